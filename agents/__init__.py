@@ -1,0 +1,1 @@
+"""Robot agents: observation, memory, policies (installed as mhrc.agents)."""

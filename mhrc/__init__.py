@@ -1,0 +1,1 @@
+"""mhrc: multi-heterogeneous robot collaboration with LLM agents over Zenoh."""

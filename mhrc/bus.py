@@ -1,0 +1,222 @@
+"""Zenoh sessions bridged to asyncio.
+
+zenoh-python has no asyncio API: its callbacks run on zenoh threads. Every callback here
+copies the sample and hands it to the event loop with `call_soon_threadsafe`, then returns;
+all user handlers run on the loop. Blocking zenoh calls (`open`, `close`, reading `get`
+replies) run in `asyncio.to_thread`. A `Bus` owns its session and every entity it declared,
+and closes them all in `close()` (use `async with`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import structlog
+import zenoh
+from pydantic import BaseModel
+
+from .protocol import encode
+
+log = structlog.get_logger("mhrc.bus")
+
+DEFAULT_LEASE_MS = 2000
+
+
+class BusError(RuntimeError):
+    """The bus could not be opened or used."""
+
+
+@dataclass(frozen=True)
+class Sample:
+    key: str
+    payload: bytes
+    is_put: bool = True
+
+
+Handler = Callable[[Sample], Any]
+QueryHandler = Callable[[str, dict[str, str], bytes], Awaitable[BaseModel | None]]
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that is free on `host` right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def endpoint(host: str, port: int) -> str:
+    return f"tcp/{host}:{port}"
+
+
+def make_config(
+    *, mode: str = "peer", listen: Sequence[str] = (), connect: Sequence[str] = (), lease_ms: int = DEFAULT_LEASE_MS
+) -> zenoh.Config:
+    """A Zenoh config with multicast scouting off and explicit endpoints only."""
+    if mode not in ("peer", "client", "router"):
+        raise BusError(f"zenoh mode must be peer, client or router, not {mode!r}")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "true")
+    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("transport/link/tx/lease", str(lease_ms))
+    conf.insert_json5("transport/link/tx/keep_alive", "4")
+    return conf
+
+
+class Bus:
+    """One Zenoh session, with asyncio-friendly publish, subscribe, query and liveliness."""
+
+    def __init__(self, session: zenoh.Session, loop: asyncio.AbstractEventLoop) -> None:
+        self._session = session
+        self._loop = loop
+        self._entities: list[Any] = []
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._closed = False
+
+    # ------------------------------------------------------------------ lifecycle
+    @classmethod
+    async def open(
+        cls, *, mode: str = "peer", listen: Sequence[str] = (), connect: Sequence[str] = (), lease_ms: int = DEFAULT_LEASE_MS
+    ) -> Bus:
+        conf = make_config(mode=mode, listen=listen, connect=connect, lease_ms=lease_ms)
+        try:
+            session = await asyncio.to_thread(zenoh.open, conf)
+        except zenoh.ZError as exc:
+            where = ", ".join([*listen, *connect]) or "no endpoints"
+            raise BusError(f"could not open a zenoh session ({where}): {exc}") from None
+        return cls(session, asyncio.get_running_loop())
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for ent in reversed(self._entities):
+            try:
+                ent.undeclare()
+            except Exception as exc:  # an entity of a dying session; keep closing the rest
+                log.debug("undeclare failed", error=str(exc))
+        for pub in self._publishers.values():
+            try:
+                pub.undeclare()
+            except Exception as exc:
+                log.debug("undeclare publisher failed", error=str(exc))
+        self._entities.clear()
+        self._publishers.clear()
+        await asyncio.to_thread(self._session.close)
+
+    async def __aenter__(self) -> Bus:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    @property
+    def zid(self) -> str:
+        return str(self._session.zid())
+
+    # ------------------------------------------------------------------ pub/sub
+    def put(self, key: str, message: BaseModel | bytes) -> None:
+        """Publish reliably (congestion control BLOCK) on `key`."""
+        payload = message if isinstance(message, bytes) else encode(message)
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self._session.declare_publisher(
+                key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
+            )
+            self._publishers[key] = pub
+        pub.put(payload)
+
+    def _bridge(self, handler: Handler) -> Callable[[zenoh.Sample], None]:
+        loop = self._loop
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            copy = Sample(str(sample.key_expr), sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT)
+            try:
+                loop.call_soon_threadsafe(_run_handler, handler, copy)
+            except RuntimeError:  # loop closed while zenoh still delivers
+                pass
+
+        return on_sample
+
+    def subscribe(self, key_expr: str, handler: Handler) -> None:
+        """Call `handler(Sample)` on the event loop for every sample matching `key_expr`."""
+        self._entities.append(self._session.declare_subscriber(key_expr, self._bridge(handler)))
+
+    # ------------------------------------------------------------------ queries
+    def serve(self, key: str, handler: QueryHandler) -> None:
+        """Answer `get`s on `key` with `await handler(key, parameters, payload)` (None: no reply)."""
+        loop = self._loop
+
+        async def answer(query: zenoh.Query) -> None:
+            try:
+                params = dict(query.parameters) if query.parameters is not None else {}
+                payload = query.payload.to_bytes() if query.payload is not None else b""
+                reply = await handler(str(query.key_expr), params, payload)
+                if reply is not None:
+                    query.reply(key, encode(reply))
+            except Exception as exc:
+                log.warning("query handler failed", key=key, error=str(exc))
+                try:
+                    query.reply_err(str(exc).encode())
+                except Exception:
+                    pass
+            finally:
+                query.drop()
+
+        def on_query(query: zenoh.Query) -> None:
+            try:
+                loop.call_soon_threadsafe(lambda: loop.create_task(answer(query)))
+            except RuntimeError:
+                query.drop()
+
+        self._entities.append(self._session.declare_queryable(key, on_query, complete=True))
+
+    async def get(self, selector: str, payload: BaseModel | bytes | None = None, timeout: float = 5.0) -> list[bytes]:
+        """Query `selector`; return the payloads of the OK replies received within `timeout`."""
+        data = None if payload is None else payload if isinstance(payload, bytes) else encode(payload)
+
+        def run() -> list[bytes]:
+            out = []
+            replies = self._session.get(selector, payload=data, timeout=timeout)
+            for reply in replies:
+                if reply.ok is not None:
+                    out.append(reply.ok.payload.to_bytes())
+                else:
+                    log.debug("query error reply", selector=selector, error=reply.err.payload.to_string())
+            return out
+
+        return await asyncio.to_thread(run)
+
+    # ------------------------------------------------------------------ liveliness
+    def declare_token(self, key: str) -> None:
+        self._entities.append(self._session.liveliness().declare_token(key))
+
+    def watch_liveliness(self, key_expr: str, handler: Handler) -> None:
+        """`handler(Sample)` with is_put True when a token appears, False when it vanishes.
+
+        Tokens alive at the time of the call are reported too (history)."""
+        self._entities.append(self._session.liveliness().declare_subscriber(key_expr, self._bridge(handler), history=True))
+
+    async def alive(self, key_expr: str, timeout: float = 2.0) -> list[str]:
+        """Keys of the liveliness tokens currently matching `key_expr`."""
+
+        def run() -> list[str]:
+            return [str(r.ok.key_expr) for r in self._session.liveliness().get(key_expr, timeout=timeout) if r.ok is not None]
+
+        return await asyncio.to_thread(run)
+
+
+def _run_handler(handler: Handler, sample: Sample) -> None:
+    try:
+        result = handler(sample)
+        if asyncio.iscoroutine(result):
+            asyncio.ensure_future(result)
+    except Exception as exc:
+        log.exception("bus handler failed", key=sample.key, error=str(exc))

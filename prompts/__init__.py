@@ -1,0 +1,1 @@
+"""Prompt templates, one set per robot role (package data)."""

@@ -1,0 +1,69 @@
+"""The Zenoh bridge over real sessions on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+
+from mhrc.bus import Bus, Sample, endpoint, free_port
+from mhrc.protocol import ActionAck, decode
+
+
+async def test_pub_sub_query_and_liveliness_across_sessions() -> None:
+    port = free_port()
+    router = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    client = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    other = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    try:
+        got: asyncio.Queue[Sample] = asyncio.Queue()
+        other.subscribe("t/**", got.put_nowait)
+        presence: asyncio.Queue[tuple[str, bool]] = asyncio.Queue()
+        router.watch_liveliness("t/alive/*", lambda s: presence.put_nowait((s.key, s.is_put)))
+
+        async def answer(key: str, params: dict[str, str], payload: bytes) -> ActionAck:
+            return ActionAck(goal_id=payload.decode(), robot=params["robot"], accepted=True)
+
+        router.serve("t/q", answer)
+        await asyncio.sleep(0.3)  # declarations reach the other sessions
+
+        client.put("t/x", b"hello")
+        sample = await asyncio.wait_for(got.get(), 5)
+        assert (sample.key, sample.payload, sample.is_put) == ("t/x", b"hello", True)
+
+        replies = await client.get("t/q?robot=bob", b"g1", timeout=5)
+        assert [decode(r, ActionAck) for r in replies] == [ActionAck(goal_id="g1", robot="bob", accepted=True)]
+
+        client.declare_token("t/alive/c")
+        assert await asyncio.wait_for(presence.get(), 5) == ("t/alive/c", True)
+        assert await other.alive("t/alive/*") == ["t/alive/c"]
+        await client.close()
+        assert await asyncio.wait_for(presence.get(), 5) == ("t/alive/c", False)
+    finally:
+        await client.close()
+        await other.close()
+        await router.close()
+
+
+async def test_a_failing_handler_does_not_stop_delivery() -> None:
+    port = free_port()
+    a = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    b = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    try:
+        seen: list[bytes] = []
+
+        def flaky(s: Sample) -> None:
+            seen.append(s.payload)
+            if s.payload == b"boom":
+                raise RuntimeError("handler bug")
+
+        a.subscribe("t/y", flaky)
+        await asyncio.sleep(0.3)
+        for p in (b"1", b"boom", b"2"):
+            b.put("t/y", p)
+        for _ in range(50):
+            if len(seen) == 3:
+                break
+            await asyncio.sleep(0.05)
+        assert seen == [b"1", b"boom", b"2"]
+    finally:
+        await b.close()
+        await a.close()

@@ -1,0 +1,1 @@
+"""World simulator: PyBullet scene, robots, skills, planners, tasks (installed as mhrc.world)."""
