@@ -1,0 +1,221 @@
+"""One robot's agent loop: attach, then observe -> decide -> request -> await result, until done.
+
+The agent talks to the world only through the bus (attach query, action request/ack/result,
+world events, the world's liveliness token), so the same code runs in the world's process,
+in another process or on another host.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import uuid
+
+import structlog
+
+from mhrc.bus import Bus, Sample
+from mhrc.keys import Keys
+from mhrc.protocol import (
+    ActionAck,
+    ActionRequest,
+    ActionResult,
+    AttachReply,
+    AttachRequest,
+    EpisodeDone,
+    Observation,
+    ProtocolError,
+    Thought,
+    decode,
+    decode_event,
+)
+
+from .policy import Decision, Policy
+
+log = structlog.get_logger("mhrc.agent")
+
+
+class AgentError(RuntimeError):
+    """The agent cannot go on."""
+
+
+class AttachRejected(AgentError):
+    """The world refused this agent (robot unknown, already attached, episode over)."""
+
+
+class WorldGone(AgentError):
+    """The world's liveliness token disappeared or it never answered."""
+
+
+class RobotAgent:
+    """Drives `policy` for `robot` in run `run` until the episode ends."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        policy: Policy,
+        *,
+        run: str,
+        robot: str,
+        agent_id: str | None = None,
+        attach_timeout: float = 30.0,
+        ack_timeout: float = 10.0,
+        result_timeout: float | None = None,
+    ) -> None:
+        self.bus = bus
+        self.policy = policy
+        self.robot = robot
+        self.keys = Keys(run)
+        self.keys.alive_robot(robot)  # validates the robot id
+        self.agent_id = agent_id or f"{robot}-{uuid.uuid4().hex[:8]}"
+        self.attach_timeout = attach_timeout
+        self.ack_timeout = ack_timeout
+        self.result_timeout = result_timeout
+        self.episode: EpisodeDone | None = None
+        self.steps = 0
+        self._acks: dict[str, asyncio.Future[ActionAck]] = {}
+        self._results: dict[str, asyncio.Future[ActionResult]] = {}
+        self._done = asyncio.Event()
+        self._world_gone = asyncio.Event()
+        self._log = log.bind(run=run, robot=robot, agent=self.agent_id)
+
+    # ------------------------------------------------------------------ bus handlers
+    def _on_ack(self, sample: Sample) -> None:
+        try:
+            ack = decode(sample.payload, ActionAck)
+        except ProtocolError as exc:
+            self._log.warning("malformed ack ignored", reason=str(exc))
+            return
+        fut = self._acks.get(ack.goal_id)
+        if fut is not None and not fut.done():
+            fut.set_result(ack)
+
+    def _on_result(self, sample: Sample) -> None:
+        try:
+            result = decode(sample.payload, ActionResult)
+        except ProtocolError as exc:
+            self._log.warning("malformed result ignored", reason=str(exc))
+            return
+        fut = self._results.get(result.goal_id)
+        if fut is not None and not fut.done():
+            fut.set_result(result)
+
+    def _on_event(self, sample: Sample) -> None:
+        try:
+            event = decode_event(sample.payload)
+        except ProtocolError as exc:
+            self._log.warning("malformed world event ignored", reason=str(exc))
+            return
+        if isinstance(event, EpisodeDone):
+            self.episode = event
+            self._done.set()
+
+    def _on_world_liveliness(self, sample: Sample) -> None:
+        if not sample.is_put:
+            self._log.warning("world vanished")
+            self._world_gone.set()
+
+    # ------------------------------------------------------------------ running
+    async def run(self) -> EpisodeDone | None:
+        """Play the episode. Returns the world's final event, or None if it never came."""
+        k = self.keys
+        self.bus.subscribe(k.action_ack(self.robot), self._on_ack)
+        self.bus.subscribe(k.action_result(self.robot), self._on_result)
+        self.bus.subscribe(k.world_event, self._on_event)
+        self.bus.watch_liveliness(k.alive_world, self._on_world_liveliness)
+        obs = await self._attach()
+        self.bus.declare_token(k.alive_robot(self.robot))
+        while not self._done.is_set():
+            decision = await self.policy.decide(obs)
+            self._publish_thought(obs, decision)
+            result = await self._act(obs, decision)
+            if result is None:
+                if self._done.is_set():
+                    break
+                obs = await self._attach()  # the world moved on (tick mismatch): resynchronize
+                continue
+            self.steps += 1
+            self.policy.record(result)
+            self._log.debug("action done", tick=result.tick, action=result.action.call(), ok=result.outcome.succeeded)
+            obs = result.observation
+            if result.done:
+                break
+        if self.episode is None:
+            try:
+                await asyncio.wait_for(self._done.wait(), 5.0)
+            except TimeoutError:
+                self._log.warning("no episode_done event received")
+        return self.episode
+
+    async def _attach(self) -> Observation:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + self.attach_timeout
+        request = AttachRequest(robot=self.robot, agent_id=self.agent_id)
+        while True:
+            replies = await self.bus.get(self.keys.attach(self.robot), request, timeout=2.0)
+            if replies:
+                try:
+                    reply = decode(replies[0], AttachReply)
+                except ProtocolError as exc:
+                    raise AgentError(f"the world sent a malformed attach reply: {exc}") from None
+                if not reply.accepted or reply.observation is None:
+                    raise AttachRejected(f"the world refused {self.robot}: {reply.reason}")
+                self._log.info("attached", tick=reply.tick)
+                return reply.observation
+            if loop.time() >= deadline:
+                raise WorldGone(f"no world answered for run {self.keys.run!r} within {self.attach_timeout:.0f} s")
+            await asyncio.sleep(0.2)
+
+    async def _act(self, obs: Observation, decision: Decision) -> ActionResult | None:
+        """Request the action and await its result; None when the world rejected it as stale."""
+        req = ActionRequest(robot=self.robot, agent_id=self.agent_id, tick=obs.tick, action=decision.action)
+        loop = asyncio.get_running_loop()
+        ack_fut: asyncio.Future[ActionAck] = loop.create_future()
+        res_fut: asyncio.Future[ActionResult] = loop.create_future()
+        self._acks[req.goal_id] = ack_fut
+        self._results[req.goal_id] = res_fut
+        try:
+            self.bus.put(self.keys.action_request(self.robot), req)
+            ack = await self._await(ack_fut, self.ack_timeout, "ack")
+            if ack is None:
+                return None
+            if not ack.accepted:
+                if "tick" in ack.reason and not self._done.is_set():
+                    self._log.info("request out of step, resynchronizing", reason=ack.reason)
+                    return None
+                raise AgentError(f"the world rejected {decision.action.call()}: {ack.reason}")
+            return await self._await(res_fut, self.result_timeout, "result")
+        finally:
+            self._acks.pop(req.goal_id, None)
+            self._results.pop(req.goal_id, None)
+
+    async def _await(self, fut: asyncio.Future, timeout: float | None, what: str):  # type: ignore[no-untyped-def]
+        done_wait = asyncio.ensure_future(self._done.wait())
+        gone_wait = asyncio.ensure_future(self._world_gone.wait())
+        try:
+            finished, _ = await asyncio.wait({fut, done_wait, gone_wait}, timeout=timeout, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            done_wait.cancel()
+            gone_wait.cancel()
+        if fut in finished:
+            return fut.result()
+        if gone_wait in finished:
+            raise WorldGone(f"the world disappeared while {self.robot} awaited its {what}")
+        if done_wait in finished:
+            return None
+        raise WorldGone(f"no {what} from the world within {timeout} s")
+
+    def _publish_thought(self, obs: Observation, d: Decision) -> None:
+        self.bus.put(
+            self.keys.thought(self.robot),
+            Thought(
+                robot=self.robot,
+                tick=obs.tick,
+                policy=self.policy.name,
+                prompt=d.prompt,
+                reply=d.reply,
+                action=d.action.call(),
+                parse_error=d.parse_error,
+                prompt_tokens=d.prompt_tokens,
+                completion_tokens=d.completion_tokens,
+                latency=d.latency,
+            ),
+        )

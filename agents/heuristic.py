@@ -1,0 +1,342 @@
+"""Scripted expert policies, one per role, for Pack Objects.
+
+Each sees only its own robot's observation (its partial scene graph, status, new messages and
+the feedback of its last action) and coordinates through `communicate` messages, as the
+paper's roles do:
+
+- Bob asks Alice for every target he cannot pick himself, then packs what is in his reach.
+- Alice hands the open surfaces to David, explores the closed containers herself, fetches what
+  Bob asked for and puts it on table_0 near him. A grasp that fails for distance is fixed with
+  `move(dx, dy)` from the feedback; other grasp failures try the next stand pose.
+- David explores the surfaces Alice hands him and reports what lies on each.
+
+Messages are plain sentences with a fixed shape, so any other agent (an LLM) can read them too.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+from mhrc.protocol import (
+    Action,
+    ActionResult,
+    Communicate,
+    FurnitureView,
+    Move,
+    Navigate,
+    Observation,
+    ObjectView,
+    Open,
+    OutcomeCode,
+    Pick,
+    Place,
+    Wait,
+)
+
+from .policy import Decision
+
+HANDOVER = "table_0"  # Bob's table: where fetched objects go
+RECEPTACLE = "tray"
+_NAMES = r"([A-Za-z0-9_]+(?:\s*,\s*[A-Za-z0-9_]+)*)"
+REQUEST_RE = re.compile(r"bring these to table_0 within my reach:\s*" + _NAMES)
+EXPLORE_RE = re.compile(r"explore these surfaces and tell me what lies on them:\s*" + _NAMES)
+REPORT_RE = re.compile(r"On ([A-Za-z0-9_]+) I found")
+MAX_GRASP_TRIES = 4
+
+
+def _names(text: str) -> list[str]:
+    return [n.strip() for n in text.split(",") if n.strip()]
+
+
+def _dist2(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    return math.hypot(a[0] - b[0], a[1] - b[1])
+
+
+def _furniture(obs: Observation, name: str) -> FurnitureView | None:
+    return next((f for f in obs.furniture if f.name == name), None)
+
+
+def _object(obs: Observation, name: str) -> ObjectView | None:
+    return next((o for o in obs.objects if o.name == name), None)
+
+
+def _nearest_stand_pose(f: FurnitureView, point: tuple[float, ...]) -> int:
+    return min(range(len(f.stand_poses)), key=lambda i: _dist2((f.stand_poses[i].x, f.stand_poses[i].y), point))
+
+
+def _at_stand_pose(obs: Observation, f: FurnitureView, idx: int, tol: float = 0.05) -> bool:
+    base = obs.status.base
+    if base is None or idx >= len(f.stand_poses):
+        return False
+    sp = f.stand_poses[idx]
+    return math.hypot(base.x - sp.x, base.y - sp.y) <= tol
+
+
+@dataclass
+class _RoleBase:
+    """Shared bookkeeping: the last result this policy got."""
+
+    name: str = "heuristic"
+    last: ActionResult | None = None
+
+    def record(self, result: ActionResult) -> None:
+        self.last = result
+
+    def _decision(self, action: Action) -> Decision:
+        return Decision(action=action)
+
+    def _last_failed(self, skill: str) -> bool:
+        return self.last is not None and self.last.action.skill == skill and not self.last.outcome.succeeded
+
+
+# --------------------------------------------------------------------------- Bob
+
+
+@dataclass
+class BobHeuristic(_RoleBase):
+    """Packs the targets within his reach; asks Alice for the rest."""
+
+    requested: set[str] = field(default_factory=set)
+    pick_failures: dict[str, int] = field(default_factory=dict)
+
+    async def decide(self, obs: Observation) -> Decision:
+        if self._last_failed("pick") and isinstance(self.last.action, Pick):  # type: ignore[union-attr]
+            name = self.last.action.obj  # type: ignore[union-attr]
+            self.pick_failures[name] = self.pick_failures.get(name, 0) + 1
+        holding = obs.status.holding
+        if holding:
+            return self._decision(Place(obj=holding, location=RECEPTACLE))
+        packed = {o.name for o in obs.objects if o.on == RECEPTACLE}
+        todo = [t for t in obs.targets if t not in packed]
+        reachable = [t for t in todo if self._in_reach(obs, t) and self.pick_failures.get(t, 0) < 2]
+        if reachable:
+            return self._decision(Pick(obj=reachable[0]))
+        ask = [t for t in todo if t not in self.requested or (self.pick_failures.get(t, 0) >= 2 and _object(obs, t))]
+        if ask and "alice" in obs.teammates:
+            self.requested.update(ask)
+            for t in ask:
+                self.pick_failures.pop(t, None)
+            return self._decision(
+                Communicate(to="alice", content=f"Alice, please bring these to table_0 within my reach: {', '.join(ask)}.")
+            )
+        return self._decision(Wait())
+
+    @staticmethod
+    def _in_reach(obs: Observation, name: str) -> bool:
+        o = _object(obs, name)
+        s = obs.status
+        if o is None or o.on != HANDOVER or s.arm_base is None or s.reach is None:
+            return False
+        return _dist2(o.position, s.arm_base) <= s.reach
+
+
+# --------------------------------------------------------------------------- Alice
+
+
+@dataclass
+class AliceHeuristic(_RoleBase):
+    """Explores containers, delegates surfaces to David, fetches what Bob needs."""
+
+    needed: list[str] = field(default_factory=list)
+    delivered: set[str] = field(default_factory=set)
+    explored: set[str] = field(default_factory=set)
+    delegated: bool = False
+    grasp_tries: dict[str, int] = field(default_factory=dict)
+    given_up: set[str] = field(default_factory=set)
+    pose_choice: dict[str, int] = field(default_factory=dict)  # object -> stand pose to use
+    told_bob: bool = False
+
+    async def decide(self, obs: Observation) -> Decision:
+        self._read_messages(obs)
+        self._learn_from_last(obs)
+        holding = obs.status.holding
+        if holding:
+            return self._deliver(obs, holding)
+        if not self.delegated and "david" in obs.teammates:
+            surfaces = self._open_surfaces(obs)
+            self.delegated = True
+            if surfaces:
+                return self._decision(
+                    Communicate(
+                        to="david",
+                        content=f"David, please explore these surfaces and tell me what lies on them: {', '.join(surfaces)}.",
+                    )
+                )
+        target = self._next_target(obs)
+        if target is not None:
+            return self._fetch(obs, target)
+        explore = self._next_exploration(obs)
+        if explore is not None:
+            return explore
+        return self._decision(Wait())
+
+    # ---- knowledge
+    def _read_messages(self, obs: Observation) -> None:
+        for m in obs.new_messages:
+            if (hit := REQUEST_RE.search(m.content)) is not None:
+                for name in _names(hit.group(1)):
+                    if name not in self.needed:
+                        self.needed.append(name)
+                    self.delivered.discard(name)
+                    self.given_up.discard(name)
+                    self.grasp_tries.pop(name, None)
+            for hit in REPORT_RE.finditer(m.content):
+                self.explored.add(hit.group(1))
+
+    def _learn_from_last(self, obs: Observation) -> None:
+        last = self.last
+        if last is None:
+            return
+        a = last.action
+        if isinstance(a, Navigate) and last.outcome.succeeded:
+            self.explored.add(a.target)
+        if isinstance(a, Open) and (last.outcome.succeeded or last.outcome.code == OutcomeCode.ALREADY_OPEN):
+            self.explored.add(a.target)
+        if isinstance(a, Place) and last.outcome.succeeded and a.location == HANDOVER:
+            self.delivered.add(a.obj)
+        if isinstance(a, Pick) and not last.outcome.succeeded:
+            self.grasp_tries[a.obj] = self.grasp_tries.get(a.obj, 0) + 1
+            if self.grasp_tries[a.obj] >= MAX_GRASP_TRIES:
+                self.given_up.add(a.obj)
+
+    def _open_surfaces(self, obs: Observation) -> list[str]:
+        return [f.name for f in obs.furniture if not f.openable and f.stand_poses and f.name != HANDOVER and f.place_pose is not None]
+
+    def _next_target(self, obs: Observation) -> ObjectView | None:
+        here = obs.status.base
+        candidates = []
+        for name in self.needed:
+            if name in self.delivered or name in self.given_up:
+                continue
+            o = _object(obs, name)
+            if o is None or o.on == RECEPTACLE or o.held_by not in (None, obs.robot):
+                continue
+            candidates.append(o)
+        if not candidates:
+            return None
+        if here is None:
+            return candidates[0]
+        return min(candidates, key=lambda o: _dist2(o.position, (here.x, here.y)))
+
+    # ---- acting
+    def _fetch(self, obs: Observation, o: ObjectView) -> Decision:
+        f = _furniture(obs, o.on or "")
+        if f is None or not f.stand_poses:
+            self.given_up.add(o.name)
+            return self._decision(Wait())
+        if f.openable and not f.is_open:
+            idx = _nearest_stand_pose(f, f.position)
+            if not _at_stand_pose(obs, f, idx):
+                return self._decision(Navigate(target=f.name, stand_pose=idx))
+            return self._decision(Open(target=f.name))
+        last = self.last
+        if (
+            last is not None
+            and isinstance(last.action, Pick)
+            and last.action.obj == o.name
+            and last.outcome.code == OutcomeCode.TOO_FAR
+            and "dx" in last.outcome.details
+            and "dy" in last.outcome.details
+        ):
+            return self._decision(Move(dx=float(last.outcome.details["dx"]), dy=float(last.outcome.details["dy"])))
+        if last is not None and isinstance(last.action, Pick) and last.action.obj == o.name and not last.outcome.succeeded:
+            # another stand pose after a failure that moving cannot fix
+            self.pose_choice[o.name] = (self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position)) + 1) % len(f.stand_poses)
+        idx = self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position))
+        near = obs.status.base is not None and _dist2(o.position, (obs.status.base.x, obs.status.base.y)) <= 1.6
+        moved_here = last is not None and isinstance(last.action, Move) and last.outcome.succeeded
+        if not _at_stand_pose(obs, f, idx) and not (moved_here and near):
+            return self._decision(Navigate(target=f.name, stand_pose=idx))
+        return self._decision(Pick(obj=o.name))
+
+    def _deliver(self, obs: Observation, holding: str) -> Decision:
+        table = _furniture(obs, HANDOVER)
+        if table is None or not table.stand_poses:
+            return self._decision(Wait())
+        goal = table.place_pose or table.position
+        idx = _nearest_stand_pose(table, goal)
+        if self._last_failed("place"):
+            idx = (idx + 1) % len(table.stand_poses)
+        if not _at_stand_pose(obs, table, idx):
+            return self._decision(Navigate(target=HANDOVER, stand_pose=idx))
+        return self._decision(Place(obj=holding, location=HANDOVER))
+
+    def _next_exploration(self, obs: Observation) -> Decision | None:
+        """Open the closed containers nobody has looked into yet (nearest first)."""
+        here = obs.status.base
+        todo = [f for f in obs.furniture if f.openable and not f.is_open and f.name not in self.explored and f.stand_poses]
+        if not self.needed and not todo:
+            return None
+        if not todo:
+            # David has not reported everything yet: check surfaces nobody explored, if any are left
+            if "david" in obs.teammates:
+                return None
+            todo = [f for f in obs.furniture if f.name in self._open_surfaces(obs) and f.name not in self.explored]
+            if not todo:
+                return None
+        if here is not None:
+            todo.sort(key=lambda f: _dist2(f.position, (here.x, here.y)))
+        f = todo[0]
+        idx = _nearest_stand_pose(f, f.position)
+        if not _at_stand_pose(obs, f, idx):
+            return self._decision(Navigate(target=f.name, stand_pose=idx))
+        if f.openable:
+            return self._decision(Open(target=f.name))
+        self.explored.add(f.name)
+        return None
+
+
+# --------------------------------------------------------------------------- David
+
+
+@dataclass
+class DavidHeuristic(_RoleBase):
+    """Explores the surfaces Alice hands over and reports what lies on each."""
+
+    assigned: list[str] = field(default_factory=list)
+    visited: set[str] = field(default_factory=set)
+    pose_try: dict[str, int] = field(default_factory=dict)
+    report_to: str = "alice"
+
+    async def decide(self, obs: Observation) -> Decision:
+        for m in obs.new_messages:
+            if (hit := EXPLORE_RE.search(m.content)) is not None:
+                self.report_to = m.sender
+                for name in _names(hit.group(1)):
+                    if name not in self.assigned:
+                        self.assigned.append(name)
+        last = self.last
+        if last is not None and isinstance(last.action, Navigate):
+            target = last.action.target
+            if last.outcome.succeeded:
+                self.visited.add(target)
+                found = sorted(o.name for o in obs.objects if o.on == target)
+                text = f"On {target} I found: {', '.join(found)}." if found else f"On {target} I found nothing."
+                return self._decision(Communicate(to=self.report_to, content=text))
+            f = _furniture(obs, target)
+            tries = self.pose_try.get(target, 0) + 1
+            self.pose_try[target] = tries
+            if f is None or tries >= len(f.stand_poses):
+                self.visited.add(target)  # unreachable for David: give it up
+        for name in self.assigned:
+            if name in self.visited:
+                continue
+            f = _furniture(obs, name)
+            if f is None or not f.stand_poses:
+                self.visited.add(name)
+                continue
+            return self._decision(Navigate(target=name, stand_pose=self.pose_try.get(name, 0)))
+        return self._decision(Wait())
+
+
+ROLES = {"alice": AliceHeuristic, "bob": BobHeuristic, "david": DavidHeuristic}
+
+
+def heuristic_policy(robot: str) -> _RoleBase:
+    """The scripted expert for `robot` (alice, bob or david)."""
+    try:
+        return ROLES[robot]()
+    except KeyError:
+        raise ValueError(f"no heuristic policy for robot {robot!r}; known roles: {', '.join(ROLES)}") from None

@@ -1,0 +1,33 @@
+"""The policy interface every robot agent drives: observation in, one action out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+from mhrc.protocol import Action, ActionResult, Observation
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One chosen action and what led to it (published as the robot's thought)."""
+
+    action: Action
+    prompt: str | None = None
+    reply: str | None = None
+    parse_error: str | None = None
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    latency: float = 0.0
+
+
+class Policy(Protocol):
+    """Chooses a robot's next action from that robot's own observation only."""
+
+    name: str
+
+    async def decide(self, obs: Observation) -> Decision: ...
+
+    def record(self, result: ActionResult) -> None:
+        """Called with the result of the action this policy chose last."""
+        ...

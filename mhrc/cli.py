@@ -1,0 +1,164 @@
+"""The `mhrc` command: run an episode, a world alone, an agent, or a router."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import signal
+import sys
+from collections.abc import Callable, Coroutine
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+
+from . import logs
+from .episode import ROBOTS, ConfigError, EpisodeConfig
+
+T = TypeVar("T")
+
+
+def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]]) -> T:
+    """Run a coroutine; SIGTERM cancels it like Ctrl-C, so every session closes in `finally`."""
+
+    async def main() -> T:
+        task = asyncio.current_task()
+        loop = asyncio.get_running_loop()
+        if task is not None:
+            loop.add_signal_handler(signal.SIGTERM, task.cancel)
+        return await coro_fn()
+
+    try:
+        return asyncio.run(main())
+    except (KeyboardInterrupt, asyncio.CancelledError):
+        click.echo("interrupted", err=True)
+        sys.exit(130)
+
+
+def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
+    opts = [
+        click.option("--task", default="pack_objects", show_default=True, help="Task id."),
+        click.option("--scene", default="house", show_default=True, help="Scene layout."),
+        click.option("--seed", default=0, show_default=True, type=int, help="Episode generator seed."),
+        click.option("--objects", "n_objects", default=4, show_default=True, type=int, help="Target objects, 3-6."),
+        click.option("--horizon", default=50, show_default=True, type=int, help="Temporal steps before the episode ends."),
+        click.option("--run", default=None, help="Run id ([a-z0-9_-]+); default: a new random one."),
+        click.option("--host", default="127.0.0.1", show_default=True, help="Address the world listens on."),
+        click.option("--port", default=0, type=int, help="Port the world listens on; default: a free one."),
+        click.option("--trace", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                     help="JSONL trace of every bus message; default runs/RUN/trace.jsonl."),
+        click.option("--gui", is_flag=True, help="Show the PyBullet GUI (needs a display)."),
+        click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"])),
+    ]  # fmt: skip
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
+
+
+def _config(**values: Any) -> EpisodeConfig:
+    values = {k: v for k, v in values.items() if v is not None}
+    try:
+        return EpisodeConfig.build(**values).resolved()
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="mhrc")
+def main() -> None:
+    """Heterogeneous robots, each driven by its own agent, collaborate on household tasks in a
+    PyBullet world; the world and every agent talk over a Zenoh bus.
+
+    Start with `mhrc up`: one Pack Objects episode with Alice (mobile manipulator), Bob (arm on
+    table_0) and David (mobile robot) driven by the built-in heuristic policy.
+    """
+
+
+@main.command()
+@_episode_options
+@click.option("--processes", is_flag=True, help="Run the world and each agent as separate OS processes.")
+@click.option("--external", multiple=True, type=click.Choice(ROBOTS),
+              help="Do not start an agent for this robot: attach your own with `mhrc agent` (repeatable).")
+@click.option("--quiet", "-q", is_flag=True, help="Print only the final summary.")
+@click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
+@click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
+def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, **values: Any) -> None:
+    """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
+    from rich.console import Console
+
+    from .episode import up_in_process, up_processes
+    from .progress import ProgressPrinter
+
+    logs.configure(log_level)
+    cfg = _config(**values)
+    robots = tuple(r for r in ROBOTS if r not in external)
+    console = Console(highlight=False, stderr=as_json)
+    printer = ProgressPrinter(console, verbose=not quiet)
+    console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
+    if external:
+        console.print("attach the external robots with: " + "; ".join(
+            f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}" for r in external))
+    runner = up_processes if processes else up_in_process
+    done = _run(lambda: runner(cfg, observe=printer.attach, robots=robots))
+    if as_json:
+        click.echo(json.dumps(done.metrics.model_dump()))
+
+
+@main.command()
+@_episode_options
+@click.option("--start-timeout", type=float, default=None,
+              help="Start with the robots attached after this many seconds; default: wait for all three.")
+def world(log_level: str, start_timeout: float | None, **values: Any) -> None:
+    """Run the world alone and wait for agents to attach (`mhrc agent`)."""
+    from .episode import serve_world
+    from .progress import ProgressPrinter
+
+    logs.configure(log_level)
+    cfg = _config(start_timeout=start_timeout, **values)
+    click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
+    for r in ROBOTS:
+        click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}", err=True)
+    printer = ProgressPrinter(verbose=False)
+    _run(lambda: serve_world(cfg, observe=printer.attach))
+
+
+@main.command()
+@click.option("--robot", required=True, type=click.Choice(ROBOTS), help="The robot this agent drives.")
+@click.option("--connect", required=True, help="The world's endpoint, e.g. tcp/127.0.0.1:7447.")
+@click.option("--run", default=None, help="Run id of the world; default: the only world alive at --connect.")
+@click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
+@click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
+def agent(robot: str, connect: str, run: str | None, attach_timeout: float, log_level: str) -> None:
+    """Attach one robot's agent (heuristic policy) to a running world."""
+    from .episode import attach_agent
+
+    logs.configure(log_level)
+    try:
+        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout))
+    except Exception as exc:  # typed agent errors: say what happened, exit non-zero
+        raise click.ClickException(str(exc)) from None
+    if done is not None:
+        m = done.metrics
+        click.echo(f"{robot}: episode {done.run} ended ({done.reason}): success={m.success} placed={m.placed}/{m.total} TS={m.temporal_steps}")
+
+
+@main.command()
+@click.option("--host", default="127.0.0.1", show_default=True)
+@click.option("--port", default=7447, show_default=True, type=int)
+def router(host: str, port: int) -> None:
+    """Run a Zenoh router that worlds and agents on several hosts can all connect to."""
+    from .bus import Bus, endpoint
+
+    async def serve() -> None:
+        bus = await Bus.open(mode="router", listen=[endpoint(host, port)])
+        try:
+            click.echo(f"router listening on {endpoint(host, port)}; Ctrl-C to stop", err=True)
+            await asyncio.Event().wait()
+        finally:
+            await bus.close()
+
+    _run(serve)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,267 @@
+"""Running one episode: the world and the agents as asyncio tasks in one process, or as
+separate OS processes, on one Zenoh bus.
+
+The world's session is a Zenoh router listening on `tcp/HOST:PORT`; every agent (here or in
+another process) connects to it as a client, so any participant's messages reach every
+other one, and the recorder on the world's session sees them all.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import structlog
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from .bus import Bus, endpoint, free_port
+from .keys import check_id, new_run_id
+from .protocol import EpisodeDone, ProtocolError, decode
+
+log = structlog.get_logger("mhrc.episode")
+
+ROBOTS = ("alice", "bob", "david")
+
+
+class ConfigError(ValueError):
+    """A configuration value that cannot work; the message names the field."""
+
+
+class EpisodeConfig(BaseModel):
+    """What one episode runs: validated before anything starts."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    task: str = "pack_objects"
+    scene: str = "house"
+    seed: int = Field(0, ge=0)
+    n_objects: int = Field(4, ge=3, le=6)
+    horizon: int = Field(50, ge=1, le=1000)
+    run: str = Field(default_factory=new_run_id)
+    host: str = "127.0.0.1"
+    port: int = Field(0, ge=0, le=65535, description="0: pick a free port")
+    trace: Path | None = None
+    gui: bool = False
+    start_timeout: float | None = Field(None, gt=0)
+    tick_delay: float = Field(0.0, ge=0)
+
+    @field_validator("run")
+    @classmethod
+    def _run_id(cls, v: str) -> str:
+        check_id(v, "run id")
+        return v
+
+    @classmethod
+    def build(cls, **values: object) -> EpisodeConfig:
+        """Validate, raising ConfigError that names the offending field."""
+        try:
+            cfg = cls(**values)
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            field = ".".join(str(p) for p in err["loc"]) or "config"
+            raise ConfigError(f"{field}: {err['msg']} (got {err.get('input')!r})") from None
+        from mhrc.world.sim import check_episode  # validates task and scene names without building
+
+        try:
+            check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        return cfg
+
+    def resolved(self) -> EpisodeConfig:
+        """A copy with a concrete port and trace path."""
+        port = self.port or free_port(self.host)
+        trace = self.trace or Path("runs") / self.run / "trace.jsonl"
+        return self.model_copy(update={"port": port, "trace": trace})
+
+    @property
+    def endpoint(self) -> str:
+        return endpoint(self.host, self.port)
+
+
+EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
+
+
+async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None) -> EpisodeDone:
+    """Build the scene, open the world's bus on cfg.endpoint, record, and run the episode."""
+    from mhrc.world.service import WorldConfig, WorldService
+    from mhrc.world.sim import Sim
+
+    from .trace import Recorder
+
+    sim = await asyncio.to_thread(Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui)
+    bus = None
+    recorder = None
+    try:
+        bus = await Bus.open(mode="router", listen=[cfg.endpoint])
+        if cfg.trace is not None:
+            recorder = Recorder(bus, cfg.run, cfg.trace).start()
+        if observe is not None:
+            observe(bus, cfg.run)
+        world = WorldService(
+            bus,
+            sim,
+            WorldConfig(run=cfg.run, horizon=cfg.horizon, start_timeout=cfg.start_timeout, tick_delay=cfg.tick_delay),
+        )
+        try:
+            return await world.run()
+        except asyncio.CancelledError:
+            world.stop()
+            raise
+        finally:
+            await asyncio.sleep(0.2)  # let the last results and the done event leave
+    finally:
+        if recorder is not None:
+            recorder.close()
+        if bus is not None:
+            await bus.close()
+        await asyncio.to_thread(sim.close)
+
+
+async def run_agent(robot: str, run: str, connect: str, *, policy: object | None = None, attach_timeout: float = 30.0) -> EpisodeDone | None:
+    """Attach an agent for `robot` to the world at `connect` and play until the episode ends."""
+    from mhrc.agents.agent import RobotAgent
+    from mhrc.agents.heuristic import heuristic_policy
+
+    bus = await Bus.open(mode="client", connect=[connect])
+    try:
+        agent = RobotAgent(bus, policy or heuristic_policy(robot), run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
+        return await agent.run()
+    finally:
+        await bus.close()
+
+
+async def find_run(bus: Bus, timeout: float = 2.0) -> str:
+    """The run id of the only world alive on this bus (raises if there is none or several)."""
+    alive = await bus.alive("mhrc/*/alive/world", timeout=timeout)
+    runs = sorted({key.split("/")[1] for key in alive})
+    if len(runs) != 1:
+        found = ", ".join(runs) if runs else "none"
+        raise ConfigError(f"pass --run: expected exactly one world on the bus, found {found}")
+    return runs[0]
+
+
+async def attach_agent(robot: str, connect: str, run: str | None, attach_timeout: float = 30.0) -> EpisodeDone | None:
+    """`mhrc agent`: find the run if not given, then play `robot` with the heuristic policy."""
+    if run is None:
+        bus = await Bus.open(mode="client", connect=[connect])
+        try:
+            run = await find_run(bus)
+        finally:
+            await bus.close()
+    return await run_agent(robot, run, connect, attach_timeout=attach_timeout)
+
+
+async def up_in_process(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] = ROBOTS) -> EpisodeDone:
+    """World and the given robots' agents as asyncio tasks of this process."""
+    world = asyncio.create_task(serve_world(cfg, observe=observe), name="world")
+    agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint), name=f"agent-{r}") for r in robots]
+    try:
+        done = await world
+    finally:
+        for t in agents:
+            if not t.done():
+                t.cancel()
+        results = await asyncio.gather(*agents, return_exceptions=True)
+        for r, res in zip(robots, results):
+            if isinstance(res, BaseException) and not isinstance(res, asyncio.CancelledError):
+                log.warning("agent ended with an error", robot=r, error=str(res))
+        if not world.done():
+            world.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await world
+    return done
+
+
+def _child_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    return env
+
+
+def world_command(cfg: EpisodeConfig) -> list[str]:
+    cmd = [
+        sys.executable, "-m", "mhrc", "world",
+        "--task", cfg.task, "--scene", cfg.scene, "--seed", str(cfg.seed), "--objects", str(cfg.n_objects),
+        "--horizon", str(cfg.horizon), "--run", cfg.run, "--host", cfg.host, "--port", str(cfg.port),
+    ]  # fmt: skip
+    if cfg.trace is not None:
+        cmd += ["--trace", str(cfg.trace)]
+    return cmd
+
+
+def agent_command(robot: str, cfg: EpisodeConfig) -> list[str]:
+    return [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
+
+
+def wait_for_port(host: str, port: int, timeout: float, proc: subprocess.Popen[bytes] | None = None) -> None:
+    """Block until something accepts TCP connections on host:port."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc is not None and proc.poll() is not None:
+            raise RuntimeError(f"the world process exited early with code {proc.returncode}")
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.settimeout(0.2)
+            if s.connect_ex((host, port)) == 0:
+                return
+        time.sleep(0.1)
+    raise TimeoutError(f"nothing listened on {host}:{port} within {timeout:.0f} s")
+
+
+async def up_processes(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] = ROBOTS) -> EpisodeDone:
+    """The world and each agent as separate OS processes; this process only observes."""
+    procs: list[subprocess.Popen[bytes]] = []
+    bus = None
+    try:
+        world = subprocess.Popen(world_command(cfg), env=_child_env())
+        procs.append(world)
+        await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)
+        bus = await Bus.open(mode="client", connect=[cfg.endpoint])
+        done_fut: asyncio.Future[EpisodeDone] = asyncio.get_running_loop().create_future()
+        from .keys import Keys
+
+        def on_event(sample: object) -> None:
+            try:
+                ev = decode(sample.payload, EpisodeDone)  # type: ignore[attr-defined]
+            except ProtocolError:
+                return
+            if not done_fut.done():
+                done_fut.set_result(ev)
+
+        bus.subscribe(Keys(cfg.run).world_event, on_event)
+        if observe is not None:
+            observe(bus, cfg.run)
+        for r in robots:
+            procs.append(subprocess.Popen(agent_command(r, cfg), env=_child_env()))
+        waiter = asyncio.create_task(asyncio.to_thread(world.wait))
+        finished, _ = await asyncio.wait({done_fut, waiter}, return_when=asyncio.FIRST_COMPLETED)
+        if done_fut not in finished:
+            raise RuntimeError(f"the world process exited with code {world.returncode} before the episode ended")
+        done = done_fut.result()
+        for p in procs:
+            await asyncio.to_thread(_wait_or_kill, p, 20.0)
+        return done
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p in procs:
+            await asyncio.to_thread(_wait_or_kill, p, 10.0)
+        if bus is not None:
+            await bus.close()
+
+
+def _wait_or_kill(proc: subprocess.Popen[bytes], timeout: float) -> None:
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()

@@ -1,0 +1,65 @@
+"""The recorder: every message of one run, as JSON lines.
+
+It subscribes to `mhrc/<run>/**` and to the run's liveliness tokens, so it sees every request,
+ack, result, message, thought and world event, whichever process sent them. Each line is
+`{"t": seconds since recording started, "key": ..., "kind": "put"|"delete"|"alive"|"gone",
+"msg": the decoded JSON payload}`; a payload that is not JSON is kept as `{"raw": text}`.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import IO, Any
+
+from .bus import Bus, Sample
+from .keys import Keys
+
+
+class Recorder:
+    """Writes every sample of `run` to `path` (JSONL, flushed line by line)."""
+
+    def __init__(self, bus: Bus, run: str, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._keys = Keys(run)
+        self._bus = bus
+        self._file: IO[str] | None = None
+        self._t0 = time.perf_counter()
+        self.count = 0
+
+    def start(self) -> Recorder:
+        self._file = self.path.open("w", encoding="utf-8")
+        self._t0 = time.perf_counter()
+        self._bus.subscribe(self._keys.all, self._on_sample)
+        self._bus.watch_liveliness(f"{self._keys.base}/alive/**", self._on_liveliness)
+        return self
+
+    def _write(self, key: str, kind: str, msg: Any) -> None:
+        if self._file is None or self._file.closed:
+            return
+        line = {"t": round(time.perf_counter() - self._t0, 6), "key": key, "kind": kind, "msg": msg}
+        self._file.write(json.dumps(line, separators=(",", ":")) + "\n")
+        self._file.flush()
+        self.count += 1
+
+    def _on_sample(self, sample: Sample) -> None:
+        try:
+            msg: Any = json.loads(sample.payload)
+        except (ValueError, UnicodeDecodeError):
+            msg = {"raw": sample.payload.decode("utf-8", "replace")}
+        self._write(sample.key, "put" if sample.is_put else "delete", msg)
+
+    def _on_liveliness(self, sample: Sample) -> None:
+        self._write(sample.key, "alive" if sample.is_put else "gone", None)
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+
+
+def read_trace(path: str | Path) -> list[dict[str, Any]]:
+    """The lines of a trace file, parsed."""
+    with Path(path).open(encoding="utf-8") as f:
+        return [json.loads(line) for line in f if line.strip()]

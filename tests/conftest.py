@@ -1,0 +1,42 @@
+"""Shared fixtures: real Zenoh sessions on loopback, real worlds."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+import pytest
+
+from mhrc.bus import Bus
+from mhrc.episode import EpisodeConfig, serve_world
+from mhrc.protocol import EpisodeDone
+
+
+class RunningWorld:
+    def __init__(self, cfg: EpisodeConfig, task: asyncio.Task[EpisodeDone]) -> None:
+        self.cfg = cfg
+        self.task = task
+
+    async def client(self) -> Bus:
+        return await Bus.open(mode="client", connect=[self.cfg.endpoint])
+
+
+@contextlib.asynccontextmanager
+async def running_world(tmp_path: Path, **values: object) -> AsyncIterator[RunningWorld]:
+    """A world serving one episode on a free loopback port; cancelled and closed on exit."""
+    cfg = EpisodeConfig.build(trace=tmp_path / "trace.jsonl", **values).resolved()
+    task = asyncio.create_task(serve_world(cfg))
+    try:
+        yield RunningWorld(cfg, task)
+    finally:
+        if not task.done():
+            task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+
+@pytest.fixture
+def world_factory(tmp_path: Path):  # type: ignore[no-untyped-def]
+    return lambda **values: running_world(tmp_path, **values)

@@ -1,0 +1,91 @@
+"""Whole episodes: the heuristic team over real Zenoh with the real PyBullet world."""
+
+from __future__ import annotations
+
+import asyncio
+import subprocess
+import sys
+
+import pytest
+
+from mhrc.episode import ConfigError, EpisodeConfig, agent_command, serve_world, up_in_process, up_processes
+from mhrc.trace import read_trace
+
+
+async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    cfg = EpisodeConfig.build(seed=0, n_objects=4, trace=tmp_path / "trace.jsonl").resolved()
+    done = await up_in_process(cfg)
+    m = done.metrics
+    assert done.reason == "success" and m.success and m.placed == m.total == 4
+    assert 0 < m.temporal_steps < 50 and m.action_steps > 0
+
+    trace = read_trace(tmp_path / "trace.jsonl")
+    kinds = {line["key"].split("/", 2)[2] for line in trace}
+    assert {"world/event", "robot/bob/action/request", "robot/bob/action/ack", "robot/bob/action/result", "agent/bob/thought"} <= kinds
+    assert any(k.startswith("robot/alice/inbox/") for k in kinds), "Bob's request to Alice was not recorded"
+    assert trace[-1]["msg"]["kind"] == "episode_done" or any(line["msg"] and line["msg"].get("kind") == "episode_done" for line in trace)
+    results = [line["msg"] for line in trace if line["key"].endswith("/action/result")]
+    assert sum(1 for r in results if r["action"]["skill"] != "wait") == m.action_steps
+
+
+async def test_same_metrics_in_process_and_in_processes(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    a = await up_in_process(EpisodeConfig.build(seed=3, n_objects=3, trace=tmp_path / "a.jsonl").resolved())
+    b = await up_processes(EpisodeConfig.build(seed=3, n_objects=3, trace=tmp_path / "b.jsonl").resolved())
+    strip = {"wall_time"}
+    assert a.metrics.model_dump(exclude=strip) == b.metrics.model_dump(exclude=strip)
+    assert a.metrics.success
+
+
+async def test_agent_attached_from_another_process(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Alice and Bob run here; David is a separate OS process started as a user would."""
+    cfg = EpisodeConfig.build(seed=5, n_objects=3, trace=tmp_path / "t.jsonl").resolved()
+    world = asyncio.create_task(up_in_process(cfg, robots=("alice", "bob")))
+    david = subprocess.Popen(agent_command("david", cfg), stdout=subprocess.PIPE, text=True)
+    try:
+        done = await asyncio.wait_for(world, 240)
+        out, _ = await asyncio.to_thread(david.communicate, timeout=30)
+    finally:
+        if david.poll() is None:
+            david.kill()
+            david.wait()
+    assert done.metrics.success
+    assert done.metrics.action_steps_per_robot["david"] > 0
+    assert david.returncode == 0 and "success=True" in out
+
+
+@pytest.mark.parametrize(
+    "values, field",
+    [
+        ({"n_objects": 9}, "n_objects"),
+        ({"seed": -1}, "seed"),
+        ({"task": "juggle"}, "juggle"),
+        ({"run": "Bad/Id"}, "run"),
+        ({"horizon": 0}, "horizon"),
+    ],
+)
+def test_bad_config_fails_before_anything_starts(values: dict[str, object], field: str) -> None:
+    with pytest.raises(ConfigError, match=field):
+        EpisodeConfig.build(**values)
+
+
+def test_cli_names_the_bad_field() -> None:
+    out = subprocess.run([sys.executable, "-m", "mhrc", "up", "--objects", "9"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "n_objects" in out.stderr
+
+
+async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The world starts with Alice and Bob; David attaches later and is scheduled from then on."""
+    from mhrc.episode import run_agent
+
+    cfg = EpisodeConfig.build(seed=6, n_objects=3, start_timeout=1.0, trace=tmp_path / "t.jsonl").resolved()
+    world = asyncio.create_task(serve_world(cfg))
+    agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint)) for r in ("alice", "bob")]
+    await asyncio.sleep(4.0)
+    late = asyncio.create_task(run_agent("david", cfg.run, cfg.endpoint))
+    done = await asyncio.wait_for(world, 240)
+    await asyncio.gather(*agents, late, return_exceptions=True)
+    trace = read_trace(tmp_path / "t.jsonl")
+    attached = [line["msg"] for line in trace if line["msg"] and line["msg"].get("kind") == "robot_attached"]
+    david = next(a for a in attached if a["robot"] == "david")
+    assert david["tick"] > 0
+    assert done.metrics.temporal_steps > 0

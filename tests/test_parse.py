@@ -1,0 +1,39 @@
+from __future__ import annotations
+
+import pytest
+
+from mhrc.agents.parse import ReplyFormatError, parse_command
+from mhrc.protocol import Communicate, Move, Navigate, Open, Pick, Place, Wait
+
+
+@pytest.mark.parametrize(
+    "reply, action",
+    [
+        ("**Command:** navigate(table_1, stand pose 0).", Navigate(target="table_1", stand_pose=0)),
+        ("Analysis: ...\nReasoning: ...\nCommand: pick('apple')", Pick(obj="apple")),
+        ("```\nplace(apple, tray)\n```", Place(obj="apple", location="tray")),
+        ("Command: move(-0.25, 0.1)", Move(dx=-0.25, dy=0.1)),
+        ("command: open(drawer_unit).", Open(target="drawer_unit")),
+        ("Command: wait()", Wait()),
+        ("I could pick(apple) but first: **Command:** wait().", Wait()),
+        ('Command: communicate("Alice, bring me the fork, please.", alice)', Communicate(content="Alice, bring me the fork, please.", to="alice")),
+        ("Command: navigate(table 1, 2)", Navigate(target="table_1", stand_pose=2)),
+    ],
+)
+def test_replies_real_models_write(reply: str, action: object) -> None:
+    assert parse_command(reply) == action
+
+
+@pytest.mark.parametrize(
+    "reply, reason",
+    [
+        ("I think we should wait.", "no command"),
+        ("pick(apple) then place(apple, tray)", "several commands"),
+        ("Command: pick(apple", "not closed"),
+        ("Command: place(apple)", "place takes 2"),
+        ("Command: move(left, 1)", "dx must be a number"),
+    ],
+)
+def test_ambiguous_or_broken_replies_explain_themselves(reply: str, reason: str) -> None:
+    with pytest.raises(ReplyFormatError, match=reason):
+        parse_command(reply)

@@ -1,0 +1,254 @@
+"""The world service over real Zenoh on loopback with the real PyBullet world.
+
+A `ManualAgent` here speaks the protocol by hand (attach query, request, ack, result) so each
+test can send exactly the message it is about, malformed ones included.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import subprocess
+import sys
+
+import pytest
+
+from mhrc.agents.agent import RobotAgent, WorldGone
+from mhrc.agents.heuristic import heuristic_policy
+from mhrc.bus import Bus, Sample
+from mhrc.episode import EpisodeConfig, agent_command, world_command, wait_for_port
+from mhrc.keys import Keys
+from mhrc.protocol import (
+    Action,
+    ActionAck,
+    ActionRequest,
+    ActionResult,
+    AttachReply,
+    AttachRequest,
+    Communicate,
+    EpisodeDone,
+    Navigate,
+    OutcomeCode,
+    Pick,
+    Place,
+    RobotDetached,
+    Wait,
+    decode,
+    decode_event,
+    encode,
+)
+
+
+class ManualAgent:
+    def __init__(self, bus: Bus, run: str, robot: str, agent_id: str | None = None) -> None:
+        self.bus, self.robot, self.keys = bus, robot, Keys(run)
+        self.agent_id = agent_id or f"manual-{robot}"
+        self.acks: asyncio.Queue[ActionAck] = asyncio.Queue()
+        self.results: asyncio.Queue[ActionResult] = asyncio.Queue()
+        self.events: list[object] = []
+        bus.subscribe(self.keys.action_ack(robot), lambda s: self.acks.put_nowait(decode(s.payload, ActionAck)))
+        bus.subscribe(self.keys.action_result(robot), lambda s: self.results.put_nowait(decode(s.payload, ActionResult)))
+        bus.subscribe(self.keys.world_event, lambda s: self.events.append(decode_event(s.payload)))
+        self.tick = 0
+
+    async def attach(self) -> AttachReply:
+        for _ in range(100):
+            replies = await self.bus.get(self.keys.attach(self.robot), AttachRequest(robot=self.robot, agent_id=self.agent_id))
+            if replies:
+                reply = decode(replies[0], AttachReply)
+                if reply.accepted:
+                    self.bus.declare_token(self.keys.alive_robot(self.robot))
+                    self.tick = reply.tick
+                return reply
+            await asyncio.sleep(0.1)
+        raise AssertionError("the world never answered the attach query")
+
+    async def act(self, action: Action) -> tuple[ActionAck, ActionResult | None]:
+        req = ActionRequest(robot=self.robot, agent_id=self.agent_id, tick=self.tick, action=action)
+        self.bus.put(self.keys.action_request(self.robot), req)
+        ack = await asyncio.wait_for(self.acks.get(), 10)
+        assert ack.goal_id == req.goal_id
+        if not ack.accepted:
+            return ack, None
+        result = await asyncio.wait_for(self.results.get(), 60)
+        assert result.goal_id == req.goal_id
+        self.tick = result.tick + 1
+        return ack, result
+
+
+async def test_request_ack_result_and_bad_input(world_factory) -> None:  # type: ignore[no-untyped-def]
+    # one robot attached, so every tick closes on its action alone
+    async with world_factory(seed=1, start_timeout=0.5) as world:
+        bus = await world.client()
+        try:
+            alice = ManualAgent(bus, world.cfg.run, "alice")
+            reply = await alice.attach()
+            assert reply.accepted and reply.observation is not None
+            assert reply.observation.robot == "alice" and reply.horizon == 50
+            await asyncio.sleep(0.7)  # the world starts with alice alone
+
+            ack, res = await alice.act(Navigate(target="table_0", stand_pose=0))
+            assert ack.accepted and res is not None
+            assert res.outcome.succeeded, res.outcome.feedback
+            assert res.observation.tick == 1 and res.tick == 0
+
+            ack, res = await alice.act(Pick(obj="applle"))
+            assert res is not None and not res.outcome.succeeded
+            assert res.outcome.code == OutcomeCode.OBJECT_UNKNOWN and "applle" in res.outcome.feedback
+
+            ack, res = await alice.act(Navigate(target="table_0", stand_pose=99))
+            assert res is not None and res.outcome.code == OutcomeCode.STAND_POSE_INVALID
+
+            ack, res = await alice.act(Place(obj="apple", location="table_0"))
+            assert res is not None and res.outcome.code == OutcomeCode.GRIPPER_EMPTY
+
+            ack, res = await alice.act(Communicate(content="hi", to="zed"))
+            assert res is not None and res.outcome.code == OutcomeCode.RECIPIENT_UNKNOWN
+
+            # a malformed payload is rejected with a reason; the world goes on
+            request_key = Keys(world.cfg.run).action_request("alice")
+            bus.put(request_key, b'{"v": 1, "goal_id": "bad1", "robot": "alice", "tick": 0, "action": {"skill": "teleport"}}')
+            bad = await asyncio.wait_for(alice.acks.get(), 10)
+            assert bad.goal_id == "bad1" and not bad.accepted and "malformed" in bad.reason
+            bus.put(request_key, b"\x00garbage")
+            bad = await asyncio.wait_for(alice.acks.get(), 10)
+            assert not bad.accepted and "malformed" in bad.reason
+
+            # a stale tick is rejected, not executed
+            alice.tick -= 1
+            ack, res = await alice.act(Wait())
+            assert not ack.accepted and "tick" in ack.reason
+            alice.tick += 1
+            ack, res = await alice.act(Wait())
+            assert ack.accepted and res is not None and res.outcome.succeeded
+        finally:
+            await bus.close()
+
+
+async def test_capabilities_duplicates_and_messages(world_factory) -> None:  # type: ignore[no-untyped-def]
+    async with world_factory(seed=2, start_timeout=1.0) as world:
+        bus = await world.client()
+        try:
+            david = ManualAgent(bus, world.cfg.run, "david")
+            bob = ManualAgent(bus, world.cfg.run, "bob")
+            assert (await david.attach()).accepted
+            assert (await bob.attach()).accepted
+            impostor = ManualAgent(bus, world.cfg.run, "david", agent_id="impostor")
+            reply = await impostor.attach()
+            assert not reply.accepted and "already attached" in reply.reason
+
+            # both submit for tick 0: results come back together
+            (ack_d, res_d), (ack_b, res_b) = await asyncio.gather(
+                david.act(Pick(obj="apple")), bob.act(Communicate(content="David, hello.", to="david"))
+            )
+            assert res_d is not None and res_d.outcome.code == OutcomeCode.NOT_CAPABLE
+            assert "david" in res_d.outcome.feedback.lower() and "pick" in res_d.outcome.feedback
+            assert res_b is not None and res_b.outcome.succeeded
+        finally:
+            await bus.close()
+
+
+async def test_message_reaches_receiver_next_tick(world_factory) -> None:  # type: ignore[no-untyped-def]
+    async with world_factory(seed=3, start_timeout=1.0) as world:
+        bus = await world.client()
+        try:
+            alice = ManualAgent(bus, world.cfg.run, "alice")
+            bob = ManualAgent(bus, world.cfg.run, "bob")
+            await alice.attach()
+            await bob.attach()
+            (_, ra), (_, rb) = await asyncio.gather(alice.act(Wait()), bob.act(Communicate(content="Alice, go.", to="alice")))
+            assert ra is not None and [m.content for m in ra.observation.new_messages] == ["Alice, go."]
+            assert ra.observation.new_messages[0].sender == "bob" and ra.observation.new_messages[0].tick == 0
+            (_, ra), _ = await asyncio.gather(alice.act(Wait()), bob.act(Wait()))
+            assert ra is not None and ra.observation.new_messages == []
+        finally:
+            await bus.close()
+
+
+async def test_world_notices_a_dead_agent_and_goes_on(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """An agent process killed mid-episode: liveliness tells the world, which does not hang."""
+    cfg = EpisodeConfig.build(seed=0, horizon=12, trace=tmp_path / "t.jsonl").resolved()
+    world_proc = subprocess.Popen(world_command(cfg))
+    agents: list[subprocess.Popen[bytes]] = []
+    bus = None
+    try:
+        await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60, world_proc)
+        bus = await Bus.open(mode="client", connect=[cfg.endpoint])
+        events: asyncio.Queue[object] = asyncio.Queue()
+        bus.subscribe(Keys(cfg.run).world_event, lambda s: events.put_nowait(decode_event(s.payload)))
+        agents = [subprocess.Popen(agent_command(r, cfg)) for r in ("alice", "bob", "david")]
+        ticks = 0
+        while ticks < 2:  # let the episode run a little
+            ev = await asyncio.wait_for(events.get(), 90)
+            ticks += ev.kind == "tick"  # type: ignore[attr-defined]
+        agents[2].send_signal(signal.SIGKILL)
+        detached = done = None
+        while done is None:
+            ev = await asyncio.wait_for(events.get(), 90)
+            if isinstance(ev, RobotDetached):
+                detached = ev
+            if isinstance(ev, EpisodeDone):
+                done = ev
+        assert detached is not None and detached.robot == "david"
+        assert done.metrics.temporal_steps <= 12
+        assert await asyncio.to_thread(world_proc.wait, 30) == 0
+        for p in agents[:2]:
+            assert await asyncio.to_thread(p.wait, 30) == 0
+    finally:
+        if bus is not None:
+            await bus.close()
+        for p in [world_proc, *agents]:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+
+
+async def test_agent_fails_fast_when_the_world_vanishes(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    cfg = EpisodeConfig.build(seed=0, trace=tmp_path / "t.jsonl").resolved()
+    world_proc = subprocess.Popen(world_command(cfg))
+    bus = None
+    try:
+        await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60, world_proc)
+        bus = await Bus.open(mode="client", connect=[cfg.endpoint])
+        # alone, alice's first action never completes: the world waits for bob and david
+        agent = RobotAgent(bus, heuristic_policy("alice"), run=cfg.run, robot="alice")
+        task = asyncio.create_task(agent.run())
+        await asyncio.sleep(3.0)
+        assert not task.done()
+        world_proc.send_signal(signal.SIGKILL)
+        with pytest.raises(WorldGone):
+            await asyncio.wait_for(task, 10)  # the lease is 2 s: far sooner than any timeout
+    finally:
+        if bus is not None:
+            await bus.close()
+        if world_proc.poll() is None:
+            world_proc.kill()
+        world_proc.wait()
+
+
+def _stray(run: str) -> list[str]:
+    found = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                cmd = f.read().replace(b"\0", b" ").decode()
+        except OSError:
+            continue
+        if run in cmd:
+            found.append(cmd)
+    return found
+
+
+def test_processes_mode_exits_cleanly(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    run = "clean-exit-test"
+    out = subprocess.run(
+        [sys.executable, "-m", "mhrc", "up", "--processes", "--quiet", "--json", "--seed", "4", "--objects", "3",
+         "--run", run, "--trace", str(tmp_path / "t.jsonl")],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert '"success": true' in out.stdout.lower().replace('"success":true', '"success": true')
+    assert _stray(run) == []
