@@ -191,7 +191,9 @@ class AliceHeuristic(_RoleBase):
             return
         a = last.action
         if isinstance(a, Navigate) and last.outcome.succeeded:
-            self.explored.add(a.target)
+            f = _furniture(obs, a.target)
+            if f is not None and not (f.openable and not f.is_open):
+                self.explored.add(a.target)
         if isinstance(a, Open) and (last.outcome.succeeded or last.outcome.code == OutcomeCode.ALREADY_OPEN):
             self.explored.add(a.target)
         if isinstance(a, Place) and last.outcome.succeeded and a.location == HANDOVER:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import signal
 import sys
 from collections.abc import Callable, Coroutine
@@ -57,6 +58,8 @@ def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
 
 def _config(**values: Any) -> EpisodeConfig:
     values = {k: v for k, v in values.items() if v is not None}
+    if values.get("gui") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise click.UsageError("--gui needs a display (DISPLAY is not set); run without --gui, or under xvfb-run")
     try:
         return EpisodeConfig.build(**values).resolved()
     except ConfigError as exc:
@@ -92,7 +95,7 @@ def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, l
     logs.configure(log_level)
     cfg = _config(**values)
     robots = tuple(r for r in ROBOTS if r not in external)
-    console = Console(highlight=False, stderr=as_json)
+    console = Console(highlight=False, stderr=as_json, soft_wrap=True)
     printer = ProgressPrinter(console, verbose=not quiet)
     console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
     if external:
@@ -108,13 +111,17 @@ def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, l
 @_episode_options
 @click.option("--start-timeout", type=float, default=None,
               help="Start with the robots attached after this many seconds; default: wait for all three.")
-def world(log_level: str, start_timeout: float | None, **values: Any) -> None:
+@click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
+def world(log_level: str, start_timeout: float | None, quiet: bool, **values: Any) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
     from .episode import serve_world
     from .progress import ProgressPrinter
 
     logs.configure(log_level)
     cfg = _config(start_timeout=start_timeout, **values)
+    if quiet:
+        _run(lambda: serve_world(cfg))
+        return
     click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
     for r in ROBOTS:
         click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}", err=True)

@@ -22,7 +22,7 @@ from pathlib import Path
 import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .bus import Bus, endpoint, free_port
+from .bus import Bus, BusError, endpoint, free_port
 from .keys import check_id, new_run_id
 from .protocol import EpisodeDone, ProtocolError, decode
 
@@ -126,12 +126,25 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None) -
         await asyncio.to_thread(sim.close)
 
 
+async def open_client(connect: str, timeout: float) -> Bus:
+    """A client session to `connect`, retrying while the world is still starting up."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        try:
+            return await Bus.open(mode="client", connect=[connect])
+        except BusError:
+            if loop.time() >= deadline:
+                raise
+            await asyncio.sleep(0.2)
+
+
 async def run_agent(robot: str, run: str, connect: str, *, policy: object | None = None, attach_timeout: float = 30.0) -> EpisodeDone | None:
     """Attach an agent for `robot` to the world at `connect` and play until the episode ends."""
     from mhrc.agents.agent import RobotAgent
     from mhrc.agents.heuristic import heuristic_policy
 
-    bus = await Bus.open(mode="client", connect=[connect])
+    bus = await open_client(connect, attach_timeout)
     try:
         agent = RobotAgent(bus, policy or heuristic_policy(robot), run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
         return await agent.run()
@@ -152,7 +165,7 @@ async def find_run(bus: Bus, timeout: float = 2.0) -> str:
 async def attach_agent(robot: str, connect: str, run: str | None, attach_timeout: float = 30.0) -> EpisodeDone | None:
     """`mhrc agent`: find the run if not given, then play `robot` with the heuristic policy."""
     if run is None:
-        bus = await Bus.open(mode="client", connect=[connect])
+        bus = await open_client(connect, attach_timeout)
         try:
             run = await find_run(bus)
         finally:
@@ -165,7 +178,14 @@ async def up_in_process(cfg: EpisodeConfig, *, observe: EventHook | None = None,
     world = asyncio.create_task(serve_world(cfg, observe=observe), name="world")
     agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint), name=f"agent-{r}") for r in robots]
     try:
-        done = await world
+        pending = {world, *agents}
+        while world in pending:
+            finished, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
+            if world not in finished and not any(t in pending for t in agents):
+                errors = [t.exception() for t in agents if t.exception() is not None]
+                if errors:  # every agent is gone and nobody else will attach: stop the world
+                    raise errors[0]  # type: ignore[misc]
+        done = world.result()
     finally:
         for t in agents:
             if not t.done():
@@ -191,7 +211,7 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
     cmd = [
         sys.executable, "-m", "mhrc", "world",
         "--task", cfg.task, "--scene", cfg.scene, "--seed", str(cfg.seed), "--objects", str(cfg.n_objects),
-        "--horizon", str(cfg.horizon), "--run", cfg.run, "--host", cfg.host, "--port", str(cfg.port),
+        "--horizon", str(cfg.horizon), "--run", cfg.run, "--host", cfg.host, "--port", str(cfg.port), "--quiet",
     ]  # fmt: skip
     if cfg.trace is not None:
         cmd += ["--trace", str(cfg.trace)]

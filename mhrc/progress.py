@@ -28,7 +28,7 @@ class ProgressPrinter:
     """Subscribes to one run's results, messages and world events and prints them."""
 
     def __init__(self, console: Console | None = None, *, verbose: bool = True) -> None:
-        self.console = console or Console(highlight=False)
+        self.console = console or Console(highlight=False, soft_wrap=True)
         self.verbose = verbose
 
     def attach(self, bus: Bus, run: str) -> None:

@@ -1,0 +1,120 @@
+"""Occupancy grid and 8-connected A* for mobile bases (octile heuristic, no corner cutting)."""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+SQRT2 = math.sqrt(2.0)
+
+
+@dataclass
+class Grid:
+    """A boolean occupancy grid over [x0, x0 + w*res) x [y0, y0 + h*res); True = blocked."""
+
+    x0: float
+    y0: float
+    res: float
+    blocked: np.ndarray  # shape (nx, ny)
+
+    @classmethod
+    def empty(cls, xmin: float, xmax: float, ymin: float, ymax: float, res: float = 0.05) -> Grid:
+        nx, ny = int(math.ceil((xmax - xmin) / res)), int(math.ceil((ymax - ymin) / res))
+        return cls(xmin, ymin, res, np.zeros((nx, ny), dtype=bool))
+
+    def cell(self, x: float, y: float) -> tuple[int, int]:
+        return int((x - self.x0) / self.res), int((y - self.y0) / self.res)
+
+    def center(self, i: int, j: int) -> tuple[float, float]:
+        return self.x0 + (i + 0.5) * self.res, self.y0 + (j + 0.5) * self.res
+
+    def inside(self, i: int, j: int) -> bool:
+        return 0 <= i < self.blocked.shape[0] and 0 <= j < self.blocked.shape[1]
+
+    def free(self, x: float, y: float) -> bool:
+        i, j = self.cell(x, y)
+        return self.inside(i, j) and not self.blocked[i, j]
+
+    def add_box(self, cx: float, cy: float, sx: float, sy: float, yaw: float = 0.0, margin: float = 0.0) -> None:
+        """Block a (possibly rotated) rectangle of size sx x sy grown by `margin` on every side."""
+        hx, hy = sx / 2 + margin, sy / 2 + margin
+        r = math.hypot(hx, hy)
+        i0, j0 = self.cell(cx - r, cy - r)
+        i1, j1 = self.cell(cx + r, cy + r)
+        i0, j0 = max(i0, 0), max(j0, 0)
+        i1, j1 = min(i1 + 1, self.blocked.shape[0]), min(j1 + 1, self.blocked.shape[1])
+        if i0 >= i1 or j0 >= j1:
+            return
+        xs = self.x0 + (np.arange(i0, i1) + 0.5) * self.res
+        ys = self.y0 + (np.arange(j0, j1) + 0.5) * self.res
+        gx, gy = np.meshgrid(xs - cx, ys - cy, indexing="ij")
+        c, s = math.cos(yaw), math.sin(yaw)
+        lx, ly = c * gx + s * gy, -s * gx + c * gy
+        self.blocked[i0:i1, j0:j1] |= (np.abs(lx) <= hx) & (np.abs(ly) <= hy)
+
+
+def astar(grid: Grid, start: tuple[float, float], goal: tuple[float, float]) -> list[tuple[float, float]] | None:
+    """Shortest 8-connected path between two free points (cell centres, ends exact), or None."""
+    s, g = grid.cell(*start), grid.cell(*goal)
+    blocked = grid.blocked
+    if s == g:
+        return [start, goal]
+    openq: list[tuple[float, float, tuple[int, int]]] = [(0.0, 0.0, s)]
+    came: dict[tuple[int, int], tuple[int, int]] = {}
+    cost = {s: 0.0}
+    gi, gj = g
+    steps = [(1, 0, 1.0), (-1, 0, 1.0), (0, 1, 1.0), (0, -1, 1.0), (1, 1, SQRT2), (1, -1, SQRT2), (-1, 1, SQRT2), (-1, -1, SQRT2)]
+    nx, ny = blocked.shape
+    while openq:
+        _, c, cur = heapq.heappop(openq)
+        if cur == g:
+            break
+        if c > cost.get(cur, math.inf):
+            continue
+        i, j = cur
+        for di, dj, w in steps:
+            ni, nj = i + di, j + dj
+            if not (0 <= ni < nx and 0 <= nj < ny) or blocked[ni, nj]:
+                continue
+            if di and dj and (blocked[i + di, j] or blocked[i, j + dj]):
+                continue  # no corner cutting
+            nc = c + w
+            if nc < cost.get((ni, nj), math.inf):
+                cost[(ni, nj)] = nc
+                came[(ni, nj)] = cur
+                dx, dy = abs(ni - gi), abs(nj - gj)
+                h = (dx + dy) + (SQRT2 - 2) * min(dx, dy)
+                heapq.heappush(openq, (nc + h, nc, (ni, nj)))
+    if g not in came:
+        return None
+    cells = [g]
+    while cells[-1] != s:
+        cells.append(came[cells[-1]])
+    cells.reverse()
+    pts = [start] + [grid.center(*c) for c in cells[1:-1]] + [goal]
+    return smooth(grid, pts)
+
+
+def _line_free(grid: Grid, a: tuple[float, float], b: tuple[float, float]) -> bool:
+    n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / (grid.res * 0.5)) + 1)
+    return all(grid.free(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t) for t in np.linspace(0.0, 1.0, n))
+
+
+def smooth(grid: Grid, pts: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Shortcut the path greedily: keep a waypoint only where the straight line is blocked."""
+    out = [pts[0]]
+    i = 0
+    while i < len(pts) - 1:
+        j = len(pts) - 1
+        while j > i + 1 and not _line_free(grid, pts[i], pts[j]):
+            j -= 1
+        out.append(pts[j])
+        i = j
+    return out
+
+
+def path_length(pts: list[tuple[float, float]]) -> float:
+    return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(pts, pts[1:]))
