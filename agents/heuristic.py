@@ -199,9 +199,21 @@ class AliceHeuristic(_RoleBase):
         if isinstance(a, Place) and last.outcome.succeeded and a.location == HANDOVER:
             self.delivered.add(a.obj)
         if isinstance(a, Pick) and not last.outcome.succeeded:
-            self.grasp_tries[a.obj] = self.grasp_tries.get(a.obj, 0) + 1
-            if self.grasp_tries[a.obj] >= MAX_GRASP_TRIES:
-                self.given_up.add(a.obj)
+            self._count_try(a.obj)
+        if isinstance(a, Navigate) and not last.outcome.succeeded:
+            # a stand pose we cannot reach: the next fetch of an object there tries another
+            for name, idx in list(self.pose_choice.items()):
+                if idx == a.stand_pose:
+                    self.pose_choice[name] = idx + 1
+            for o in obs.objects:
+                if o.on == a.target and o.name in self.needed:
+                    self.pose_choice.setdefault(o.name, a.stand_pose + 1)
+                    self._count_try(o.name)
+
+    def _count_try(self, name: str) -> None:
+        self.grasp_tries[name] = self.grasp_tries.get(name, 0) + 1
+        if self.grasp_tries[name] >= MAX_GRASP_TRIES:
+            self.given_up.add(name)
 
     def _open_surfaces(self, obs: Observation) -> list[str]:
         return [f.name for f in obs.furniture if not f.openable and f.stand_poses and f.name != HANDOVER and f.place_pose is not None]
@@ -246,7 +258,7 @@ class AliceHeuristic(_RoleBase):
         if last is not None and isinstance(last.action, Pick) and last.action.obj == o.name and not last.outcome.succeeded:
             # another stand pose after a failure that moving cannot fix
             self.pose_choice[o.name] = (self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position)) + 1) % len(f.stand_poses)
-        idx = self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position))
+        idx = self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position)) % len(f.stand_poses)
         near = obs.status.base is not None and _dist2(o.position, (obs.status.base.x, obs.status.base.y)) <= 1.6
         moved_here = last is not None and isinstance(last.action, Move) and last.outcome.succeeded
         if not _at_stand_pose(obs, f, idx) and not (moved_here and near):

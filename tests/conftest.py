@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from mhrc.bus import Bus
-from mhrc.episode import EpisodeConfig, serve_world
+from mhrc.episode import EpisodeConfig, open_client, serve_world
 from mhrc.protocol import EpisodeDone
 
 
@@ -20,7 +20,7 @@ class RunningWorld:
         self.task = task
 
     async def client(self) -> Bus:
-        return await Bus.open(mode="client", connect=[self.cfg.endpoint])
+        return await open_client(self.cfg.endpoint, 30.0)
 
 
 @contextlib.asynccontextmanager
@@ -40,3 +40,10 @@ async def running_world(tmp_path: Path, **values: object) -> AsyncIterator[Runni
 @pytest.fixture
 def world_factory(tmp_path: Path):  # type: ignore[no-untyped-def]
     return lambda **values: running_world(tmp_path, **values)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _quiet_logs() -> None:
+    from mhrc import logs
+
+    logs.configure("info")

@@ -8,7 +8,9 @@ import sys
 
 import pytest
 
-from mhrc.episode import ConfigError, EpisodeConfig, agent_command, serve_world, up_in_process, up_processes
+from mhrc.episode import ConfigError, EpisodeConfig, agent_command, open_client, run_agent, serve_world, up_in_process, up_processes
+from mhrc.keys import Keys
+from mhrc.protocol import decode_event
 from mhrc.trace import read_trace
 
 
@@ -23,7 +25,7 @@ async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None: 
     kinds = {line["key"].split("/", 2)[2] for line in trace}
     assert {"world/event", "robot/bob/action/request", "robot/bob/action/ack", "robot/bob/action/result", "agent/bob/thought"} <= kinds
     assert any(k.startswith("robot/alice/inbox/") for k in kinds), "Bob's request to Alice was not recorded"
-    assert trace[-1]["msg"]["kind"] == "episode_done" or any(line["msg"] and line["msg"].get("kind") == "episode_done" for line in trace)
+    assert any(line["msg"] and line["msg"].get("kind") == "episode_done" for line in trace)
     results = [line["msg"] for line in trace if line["key"].endswith("/action/result")]
     assert sum(1 for r in results if r["action"]["skill"] != "wait") == m.action_steps
 
@@ -74,18 +76,25 @@ def test_cli_names_the_bad_field() -> None:
 
 
 async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    """The world starts with Alice and Bob; David attaches later and is scheduled from then on."""
-    from mhrc.episode import run_agent
-
-    cfg = EpisodeConfig.build(seed=6, n_objects=3, start_timeout=1.0, trace=tmp_path / "t.jsonl").resolved()
+    """The world starts with Alice and Bob; David attaches once ticks are running and is
+    scheduled from then on."""
+    cfg = EpisodeConfig.build(seed=6, n_objects=6, start_timeout=1.0, tick_delay=0.3, trace=tmp_path / "t.jsonl").resolved()
     world = asyncio.create_task(serve_world(cfg))
     agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint)) for r in ("alice", "bob")]
-    await asyncio.sleep(4.0)
-    late = asyncio.create_task(run_agent("david", cfg.run, cfg.endpoint))
-    done = await asyncio.wait_for(world, 240)
-    await asyncio.gather(*agents, late, return_exceptions=True)
+    observer = await open_client(cfg.endpoint, 30.0)
+    try:
+        ticks: asyncio.Queue[int] = asyncio.Queue()
+        observer.subscribe(Keys(cfg.run).world_event, lambda s: ticks.put_nowait(decode_event(s.payload).kind == "tick"))
+        while not await asyncio.wait_for(ticks.get(), 60):
+            pass
+        late = asyncio.create_task(run_agent("david", cfg.run, cfg.endpoint))
+        done = await asyncio.wait_for(world, 240)
+        await asyncio.gather(*agents, late)
+    finally:
+        await observer.close()
     trace = read_trace(tmp_path / "t.jsonl")
     attached = [line["msg"] for line in trace if line["msg"] and line["msg"].get("kind") == "robot_attached"]
-    david = next(a for a in attached if a["robot"] == "david")
-    assert david["tick"] > 0
-    assert done.metrics.temporal_steps > 0
+    assert {a["robot"]: a["tick"] for a in attached}["david"] > 0
+    david_results = [line["msg"] for line in trace if line["key"].endswith("robot/david/action/result")]
+    assert david_results and david_results[0]["tick"] == {a["robot"]: a["tick"] for a in attached}["david"]
+    assert done.metrics.action_steps_per_robot["david"] > 0

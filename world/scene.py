@@ -89,7 +89,7 @@ HOUSE = Layout(
         (5.0, 0.0, 0.1, 8.2),
         (0.5, -2.3, 0.1, 3.4),  # interior wall with a 1.2 m doorway around y = 0
         (0.5, 2.3, 0.1, 3.4),
-        (2.75, 0.0, 1.5, 0.1),  # partition between living room and study, open to the east
+        (2.2, 0.0, 1.0, 0.1),  # partition between living room and study, open to the east
     ),
     furniture=(
         FurnitureSpec(

@@ -515,7 +515,8 @@ class Sim:
             if q is not None:
                 t += float(np.max(np.abs(q - r.q))) / JOINT_SPEED
                 self._set_arm(r, q)
-        self.planner.set_box(f.name + ":drawer", self._drawer_center(f), (d.size[0] / 2, d.size[1] / 2, 0.01))
+        cx, cy, cz = self._drawer_center(f)
+        self.planner.set_box(f.name + ":drawer", (cx, cy, cz - 0.011), (d.size[0] / 2, d.size[1] / 2, 0.01))
         t += self._retract(r)
         inside = sorted(o.name for o in self.objects.values() if o.on == f.name and o.inside)
         self.known[r.name].update(inside)
