@@ -20,14 +20,14 @@ import tempfile
 import time
 from pathlib import Path
 
-from mhrc.bus import Bus
-from mhrc.episode import EpisodeConfig, serve_world, wait_for_port, world_command
+
+from mhrc.episode import EpisodeConfig, open_client, serve_world, wait_for_port, world_command
 from mhrc.keys import Keys
 from mhrc.protocol import ActionAck, ActionRequest, ActionResult, AttachReply, AttachRequest, Wait, decode
 
 
 async def _round_trips(endpoint: str, run: str, n: int) -> dict[str, float]:
-    bus = await Bus.open(mode="client", connect=[endpoint])
+    bus = await open_client(endpoint, 30.0)
     try:
         k = Keys(run)
         acks: asyncio.Queue[ActionAck] = asyncio.Queue()

@@ -50,7 +50,7 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
 KINDS = {"alice": "mobile manipulator", "bob": "tabletop manipulator", "david": "mobile robot"}
 BASE_INFLATION = 0.28  # half the chassis footprint, for the occupancy grid
 ARM_FORWARD, ARM_HEIGHT = 0.2, 0.65  # Alice's arm base on her chassis
-IDEAL_REACH = 0.5  # arm-base-to-object distance a corrective move aims for
+IDEAL_REACH = 0.6  # arm-base-to-object distance a corrective move aims for
 REACH = {"alice": 0.75, "bob": 0.62}
 NAV_SPEED, JOINT_SPEED = 0.5, 1.0  # m/s, rad/s for simulated time
 MAX_MOVE = 1.0
@@ -365,12 +365,30 @@ class Sim:
             )
         details: dict[str, float | str] = {"distance": round(err, 3), "horizontal_distance": round(dist, 3)}
         text = f"The end effector could not reach {what}: it stayed {err:.2f} m away (the arm base is {dist:.2f} m from it)."
-        if r.name == "alice" and dist > 1e-6:
-            k = (dist - IDEAL_REACH) / dist
-            dx, dy = (target[0] - ab[0]) * k, (target[1] - ab[1]) * k
+        fix = self._corrective_move(r, target) if r.name == "alice" else None
+        if fix is not None:
+            dx, dy = fix
             details.update(dx=round(dx, 3), dy=round(dy, 3))
-            text += f" Moving your base by dx={dx:.2f}, dy={dy:.2f} would bring it to a good grasping distance."
+            text += f" Moving your base by dx={dx:.2f}, dy={dy:.2f} would bring it within good grasping distance."
         return SkillOutcome.fail(OutcomeCode.TOO_FAR, text, **details)
+
+    def _corrective_move(self, r: _Robot, target: tuple[float, float, float]) -> tuple[float, float] | None:
+        """The shortest collision-free base shift (<= MAX_MOVE) putting `target` at a good grasp distance."""
+        assert r.base is not None
+        x, y, yaw = r.base
+        fx, fy = ARM_FORWARD * math.cos(yaw), ARM_FORWARD * math.sin(yaw)
+        steps = np.round(np.arange(-MAX_MOVE, MAX_MOVE + 1e-9, 0.05), 3)
+        cands = sorted(
+            ((float(dx), float(dy)) for dx in steps for dy in steps if math.hypot(dx, dy) <= MAX_MOVE),
+            key=lambda d: math.hypot(*d),
+        )
+        for dx, dy in cands:
+            if math.hypot(target[0] - (x + dx + fx), target[1] - (y + dy + fy)) > IDEAL_REACH:
+                continue
+            n = max(2, int(math.hypot(dx, dy) / 0.02) + 1)
+            if all(self.grid.free(x + dx * t, y + dy * t) for t in np.linspace(0, 1, n)[1:]):
+                return dx, dy
+        return None
 
     def _reach_and_plan(self, r: _Robot, target: tuple[float, float, float], what: str) -> tuple[list[np.ndarray] | None, SkillOutcome | None]:
         """A plan to a pose above `target`, then straight down onto it."""

@@ -1,0 +1,88 @@
+"""Scene build time and each skill's time (navigate, open, pick, place), over several seeds.
+
+Plays the team plan of tests/test_sim.py against the simulator directly (no bus) and times
+every call. Prints JSON (or writes it with --out).
+
+    python bench/bench_skills.py [--seeds 0-9] [--objects 6]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from collections import defaultdict
+from pathlib import Path
+
+from mhrc.protocol import Action, Navigate, Open, Pick, Place, SkillOutcome
+from mhrc.world.sim import Sim
+
+
+def _stats(xs: list[float]) -> dict[str, float]:
+    xs = sorted(xs)
+    return {"n": len(xs), "p50_ms": round(statistics.median(xs) * 1e3, 3), "p99_ms": round(xs[int(0.99 * (len(xs) - 1))] * 1e3, 3)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", default="0-9")
+    ap.add_argument("--objects", type=int, default=6)
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args()
+    lo, _, hi = args.seeds.partition("-")
+    times: dict[str, list[float]] = defaultdict(list)
+    failures: dict[str, int] = defaultdict(int)
+    build: list[float] = []
+    for seed in range(int(lo), int(hi or lo) + 1):
+        t0 = time.perf_counter()
+        sim = Sim(seed=seed, n_objects=args.objects)
+        build.append(time.perf_counter() - t0)
+
+        def run(robot: str, action: Action) -> SkillOutcome:
+            t = time.perf_counter()
+            out = sim.execute(robot, action)
+            times[action.skill].append(time.perf_counter() - t)
+            failures[action.skill] += not out.succeeded
+            return out
+
+        try:
+            for name in list(sim.targets):
+                obj = sim.objects[name]
+                if obj.on == "table_0" and run("bob", Pick(obj=name)).succeeded:
+                    run("bob", Place(obj=name, location="tray"))
+                    continue
+                sim.known["alice"].add(name)
+                f = sim.layout.get(obj.on or "")
+                assert f is not None
+                if f.drawer is not None and not sim.drawer_open[f.name]:
+                    run("alice", Navigate(target=f.name, stand_pose=0))
+                    run("alice", Open(target=f.name))
+                x, y, _ = sim._pos(obj)
+                idx = min(range(len(f.stand_poses)), key=lambda i: (f.stand_poses[i][0] - x) ** 2 + (f.stand_poses[i][1] - y) ** 2)
+                run("alice", Navigate(target=f.name, stand_pose=idx))
+                run("alice", Pick(obj=name))
+                run("alice", Navigate(target="table_0", stand_pose=0))
+                run("alice", Place(obj=name, location="table_0"))
+                run("bob", Pick(obj=name))
+                run("bob", Place(obj=name, location="tray"))
+        finally:
+            sim.close()
+    report = {
+        "bench": "skills",
+        "seeds": args.seeds,
+        "objects": args.objects,
+        "scene_build": _stats(build),
+        "skills": {k: _stats(v) for k, v in sorted(times.items())},
+        "failures": dict(failures),
+        "planner_note": "pick/place/open include IK, a BIT* plan (first solution), the descent and the retract plan",
+    }
+    text = json.dumps(report, indent=2)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text + "\n")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
