@@ -12,7 +12,6 @@ import asyncio
 import json
 import time
 from collections import Counter
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -391,5 +390,3 @@ def _goal_id_of(payload: bytes) -> str:
     except (ValueError, UnicodeDecodeError):
         return "unknown"
 
-
-SimFactory = Callable[[], SimLike]

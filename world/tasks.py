@@ -105,28 +105,18 @@ class PackObjects:
         rng.shuffle(inside)
         other = [(f.name, s) for f in surfaces for s in f.slots]
         other = [other[i] for i in rng.permutation(len(other))]
-        # the three kinds of work every episode needs, then the rest far away
+        # the three kinds of work every episode needs
         spots.append(("table_0", near.pop(), False))
         spots.append(("table_0", far.pop(), False))
         spots.append((drawer.name, inside.pop(), True))
-        far_away = [(name, s, False) for name, s in other]
-        extra = far_away[:1] + [("table_0", s, False) for s in far[:1]] + [(drawer.name, s, True) for s in inside[:1]]
-        extra += far_away[1:]
-        used_furniture: set[str] = set()
-        for name, s, ins in extra:
+        # the rest anywhere: table_0, the drawer, or furniture in other rooms
+        rest = [("table_0", s, False) for s in near + far] + [(drawer.name, s, True) for s in inside]
+        rest += [(name, s, False) for name, s in other]
+        for i in rng.permutation(len(rest)):
             if len(spots) >= len(kinds):
                 break
-            if name not in ("table_0", drawer.name) and name in used_furniture and len(used_furniture) < len(surfaces):
-                continue  # spread far objects over several pieces of furniture first
-            spots.append((name, s, ins))
-            used_furniture.add(name)
-        for name, s in other:
-            if len(spots) >= len(kinds):
-                break
-            if all(s != sp[1] for sp in spots):
-                spots.append((name, s, False))
+            spots.append(rest[i])
         target_idx = set(range(n_objects))
-        # distractors go last in `kinds`; put them on far furniture where possible
         return [Placement(kind, name, xy, ins, i in target_idx) for i, (kind, (name, xy, ins)) in enumerate(zip(kinds, spots))]
 
     def evaluate(self, targets: list[str], objects: list[ObjectState]) -> TaskResult:
