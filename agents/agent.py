@@ -78,25 +78,16 @@ class RobotAgent:
         self._log = log.bind(run=run, robot=robot, agent=self.agent_id)
 
     # ------------------------------------------------------------------ bus handlers
-    def _on_ack(self, sample: Sample) -> None:
+    def _resolve(self, sample: Sample, model: type[ActionAck] | type[ActionResult], waiting: dict) -> None:  # type: ignore[type-arg]
+        """Hand an ack or result to the request awaiting its goal id."""
         try:
-            ack = decode(sample.payload, ActionAck)
+            msg = decode(sample.payload, model)
         except ProtocolError as exc:
-            self._log.warning("malformed ack ignored", reason=str(exc))
+            self._log.warning("malformed message ignored", key=sample.key, reason=str(exc))
             return
-        fut = self._acks.get(ack.goal_id)
+        fut = waiting.get(msg.goal_id)
         if fut is not None and not fut.done():
-            fut.set_result(ack)
-
-    def _on_result(self, sample: Sample) -> None:
-        try:
-            result = decode(sample.payload, ActionResult)
-        except ProtocolError as exc:
-            self._log.warning("malformed result ignored", reason=str(exc))
-            return
-        fut = self._results.get(result.goal_id)
-        if fut is not None and not fut.done():
-            fut.set_result(result)
+            fut.set_result(msg)
 
     def _on_event(self, sample: Sample) -> None:
         try:
@@ -117,8 +108,8 @@ class RobotAgent:
     async def run(self) -> EpisodeDone | None:
         """Play the episode. Returns the world's final event, or None if it never came."""
         k = self.keys
-        self.bus.subscribe(k.action_ack(self.robot), self._on_ack)
-        self.bus.subscribe(k.action_result(self.robot), self._on_result)
+        self.bus.subscribe(k.action_ack(self.robot), lambda s: self._resolve(s, ActionAck, self._acks))
+        self.bus.subscribe(k.action_result(self.robot), lambda s: self._resolve(s, ActionResult, self._results))
         self.bus.subscribe(k.world_event, self._on_event)
         self.bus.watch_liveliness(k.alive_world, self._on_world_liveliness)
         obs = await self._attach()

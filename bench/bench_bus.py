@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import json
 import statistics
 import subprocess
 import sys
@@ -20,6 +19,8 @@ import tempfile
 import time
 from pathlib import Path
 
+
+from report import emit, percentile
 
 from mhrc.episode import EpisodeConfig, open_client, serve_world, wait_for_port, world_command
 from mhrc.keys import Keys
@@ -63,7 +64,7 @@ async def _round_trips(endpoint: str, run: str, n: int) -> dict[str, float]:
 
 def _stats(name: str, xs: list[float]) -> dict[str, float]:
     xs = sorted(xs)
-    return {f"{name}_p50": round(statistics.median(xs), 3), f"{name}_p99": round(xs[int(0.99 * (len(xs) - 1))], 3)}
+    return {f"{name}_p50": round(statistics.median(xs), 3), f"{name}_p99": round(percentile(xs, 0.99), 3)}
 
 
 async def in_process(n: int, tmp: Path) -> dict[str, float]:
@@ -99,11 +100,7 @@ def main() -> None:
             "in_process": asyncio.run(in_process(args.n, Path(d))),
             "cross_process": asyncio.run(cross_process(args.n, Path(d))),
         }
-    text = json.dumps(report, indent=2)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
-    print(text)
+    emit(report, args.out)
 
 
 if __name__ == "__main__":

@@ -9,11 +9,12 @@ every call. Prints JSON (or writes it with --out).
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 from collections import defaultdict
 from pathlib import Path
+
+from report import emit, percentile
 
 from mhrc.protocol import Action, Navigate, Open, Pick, Place, SkillOutcome
 from mhrc.world.sim import Sim
@@ -21,7 +22,7 @@ from mhrc.world.sim import Sim
 
 def _stats(xs: list[float]) -> dict[str, float]:
     xs = sorted(xs)
-    return {"n": len(xs), "p50_ms": round(statistics.median(xs) * 1e3, 3), "p99_ms": round(xs[int(0.99 * (len(xs) - 1))] * 1e3, 3)}
+    return {"n": len(xs), "p50_ms": round(statistics.median(xs) * 1e3, 3), "p99_ms": round(percentile(xs, 0.99) * 1e3, 3)}
 
 
 def main() -> None:
@@ -77,11 +78,7 @@ def main() -> None:
         "failures": dict(failures),
         "planner_note": "pick/place/open include IK, a BIT* plan (first solution), the descent and the retract plan",
     }
-    text = json.dumps(report, indent=2)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
-    print(text)
+    emit(report, args.out)
 
 
 if __name__ == "__main__":
