@@ -85,6 +85,9 @@ def main() -> None:
 @click.option("--quiet", "-q", is_flag=True, help="Print only the final summary.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
+@click.option("--llm", default=None, metavar="SPEC",
+              help="Drive every robot with this model (openai:gpt-4o, ollama:llama3.1:8b, vllm:M, lmstudio:M, llamacpp:M); default: the heuristic policy.")
+@click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm, e.g. http://127.0.0.1:8000/v1.")
 def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, **values: Any) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
@@ -134,14 +137,16 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, **values: An
 @click.option("--connect", required=True, help="The world's endpoint, e.g. tcp/127.0.0.1:7447.")
 @click.option("--run", default=None, help="Run id of the world; default: the only world alive at --connect.")
 @click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
+@click.option("--llm", default=None, metavar="SPEC", help="Model spec for an LLM policy; default: the heuristic policy.")
+@click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm.")
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-def agent(robot: str, connect: str, run: str | None, attach_timeout: float, log_level: str) -> None:
-    """Attach one robot's agent (heuristic policy) to a running world."""
+def agent(robot: str, connect: str, run: str | None, attach_timeout: float, llm: str | None, base_url: str | None, log_level: str) -> None:
+    """Attach one robot's agent (heuristic or LLM policy) to a running world."""
     from .episode import attach_agent
 
     logs.configure(log_level)
     try:
-        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout))
+        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, llm, base_url))
     except Exception as exc:  # typed agent errors: say what happened, exit non-zero
         raise click.ClickException(str(exc)) from None
     if done is not None:

@@ -52,6 +52,8 @@ class EpisodeConfig(BaseModel):
     gui: bool = False
     start_timeout: float | None = Field(None, gt=0)
     tick_delay: float = Field(0.0, ge=0)
+    llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
+    base_url: str | None = None
 
     @field_validator("run")
     @classmethod
@@ -72,6 +74,10 @@ class EpisodeConfig(BaseModel):
 
         try:
             check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
+            if cfg.llm is not None:
+                from mhrc.agents.llm import check_spec
+
+                check_spec(cfg.llm, cfg.base_url)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
         return cfg
@@ -139,17 +145,31 @@ async def open_client(connect: str, timeout: float) -> Bus:
             await asyncio.sleep(0.2)
 
 
-async def run_agent(robot: str, run: str, connect: str, *, policy: object | None = None, attach_timeout: float = 30.0) -> EpisodeDone | None:
-    """Attach an agent for `robot` to the world at `connect` and play until the episode ends."""
+async def run_agent(
+    robot: str, run: str, connect: str, *, llm: str | None = None, base_url: str | None = None, attach_timeout: float = 30.0
+) -> EpisodeDone | None:
+    """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
+    the heuristic policy, or with `llm` an LLMPolicy on that model spec."""
     from mhrc.agents.agent import RobotAgent
     from mhrc.agents.heuristic import heuristic_policy
 
+    client = None
+    if llm is None:
+        policy = heuristic_policy(robot)
+    else:
+        from mhrc.agents.llm import make_client
+        from mhrc.agents.llm_policy import LLMPolicy
+
+        client = make_client(llm, base_url=base_url)
+        policy = LLMPolicy(robot, client)  # type: ignore[assignment]
     bus = await open_client(connect, attach_timeout)
     try:
-        agent = RobotAgent(bus, policy or heuristic_policy(robot), run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
+        agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
         return await agent.run()
     finally:
         await bus.close()
+        if client is not None:
+            await client.aclose()
 
 
 async def find_run(bus: Bus, timeout: float = 2.0) -> str:
@@ -162,7 +182,9 @@ async def find_run(bus: Bus, timeout: float = 2.0) -> str:
     return runs[0]
 
 
-async def attach_agent(robot: str, connect: str, run: str | None, attach_timeout: float = 30.0) -> EpisodeDone | None:
+async def attach_agent(
+    robot: str, connect: str, run: str | None, attach_timeout: float = 30.0, llm: str | None = None, base_url: str | None = None
+) -> EpisodeDone | None:
     """`mhrc agent`: find the run if not given, then play `robot` with the heuristic policy."""
     if run is None:
         bus = await open_client(connect, attach_timeout)
@@ -170,13 +192,16 @@ async def attach_agent(robot: str, connect: str, run: str | None, attach_timeout
             run = await find_run(bus)
         finally:
             await bus.close()
-    return await run_agent(robot, run, connect, attach_timeout=attach_timeout)
+    return await run_agent(robot, run, connect, llm=llm, base_url=base_url, attach_timeout=attach_timeout)
 
 
 async def up_in_process(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] = ROBOTS) -> EpisodeDone:
     """World and the given robots' agents as asyncio tasks of this process."""
     world = asyncio.create_task(serve_world(cfg, observe=observe), name="world")
-    agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint), name=f"agent-{r}") for r in robots]
+    agents = [
+        asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint, llm=cfg.llm, base_url=cfg.base_url), name=f"agent-{r}")
+        for r in robots
+    ]
     try:
         pending = {world, *agents}
         while world in pending:
@@ -219,7 +244,10 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
 
 
 def agent_command(robot: str, cfg: EpisodeConfig) -> list[str]:
-    return [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
+    cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
+    if cfg.llm is not None:
+        cmd += ["--llm", cfg.llm] + (["--base-url", cfg.base_url] if cfg.base_url else [])
+    return cmd
 
 
 def wait_for_port(host: str, port: int, timeout: float, proc: subprocess.Popen[bytes] | None = None) -> None:

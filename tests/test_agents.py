@@ -17,7 +17,7 @@ async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(wo
     async with world_factory(seed=0, horizon=3, start_timeout=0.5) as world:
         bus = await world.client()
         try:
-            policy = ScriptedPolicy(["I am not sure what to do.", "**Command:** pick(ghost).", "Command: wait()"])
+            policy = ScriptedPolicy("bob", ["I am not sure what to do.", "**Command:** pick(ghost).", "Command: wait()"])
             agent = RobotAgent(bus, policy, run=world.cfg.run, robot="bob")
             done = await asyncio.wait_for(agent.run(), 60)
         finally:
@@ -36,10 +36,10 @@ async def test_a_second_agent_for_an_attached_robot_is_refused(world_factory) ->
     async with world_factory(seed=0) as world:
         first, second = await world.client(), await world.client()
         try:
-            a = asyncio.create_task(RobotAgent(first, ScriptedPolicy([]), run=world.cfg.run, robot="bob").run())
+            a = asyncio.create_task(RobotAgent(first, ScriptedPolicy("bob", []), run=world.cfg.run, robot="bob").run())
             await asyncio.sleep(1.5)
             with pytest.raises(AttachRejected, match="already attached"):
-                await RobotAgent(second, ScriptedPolicy([]), run=world.cfg.run, robot="bob").run()
+                await RobotAgent(second, ScriptedPolicy("bob", []), run=world.cfg.run, robot="bob").run()
             a.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await a
