@@ -23,6 +23,7 @@ log = structlog.get_logger("mhrc.llm")
 Messages = list[dict[str, str]]
 
 # provider -> (default base URL, environment variable holding the API key or None)
+# `replay:TRACE` is handled by mhrc.agents.replay (one client per robot)
 PROVIDERS: dict[str, tuple[str, str | None]] = {
     "openai": ("https://api.openai.com/v1", "OPENAI_API_KEY"),
     "ollama": ("http://127.0.0.1:11434/v1", None),
@@ -169,6 +170,10 @@ class ScriptedClient:
 def check_spec(spec: str, base_url: str | None = None, api_key_env: str | None = None) -> tuple[str, str, str | None]:
     """(model, base URL, API key) for a spec, or ValueError saying what is wrong."""
     provider, sep, model = spec.partition(":")
+    if provider == "replay" and model:
+        if not os.path.isfile(model):
+            raise ValueError(f"replay trace {model!r} does not exist")
+        return model, "", None
     if not sep or not model:
         raise ValueError(f"LLM spec {spec!r} must look like provider:model, e.g. openai:gpt-4o or ollama:llama3.1:8b")
     if provider not in PROVIDERS:

@@ -16,6 +16,8 @@ import click
 from . import logs
 from .episode import ROBOTS, ConfigError, EpisodeConfig
 
+ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
+
 T = TypeVar("T")
 
 
@@ -49,6 +51,8 @@ def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--trace", type=click.Path(dir_okay=False, path_type=Path), default=None,
                      help="JSONL trace of every bus message; default runs/RUN/trace.jsonl."),
         click.option("--gui", is_flag=True, help="Show the PyBullet GUI (needs a display)."),
+        click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS),
+                     help="Paper ablation: no_mobile leaves David out; no_feedback / no_history change LLM prompts."),
         click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"])),
     ]  # fmt: skip
     for opt in reversed(opts):
@@ -88,6 +92,8 @@ def main() -> None:
 @click.option("--llm", default=None, metavar="SPEC",
               help="Drive every robot with this model (openai:gpt-4o, ollama:llama3.1:8b, vllm:M, lmstudio:M, llamacpp:M); default: the heuristic policy.")
 @click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm, e.g. http://127.0.0.1:8000/v1.")
+@click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
+              help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm.")
 def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, **values: Any) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
@@ -97,7 +103,7 @@ def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, l
 
     logs.configure(log_level)
     cfg = _config(**values)
-    robots = tuple(r for r in ROBOTS if r not in external)
+    robots = tuple(r for r in cfg.robots if r not in external)
     console = Console(highlight=False, stderr=as_json, soft_wrap=True)
     printer = ProgressPrinter(console, verbose=not quiet)
     console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
@@ -139,14 +145,28 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, **values: An
 @click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
 @click.option("--llm", default=None, metavar="SPEC", help="Model spec for an LLM policy; default: the heuristic policy.")
 @click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm.")
+@click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
+@click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
+              help="Directory of your own prompt templates.")
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-def agent(robot: str, connect: str, run: str | None, attach_timeout: float, llm: str | None, base_url: str | None, log_level: str) -> None:
+def agent(
+    robot: str,
+    connect: str,
+    run: str | None,
+    attach_timeout: float,
+    llm: str | None,
+    base_url: str | None,
+    ablation: str,
+    prompts: Path | None,
+    log_level: str,
+) -> None:
     """Attach one robot's agent (heuristic or LLM policy) to a running world."""
     from .episode import attach_agent
 
     logs.configure(log_level)
     try:
-        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, llm, base_url))
+        options = EpisodeConfig(ablation=ablation, prompts=prompts).policy_options()  # type: ignore[arg-type]
+        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, llm, base_url, **options))
     except Exception as exc:  # typed agent errors: say what happened, exit non-zero
         raise click.ClickException(str(exc)) from None
     if done is not None:

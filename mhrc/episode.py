@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from typing import Any, Literal
 from pathlib import Path
 
 import structlog
@@ -53,6 +54,8 @@ class EpisodeConfig(BaseModel):
     start_timeout: float | None = Field(None, gt=0)
     tick_delay: float = Field(0.0, ge=0)
     llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
+    ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
+    prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
 
     @field_validator("run")
@@ -76,9 +79,13 @@ class EpisodeConfig(BaseModel):
             check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
             if cfg.llm is not None:
                 from mhrc.agents.llm import check_spec
+                from mhrc.agents.llm_policy import load_template
 
                 check_spec(cfg.llm, cfg.base_url)
-        except ValueError as exc:
+                for robot in cfg.robots:
+                    for part in ("system", "user"):
+                        load_template(robot, part, cfg.prompts)
+        except (ValueError, FileNotFoundError) as exc:
             raise ConfigError(str(exc)) from None
         return cfg
 
@@ -92,6 +99,20 @@ class EpisodeConfig(BaseModel):
     def endpoint(self) -> str:
         return endpoint(self.host, self.port)
 
+    @property
+    def robots(self) -> tuple[str, ...]:
+        """The robots in this episode (no_mobile leaves David out)."""
+        return tuple(r for r in ROBOTS if not (r == "david" and self.ablation == "no_mobile"))
+
+    def policy_options(self) -> dict[str, Any]:
+        """LLMPolicy switches for the ablation (the heuristic policy ignores them)."""
+        return {
+            "feedback": self.ablation != "no_feedback",
+            "history": self.ablation != "no_history",
+            "teammates_absent": tuple(r for r in ROBOTS if r not in self.robots),
+            "prompts_dir": self.prompts,
+        }
+
 
 EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
 
@@ -103,7 +124,9 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None) -
 
     from .trace import Recorder
 
-    sim = await asyncio.to_thread(Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui)
+    sim = await asyncio.to_thread(
+        Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots
+    )
     bus = None
     recorder = None
     try:
@@ -146,7 +169,14 @@ async def open_client(connect: str, timeout: float) -> Bus:
 
 
 async def run_agent(
-    robot: str, run: str, connect: str, *, llm: str | None = None, base_url: str | None = None, attach_timeout: float = 30.0
+    robot: str,
+    run: str,
+    connect: str,
+    *,
+    llm: str | None = None,
+    base_url: str | None = None,
+    attach_timeout: float = 30.0,
+    **policy_options: Any,
 ) -> EpisodeDone | None:
     """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
     the heuristic policy, or with `llm` an LLMPolicy on that model spec."""
@@ -159,9 +189,13 @@ async def run_agent(
     else:
         from mhrc.agents.llm import make_client
         from mhrc.agents.llm_policy import LLMPolicy
+        from mhrc.agents.replay import ReplayClient
 
-        client = make_client(llm, base_url=base_url)
-        policy = LLMPolicy(robot, client)  # type: ignore[assignment]
+        if llm.startswith("replay:"):
+            policy = LLMPolicy(robot, ReplayClient(llm.removeprefix("replay:"), robot), **policy_options)  # type: ignore[assignment]
+        else:
+            client = make_client(llm, base_url=base_url)
+            policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
     bus = await open_client(connect, attach_timeout)
     try:
         agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
@@ -183,7 +217,13 @@ async def find_run(bus: Bus, timeout: float = 2.0) -> str:
 
 
 async def attach_agent(
-    robot: str, connect: str, run: str | None, attach_timeout: float = 30.0, llm: str | None = None, base_url: str | None = None
+    robot: str,
+    connect: str,
+    run: str | None,
+    attach_timeout: float = 30.0,
+    llm: str | None = None,
+    base_url: str | None = None,
+    **policy_options: Any,
 ) -> EpisodeDone | None:
     """`mhrc agent`: find the run if not given, then play `robot` with the heuristic policy."""
     if run is None:
@@ -192,14 +232,17 @@ async def attach_agent(
             run = await find_run(bus)
         finally:
             await bus.close()
-    return await run_agent(robot, run, connect, llm=llm, base_url=base_url, attach_timeout=attach_timeout)
+    return await run_agent(robot, run, connect, llm=llm, base_url=base_url, attach_timeout=attach_timeout, **policy_options)
 
 
-async def up_in_process(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] = ROBOTS) -> EpisodeDone:
-    """World and the given robots' agents as asyncio tasks of this process."""
+async def up_in_process(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None) -> EpisodeDone:
+    """World and the given robots' agents (default: the episode's) as asyncio tasks of this process."""
+    robots = cfg.robots if robots is None else robots
     world = asyncio.create_task(serve_world(cfg, observe=observe), name="world")
     agents = [
-        asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint, llm=cfg.llm, base_url=cfg.base_url), name=f"agent-{r}")
+        asyncio.create_task(
+            run_agent(r, cfg.run, cfg.endpoint, llm=cfg.llm, base_url=cfg.base_url, **cfg.policy_options()), name=f"agent-{r}"
+        )
         for r in robots
     ]
     try:
@@ -237,6 +280,7 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         sys.executable, "-m", "mhrc", "world",
         "--task", cfg.task, "--scene", cfg.scene, "--seed", str(cfg.seed), "--objects", str(cfg.n_objects),
         "--horizon", str(cfg.horizon), "--run", cfg.run, "--host", cfg.host, "--port", str(cfg.port), "--quiet",
+        "--ablation", cfg.ablation,
     ]  # fmt: skip
     if cfg.trace is not None:
         cmd += ["--trace", str(cfg.trace)]
@@ -246,7 +290,8 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
 def agent_command(robot: str, cfg: EpisodeConfig) -> list[str]:
     cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
     if cfg.llm is not None:
-        cmd += ["--llm", cfg.llm] + (["--base-url", cfg.base_url] if cfg.base_url else [])
+        cmd += ["--llm", cfg.llm, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
+        cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
     return cmd
 
 
@@ -264,8 +309,9 @@ def wait_for_port(host: str, port: int, timeout: float, proc: subprocess.Popen[b
     raise TimeoutError(f"nothing listened on {host}:{port} within {timeout:.0f} s")
 
 
-async def up_processes(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] = ROBOTS) -> EpisodeDone:
+async def up_processes(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None) -> EpisodeDone:
     """The world and each agent as separate OS processes; this process only observes."""
+    robots = cfg.robots if robots is None else robots
     procs: list[subprocess.Popen[bytes]] = []
     bus = None
     try:

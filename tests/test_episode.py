@@ -98,3 +98,16 @@ async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ign
     david_results = [line["msg"] for line in trace if line["key"].endswith("robot/david/action/result")]
     assert david_results and david_results[0]["tick"] == {a["robot"]: a["tick"] for a in attached}["david"]
     assert done.metrics.action_steps_per_robot["david"] > 0
+
+
+async def test_no_mobile_ablation_runs_without_david(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    cfg = EpisodeConfig.build(seed=1, n_objects=4, ablation="no_mobile", trace=tmp_path / "t.jsonl").resolved()
+    assert cfg.robots == ("alice", "bob") and cfg.policy_options()["teammates_absent"] == ("david",)
+    world = asyncio.create_task(up_in_process(cfg))
+    try:
+        with pytest.raises(Exception, match="no robot 'david'"):
+            await run_agent("david", cfg.run, cfg.endpoint, attach_timeout=20)
+        done = await asyncio.wait_for(world, 120)
+    finally:
+        world.cancel()
+    assert done.metrics.success and set(done.metrics.action_steps_per_robot) == {"alice", "bob"}

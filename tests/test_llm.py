@@ -182,3 +182,34 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
     spans = [(who, s, e) for who, s, e in server.spans if e - s >= 0.25]
     overlapping = {a for a, s1, e1 in spans for b, s2, e2 in spans if a != b and s1 < e2 and s2 < e1}
     assert len(overlapping) == 3, spans
+
+
+async def test_replay_reproduces_a_recorded_episode_exactly(server_factory, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """An LLM episode recorded against the server, then replayed from its trace alone."""
+    from mhrc.agents.replay import ReplayClient, ReplayMismatch
+
+    def respond(body: dict[str, Any]) -> Reply:
+        system, user = body["messages"][0]["content"], body["messages"][1]["content"]
+        if system.startswith("You are Bob"):
+            return ok("Command: pick(phone)" if "Gripper: empty" in user else "Command: place(phone, tray)")
+        if system.startswith("You are Alice"):
+            return ok("Analysis: look around.\nCommand: navigate(drawer_unit, 0)" if "drawer_unit" not in user.split("actions so far")[-1] else "Command: open(drawer_unit)")
+        return ok("Command: navigate(sofa, 0)" if "sofa" not in user.split("actions so far")[-1] else "I should wait maybe?")
+
+    server = server_factory(respond)
+    recorded = EpisodeConfig.build(seed=0, horizon=5, llm="openai:m", base_url=server.url, trace=tmp_path / "rec.jsonl").resolved()
+    first = await up_in_process(recorded)
+    replayed = EpisodeConfig.build(seed=0, horizon=5, llm=f"replay:{recorded.trace}", trace=tmp_path / "rep.jsonl").resolved()
+    second = await up_in_process(replayed)
+    calls = len(server.requests)
+
+    def actions(path: Any) -> list[tuple[str, int, str]]:
+        return sorted((l["msg"]["robot"], l["msg"]["tick"], l["msg"]["action"]["skill"]) for l in read_trace(path) if l["key"].endswith("/action/result"))
+
+    assert first.metrics.model_dump(exclude={"wall_time"}) == second.metrics.model_dump(exclude={"wall_time"})
+    assert actions(recorded.trace) == actions(replayed.trace)
+    assert first.metrics.action_steps > 5 and len(server.requests) == calls  # the replay asked the server nothing
+
+    client = ReplayClient(recorded.trace, "bob")
+    with pytest.raises(ReplayMismatch, match="differs"):
+        await client.complete([{"role": "system", "content": "another prompt"}])

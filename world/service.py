@@ -114,8 +114,7 @@ class WorldService:
         """Serve the episode; returns its final event (also published on world/event)."""
         k = self.keys
         self.bus.serve(k.world_state, self._on_state_query)
-        for robot in self.sim.robots:
-            self.bus.serve(k.attach(robot), self._on_attach)
+        self.bus.serve(f"{k.base}/robot/*/attach", self._on_attach)
         self.bus.subscribe(k.any_action_request, self._on_request)
         self.bus.watch_liveliness(k.alive_any_robot, self._on_liveliness)
         self.bus.declare_token(k.alive_world)
@@ -291,6 +290,8 @@ class WorldService:
             return AttachReply(robot=robot, accepted=False, reason=f"malformed attach request: {exc}")
         if req.robot != robot:
             return AttachReply(robot=robot, accepted=False, reason=f"attach for {req.robot!r} sent on the key of {robot!r}")
+        if robot not in self.sim.robots:
+            return AttachReply(robot=robot, accepted=False, reason=f"there is no robot {robot!r} in this episode ({', '.join(self.sim.robots)})")
         if self.done is not None:
             return AttachReply(robot=robot, accepted=False, reason="the episode is over")
         holder = self.attached.get(robot)

@@ -100,10 +100,20 @@ class _Robot:
 class Sim:
     """The PyBullet world of one episode (p.DIRECT unless gui=True)."""
 
-    robots: tuple[str, ...] = ROBOTS
-
-    def __init__(self, *, task: str = "pack_objects", scene: str = "house", seed: int = 0, n_objects: int = 4, gui: bool = False) -> None:
+    def __init__(
+        self,
+        *,
+        task: str = "pack_objects",
+        scene: str = "house",
+        seed: int = 0,
+        n_objects: int = 4,
+        gui: bool = False,
+        robots: tuple[str, ...] = ROBOTS,
+    ) -> None:
         check_episode(task=task, scene=scene, n_objects=n_objects)
+        if not {"alice", "bob"} <= set(robots) or not set(robots) <= set(ROBOTS):
+            raise ValueError(f"robots must include alice and bob and come from {', '.join(ROBOTS)}, not {robots}")
+        self.robots = tuple(r for r in ROBOTS if r in robots)
         self.task_id, self.scene_id, self.seed, self.n_objects = task, scene, seed, n_objects
         self.task = get_task(task)
         self.layout = get_layout(scene)
@@ -112,7 +122,7 @@ class Sim:
         self.drawer_open: dict[str, float] = {}
         self.drawer_bodies: dict[str, int] = {}
         self.objects: dict[str, _Object] = {}
-        self.known: dict[str, set[str]] = {r: set() for r in ROBOTS}
+        self.known: dict[str, set[str]] = {r: set() for r in self.robots}
         self.robots_state: dict[str, _Robot] = {}
         self._build()
 
@@ -157,13 +167,15 @@ class Sim:
         alice = _Robot("alice", lay.starts["alice"])
         alice.body = self._box((0, 0, ARM_HEIGHT / 2), (0.3, 0.25, ARM_HEIGHT / 2), (0.6, 0.2, 0.6, 1))
         alice.arm = p.loadURDF(panda, (0, 0, ARM_HEIGHT), useFixedBase=True, physicsClientId=self.cid)
-        david = _Robot("david", lay.starts["david"])
-        david.body = p.loadURDF("r2d2.urdf", (0, 0, 0.47), globalScaling=0.8, physicsClientId=self.cid)
-        self.robots_state = {"alice": alice, "bob": bob, "david": david}
+        self.robots_state = {"alice": alice, "bob": bob}
+        if "david" in self.robots:
+            david = _Robot("david", lay.starts["david"])
+            david.body = p.loadURDF("r2d2.urdf", (0, 0, 0.47), globalScaling=0.8, physicsClientId=self.cid)
+            self.robots_state["david"] = david
+            self._set_base(david, david.base)  # type: ignore[arg-type]
         for r in (alice, bob):
             self._set_arm(r, r.q)
-        for r in (alice, david):
-            self._set_base(r, r.base)  # type: ignore[arg-type]
+        self._set_base(alice, alice.base)  # type: ignore[arg-type]
         # objects
         self.targets: list[str] = []
         for pl in self.task.generate(lay, self.seed, self.n_objects):
@@ -276,7 +288,7 @@ class Sim:
 
     # ------------------------------------------------------------------ public API
     def capabilities(self, robot: str) -> frozenset[str]:
-        return frozenset(CAPABILITIES.get(robot, ()))
+        return frozenset(CAPABILITIES[robot]) if robot in self.robots else frozenset()
 
     def execute(self, robot: str, action: Action) -> SkillOutcome:
         if robot not in self.robots_state:
@@ -602,7 +614,7 @@ class Sim:
             task_detail=self.task.detail(self.targets) if is_bob else helper,
             targets=list(self.targets) if is_bob else [],
             task_status=self.task.status(self.targets, list(self.objects.values())) if is_bob else None,  # type: ignore[arg-type]
-            teammates={o: list(CAPABILITIES[o]) for o in ROBOTS if o != robot},
+            teammates={o: list(CAPABILITIES[o]) for o in self.robots if o != robot},
         )
 
     def evaluate(self) -> TaskResult:
