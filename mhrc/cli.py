@@ -175,6 +175,32 @@ def agent(
 
 
 @main.command()
+def scenes() -> None:
+    """List the scene layouts."""
+    from mhrc.world.scene import LAYOUTS
+
+    for layout in LAYOUTS.values():
+        names = ", ".join(f.name for f in layout.furniture)
+        click.echo(f"{layout.name}: {layout.description}\n  furniture: {names}")
+
+
+@main.command()
+@click.option("--scene", default="house", show_default=True, help="Scene layout (see `mhrc scenes`).")
+@click.option("--seed", default=0, show_default=True, type=int, help="Episode whose objects are shown.")
+@click.option("--objects", "n_objects", default=6, show_default=True, type=int)
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("renders"), show_default=True)
+def render(scene: str, seed: int, n_objects: int, out: Path) -> None:
+    """Write top-down and perspective PNGs of a scene (CPU renderer, no display needed)."""
+    from mhrc.world.render import render_scene
+
+    try:
+        for path in render_scene(scene, out, seed=seed, n_objects=n_objects):
+            click.echo(str(path))
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+@main.command()
 @click.option("--host", default="127.0.0.1", show_default=True)
 @click.option("--port", default=7447, show_default=True, type=int)
 def router(host: str, port: int) -> None:
