@@ -206,10 +206,17 @@ async def run_agent(
             await client.aclose()
 
 
-async def find_run(bus: Bus, timeout: float = 2.0) -> str:
-    """The run id of the only world alive on this bus (raises if there is none or several)."""
-    alive = await bus.alive("mhrc/*/alive/world", timeout=timeout)
-    runs = sorted({key.split("/")[1] for key in alive})
+async def find_run(bus: Bus, timeout: float = 5.0) -> str:
+    """The run id of the only world alive on this bus (raises if there is none or several).
+
+    Asks again for a while: a freshly connected session may not see the tokens at once."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        runs = sorted({key.split("/")[1] for key in await bus.alive("mhrc/*/alive/world", timeout=1.0)})
+        if runs or loop.time() >= deadline:
+            break
+        await asyncio.sleep(0.3)
     if len(runs) != 1:
         found = ", ".join(runs) if runs else "none"
         raise ConfigError(f"pass --run: expected exactly one world on the bus, found {found}")

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from mhrc.episode import ConfigError, EpisodeConfig, agent_command, open_client, run_agent, serve_world, up_in_process, up_processes
+from mhrc.episode import ConfigError, EpisodeConfig, open_client, run_agent, serve_world, up_in_process, up_processes
 from mhrc.keys import Keys
 from mhrc.protocol import decode_event
 from mhrc.trace import read_trace
@@ -42,7 +42,9 @@ async def test_agent_attached_from_another_process(tmp_path) -> None:  # type: i
     """Alice and Bob run here; David is a separate OS process started as a user would."""
     cfg = EpisodeConfig.build(seed=5, n_objects=3, trace=tmp_path / "t.jsonl").resolved()
     world = asyncio.create_task(up_in_process(cfg, robots=("alice", "bob")))
-    david = subprocess.Popen(agent_command("david", cfg), stdout=subprocess.PIPE, text=True)
+    # as a user would type it, without --run: the agent finds the only world on the bus
+    cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", "david", "--connect", cfg.endpoint]
+    david = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     try:
         done = await asyncio.wait_for(world, 240)
         out, _ = await asyncio.to_thread(david.communicate, timeout=30)
