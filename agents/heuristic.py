@@ -146,7 +146,6 @@ class AliceHeuristic(_RoleBase):
     grasp_tries: dict[str, int] = field(default_factory=dict)
     given_up: set[str] = field(default_factory=set)
     pose_choice: dict[str, int] = field(default_factory=dict)  # object -> stand pose to use
-    told_bob: bool = False
 
     async def decide(self, obs: Observation) -> Decision:
         self._read_messages(obs)

@@ -40,7 +40,7 @@ def main() -> None:
         sim = Sim(seed=seed, n_objects=args.objects)
         build.append(time.perf_counter() - t0)
 
-        def run(robot: str, action: Action) -> SkillOutcome:
+        def run(robot: str, action: Action, sim: Sim = sim) -> SkillOutcome:
             t = time.perf_counter()
             out = sim.execute(robot, action)
             times[action.skill].append(time.perf_counter() - t)

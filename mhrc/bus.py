@@ -156,7 +156,7 @@ class Bus:
 
         async def answer(query: zenoh.Query) -> None:
             try:
-                params = dict(query.parameters) if query.parameters is not None else {}
+                params = dict(query.parameters) if query.parameters is not None else {}  # type: ignore[call-overload]
                 payload = query.payload.to_bytes() if query.payload is not None else b""
                 reply = await handler(str(query.key_expr), params, payload)
                 if reply is not None:
@@ -188,7 +188,7 @@ class Bus:
             for reply in replies:
                 if reply.ok is not None:
                     out.append(reply.ok.payload.to_bytes())
-                else:
+                elif reply.err is not None:
                     log.debug("query error reply", selector=selector, error=reply.err.payload.to_string())
             return out
 

@@ -343,7 +343,8 @@ async def up_processes(cfg: EpisodeConfig, *, observe: EventHook | None = None, 
         for r in robots:
             procs.append(subprocess.Popen(agent_command(r, cfg), env=_child_env()))
         waiter = asyncio.create_task(asyncio.to_thread(world.wait))
-        finished, _ = await asyncio.wait({done_fut, waiter}, return_when=asyncio.FIRST_COMPLETED)
+        watched: set[asyncio.Future[Any]] = {done_fut, waiter}
+        finished, _ = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
         if done_fut not in finished:
             raise RuntimeError(f"the world process exited with code {world.returncode} before the episode ended")
         done = done_fut.result()

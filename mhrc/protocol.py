@@ -27,7 +27,7 @@ class _Model(BaseModel):
 class Message(_Model):
     """Base of every top-level bus payload: carries the protocol version."""
 
-    v: Literal[1] = PROTOCOL_VERSION
+    v: Literal[1] = 1  # PROTOCOL_VERSION
 
 
 # --------------------------------------------------------------------------- actions
@@ -142,11 +142,11 @@ class SkillOutcome(_Model):
     sim_time: float = Field(0.0, ge=0.0, description="simulated seconds the skill took")
 
     @classmethod
-    def ok(cls, feedback: str, sim_time: float = 0.0, **details: float | str) -> SkillOutcome:
+    def ok(cls, feedback: str, *, sim_time: float = 0.0, **details: Any) -> SkillOutcome:
         return cls(succeeded=True, code=OutcomeCode.OK, feedback=feedback, details=details, sim_time=sim_time)
 
     @classmethod
-    def fail(cls, code: OutcomeCode, feedback: str, sim_time: float = 0.0, **details: float | str) -> SkillOutcome:
+    def fail(cls, code: OutcomeCode, feedback: str, *, sim_time: float = 0.0, **details: Any) -> SkillOutcome:
         return cls(succeeded=False, code=code, feedback=feedback, details=details, sim_time=sim_time)
 
 

@@ -17,7 +17,7 @@ import pytest
 
 from mhrc.agents.agent import RobotAgent, WorldGone
 from mhrc.agents.heuristic import heuristic_policy
-from mhrc.bus import Bus, Sample
+from mhrc.bus import Bus
 from mhrc.episode import EpisodeConfig, agent_command, world_command, wait_for_port
 from mhrc.keys import Keys
 from mhrc.protocol import (
@@ -37,7 +37,6 @@ from mhrc.protocol import (
     Wait,
     decode,
     decode_event,
-    encode,
 )
 
 

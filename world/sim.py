@@ -179,19 +179,19 @@ class Sim:
         # objects
         self.targets: list[str] = []
         for pl in self.task.generate(lay, self.seed, self.n_objects):
-            f = lay.get(pl.furniture)
-            assert f is not None
+            home = lay.get(pl.furniture)
+            assert home is not None
             body = self._object_body(pl.kind)
-            obj = _Object(pl.kind.name, pl.kind, body, f.name, pl.inside, pl.target)
+            obj = _Object(pl.kind.name, pl.kind, body, home.name, pl.inside, pl.target)
             if pl.inside:
                 obj.drawer_offset = pl.xy
             self.objects[obj.name] = obj
             if pl.target:
                 self.targets.append(obj.name)
             if pl.inside:
-                self._sync_drawer(f)
+                self._sync_drawer(home)
             else:
-                self._rest(obj, pl.xy[0], pl.xy[1], f.top)
+                self._rest(obj, pl.xy[0], pl.xy[1], home.top)
         self.known["bob"] = set()
 
     def _object_body(self, k: ObjectKind) -> int:
@@ -382,7 +382,7 @@ class Sim:
             dx, dy = fix
             details.update(dx=round(dx, 3), dy=round(dy, 3))
             text += f" Moving your base by dx={dx:.2f}, dy={dy:.2f} would bring it within good grasping distance."
-        return SkillOutcome.fail(OutcomeCode.TOO_FAR, text, **details)
+        return SkillOutcome(succeeded=False, code=OutcomeCode.TOO_FAR, feedback=text, details=details)
 
     def _corrective_move(self, r: _Robot, target: tuple[float, float, float]) -> tuple[float, float] | None:
         """The shortest collision-free base shift (<= MAX_MOVE) putting `target` at a good grasp distance."""
@@ -532,7 +532,8 @@ class Sim:
         path, failure = self._reach_and_plan(r, handle, f"the handle of {f.name}")
         if failure is not None:
             if failure.code == OutcomeCode.TOO_FAR:
-                return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, f"The handle of {f.name} is out of your reach: " + failure.feedback, **failure.details)
+                text = f"The handle of {f.name} is out of your reach: " + failure.feedback
+                return failure.model_copy(update={"code": OutcomeCode.OUT_OF_REACH, "feedback": text})
             return failure
         assert path is not None
         t = self._run_path(r, path)

@@ -117,7 +117,7 @@ class PackObjects:
                 break
             spots.append(rest[i])
         target_idx = set(range(n_objects))
-        return [Placement(kind, name, xy, ins, i in target_idx) for i, (kind, (name, xy, ins)) in enumerate(zip(kinds, spots))]
+        return [Placement(kind, name, xy, ins, i in target_idx) for i, (kind, (name, xy, ins)) in enumerate(zip(kinds, spots, strict=True))]
 
     def evaluate(self, targets: list[str], objects: list[ObjectState]) -> TaskResult:
         in_tray = {o.name for o in objects if o.on == "tray"}
