@@ -92,6 +92,7 @@ def main() -> None:
 @click.option("--llm", default=None, metavar="SPEC",
               help="Drive every robot with this model (openai:gpt-4o, ollama:llama3.1:8b, vllm:M, lmstudio:M, llamacpp:M); default: the heuristic policy.")
 @click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm, e.g. http://127.0.0.1:8000/v1.")
+@click.option("--llm-timeout", default=60.0, show_default=True, type=float, help="Seconds per LLM request before it is retried.")
 @click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
               help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm.")
 def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, **values: Any) -> None:
@@ -145,6 +146,7 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, **values: An
 @click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
 @click.option("--llm", default=None, metavar="SPEC", help="Model spec for an LLM policy; default: the heuristic policy.")
 @click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm.")
+@click.option("--llm-timeout", default=60.0, show_default=True, type=float, help="Seconds per LLM request before it is retried.")
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
 @click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
               help="Directory of your own prompt templates.")
@@ -156,6 +158,7 @@ def agent(
     attach_timeout: float,
     llm: str | None,
     base_url: str | None,
+    llm_timeout: float,
     ablation: str,
     prompts: Path | None,
     log_level: str,
@@ -166,7 +169,7 @@ def agent(
     logs.configure(log_level)
     try:
         options = EpisodeConfig(ablation=ablation, prompts=prompts).policy_options()  # type: ignore[arg-type]
-        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, llm, base_url, **options))
+        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, llm, base_url, llm_timeout, **options))
     except Exception as exc:  # typed agent errors: say what happened, exit non-zero
         raise click.ClickException(str(exc)) from None
     if done is not None:

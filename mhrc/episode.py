@@ -57,6 +57,7 @@ class EpisodeConfig(BaseModel):
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
+    llm_timeout: float = Field(60.0, gt=0, description="seconds per LLM request before it is retried")
 
     @field_validator("run")
     @classmethod
@@ -175,6 +176,7 @@ async def run_agent(
     *,
     llm: str | None = None,
     base_url: str | None = None,
+    llm_timeout: float = 60.0,
     attach_timeout: float = 30.0,
     **policy_options: Any,
 ) -> EpisodeDone | None:
@@ -194,7 +196,7 @@ async def run_agent(
         if llm.startswith("replay:"):
             policy = LLMPolicy(robot, ReplayClient(llm.removeprefix("replay:"), robot), **policy_options)  # type: ignore[assignment]
         else:
-            client = make_client(llm, base_url=base_url)
+            client = make_client(llm, base_url=base_url, timeout=llm_timeout)
             policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
     bus = await open_client(connect, attach_timeout)
     try:
@@ -230,6 +232,7 @@ async def attach_agent(
     attach_timeout: float = 30.0,
     llm: str | None = None,
     base_url: str | None = None,
+    llm_timeout: float = 60.0,
     **policy_options: Any,
 ) -> EpisodeDone | None:
     """`mhrc agent`: find the run if not given, then play `robot` with the heuristic policy."""
@@ -239,7 +242,9 @@ async def attach_agent(
             run = await find_run(bus)
         finally:
             await bus.close()
-    return await run_agent(robot, run, connect, llm=llm, base_url=base_url, attach_timeout=attach_timeout, **policy_options)
+    return await run_agent(
+        robot, run, connect, llm=llm, base_url=base_url, llm_timeout=llm_timeout, attach_timeout=attach_timeout, **policy_options
+    )
 
 
 async def up_in_process(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None) -> EpisodeDone:
@@ -248,7 +253,8 @@ async def up_in_process(cfg: EpisodeConfig, *, observe: EventHook | None = None,
     world = asyncio.create_task(serve_world(cfg, observe=observe), name="world")
     agents = [
         asyncio.create_task(
-            run_agent(r, cfg.run, cfg.endpoint, llm=cfg.llm, base_url=cfg.base_url, **cfg.policy_options()), name=f"agent-{r}"
+            run_agent(r, cfg.run, cfg.endpoint, llm=cfg.llm, base_url=cfg.base_url, llm_timeout=cfg.llm_timeout, **cfg.policy_options()),
+            name=f"agent-{r}",
         )
         for r in robots
     ]
@@ -299,6 +305,7 @@ def agent_command(robot: str, cfg: EpisodeConfig) -> list[str]:
     if cfg.llm is not None:
         cmd += ["--llm", cfg.llm, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
         cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
+        cmd += ["--llm-timeout", str(cfg.llm_timeout)]
     return cmd
 
 

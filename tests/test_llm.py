@@ -154,7 +154,11 @@ def test_specs_are_checked_before_any_request(monkeypatch: pytest.MonkeyPatch) -
 async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning(server_factory, tmp_path) -> None:  # type: ignore[no-untyped-def]
     """Three LLM agents against one scripted server: malformed replies, a 500 and a 429 along
     the way; the episode runs to its horizon, and the robots' calls overlap in time."""
-    hiccups = {"bob": [(500, {}, b"boom", 0.0), (200, {}, b"not json at all", 0.0)], "alice": [(429, {"Retry-After": "0"}, b"", 0.0)]}
+    hiccups = {
+        "bob": [(500, {}, b"boom", 0.0), (200, {}, b"not json at all", 0.0)],
+        "alice": [(429, {"Retry-After": "0"}, b"", 0.0)],
+        "david": [ok("Command: wait()")[:3] + (3.0,)],  # beyond the request timeout: retried
+    }
     replies = {"bob": ["I am thinking about the tray.", "Command: pick(ghost)"], "alice": [], "david": ["Command: navigate(table_1, 0)"]}
     lock = threading.Lock()
 
@@ -167,7 +171,9 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
         return ok(text)[:3] + (0.3,)
 
     server = server_factory(respond)
-    cfg = EpisodeConfig.build(seed=0, horizon=4, llm="openai:test-model", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
+    cfg = EpisodeConfig.build(
+        seed=0, horizon=4, llm="openai:test-model", base_url=server.url, llm_timeout=1.0, trace=tmp_path / "t.jsonl"
+    ).resolved()
     done = await up_in_process(cfg)
     assert done.reason == "horizon" and done.metrics.temporal_steps == 4
     assert done.metrics.failed_actions.get("pick") == 1  # pick(ghost) reached the world and failed there
@@ -178,8 +184,12 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
     assert "could not be executed" in bob[1]["prompt"]  # the format error came back as feedback
     assert all(t["policy"] == "llm:test-model" and t["prompt"] and t["prompt_tokens"] > 0 for t in thoughts)
 
+    for robot, extra in (("David", 1), ("Bob", 2), ("Alice", 1)):  # each hiccup cost one retried request
+        sent = sum(1 for body, _ in server.requests if body["messages"][0]["content"].startswith(f"You are {robot}"))
+        assert sent == sum(1 for t in thoughts if t["robot"] == robot.lower()) + extra
+
     # planning overlapped: some call of each robot ran while another robot's call was in flight
-    spans = [(who, s, e) for who, s, e in server.spans if e - s >= 0.25]
+    spans = [(who, s, e) for who, s, e in server.spans if 0.25 <= e - s < 1.0]
     overlapping = {a for a, s1, e1 in spans for b, s2, e2 in spans if a != b and s1 < e2 and s2 < e1}
     assert len(overlapping) == 3, spans
 
