@@ -1,19 +1,23 @@
 """LLM clients: OpenAI-compatible chat completions over httpx, and a scripted stand-in.
 
-A model spec names the provider and model: `openai:gpt-4o`, `ollama:llama3.1:8b`,
-`vllm:MODEL`, `lmstudio:MODEL`, `llamacpp:MODEL`, or `openai:MODEL` with `base_url` pointing at
-any OpenAI-compatible server. Transient failures (429, 5xx, timeouts, refused connections,
-unreadable bodies) are retried with exponential backoff, honouring Retry-After; then LLMError.
+A model spec names the provider and the model: `openai:gpt-4o`, `ollama:llama3.1:8b`,
+`vllm:MODEL`, `lmstudio:MODEL`, `llamacpp:MODEL`. With an explicit `base_url` the request goes
+to that server, and a spec without a known provider is the model name itself (`qwen2.5:7b`). The API
+key comes from the provider's variable (OPENAI_API_KEY for openai), from `api_key_env` if
+given, else from MHRC_API_KEY. Transient failures (429, 5xx, timeouts, refused connections,
+unreadable bodies) are retried with exponential backoff, honouring Retry-After, a bounded
+number of times; then LLMError.
 """
 
 from __future__ import annotations
 
 import asyncio
+import email.utils
 import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol, Self
 
 import httpx
 import structlog
@@ -22,8 +26,8 @@ log = structlog.get_logger("mhrc.llm")
 
 Messages = list[dict[str, str]]
 
-# provider -> (default base URL, environment variable holding the API key or None)
-# `replay:TRACE` is handled by mhrc.agents.replay (one client per robot)
+# provider -> (default base URL, environment variable holding the API key, or None)
+# `replay:TRACE` is not a provider: mhrc.agents.replay builds one client per robot from a trace.
 PROVIDERS: dict[str, tuple[str, str | None]] = {
     "openai": ("https://api.openai.com/v1", "OPENAI_API_KEY"),
     "ollama": ("http://127.0.0.1:11434/v1", None),
@@ -32,10 +36,15 @@ PROVIDERS: dict[str, tuple[str, str | None]] = {
     "llamacpp": ("http://127.0.0.1:8080/v1", None),
 }
 GENERIC_KEY_ENV = "MHRC_API_KEY"
+DEFAULT_TEMPERATURE = 0.5  # the paper's
 
 
 class LLMError(RuntimeError):
-    """The model could not be reached or answered unusably, after retries."""
+    """The model could not be reached, or answered unusably, after the retries."""
+
+
+class LLMSpecError(ValueError):
+    """A model spec that names no usable server (unknown provider, missing API key)."""
 
 
 @dataclass(frozen=True)
@@ -43,13 +52,15 @@ class Completion:
     text: str
     prompt_tokens: int
     completion_tokens: int
-    latency: float
+    latency: float  # seconds, the successful attempt only
 
 
 class LLMClient(Protocol):
+    """Anything that answers a chat: the policies need nothing more."""
+
     model: str
 
-    async def complete(self, messages: Messages, *, temperature: float) -> Completion: ...
+    async def complete(self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE) -> Completion: ...
 
 
 def estimate_tokens(text: str) -> int:
@@ -57,8 +68,13 @@ def estimate_tokens(text: str) -> int:
     return max(1, len(text) // 4)
 
 
+def prompt_text(messages: Messages) -> str:
+    """The messages' contents as one text: what a Thought records and a replay compares."""
+    return "\n\n".join(m.get("content", "") for m in messages)
+
+
 class OpenAIChatClient:
-    """POST {base_url}/chat/completions, with retries and a concurrency limit."""
+    """POST {base_url}/chat/completions, with retries, a per-request timeout and a concurrency limit."""
 
     RETRY_STATUS = frozenset({408, 409, 425, 429, 500, 502, 503, 504})
 
@@ -71,60 +87,99 @@ class OpenAIChatClient:
         timeout: float = 60.0,
         retries: int = 4,
         backoff: float = 0.5,
-        max_backoff: float = 20.0,
-        max_concurrency: int = 8,
+        max_backoff: float = 30.0,
+        max_concurrency: int = 4,
+        max_tokens: int | None = None,
+        extra_body: dict[str, Any] | None = None,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
+        if retries < 0 or timeout <= 0 or max_concurrency < 1:
+            raise ValueError("need retries >= 0, timeout > 0 and max_concurrency >= 1")
         self.model = model
         self.base_url = base_url.rstrip("/")
+        self.timeout = timeout
         self.retries = retries
         self.backoff = backoff
         self.max_backoff = max_backoff
+        self.max_tokens = max_tokens
+        self.extra_body = dict(extra_body or {})
         headers = {"Authorization": f"Bearer {api_key}"} if api_key else {}
         self._http = httpx.AsyncClient(timeout=timeout, headers=headers, transport=transport)
         self._limit = asyncio.Semaphore(max_concurrency)
-        self.calls = 0
+        self.requests = 0  # HTTP attempts, retries included
+        self.prompt_tokens = 0  # totals over successful calls
+        self.completion_tokens = 0
 
     async def aclose(self) -> None:
         await self._http.aclose()
 
-    async def complete(self, messages: Messages, *, temperature: float = 0.5) -> Completion:
-        body = {"model": self.model, "messages": messages, "temperature": temperature}
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.aclose()
+
+    def body(self, messages: Messages, temperature: float) -> dict[str, Any]:
+        body: dict[str, Any] = {"model": self.model, "messages": messages, "temperature": temperature}
+        if self.max_tokens is not None:
+            body["max_tokens"] = self.max_tokens
+        return body | self.extra_body
+
+    async def complete(self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE) -> Completion:
         url = f"{self.base_url}/chat/completions"
+        body = self.body(messages, temperature)
         last = ""
         for attempt in range(self.retries + 1):
             delay = min(self.max_backoff, self.backoff * 2**attempt)
-            t0 = time.perf_counter()
             try:
-                async with self._limit:
-                    self.calls += 1
-                    resp = await self._http.post(url, json=body)
+                async with self._limit:  # the timeout starts once a slot is free
+                    self.requests += 1
+                    t0 = time.perf_counter()
+                    async with asyncio.timeout(self.timeout):  # whole request, however the bytes trickle
+                        resp = await self._http.post(url, json=body)
+                    latency = time.perf_counter() - t0
                 if resp.status_code in self.RETRY_STATUS:
                     last = f"HTTP {resp.status_code}: {resp.text[:200]}"
-                    delay = _retry_after(resp, delay, self.max_backoff)
+                    delay = retry_after(resp, delay, self.max_backoff)
                 elif resp.status_code >= 400:
-                    raise LLMError(f"{url} answered HTTP {resp.status_code}: {resp.text[:300]}")
+                    raise LLMError(f"{url} answered HTTP {resp.status_code} (not retried): {resp.text[:300]}")
                 else:
-                    return _completion(resp, messages, time.perf_counter() - t0)
-            except (httpx.TimeoutException, httpx.TransportError) as exc:
+                    c = _completion(resp, messages, latency)
+                    self.prompt_tokens += c.prompt_tokens
+                    self.completion_tokens += c.completion_tokens
+                    return c
+            except TimeoutError:
+                last = f"no answer within {self.timeout:g} s"
+            except httpx.TimeoutException as exc:
+                last = f"{type(exc).__name__}: no answer within {self.timeout:g} s"
+            except httpx.TransportError as exc:
                 last = f"{type(exc).__name__}: {exc}"
             except _Unreadable as exc:
                 last = str(exc)
             if attempt < self.retries:
-                log.info("llm call failed, retrying", model=self.model, attempt=attempt + 1, error=last, delay=delay)
+                log.warning("llm call failed, retrying", model=self.model, attempt=attempt + 1, error=last, delay=delay)
                 await asyncio.sleep(delay)
         raise LLMError(f"{self.model} at {self.base_url} failed after {self.retries + 1} attempts: {last}")
 
 
 class _Unreadable(ValueError):
-    pass
+    """A 200 answer without a usable completion in it."""
 
 
-def _retry_after(resp: httpx.Response, default: float, cap: float) -> float:
-    try:
-        return min(cap, max(0.0, float(resp.headers.get("retry-after", default))))
-    except ValueError:
+def retry_after(resp: httpx.Response, default: float, cap: float) -> float:
+    """Seconds to wait as the server's Retry-After says (seconds or HTTP date), else `default`."""
+    value = resp.headers.get("retry-after")
+    if value is None:
         return default
+    try:
+        seconds = float(value)
+    except ValueError:
+        try:
+            when = email.utils.parsedate_to_datetime(value)
+        except (TypeError, ValueError):
+            return default
+        seconds = when.timestamp() - time.time()
+    return min(cap, max(0.0, seconds))
 
 
 def _completion(resp: httpx.Response, messages: Messages, latency: float) -> Completion:
@@ -132,62 +187,88 @@ def _completion(resp: httpx.Response, messages: Messages, latency: float) -> Com
         data = resp.json()
         text = data["choices"][0]["message"]["content"]
         if not isinstance(text, str):
-            raise TypeError("content is not text")
+            raise TypeError("message content is not text")
     except (ValueError, KeyError, IndexError, TypeError) as exc:
-        raise _Unreadable(f"unreadable completion body ({exc}): {resp.text[:200]}") from None
+        raise _Unreadable(f"unreadable completion body ({type(exc).__name__}: {exc}): {resp.text[:200]}") from None
     usage = data.get("usage") or {}
-    prompt_chars = "".join(m.get("content", "") for m in messages)
     return Completion(
         text=text,
-        prompt_tokens=int(usage.get("prompt_tokens") or estimate_tokens(prompt_chars)),
+        prompt_tokens=int(usage.get("prompt_tokens") or estimate_tokens(prompt_text(messages))),
         completion_tokens=int(usage.get("completion_tokens") or estimate_tokens(text)),
         latency=latency,
     )
 
 
+Reply = str | BaseException
+
+
 class ScriptedClient:
-    """Replies from a list (or a function of the messages), optionally after a fixed delay."""
+    """Answers from a list (then `Command: wait()`), or from a function of the messages.
 
-    def __init__(self, replies: Sequence[str] | Callable[[Messages], str], *, latency: float = 0.0, model: str = "scripted") -> None:
+    A reply that is an exception is raised instead (e.g. an LLMError, to test a model that is down).
+    `latency` sleeps that long per call, to exercise concurrency. The prompts it was given are kept.
+    """
+
+    EXHAUSTED = "Command: wait()"
+
+    def __init__(
+        self, replies: Sequence[Reply] | Callable[[Messages], Reply], *, latency: float = 0.0, model: str = "scripted"
+    ) -> None:
         self.model = model
-        self._replies = replies if callable(replies) else list(replies)
+        self._replies: list[Reply] | Callable[[Messages], Reply] = replies if callable(replies) else list(replies)
         self.latency = latency
-        self.calls = 0
+        self.prompts: list[Messages] = []
 
-    async def complete(self, messages: Messages, *, temperature: float = 0.5) -> Completion:
+    @property
+    def calls(self) -> int:
+        return len(self.prompts)
+
+    async def complete(self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE) -> Completion:
+        self.prompts.append([dict(m) for m in messages])
         t0 = time.perf_counter()
-        self.calls += 1
         if self.latency:
             await asyncio.sleep(self.latency)
         if callable(self._replies):
-            text = self._replies(messages)
+            reply = self._replies(messages)
         else:
-            text = self._replies.pop(0) if self._replies else "Command: wait()"
-        prompt = "".join(m["content"] for m in messages)
-        return Completion(text, estimate_tokens(prompt), estimate_tokens(text), time.perf_counter() - t0)
+            reply = self._replies.pop(0) if self._replies else self.EXHAUSTED
+        if isinstance(reply, BaseException):
+            raise reply
+        return Completion(reply, estimate_tokens(prompt_text(messages)), estimate_tokens(reply), time.perf_counter() - t0)
 
 
 def check_spec(spec: str, base_url: str | None = None, api_key_env: str | None = None) -> tuple[str, str, str | None]:
-    """(model, base URL, API key) for a spec, or ValueError saying what is wrong."""
+    """(model, base URL, API key) for a spec, or LLMSpecError (a ValueError) saying what to fix."""
     provider, sep, model = spec.partition(":")
-    if provider == "replay" and model:
-        if not os.path.isfile(model):
-            raise ValueError(f"replay trace {model!r} does not exist")
+    if provider == "replay":
+        if not model or not os.path.isfile(model):
+            raise LLMSpecError(f"replay trace {model!r} (from LLM spec {spec!r}) does not exist")
         return model, "", None
-    if not sep or not model:
-        raise ValueError(f"LLM spec {spec!r} must look like provider:model, e.g. openai:gpt-4o or ollama:llama3.1:8b")
     if provider not in PROVIDERS:
-        raise ValueError(f"unknown LLM provider {provider!r} in {spec!r}; known: {', '.join(PROVIDERS)}")
-    default_url, key_env = PROVIDERS[provider]
+        if base_url is None:
+            hint = f"known providers: {', '.join(PROVIDERS)}; or pass a base URL for any OpenAI-compatible server"
+            if not sep:
+                raise LLMSpecError(f"LLM spec {spec!r} must look like provider:model, e.g. openai:gpt-4o; {hint}")
+            raise LLMSpecError(f"unknown LLM provider {provider!r} in LLM spec {spec!r}; {hint}")
+        provider, model = "", spec  # with a base URL, a spec without a known provider is the model name
+    if not model:
+        raise LLMSpecError(f"LLM spec {spec!r} names no model, e.g. {provider or 'openai'}:gpt-4o")
+    default_url, key_env = PROVIDERS.get(provider, ("", None))
     key_env = api_key_env or key_env
-    api_key = os.environ.get(key_env) if key_env else None
-    api_key = api_key or os.environ.get(GENERIC_KEY_ENV)
+    api_key = (os.environ.get(key_env) if key_env else None) or os.environ.get(GENERIC_KEY_ENV)
     if provider == "openai" and base_url is None and not api_key:
-        raise ValueError(f"{spec}: set {key_env} (or {GENERIC_KEY_ENV}) to your API key, or pass --base-url for another server")
+        raise LLMSpecError(
+            f"LLM spec {spec!r}: set {key_env} (or {GENERIC_KEY_ENV}) to your API key, or pass a base URL for another server"
+        )
     return model, base_url or default_url, api_key
 
 
-def make_client(spec: str, *, base_url: str | None = None, api_key_env: str | None = None, **options: object) -> OpenAIChatClient:
-    """An OpenAI-compatible client for `provider:model`; fails before any request if unusable."""
+def make_client(spec: str, base_url: str | None = None, *, api_key_env: str | None = None, **options: Any) -> OpenAIChatClient:
+    """An OpenAI-compatible client for a model spec; raises LLMSpecError before any request if unusable.
+
+    `options` go to OpenAIChatClient: timeout, retries, backoff, max_concurrency, max_tokens, extra_body.
+    """
     model, url, api_key = check_spec(spec, base_url, api_key_env)
-    return OpenAIChatClient(model, url, api_key=api_key, **options)  # type: ignore[arg-type]
+    if spec.startswith("replay:"):
+        raise LLMSpecError(f"{spec!r} is a recorded trace: use mhrc.agents.replay.replay_clients for it")
+    return OpenAIChatClient(model, url, api_key=api_key, **options)

@@ -1,59 +1,119 @@
 """The paper's planner: render the role's prompts from the robot's own observation and memory,
 ask the model, parse exactly one command.
 
-An unparseable reply or a model that stays down after retries never crashes the agent: the
-robot waits that step, and the reason becomes feedback in its next prompt.
+An unparseable reply, or a model that stays down after its retries, never crashes the agent:
+the robot waits that step and the reason becomes feedback in its next prompt.
+
+Templates are `string.Template` files `<robot>_system.txt` and `<robot>_user.txt`, from the
+package `mhrc.prompts` or from a directory of your own (`prompts_dir`). Placeholders:
+
+system  $robot      the robot's name, capitalized (Alice)
+        $teammates  one line per teammate present: name and skill signatures
+        $absent     a note naming the teammates left out of this episode, or nothing
+        $skills     one line per skill of this robot: signature and what it does
+user    $step       the current step (tick)
+        $scene_graph  furniture (position, yaw, open/closed, stand poses, place pose) and known objects
+        $status     base pose and where the robot stands, arm base and reach, gripper
+        $task       brief and detailed task (Bob: the object list)
+        $progress   the latest task progress status (Bob's; a placeholder for the others)
+        $feedback, $messages, $actions
+                    each history as a titled section, older entries first and the newest tagged
+                    "(latest)"; empty where an ablation removes it
+
+An unknown placeholder in a template is an error at load time, not a silent "$name" in a prompt.
 """
 
 from __future__ import annotations
 
+import re
 from importlib import resources
 from pathlib import Path
 from string import Template
 
+import structlog
+
 from mhrc.protocol import ActionResult, Observation, Wait
 
 from . import observation as describe
-from .llm import LLMClient, LLMError, Messages
-from .memory import Memory
-from .parse import ReplyFormatError, parse_command
+from .llm import DEFAULT_TEMPERATURE, LLMClient, LLMError, Messages, prompt_text
+from .memory import HISTORIES, TITLES, Memory
+from .parse import SIGNATURES, ReplyFormatError, parse_command
 from .policy import Decision
+from .replay import LLM_ERROR_PREFIX
 
-SIGNATURES = {
-    "navigate": "navigate(furniture, stand_pose_id): drive to that stand pose of the furniture",
-    "move": "move(dx, dy): shift your base by dx, dy metres (world frame), at most 1 m",
-    "open": "open(furniture): open a closed drawer or door you stand at",
-    "pick": "pick(object): grasp an object within reach with the suction cup",
-    "place": "place(object, location): put the held object on a furniture surface or in the tray",
-    "communicate": "communicate(content, robot): send a message to a teammate",
-    "wait": "wait(): do nothing this step",
+log = structlog.get_logger("mhrc.llm_policy")
+
+MEANINGS = {
+    "navigate": "drive your base to that stand pose (numbered from 0) of a piece of furniture",
+    "move": "shift your base by dx, dy metres along the world x and y axes (small corrections, at most 1 m)",
+    "open": "open the closed drawer or door of the furniture you stand at",
+    "pick": "grasp an object within your arm's reach with the suction cup",
+    "place": "put the object you hold on a furniture surface (e.g. table_0) or in the tray",
+    "communicate": "send the message content to a teammate, named in lower case (alice, bob, david)",
+    "wait": "do nothing this step",
 }
+PLACEHOLDERS = {
+    "system": frozenset({"robot", "teammates", "absent", "skills"}),
+    "user": frozenset({"step", "scene_graph", "status", "task", "progress", *HISTORIES}),
+}
+DEFAULT_CAP_CHARS = 12_000  # ~3,000 tokens: fits a 4k-context local model with room for the reply
+FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. End your reply with one line: Command: skill(arguments)."
+MODEL_DOWN = "Your planner could not reach its model ({reason}), so you waited."
 
 
-def load_template(robot: str, part: str, prompts_dir: Path | None = None) -> Template:
-    """`<robot>_<part>.txt` from `prompts_dir`, else from the package's prompts."""
+class TemplateError(ValueError):
+    """A prompt template that is missing or uses a placeholder mhrc does not fill."""
+
+
+def load_template(robot: str, part: str, prompts_dir: str | Path | None = None) -> Template:
+    """`<robot>_<part>.txt` from `prompts_dir`, else from the package's prompts; placeholders checked."""
     name = f"{robot}_{part}.txt"
     if prompts_dir is not None:
         path = Path(prompts_dir) / name
         if not path.is_file():
-            raise FileNotFoundError(f"prompt template {path} is missing (expected {name} in {prompts_dir})")
-        return Template(path.read_text(encoding="utf-8"))
-    return Template(resources.files("mhrc.prompts").joinpath(name).read_text(encoding="utf-8"))
+            raise TemplateError(f"prompt template {path} is missing (expected {name} in {prompts_dir})")
+        text, where = path.read_text(encoding="utf-8"), str(path)
+    else:
+        res = resources.files("mhrc.prompts").joinpath(name)
+        if not res.is_file():
+            raise TemplateError(f"no built-in prompt template {name}: robots with prompts are alice, bob, david")
+        text, where = res.read_text(encoding="utf-8"), f"mhrc.prompts/{name}"
+    template = Template(text)
+    if not template.is_valid():
+        raise TemplateError(f"{where}: a '$' that starts no placeholder; write '$$' for a dollar sign")
+    unknown = set(template.get_identifiers()) - PLACEHOLDERS[part]
+    if unknown:
+        raise TemplateError(
+            f"{where}: unknown placeholder(s) {', '.join(sorted('$' + u for u in unknown))}; "
+            f"{part} templates may use {', '.join(sorted('$' + p for p in PLACEHOLDERS[part]))}"
+        )
+    return template
+
+
+def _tidy(text: str) -> str:
+    """No runs of blank lines where an ablation emptied a section."""
+    return re.sub(r"\n{3,}", "\n\n", text).strip() + "\n"
 
 
 class LLMPolicy:
-    """One robot's LLM planner. Switches: feedback=False and history=False are the paper's ablations."""
+    """One robot's LLM planner.
+
+    Ablations: feedback=False leaves all feedback out; history=False leaves the histories out and
+    keeps only the current observation: what arrived with it this step (the last action's
+    feedback, the messages delivered now). teammates_absent names robots not in this episode.
+    prompt_cap_chars bounds the whole prompt (system + user); None means no cap.
+    """
 
     def __init__(
         self,
         robot: str,
         client: LLMClient,
         *,
-        prompts_dir: Path | None = None,
-        temperature: float = 0.5,
+        prompts_dir: str | Path | None = None,
+        temperature: float = DEFAULT_TEMPERATURE,
         feedback: bool = True,
         history: bool = True,
-        prompt_cap_chars: int | None = 6000,
+        prompt_cap_chars: int | None = DEFAULT_CAP_CHARS,
         teammates_absent: tuple[str, ...] = (),
     ) -> None:
         self.robot = robot
@@ -62,53 +122,104 @@ class LLMPolicy:
         self.temperature = temperature
         self.feedback = feedback
         self.history = history
-        self.absent = teammates_absent
-        self.memory = Memory(cap_chars=prompt_cap_chars)
+        self.cap = prompt_cap_chars
+        self.absent = tuple(teammates_absent)
+        self.memory = Memory()
         self.system_t = load_template(robot, "system", prompts_dir)
         self.user_t = load_template(robot, "user", prompts_dir)
+        self._pending: tuple[int, str] | None = None  # (tick, why this step's reply gave no action)
+        self._log = log.bind(robot=robot, model=client.model)
+
+    # ------------------------------------------------------------------ rendering
+    def _histories(self, obs: Observation, budget: int | None) -> dict[str, str]:
+        sections = dict.fromkeys(HISTORIES, "")
+        if self.history:
+            shown = HISTORIES if self.feedback else ("messages", "actions")
+            return sections | self.memory.render(shown, budget)
+        # only what arrived with the current observation
+        if self.feedback:
+            sections["feedback"] = self._latest_feedback()
+        lines = [f"- (latest) from {m.sender.capitalize()}: {m.content}" for m in obs.new_messages]
+        sections["messages"] = f"{TITLES['messages']}:\n" + ("\n".join(lines) or "- (none this step)")
+        return sections
+
+    def _latest_feedback(self) -> str:
+        latest = self.memory.latest("feedback")
+        acted = self.memory.actions[-1].step if self.memory.actions else None
+        latest = [e for e in latest if e.step == acted]  # older feedback is history
+        return f"{TITLES['feedback']}:\n" + ("\n".join(e.line(latest=True) for e in latest) or "- (none yet)")
 
     def render(self, obs: Observation) -> Messages:
-        teammates = {k: v for k, v in obs.teammates.items() if k not in self.absent}
-        team = "\n".join(f"- {n}: {', '.join(s)}" for n, s in teammates.items()) or "- nobody"
-        absent = "".join(f"{a.capitalize()} is not part of the team in this episode.\n" for a in self.absent)
-        system = self.system_t.safe_substitute(
-            teammates=team, absent=absent, skills="\n".join(f"- {SIGNATURES[s]}" for s in obs.status.skills if s in SIGNATURES)
+        """The system and user messages for this observation and the memory so far."""
+        system = self.system_t.substitute(
+            robot=self.robot.capitalize(),
+            teammates=describe.teammates(obs, self.absent),
+            absent=self._absent_note(),
+            skills="\n".join(f"- {SIGNATURES[s]}: {MEANINGS[s]}" for s in obs.status.skills if s in SIGNATURES),
         )
-        off = "(not available)"
-        user = self.user_t.safe_substitute(
-            scene_graph=describe.scene_graph(obs),
-            status=describe.robot_status(obs),
-            task=describe.task_text(obs),
-            feedback=self.memory.render("feedback") if self.feedback and self.history else (self._last_feedback() if self.feedback else off),
-            messages=self.memory.render("messages") if self.history else self._latest_messages(obs),
-            actions=self.memory.render("actions") if self.history else off,
+        fields = {
+            "step": str(obs.tick),
+            "scene_graph": describe.scene_graph(obs),
+            "status": describe.robot_status(obs),
+            "task": describe.task_text(obs),
+            "progress": describe.progress_text(obs),
+        }
+        budget = None
+        if self.cap is not None and self.history:
+            fixed = len(system) + 2 + len(self.user_t.substitute(fields | dict.fromkeys(HISTORIES, "")))
+            budget = max(0, self.cap - fixed)
+        user = self.user_t.substitute(fields | self._histories(obs, budget))
+        return [{"role": "system", "content": _tidy(system)}, {"role": "user", "content": _tidy(user)}]
+
+    def _absent_note(self) -> str:
+        if not self.absent:
+            return ""
+        names = " and ".join(a.capitalize() for a in self.absent)
+        verb = "is" if len(self.absent) == 1 else "are"
+        return (
+            f"{names} {verb} not part of the team in this episode: nobody else will do {names}'s part, "
+            "so ignore what this prompt says about working with them and take over their part yourself where you can."
         )
-        return [{"role": "system", "content": system}, {"role": "user", "content": user}]
 
-    def _last_feedback(self) -> str:
-        return f"- {self.memory.feedback[-1]} (latest)" if self.memory.feedback else "(none yet)"
-
-    @staticmethod
-    def _latest_messages(obs: Observation) -> str:
-        return "\n".join(f"- from {m.sender}: {m.content} (latest)" for m in obs.new_messages) or "(none new)"
-
+    # ------------------------------------------------------------------ deciding
     async def decide(self, obs: Observation) -> Decision:
-        self.memory.messages += [f"from {m.sender} at step {m.tick}: {m.content}" for m in obs.new_messages]
+        self._flush_pending()
+        for m in obs.new_messages:
+            self.memory.add("messages", m.tick, f"from {m.sender.capitalize()}: {m.content}", tag=f"from {m.sender}")
         messages = self.render(obs)
-        prompt = "\n\n".join(m["content"] for m in messages)
+        prompt = prompt_text(messages)
         try:
             c = await self.client.complete(messages, temperature=self.temperature)
         except LLMError as exc:
-            self.memory.feedback.append(f"Your planner could not reach its model ({exc}); you waited.")
-            return Decision(action=Wait(), prompt=prompt, parse_error=f"llm error: {exc}")
+            self._log.warning("model unavailable, waiting", tick=obs.tick, error=str(exc))
+            self._pending = (obs.tick, MODEL_DOWN.format(reason=exc))
+            return Decision(action=Wait(), prompt=prompt, parse_error=f"{LLM_ERROR_PREFIX}{exc}")
         try:
             action = parse_command(c.text)
             error = None
         except ReplyFormatError as exc:
+            self._log.info("unparseable reply, waiting", tick=obs.tick, reason=str(exc))
             action, error = Wait(), str(exc)
-            self.memory.feedback.append(f"Your last reply could not be executed ({exc}); you waited instead.")
+            self._pending = (obs.tick, FORMAT_ERROR.format(reason=exc))
         return Decision(action, prompt, c.text, error, c.prompt_tokens, c.completion_tokens, c.latency)
 
+    def _flush_pending(self) -> None:
+        """A format or model error whose result never came back still becomes feedback."""
+        if self._pending is not None:
+            tick, text = self._pending
+            self.memory.add("feedback", tick, text, tag="failed")
+            self._pending = None
+
     def record(self, result: ActionResult) -> None:
-        self.memory.actions.append(f"step {result.tick}: {result.action.call()}")
-        self.memory.feedback.append(f"step {result.tick}: {result.action.call()} -> {result.outcome.feedback}")
+        """The result of the action this policy chose last: into the feedback and action histories."""
+        call = result.action.call()
+        self.memory.add("actions", result.tick, call, tag=result.action.skill)
+        if self._pending is not None and self._pending[0] == result.tick:
+            self._flush_pending()  # the reason for the wait, not "You waited."
+            return
+        self._flush_pending()
+        ok = result.outcome.succeeded
+        if ok and result.action.skill == "wait":
+            return  # nothing learned; Bob's task status is in his observation
+        verdict = "succeeded" if ok else "FAILED"
+        self.memory.add("feedback", result.tick, f"{call} {verdict}: {result.outcome.feedback}", tag="succeeded" if ok else "failed")

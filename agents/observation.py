@@ -1,62 +1,129 @@
-"""The description function: one robot's own observation as text for its prompt.
+"""The description function: one robot's own Observation as the text sections of its prompt.
 
-It reads nothing but the robot's `Observation`, so a prompt can never leak what the robot
-has not seen.
+It reads nothing but that robot's `Observation`, so a prompt never shows what the robot has
+not seen or been told. Every number is rounded to centimetres and whole degrees, so the
+text (and a replayed prompt) is stable across platforms.
 """
 
 from __future__ import annotations
 
 import math
 
-from mhrc.protocol import Observation
+from mhrc.protocol import FurnitureView, ObjectView, Observation, Pose2D
+
+from .parse import SIGNATURES
+
+AT_POSE_TOL = 0.05  # metres: the base counts as standing at a stand pose within this
 
 
 def _xyz(p: tuple[float, float, float]) -> str:
     return f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f})"
 
 
+def _deg(rad: float) -> str:
+    d = round(math.degrees(rad))
+    return f"{0 if d == 0 else d} deg"  # no "-0 deg"
+
+
+def _pose(s: Pose2D) -> str:
+    return f"({s.x:.2f}, {s.y:.2f}), yaw {_deg(s.yaw)}"
+
+
+def _flat(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    return math.hypot(a[0] - b[0], a[1] - b[1])
+
+
+def furniture_line(f: FurnitureView, navigates: bool = True) -> str:
+    """`- name (kind): position, yaw; state; stand poses (for robots that navigate); place pose`."""
+    parts = [f"position {_xyz(f.position)}, yaw {_deg(f.yaw)}"]
+    if f.openable:
+        parts.append("open" if f.is_open else "closed (open it to see inside)")
+    if navigates and f.stand_poses:
+        poses = ", ".join(f"{i} = ({s.x:.2f}, {s.y:.2f}, yaw {_deg(s.yaw)})" for i, s in enumerate(f.stand_poses))
+        parts.append(f"stand poses {poses}")
+    elif navigates:
+        parts.append("no stand pose (not a navigation target)")
+    if f.place_pose is not None:
+        parts.append(f"place pose {_xyz(f.place_pose)}")
+    return f"- {f.name} ({f.kind}): " + "; ".join(parts)
+
+
+def object_line(o: ObjectView, obs: Observation) -> str:
+    """`- name: where it lies, position, distance from the robot (and reach, for an arm)`."""
+    if o.held_by:
+        where = "in your gripper" if o.held_by == obs.robot else f"held by {o.held_by}"
+    elif o.on:
+        where = f"inside {o.on}" if o.inside else ("in the tray" if o.on == "tray" else f"on {o.on}")
+    else:
+        where = "on the floor"
+    text = f"- {o.name}: {where}, at {_xyz(o.position)}"
+    if o.held_by:
+        return text
+    s = obs.status
+    if s.arm_base is not None and s.reach is not None:
+        d = _flat(o.position, s.arm_base)
+        reach = "within your reach" if d <= s.reach else "out of your reach"
+        text += f", {d:.2f} m from your arm base ({reach})"
+    elif s.base is not None:
+        text += f", {_flat(o.position, (s.base.x, s.base.y)):.2f} m from you"
+    return text
+
+
 def scene_graph(obs: Observation) -> str:
-    lines = []
-    for f in obs.furniture:
-        parts = [f"position {_xyz(f.position)}", f"yaw {math.degrees(f.yaw):.0f} deg"]
-        if f.openable:
-            parts.append("state open" if f.is_open else "state closed")
-        if f.stand_poses:
-            poses = ", ".join(f"{i}: ({s.x:.2f}, {s.y:.2f}, yaw {math.degrees(s.yaw):.0f} deg)" for i, s in enumerate(f.stand_poses))
-            parts.append(f"stand poses [{poses}]")
-        if f.place_pose:
-            parts.append(f"place pose {_xyz(f.place_pose)}")
-        lines.append(f"- {f.name} ({f.kind}): " + "; ".join(parts))
+    """Furniture (always known), then the objects this robot knows of."""
+    navigates = "navigate" in obs.status.skills
+    lines = ["Furniture:"] + [furniture_line(f, navigates) for f in obs.furniture]
     if obs.objects:
         lines.append("Objects you know of:")
-        for o in obs.objects:
-            where = f"held by {o.held_by}" if o.held_by else (f"inside {o.on}" if o.inside else f"on {o.on}" if o.on else "on the floor")
-            lines.append(f"- {o.name}: position {_xyz(o.position)}, {where}")
+        lines += [object_line(o, obs) for o in obs.objects]
     else:
         lines.append("Objects you know of: none yet.")
     return "\n".join(lines)
 
 
+def standing_at(obs: Observation) -> str | None:
+    """`stand pose i of name` when the base stands on one, else None."""
+    b = obs.status.base
+    if b is None:
+        return None
+    for f in obs.furniture:
+        for i, s in enumerate(f.stand_poses):
+            if math.hypot(b.x - s.x, b.y - s.y) <= AT_POSE_TOL:
+                return f"stand pose {i} of {f.name}"
+    return None
+
+
 def robot_status(obs: Observation) -> str:
+    """Pose, where the robot stands, arm and gripper."""
     s = obs.status
-    parts = [f"You are {s.name}, a {s.kind}."]
+    lines = [f"You are {s.name.capitalize()}, a {s.kind}. Current step: {obs.tick}."]
     if s.base is not None:
-        parts.append(f"Base pose: ({s.base.x:.2f}, {s.base.y:.2f}), yaw {math.degrees(s.base.yaw):.0f} deg.")
-    if s.arm_base is not None:
-        parts.append(f"Arm base at {_xyz(s.arm_base)}, reach about {s.reach:.2f} m.")
+        at = standing_at(obs)
+        lines.append(f"Base pose: {_pose(s.base)}" + (f", at {at}." if at else ", not at any stand pose."))
+    else:
+        lines.append("Your base is fixed: you cannot move.")
+    if s.arm_base is not None and s.reach is not None:
+        lines.append(f"Arm base: {_xyz(s.arm_base)}; reach about {s.reach:.2f} m from it.")
     if "pick" in s.skills:
-        parts.append(f"Gripper: holding {s.holding}." if s.holding else "Gripper: empty.")
-    return " ".join(parts)
-
-
-def task_text(obs: Observation) -> str:
-    lines = [f"Task: {obs.task_brief}", f"Details: {obs.task_detail}"]
-    if obs.targets:
-        lines.append(f"Object list: {', '.join(obs.targets)}.")
-    if obs.task_status:
-        lines.append(f"Latest task progress: {obs.task_status}")
+        lines.append(f"Gripper: holding {s.holding}." if s.holding else "Gripper: empty.")
     return "\n".join(lines)
 
 
-def teammates(obs: Observation) -> str:
-    return "\n".join(f"- {name}: {', '.join(skills)}" for name, skills in obs.teammates.items()) or "- nobody"
+def task_text(obs: Observation) -> str:
+    """Brief and detailed task; Bob's object list."""
+    lines = [f"Task: {obs.task_brief}", f"Details: {obs.task_detail}"]
+    if obs.targets:
+        lines.append(f"Object list: {', '.join(obs.targets)}.")
+    return "\n".join(lines)
+
+
+def progress_text(obs: Observation) -> str:
+    """The latest task progress status (Bob's), or a placeholder for robots without one."""
+    return obs.task_status or "(no progress report for you)"
+
+
+def teammates(obs: Observation, absent: tuple[str, ...] = ()) -> str:
+    """`- Name: signature, signature` for every teammate present in this episode."""
+    present = {n: s for n, s in obs.teammates.items() if n not in absent}
+    lines = [f"- {n.capitalize()}: {', '.join(SIGNATURES.get(k, k) for k in s)}" for n, s in present.items()]
+    return "\n".join(lines) or "- nobody: you are on your own"

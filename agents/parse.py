@@ -13,7 +13,23 @@ import re
 from mhrc.protocol import Action, Communicate, Move, Navigate, Open, Pick, Place, Wait
 
 SKILL_CALL = re.compile(r"\b(navigate|move|open|pick|place|communicate|wait)\s*\(", re.IGNORECASE)
-LABEL = re.compile(r"command\s*[:*]*\s*", re.IGNORECASE)
+LABEL = re.compile(r"\bcommand\s*\**\s*:\s*\**\s*", re.IGNORECASE)  # "Command:", "**Command:**"
+LOOSE_LABEL = re.compile(r"command\s*[:*]*\s*", re.IGNORECASE)  # "Command pick(x)", for want of a colon
+KEYWORD = re.compile(
+    r"^(?:furniture|target|obj|object|stand_pose_id|stand_pose|location|dx|dy|content|message|robot|to)\s*=\s*",
+    re.IGNORECASE,
+)
+
+# Each skill's call form, exactly as parse_command accepts it (the prompts quote these).
+SIGNATURES = {
+    "navigate": "navigate(furniture, stand_pose_id)",
+    "move": "move(dx, dy)",
+    "open": "open(furniture)",
+    "pick": "pick(object)",
+    "place": "place(object, location)",
+    "communicate": "communicate(content, robot)",
+    "wait": "wait()",
+}
 
 
 class ReplyFormatError(ValueError):
@@ -28,7 +44,7 @@ def _call_args(text: str, start: int) -> tuple[str, int]:
         if quote:
             if ch == quote:
                 quote = ""
-        elif ch in "\"'" and (i == start + 1 or text[i - 1] in " ,(") :
+        elif ch in "\"'" and (i == start + 1 or text[i - 1] in " ,(="):
             quote = ch
         elif ch == "(":
             depth += 1
@@ -47,7 +63,7 @@ def _split(args: str) -> list[str]:
             cur += ch
             if ch == quote:
                 quote = ""
-        elif ch in "\"'" and not cur.strip():
+        elif ch in "\"'" and (not cur.strip() or re.fullmatch(r"\s*\w+\s*=\s*", cur)):
             quote = ch
             cur += ch
         elif ch == ",":
@@ -61,7 +77,7 @@ def _split(args: str) -> list[str]:
 
 
 def _unquote(a: str) -> str:
-    a = a.strip().strip("`").strip()
+    a = KEYWORD.sub("", a.strip().strip("`").strip())  # navigate(furniture=table_1, ...)
     if len(a) >= 2 and a[0] == a[-1] and a[0] in "\"'":
         a = a[1:-1]
     return a.strip()
@@ -80,7 +96,7 @@ def _number(a: str, what: str) -> float:
 
 def parse_command(reply: str) -> Action:
     """The one action a reply commands, or ReplyFormatError saying what is wrong."""
-    labels = list(LABEL.finditer(reply))
+    labels = list(LABEL.finditer(reply)) or list(LOOSE_LABEL.finditer(reply))
     scope = reply[labels[-1].end() :] if labels else reply
     calls = list(SKILL_CALL.finditer(scope))
     if not calls:

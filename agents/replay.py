@@ -1,42 +1,86 @@
 """Replaying a recorded episode without the model: each robot's recorded replies, in order.
 
-The recorder keeps every thought (prompt, reply, usage) in the trace. A `ReplayClient`
-answers the robot's n-th call with its n-th recorded reply, after checking that the prompt it
-is given is the one recorded: a replay that drifts stops with ReplayMismatch instead of
-silently diverging.
+The recorder keeps every thought (prompt, reply, token usage) in the trace, on keys ending
+`/agent/<robot>/thought`. A `ReplayClient` answers the robot's n-th call with its n-th
+recorded reply, after checking that the prompt it is given (the messages' contents joined as
+`prompt_text` joins them, which is what a Thought records) equals the recorded one. Equal
+prompts at every call prove the episode is reproduced exactly; the first difference stops the
+replay with ReplayMismatch, naming the call, tick and first differing line.
 """
 
 from __future__ import annotations
 
+from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 from mhrc.trace import read_trace
 
-from .llm import Completion, LLMError, Messages
+from .llm import DEFAULT_TEMPERATURE, Completion, LLMError, Messages, prompt_text
+
+THOUGHT_SUFFIX = "/agent/{robot}/thought"
+LLM_ERROR_PREFIX = "llm error: "  # how LLMPolicy records a model that stayed down
 
 
 class ReplayMismatch(RuntimeError):
     """The replayed episode asked something the recorded one did not."""
 
 
+def _first_difference(got: str, want: str) -> str:
+    a, b = got.splitlines(), want.splitlines()
+    for i, (x, y) in enumerate(zip(a, b)):
+        if x != y:
+            return f"line {i + 1}: recorded {y[:160]!r}, now {x[:160]!r}"
+    return f"the recorded prompt has {len(b)} lines, this one {len(a)}"
+
+
 class ReplayClient:
-    def __init__(self, trace: str | Path, robot: str) -> None:
+    """One robot's recorded replies, handed out in order against matching prompts."""
+
+    def __init__(self, trace: str | Path, robot: str, *, thoughts: list[dict[str, Any]] | None = None) -> None:
         self.model = "replay"
         self.robot = robot
-        suffix = f"/agent/{robot}/thought"
-        self._thoughts = [line["msg"] for line in read_trace(trace) if line["key"].endswith(suffix)]
-        if not self._thoughts or self._thoughts[0].get("prompt") is None:
-            raise ReplayMismatch(f"{trace} holds no LLM prompts for {robot}: only episodes run with --llm can be replayed")
+        self.trace = Path(trace)
+        if thoughts is None:
+            suffix = THOUGHT_SUFFIX.format(robot=robot)
+            thoughts = [line["msg"] for line in read_trace(trace) if line["key"].endswith(suffix)]
+        self._thoughts = thoughts
+        if not thoughts or thoughts[0].get("prompt") is None:
+            raise ReplayMismatch(
+                f"{trace} holds no LLM prompts for {robot}: only episodes run with an LLM policy can be replayed"
+            )
         self.calls = 0
 
-    async def complete(self, messages: Messages, *, temperature: float = 0.5) -> Completion:
+    @property
+    def remaining(self) -> int:
+        """Recorded calls not replayed yet (0 once the whole episode was reproduced)."""
+        return len(self._thoughts) - self.calls
+
+    async def complete(self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE) -> Completion:
         if self.calls >= len(self._thoughts):
-            raise ReplayMismatch(f"{self.robot} asked for call {self.calls + 1}; the trace holds {len(self._thoughts)}")
+            raise ReplayMismatch(f"{self.robot} asked for call {self.calls + 1}; {self.trace} holds {len(self._thoughts)}")
         t = self._thoughts[self.calls]
         self.calls += 1
-        prompt = "\n\n".join(m["content"] for m in messages)
-        if prompt != t["prompt"]:
-            raise ReplayMismatch(f"{self.robot}'s prompt at call {self.calls} (tick {t['tick']}) differs from the recorded one")
-        if t.get("reply") is None:  # the model failed in the recorded run: fail the same way
-            raise LLMError(str(t.get("parse_error") or "recorded model failure").removeprefix("llm error: "))
+        prompt = prompt_text(messages)
+        if prompt != t.get("prompt"):
+            raise ReplayMismatch(
+                f"{self.robot}'s prompt at call {self.calls} (tick {t.get('tick')}) differs from the one recorded "
+                f"in {self.trace}: {_first_difference(prompt, t.get('prompt') or '')}"
+            )
+        if t.get("reply") is None:  # the model stayed down in the recorded run: fail the same way
+            raise LLMError(str(t.get("parse_error") or "recorded model failure").removeprefix(LLM_ERROR_PREFIX))
         return Completion(t["reply"], t.get("prompt_tokens", 0), t.get("completion_tokens", 0), t.get("latency", 0.0))
+
+
+def replay_clients(trace: str | Path) -> dict[str, ReplayClient]:
+    """A ReplayClient for every robot whose LLM thoughts the trace holds."""
+    by_robot: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for line in read_trace(trace):
+        key, msg = line.get("key", ""), line.get("msg")
+        parts = key.rsplit("/", 3)
+        if len(parts) == 4 and parts[1] == "agent" and parts[3] == "thought" and isinstance(msg, dict):
+            by_robot[parts[2]].append(msg)
+    clients = {r: ReplayClient(trace, r, thoughts=ts) for r, ts in by_robot.items() if ts and ts[0].get("prompt") is not None}
+    if not clients:
+        raise ReplayMismatch(f"{trace} holds no LLM thoughts: only episodes run with an LLM policy can be replayed")
+    return clients

@@ -1,4 +1,4 @@
-"""A scripted stand-in for an LLM: replies from a list, parsed like a real model's.
+"""A scripted stand-in for an LLM: an LLMPolicy whose model answers from a list.
 
 For tests and demos of the plumbing: the replies are the model's "judgement"; prompt
 rendering, parsing, format feedback and the agent loop are the real ones.
@@ -7,24 +7,45 @@ rendering, parsing, format feedback and the agent loop are the real ones.
 from __future__ import annotations
 
 from collections.abc import Iterable
+from pathlib import Path
 
 from mhrc.protocol import ActionResult
 
-from .llm import ScriptedClient
-from .llm_policy import LLMPolicy
+from .llm import DEFAULT_TEMPERATURE, ScriptedClient
+from .llm_policy import DEFAULT_CAP_CHARS, LLMPolicy
 
 
 class ScriptedPolicy(LLMPolicy):
     """An LLMPolicy whose model answers each step with the next scripted reply (then `wait()`)."""
 
-    def __init__(self, robot: str, replies: Iterable[str], **options: object) -> None:
-        super().__init__(robot, ScriptedClient(list(replies)), **options)  # type: ignore[arg-type]
-        self.name = "scripted"
+    def __init__(
+        self,
+        robot: str,
+        replies: Iterable[str],
+        *,
+        prompts_dir: str | Path | None = None,
+        temperature: float = DEFAULT_TEMPERATURE,
+        feedback: bool = True,
+        history: bool = True,
+        prompt_cap_chars: int | None = DEFAULT_CAP_CHARS,
+        teammates_absent: tuple[str, ...] = (),
+    ) -> None:
+        super().__init__(
+            robot,
+            ScriptedClient(list(replies)),
+            prompts_dir=prompts_dir,
+            temperature=temperature,
+            feedback=feedback,
+            history=history,
+            prompt_cap_chars=prompt_cap_chars,
+            teammates_absent=teammates_absent,
+        )
         self.results: list[ActionResult] = []
 
     @property
     def format_feedback(self) -> list[str]:
-        return [f for f in self.memory.feedback if "could not be executed" in f]
+        """The feedback entries that report an unparseable reply."""
+        return [e.text for e in self.memory.feedback if "could not be executed" in e.text]
 
     def record(self, result: ActionResult) -> None:
         super().record(result)

@@ -1,51 +1,171 @@
-"""Prompt size (characters, estimated tokens) at steps 1, 25 and 50, with and without the cap.
+"""Prompt size (characters, estimated tokens = chars/4) at steps 1, 25 and 50 of a synthetic
+long episode, for each role, with and without the prompt cap.
 
-Alice's prompt from a real observation, with histories filled the way a long episode fills
-them (one feedback and one action entry per step, a message every fifth step).
+The observations are hand-built in the paper's example house (15 pieces of furniture, 6 target
+objects found along the way); every step goes through LLMPolicy.decide and record with a
+scripted model, so the memory fills the way a real episode fills it: one action and one
+feedback entry per step, a message every few steps.
 
-    python bench/bench_prompt_size.py [--cap 6000]
+    python bench/bench_prompt_size.py [--cap 12000] [--out bench/results/prompt_size.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 from pathlib import Path
-
-from report import emit
+from typing import Any
 
 from mhrc.agents.llm import ScriptedClient, estimate_tokens
-from mhrc.agents.llm_policy import LLMPolicy
-from mhrc.world.sim import Sim
+from mhrc.agents.llm_policy import DEFAULT_CAP_CHARS, LLMPolicy
+from report import emit
 
-FEEDBACK = [
-    "navigate(table_1, 0) -> You reached stand pose 0 of table_1. On table_1: apple, book.",
-    "pick(apple) -> The end effector could not reach apple: it stayed 0.21 m away (the arm base is 0.92 m from it). Moving your base by dx=0.10, dy=0.25 would bring it within good grasping distance.",
-    "place(apple, table_0) -> You placed apple on table_0.",
-    "open(drawer_unit) -> You opened drawer_unit. Inside: soap, phone.",
+from mhrc.protocol import (
+    ActionResult,
+    FurnitureView,
+    ObjectView,
+    Observation,
+    OutcomeCode,
+    Pose2D,
+    RobotMessage,
+    RobotStatus,
+    SkillOutcome,
+)
+
+STEPS = (1, 25, 50)
+SKILLS = {
+    "alice": ["navigate", "move", "open", "pick", "place", "communicate", "wait"],
+    "bob": ["pick", "place", "communicate", "wait"],
+    "david": ["navigate", "communicate", "wait"],
+}
+# name, kind, x, y, openable, surface
+HOUSE = [
+    ("table_0", "table", -3.0, 0.0, False, True),
+    ("drawer_unit", "drawer unit", -3.0, 3.45, True, False),
+    ("dishwasher", "dishwasher", -1.2, 3.5, True, False),
+    ("microwave", "microwave", 0.2, 3.6, True, False),
+    ("fridge", "fridge", 1.4, 3.5, True, False),
+    ("table_1", "table", 2.5, 2.5, False, True),
+    ("table_2", "table", 2.5, -2.8, False, True),
+    ("table_3", "table", 6.0, 2.0, False, True),
+    ("table_4", "table", 6.5, -2.5, False, True),
+    ("cabinet_0", "cabinet", -4.5, -3.0, True, False),
+    ("cabinet_1", "cabinet", 4.5, 3.6, True, False),
+    ("sofa", "sofa", 4.3, -1.6, False, True),
+    ("bookcase", "bookcase", 8.0, 0.0, False, True),
+    ("tub", "tub", 8.5, 3.0, False, True),
+    ("washbasin", "washbasin", 8.5, -3.2, False, True),
 ]
+TARGETS = ["apple", "fork", "soap", "toy_duck", "phone", "book"]
+WHERE = {"apple": "fridge", "fork": "drawer_unit", "soap": "washbasin", "toy_duck": "tub", "phone": "table_0", "book": "table_0"}
+
+# (reply, succeeded, feedback): what each role's model says and the world answers, cycled
+SCRIPT: dict[str, list[tuple[str, bool, str]]] = {
+    "alice": [
+        ("Command: navigate(fridge, 0)", True, "You reached stand pose 0 of fridge. fridge is closed: open it to see what is inside."),
+        ("Command: open(fridge)", True, "You opened fridge. Inside: apple, milk."),
+        ("Command: pick(apple)", False, "The end effector cannot reach apple: it is 0.21 m away from the closest pose your arm can get to. Moving your base by dx=0.10, dy=0.25 would bring it within a good grasping distance."),
+        ("Command: move(0.10, 0.25)", True, "You moved by dx=0.10 m, dy=0.25 m."),
+        ("Command: pick(apple)", True, "You picked up apple."),
+        ("Command: navigate(table_0, 1)", True, "You reached stand pose 1 of table_0. On table_0: phone, book, tray."),
+        ("Command: place(apple, table_0)", True, "You placed apple on table_0."),
+        ('Command: communicate("Bob, I placed apple on table_0 for you.", bob)', True, "Message sent to bob."),
+    ],
+    "bob": [
+        ('Command: communicate("Alice, please bring these to table_0 within my reach: apple, fork, soap, toy_duck, book.", alice)', True, "Message sent to alice."),
+        ("Command: pick(phone)", True, "You picked up phone."),
+        ("Command: place(phone, tray)", True, "You placed phone in the tray."),
+        ("Command: pick(book)", False, "The end effector cannot reach book: it is 0.73 m away from the closest pose your arm can get to."),
+        ("Command: wait()", True, "You waited."),
+        ("Command: wait()", True, "You waited."),
+    ],
+    "david": [
+        ("Command: navigate(table_3, 0)", True, "You reached stand pose 0 of table_3. There is nothing on table_3."),
+        ('Command: communicate("On table_3 I found nothing.", alice)', True, "Message sent to alice."),
+        ("Command: navigate(tub, 0)", False, "Navigation failed: there is no collision-free path to stand pose 0 of tub."),
+        ("Command: navigate(tub, 1)", True, "You reached stand pose 1 of tub. On tub: toy_duck."),
+        ('Command: communicate("On tub I found: toy_duck.", alice)', True, "Message sent to alice."),
+        ("Command: wait()", True, "You waited."),
+    ],
+}
+MESSAGES = {
+    "alice": [("bob", "Alice, please bring these to table_0 within my reach: apple, fork, soap, toy_duck, book."), ("david", "On tub I found: toy_duck."), ("david", "On table_3 I found nothing.")],
+    "bob": [("alice", "Bob, I placed apple on table_0 for you.")],
+    "david": [("alice", "David, please explore these surfaces and tell me what lies on them: table_1, table_2, table_3, table_4, sofa, bookcase, tub, washbasin.")],
+}
+
+
+def furniture(opened: set[str]) -> list[FurnitureView]:
+    out = []
+    for name, kind, x, y, openable, surface in HOUSE:
+        poses = [Pose2D(x=x - 0.3, y=y - 0.85, yaw=1.5708), Pose2D(x=x + 0.3, y=y - 0.85, yaw=1.5708)]
+        out.append(
+            FurnitureView(
+                name=name, kind=kind, position=(x, y, 0.7), openable=openable, is_open=(name in opened) if openable else None,
+                stand_poses=poses, place_pose=(x, y, 0.7) if surface else None,
+            )
+        )
+    out.append(FurnitureView(name="tray", kind="tray on table_0", position=(-3.4, 0.19, 0.71), place_pose=(-3.4, 0.19, 0.71)))
+    return out
+
+
+def observe(robot: str, step: int, messages: list[RobotMessage]) -> Observation:
+    """The robot's view at `step`: one more target known every eight steps, containers opening."""
+    known = TARGETS[: 2 + step // 8] if robot != "bob" else ["phone", "book"] + TARGETS[: step // 10]
+    objects = [ObjectView(name=o, position=(-3.2, 0.1, 0.72), on=WHERE[o], inside=WHERE[o] in ("fridge", "drawer_unit")) for o in known]
+    bob = robot == "bob"
+    return Observation(
+        robot=robot,
+        tick=step,
+        status=RobotStatus(
+            name=robot, kind={"alice": "mobile manipulator", "bob": "tabletop manipulator", "david": "mobile robot"}[robot], skills=SKILLS[robot],
+            base=None if bob else Pose2D(x=-1.5, y=1.2), arm_base={"alice": (-1.3, 1.2, 0.65), "bob": (-3.75, 0.0, 0.7)}.get(robot),
+            reach={"alice": 0.72, "bob": 0.62}.get(robot),
+        ),
+        furniture=furniture({"fridge", "drawer_unit"} if step > 10 else set()),
+        objects=objects,
+        task_brief="Pack the listed objects into the tray on table_0; nothing else goes in the tray.",
+        task_detail=f"Objects to pack: {', '.join(TARGETS)}." if bob else "Help Bob pack the listed objects into the tray on table_0: find them, fetch them and hand them over.",
+        targets=TARGETS if bob else [],
+        task_status=f"In the tray: phone. Not yet in the tray: {', '.join(TARGETS[:-2])}, book." if bob else None,
+        teammates={r: SKILLS[r] for r in SKILLS if r != robot},
+        new_messages=messages,
+    )
+
+
+async def sizes(robot: str, cap: int | None) -> dict[int, dict[str, int]]:
+    script = SCRIPT[robot]
+    policy = LLMPolicy(robot, ScriptedClient([script[i % len(script)][0] for i in range(max(STEPS))]), prompt_cap_chars=cap)
+    out: dict[int, dict[str, int]] = {}
+    for step in range(1, max(STEPS) + 1):
+        inbox = []
+        if step % 4 == 0:  # a message every fourth step
+            sender, content = MESSAGES[robot][(step // 4) % len(MESSAGES[robot])]
+            inbox = [RobotMessage(sender=sender, to=robot, content=content, tick=step - 1)]
+        obs = observe(robot, step, inbox)
+        d = await policy.decide(obs)
+        if step in STEPS:
+            text = d.prompt or ""
+            out[step] = {"chars": len(text), "est_tokens": estimate_tokens(text)}
+        _, ok, feedback = script[(step - 1) % len(script)]
+        outcome = SkillOutcome.ok(feedback) if ok else SkillOutcome.fail(OutcomeCode.TOO_FAR, feedback)
+        policy.record(ActionResult(goal_id=f"g{step}", robot=robot, tick=step, action=d.action, outcome=outcome, observation=obs))
+    return out
+
+
+async def run(cap: int) -> dict[str, Any]:
+    report: dict[str, Any] = {"bench": "prompt_size", "cap_chars": cap, "steps": list(STEPS), "est_tokens": "chars // 4", "roles": {}}
+    for robot in SCRIPT:
+        report["roles"][robot] = {"capped": await sizes(robot, cap), "uncapped": await sizes(robot, None)}
+    return report
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cap", type=int, default=6000)
+    ap.add_argument("--cap", type=int, default=DEFAULT_CAP_CHARS, help="prompt cap in characters (default %(default)s)")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
-    report: dict[str, object] = {"bench": "prompt_size", "robot": "alice", "cap_chars": args.cap}
-    with Sim(seed=0, n_objects=6) as sim:
-        obs = sim.observe("alice", 0)
-        for label, cap in (("capped", args.cap), ("uncapped", None)):
-            policy = LLMPolicy("alice", ScriptedClient([]), prompt_cap_chars=cap)
-            sizes = {}
-            for step in range(1, 51):
-                if step in (1, 25, 50):
-                    text = "\n\n".join(m["content"] for m in policy.render(obs))
-                    sizes[step] = {"chars": len(text), "est_tokens": estimate_tokens(text)}
-                policy.memory.feedback.append(f"step {step}: {FEEDBACK[step % len(FEEDBACK)]}")
-                policy.memory.actions.append(f"step {step}: {FEEDBACK[step % len(FEEDBACK)].split(' ->')[0]}")
-                if step % 5 == 0:
-                    policy.memory.messages.append(f"from bob at step {step}: Alice, please bring these to table_0 within my reach: soap, phone.")
-            report[label] = sizes
-    emit(report, args.out)
+    emit(asyncio.run(run(args.cap)), args.out)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,240 @@
+"""The OpenAI-compatible client against a real HTTP server on 127.0.0.1 (stdlib, in a thread).
+
+The server answers from a script: OpenAI-style JSON, a 429 with Retry-After, a 500, a reply
+slower than the client's timeout, a malformed body. Nothing here needs an API key or a network
+beyond loopback, and no assertion depends on how long anything took.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import threading
+from collections.abc import Callable, Iterator, MutableMapping
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+
+import pytest
+from mhrc.agents.llm import (
+    GENERIC_KEY_ENV,
+    LLMError,
+    LLMSpecError,
+    OpenAIChatClient,
+    ScriptedClient,
+    check_spec,
+    estimate_tokens,
+    make_client,
+)
+from structlog.testing import capture_logs
+
+Answer = tuple[int, dict[str, str], bytes, float]  # status, headers, body, delay before answering
+HI = [{"role": "system", "content": "You are a test."}, {"role": "user", "content": "Say something."}]
+
+
+def completion(text: str, usage: dict[str, int] | None = None) -> Answer:
+    body: dict[str, Any] = {"id": "c1", "object": "chat.completion", "choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
+    if usage is not None:
+        body["usage"] = usage
+    return 200, {"Content-Type": "application/json"}, json.dumps(body).encode(), 0.0
+
+
+class Server:
+    """A chat-completions endpoint on loopback; records requests and counts concurrent ones."""
+
+    def __init__(self, answer: Callable[[dict[str, Any]], Answer]) -> None:
+        self.answer = answer
+        self.requests: list[tuple[str, dict[str, Any], dict[str, str]]] = []
+        self.in_flight = self.max_in_flight = 0
+        self.lock = threading.Lock()
+        self.release = threading.Event()  # ends the slow answers early when the test is over
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1"
+
+            def do_POST(self) -> None:
+                raw = self.rfile.read(int(self.headers["Content-Length"]))
+                with server.lock:
+                    server.requests.append((self.path, json.loads(raw), dict(self.headers)))
+                    server.in_flight += 1
+                    server.max_in_flight = max(server.max_in_flight, server.in_flight)
+                    status, headers, body, delay = server.answer(json.loads(raw))
+                server.release.wait(delay)
+                with server.lock:
+                    server.in_flight -= 1
+                try:
+                    self.send_response(status)
+                    for k, v in headers.items():
+                        self.send_header(k, v)
+                    self.send_header("Content-Length", str(len(body)))
+                    self.end_headers()
+                    self.wfile.write(body)
+                except OSError:
+                    pass  # the client gave up (timeout)
+
+            def log_message(self, *args: object) -> None:
+                pass
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+        threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+
+    def close(self) -> None:
+        self.release.set()
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+@pytest.fixture
+def serve() -> Iterator[Callable[..., Server]]:
+    servers: list[Server] = []
+
+    def start(answers: list[Answer] | Callable[[dict[str, Any]], Answer]) -> Server:
+        script = answers if callable(answers) else (lambda body, queue=list(answers): queue.pop(0))
+        servers.append(Server(script))
+        return servers[-1]
+
+    yield start
+    for s in servers:
+        s.close()
+
+
+@pytest.fixture(autouse=True)
+def _no_keys(monkeypatch: pytest.MonkeyPatch) -> None:
+    for var in ("OPENAI_API_KEY", GENERIC_KEY_ENV, "MY_LLM_KEY"):
+        monkeypatch.delenv(var, raising=False)
+
+
+def _delays(logs: list[MutableMapping[str, Any]]) -> list[float]:
+    return [e["delay"] for e in logs if e["event"] == "llm call failed, retrying"]
+
+
+async def test_every_transient_failure_is_retried_and_then_the_reply_comes_through(serve) -> None:  # type: ignore[no-untyped-def]
+    server = serve(
+        [
+            (429, {"Retry-After": "0.05"}, b'{"error": {"message": "rate limited"}}', 0.0),
+            (500, {}, b"internal error", 0.0),
+            completion("too late", {"prompt_tokens": 1, "completion_tokens": 1})[:3] + (5.0,),  # beyond the timeout
+            (200, {"Content-Type": "application/json"}, b'{"choices": [{"message": ', 0.0),  # malformed JSON
+            (200, {}, b'{"choices": []}', 0.0),  # JSON, but no completion in it
+            completion("Command: wait()", {"prompt_tokens": 123, "completion_tokens": 45}),
+        ]
+    )
+    client = OpenAIChatClient("test-model", server.url, api_key="k-123", timeout=0.5, retries=5, backoff=0.01)
+    try:
+        with capture_logs() as logs:
+            c = await client.complete(HI, temperature=0.5)
+    finally:
+        await client.aclose()
+    assert c.text == "Command: wait()"
+    assert (c.prompt_tokens, c.completion_tokens) == (123, 45) == (client.prompt_tokens, client.completion_tokens)
+    assert len(server.requests) == 6 == client.requests
+    delays = _delays(logs)
+    assert delays[0] == pytest.approx(0.05)  # Retry-After honoured
+    assert delays[1:] == pytest.approx([0.02, 0.04, 0.08, 0.16])  # then exponential backoff
+    errors = " | ".join(e["error"] for e in logs if e["event"] == "llm call failed, retrying")
+    for reason in ("HTTP 429", "HTTP 500", "no answer within 0.5 s", "unreadable completion body"):
+        assert reason in errors
+    path, body, headers = server.requests[-1]
+    assert path == "/v1/chat/completions"
+    assert body == {"model": "test-model", "messages": HI, "temperature": 0.5}
+    assert headers["Authorization"] == "Bearer k-123"
+
+
+async def test_the_retry_budget_ends_in_a_typed_error(serve) -> None:  # type: ignore[no-untyped-def]
+    server = serve(lambda body: (503, {"Retry-After": "0"}, b"overloaded", 0.0))
+    async with OpenAIChatClient("m", server.url, retries=2, backoff=0.01) as client:
+        with pytest.raises(LLMError, match=r"m at http://127\.0\.0\.1:\d+/v1 failed after 3 attempts: HTTP 503: overloaded"):
+            await client.complete(HI)
+    assert len(server.requests) == 3
+
+
+async def test_a_server_that_is_not_there_is_retried_then_reported() -> None:
+    with socket.socket() as s:  # a free port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    async with OpenAIChatClient("m", f"http://127.0.0.1:{port}/v1", retries=2, backoff=0.01) as client:
+        with capture_logs() as logs, pytest.raises(LLMError, match="failed after 3 attempts: ConnectError"):
+            await client.complete(HI)
+    assert len(_delays(logs)) == 2 and client.requests == 3
+
+
+async def test_a_client_error_is_reported_at_once(serve) -> None:  # type: ignore[no-untyped-def]
+    server = serve(lambda body: (401, {}, b'{"error": "invalid api key"}', 0.0))
+    async with OpenAIChatClient("m", server.url, retries=3, backoff=0.01) as client:
+        with pytest.raises(LLMError, match="HTTP 401 .not retried.: .*invalid api key"):
+            await client.complete(HI)
+    assert len(server.requests) == 1
+
+
+async def test_usage_is_estimated_when_the_server_reports_none(serve) -> None:  # type: ignore[no-untyped-def]
+    reply = "Analysis: the tray is empty.\nCommand: pick(apple)"
+    server = serve([completion(reply)])
+    async with OpenAIChatClient("m", server.url) as client:
+        c = await client.complete(HI, temperature=0.2)
+    prompt = "You are a test.\n\nSay something."
+    assert (c.prompt_tokens, c.completion_tokens) == (estimate_tokens(prompt), estimate_tokens(reply)) == (len(prompt) // 4, len(reply) // 4)
+    assert server.requests[0][1]["temperature"] == 0.2 and "Authorization" not in server.requests[0][2]
+
+
+async def test_the_concurrency_limit_is_shared_by_all_calls_of_a_client(serve) -> None:  # type: ignore[no-untyped-def]
+    server = serve(lambda body: completion("Command: wait()")[:3] + (0.15,))
+    async with OpenAIChatClient("m", server.url, max_concurrency=2) as client:
+        replies = await asyncio.gather(*(client.complete([{"role": "user", "content": str(i)}]) for i in range(6)))
+    assert len(replies) == 6 and len(server.requests) == 6
+    assert server.max_in_flight == 2
+
+
+async def test_make_client_takes_the_key_from_the_named_variable_or_the_generic_one(serve, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+    server = serve([completion("Command: wait()"), completion("Command: wait()"), completion("Command: wait()")])
+    monkeypatch.setenv("MY_LLM_KEY", "from-my-var")
+    monkeypatch.setenv(GENERIC_KEY_ENV, "from-generic")
+    for spec, kw, key, model in (
+        ("openai:gpt-4o", {"api_key_env": "MY_LLM_KEY"}, "from-my-var", "gpt-4o"),
+        ("vllm:Qwen/Qwen2.5-7B-Instruct", {}, "from-generic", "Qwen/Qwen2.5-7B-Instruct"),
+        ("qwen2.5:7b", {}, "from-generic", "qwen2.5:7b"),  # no known provider: with a base URL the spec is the model
+    ):
+        client = make_client(spec, base_url=server.url, max_tokens=64, **kw)
+        try:
+            await client.complete(HI)
+        finally:
+            await client.aclose()
+        _, body, headers = server.requests[-1]
+        assert headers["Authorization"] == f"Bearer {key}"
+        assert body["model"] == model and body["max_tokens"] == 64
+
+
+def test_specs_are_checked_before_any_request(monkeypatch: pytest.MonkeyPatch) -> None:
+    with pytest.raises(LLMSpecError, match="OPENAI_API_KEY") as missing:
+        make_client("openai:gpt-4o")
+    assert "openai:gpt-4o" in str(missing.value) and GENERIC_KEY_ENV in str(missing.value)
+    with pytest.raises(LLMSpecError, match="unknown LLM provider 'acme' in LLM spec 'acme:m1'"):
+        make_client("acme:m1")
+    with pytest.raises(LLMSpecError, match="'gpt4' must look like provider:model"):
+        make_client("gpt4")
+    with pytest.raises(ValueError, match="names no model"):
+        check_spec("ollama:")
+    assert check_spec("ollama:llama3.1:8b") == ("llama3.1:8b", "http://127.0.0.1:11434/v1", None)
+    assert check_spec("vllm:m")[1] == "http://127.0.0.1:8000/v1"
+    assert check_spec("lmstudio:m")[1] == "http://127.0.0.1:1234/v1"
+    assert check_spec("llamacpp:m")[1] == "http://127.0.0.1:8080/v1"
+    assert check_spec("openai:m", "http://127.0.0.1:9/v1") == ("m", "http://127.0.0.1:9/v1", None)  # a local server needs no key
+    monkeypatch.setenv("OPENAI_API_KEY", "sk-test")
+    client = make_client("openai:gpt-4o")
+    assert client.base_url == "https://api.openai.com/v1" and client.model == "gpt-4o"  # built, never called
+
+
+async def test_the_scripted_client_replies_in_order_then_waits() -> None:
+    down = LLMError("model down")
+    client = ScriptedClient(["Command: pick(apple)", down], latency=0.01)
+    assert (await client.complete(HI)).text == "Command: pick(apple)"
+    with pytest.raises(LLMError, match="model down"):
+        await client.complete(HI)
+    assert (await client.complete(HI)).text == ScriptedClient.EXHAUSTED
+    assert client.calls == 3 and client.prompts[0] == HI
+
+    echo = ScriptedClient(lambda messages: f"Command: communicate({messages[-1]['content']!r}, bob)")
+    c = await echo.complete(HI)
+    assert c.text == "Command: communicate('Say something.', bob)" and c.completion_tokens == len(c.text) // 4
