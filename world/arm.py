@@ -1,14 +1,15 @@
 """Arm kinematics and motion planning for the Franka Panda arms (Alice's and Bob's).
 
-Planning runs in a separate p.DIRECT "shadow" client holding one Panda and the furniture as
-boxes, so it never moves the live robots: IK is plain PyBullet IK, clipped to the joint
-limits, reseeded with random restarts and verified by forward kinematics; motions are planned
-with OMPL BIT* in joint space, each state checked for contacts against the furniture.
+Everything here runs in a separate p.DIRECT "shadow" client holding one Panda and copies of
+the scene's fixed bodies, so planning never moves the live robots. IK is plain PyBullet IK,
+clipped to the joint limits, reseeded with random restarts and verified by forward kinematics;
+motions are planned with OMPL BIT* in joint space, every state checked for contacts.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,45 +19,60 @@ from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 
-ARM_JOINTS = list(range(7))
+from .scene import StaticBody, load_statics
+
+ARM_JOINTS = tuple(range(7))
+FINGERS = (9, 10)
 EE_LINK = 11  # panda_grasptarget: the suction cup's tip
-LOWER = np.array([-2.9671, -1.8326, -2.9671, -3.1416, -2.9671, -0.0873, -2.9671])
+LOWER = np.array([-2.9671, -1.8326, -2.9671, -3.1416, -2.9671, -0.0873, -2.9671])  # panda.urdf's limits
 UPPER = np.array([2.9671, 1.8326, 2.9671, 0.0, 2.9671, 3.8223, 2.9671])
-HOME = np.array([0.0, -0.5, 0.0, -2.2, 0.0, 1.9, 0.785])
+HOME = np.array([0.0, -1.2, 0.0, -2.9, 0.0, 1.9, 0.785])  # tucked carry posture: hand over the base
 DOWN = (math.pi, 0.0)  # roll, pitch of a top-down tool (z axis pointing down)
+OMPL_SEED = 20240917
 
-_seeded = False
+# OMPL's RNG is process-wide. Re-seeding it before each plan restarts its seed sequence, so a
+# plan depends only on its inputs, not on how many plans ran before (same seed, same outcome).
+# The lock keeps two simulators in two threads from interleaving their sampling.
+_ompl_lock = threading.Lock()
+_ompl_ready = False
 
 
-def seed_ompl(seed: int = 0) -> None:
-    """OMPL's RNG seed must be set before any planner exists in the process (SIM-NOTES)."""
-    global _seeded
-    if not _seeded:
-        ou.RNG.setSeed(seed + 1)
-        ou.setLogLevel(ou.LogLevel.LOG_ERROR)
-        _seeded = True
+def _reset_ompl_rng() -> None:
+    global _ompl_ready
+    if not _ompl_ready:
+        ou.setLogLevel(ou.LogLevel.LOG_NONE)  # re-seeding logs an error we mean to ignore
+        _ompl_ready = True
+    ou.RNG.setSeed(OMPL_SEED)
 
+
+@dataclass
+class IKResult:
+    q: np.ndarray | None
+    error: float  # the best attempt's tool-tip distance from the target (m)
+    collided: bool  # some attempt reached the target but collided
 
 @dataclass
 class PlanResult:
     path: list[np.ndarray] | None
-    reason: str = ""  # "start_invalid", "goal_invalid", "no_plan" when path is None
+    reason: str = ""  # "start_invalid", "goal_invalid" or "no_plan" when path is None
+    checks: int = 0
 
 
 class ArmPlanner:
     """IK and collision-free joint-space plans for a Panda whose base can be anywhere."""
 
-    def __init__(self, seed: int = 0, budget: float = 1.0) -> None:
-        seed_ompl(seed)
+    def __init__(self, statics: list[StaticBody], *, seed: int = 0, budget: float = 1.5) -> None:
         self.cid = p.connect(p.DIRECT)
         self.rng = np.random.default_rng(seed)
         self.budget = budget
         self.arm = p.loadURDF(
             pybullet_data.getDataPath() + "/franka_panda/panda.urdf", useFixedBase=True, physicsClientId=self.cid
         )
-        for f in (9, 10):
+        for f in FINGERS:
             p.resetJointState(self.arm, f, 0.0, physicsClientId=self.cid)
+        self.bodies = load_statics(self.cid, statics)
         self.boxes: dict[str, int] = {}
+        self.other_arms: dict[str, int] = {}
         self.checks = 0
 
     def close(self) -> None:
@@ -65,14 +81,39 @@ class ArmPlanner:
             self.cid = -1
 
     # ------------------------------------------------------------------ world model
+    def set_joint(self, body: str, joint: int, value: float) -> None:
+        """Mirror a live joint (an opened drawer) into the planning world."""
+        p.resetJointState(self.bodies[body], joint, value, physicsClientId=self.cid)
+
     def set_box(self, name: str, center: tuple[float, float, float], half: tuple[float, float, float], yaw: float = 0.0) -> None:
-        """Create or move the obstacle box `name`."""
+        """Create or move the obstacle box `name` (a chassis, an object)."""
         orn = p.getQuaternionFromEuler((0, 0, yaw))
-        if name in self.boxes:
+        if name not in self.boxes:
+            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.cid)
+            self.boxes[name] = p.createMultiBody(0, shape, -1, center, orn, physicsClientId=self.cid)
+        else:
             p.resetBasePositionAndOrientation(self.boxes[name], center, orn, physicsClientId=self.cid)
-            return
-        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.cid)
-        self.boxes[name] = p.createMultiBody(0, shape, -1, center, orn, physicsClientId=self.cid)
+
+    def hide_box(self, name: str) -> None:
+        if name in self.boxes:
+            p.resetBasePositionAndOrientation(self.boxes[name], (0, 0, -50), (0, 0, 0, 1), physicsClientId=self.cid)
+
+    def set_other_arm(self, name: str, base: tuple[float, float, float], yaw: float, q: np.ndarray) -> None:
+        """Mirror another robot's arm (pose and joints) as an obstacle."""
+        if name not in self.other_arms:
+            self.other_arms[name] = p.loadURDF(
+                pybullet_data.getDataPath() + "/franka_panda/panda.urdf", useFixedBase=True, physicsClientId=self.cid
+            )
+        body = self.other_arms[name]
+        p.resetBasePositionAndOrientation(body, base, p.getQuaternionFromEuler((0, 0, yaw)), physicsClientId=self.cid)
+        for j, v in zip(ARM_JOINTS, q):
+            p.resetJointState(body, j, float(v), physicsClientId=self.cid)
+        for f in FINGERS:
+            p.resetJointState(body, f, 0.0, physicsClientId=self.cid)
+
+    def hide_other_arm(self, name: str) -> None:
+        if name in self.other_arms:
+            p.resetBasePositionAndOrientation(self.other_arms[name], (0, 0, -50), (0, 0, 0, 1), physicsClientId=self.cid)
 
     def set_base(self, xyz: tuple[float, float, float], yaw: float) -> None:
         p.resetBasePositionAndOrientation(self.arm, xyz, p.getQuaternionFromEuler((0, 0, yaw)), physicsClientId=self.cid)
@@ -83,58 +124,80 @@ class ArmPlanner:
             p.resetJointState(self.arm, j, float(v), physicsClientId=self.cid)
 
     def fk(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tool-tip position and orientation (quaternion) of configuration q."""
         self._set(q)
         st = p.getLinkState(self.arm, EE_LINK, computeForwardKinematics=True, physicsClientId=self.cid)
         return np.array(st[4]), np.array(st[5])
 
     def valid(self, q: np.ndarray) -> bool:
-        """Within limits and touching no obstacle box."""
+        """Within limits and touching nothing but the mount under the arm's base link."""
         self.checks += 1
         if np.any(q < LOWER - 1e-6) or np.any(q > UPPER + 1e-6):
             return False
         self._set(q)
         p.performCollisionDetection(physicsClientId=self.cid)
         for c in p.getContactPoints(bodyA=self.arm, physicsClientId=self.cid):
-            if c[2] != self.arm and c[8] < 0:
+            if c[2] != self.arm and c[3] >= 0 and c[8] < 0:  # c[3]: the arm's link; its base (-1) sits on the mount
                 return False
         return True
 
-    def ik(self, target: tuple[float, float, float], yaw: float, seed_q: np.ndarray, restarts: int = 8) -> np.ndarray | None:
-        """A verified, collision-free joint solution putting the tool tip at `target`, pointing down."""
-        orn = p.getQuaternionFromEuler((*DOWN, yaw))
+    def solve(self, target: tuple[float, float, float], yaw: float, seed_q: np.ndarray, restarts: int = 8) -> IKResult:
+        """A verified, collision-free joint solution putting the tool tip at `target`, pointing down.
+
+        Each attempt starts from `seed_q` (then from random configurations) and refines the plain
+        IK answer a few times; an answer counts only if FK confirms it within 2 mm and 0.05 rad.
+        """
+        orn = np.array(p.getQuaternionFromEuler((*DOWN, yaw)))
         tgt = np.array(target)
+        best, collided = math.inf, False
         for k in range(restarts):
-            start = seed_q if k == 0 else self.rng.uniform(LOWER, UPPER)
-            self._set(start)
-            sol = p.calculateInverseKinematics(
-                self.arm, EE_LINK, target, orn, maxNumIterations=200, residualThreshold=1e-5, physicsClientId=self.cid
-            )
-            q = np.clip(np.array(sol[:7]), LOWER, UPPER)
-            pos, got = self.fk(q)
-            if np.linalg.norm(pos - tgt) > 0.005:
-                continue
-            dot = abs(float(np.dot(np.array(orn), got)))
-            if 2 * math.acos(min(1.0, dot)) > 0.1:
+            q = np.array(seed_q if k == 0 else self.rng.uniform(LOWER, UPPER), dtype=float)
+            for _ in range(3):
+                self._set(q)
+                sol = p.calculateInverseKinematics(
+                    self.arm, EE_LINK, target, orn, maxNumIterations=100, residualThreshold=1e-6, physicsClientId=self.cid
+                )
+                q = np.clip(np.array(sol[:7]), LOWER, UPPER)
+                pos, got = self.fk(q)
+                err = float(np.linalg.norm(pos - tgt))
+                if err < 5e-4:
+                    break
+            best = min(best, err)
+            if err > 0.002 or 2 * math.acos(min(1.0, abs(float(np.dot(orn, got))))) > 0.05:
                 continue
             if self.valid(q):
-                return q
-        return None
+                return IKResult(q, err, False)
+            collided = True
+        return IKResult(None, best, collided)
 
-    def reach_error(self, target: tuple[float, float, float], yaw: float, seed_q: np.ndarray) -> float:
-        """How far the best IK attempt's tool tip stays from `target` (metres)."""
+    def ik(self, target: tuple[float, float, float], yaw: float, seed_q: np.ndarray, restarts: int = 8) -> np.ndarray | None:
+        return self.solve(target, yaw, seed_q, restarts).q
+
+    def reach_error(self, target: tuple[float, float, float], yaw: float, seed_q: np.ndarray, tries: int = 4) -> float:
+        """How far the best of a few IK attempts leaves the tool tip from `target` (metres)."""
         orn = p.getQuaternionFromEuler((*DOWN, yaw))
-        self._set(seed_q)
-        sol = p.calculateInverseKinematics(self.arm, EE_LINK, target, orn, maxNumIterations=200, physicsClientId=self.cid)
-        pos, _ = self.fk(np.clip(np.array(sol[:7]), LOWER, UPPER))
-        return float(np.linalg.norm(pos - np.array(target)))
+        best = math.inf
+        for k in range(tries):
+            self._set(seed_q if k == 0 else self.rng.uniform(LOWER, UPPER))
+            sol = p.calculateInverseKinematics(self.arm, EE_LINK, target, orn, maxNumIterations=200, physicsClientId=self.cid)
+            pos, _ = self.fk(np.clip(np.array(sol[:7]), LOWER, UPPER))
+            best = min(best, float(np.linalg.norm(pos - np.array(target))))
+        return best
 
     # ------------------------------------------------------------------ planning
     def plan(self, start: np.ndarray, goal: np.ndarray, points: int = 30) -> PlanResult:
-        """BIT* from start to goal (first solution), interpolated to `points` states."""
+        """BIT* from start to goal (first solution), interpolated to at least `points` states."""
+        checks0 = self.checks
         if not self.valid(start):
-            return PlanResult(None, "start_invalid")
+            return PlanResult(None, "start_invalid", self.checks - checks0)
         if not self.valid(goal):
-            return PlanResult(None, "goal_invalid")
+            return PlanResult(None, "goal_invalid", self.checks - checks0)
+        with _ompl_lock:
+            _reset_ompl_rng()
+            path = self._bitstar(start, goal, points)
+        return PlanResult(path, "" if path is not None else "no_plan", self.checks - checks0)
+
+    def _bitstar(self, start: np.ndarray, goal: np.ndarray, points: int) -> list[np.ndarray] | None:
         space = ob.RealVectorStateSpace(7)
         bounds = ob.RealVectorBounds(7)
         for i in range(7):
@@ -153,11 +216,15 @@ class ArmPlanner:
         planner.setStopOnSolnImprovement(True)
         ss.setPlanner(planner)
         status = ss.solve(self.budget)
-        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
-            ss.clear()
-            return PlanResult(None, "no_plan")
-        path = ss.getSolutionPath()
-        path.interpolate(points)
-        out = [np.array([path.getState(k)[i] for i in range(7)]) for k in range(path.getStateCount())]
+        out: list[np.ndarray] | None = None
+        if status.getStatus() == ob.PlannerStatus.EXACT_SOLUTION:
+            path = ss.getSolutionPath()
+            path.interpolate(points)
+            out = [np.array([path.getState(k)[i] for i in range(7)]) for k in range(path.getStateCount())]
         ss.clear()
-        return PlanResult(out)
+        return out
+
+
+def straight(a: np.ndarray, b: np.ndarray, n: int) -> list[np.ndarray]:
+    """n joint configurations from a to b, both included."""
+    return [a + (b - a) * t for t in np.linspace(0.0, 1.0, n)]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from itertools import pairwise
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,8 +57,13 @@ class Grid:
         self.blocked[i0:i1, j0:j1] |= (np.abs(lx) <= hx) & (np.abs(ly) <= hy)
 
 
-def astar(grid: Grid, start: tuple[float, float], goal: tuple[float, float]) -> list[tuple[float, float]] | None:
-    """Shortest 8-connected path between two free points (cell centres, ends exact), or None."""
+def astar(
+    grid: Grid, start: tuple[float, float], goal: tuple[float, float], *, smoothed: bool = True
+) -> list[tuple[float, float]] | None:
+    """Shortest 8-connected path between two free points (cell centres, ends exact), or None.
+
+    With `smoothed`, waypoints whose neighbours see each other in a straight line are dropped.
+    """
     s, g = grid.cell(*start), grid.cell(*goal)
     blocked = grid.blocked
     if s == g:
@@ -95,10 +101,11 @@ def astar(grid: Grid, start: tuple[float, float], goal: tuple[float, float]) -> 
         cells.append(came[cells[-1]])
     cells.reverse()
     pts = [start] + [grid.center(*c) for c in cells[1:-1]] + [goal]
-    return smooth(grid, pts)
+    return smooth(grid, pts) if smoothed else pts
 
 
-def _line_free(grid: Grid, a: tuple[float, float], b: tuple[float, float]) -> bool:
+def line_free(grid: Grid, a: tuple[float, float], b: tuple[float, float]) -> bool:
+    """Whether the straight segment a-b crosses only free cells (sampled at half a cell)."""
     n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / (grid.res * 0.5)) + 1)
     return all(grid.free(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t) for t in np.linspace(0.0, 1.0, n))
 
@@ -109,7 +116,7 @@ def smooth(grid: Grid, pts: list[tuple[float, float]]) -> list[tuple[float, floa
     i = 0
     while i < len(pts) - 1:
         j = len(pts) - 1
-        while j > i + 1 and not _line_free(grid, pts[i], pts[j]):
+        while j > i + 1 and not line_free(grid, pts[i], pts[j]):
             j -= 1
         out.append(pts[j])
         i = j
@@ -117,4 +124,4 @@ def smooth(grid: Grid, pts: list[tuple[float, float]]) -> list[tuple[float, floa
 
 
 def path_length(pts: list[tuple[float, float]]) -> float:
-    return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(pts, pts[1:]))
+    return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in pairwise(pts))

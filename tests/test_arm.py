@@ -1,0 +1,101 @@
+"""Arm IK (FK-verified) and OMPL BIT* planning in the shadow client, against real PyBullet."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from mhrc.world.arm import HOME, LOWER, UPPER, ArmPlanner, straight
+from mhrc.world.assets import AssetDir
+from mhrc.world.scene import HOUSE, StaticBody, scene_statics
+
+BASE = (0.0, 0.0, 0.7)
+
+
+@pytest.fixture
+def planner() -> Iterator[ArmPlanner]:
+    pl = ArmPlanner([], seed=0, budget=1.0)
+    pl.set_base(BASE, 0.0)
+    yield pl
+    pl.close()
+
+
+def test_ik_solutions_are_verified_by_forward_kinematics(planner: ArmPlanner) -> None:
+    for target in [(0.45, 0.1, 0.75), (0.35, -0.3, 0.85), (0.6, 0.0, 0.72)]:
+        q = planner.ik(target, 0.0, HOME)
+        assert q is not None, target
+        assert np.all(q >= LOWER - 1e-9) and np.all(q <= UPPER + 1e-9)
+        pos, orn = planner.fk(q)
+        assert np.linalg.norm(pos - np.array(target)) < 0.002
+        z_axis = np.array([2 * (orn[0] * orn[2] + orn[3] * orn[1]), 2 * (orn[1] * orn[2] - orn[3] * orn[0]), 1 - 2 * (orn[0] ** 2 + orn[1] ** 2)])
+        assert z_axis[2] < -0.99  # the tool points down
+
+
+def test_ik_reports_how_far_an_unreachable_target_stays(planner: ArmPlanner) -> None:
+    res = planner.solve((1.6, 0.0, 0.8), 0.0, HOME, restarts=3)
+    assert res.q is None and not res.collided and res.error > 0.4
+
+
+def test_validity_sees_obstacles(planner: ArmPlanner) -> None:
+    q = planner.ik((0.5, 0.0, 0.8), 0.0, HOME)
+    assert q is not None and planner.valid(q)
+    planner.set_box("block", (0.5, 0.0, 0.8), (0.05, 0.05, 0.05))
+    assert not planner.valid(q)
+    res = planner.solve((0.5, 0.0, 0.8), 0.0, HOME, restarts=3)
+    assert res.q is None and res.collided  # reachable, but only through the block
+
+
+def test_invalid_start_or_goal_is_reported_before_planning(planner: ArmPlanner) -> None:
+    goal = planner.ik((0.5, 0.2, 0.9), 0.0, HOME)
+    assert goal is not None
+    planner.set_box("block", (0.5, 0.2, 0.9), (0.04, 0.04, 0.04))
+    res = planner.plan(HOME, goal)
+    assert res.path is None and res.reason == "goal_invalid" and res.checks <= 2
+    res = planner.plan(goal, HOME)
+    assert res.path is None and res.reason == "start_invalid" and res.checks == 1
+
+
+def test_plans_avoid_a_wall_and_end_where_asked(planner: ArmPlanner) -> None:
+    start = planner.ik((0.45, -0.35, 0.85), 0.0, HOME)
+    goal = planner.ik((0.45, 0.35, 0.85), 0.0, HOME)
+    assert start is not None and goal is not None
+    planner.set_box("wall", (0.45, 0.0, 0.9), (0.2, 0.02, 0.2))  # between the two, not over them
+    assert not all(planner.valid(q) for q in straight(start, goal, 60)), "the straight motion must collide"
+    res = planner.plan(start, goal)
+    assert res.path is not None, res.reason
+    assert np.allclose(res.path[0], start) and np.allclose(res.path[-1], goal)
+    for a, b in zip(res.path, res.path[1:]):  # densely re-checked
+        n = max(2, int(np.max(np.abs(b - a)) / 0.01) + 1)
+        assert all(planner.valid(q) for q in straight(a, b, n))
+
+
+def test_plans_do_not_depend_on_earlier_plans(planner: ArmPlanner) -> None:
+    goal = planner.ik((0.3, 0.4, 0.8), 0.0, HOME)
+    other = planner.ik((0.5, -0.3, 0.9), 0.0, HOME)
+    assert goal is not None and other is not None
+    planner.set_box("pillar", (0.4, 0.15, 0.9), (0.03, 0.03, 0.3))
+    first = planner.plan(HOME, goal).path
+    planner.plan(HOME, other)  # a plan in between advances OMPL's random streams
+    again = planner.plan(HOME, goal).path
+    assert first is not None and again is not None
+    assert len(first) == len(again) and all(np.array_equal(a, b) for a, b in zip(first, again))
+
+
+def test_the_shadow_world_holds_the_scene() -> None:
+    assets = AssetDir()
+    try:
+        statics = scene_statics(HOUSE, assets)
+        pl = ArmPlanner(statics, seed=0)
+        try:
+            assert set(pl.bodies) == {s.name for s in statics}
+            assert all(isinstance(s, StaticBody) for s in statics)
+            # an arm standing in front of table_0 cannot push its hand into the table top
+            pl.set_base((-3.0, -0.75, 0.65), math.pi / 2)
+            assert pl.ik((-3.0, -0.2, 0.70 + 0.015), math.pi / 2, HOME) is not None
+            assert pl.ik((-3.0, -0.2, 0.60), math.pi / 2, HOME) is None
+        finally:
+            pl.close()
+    finally:
+        assets.close()

@@ -1,0 +1,243 @@
+"""Procedural URDFs built from primitives (walls, furniture, drawer units, the tray, objects,
+Alice's chassis), written to a temporary directory that lives as long as its `AssetDir`.
+
+Every body's origin is on the floor (or, for objects, at the body's centre), axis-aligned, so
+the scene can place it with a plain position and yaw.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+Color = tuple[float, float, float, float]
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Box:
+    """One box of a link: centre and full size in the link frame."""
+
+    center: Vec3
+    size: Vec3
+    color: Color
+    collide: bool = True
+
+
+@dataclass(frozen=True)
+class Shape:
+    """The primitive an object is made of: box (sx, sy, sz), cylinder (r, r, h) or sphere (r, r, 2r)."""
+
+    kind: str
+    size: Vec3
+
+    @property
+    def height(self) -> float:
+        return self.size[2]
+
+    @property
+    def footprint(self) -> tuple[float, float]:
+        """Full extent along x and y when the object stands upright with yaw 0."""
+        if self.kind == "box":
+            return self.size[0], self.size[1]
+        return 2 * self.size[0], 2 * self.size[0]
+
+
+def _f(v: float) -> str:
+    return f"{v:.5g}"
+
+
+def _v(v: Vec3) -> str:
+    return " ".join(_f(c) for c in v)
+
+
+def _material(color: Color) -> str:
+    return f'<material name="c{abs(hash(color)) % 10**8}"><color rgba="{_v(color[:3])} {_f(color[3])}"/></material>'
+
+
+def _boxes_xml(boxes: list[Box]) -> str:
+    parts = []
+    for b in boxes:
+        geom = f'<origin xyz="{_v(b.center)}"/><geometry><box size="{_v(b.size)}"/></geometry>'
+        parts.append(f"<visual>{geom}{_material(b.color)}</visual>")
+        if b.collide:
+            parts.append(f"<collision>{geom}</collision>")
+    return "\n".join(parts)
+
+
+def _inertial(mass: float, center: Vec3 = (0.0, 0.0, 0.0)) -> str:
+    i = max(mass, 1e-3) * 0.01
+    return (
+        f'<inertial><origin xyz="{_v(center)}"/><mass value="{_f(mass)}"/>'
+        f'<inertia ixx="{_f(i)}" iyy="{_f(i)}" izz="{_f(i)}" ixy="0" ixz="0" iyz="0"/></inertial>'
+    )
+
+
+def link_urdf(name: str, boxes: list[Box], mass: float = 0.0) -> str:
+    """A single-link body made of boxes."""
+    return f'<?xml version="1.0"?>\n<robot name="{name}">\n<link name="base">{_inertial(mass)}\n{_boxes_xml(boxes)}\n</link>\n</robot>\n'
+
+
+# --------------------------------------------------------------------------- furniture
+
+
+def wall_boxes(size: Vec3, color: Color) -> list[Box]:
+    return [Box((0.0, 0.0, size[2] / 2), size, color)]
+
+
+def table_boxes(size: Vec3, color: Color, slab: float = 0.04, leg: float = 0.06) -> list[Box]:
+    """A top slab on four legs; the top surface is at size[2]."""
+    sx, sy, h = size
+    boxes = [Box((0.0, 0.0, h - slab / 2), (sx, sy, slab), color)]
+    dark = (color[0] * 0.7, color[1] * 0.7, color[2] * 0.7, color[3])
+    for ix in (-1, 1):
+        for iy in (-1, 1):
+            c = (ix * (sx / 2 - leg), iy * (sy / 2 - leg), (h - slab) / 2)
+            boxes.append(Box(c, (leg, leg, h - slab), dark))
+    return boxes
+
+
+def block_boxes(size: Vec3, color: Color) -> list[Box]:
+    """A solid block (counter, cabinet) whose top surface is at size[2]."""
+    return [Box((0.0, 0.0, size[2] / 2), size, color)]
+
+
+def sofa_boxes(size: Vec3, color: Color, back: float = 0.15) -> list[Box]:
+    """A seat block of height size[2] and a backrest along the +x side."""
+    sx, sy, h = size
+    return [
+        Box((0.0, 0.0, h / 2), (sx, sy, h), color),
+        Box((sx / 2 + back / 2, 0.0, (h + 0.4) / 2), (back, sy, h + 0.4), color),
+    ]
+
+
+@dataclass(frozen=True)
+class DrawerGeometry:
+    """A drawer unit in its own frame: the drawer slides out along -y (the front)."""
+
+    width: float  # along x
+    depth: float  # along y
+    height: float
+    travel: float
+    inner: Vec3  # drawer inside: sx, sy, wall height
+    floor: float  # z of the drawer's floor surface
+    wall: float = 0.02
+
+    @property
+    def drawer_origin(self) -> Vec3:
+        """The drawer link's origin (centre of its floor surface) with the drawer closed."""
+        front = -self.depth / 2
+        return (0.0, front + self.wall + self.inner[1] / 2, self.floor)
+
+    @property
+    def handle(self) -> Vec3:
+        """Top centre of the handle bar, in the drawer link's frame."""
+        return (0.0, -(self.inner[1] / 2 + self.wall + 0.045), self.inner[2] - 0.01)
+
+
+def drawer_unit_urdf(name: str, g: DrawerGeometry, color: Color) -> str:
+    """A carcass (plinth, top, sides, back) and a drawer on a prismatic joint, handle in front."""
+    t = g.wall
+    w, d, h = g.width, g.depth, g.height
+    cavity_lo = g.floor - t  # the drawer's floor board sits on the plinth
+    top_lo = g.floor + g.inner[2] + 0.02
+    carcass = [
+        Box((0.0, 0.0, cavity_lo / 2), (w, d, cavity_lo), color),  # plinth
+        Box((0.0, 0.0, (top_lo + h) / 2), (w, d, h - top_lo), color),  # top
+        Box((-(w / 2 - t / 2), 0.0, (cavity_lo + top_lo) / 2), (t, d, top_lo - cavity_lo), color),
+        Box((w / 2 - t / 2, 0.0, (cavity_lo + top_lo) / 2), (t, d, top_lo - cavity_lo), color),
+        Box((0.0, d / 2 - t / 2, (cavity_lo + top_lo) / 2), (w - 2 * t, t, top_lo - cavity_lo), color),
+    ]
+    sx, sy, wall_h = g.inner
+    panel = top_lo - g.floor - 0.005  # the front panel's top, above the drawer floor
+    wood = (color[0] * 0.85, color[1] * 0.8, color[2] * 0.7, 1.0)
+    drawer = [
+        Box((0.0, 0.0, -t / 2), (sx + 2 * t, sy + 2 * t, t), wood),  # floor board
+        Box((-(sx / 2 + t / 2), 0.0, wall_h / 2), (t, sy, wall_h), wood),
+        Box((sx / 2 + t / 2, 0.0, wall_h / 2), (t, sy, wall_h), wood),
+        Box((0.0, sy / 2 + t / 2, wall_h / 2), (sx + 2 * t, t, wall_h), wood),
+        Box((0.0, -(sy / 2 + t / 2), (panel - t) / 2), (w - 0.01, t, panel + t), color),  # front panel
+        Box((0.0, g.handle[1] + 0.025, g.handle[2] - 0.01), (0.04, 0.05, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle stem
+        Box((0.0, g.handle[1], g.handle[2] - 0.01), (0.24, 0.03, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle bar
+    ]
+    o = g.drawer_origin
+    return f"""<?xml version="1.0"?>
+<robot name="{name}">
+<link name="carcass">{_inertial(0.0)}
+{_boxes_xml(carcass)}
+</link>
+<link name="drawer">{_inertial(1.0)}
+{_boxes_xml(drawer)}
+</link>
+<joint name="drawer_joint" type="prismatic">
+<parent link="carcass"/><child link="drawer"/>
+<origin xyz="{_v(o)}"/><axis xyz="0 -1 0"/>
+<limit lower="0" upper="{_f(g.travel)}" effort="100" velocity="1"/>
+</joint>
+</robot>
+"""
+
+
+def tray_boxes(sx: float, sy: float, color: Color, rim: float = 0.04, t: float = 0.01) -> list[Box]:
+    """A flat tray with low rims; its floor surface is at z = t."""
+    return [
+        Box((0.0, 0.0, t / 2), (sx, sy, t), color),
+        Box((0.0, sy / 2 - t / 2, rim / 2), (sx, t, rim), color),
+        Box((0.0, -(sy / 2 - t / 2), rim / 2), (sx, t, rim), color),
+        Box((sx / 2 - t / 2, 0.0, rim / 2), (t, sy, rim), color),
+        Box((-(sx / 2 - t / 2), 0.0, rim / 2), (t, sy, rim), color),
+    ]
+
+
+# --------------------------------------------------------------------------- objects and robots
+
+
+def object_urdf(name: str, shape: Shape, color: Color, mass: float = 0.1) -> str:
+    """A graspable object: one primitive centred on the body origin."""
+    if shape.kind == "box":
+        geometry = f'<box size="{_v(shape.size)}"/>'
+    elif shape.kind == "cylinder":
+        geometry = f'<cylinder radius="{_f(shape.size[0])}" length="{_f(shape.size[2])}"/>'
+    elif shape.kind == "sphere":
+        geometry = f'<sphere radius="{_f(shape.size[0])}"/>'
+    else:
+        raise ValueError(f"unknown shape {shape.kind!r}: use box, cylinder or sphere")
+    return f"""<?xml version="1.0"?>
+<robot name="{name}">
+<link name="base">{_inertial(mass)}
+<visual><geometry>{geometry}</geometry>{_material(color)}</visual>
+<collision><geometry>{geometry}</geometry></collision>
+</link>
+</robot>
+"""
+
+
+def chassis_boxes(length: float, width: float, height: float, color: Color) -> list[Box]:
+    """A wheeled box chassis; the arm mounts on its top."""
+    boxes = [Box((0.0, 0.0, 0.06 + (height - 0.06) / 2), (length, width, height - 0.06), color)]
+    black = (0.1, 0.1, 0.1, 1.0)
+    for ix in (-1, 1):
+        for iy in (-1, 1):
+            boxes.append(Box((ix * (length / 2 - 0.09), iy * (width / 2 - 0.02), 0.06), (0.14, 0.05, 0.12), black, collide=False))
+    return boxes
+
+
+class AssetDir:
+    """A temporary directory of generated URDFs, removed by `close()`."""
+
+    def __init__(self) -> None:
+        self.path = Path(tempfile.mkdtemp(prefix="mhrc-assets-"))
+        self._written: dict[str, str] = {}
+
+    def write(self, name: str, urdf: str) -> str:
+        """Write `urdf` as `<name>.urdf` (once per name) and return its absolute path."""
+        path = self.path / f"{name}.urdf"
+        if self._written.get(name) != urdf:
+            path.write_text(urdf, encoding="utf-8")
+            self._written[name] = urdf
+        return str(path)
+
+    def close(self) -> None:
+        shutil.rmtree(self.path, ignore_errors=True)

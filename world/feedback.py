@@ -1,0 +1,185 @@
+"""The feedback sentences a robot's agent reads after each skill (after the paper's Table III).
+
+One function per row of the table: each takes what the skill measured and says it plainly,
+with the numbers the agent needs to recover (distances, offsets, valid indices, known names).
+"""
+
+from __future__ import annotations
+
+
+def _names(names: list[str] | tuple[str, ...], empty: str = "none") -> str:
+    return ", ".join(names) if names else empty
+
+
+# --------------------------------------------------------------------------- any skill
+
+
+def not_capable(robot: str, skill: str, skills: tuple[str, ...]) -> str:
+    return f"{robot.capitalize()} cannot {skill}: its skills are {_names(skills)}."
+
+
+def no_such_robot(robot: str, robots: tuple[str, ...]) -> str:
+    return f"There is no robot {robot!r} in this world; robots: {_names(robots)}."
+
+
+def waited() -> str:
+    return "You waited."
+
+
+# --------------------------------------------------------------------------- navigate / move
+
+
+def unknown_furniture(name: str, furniture: list[str]) -> str:
+    return f"There is no {name!r} in your scene graph; furniture: {_names(furniture)}."
+
+
+def not_navigable(name: str, where: str | None) -> str:
+    if where:
+        return f"{name} has no stand pose: it is not something you can navigate to. Navigate to {where} instead."
+    return f"{name} has no stand pose: it is not something you can navigate to."
+
+
+def stand_pose_invalid(name: str, count: int, index: int) -> str:
+    return f"{name} has {count} stand pose(s), numbered 0 to {count - 1}; there is no stand pose {index}."
+
+
+def start_invalid() -> str:
+    return "Navigation failed: your start pose is on an obstacle or off the map."
+
+
+def goal_invalid(name: str, index: int) -> str:
+    return f"Navigation failed: stand pose {index} of {name} is on an obstacle or off the map."
+
+
+def no_path(name: str, index: int) -> str:
+    return f"Navigation failed: there is no collision-free path to stand pose {index} of {name}."
+
+
+def reached(name: str, index: int, seen: list[str] | None, *, container: bool = False) -> str:
+    """`seen` is None for a closed container (its inside cannot be seen)."""
+    text = f"You reached stand pose {index} of {name}."
+    if seen is None:
+        return text + f" {name} is closed: open it to see what is inside."
+    if container:
+        return text + (f" In the open {name}: {', '.join(seen)}." if seen else f" The open {name} is empty.")
+    return text + (f" On {name}: {', '.join(seen)}." if seen else f" There is nothing on {name}.")
+
+
+def move_too_long(distance: float, limit: float) -> str:
+    return f"Move failed: {distance:.2f} m is more than the {limit:.1f} m one move may cover."
+
+
+def move_blocked(dx: float, dy: float) -> str:
+    return f"Move failed: moving by dx={dx:.2f}, dy={dy:.2f} would hit an obstacle or leave the map."
+
+
+def moved(dx: float, dy: float) -> str:
+    return f"You moved by dx={dx:.2f} m, dy={dy:.2f} m."
+
+
+# --------------------------------------------------------------------------- open
+
+
+def not_openable(name: str) -> str:
+    return f"{name} cannot be opened: it has no door or drawer."
+
+
+def already_open(name: str) -> str:
+    return f"{name} is already open."
+
+
+def hands_full_to_open(name: str, held: str) -> str:
+    return f"Your gripper holds {held}; place it before opening {name}."
+
+
+def handle_out_of_reach(name: str, distance: float) -> str:
+    return (
+        f"The handle of {name} is out of your arm's reach: it is {distance:.2f} m from your arm base. "
+        f"Navigate to a stand pose of {name} first."
+    )
+
+
+def pull_failed(name: str) -> str:
+    return f"Your arm could not follow the handle of {name}: it stays closed."
+
+
+def opened(name: str, inside: list[str]) -> str:
+    if not inside:
+        return f"You opened {name}; it is empty."
+    return f"You opened {name}. Inside: {', '.join(inside)}."
+
+
+# --------------------------------------------------------------------------- pick
+
+
+def gripper_full(held: str) -> str:
+    return f"Your gripper already holds {held}; place it first."
+
+
+def object_unknown(name: str, known: list[str]) -> str:
+    return f"There is no {name!r} in your scene graph; objects you know: {_names(known)}."
+
+
+def held_by_other(name: str, robot: str) -> str:
+    return f"{name} is held by {robot}; you cannot pick it now."
+
+
+def in_closed_container(name: str, container: str) -> str:
+    return f"{name} is inside {container}, which is closed: open it first."
+
+
+def too_far(name: str, distance: float, offset: tuple[float, float] | None) -> str:
+    text = f"The end effector cannot reach {name}: it is {distance:.2f} m away from the closest pose your arm can get to."
+    if offset is not None:
+        text += f" Moving your base by dx={offset[0]:.2f}, dy={offset[1]:.2f} would bring it within a good grasping distance."
+    return text
+
+
+def config_invalid(what: str, which: str) -> str:
+    return f"The arm planner found the {which} configuration invalid (in collision) for {what}."
+
+
+def plan_failed(what: str) -> str:
+    return f"The arm planner found no collision-free motion to {what}."
+
+
+def picked(name: str) -> str:
+    return f"You picked up {name}."
+
+
+# --------------------------------------------------------------------------- place
+
+
+def gripper_empty(name: str) -> str:
+    return f"Your gripper is empty: there is no {name} to place."
+
+
+def wrong_object(held: str, named: str) -> str:
+    return f"You hold {held}, not {named}."
+
+
+def location_unknown(name: str, places: list[str]) -> str:
+    return f"There is no place called {name!r}; places: {_names(places)}."
+
+
+def not_a_surface(name: str) -> str:
+    return f"Objects cannot be placed on or into {name}; place them on a table, the counter, the sofa or in the tray."
+
+
+def no_free_spot(name: str) -> str:
+    return f"There is no free spot left on {name}."
+
+
+def place_out_of_reach(name: str, distance: float) -> str:
+    return (
+        f"No free spot on {name} is within your arm's reach (the nearest is {distance:.2f} m from your arm base). "
+        f"Navigate to a stand pose of {name} first."
+    )
+
+
+def place_failed(name: str, location: str) -> str:
+    return f"{name} did not end up on {location}."
+
+
+def placed(name: str, location: str) -> str:
+    return f"You placed {name} in the tray." if location == "tray" else f"You placed {name} on {location}."

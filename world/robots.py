@@ -1,0 +1,174 @@
+"""Robot kinds as data (skills, model, reach) and their kinematic PyBullet bodies.
+
+A new robot kind is a new `RobotKind` entry, not a new code path: the skills check
+`has_arm` / `mobile` and the capability set. Bases and arms are moved by setting poses and
+joint states; an object held by suction follows the tool tip (a kinematic attachment, so
+every run of the same actions ends in the same state).
+"""
+
+from __future__ import annotations
+
+import math
+from itertools import pairwise
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as p
+import pybullet_data
+
+from . import assets
+from .arm import EE_LINK, FINGERS, HOME
+from .assets import AssetDir
+
+
+@dataclass(frozen=True)
+class RobotKind:
+    id: str
+    label: str  # how observations describe it
+    skills: tuple[str, ...]
+    model: str  # what the body is made of
+    mobile: bool
+    has_arm: bool
+    reach: float | None = None  # conservative horizontal reach of the arm (m): picks within it usually succeed
+    footprint: float = 0.0  # radius the occupancy grid is inflated by
+
+
+KINDS: dict[str, RobotKind] = {
+    k.id: k
+    for k in (
+        RobotKind(
+            "mobile_manipulator", "mobile manipulator",
+            ("navigate", "move", "open", "pick", "place", "communicate", "wait"),
+            "box chassis with a Franka Panda arm and a suction cup", mobile=True, has_arm=True, reach=0.72, footprint=0.3,
+        ),
+        RobotKind(
+            "tabletop_arm", "tabletop manipulator", ("pick", "place", "communicate", "wait"),
+            "Franka Panda arm fixed on table_0, with a suction cup", mobile=False, has_arm=True, reach=0.62,
+        ),
+        RobotKind(
+            "mobile_base", "mobile robot", ("navigate", "communicate", "wait"),
+            "R2-D2 style wheeled base (pybullet_data r2d2.urdf)", mobile=True, has_arm=False, footprint=0.3,
+        ),
+    )
+}  # fmt: skip
+
+TEAM: dict[str, str] = {"alice": "mobile_manipulator", "bob": "tabletop_arm", "david": "mobile_base"}
+ROBOTS = tuple(TEAM)  # the fixed execution order
+
+CHASSIS = (0.6, 0.5, 0.65)  # Alice's chassis: length, width, height (the arm mounts on top)
+ARM_FORWARD = 0.2  # arm base ahead of the chassis centre
+CHASSIS_COLOR = (0.55, 0.25, 0.6, 1.0)
+PANDA = "franka_panda/panda.urdf"
+
+
+@dataclass
+class RobotBody:
+    """One robot's live state: base pose, arm joints, held object, body ids."""
+
+    name: str
+    kind: RobotKind
+    cid: int
+    base: tuple[float, float, float] | None = None  # x, y, yaw; None for a fixed arm
+    fixed_arm: tuple[float, float, float] | None = None  # arm base of a fixed arm
+    fixed_yaw: float = 0.0
+    body: int = -1  # chassis or mobile base
+    arm: int = -1
+    q: np.ndarray = field(default_factory=lambda: HOME.copy())
+    holding: str | None = None
+    held_body: int = -1
+    held_drop: float = 0.0  # how far the held object's centre hangs below the tool tip
+    held_yaw: float = 0.0  # the held object's yaw relative to the tool's
+
+    # ---------------------------------------------------------------- geometry
+    def arm_base(self) -> tuple[float, float, float] | None:
+        if not self.kind.has_arm:
+            return None
+        if self.base is None:
+            return self.fixed_arm
+        x, y, yaw = self.base
+        return (x + ARM_FORWARD * math.cos(yaw), y + ARM_FORWARD * math.sin(yaw), CHASSIS[2])
+
+    def arm_yaw(self) -> float:
+        return self.base[2] if self.base is not None else self.fixed_yaw
+
+    def tip(self) -> tuple[float, float, float]:
+        st = p.getLinkState(self.arm, EE_LINK, computeForwardKinematics=True, physicsClientId=self.cid)
+        return (float(st[4][0]), float(st[4][1]), float(st[4][2]))
+
+    def tool_yaw(self) -> float:
+        """Heading of the tool's x axis in the world's xy plane."""
+        st = p.getLinkState(self.arm, EE_LINK, computeForwardKinematics=True, physicsClientId=self.cid)
+        m = p.getMatrixFromQuaternion(st[5])
+        return math.atan2(m[3], m[0])
+
+    # ---------------------------------------------------------------- moving
+    def set_base(self, pose: tuple[float, float, float]) -> None:
+        self.base = pose
+        x, y, yaw = pose
+        if self.kind.has_arm:
+            orn = p.getQuaternionFromEuler((0, 0, yaw))
+            p.resetBasePositionAndOrientation(self.body, (x, y, 0.0), orn, physicsClientId=self.cid)
+            ab = self.arm_base()
+            assert ab is not None
+            p.resetBasePositionAndOrientation(self.arm, ab, orn, physicsClientId=self.cid)
+            self._carry()
+        else:  # r2d2.urdf faces its own +y
+            orn = p.getQuaternionFromEuler((0, 0, yaw - math.pi / 2))
+            p.resetBasePositionAndOrientation(self.body, (x, y, 0.38), orn, physicsClientId=self.cid)
+
+    def set_arm(self, q: np.ndarray) -> None:
+        self.q = np.array(q, dtype=float)
+        for j in range(7):
+            p.resetJointState(self.arm, j, float(self.q[j]), physicsClientId=self.cid)
+        self._carry()
+
+    def run(self, path: list[np.ndarray], joint_speed: float = 1.0) -> float:
+        """Set the arm along `path`; the simulated seconds it takes at `joint_speed` rad/s."""
+        for q in path:
+            self.set_arm(q)
+        return sum(float(np.max(np.abs(b - a))) for a, b in pairwise(path)) / joint_speed
+
+    # ---------------------------------------------------------------- suction
+    def attach(self, name: str, body: int) -> None:
+        """Hold `body` as it is now, relative to the tool tip (suction)."""
+        pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=self.cid)
+        self.holding, self.held_body = name, body
+        self.held_drop = self.tip()[2] - float(pos[2])
+        self.held_yaw = p.getEulerFromQuaternion(orn)[2] - self.tool_yaw()
+        self._carry()
+
+    def release(self) -> None:
+        self.holding, self.held_body = None, -1
+
+    def _carry(self) -> None:
+        if self.held_body < 0:
+            return
+        x, y, z = self.tip()
+        orn = p.getQuaternionFromEuler((0, 0, self.tool_yaw() + self.held_yaw))
+        p.resetBasePositionAndOrientation(self.held_body, (x, y, z - self.held_drop), orn, physicsClientId=self.cid)
+
+
+def spawn(cid: int, name: str, kind: RobotKind, assets_dir: AssetDir, *, pose: tuple[float, float, float] | None = None,
+          arm_base: tuple[float, float, float] | None = None, arm_yaw: float = 0.0) -> RobotBody:  # fmt: skip
+    """Load a robot's bodies: a chassis with an arm, a fixed arm, or a bare mobile base."""
+    r = RobotBody(name, kind, cid, fixed_arm=arm_base, fixed_yaw=arm_yaw)
+    data = pybullet_data.getDataPath()
+    if kind.has_arm:
+        if kind.mobile:
+            urdf = assets.link_urdf(f"{name}_chassis", assets.chassis_boxes(*CHASSIS, CHASSIS_COLOR))
+            r.body = p.loadURDF(assets_dir.write(f"{name}_chassis", urdf), useFixedBase=True, physicsClientId=cid)
+            r.arm = p.loadURDF(f"{data}/{PANDA}", useFixedBase=True, physicsClientId=cid)
+        else:
+            assert arm_base is not None, f"{name}: a fixed arm needs its base position"
+            orn = p.getQuaternionFromEuler((0, 0, arm_yaw))
+            r.arm = p.loadURDF(f"{data}/{PANDA}", arm_base, orn, useFixedBase=True, physicsClientId=cid)
+        for f in FINGERS:  # closed fingers around the suction cup
+            p.resetJointState(r.arm, f, 0.0, physicsClientId=cid)
+    else:
+        r.body = p.loadURDF(f"{data}/r2d2.urdf", globalScaling=0.8, physicsClientId=cid)
+    if kind.mobile:
+        assert pose is not None, f"{name}: a mobile robot needs a start pose"
+        r.set_base(pose)
+    if kind.has_arm:
+        r.set_arm(HOME)
+    return r

@@ -1,0 +1,409 @@
+"""The skills that move things: navigate, move, open, pick, place.
+
+Each takes the simulator, the acting robot and the action, runs the real planners (A* for
+bases; IK and OMPL BIT* for arms), executes the result kinematically and returns a
+`SkillOutcome` whose sentence comes from `feedback`. Bad arguments are failures, never
+exceptions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mhrc.protocol import Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
+
+from . import feedback as fb
+from .arm import HOME, ArmPlanner, straight
+from .astar import astar, line_free, path_length
+from .robots import ARM_FORWARD, CHASSIS, RobotBody
+
+if TYPE_CHECKING:
+    from .sim import ObjectState, Sim
+    from .tasks import ObjectKind
+
+NAV_SPEED = 0.5  # m/s: simulated time of base motions
+JOINT_SPEED = 1.0  # rad/s: simulated time of arm motions
+SUCTION_TIME = 1.0  # s to grip or release
+MAX_MOVE = 1.0  # m, the longest `move`
+APPROACH = 0.12  # pre-grasp height above the grasp point
+MAX_ARM_RANGE = 0.9  # no top-down pose exists beyond this horizontal distance from the arm base
+IDEAL_PICK = (0.3, 0.58)  # horizontal arm-base-to-object distances a corrective move aims for
+PULL_STEPS = 16  # IK waypoints along a drawer's travel
+SPOT_GAP = 0.02  # clearance between placed objects' footprints
+TIP_CLEARANCE = 0.015  # the closed fingertips reach this far below the suction point
+
+
+# --------------------------------------------------------------------------- bases
+
+
+def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
+    f = sim.layout.get(a.target)
+    if f is None:
+        if a.target == "tray":
+            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable("tray", sim.layout.bob_table))
+        known = sim.known_objects(r.name)
+        if a.target in known:
+            on = sim.objects[a.target].on
+            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, on if on != "tray" else sim.layout.bob_table))
+        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, sim.furniture_names()))
+    if not f.stand_poses:
+        return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(f.name, None))
+    if a.stand_pose >= len(f.stand_poses):
+        return SkillOutcome.fail(OutcomeCode.STAND_POSE_INVALID, fb.stand_pose_invalid(f.name, len(f.stand_poses), a.stand_pose))
+    assert r.base is not None
+    goal = f.stand_poses[a.stand_pose]
+    if not sim.grid.free(r.base[0], r.base[1]):
+        return SkillOutcome.fail(OutcomeCode.START_INVALID, fb.start_invalid())
+    if not sim.grid.free(goal[0], goal[1]):
+        return SkillOutcome.fail(OutcomeCode.GOAL_INVALID, fb.goal_invalid(f.name, a.stand_pose))
+    path = astar(sim.grid, (r.base[0], r.base[1]), (goal[0], goal[1]))
+    if path is None:
+        return SkillOutcome.fail(OutcomeCode.NO_PATH, fb.no_path(f.name, a.stand_pose))
+    for x, y in path[1:-1]:  # kinematic: the base visits the waypoints, heading along the path
+        r.set_base((x, y, r.base[2]))
+    r.set_base(goal)
+    length = path_length(path)
+    if f.drawer is not None and not sim.is_open(f.name):
+        seen = None
+    else:
+        seen = sim.objects_on(f.name)
+        sim.learn(r.name, seen)
+    return SkillOutcome.ok(fb.reached(f.name, a.stand_pose, seen, container=f.drawer is not None), sim_time=length / NAV_SPEED, path_length=round(length, 3))
+
+
+def _move_blocked(sim: Sim, x: float, y: float, dx: float, dy: float) -> bool:
+    return not (sim.grid.free(x, y) and line_free(sim.grid, (x, y), (x + dx, y + dy)))
+
+
+def move(sim: Sim, r: RobotBody, a: Move) -> SkillOutcome:
+    assert r.base is not None
+    d = math.hypot(a.dx, a.dy)
+    if d > MAX_MOVE + 1e-9:
+        return SkillOutcome.fail(OutcomeCode.GOAL_INVALID, fb.move_too_long(d, MAX_MOVE))
+    x, y, yaw = r.base
+    if not sim.grid.free(x, y):
+        return SkillOutcome.fail(OutcomeCode.START_INVALID, fb.start_invalid())
+    if _move_blocked(sim, x, y, a.dx, a.dy):
+        return SkillOutcome.fail(OutcomeCode.GOAL_INVALID, fb.move_blocked(a.dx, a.dy))
+    r.set_base((x + a.dx, y + a.dy, yaw))
+    return SkillOutcome.ok(fb.moved(a.dx, a.dy), sim_time=d / NAV_SPEED, distance=round(d, 3))
+
+
+# --------------------------------------------------------------------------- arms: shared
+
+
+@dataclass
+class Reach:
+    """A plan to a pose above a point, the straight descent onto it, or why there is none."""
+
+    path: list[np.ndarray] | None = None
+    descent: list[np.ndarray] | None = None
+    failure: SkillOutcome | None = None
+    distance: float = 0.0  # how far the tool tip stays from the point when it cannot reach it
+
+
+def planner_for(sim: Sim, r: RobotBody, base: tuple[float, float, float] | None = None) -> ArmPlanner:
+    """The shadow planner, set up for r's arm: its base pose, its own chassis, the other arms.
+
+    `base` plans as if a mobile robot stood there instead. Bases do not collide with each
+    other (navigation ignores robots, as the paper's platform does), so other robots'
+    bodies are left out; their arms are not.
+    """
+    pl = sim.planner
+    for other in sim.bots.values():
+        if other is r:
+            pl.hide_other_arm(other.name)
+        elif other.kind.has_arm:
+            oab = other.arm_base()
+            assert oab is not None
+            pl.set_other_arm(other.name, oab, other.arm_yaw(), other.q)
+    base = base or r.base
+    if base is None:
+        assert r.fixed_arm is not None
+        pl.set_base(r.fixed_arm, r.fixed_yaw)
+        pl.hide_box("chassis")
+    else:
+        x, y, yaw = base
+        pl.set_base((x + ARM_FORWARD * math.cos(yaw), y + ARM_FORWARD * math.sin(yaw), CHASSIS[2]), yaw)
+        pl.set_box("chassis", (x, y, CHASSIS[2] / 2), (CHASSIS[0] / 2, CHASSIS[1] / 2, CHASSIS[2] / 2 - 0.01), yaw)
+    return pl
+
+
+def horizontal(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    return math.hypot(a[0] - b[0], a[1] - b[1])
+
+
+def reach_point(sim: Sim, r: RobotBody, point: tuple[float, float, float], what: str, tool_yaw: float | None = None) -> Reach:
+    """IK (verified) for `point` and a point above it, then BIT* from r's arm to the one above.
+
+    The tool points down, turned to `tool_yaw` (default: the arm base's heading).
+    """
+    pl = planner_for(sim, r)
+    ab = r.arm_base()
+    assert ab is not None
+    yaw = r.arm_yaw() if tool_yaw is None else tool_yaw
+    if horizontal(ab, point) > MAX_ARM_RANGE:
+        return Reach(distance=horizontal(ab, point) - 0.75)
+    above = (point[0], point[1], point[2] + APPROACH)
+    sol_above = pl.solve(above, yaw, r.q)
+    sol_at = pl.solve(point, yaw, sol_above.q) if sol_above.q is not None else sol_above
+    q_above, q_at = sol_above.q, sol_at.q
+    if q_above is None or q_at is None:
+        if sol_at.collided:  # the pose exists, but every solution found collides
+            return Reach(failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.config_invalid(what, "goal")))
+        return Reach(distance=sol_at.error)
+    descent = straight(q_above, q_at, 8)
+    if not all(pl.valid(q) for q in descent[1:-1]):
+        return Reach(failure=SkillOutcome.fail(OutcomeCode.PLAN_FAILED, fb.plan_failed(what)))
+    res = pl.plan(r.q, q_above)
+    if res.path is None:
+        if res.reason in ("start_invalid", "goal_invalid"):
+            which = res.reason.split("_")[0]
+            return Reach(failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.config_invalid(what, which)))
+        return Reach(failure=SkillOutcome.fail(OutcomeCode.PLAN_FAILED, fb.plan_failed(what)))
+    return Reach(path=res.path, descent=descent)
+
+
+def retract(sim: Sim, r: RobotBody) -> float:
+    """Back to the carry posture: planned, or straight in joint space if no plan is found."""
+    res = planner_for(sim, r).plan(r.q, HOME)
+    path = res.path if res.path is not None else straight(r.q, HOME, 12)
+    return r.run(path, JOINT_SPEED)
+
+
+def corrective_move(sim: Sim, r: RobotBody, point: tuple[float, float, float]) -> tuple[float, float] | None:
+    """The shortest collision-free base shift (<= MAX_MOVE) after which IK reaches `point` well."""
+    assert r.base is not None
+    x, y, yaw = r.base
+    fx, fy = ARM_FORWARD * math.cos(yaw), ARM_FORWARD * math.sin(yaw)
+    steps = np.round(np.arange(-MAX_MOVE, MAX_MOVE + 1e-9, 0.05), 3)
+    cands = sorted(
+        ((float(dx), float(dy)) for dx in steps for dy in steps if math.hypot(dx, dy) <= MAX_MOVE),
+        key=lambda d: (round(math.hypot(*d), 6), d),
+    )
+    tried = 0
+    for dx, dy in cands:
+        dist = math.hypot(point[0] - (x + dx + fx), point[1] - (y + dy + fy))
+        if not IDEAL_PICK[0] <= dist <= IDEAL_PICK[1] or _move_blocked(sim, x, y, dx, dy):
+            continue
+        pl = planner_for(sim, r, base=(x + dx, y + dy, yaw))
+        ok = pl.ik((point[0], point[1], point[2] + APPROACH), yaw, HOME, restarts=4) is not None
+        ok = ok and pl.ik(point, yaw, HOME, restarts=4) is not None
+        if ok:
+            return dx, dy
+        tried += 1
+        if tried >= 12:
+            break
+    return None
+
+
+def _too_far(sim: Sim, r: RobotBody, point: tuple[float, float, float], name: str, distance: float) -> SkillOutcome:
+    ab = r.arm_base()
+    assert ab is not None
+    details: dict[str, float | str] = {"distance": round(distance, 3), "horizontal_distance": round(horizontal(ab, point), 3)}
+    fix = corrective_move(sim, r, point) if r.kind.mobile else None
+    if fix is not None:
+        details.update(dx=round(fix[0], 3), dy=round(fix[1], 3))
+    return SkillOutcome(succeeded=False, code=OutcomeCode.TOO_FAR, feedback=fb.too_far(name, distance, fix), details=details)
+
+
+# --------------------------------------------------------------------------- open
+
+
+def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
+    f = sim.layout.get(a.target)
+    if f is None:
+        if a.target == "tray" or a.target in sim.known_objects(r.name):
+            return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(a.target))
+        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, sim.furniture_names()))
+    if f.drawer is None:
+        return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(f.name))
+    if sim.is_open(f.name):
+        return SkillOutcome.fail(OutcomeCode.ALREADY_OPEN, fb.already_open(f.name))
+    if r.holding is not None:
+        return SkillOutcome.fail(OutcomeCode.GRIPPER_FULL, fb.hands_full_to_open(f.name, r.holding))
+    hx, hy, hz = sim.handle_position(f.name)
+    handle = (hx, hy, hz + TIP_CLEARANCE)
+    ab = r.arm_base()
+    assert ab is not None
+    reach = reach_point(sim, r, handle, f"the handle of {f.name}")
+    if reach.failure is not None:
+        return reach.failure
+    if reach.path is None or reach.descent is None:
+        return SkillOutcome.fail(
+            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle)),
+            distance=round(reach.distance, 3), horizontal_distance=round(horizontal(ab, handle), 3),
+        )  # fmt: skip
+    q0 = r.q.copy()
+    t = r.run(reach.path + reach.descent, JOINT_SPEED)
+    # pull the handle along the drawer's axis, the arm following IK waypoints
+    pl = planner_for(sim, r)
+    d = f.drawer
+    yaw = r.arm_yaw()
+    pulled = 0.0
+    for s in np.linspace(0.0, d.travel, PULL_STEPS + 1)[1:]:
+        goal = (handle[0] + d.axis[0] * s, handle[1] + d.axis[1] * s, handle[2])
+        sim.set_drawer(f.name, float(s))  # the drawer (handle held) moves out of the planner's way
+        q = pl.ik(goal, yaw, r.q, restarts=3)
+        if q is None or float(np.max(np.abs(q - r.q))) > 0.6:
+            sim.set_drawer(f.name, pulled)
+            break
+        t += r.run([r.q, q], JOINT_SPEED)
+        pulled = float(s)
+    if pulled < d.travel - 1e-6:
+        sim.set_drawer(f.name, 0.0)
+        t += r.run(straight(r.q, q0, 10), JOINT_SPEED)
+        return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), sim_time=t, pulled=round(pulled, 3))
+    lift = pl.ik((r.tip()[0], r.tip()[1], r.tip()[2] + 0.08), yaw, r.q, restarts=2)
+    if lift is not None:
+        t += r.run(straight(r.q, lift, 5), JOINT_SPEED)
+    t += retract(sim, r)
+    inside = sim.objects_on(f.name)
+    sim.learn(r.name, inside)
+    return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(pulled, 3))
+
+
+# --------------------------------------------------------------------------- pick
+
+
+def pick(sim: Sim, r: RobotBody, a: Pick) -> SkillOutcome:
+    if r.holding is not None:
+        return SkillOutcome.fail(OutcomeCode.GRIPPER_FULL, fb.gripper_full(r.holding))
+    known = sim.known_objects(r.name)
+    if a.obj not in known:
+        return SkillOutcome.fail(OutcomeCode.OBJECT_UNKNOWN, fb.object_unknown(a.obj, sorted(known)))
+    obj = sim.objects[a.obj]
+    if obj.held_by is not None:
+        return SkillOutcome.fail(OutcomeCode.OBJECT_UNKNOWN, fb.held_by_other(obj.name, obj.held_by))
+    if obj.inside and obj.on is not None and not sim.is_open(obj.on):
+        return SkillOutcome.fail(OutcomeCode.NOT_REACHABLE_CONTAINER, fb.in_closed_container(obj.name, obj.on))
+    x, y, z = sim.position(obj)
+    top = (x, y, z + obj.kind.height / 2 + TIP_CLEARANCE)
+    reach = reach_point(sim, r, top, obj.name)
+    if reach.failure is not None:
+        return reach.failure
+    if reach.path is None or reach.descent is None:
+        return _too_far(sim, r, top, obj.name, reach.distance)
+    t = r.run(reach.path + reach.descent, JOINT_SPEED)
+    sim.grasp(r, obj)
+    t += r.run(list(reversed(reach.descent)), JOINT_SPEED)
+    t += retract(sim, r)
+    return SkillOutcome.ok(fb.picked(obj.name), sim_time=t + SUCTION_TIME)
+
+
+# --------------------------------------------------------------------------- place
+
+
+def half_extent(kind: ObjectKind, yaw: float, gap: float = SPOT_GAP) -> tuple[float, float]:
+    """Half the x and y extent of an upright object turned by `yaw`, plus half of `gap`."""
+    fx, fy = kind.shape.footprint
+    c, s = abs(math.cos(yaw)), abs(math.sin(yaw))
+    return (c * fx + s * fy) / 2 + gap / 2, (s * fx + c * fy) / 2 + gap / 2
+
+
+def free_spots(sim: Sim, location: str, held: ObjectState) -> tuple[list[tuple[float, float, float]], float] | None:
+    """Spots (x, y, yaw) at `location` where `held` fits without touching anything, best first, and the surface z."""
+    lay = sim.layout
+    if location == "tray":
+        tx, ty, sx, sy = lay.tray
+        top = sim.tray_floor()
+        x0, x1, y0, y1 = tx - sx / 2 + 0.015, tx + sx / 2 - 0.015, ty - sy / 2 + 0.015, ty + sy / 2 - 0.015
+        center = (x1, y1)  # fill the tray from its far corner
+        avoid_tray = False
+    else:
+        f = lay.get(location)
+        if f is None or f.place_pose is None:
+            return None
+        top = f.top
+        x0, x1 = f.center[0] - f.size[0] / 2 + 0.02, f.center[0] + f.size[0] / 2 - 0.02
+        y0, y1 = f.center[1] - f.size[1] / 2 + 0.02, f.center[1] + f.size[1] / 2 - 0.02
+        center = f.place_pose
+        avoid_tray = f.name == lay.bob_table
+    radius = math.inf if location == "tray" else lay.get(location).place_radius  # type: ignore[union-attr]
+    boxes = []
+    for o in sim.objects.values():
+        if o is held or o.held_by is not None:
+            continue
+        ox, oy, oz = sim.position(o)
+        if abs(oz - o.kind.height / 2 - top) < 0.15:
+            boxes.append(((ox, oy), half_extent(o.kind, sim.yaw(o))))
+    if avoid_tray:
+        boxes.append((lay.tray[:2], (lay.tray[2] / 2, lay.tray[3] / 2)))
+    out: list[tuple[float, float, float]] = []
+    for yaw in (0.0, math.pi / 2):
+        hx, hy = half_extent(held.kind, yaw)
+        for x in np.arange(x0 + hx, x1 - hx + 1e-9, 0.02):
+            for y in np.arange(y0 + hy, y1 - hy + 1e-9, 0.02):
+                c = (round(float(x), 4), round(float(y), 4))
+                if math.hypot(c[0] - center[0], c[1] - center[1]) > radius:
+                    continue
+                if not any(_overlaps(c, (hx, hy), b, h) for b, h in boxes):
+                    out.append((c[0], c[1], yaw))
+    out.sort(key=lambda c: (round(math.hypot(c[0] - center[0], c[1] - center[1]), 6), c[2], c[0], c[1]))
+    return out, top
+
+
+def _overlaps(a: tuple[float, float], ha: tuple[float, float], b: tuple[float, float], hb: tuple[float, float]) -> bool:
+    return abs(a[0] - b[0]) < ha[0] + hb[0] and abs(a[1] - b[1]) < ha[1] + hb[1]
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def tool_yaw_for(r: RobotBody, object_yaw: float) -> float:
+    """The tool heading that sets the held object down at `object_yaw`, nearest the arm's heading."""
+    base = object_yaw - r.held_yaw
+    return min((base + k * math.pi for k in (-2, -1, 0, 1, 2)), key=lambda y: abs(_wrap(y - r.arm_yaw())))
+
+
+def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
+    if r.holding is None:
+        return SkillOutcome.fail(OutcomeCode.GRIPPER_EMPTY, fb.gripper_empty(a.obj))
+    if a.obj != r.holding:
+        return SkillOutcome.fail(OutcomeCode.WRONG_OBJECT, fb.wrong_object(r.holding, a.obj))
+    held = sim.objects[r.holding]
+    f = sim.layout.get(a.location)
+    if f is not None and f.place_pose is None:
+        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.not_a_surface(f.name))
+    spots = free_spots(sim, a.location, held)
+    if spots is None:
+        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.location_unknown(a.location, sim.place_names()))
+    cands, top = spots
+    if a.location == sim.layout.bob_table:
+        cands = [c for c in cands if sim.within_handover(c)] or cands
+    if not cands:
+        return SkillOutcome.fail(OutcomeCode.PLACE_FAILED, fb.no_free_spot(a.location))
+    ab = r.arm_base()
+    assert ab is not None
+    reachable = [c for c in cands if horizontal(ab, c) <= MAX_ARM_RANGE - 0.1]
+    if not reachable:
+        nearest = min(horizontal(ab, c) for c in cands)
+        return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest), distance=round(nearest, 3))
+    failure: SkillOutcome | None = None
+    tries = 0
+    for x, y, yaw in reachable:
+        point = (x, y, top + held.kind.height + TIP_CLEARANCE + 0.002)
+        tool = _wrap(tool_yaw_for(r, yaw))
+        reach = reach_point(sim, r, point, f"the spot on {a.location}", tool_yaw=tool)
+        if reach.path is None or reach.descent is None:
+            failure = failure or reach.failure
+            tries += 1
+            if tries >= 8:
+                break
+            continue
+        t = r.run(reach.path + reach.descent, JOINT_SPEED)
+        sim.release(r, held, (x, y, top), yaw)
+        t += r.run(list(reversed(reach.descent)), JOINT_SPEED)
+        t += retract(sim, r)
+        if not sim.settled_at(held, a.location):
+            return SkillOutcome.fail(OutcomeCode.PLACE_FAILED, fb.place_failed(held.name, a.location), sim_time=t + SUCTION_TIME)
+        return SkillOutcome.ok(fb.placed(held.name, a.location), sim_time=t + SUCTION_TIME)
+    if failure is not None:
+        return failure
+    nearest = min(horizontal(ab, c) for c in reachable)
+    return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest), distance=round(nearest, 3))
