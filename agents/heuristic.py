@@ -1,10 +1,12 @@
-"""Scripted expert policies, one per role, for Pack Objects.
+"""Scripted expert policies, one per role, for every task (pack, sort, sandwich).
 
 Each sees only its own robot's observation (its partial scene graph, status, new messages and
 the feedback of its last action) and coordinates through `communicate` messages, as the
 paper's roles do:
 
-- Bob asks Alice for every target he cannot pick himself, then packs what is in his reach.
+- Bob asks Alice for every target he cannot pick himself, then puts what is in his reach on
+  its goal (the tray, its colour's panel, the cutting board); for an ordered task (a sandwich)
+  only the next target in the list, waiting for it if need be.
 - Alice hands the open surfaces to David, explores the closed containers herself, fetches what
   Bob asked for and puts it on table_0 near him. A grasp that fails for distance is fixed with
   `move(dx, dy)` from the feedback; other grasp failures try the next stand pose.
@@ -38,7 +40,6 @@ from mhrc.protocol import (
 from .policy import Decision
 
 HANDOVER = "table_0"  # Bob's table: where fetched objects go
-RECEPTACLE = "tray"
 _NAMES = r"([A-Za-z0-9_]+(?:\s*,\s*[A-Za-z0-9_]+)*)"
 REQUEST_RE = re.compile(r"bring these to table_0 within my reach:\s*" + _NAMES)
 EXPLORE_RE = re.compile(r"explore these surfaces and tell me what lies on them:\s*" + _NAMES)
@@ -60,6 +61,13 @@ def _furniture(obs: Observation, name: str) -> FurnitureView | None:
 
 def _object(obs: Observation, name: str) -> ObjectView | None:
     return next((o for o in obs.objects if o.name == name), None)
+
+
+def _on_fixture(obs: Observation, o: ObjectView) -> bool:
+    """Whether `o` lies on one of the task's fixtures on Bob's table (a tray, a panel, a board):
+    furniture one cannot stand at."""
+    f = _furniture(obs, o.on or "")
+    return f is not None and not f.stand_poses and o.on != HANDOVER
 
 
 def _nearest_stand_pose(f: FurnitureView, point: tuple[float, ...]) -> int:
@@ -107,10 +115,11 @@ class BobHeuristic(_RoleBase):
             self.pick_failures[name] = self.pick_failures.get(name, 0) + 1
         holding = obs.status.holding
         if holding:
-            return self._decision(Place(obj=holding, location=RECEPTACLE))
-        packed = {o.name for o in obs.objects if o.on == RECEPTACLE}
-        todo = [t for t in obs.targets if t not in packed]
-        reachable = [t for t in todo if self._in_reach(obs, t) and self.pick_failures.get(t, 0) < 2]
+            return self._decision(Place(obj=holding, location=obs.goals.get(holding, HANDOVER)))
+        done = {o.name for o in obs.objects if o.name in obs.goals and o.on == obs.goals[o.name]}
+        todo = [t for t in obs.targets if t not in done]
+        candidates = todo[:1] if obs.ordered else todo
+        reachable = [t for t in candidates if self._in_reach(obs, t) and self.pick_failures.get(t, 0) < 2]
         if reachable:
             return self._decision(Pick(obj=reachable[0]))
         ask = [t for t in todo if t not in self.requested or (self.pick_failures.get(t, 0) >= 2 and _object(obs, t))]
@@ -224,7 +233,7 @@ class AliceHeuristic(_RoleBase):
             if name in self.delivered or name in self.given_up:
                 continue
             o = _object(obs, name)
-            if o is None or o.on == RECEPTACLE or o.held_by not in (None, obs.robot):
+            if o is None or _on_fixture(obs, o) or o.held_by not in (None, obs.robot):
                 continue
             candidates.append(o)
         if not candidates:

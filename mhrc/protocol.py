@@ -209,6 +209,8 @@ class Observation(_Model):
     task_brief: str
     task_detail: str
     targets: list[str] = Field(default_factory=list, description="the task's object list (Bob only)")
+    goals: dict[str, str] = Field(default_factory=dict, description="target -> where it must end: tray, panel, board (Bob only)")
+    ordered: bool = Field(False, description="whether the targets must reach their goals in the listed order (a sandwich)")
     task_status: str | None = Field(None, description="progress text (Bob only)")
     teammates: dict[str, list[str]] = Field(default_factory=dict, description="robot -> its skills")
     new_messages: list[RobotMessage] = Field(default_factory=list)

@@ -28,7 +28,8 @@ class Box:
 
 @dataclass(frozen=True)
 class Shape:
-    """The primitive an object is made of: box (sx, sy, sz), cylinder (r, r, h) or sphere (r, r, 2r)."""
+    """The primitive an object is made of: box (sx, sy, sz), cylinder (r, r, h), sphere (r, r, 2r)
+    or prism (sx, sy, sz: a triangular prism lying on its sx x sy face, ridge along y on top)."""
 
     kind: str
     size: Vec3
@@ -40,7 +41,7 @@ class Shape:
     @property
     def footprint(self) -> tuple[float, float]:
         """Full extent along x and y when the object stands upright with yaw 0."""
-        if self.kind == "box":
+        if self.kind in ("box", "prism"):
             return self.size[0], self.size[1]
         return 2 * self.size[0], 2 * self.size[0]
 
@@ -180,6 +181,11 @@ def drawer_unit_urdf(name: str, g: DrawerGeometry, color: Color) -> str:
 """
 
 
+def slab_boxes(sx: float, sy: float, t: float, color: Color) -> list[Box]:
+    """A flat slab (a panel, a cutting board) whose top surface is at z = t."""
+    return [Box((0.0, 0.0, t / 2), (sx, sy, t), color)]
+
+
 def tray_boxes(sx: float, sy: float, color: Color, rim: float = 0.04, t: float = 0.01) -> list[Box]:
     """A flat tray with low rims; its floor surface is at z = t."""
     return [
@@ -202,8 +208,10 @@ def object_urdf(name: str, shape: Shape, color: Color, mass: float = 0.1) -> str
         geometry = f'<cylinder radius="{_f(shape.size[0])}" length="{_f(shape.size[2])}"/>'
     elif shape.kind == "sphere":
         geometry = f'<sphere radius="{_f(shape.size[0])}"/>'
+    elif shape.kind == "prism":
+        geometry = f'<mesh filename="{name}.obj"/>'
     else:
-        raise ValueError(f"unknown shape {shape.kind!r}: use box, cylinder or sphere")
+        raise ValueError(f"unknown shape {shape.kind!r}: use box, cylinder, sphere or prism")
     return f"""<?xml version="1.0"?>
 <robot name="{name}">
 <link name="base">{_inertial(mass)}
@@ -212,6 +220,22 @@ def object_urdf(name: str, shape: Shape, color: Color, mass: float = 0.1) -> str
 </link>
 </robot>
 """
+
+
+def prism_obj(size: Vec3) -> str:
+    """A triangular prism as a Wavefront OBJ mesh, centred on the origin."""
+    a, b, h = size[0] / 2, size[1] / 2, size[2] / 2
+    verts = [(-a, -b, -h), (a, -b, -h), (a, b, -h), (-a, b, -h), (0.0, -b, h), (0.0, b, h)]
+    faces = [(1, 3, 2), (1, 4, 3), (1, 2, 5), (2, 3, 6), (2, 6, 5), (3, 4, 6), (4, 1, 5), (4, 5, 6)]
+    lines = [f"v {_f(x)} {_f(y)} {_f(z)}" for x, y, z in verts] + [f"f {i} {j} {k}" for i, j, k in faces]
+    return "\n".join(lines) + "\n"
+
+
+def write_object(assets_dir: AssetDir, name: str, shape: Shape, color: Color) -> str:
+    """Write an object's URDF (and its mesh, for a prism); return the URDF's path."""
+    if shape.kind == "prism":
+        assets_dir.write_file(f"{name}.obj", prism_obj(shape.size))
+    return assets_dir.write(f"object_{name}", object_urdf(name, shape, color))
 
 
 def chassis_boxes(length: float, width: float, height: float, color: Color) -> list[Box]:
@@ -237,6 +261,12 @@ class AssetDir:
         if self._written.get(name) != urdf:
             path.write_text(urdf, encoding="utf-8")
             self._written[name] = urdf
+        return str(path)
+
+    def write_file(self, filename: str, text: str) -> str:
+        """Write another file (a mesh) beside the URDFs; return its absolute path."""
+        path = self.path / filename
+        path.write_text(text, encoding="utf-8")
         return str(path)
 
     def close(self) -> None:

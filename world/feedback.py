@@ -162,8 +162,8 @@ def location_unknown(name: str, places: list[str]) -> str:
     return f"There is no place called {name!r}; places: {_names(places)}."
 
 
-def not_a_surface(name: str) -> str:
-    return f"Objects cannot be placed on or into {name}; place them on a table, the counter, the sofa or in the tray."
+def not_a_surface(name: str, places: list[str]) -> str:
+    return f"Objects cannot be placed on or into {name}: it has no place pose. Places: {_names(places)}."
 
 
 def no_free_spot(name: str) -> str:

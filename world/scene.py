@@ -63,6 +63,11 @@ class FurnitureSpec:
     def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
         return abs(x - self.center[0]) <= self.size[0] / 2 + margin and abs(y - self.center[1]) <= self.size[1] / 2 + margin
 
+    @property
+    def container(self) -> DrawerSpec | None:
+        """What makes this furniture a closed container (its drawer), if anything."""
+        return self.drawer
+
     def drawer_geometry(self) -> DrawerGeometry:
         d = self.drawer
         assert d is not None, f"{self.name} has no drawer"
@@ -78,10 +83,10 @@ class Layout:
     bounds: tuple[float, float, float, float]  # xmin, xmax, ymin, ymax
     walls: tuple[tuple[float, float, float, float], ...]  # centre x, y, size x, y
     furniture: tuple[FurnitureSpec, ...]
-    bob_table: str  # the table Bob is mounted on; the tray lies on it
+    bob_table: str  # the table Bob is mounted on; the task's fixtures lie on it
     bob_base: tuple[float, float, float]  # Bob's arm base on his table
     bob_yaw: float
-    tray: tuple[float, float, float, float]  # centre x, y and size x, y, on Bob's table
+    goal_area: tuple[float, float, float, float]  # centre x, y and size x, y on Bob's table: the task's fixtures go here
     near_slots: tuple[tuple[float, float], ...]  # on Bob's table within his reach
     far_slots: tuple[tuple[float, float], ...]  # on Bob's table beyond his reach
     starts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
@@ -89,8 +94,8 @@ class Layout:
     def get(self, name: str) -> FurnitureSpec | None:
         return next((f for f in self.furniture if f.name == name), None)
 
-    def in_tray(self, x: float, y: float, margin: float = 0.0) -> bool:
-        tx, ty, sx, sy = self.tray
+    def in_goal_area(self, x: float, y: float, margin: float = 0.0) -> bool:
+        tx, ty, sx, sy = self.goal_area
         return abs(x - tx) <= sx / 2 + margin and abs(y - ty) <= sy / 2 + margin
 
 
@@ -163,7 +168,7 @@ HOUSE = Layout(
     bob_table="table_0",
     bob_base=(-3.75, 0.0, 0.7),
     bob_yaw=0.0,
-    tray=(-3.4, 0.19, 0.48, 0.36),
+    goal_area=(-3.3, 0.2, 0.48, 0.36),
     near_slots=((-3.47, -0.22), (-3.25, -0.24)),
     far_slots=((-2.65, -0.15), (-2.4, 0.05), (-2.6, 0.2), (-2.85, 0.05)),
     starts={"alice": (-1.5, 1.2, 0.0), "david": (4.0, 3.0, math.pi)},
@@ -202,11 +207,25 @@ class BuiltScene:
     grid: Grid
 
 
-TRAY_COLOR = (0.2, 0.3, 0.6, 1.0)
+@dataclass(frozen=True)
+class Fixture:
+    """A goal surface a task lays on Bob's table: the tray, a coloured panel, the cutting board."""
+
+    name: str
+    kind: str  # how observations describe it
+    center: tuple[float, float]
+    size: tuple[float, float]
+    color: Color
+    thickness: float  # its surface above the table top
+    rim: bool = False  # a tray's low walls
+    stack: bool = False  # objects go on top of each other at its centre
+
+    def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
+        return abs(x - self.center[0]) <= self.size[0] / 2 + margin and abs(y - self.center[1]) <= self.size[1] / 2 + margin
 
 
-def scene_statics(layout: Layout, assets_dir: AssetDir) -> list[StaticBody]:
-    """Write the layout's URDFs and list every fixed body (walls, furniture, tray)."""
+def scene_statics(layout: Layout, assets_dir: AssetDir, fixtures: list[Fixture] | tuple[Fixture, ...] = ()) -> list[StaticBody]:
+    """Write the layout's URDFs and list every fixed body (walls, furniture, the task's fixtures)."""
     out: list[StaticBody] = []
     wall_color = (0.9, 0.9, 0.88, 1.0)
     for i, (cx, cy, sx, sy) in enumerate(layout.walls):
@@ -224,9 +243,11 @@ def scene_statics(layout: Layout, assets_dir: AssetDir) -> list[StaticBody]:
         else:
             raise ValueError(f"{f.name}: unknown furniture style {f.style!r}")
         out.append(StaticBody(f.name, assets_dir.write(f.name, urdf), (f.center[0], f.center[1], 0.0), f.yaw))
-    tx, ty, sx, sy = layout.tray
     top = _require(layout, layout.bob_table).top
-    out.append(StaticBody("tray", assets_dir.write("tray", assets.link_urdf("tray", assets.tray_boxes(sx, sy, TRAY_COLOR))), (tx, ty, top)))
+    for fx in fixtures:
+        boxes = assets.tray_boxes(*fx.size, fx.color, t=fx.thickness) if fx.rim else assets.slab_boxes(*fx.size, fx.thickness, fx.color)
+        path = assets_dir.write(fx.name, assets.link_urdf(fx.name, boxes))
+        out.append(StaticBody(fx.name, path, (fx.center[0], fx.center[1], top)))
     return out
 
 
@@ -257,11 +278,11 @@ def occupancy(layout: Layout, margin: float, res: float = 0.05) -> Grid:
     return grid
 
 
-def build_scene(cid: int, layout: Layout, assets_dir: AssetDir, margin: float) -> BuiltScene:
-    """Floor, walls, furniture and tray in client `cid`, and the base planners' occupancy grid."""
+def build_scene(cid: int, layout: Layout, assets_dir: AssetDir, margin: float, fixtures: list[Fixture] | tuple[Fixture, ...] = ()) -> BuiltScene:
+    """Floor, walls, furniture and the task's fixtures in client `cid`, and the base planners' occupancy grid."""
     p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
     p.loadURDF("plane.urdf", physicsClientId=cid)
-    statics = scene_statics(layout, assets_dir)
+    statics = scene_statics(layout, assets_dir, fixtures)
     bodies = load_statics(cid, statics)
     joints: dict[str, int] = {}
     for f in layout.furniture:

@@ -38,8 +38,8 @@ from . import feedback as fb
 from .arm import ArmPlanner
 from .assets import AssetDir
 from .robots import KINDS, ROBOTS, TEAM, RobotBody, spawn
-from .scene import Layout, build_scene, get_layout
-from .tasks import ObjectKind, TaskResult, get_task
+from .scene import Fixture, Layout, build_scene, get_layout
+from .tasks import ObjectKind, Seen, TaskResult, get_task
 
 log = structlog.get_logger("mhrc.world.sim")
 
@@ -59,7 +59,7 @@ class ObjectState:
     name: str
     kind: ObjectKind
     body: int
-    on: str | None  # furniture or "tray"
+    on: str | None  # furniture or a fixture (tray, panel, cutting board)
     inside: bool  # in a container (drawer) rather than on a surface
     target: bool
     local: tuple[float, float] | None = None  # position in the drawer's frame while inside
@@ -102,7 +102,8 @@ class Sim:
     def _build(self) -> None:
         lay = self.layout
         margin = max(KINDS[TEAM[r]].footprint for r in self.robots)
-        self.scene = build_scene(self.cid, lay, self.assets, margin)
+        self.fixtures: dict[str, Fixture] = {fx.name: fx for fx in self.task.fixtures(lay)}
+        self.scene = build_scene(self.cid, lay, self.assets, margin, list(self.fixtures.values()))
         self.grid = self.scene.grid
         self.planner = ArmPlanner(self.scene.statics, seed=self.seed)
         self.drawer_open: dict[str, float] = {name: 0.0 for name in self.scene.drawer_joint}
@@ -115,15 +116,17 @@ class Sim:
                 self.bots[name] = spawn(self.cid, name, kind, self.assets, arm_base=lay.bob_base, arm_yaw=lay.bob_yaw)
         self.objects: dict[str, ObjectState] = {}
         self.targets: list[str] = []
+        self.goals: dict[str, str] = {}  # target -> the fixture it must end on
         self.known: dict[str, set[str]] = {r: set() for r in self.robots}
         for pl in self.task.generate(lay, self.seed, self.n_objects):
             k = pl.kind
-            path = self.assets.write(f"object_{k.name}", assets.object_urdf(k.name, k.shape, k.color))
+            path = assets.write_object(self.assets, k.name, k.shape, k.color)
             body = p.loadURDF(path, (0, 0, -5), physicsClientId=self.cid)
             obj = ObjectState(k.name, k, body, pl.furniture, pl.inside, pl.target, local=pl.xy if pl.inside else None)
             self.objects[k.name] = obj
             if pl.target:
                 self.targets.append(k.name)
+                self.goals[k.name] = self.task.goal(k)
             if pl.inside:
                 self._follow_drawer(obj)
             else:
@@ -197,10 +200,25 @@ class Sim:
         assert f is not None
         return self._to_world(name, f.drawer_geometry().handle)
 
-    def tray_floor(self) -> float:
+    def table_top(self) -> float:
         f = self.layout.get(self.layout.bob_table)
         assert f is not None
-        return f.top + 0.01
+        return f.top
+
+    def fixture_top(self, name: str, without: ObjectState | None = None) -> float:
+        """The z where the next object set on fixture `name` rests (the top of the stack, for a stacking fixture)."""
+        fx = self.fixtures[name]
+        top = self.table_top() + fx.thickness
+        if fx.stack:
+            top += sum(o.kind.height for o in self.objects.values() if o.on == name and o.held_by is None and o is not without)
+        return top
+
+    def fixture_at(self, x: float, y: float) -> Fixture | None:
+        return next((fx for fx in self.fixtures.values() if fx.contains_xy(x, y)), None)
+
+    def on_bob_table(self, on: str | None) -> bool:
+        """Whether `on` is Bob's table or one of the fixtures lying on it."""
+        return on == self.layout.bob_table or on in self.fixtures
 
     def grasp(self, r: RobotBody, obj: ObjectState) -> None:
         r.attach(obj.name, obj.body)
@@ -218,8 +236,9 @@ class Sim:
         lay = self.layout
         bottom = z - obj.kind.height / 2
         obj.on, obj.inside = None, False
-        if lay.in_tray(x, y) and abs(bottom - self.tray_floor()) < 0.01:
-            obj.on = "tray"
+        fx = self.fixture_at(x, y)
+        if fx is not None and abs(bottom - self.fixture_top(fx.name, without=obj)) < 0.01:
+            obj.on = fx.name
         else:
             for f in lay.furniture:
                 if f.place_pose is not None and f.contains_xy(x, y) and abs(bottom - f.top) < 0.01:
@@ -236,15 +255,15 @@ class Sim:
         return 0.3 <= math.hypot(spot[0] - ab[0], spot[1] - ab[1]) <= bob.kind.reach - 0.03
 
     def objects_on(self, furniture: str) -> list[str]:
-        """What lies on (or, for a container, in) a piece of furniture; the tray counts as Bob's table."""
-        where = {furniture, "tray"} if furniture == self.layout.bob_table else {furniture}
+        """What lies on (or, for a container, in) a piece of furniture; fixtures count as Bob's table."""
+        where = {furniture, *self.fixtures} if furniture == self.layout.bob_table else {furniture}
         return sorted(o.name for o in self.objects.values() if o.on in where and o.held_by is None)
 
     # ------------------------------------------------------------------ knowledge
     def known_objects(self, robot: str) -> set[str]:
         """The objects in `robot`'s scene graph."""
-        if robot == "bob":  # Bob sees his own table, tray included, and remembers what he saw there
-            self.known[robot].update(o.name for o in self.objects.values() if o.on in (self.layout.bob_table, "tray"))
+        if robot == "bob":  # Bob sees his own table, fixtures included, and remembers what he saw there
+            self.known[robot].update(o.name for o in self.objects.values() if self.on_bob_table(o.on))
         known = set(self.known.get(robot, ()))
         for o in self.objects.values():
             if o.held_by == robot:
@@ -297,10 +316,10 @@ class Sim:
         return out
 
     def furniture_names(self) -> list[str]:
-        return [f.name for f in self.layout.furniture] + ["tray"]
+        return [f.name for f in self.layout.furniture] + list(self.fixtures)
 
     def place_names(self) -> list[str]:
-        return ["tray"] + [f.name for f in self.layout.furniture if f.place_pose is not None]
+        return list(self.fixtures) + [f.name for f in self.layout.furniture if f.place_pose is not None]
 
     # ------------------------------------------------------------------ views
     def _object_view(self, o: ObjectState) -> ObjectView:
@@ -322,9 +341,10 @@ class Sim:
                     place_pose=(f.place_pose[0], f.place_pose[1], f.top) if f.place_pose else None,
                 )
             )
-        tx, ty, _, _ = self.layout.tray
-        top = round(self.tray_floor(), 3)
-        out.append(FurnitureView(name="tray", kind=f"tray on {self.layout.bob_table}", position=(tx, ty, top), place_pose=(tx, ty, top)))
+        for fx in self.fixtures.values():
+            top = round(self.fixture_top(fx.name), 3)
+            x, y = fx.center
+            out.append(FurnitureView(name=fx.name, kind=f"{fx.kind} on {self.layout.bob_table}", position=(x, y, top), place_pose=(x, y, top)))
         return out
 
     def _status(self, robot: str) -> RobotStatus:
@@ -353,17 +373,23 @@ class Sim:
             furniture=self._furniture_views(),
             objects=[self._object_view(o) for o in self.objects.values() if o.name in known],
             task_brief=self.task.brief,
-            task_detail=self.task.detail(robot, self.targets),
+            task_detail=self.task.detail(robot, self.targets, self.goals),
             targets=list(self.targets) if is_bob else [],
+            goals=dict(self.goals) if is_bob else {},
+            ordered=self.task.ordered,
             task_status=self.task_status() if is_bob else None,
             teammates={o: list(self.bots[o].kind.skills) for o in self.robots if o != robot},
         )
 
+    def seen(self) -> list[Seen]:
+        """Every object's end state as the goal check reads it."""
+        return [Seen(o.name, o.kind, o.on if o.held_by is None else None, round(self.position(o)[2], 4)) for o in self.objects.values()]
+
     def evaluate(self) -> TaskResult:
-        return self.task.evaluate(self.targets, list(self.objects.values()))
+        return self.task.evaluate(self.targets, self.seen())
 
     def task_status(self) -> str:
-        return self.task.status(self.targets, list(self.objects.values()))
+        return self.task.status(self.targets, self.seen())
 
     def views(self) -> tuple[list[FurnitureView], list[ObjectView]]:
         """Full ground truth, for observers."""

@@ -43,12 +43,12 @@ TIP_CLEARANCE = 0.015  # the closed fingertips reach this far below the suction 
 def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
     f = sim.layout.get(a.target)
     if f is None:
-        if a.target == "tray":
-            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable("tray", sim.layout.bob_table))
+        if a.target in sim.fixtures:
+            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, sim.layout.bob_table))
         known = sim.known_objects(r.name)
         if a.target in known:
             on = sim.objects[a.target].on
-            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, on if on != "tray" else sim.layout.bob_table))
+            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, sim.layout.bob_table if sim.on_bob_table(on) else on))
         return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, sim.furniture_names()))
     if not f.stand_poses:
         return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(f.name, None))
@@ -156,7 +156,7 @@ def reach_point(sim: Sim, r: RobotBody, point: tuple[float, float, float], what:
         if sol_at.collided:  # the pose exists, but every solution found collides
             return Reach(failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.config_invalid(what, "goal")))
         return Reach(distance=sol_at.error)
-    descent = straight(q_above, q_at, 8)
+    descent = cartesian_descent(pl, above, point, yaw, q_above, q_at)
     if not all(pl.valid(q) for q in descent[1:-1]):
         return Reach(failure=SkillOutcome.fail(OutcomeCode.PLAN_FAILED, fb.plan_failed(what)))
     res = pl.plan(r.q, q_above)
@@ -166,6 +166,24 @@ def reach_point(sim: Sim, r: RobotBody, point: tuple[float, float, float], what:
             return Reach(failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.config_invalid(what, which)))
         return Reach(failure=SkillOutcome.fail(OutcomeCode.PLAN_FAILED, fb.plan_failed(what)))
     return Reach(path=res.path, descent=descent)
+
+
+def cartesian_descent(
+    pl: ArmPlanner, above: tuple[float, float, float], point: tuple[float, float, float], yaw: float, q_above: np.ndarray, q_at: np.ndarray, steps: int = 8
+) -> list[np.ndarray]:
+    """Joint waypoints that keep the tool on the vertical line from `above` down to `point`,
+    each IK solution seeded by the one before (a joint-space straight line can swing the
+    elbow into the table close to the arm's base); the joint-space line if IK loses the way."""
+    path = [q_above]
+    for k in range(1, steps):
+        s = k / steps
+        goal = (point[0], point[1], above[2] + (point[2] - above[2]) * s)
+        q = pl.ik(goal, yaw, path[-1], restarts=1)
+        if q is None or float(np.max(np.abs(q - path[-1]))) > 0.5:
+            return straight(q_above, q_at, steps)
+        path.append(q)
+    path.append(q_at)
+    return path
 
 
 def retract(sim: Sim, r: RobotBody) -> float:
@@ -217,7 +235,7 @@ def _too_far(sim: Sim, r: RobotBody, point: tuple[float, float, float], name: st
 def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
     f = sim.layout.get(a.target)
     if f is None:
-        if a.target == "tray" or a.target in sim.known_objects(r.name):
+        if a.target in sim.fixtures or a.target in sim.known_objects(r.name):
             return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(a.target))
         return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, sim.furniture_names()))
     if f.drawer is None:
@@ -308,12 +326,16 @@ def half_extent(kind: ObjectKind, yaw: float, gap: float = SPOT_GAP) -> tuple[fl
 def free_spots(sim: Sim, location: str, held: ObjectState) -> tuple[list[tuple[float, float, float]], float] | None:
     """Spots (x, y, yaw) at `location` where `held` fits without touching anything, best first, and the surface z."""
     lay = sim.layout
-    if location == "tray":
-        tx, ty, sx, sy = lay.tray
-        top = sim.tray_floor()
-        x0, x1, y0, y1 = tx - sx / 2 + 0.015, tx + sx / 2 - 0.015, ty - sy / 2 + 0.015, ty + sy / 2 - 0.015
-        center = (x1, y1)  # fill the tray from its far corner
-        avoid_tray = False
+    fx = sim.fixtures.get(location)
+    if fx is not None and fx.stack:  # a stack grows at the fixture's centre
+        return [(fx.center[0], fx.center[1], 0.0)], sim.fixture_top(fx.name, without=held)
+    if fx is not None:
+        (cx, cy), (sx, sy) = fx.center, fx.size
+        inset = 0.015 if fx.rim else 0.0
+        top = sim.fixture_top(fx.name)
+        x0, x1, y0, y1 = cx - sx / 2 + inset, cx + sx / 2 - inset, cy - sy / 2 + inset, cy + sy / 2 - inset
+        center = (x1, y1) if fx.rim else (cx, cy)  # fill a tray from its far corner
+        avoid_goal_area = False
     else:
         f = lay.get(location)
         if f is None or f.place_pose is None:
@@ -322,8 +344,8 @@ def free_spots(sim: Sim, location: str, held: ObjectState) -> tuple[list[tuple[f
         x0, x1 = f.center[0] - f.size[0] / 2 + 0.02, f.center[0] + f.size[0] / 2 - 0.02
         y0, y1 = f.center[1] - f.size[1] / 2 + 0.02, f.center[1] + f.size[1] / 2 - 0.02
         center = f.place_pose
-        avoid_tray = f.name == lay.bob_table
-    radius = math.inf if location == "tray" else lay.get(location).place_radius  # type: ignore[union-attr]
+        avoid_goal_area = f.name == lay.bob_table
+    radius = math.inf if fx is not None else lay.get(location).place_radius  # type: ignore[union-attr]
     boxes = []
     for o in sim.objects.values():
         if o is held or o.held_by is not None:
@@ -331,8 +353,8 @@ def free_spots(sim: Sim, location: str, held: ObjectState) -> tuple[list[tuple[f
         ox, oy, oz = sim.position(o)
         if abs(oz - o.kind.height / 2 - top) < 0.15:
             boxes.append(((ox, oy), half_extent(o.kind, sim.yaw(o))))
-    if avoid_tray:
-        boxes.append((lay.tray[:2], (lay.tray[2] / 2, lay.tray[3] / 2)))
+    if avoid_goal_area:
+        boxes.append((lay.goal_area[:2], (lay.goal_area[2] / 2, lay.goal_area[3] / 2)))
     out: list[tuple[float, float, float]] = []
     for yaw in (0.0, math.pi / 2):
         hx, hy = half_extent(held.kind, yaw)
@@ -369,7 +391,7 @@ def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
     held = sim.objects[r.holding]
     f = sim.layout.get(a.location)
     if f is not None and f.place_pose is None:
-        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.not_a_surface(f.name))
+        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.not_a_surface(f.name, sim.place_names()))
     spots = free_spots(sim, a.location, held)
     if spots is None:
         return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.location_unknown(a.location, sim.place_names()))
