@@ -48,7 +48,7 @@ MEANINGS = {
     "move": "shift your base by dx, dy metres along the world x and y axes (small corrections, at most 1 m)",
     "open": "open the closed drawer or door of the furniture you stand at",
     "pick": "grasp an object within your arm's reach with the suction cup",
-    "place": "put the object you hold on a furniture surface (e.g. table_0) or in the tray",
+    "place": "put the object you hold on a furniture surface (e.g. table_0) or on a goal (tray, a colour panel, cutting_board)",
     "communicate": "send the message content to a teammate, named in lower case (alice, bob, david)",
     "wait": "do nothing this step",
 }

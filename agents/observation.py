@@ -53,7 +53,7 @@ def object_line(o: ObjectView, obs: Observation) -> str:
     if o.held_by:
         where = "in your gripper" if o.held_by == obs.robot else f"held by {o.held_by}"
     elif o.on:
-        where = f"inside {o.on}" if o.inside else ("in the tray" if o.on == "tray" else f"on {o.on}")
+        where = f"inside {o.on}" if o.inside else (f"in the {o.on}" if o.on == "tray" else f"on {o.on}")
     else:
         where = "on the floor"
     text = f"- {o.name}: {where}, at {_xyz(o.position)}"

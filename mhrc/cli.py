@@ -41,7 +41,7 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]]) -> T:
 def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
     opts = [
         click.option("--task", default="pack_objects", show_default=True, help="Task id."),
-        click.option("--scene", default="house", show_default=True, help="Scene layout."),
+        click.option("--scene", default="kitchen", show_default=True, help="Scene layout."),
         click.option("--seed", default=0, show_default=True, type=int, help="Episode generator seed."),
         click.option("--objects", "n_objects", default=4, show_default=True, type=int, help="Target objects, 3-6."),
         click.option("--horizon", default=50, show_default=True, type=int, help="Temporal steps before the episode ends."),
@@ -179,26 +179,33 @@ def agent(
 
 @main.command()
 def scenes() -> None:
-    """List the scene layouts."""
+    """List the scene layouts (world/scenes/*.json; `--scene FILE.json` loads your own)."""
     from mhrc.world.scene import LAYOUTS
 
     for layout in LAYOUTS.values():
-        names = ", ".join(f.name for f in layout.furniture)
-        click.echo(f"{layout.name}: {layout.description}\n  furniture: {names}")
+        names = ", ".join(f"{f.name} ({f.kind})" if f.kind != f.name.split("_")[0] else f.name for f in layout.furniture)
+        click.echo(f"{layout.name}: {layout.description}\n  furniture: {names}\n  file: {layout.source}")
 
 
 @main.command()
-@click.option("--scene", default="house", show_default=True, help="Scene layout (see `mhrc scenes`).")
+@click.option("--scene", "scenes_", multiple=True, help="Scene layout or layout .json file (repeatable; default: every built-in layout).")
+@click.option("--task", default="pack_objects", show_default=True, help="Task whose fixtures and objects are shown.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Episode whose objects are shown.")
 @click.option("--objects", "n_objects", default=6, show_default=True, type=int)
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("renders"), show_default=True)
-def render(scene: str, seed: int, n_objects: int, out: Path) -> None:
-    """Write top-down and perspective PNGs of a scene (CPU renderer, no display needed)."""
+def render(scenes_: tuple[str, ...], task: str, seed: int, n_objects: int, out: Path) -> None:
+    """Write top-down and perspective PNGs of each scene (CPU renderer, no display needed):
+    OUT/<scene>_top.png and OUT/<scene>_perspective.png."""
     from mhrc.world.render import render_scene
+    from mhrc.world.scene import LAYOUTS
+    from mhrc.world.sim import check_episode
 
     try:
-        for path in render_scene(scene, out, seed=seed, n_objects=n_objects):
-            click.echo(str(path))
+        for scene in scenes_ or tuple(LAYOUTS):
+            check_episode(task=task, scene=scene, n_objects=n_objects)
+        for scene in scenes_ or tuple(LAYOUTS):
+            for path in render_scene(scene, out, seed=seed, n_objects=n_objects, task=task):
+                click.echo(str(path))
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
 

@@ -42,7 +42,7 @@ class EpisodeConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     task: str = "pack_objects"
-    scene: str = "house"
+    scene: str = "kitchen"
     seed: int = Field(0, ge=0)
     n_objects: int = Field(4, ge=3, le=6)
     horizon: int = Field(50, ge=1, le=1000)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from mhrc.world.arm import HOME, LOWER, UPPER, ArmPlanner, straight
 from mhrc.world.assets import AssetDir
-from mhrc.world.scene import HOUSE, StaticBody, scene_statics
+from mhrc.world.scene import LAYOUTS, StaticBody, scene_statics
 
 BASE = (0.0, 0.0, 0.7)
 
@@ -86,7 +86,7 @@ def test_plans_do_not_depend_on_earlier_plans(planner: ArmPlanner) -> None:
 def test_the_shadow_world_holds_the_scene() -> None:
     assets = AssetDir()
     try:
-        statics = scene_statics(HOUSE, assets)
+        statics = scene_statics(LAYOUTS["kitchen"], assets)
         pl = ArmPlanner(statics, seed=0)
         try:
             assert set(pl.bodies) == {s.name for s in statics}

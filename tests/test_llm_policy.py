@@ -155,7 +155,7 @@ def long_memory(steps: int = 50) -> Memory:
     return m
 
 
-@pytest.mark.parametrize("cap", [6000, 9000, 12000])
+@pytest.mark.parametrize("cap", [7000, 9000, 12000])
 def test_a_50_step_memory_stays_under_the_cap_with_the_latest_entries_whole(cap: int) -> None:
     capped, uncapped = LLMPolicy("alice", ScriptedClient([]), prompt_cap_chars=cap), LLMPolicy("alice", ScriptedClient([]), prompt_cap_chars=None)
     capped.memory = uncapped.memory = long_memory()

@@ -1,187 +1,22 @@
-"""Scene layouts as data (walls, furniture, stand poses, place poses, drawers, object slots)
-and the builder that turns one into PyBullet bodies and an occupancy grid.
-
-A layout is a `Layout` value and `LAYOUTS` maps names to them, so a new layout is new data,
-not a new code path. Coordinates are metres in the world frame; furniture is axis-aligned.
+"""The builder that turns a layout (`layouts.py`, loaded from `scenes/*.json`) and a task's
+fixtures into PyBullet bodies and the base planners' occupancy grid.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import pybullet as p
 import pybullet_data
 
 from . import assets
-from .assets import AssetDir, Color, DrawerGeometry
+from .assets import AssetDir, Color
 from .astar import Grid
+from .layouts import LAYOUTS, DrawerSpec, FurnitureSpec, Layout, LayoutError, get_layout, load_layout
 
-STAND_OFFSET = 0.45  # base centre to furniture edge at a stand pose
-HALF_PI = math.pi / 2
+__all__ = ["LAYOUTS", "DrawerSpec", "FurnitureSpec", "Layout", "LayoutError", "get_layout", "load_layout"]
+
 WALL_HEIGHT = 1.0
-
-
-@dataclass(frozen=True)
-class DrawerSpec:
-    """A drawer sliding out of its unit's front along `axis` (a unit x/y vector) by `travel`."""
-
-    axis: tuple[float, float]
-    travel: float
-    inner: tuple[float, float, float]  # inside of the drawer: width, depth, wall height
-    floor: float  # z of the drawer's floor surface
-    slots: tuple[tuple[float, float], ...]  # object spots in the drawer frame (x across, y towards the back)
-    max_object_height: float = 0.12
-
-
-@dataclass(frozen=True)
-class FurnitureSpec:
-    name: str
-    kind: str
-    style: str  # table | block | sofa | drawer_unit: how assets.py builds it
-    center: tuple[float, float]
-    size: tuple[float, float, float]  # sx, sy, height (of the top surface)
-    color: Color
-    stand_poses: tuple[tuple[float, float, float], ...] = ()
-    place_pose: tuple[float, float] | None = None
-    place_radius: float = 0.3  # free spots for `place` are searched this far from the place pose
-    slots: tuple[tuple[float, float], ...] = ()  # object spots on top, absolute x, y
-    drawer: DrawerSpec | None = None
-
-    @property
-    def top(self) -> float:
-        return self.size[2]
-
-    @property
-    def yaw(self) -> float:
-        """Body yaw: drawer units are built with their front along -y of their own frame."""
-        if self.drawer is None:
-            return 0.0
-        ax, ay = self.drawer.axis
-        return math.atan2(ay, ax) + HALF_PI
-
-    def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
-        return abs(x - self.center[0]) <= self.size[0] / 2 + margin and abs(y - self.center[1]) <= self.size[1] / 2 + margin
-
-    @property
-    def container(self) -> DrawerSpec | None:
-        """What makes this furniture a closed container (its drawer), if anything."""
-        return self.drawer
-
-    def drawer_geometry(self) -> DrawerGeometry:
-        d = self.drawer
-        assert d is not None, f"{self.name} has no drawer"
-        turned = abs(math.sin(self.yaw)) > 0.5
-        width, depth = (self.size[1], self.size[0]) if turned else (self.size[0], self.size[1])
-        return DrawerGeometry(width, depth, self.size[2], d.travel, d.inner, d.floor)
-
-
-@dataclass(frozen=True)
-class Layout:
-    name: str
-    description: str
-    bounds: tuple[float, float, float, float]  # xmin, xmax, ymin, ymax
-    walls: tuple[tuple[float, float, float, float], ...]  # centre x, y, size x, y
-    furniture: tuple[FurnitureSpec, ...]
-    bob_table: str  # the table Bob is mounted on; the task's fixtures lie on it
-    bob_base: tuple[float, float, float]  # Bob's arm base on his table
-    bob_yaw: float
-    goal_area: tuple[float, float, float, float]  # centre x, y and size x, y on Bob's table: the task's fixtures go here
-    near_slots: tuple[tuple[float, float], ...]  # on Bob's table within his reach
-    far_slots: tuple[tuple[float, float], ...]  # on Bob's table beyond his reach
-    starts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
-
-    def get(self, name: str) -> FurnitureSpec | None:
-        return next((f for f in self.furniture if f.name == name), None)
-
-    def in_goal_area(self, x: float, y: float, margin: float = 0.0) -> bool:
-        tx, ty, sx, sy = self.goal_area
-        return abs(x - tx) <= sx / 2 + margin and abs(y - ty) <= sy / 2 + margin
-
-
-def _south(x: float, f_y: float, sy: float) -> tuple[float, float, float]:
-    return (x, round(f_y - sy / 2 - STAND_OFFSET, 3), HALF_PI)
-
-
-def _north(x: float, f_y: float, sy: float) -> tuple[float, float, float]:
-    return (x, round(f_y + sy / 2 + STAND_OFFSET, 3), -HALF_PI)
-
-
-def _west(y: float, f_x: float, sx: float) -> tuple[float, float, float]:
-    return (round(f_x - sx / 2 - STAND_OFFSET, 3), y, 0.0)
-
-
-WOOD = (0.55, 0.4, 0.25, 1.0)
-LIGHT = (0.8, 0.75, 0.65, 1.0)
-
-HOUSE = Layout(
-    name="house",
-    description="a 10 x 8 m house: kitchen with table_0, a drawer unit and a counter to the west; study and living room to the east",
-    bounds=(-5.0, 5.0, -4.0, 4.0),
-    walls=(
-        (0.0, -4.0, 10.2, 0.1),
-        (0.0, 4.0, 10.2, 0.1),
-        (-5.0, 0.0, 0.1, 8.2),
-        (5.0, 0.0, 0.1, 8.2),
-        (0.5, -3.1, 0.1, 1.8),  # kitchen | east rooms, with 1.2 m doorways at y = -1.6 and y = 1.6
-        (0.5, 0.0, 0.1, 2.0),
-        (0.5, 3.1, 0.1, 1.8),
-        (1.85, 0.0, 2.7, 0.1),  # study | living room, open between x = 3.2 and the east wall
-    ),
-    furniture=(
-        FurnitureSpec(
-            "table_0", "table", "table", (-3.0, 0.0), (1.8, 0.8, 0.7), WOOD,
-            stand_poses=(_south(-3.3, 0.0, 0.8), _south(-2.5, 0.0, 0.8), _north(-2.5, 0.0, 0.8)),
-            place_pose=(-3.3, -0.22),
-        ),
-        FurnitureSpec(
-            "drawer_unit", "drawer unit", "drawer_unit", (-3.0, 3.45), (1.0, 0.8, 0.6), LIGHT,
-            stand_poses=((-3.0, 2.12, HALF_PI),),
-            drawer=DrawerSpec(axis=(0.0, -1.0), travel=0.45, inner=(0.8, 0.55, 0.12), floor=0.4,
-                              slots=((-0.25, -0.12), (0.0, -0.12), (0.25, -0.12))),
-        ),
-        FurnitureSpec(
-            "counter", "counter", "block", (-1.0, -3.5), (1.4, 0.6, 0.75), LIGHT,
-            stand_poses=(_north(-1.3, -3.5, 0.6), _north(-0.7, -3.5, 0.6)),
-            place_pose=(-1.0, -3.45),
-            slots=((-1.35, -3.45), (-1.0, -3.4), (-0.65, -3.45)),
-        ),
-        FurnitureSpec(
-            "table_1", "table", "table", (2.5, 2.5), (1.2, 0.7, 0.7), WOOD,
-            stand_poses=(_south(2.2, 2.5, 0.7), _south(2.8, 2.5, 0.7)),
-            place_pose=(2.5, 2.45),
-            slots=((2.15, 2.42), (2.5, 2.4), (2.85, 2.42)),
-        ),
-        FurnitureSpec(
-            "table_2", "table", "table", (2.5, -2.8), (1.2, 0.7, 0.7), WOOD,
-            stand_poses=(_north(2.2, -2.8, 0.7), _north(2.8, -2.8, 0.7)),
-            place_pose=(2.5, -2.75),
-            slots=((2.15, -2.72), (2.5, -2.7), (2.85, -2.72)),
-        ),
-        FurnitureSpec(
-            "sofa", "sofa", "sofa", (4.3, -1.6), (0.8, 1.6, 0.45), (0.3, 0.35, 0.6, 1.0),
-            stand_poses=(_west(-2.0, 4.3, 0.8), _west(-1.2, 4.3, 0.8)),
-            place_pose=(4.1, -1.6),
-            slots=((4.1, -2.0), (4.1, -1.6), (4.1, -1.2)),
-        ),
-    ),  # fmt: skip
-    bob_table="table_0",
-    bob_base=(-3.75, 0.0, 0.7),
-    bob_yaw=0.0,
-    goal_area=(-3.3, 0.2, 0.48, 0.36),
-    near_slots=((-3.47, -0.22), (-3.25, -0.24)),
-    far_slots=((-2.65, -0.15), (-2.4, 0.05), (-2.6, 0.2), (-2.85, 0.05)),
-    starts={"alice": (-1.5, 1.2, 0.0), "david": (4.0, 3.0, math.pi)},
-)
-
-LAYOUTS: dict[str, Layout] = {HOUSE.name: HOUSE}
-
-
-def get_layout(name: str) -> Layout:
-    try:
-        return LAYOUTS[name]
-    except KeyError:
-        raise ValueError(f"unknown scene {name!r}; known scenes: {', '.join(LAYOUTS)}") from None
 
 
 # --------------------------------------------------------------------------- building

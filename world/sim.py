@@ -73,7 +73,7 @@ class Sim:
         self,
         *,
         task: str = "pack_objects",
-        scene: str = "house",
+        scene: str = "kitchen",
         seed: int = 0,
         n_objects: int = 4,
         gui: bool = False,

@@ -34,6 +34,7 @@ MAX_ARM_RANGE = 0.9  # no top-down pose exists beyond this horizontal distance f
 IDEAL_PICK = (0.3, 0.58)  # horizontal arm-base-to-object distances a corrective move aims for
 PULL_STEPS = 16  # IK waypoints along a drawer's travel
 SPOT_GAP = 0.02  # clearance between placed objects' footprints
+HANDOVER_CLEARANCE = 0.2  # m between a handed-over object and the hand of the robot that put it there
 TIP_CLEARANCE = 0.015  # the closed fingertips reach this far below the suction point
 
 
@@ -398,6 +399,9 @@ def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
     cands, top = spots
     if a.location == sim.layout.bob_table:
         cands = [c for c in cands if sim.within_handover(c)] or cands
+        if r.kind.mobile:  # not under where this arm's hand will hover once it has retracted: Bob could not reach past it
+            hand = r.tip()
+            cands = [c for c in cands if horizontal(c, hand) >= HANDOVER_CLEARANCE] or cands
     if not cands:
         return SkillOutcome.fail(OutcomeCode.PLACE_FAILED, fb.no_free_spot(a.location))
     ab = r.arm_base()

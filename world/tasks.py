@@ -225,6 +225,7 @@ COLORS: dict[str, Color] = {
     "yellow": (0.95, 0.85, 0.1, 1),
     "purple": (0.5, 0.15, 0.65, 1),
 }
+PANEL_SIZE, PANEL_PITCH = 0.1, 0.12
 NO_PANEL: dict[str, Color] = {"orange": (0.95, 0.5, 0.05, 1), "white": (0.95, 0.95, 0.95, 1)}
 SOLIDS: dict[str, tuple[str, tuple[float, float, float]]] = {
     "cube": ("box", (0.05, 0.05, 0.05)),
@@ -264,14 +265,13 @@ class SortSolids:
         return scatter(layout, rng, targets, distractors)
 
     def fixtures(self, layout: Layout) -> list[Fixture]:
-        cx, cy, sx, sy = _goal_area(layout)
-        cols, rows = 3, 2
-        cw, ch = sx / cols, sy / rows
+        """Six 10 cm panels, 3 x 2 at a 12 cm pitch, centred in the goal area."""
+        cx, cy, _, _ = _goal_area(layout)
         out = []
         for i, (name, color) in enumerate(COLORS.items()):
-            c, r = i % cols, i // cols
-            center = (round(cx - sx / 2 + cw * (c + 0.5), 4), round(cy + sy / 2 - ch * (r + 0.5), 4))
-            out.append(Fixture(f"{name}_panel", f"{name} panel", center, (cw - 0.02, ch - 0.02), color, thickness=0.008))
+            c, r = i % 3, i // 3
+            center = (round(cx + (c - 1) * PANEL_PITCH, 4), round(cy + (0.5 - r) * PANEL_PITCH, 4))
+            out.append(Fixture(f"{name}_panel", f"{name} panel", center, (PANEL_SIZE, PANEL_SIZE), color, thickness=0.008))
         return out
 
     def goal(self, kind: ObjectKind) -> str:

@@ -1,0 +1,358 @@
+"""Scene layouts as data: `scenes/<name>.json` files, validated on load.
+
+A layout is a house: walls, furniture (tables, blocks such as counters, sofas, drawer units),
+Bob's table with his arm, and where Alice and David start. `LAYOUTS` holds the built-in ones
+by name; `--scene PATH.json` loads any other file. A new layout is a new data file, never a
+new code path. Coordinates are metres in the world frame; furniture is axis-aligned.
+
+The file format (every field is checked on load; an error names the file and the field):
+
+    name, description        the layout's id (lower case, digits, _) and one line for `mhrc scenes`
+    bounds                   [xmin, xmax, ymin, ymax] of the floor
+    walls                    [[centre x, centre y, size x, size y], ...], 1 m high
+    bob                      {table: the furniture Bob is mounted on (a table with a place_pose),
+                              base: [x, y, z] of his arm base, yaw,
+                              goal_area: [cx, cy, sx, sy] on his table where a task's fixtures go
+                              (tray, panels, cutting board), all within his reach,
+                              near_slots / far_slots: [[x, y], ...] object spots on his table
+                              within / beyond his reach}
+    starts                   {alice: [x, y, yaw], david: [x, y, yaw]}
+    furniture                [{name, kind (how robots are told of it), style (table | block | sofa
+                              | drawer_unit: how it is built), center [x, y], size [sx, sy, top z],
+                              color (a name from COLORS or [r, g, b, a]),
+                              stand_poses: [[x, y, yaw] or {side: north|south|east|west, at: the
+                              coordinate along that side}, ...],
+                              place_pose [x, y] (omit: nothing can be put on it), place_radius,
+                              slots: [[x, y], ...] where a task may put objects on top,
+                              drawer (drawer_unit only): {axis [dx, dy] it slides out along,
+                              travel, inner [width, depth, wall height], floor (z of its floor),
+                              slots [[x, y] in the drawer's frame], max_object_height}}, ...]
+
+A stand pose given by side stands STAND_OFFSET from that edge, facing the furniture.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from .assets import Color, DrawerGeometry
+
+STAND_OFFSET = 0.45  # base centre to furniture edge at a stand pose
+HALF_PI = math.pi / 2
+ROBOT_CLEARANCE = 0.3  # a stand pose or start must be this far from walls and furniture
+SCENES_DIR = Path(__file__).with_name("scenes")
+
+COLORS: dict[str, Color] = {
+    "wood": (0.55, 0.4, 0.25, 1.0),
+    "light": (0.8, 0.75, 0.65, 1.0),
+    "white": (0.92, 0.92, 0.9, 1.0),
+    "blue": (0.3, 0.35, 0.6, 1.0),
+    "green": (0.35, 0.5, 0.35, 1.0),
+    "grey": (0.5, 0.5, 0.52, 1.0),
+    "red": (0.6, 0.25, 0.2, 1.0),
+}
+
+
+class LayoutError(ValueError):
+    """A layout file that cannot be used; the message names the file and the field."""
+
+
+# --------------------------------------------------------------------------- what the simulator uses
+
+
+@dataclass(frozen=True)
+class DrawerSpec:
+    """A drawer sliding out of its unit's front along `axis` (a unit x/y vector) by `travel`."""
+
+    axis: tuple[float, float]
+    travel: float
+    inner: tuple[float, float, float]  # inside of the drawer: width, depth, wall height
+    floor: float  # z of the drawer's floor surface
+    slots: tuple[tuple[float, float], ...]  # object spots in the drawer frame (x across, y towards the back)
+    max_object_height: float = 0.12
+
+
+@dataclass(frozen=True)
+class FurnitureSpec:
+    name: str
+    kind: str
+    style: str  # table | block | sofa | drawer_unit: how assets.py builds it
+    center: tuple[float, float]
+    size: tuple[float, float, float]  # sx, sy, height (of the top surface)
+    color: Color
+    stand_poses: tuple[tuple[float, float, float], ...] = ()
+    place_pose: tuple[float, float] | None = None
+    place_radius: float = 0.3  # free spots for `place` are searched this far from the place pose
+    slots: tuple[tuple[float, float], ...] = ()  # object spots on top, absolute x, y
+    drawer: DrawerSpec | None = None
+
+    @property
+    def top(self) -> float:
+        return self.size[2]
+
+    @property
+    def yaw(self) -> float:
+        """Body yaw: drawer units are built with their front along -y of their own frame."""
+        if self.drawer is None:
+            return 0.0
+        ax, ay = self.drawer.axis
+        return math.atan2(ay, ax) + HALF_PI
+
+    def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
+        return abs(x - self.center[0]) <= self.size[0] / 2 + margin and abs(y - self.center[1]) <= self.size[1] / 2 + margin
+
+    @property
+    def container(self) -> DrawerSpec | None:
+        """What makes this furniture a closed container (its drawer), if anything."""
+        return self.drawer
+
+    def drawer_geometry(self) -> DrawerGeometry:
+        d = self.drawer
+        assert d is not None, f"{self.name} has no drawer"
+        turned = abs(math.sin(self.yaw)) > 0.5
+        width, depth = (self.size[1], self.size[0]) if turned else (self.size[0], self.size[1])
+        return DrawerGeometry(width, depth, self.size[2], d.travel, d.inner, d.floor)
+
+
+@dataclass(frozen=True)
+class Layout:
+    name: str
+    description: str
+    bounds: tuple[float, float, float, float]  # xmin, xmax, ymin, ymax
+    walls: tuple[tuple[float, float, float, float], ...]  # centre x, y, size x, y
+    furniture: tuple[FurnitureSpec, ...]
+    bob_table: str  # the table Bob is mounted on; the task's fixtures lie on it
+    bob_base: tuple[float, float, float]  # Bob's arm base on his table
+    bob_yaw: float
+    goal_area: tuple[float, float, float, float]  # centre x, y and size x, y on Bob's table: the task's fixtures go here
+    near_slots: tuple[tuple[float, float], ...]  # on Bob's table within his reach
+    far_slots: tuple[tuple[float, float], ...]  # on Bob's table beyond his reach
+    starts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    source: str = ""  # the file it came from
+
+    def get(self, name: str) -> FurnitureSpec | None:
+        return next((f for f in self.furniture if f.name == name), None)
+
+    def in_goal_area(self, x: float, y: float, margin: float = 0.0) -> bool:
+        tx, ty, sx, sy = self.goal_area
+        return abs(x - tx) <= sx / 2 + margin and abs(y - ty) <= sy / 2 + margin
+
+
+# --------------------------------------------------------------------------- the file schema
+
+Name = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$", max_length=40)]
+Positive = Annotated[float, Field(gt=0)]
+Vec2 = tuple[float, float]
+Pose = tuple[float, float, float]
+Rect = tuple[float, float, Positive, Positive]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class StandSide(_Strict):
+    side: Literal["north", "south", "east", "west"]
+    at: float = Field(description="x (north/south side) or y (east/west side) of the pose")
+
+
+class DrawerFile(_Strict):
+    axis: Vec2
+    travel: Positive
+    inner: tuple[Positive, Positive, Positive]
+    floor: Positive
+    slots: list[Vec2] = Field(min_length=1)
+    max_object_height: Positive = 0.12
+
+    @model_validator(mode="after")
+    def _axis(self) -> DrawerFile:
+        if sorted(abs(c) for c in self.axis) != [0.0, 1.0]:
+            raise ValueError(f"axis must be a unit vector along x or y, e.g. [0, -1], not {list(self.axis)}")
+        for i, (x, y) in enumerate(self.slots):
+            if abs(x) > self.inner[0] / 2 or abs(y) > self.inner[1] / 2:
+                raise ValueError(f"slots.{i}: {[x, y]} lies outside the drawer's inside {list(self.inner[:2])}")
+        return self
+
+
+class FurnitureFile(_Strict):
+    name: Name
+    kind: str = Field(min_length=1)
+    style: Literal["table", "block", "sofa", "drawer_unit"]
+    center: Vec2
+    size: tuple[Positive, Positive, Positive]
+    color: str | tuple[float, float, float, float] = "light"
+    stand_poses: list[Pose | StandSide] = Field(default_factory=list)
+    place_pose: Vec2 | None = None
+    place_radius: Positive = 0.3
+    slots: list[Vec2] = Field(default_factory=list)
+    drawer: DrawerFile | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> FurnitureFile:
+        if isinstance(self.color, str) and self.color not in COLORS:
+            raise ValueError(f"color: unknown colour {self.color!r}; use one of {', '.join(COLORS)} or [r, g, b, a]")
+        if (self.style == "drawer_unit") != (self.drawer is not None):
+            raise ValueError("drawer: a drawer_unit needs a drawer, and only a drawer_unit may have one")
+        if self.slots and self.place_pose is None:
+            raise ValueError("place_pose: furniture with slots needs a place_pose")
+        for what, xy in [("place_pose", self.place_pose), *((f"slots.{i}", s) for i, s in enumerate(self.slots))]:
+            if xy is not None and not _inside(self.center, self.size, xy):
+                raise ValueError(f"{what}: {list(xy)} is not on top of {self.name}")
+        return self
+
+    def stand_pose_list(self) -> list[Pose]:
+        cx, cy = self.center
+        sx, sy, _ = self.size
+        out = []
+        for sp in self.stand_poses:
+            if isinstance(sp, StandSide):
+                out.append(
+                    {
+                        "south": (sp.at, round(cy - sy / 2 - STAND_OFFSET, 3), HALF_PI),
+                        "north": (sp.at, round(cy + sy / 2 + STAND_OFFSET, 3), -HALF_PI),
+                        "west": (round(cx - sx / 2 - STAND_OFFSET, 3), sp.at, 0.0),
+                        "east": (round(cx + sx / 2 + STAND_OFFSET, 3), sp.at, math.pi),
+                    }[sp.side]
+                )
+            else:
+                out.append(sp)
+        return out
+
+
+class BobFile(_Strict):
+    table: Name
+    base: Pose
+    yaw: float = 0.0
+    goal_area: Rect
+    near_slots: list[Vec2] = Field(min_length=1)
+    far_slots: list[Vec2] = Field(min_length=1)
+
+
+class LayoutFile(_Strict):
+    name: Name
+    description: str = Field(min_length=1)
+    bounds: tuple[float, float, float, float]
+    walls: list[Rect] = Field(default_factory=list)
+    bob: BobFile
+    starts: dict[Literal["alice", "david"], Pose]
+    furniture: list[FurnitureFile] = Field(min_length=2)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> LayoutFile:
+        xmin, xmax, ymin, ymax = self.bounds
+        if not (xmin < xmax and ymin < ymax):
+            raise ValueError(f"bounds: need xmin < xmax and ymin < ymax, got {list(self.bounds)}")
+        names = [f.name for f in self.furniture]
+        for i, n in enumerate(names):
+            if n in names[:i]:
+                raise ValueError(f"furniture.{i}.name: {n!r} is used twice")
+        table = next((f for f in self.furniture if f.name == self.bob.table), None)
+        if table is None:
+            raise ValueError(f"bob.table: no furniture named {self.bob.table!r}; furniture: {', '.join(names)}")
+        if table.style != "table" or table.place_pose is None:
+            raise ValueError(f"bob.table: {table.name} must be a table with a place_pose")
+        gx, gy, gsx, gsy = self.bob.goal_area
+        if not (_inside(table.center, table.size, (gx - gsx / 2, gy - gsy / 2)) and _inside(table.center, table.size, (gx + gsx / 2, gy + gsy / 2))):
+            raise ValueError(f"bob.goal_area: {list(self.bob.goal_area)} does not lie on {table.name}")
+        for what in ("near_slots", "far_slots"):
+            for i, xy in enumerate(getattr(self.bob, what)):
+                if not _inside(table.center, table.size, xy):
+                    raise ValueError(f"bob.{what}.{i}: {list(xy)} is not on {table.name}")
+        if not any(f.drawer is not None for f in self.furniture):
+            raise ValueError("furniture: a layout needs at least one closed container (a drawer_unit)")
+        elsewhere = sum(len(f.slots) for f in self.furniture if f.name != table.name)
+        if elsewhere < 5:
+            raise ValueError(f"furniture: slots away from {table.name} number {elsewhere}; 6-object episodes need at least 5")
+        obstacles = [(f"walls.{i}", (w[0], w[1]), (w[2], w[3])) for i, w in enumerate(self.walls)]
+        obstacles += [(f"furniture.{i} ({f.name})", f.center, (f.size[0], f.size[1])) for i, f in enumerate(self.furniture)]
+        poses = [(f"starts.{r}", s) for r, s in self.starts.items()]
+        for i, f in enumerate(self.furniture):
+            if f.style != "drawer_unit" and f.name != table.name and f.stand_poses == [] and f.slots:
+                raise ValueError(f"furniture.{i}.stand_poses: {f.name} has slots but no stand pose")
+            poses += [(f"furniture.{i}.stand_poses.{j} ({f.name})", sp) for j, sp in enumerate(f.stand_pose_list())]
+        for what, (x, y, _) in poses:
+            if not (xmin + ROBOT_CLEARANCE <= x <= xmax - ROBOT_CLEARANCE and ymin + ROBOT_CLEARANCE <= y <= ymax - ROBOT_CLEARANCE):
+                raise ValueError(f"{what}: ({x}, {y}) is off the floor or too close to its edge")
+            for name, c, sz in obstacles:
+                if _inside(c, sz, (x, y), margin=ROBOT_CLEARANCE - 0.01):
+                    raise ValueError(f"{what}: ({x}, {y}) is within {ROBOT_CLEARANCE} m of {name}")
+        return self
+
+    def build(self, source: str = "") -> Layout:
+        furniture = []
+        for f in self.furniture:
+            d = f.drawer
+            furniture.append(
+                FurnitureSpec(
+                    name=f.name, kind=f.kind, style=f.style, center=f.center, size=f.size,
+                    color=COLORS[f.color] if isinstance(f.color, str) else f.color,
+                    stand_poses=tuple(f.stand_pose_list()), place_pose=f.place_pose, place_radius=f.place_radius,
+                    slots=tuple(f.slots),
+                    drawer=None if d is None else DrawerSpec(d.axis, d.travel, d.inner, d.floor, tuple(d.slots), d.max_object_height),
+                )
+            )  # fmt: skip
+        b = self.bob
+        return Layout(
+            name=self.name, description=self.description, bounds=self.bounds, walls=tuple(self.walls),
+            furniture=tuple(furniture), bob_table=b.table, bob_base=b.base, bob_yaw=b.yaw, goal_area=b.goal_area,
+            near_slots=tuple(b.near_slots), far_slots=tuple(b.far_slots), starts={str(k): v for k, v in self.starts.items()}, source=source,
+        )  # fmt: skip
+
+
+def _inside(center: Vec2, size: tuple[float, ...], xy: Vec2, margin: float = 1e-9) -> bool:
+    return abs(xy[0] - center[0]) <= size[0] / 2 + margin and abs(xy[1] - center[1]) <= size[1] / 2 + margin
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def parse_layout(data: Any, source: str = "<data>") -> Layout:
+    """Validate layout data (a dict from JSON); LayoutError names `source` and the field."""
+    try:
+        return LayoutFile.model_validate(data).build(source)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(p) for p in err["loc"] if not str(p).startswith(("tuple[", "function-after", "StandSide")))
+        msg = err["msg"].removeprefix("Value error, ")
+        raise LayoutError(f"{source}: {where + ': ' if where else ''}{msg}") from None
+
+
+def load_layout(path: str | Path) -> Layout:
+    """Read and validate one layout file."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise LayoutError(f"{path}: no such layout file") from None
+    except json.JSONDecodeError as exc:
+        raise LayoutError(f"{path}: not valid JSON: {exc}") from None
+    return parse_layout(data, str(path))
+
+
+def _builtin() -> dict[str, Layout]:
+    out = {}
+    for path in sorted(SCENES_DIR.glob("*.json")):
+        lay = load_layout(path)
+        if lay.name != path.stem:
+            raise LayoutError(f"{path}: name: {lay.name!r} must match the file name {path.stem!r}")
+        out[lay.name] = lay
+    return out
+
+
+LAYOUTS: dict[str, Layout] = _builtin()
+
+
+def get_layout(name: str) -> Layout:
+    """A built-in layout by name, or any layout file by path (ending in .json)."""
+    if name.endswith(".json"):
+        return load_layout(name)
+    try:
+        return LAYOUTS[name]
+    except KeyError:
+        raise ValueError(f"unknown scene {name!r}; known scenes: {', '.join(LAYOUTS)} (or a path to a layout .json file)") from None
