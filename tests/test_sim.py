@@ -235,7 +235,7 @@ def test_drawer_opens_for_real_and_contents_wait_for_it(sim: Sim) -> None:
     _fails(sim, "alice", Pick(obj=inside.name), OutcomeCode.NOT_REACHABLE_CONTAINER, "closed", "open it first")
     out = _ok(sim.execute("alice", Open(target="drawer_unit")))
     assert inside.name in out.feedback and out.sim_time > 0
-    body, joint = sim.scene.bodies["drawer_unit"], sim.scene.drawer_joint["drawer_unit"]
+    body, joint = sim.scene.bodies["drawer_unit"], sim.scene.joints["drawer_unit"]
     assert p.getJointState(body, joint, physicsClientId=sim.cid)[0] == pytest.approx(0.45)
     after = sim.position(inside)
     assert math.dist(before, after) == pytest.approx(0.45, abs=1e-6)  # moved out with the drawer
@@ -250,6 +250,30 @@ def test_drawer_opens_for_real_and_contents_wait_for_it(sim: Sim) -> None:
     _fails(sim, "alice", Place(obj=inside.name, location="attic"), OutcomeCode.LOCATION_UNKNOWN, "'attic'", "tray")
     _fails(sim, "alice", Place(obj=inside.name, location="drawer_unit"), OutcomeCode.LOCATION_UNKNOWN)
     _fails(sim, "alice", Place(obj=inside.name, location="table_1"), OutcomeCode.TOO_FAR, "table_1")
+
+
+@pytest.mark.parametrize(("scene", "chest"), [("bedroom", "toy_chest"), ("bathroom", "laundry_chest")])
+def test_a_chest_lid_swings_up_on_its_hinge_and_shows_what_is_inside(scene: str, chest: str) -> None:
+    with Sim(task="pack_objects", scene=scene, seed=0, n_objects=6) as sim:
+        obj = next(o for o in sim.objects.values() if not o.inside)  # put one object in the chest
+        obj.on, obj.inside, obj.local = chest, True, (0.0, -0.05)
+        sim._follow_container(obj)
+        sim.known["alice"].add(obj.name)
+        assert sim.position(obj)[2] < sim.layout.get(chest).top  # type: ignore[union-attr]
+        body, joint = sim.scene.bodies[chest], sim.scene.joints[chest]
+        assert p.getJointInfo(body, joint, physicsClientId=sim.cid)[2] == p.JOINT_REVOLUTE
+        handle_shut = sim.handle_position(chest)
+        out = _ok(sim.execute("alice", Navigate(target=chest, stand_pose=0)))
+        assert "closed: open it" in out.feedback and obj.name not in out.feedback
+        _fails(sim, "alice", Pick(obj=obj.name), OutcomeCode.NOT_REACHABLE_CONTAINER, "closed")
+        out = _ok(sim.execute("alice", Open(target=chest)))
+        assert obj.name in out.feedback
+        assert p.getJointState(body, joint, physicsClientId=sim.cid)[0] == pytest.approx(math.radians(75))
+        handle_open = sim.handle_position(chest)
+        assert handle_open[2] - handle_shut[2] > 0.4  # the lid stands up, its handle high above the rim
+        view = next(f for f in sim.observe("alice", 2).furniture if f.name == chest)
+        assert view.openable and view.is_open
+        _ok(sim.execute("alice", Pick(obj=obj.name)))
 
 
 def test_a_far_grasp_reports_the_offsets_that_fix_it(sim: Sim) -> None:

@@ -162,7 +162,7 @@ def test_every_builtin_layout_loads_from_its_file() -> None:
     [
         (lambda d: d["furniture"][2].update(size=[1.4, -0.6, 0.75]), "mine.json: furniture.2.size.1: Input should be greater than 0"),
         (lambda d: d["furniture"][2].update(colour="red"), "mine.json: furniture.2.colour: Extra inputs are not permitted"),
-        (lambda d: d["furniture"][2].update(style="castle"), "mine.json: furniture.2.style: Input should be 'table', 'block', 'sofa' or 'drawer_unit'"),
+        (lambda d: d["furniture"][2].update(style="castle"), "mine.json: furniture.2.style: Input should be 'table', 'block', 'sofa', 'drawer_unit' or 'chest'"),
         (lambda d: d["furniture"][2]["stand_poses"].append({"side": "up", "at": 0}), "mine.json: furniture.2.stand_poses.2"),
         (lambda d: d["furniture"][2]["stand_poses"].append([-1.0, -3.5, 0.0]), "furniture.2.stand_poses.2 (counter): (-1.0, -3.5) is within 0.3 m of furniture.2 (counter)"),
         (lambda d: d["starts"].update(alice=[0.5, 0.0, 0.0]), "starts.alice: (0.5, 0.0) is within 0.3 m of walls.5"),

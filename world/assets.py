@@ -186,6 +186,71 @@ def slab_boxes(sx: float, sy: float, t: float, color: Color) -> list[Box]:
     return [Box((0.0, 0.0, t / 2), (sx, sy, t), color)]
 
 
+@dataclass(frozen=True)
+class ChestGeometry:
+    """A chest in its own frame: an open-topped box whose lid hinges up at the back (+y) edge;
+    the front faces -y. The lid link's origin is on the hinge line; closed, it lies along -y."""
+
+    width: float  # along x
+    depth: float  # along y
+    height: float  # top of the closed lid
+    floor: float  # z of the inside floor
+    angle: float  # rad the lid opens to
+    wall: float = 0.03
+    lid: float = 0.02  # lid thickness
+
+    @property
+    def rim(self) -> float:
+        return self.height - self.lid
+
+    @property
+    def inner(self) -> Vec3:
+        return (self.width - 2 * self.wall, self.depth - 2 * self.wall, self.rim - self.floor)
+
+    @property
+    def hinge(self) -> Vec3:
+        return (0.0, self.depth / 2, self.rim)
+
+    @property
+    def handle(self) -> Vec3:
+        """Top centre of the handle tab at the lid's front edge, in the lid link's frame."""
+        return (0.0, -(self.depth + 0.025), self.lid)
+
+
+def chest_urdf(name: str, g: ChestGeometry, color: Color) -> str:
+    """Walls and floor of an open box, and a lid on a revolute joint at its back edge."""
+    w, d, t = g.width, g.depth, g.wall
+    rim = g.rim
+    carcass = [
+        Box((0.0, 0.0, g.floor / 2), (w, d, g.floor), color),  # plinth up to the inside floor
+        Box((-(w / 2 - t / 2), 0.0, rim / 2), (t, d, rim), color),
+        Box((w / 2 - t / 2, 0.0, rim / 2), (t, d, rim), color),
+        Box((0.0, -(d / 2 - t / 2), rim / 2), (w - 2 * t, t, rim), color),
+        Box((0.0, d / 2 - t / 2, rim / 2), (w - 2 * t, t, rim), color),
+    ]
+    dark = (color[0] * 0.75, color[1] * 0.75, color[2] * 0.75, 1.0)
+    hx, hy, hz = g.handle
+    lid = [
+        Box((0.0, -d / 2, g.lid / 2), (w, d, g.lid), dark),
+        Box((hx, hy, hz - g.lid / 2), (0.24, 0.05, g.lid), (0.3, 0.3, 0.3, 1.0)),  # handle tab
+    ]
+    return f"""<?xml version="1.0"?>
+<robot name="{name}">
+<link name="carcass">{_inertial(0.0)}
+{_boxes_xml(carcass)}
+</link>
+<link name="lid">{_inertial(1.0)}
+{_boxes_xml(lid)}
+</link>
+<joint name="lid_joint" type="revolute">
+<parent link="carcass"/><child link="lid"/>
+<origin xyz="{_v(g.hinge)}"/><axis xyz="-1 0 0"/>
+<limit lower="0" upper="{_f(g.angle)}" effort="100" velocity="1"/>
+</joint>
+</robot>
+"""
+
+
 def tray_boxes(sx: float, sy: float, color: Color, rim: float = 0.04, t: float = 0.01) -> list[Box]:
     """A flat tray with low rims; its floor surface is at z = t."""
     return [

@@ -18,7 +18,7 @@ The file format (every field is checked on load; an error names the file and the
                               within / beyond his reach}
     starts                   {alice: [x, y, yaw], david: [x, y, yaw]}
     furniture                [{name, kind (how robots are told of it), style (table | block | sofa
-                              | drawer_unit: how it is built), center [x, y], size [sx, sy, top z],
+                              | drawer_unit | chest: how it is built), center [x, y], size [sx, sy, top z],
                               color (a name from COLORS or [r, g, b, a]),
                               stand_poses: [[x, y, yaw] or {side: north|south|east|west, at: the
                               coordinate along that side}, ...],
@@ -26,7 +26,10 @@ The file format (every field is checked on load; an error names the file and the
                               slots: [[x, y], ...] where a task may put objects on top,
                               drawer (drawer_unit only): {axis [dx, dy] it slides out along,
                               travel, inner [width, depth, wall height], floor (z of its floor),
-                              slots [[x, y] in the drawer's frame], max_object_height}}, ...]
+                              slots [[x, y] in the drawer's frame], max_object_height},
+                              lid (chest only): {axis [dx, dy] its front faces, open_deg (75),
+                              floor (z of its inside floor), slots [[x, y] in the chest's frame,
+                              x across, y towards the back], max_object_height}}, ...]
 
 A stand pose given by side stands STAND_OFFSET from that edge, facing the furniture.
 """
@@ -41,7 +44,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .assets import Color, DrawerGeometry
+from .assets import ChestGeometry, Color, DrawerGeometry
 
 STAND_OFFSET = 0.45  # base centre to furniture edge at a stand pose
 HALF_PI = math.pi / 2
@@ -79,6 +82,24 @@ class DrawerSpec:
 
 
 @dataclass(frozen=True)
+class LidSpec:
+    """A chest's lid, hinged at the back, opening up to `angle` rad; the front faces `axis`."""
+
+    axis: tuple[float, float]
+    angle: float
+    floor: float  # z of the chest's inside floor
+    slots: tuple[tuple[float, float], ...]  # object spots in the chest frame (x across, y towards the back)
+    max_object_height: float = 0.12
+
+    @property
+    def travel(self) -> float:
+        return self.angle
+
+
+Container = DrawerSpec | LidSpec
+
+
+@dataclass(frozen=True)
 class FurnitureSpec:
     name: str
     kind: str
@@ -91,6 +112,7 @@ class FurnitureSpec:
     place_radius: float = 0.3  # free spots for `place` are searched this far from the place pose
     slots: tuple[tuple[float, float], ...] = ()  # object spots on top, absolute x, y
     drawer: DrawerSpec | None = None
+    lid: LidSpec | None = None
 
     @property
     def top(self) -> float:
@@ -98,25 +120,35 @@ class FurnitureSpec:
 
     @property
     def yaw(self) -> float:
-        """Body yaw: drawer units are built with their front along -y of their own frame."""
-        if self.drawer is None:
+        """Body yaw: containers are built with their front along -y of their own frame."""
+        if self.container is None:
             return 0.0
-        ax, ay = self.drawer.axis
+        ax, ay = self.container.axis
         return math.atan2(ay, ax) + HALF_PI
 
     def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
         return abs(x - self.center[0]) <= self.size[0] / 2 + margin and abs(y - self.center[1]) <= self.size[1] / 2 + margin
 
     @property
-    def container(self) -> DrawerSpec | None:
-        """What makes this furniture a closed container (its drawer), if anything."""
-        return self.drawer
+    def container(self) -> Container | None:
+        """What makes this furniture a closed container (a drawer, a lid), if anything."""
+        return self.drawer or self.lid
+
+    def _own_size(self) -> tuple[float, float]:
+        """Width and depth in the body's own frame (front along -y)."""
+        turned = abs(math.sin(self.yaw)) > 0.5
+        return (self.size[1], self.size[0]) if turned else (self.size[0], self.size[1])
+
+    def chest_geometry(self) -> ChestGeometry:
+        lid = self.lid
+        assert lid is not None, f"{self.name} has no lid"
+        width, depth = self._own_size()
+        return ChestGeometry(width, depth, self.size[2], lid.floor, lid.angle)
 
     def drawer_geometry(self) -> DrawerGeometry:
         d = self.drawer
         assert d is not None, f"{self.name} has no drawer"
-        turned = abs(math.sin(self.yaw)) > 0.5
-        width, depth = (self.size[1], self.size[0]) if turned else (self.size[0], self.size[1])
+        width, depth = self._own_size()
         return DrawerGeometry(width, depth, self.size[2], d.travel, d.inner, d.floor)
 
 
@@ -180,10 +212,24 @@ class DrawerFile(_Strict):
         return self
 
 
+class LidFile(_Strict):
+    axis: Vec2 = Field(description="the side the chest's front faces, e.g. [0, -1]")
+    open_deg: float = Field(75.0, gt=10, le=110)
+    floor: Positive
+    slots: list[Vec2] = Field(min_length=1)
+    max_object_height: Positive = 0.12
+
+    @model_validator(mode="after")
+    def _axis(self) -> LidFile:
+        if sorted(abs(c) for c in self.axis) != [0.0, 1.0]:
+            raise ValueError(f"axis must be a unit vector along x or y, e.g. [0, -1], not {list(self.axis)}")
+        return self
+
+
 class FurnitureFile(_Strict):
     name: Name
     kind: str = Field(min_length=1)
-    style: Literal["table", "block", "sofa", "drawer_unit"]
+    style: Literal["table", "block", "sofa", "drawer_unit", "chest"]
     center: Vec2
     size: tuple[Positive, Positive, Positive]
     color: str | tuple[float, float, float, float] = "light"
@@ -192,6 +238,7 @@ class FurnitureFile(_Strict):
     place_radius: Positive = 0.3
     slots: list[Vec2] = Field(default_factory=list)
     drawer: DrawerFile | None = None
+    lid: LidFile | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> FurnitureFile:
@@ -199,6 +246,17 @@ class FurnitureFile(_Strict):
             raise ValueError(f"color: unknown colour {self.color!r}; use one of {', '.join(COLORS)} or [r, g, b, a]")
         if (self.style == "drawer_unit") != (self.drawer is not None):
             raise ValueError("drawer: a drawer_unit needs a drawer, and only a drawer_unit may have one")
+        if (self.style == "chest") != (self.lid is not None):
+            raise ValueError("lid: a chest needs a lid, and only a chest may have one")
+        if self.lid is not None:
+            turned = abs(self.lid.axis[0]) > 0.5
+            width, depth = (self.size[1], self.size[0]) if turned else (self.size[0], self.size[1])
+            inner = (width / 2 - 0.05, depth / 2 - 0.05)
+            if self.lid.floor + self.lid.max_object_height > self.size[2] - 0.03:
+                raise ValueError(f"lid.max_object_height: objects that tall do not fit under the lid of {self.name}")
+            for i, (x, y) in enumerate(self.lid.slots):
+                if abs(x) > inner[0] or abs(y) > inner[1]:
+                    raise ValueError(f"lid.slots.{i}: {[x, y]} lies outside the chest's inside")
         if self.slots and self.place_pose is None:
             raise ValueError("place_pose: furniture with slots needs a place_pose")
         for what, xy in [("place_pose", self.place_pose), *((f"slots.{i}", s) for i, s in enumerate(self.slots))]:
@@ -264,8 +322,8 @@ class LayoutFile(_Strict):
             for i, xy in enumerate(getattr(self.bob, what)):
                 if not _inside(table.center, table.size, xy):
                     raise ValueError(f"bob.{what}.{i}: {list(xy)} is not on {table.name}")
-        if not any(f.drawer is not None for f in self.furniture):
-            raise ValueError("furniture: a layout needs at least one closed container (a drawer_unit)")
+        if not any(f.drawer is not None or f.lid is not None for f in self.furniture):
+            raise ValueError("furniture: a layout needs at least one closed container (a drawer_unit or a chest)")
         elsewhere = sum(len(f.slots) for f in self.furniture if f.name != table.name)
         if elsewhere < 5:
             raise ValueError(f"furniture: slots away from {table.name} number {elsewhere}; 6-object episodes need at least 5")
@@ -273,7 +331,7 @@ class LayoutFile(_Strict):
         obstacles += [(f"furniture.{i} ({f.name})", f.center, (f.size[0], f.size[1])) for i, f in enumerate(self.furniture)]
         poses = [(f"starts.{r}", s) for r, s in self.starts.items()]
         for i, f in enumerate(self.furniture):
-            if f.style != "drawer_unit" and f.name != table.name and f.stand_poses == [] and f.slots:
+            if f.style not in ("drawer_unit", "chest") and f.name != table.name and f.stand_poses == [] and f.slots:
                 raise ValueError(f"furniture.{i}.stand_poses: {f.name} has slots but no stand pose")
             poses += [(f"furniture.{i}.stand_poses.{j} ({f.name})", sp) for j, sp in enumerate(f.stand_pose_list())]
         for what, (x, y, _) in poses:
@@ -287,7 +345,7 @@ class LayoutFile(_Strict):
     def build(self, source: str = "") -> Layout:
         furniture = []
         for f in self.furniture:
-            d = f.drawer
+            d, lid = f.drawer, f.lid
             furniture.append(
                 FurnitureSpec(
                     name=f.name, kind=f.kind, style=f.style, center=f.center, size=f.size,
@@ -295,6 +353,7 @@ class LayoutFile(_Strict):
                     stand_poses=tuple(f.stand_pose_list()), place_pose=f.place_pose, place_radius=f.place_radius,
                     slots=tuple(f.slots),
                     drawer=None if d is None else DrawerSpec(d.axis, d.travel, d.inner, d.floor, tuple(d.slots), d.max_object_height),
+                    lid=None if lid is None else LidSpec(lid.axis, math.radians(lid.open_deg), lid.floor, tuple(lid.slots), lid.max_object_height),
                 )
             )  # fmt: skip
         b = self.bob

@@ -38,7 +38,7 @@ class BuiltScene:
 
     statics: list[StaticBody]
     bodies: dict[str, int]  # static name -> body id
-    drawer_joint: dict[str, int]  # drawer unit name -> its prismatic joint index
+    joints: dict[str, int]  # container name -> the joint that opens it (a drawer's prismatic, a lid's revolute)
     grid: Grid
 
 
@@ -69,6 +69,8 @@ def scene_statics(layout: Layout, assets_dir: AssetDir, fixtures: list[Fixture] 
     for f in layout.furniture:
         if f.style == "drawer_unit":
             urdf = assets.drawer_unit_urdf(f.name, f.drawer_geometry(), f.color)
+        elif f.style == "chest":
+            urdf = assets.chest_urdf(f.name, f.chest_geometry(), f.color)
         elif f.style == "table":
             urdf = assets.link_urdf(f.name, assets.table_boxes(f.size, f.color))
         elif f.style == "sofa":
@@ -121,11 +123,11 @@ def build_scene(cid: int, layout: Layout, assets_dir: AssetDir, margin: float, f
     bodies = load_statics(cid, statics)
     joints: dict[str, int] = {}
     for f in layout.furniture:
-        if f.drawer is not None:
+        if f.container is not None:
             body = bodies[f.name]
             joints[f.name] = next(
                 j for j in range(p.getNumJoints(body, physicsClientId=cid))
-                if p.getJointInfo(body, j, physicsClientId=cid)[2] == p.JOINT_PRISMATIC
+                if p.getJointInfo(body, j, physicsClientId=cid)[2] in (p.JOINT_PRISMATIC, p.JOINT_REVOLUTE)
             )  # fmt: skip
             p.setJointMotorControl2(body, joints[f.name], p.VELOCITY_CONTROL, force=0.0, physicsClientId=cid)
     return BuiltScene(statics, bodies, joints, occupancy(layout, margin))

@@ -60,9 +60,9 @@ class ObjectState:
     kind: ObjectKind
     body: int
     on: str | None  # furniture or a fixture (tray, panel, cutting board)
-    inside: bool  # in a container (drawer) rather than on a surface
+    inside: bool  # in a container (a drawer, a chest) rather than on a surface
     target: bool
-    local: tuple[float, float] | None = None  # position in the drawer's frame while inside
+    local: tuple[float, float] | None = None  # position in the container's frame while inside
     held_by: str | None = None
 
 
@@ -106,7 +106,7 @@ class Sim:
         self.scene = build_scene(self.cid, lay, self.assets, margin, list(self.fixtures.values()))
         self.grid = self.scene.grid
         self.planner = ArmPlanner(self.scene.statics, seed=self.seed)
-        self.drawer_open: dict[str, float] = {name: 0.0 for name in self.scene.drawer_joint}
+        self.opening: dict[str, float] = {name: 0.0 for name in self.scene.joints}  # container -> joint value
         self.bots: dict[str, RobotBody] = {}
         for name in self.robots:
             kind = KINDS[TEAM[name]]
@@ -128,7 +128,7 @@ class Sim:
                 self.targets.append(k.name)
                 self.goals[k.name] = self.task.goal(k)
             if pl.inside:
-                self._follow_drawer(obj)
+                self._follow_container(obj)
             else:
                 f = lay.get(pl.furniture)
                 assert f is not None
@@ -151,7 +151,7 @@ class Sim:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    # ------------------------------------------------------------------ object and drawer state
+    # ------------------------------------------------------------------ object and container state
     def position(self, obj: ObjectState) -> tuple[float, float, float]:
         pos, _ = p.getBasePositionAndOrientation(obj.body, physicsClientId=self.cid)
         return (float(pos[0]), float(pos[1]), float(pos[2]))
@@ -166,38 +166,50 @@ class Sim:
         orn = p.getQuaternionFromEuler((0, 0, yaw))
         p.resetBasePositionAndOrientation(obj.body, (x, y, surface_z + obj.kind.height / 2), orn, physicsClientId=self.cid)
 
-    def _drawer_frame(self, name: str) -> tuple[tuple[float, float, float], float]:
-        """World position and yaw of a drawer link's origin (the centre of its floor surface)."""
-        body, joint = self.scene.bodies[name], self.scene.drawer_joint[name]
-        st = p.getLinkState(body, joint, computeForwardKinematics=True, physicsClientId=self.cid)
+    def _container_frame(self, name: str) -> tuple[tuple[float, float, float], float]:
+        """World position and yaw of where a container's contents lie: a drawer link's origin (the
+        centre of its floor surface), or the centre of a chest's inside floor."""
+        f = self.layout.get(name)
+        assert f is not None
+        body = self.scene.bodies[name]
+        if f.lid is not None:
+            pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=self.cid)
+            return (float(pos[0]), float(pos[1]), f.lid.floor), float(p.getEulerFromQuaternion(orn)[2])
+        st = p.getLinkState(body, self.scene.joints[name], computeForwardKinematics=True, physicsClientId=self.cid)
         yaw = p.getEulerFromQuaternion(st[5])[2]
         return (float(st[4][0]), float(st[4][1]), float(st[4][2])), float(yaw)
 
     def _to_world(self, name: str, local: tuple[float, float, float]) -> tuple[float, float, float]:
-        (x, y, z), yaw = self._drawer_frame(name)
+        (x, y, z), yaw = self._container_frame(name)
         c, s = math.cos(yaw), math.sin(yaw)
         return (x + c * local[0] - s * local[1], y + s * local[0] + c * local[1], z + local[2])
 
-    def _follow_drawer(self, obj: ObjectState) -> None:
+    def _follow_container(self, obj: ObjectState) -> None:
         assert obj.on is not None and obj.local is not None
         x, y, z = self._to_world(obj.on, (obj.local[0], obj.local[1], 0.0))
         self._rest(obj, x, y, z)
 
     def is_open(self, name: str) -> bool:
-        return self.drawer_open.get(name, 0.0) > 0.0
+        return self.opening.get(name, 0.0) > 0.0
 
-    def set_drawer(self, name: str, value: float) -> None:
-        """Slide a drawer to `value` metres open; what lies in it moves along (planner mirrored)."""
-        p.resetJointState(self.scene.bodies[name], self.scene.drawer_joint[name], value, physicsClientId=self.cid)
-        self.drawer_open[name] = value
-        self.planner.set_joint(name, self.scene.drawer_joint[name], value)
+    def set_container(self, name: str, value: float) -> None:
+        """Slide a drawer to `value` metres open, or swing a lid to `value` rad; what lies in a
+        drawer moves along. The planner's copy is moved too."""
+        p.resetJointState(self.scene.bodies[name], self.scene.joints[name], value, physicsClientId=self.cid)
+        self.opening[name] = value
+        self.planner.set_joint(name, self.scene.joints[name], value)
         for o in self.objects.values():
             if o.on == name and o.inside and o.held_by is None:
-                self._follow_drawer(o)
+                self._follow_container(o)
 
     def handle_position(self, name: str) -> tuple[float, float, float]:
+        """Top centre of a container's handle, wherever its drawer or lid now is."""
         f = self.layout.get(name)
         assert f is not None
+        if f.lid is not None:
+            st = p.getLinkState(self.scene.bodies[name], self.scene.joints[name], computeForwardKinematics=True, physicsClientId=self.cid)
+            pos, _ = p.multiplyTransforms(st[4], st[5], f.chest_geometry().handle, (0, 0, 0, 1))
+            return (float(pos[0]), float(pos[1]), float(pos[2]))
         return self._to_world(name, f.drawer_geometry().handle)
 
     def table_top(self) -> float:
@@ -335,8 +347,8 @@ class Sim:
                     kind=f.kind,
                     position=(f.center[0], f.center[1], f.top),
                     yaw=round(f.yaw, 4),
-                    openable=f.drawer is not None,
-                    is_open=self.is_open(f.name) if f.drawer is not None else None,
+                    openable=f.container is not None,
+                    is_open=self.is_open(f.name) if f.container is not None else None,
                     stand_poses=[Pose2D(x=x, y=y, yaw=round(yaw, 4)) for x, y, yaw in f.stand_poses],
                     place_pose=(f.place_pose[0], f.place_pose[1], f.top) if f.place_pose else None,
                 )
@@ -400,5 +412,5 @@ class Sim:
         return {
             "objects": {o.name: (self.position(o), o.on, o.inside, o.held_by) for o in self.objects.values()},
             "robots": {r.name: (r.base, tuple(round(float(v), 9) for v in r.q), r.holding) for r in self.bots.values()},
-            "drawers": dict(self.drawer_open),
+            "containers": dict(self.opening),
         }

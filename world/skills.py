@@ -17,11 +17,12 @@ import numpy as np
 from mhrc.protocol import Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
 
 from . import feedback as fb
-from .arm import HOME, ArmPlanner, straight
+from .arm import HOME, LOWER, UPPER, ArmPlanner, straight
 from .astar import astar, line_free, path_length
 from .robots import ARM_FORWARD, CHASSIS, RobotBody
 
 if TYPE_CHECKING:
+    from .layouts import FurnitureSpec
     from .sim import ObjectState, Sim
     from .tasks import ObjectKind
 
@@ -32,7 +33,9 @@ MAX_MOVE = 1.0  # m, the longest `move`
 APPROACH = 0.12  # pre-grasp height above the grasp point
 MAX_ARM_RANGE = 0.9  # no top-down pose exists beyond this horizontal distance from the arm base
 IDEAL_PICK = (0.3, 0.58)  # horizontal arm-base-to-object distances a corrective move aims for
-PULL_STEPS = 16  # IK waypoints along a drawer's travel
+PULL_STEPS = 16  # IK waypoints along a drawer's travel or a lid's swing
+LID_CLEARANCE = 0.04  # the tool holds a lid's handle this far above its (tilting) top
+LID_GRASP_TRIES = 12  # grasp configurations tried for a lid before giving up
 SPOT_GAP = 0.02  # clearance between placed objects' footprints
 HANDOVER_CLEARANCE = 0.2  # m between a handed-over object and the hand of the robot that put it there
 TIP_CLEARANCE = 0.015  # the closed fingertips reach this far below the suction point
@@ -68,12 +71,12 @@ def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
         r.set_base((x, y, r.base[2]))
     r.set_base(goal)
     length = path_length(path)
-    if f.drawer is not None and not sim.is_open(f.name):
+    if f.container is not None and not sim.is_open(f.name):
         seen = None
     else:
         seen = sim.objects_on(f.name)
         sim.learn(r.name, seen)
-    return SkillOutcome.ok(fb.reached(f.name, a.stand_pose, seen, container=f.drawer is not None), sim_time=length / NAV_SPEED, path_length=round(length, 3))
+    return SkillOutcome.ok(fb.reached(f.name, a.stand_pose, seen, container=f.container is not None), sim_time=length / NAV_SPEED, path_length=round(length, 3))
 
 
 def _move_blocked(sim: Sim, x: float, y: float, dx: float, dy: float) -> bool:
@@ -239,12 +242,14 @@ def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
         if a.target in sim.fixtures or a.target in sim.known_objects(r.name):
             return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(a.target))
         return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, sim.furniture_names()))
-    if f.drawer is None:
+    if f.container is None:
         return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(f.name))
     if sim.is_open(f.name):
         return SkillOutcome.fail(OutcomeCode.ALREADY_OPEN, fb.already_open(f.name))
     if r.holding is not None:
         return SkillOutcome.fail(OutcomeCode.GRIPPER_FULL, fb.hands_full_to_open(f.name, r.holding))
+    if f.lid is not None:
+        return _open_lid(sim, r, f)
     hx, hy, hz = sim.handle_position(f.name)
     handle = (hx, hy, hz + TIP_CLEARANCE)
     ab = r.arm_base()
@@ -259,22 +264,22 @@ def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
         )  # fmt: skip
     q0 = r.q.copy()
     t = r.run(reach.path + reach.descent, JOINT_SPEED)
-    # pull the handle along the drawer's axis, the arm following IK waypoints
+    # move the handle along the joint's path (a drawer's line, a lid's arc), the arm following IK waypoints
     pl = planner_for(sim, r)
-    d = f.drawer
+    spec = f.container
     yaw = r.arm_yaw()
     pulled = 0.0
-    for s in np.linspace(0.0, d.travel, PULL_STEPS + 1)[1:]:
-        goal = (handle[0] + d.axis[0] * s, handle[1] + d.axis[1] * s, handle[2])
-        sim.set_drawer(f.name, float(s))  # the drawer (handle held) moves out of the planner's way
-        q = pl.ik(goal, yaw, r.q, restarts=3)
+    for s in np.linspace(0.0, spec.travel, PULL_STEPS + 1)[1:]:
+        sim.set_container(f.name, float(s))  # the drawer or lid (handle held) moves out of the planner's way
+        hx, hy, hz = sim.handle_position(f.name)
+        q = pl.ik((hx, hy, hz + TIP_CLEARANCE), yaw, r.q, restarts=3)
         if q is None or float(np.max(np.abs(q - r.q))) > 0.6:
-            sim.set_drawer(f.name, pulled)
+            sim.set_container(f.name, pulled)
             break
         t += r.run([r.q, q], JOINT_SPEED)
         pulled = float(s)
-    if pulled < d.travel - 1e-6:
-        sim.set_drawer(f.name, 0.0)
+    if pulled < spec.travel - 1e-6:
+        sim.set_container(f.name, 0.0)
         t += r.run(straight(r.q, q0, 10), JOINT_SPEED)
         return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), sim_time=t, pulled=round(pulled, 3))
     lift = pl.ik((r.tip()[0], r.tip()[1], r.tip()[2] + 0.08), yaw, r.q, restarts=2)
@@ -284,6 +289,73 @@ def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
     inside = sim.objects_on(f.name)
     sim.learn(r.name, inside)
     return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(pulled, 3))
+
+
+def _lid_arc(sim: Sim, pl: ArmPlanner, f: FurnitureSpec, values: np.ndarray, seed: np.ndarray, yaw: float) -> list[np.ndarray]:
+    """Joint waypoints that keep the tool on the handle while the lid passes through `values`
+    (rad, in either order), starting from an IK solution seeded by `seed`, as far as IK follows
+    without a jump. The lid is left shut again."""
+    assert f.lid is not None
+    path: list[np.ndarray] = []
+    for v in values:
+        sim.set_container(f.name, float(v))
+        hx, hy, hz = sim.handle_position(f.name)
+        q = pl.ik((hx, hy, hz + LID_CLEARANCE), yaw, path[-1] if path else seed, restarts=1)
+        if q is None or (path and float(np.max(np.abs(q - path[-1]))) > 0.6):
+            break
+        path.append(q)
+    sim.set_container(f.name, 0.0)
+    return path
+
+
+def _open_lid(sim: Sim, r: RobotBody, f: FurnitureSpec) -> SkillOutcome:
+    """Grip the lid's handle and swing it up. Several grasp configurations are tried, each
+    checked along the whole arc before the arm moves: the first that follows it is used."""
+    assert f.lid is not None
+    pl = planner_for(sim, r)
+    yaw = r.arm_yaw()
+    ab = r.arm_base()
+    assert ab is not None
+    hx, hy, hz = sim.handle_position(f.name)
+    handle = (hx, hy, hz + LID_CLEARANCE)
+    above = (hx, hy, handle[2] + APPROACH)
+    if horizontal(ab, handle) > MAX_ARM_RANGE:
+        return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle)), horizontal_distance=round(horizontal(ab, handle), 3))
+    values = np.linspace(0.0, f.lid.angle, PULL_STEPS + 1)
+    followed, grasped = 0, False
+    for k in range(LID_GRASP_TRIES):
+        seed = HOME if k == 0 else pl.rng.uniform(LOWER, UPPER)
+        # the open end is the harder pose: solve it first and follow the arc back down, else up
+        arc = _lid_arc(sim, pl, f, values[::-1], seed, yaw)[::-1]
+        if len(arc) < len(values):
+            arc = _lid_arc(sim, pl, f, values, seed, yaw)
+        grasped = grasped or bool(arc)
+        followed = max(followed, len(arc) - 1)
+        if len(arc) < len(values):
+            continue
+        q_at = arc[0]
+        # onto the handle from above if the arm can come down on it, else straight to the grasp
+        q_above = pl.ik(above, yaw, q_at, restarts=4)
+        descent = cartesian_descent(pl, above, handle, yaw, q_above, q_at) if q_above is not None else []
+        if q_above is None or not all(pl.valid(q) for q in descent[1:-1]):
+            q_above, descent = q_at, []
+        res = pl.plan(r.q, q_above)
+        if res.path is None:
+            continue
+        t = r.run(res.path + descent, JOINT_SPEED)
+        for v, q in zip(np.linspace(0.0, f.lid.angle, PULL_STEPS + 1)[1:], arc[1:]):
+            sim.set_container(f.name, float(v))
+            t += r.run([r.q, q], JOINT_SPEED)
+        lift = pl.ik((r.tip()[0], r.tip()[1], r.tip()[2] + 0.08), yaw, r.q, restarts=2)
+        if lift is not None:
+            t += r.run(straight(r.q, lift, 5), JOINT_SPEED)
+        t += retract(sim, r)
+        inside = sim.objects_on(f.name)
+        sim.learn(r.name, inside)
+        return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(f.lid.angle, 3))
+    if not grasped:
+        return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle)), horizontal_distance=round(horizontal(ab, handle), 3))
+    return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), pulled=round(followed * f.lid.angle / PULL_STEPS, 3))
 
 
 # --------------------------------------------------------------------------- pick
@@ -366,7 +438,19 @@ def free_spots(sim: Sim, location: str, held: ObjectState) -> tuple[list[tuple[f
                     continue
                 if not any(_overlaps(c, (hx, hy), b, h) for b, h in boxes):
                     out.append((c[0], c[1], yaw))
-    out.sort(key=lambda c: (round(math.hypot(c[0] - center[0], c[1] - center[1]), 6), c[2], c[0], c[1]))
+    if fx is not None and fx.rim:
+        # pack a tray tightly: keep what it holds within the smallest rectangle from its far corner
+        inside = [b for b in boxes if fx.contains_xy(*b[0])]
+        used_x = max((x1 - (b[0] - h[0]) for b, h in inside), default=0.0)
+        used_y = max((y1 - (b[1] - h[1]) for b, h in inside), default=0.0)
+
+        def area(c: tuple[float, float, float]) -> float:
+            hx, hy = half_extent(held.kind, c[2])
+            return round(max(used_x, x1 - (c[0] - hx)) * max(used_y, y1 - (c[1] - hy)), 6)
+
+        out.sort(key=lambda c: (area(c), round(math.hypot(c[0] - center[0], c[1] - center[1]), 6), c[2], c[0], c[1]))
+    else:
+        out.sort(key=lambda c: (round(math.hypot(c[0] - center[0], c[1] - center[1]), 6), c[2], c[0], c[1]))
     return out, top
 
 
