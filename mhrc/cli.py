@@ -7,6 +7,7 @@ import json
 import os
 import signal
 import sys
+import time
 from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any, TypeVar
@@ -208,6 +209,123 @@ def render(scenes_: tuple[str, ...], task: str, seed: int, n_objects: int, out: 
                 click.echo(str(path))
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
+
+
+def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
+    if text is None:
+        return None
+    try:
+        return tuple(kind(x.strip()) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected a comma-separated list, got {text!r}") from None
+
+
+@main.command("eval")
+@click.option("--llm", default=None, help="Model spec (provider:model); default: the built-in heuristic policy.")
+@click.option("--tasks", default=None, help="Comma-separated task ids; default: every registered task.")
+@click.option("--scenes", default=None, help="Comma-separated layouts; default: every built-in layout.")
+@click.option("--objects", default="3,4,5,6", show_default=True, help="Comma-separated object counts.")
+@click.option("--trials", default=4, show_default=True, type=int, help="Episodes per cell; trial i uses seed i.")
+@click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
+@click.option("--horizon", default=50, show_default=True, type=int)
+@click.option("--workers", default=os.cpu_count() or 1, show_default="the number of cores", type=int,
+              help="Local worker processes; 0: only workers that join with `mhrc worker --connect`.")
+@click.option("--listen", default=None, help="Endpoint for the bus, e.g. tcp/0.0.0.0:7448 to let other hosts' workers join; default: a free loopback port.")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory; default runs/eval-<time>.")
+@click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
+@click.option("--base-url", default=None, help="OpenAI-compatible base URL for --llm.")
+@click.option("--llm-timeout", default=60.0, show_default=True, type=float)
+@click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None)
+@click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
+def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str, trials: int, ablation: str, horizon: int,
+          workers: int, listen: str | None, out: Path | None, resume: bool, base_url: str | None, llm_timeout: float,
+          prompts: Path | None, log_level: str) -> None:  # fmt: skip
+    """Run the paper's benchmark grid (tasks x scenes x objects x trials) and write, to --out,
+    one trace per episode, episodes.jsonl (every metric of every episode) and summary.md /
+    summary.csv (tables shaped like the paper's Table I and II, TS next to its lower bound).
+
+    Without --llm the heuristic policy plays. Episodes run in --workers processes on one Zenoh
+    bus; workers on other hosts join with `mhrc worker --connect tcp/HOST:PORT` (see --listen).
+    An interrupted run continues with --resume --out DIR."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from mhrc.world.scene import LAYOUTS
+    from mhrc.world.tasks import TASKS
+
+    from .evaluation import EvalSpec, Tally, evaluate, summary_markdown
+
+    logs.configure(log_level)
+    if workers < 0:
+        raise click.BadParameter("must be 0 or more", param_hint="--workers")
+    if workers == 0 and listen is None:
+        raise click.UsageError("--workers 0 needs --listen, so that workers can join from elsewhere")
+    spec = EvalSpec(
+        tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS), objects=_csv(int, objects) or (),
+        trials=trials, llm=llm, ablation=ablation, horizon=horizon, base_url=base_url, llm_timeout=llm_timeout,
+        prompts=str(prompts) if prompts else None,
+    )  # fmt: skip
+    out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
+    console = Console(stderr=True)
+    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console)
+    bar = progress.add_task("episodes", total=None)
+
+    def hook(t: Tally, row: dict[str, Any] | None) -> None:
+        rate = f"{t.succeeded}/{t.done} solved" + (f", {t.errors} errors" if t.errors else "")
+        progress.update(bar, total=t.total, completed=t.done, description=f"{spec.method} [{rate}]")
+        if row is not None and not row["success"]:
+            progress.console.print(f"[yellow]not solved[/]: {row['key']} (PS {row['partial_success']:.2f}, TS {row['temporal_steps']})")
+
+    try:
+        spec.validate()
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    console.print(f"evaluating {spec.method} (ablation {ablation}) into {out} with {workers} worker(s)")
+    t0 = time.perf_counter()
+    with progress:
+        try:
+            rows = _run(lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook))
+        except ConfigError as exc:
+            raise click.UsageError(str(exc)) from None
+    console.print(f"done in {time.perf_counter() - t0:.1f} s: {out / 'episodes.jsonl'}, {out / 'summary.md'}")
+    if rows:
+        click.echo(summary_markdown(rows))
+
+
+@main.command("worker")
+@click.option("--connect", required=True, help="The coordinator's endpoint, e.g. tcp/10.0.0.5:7448.")
+@click.option("--eval", "eval_id", default=None, help="Evaluation id; default: the only one on the bus.")
+@click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
+def worker(connect: str, eval_id: str | None, log_level: str) -> None:
+    """Run episodes for an `mhrc eval` coordinator until its grid is done."""
+    from .evaluation import run_worker
+
+    logs.configure(log_level)
+    try:
+        n = _run(lambda: run_worker(connect, eval_id))
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    click.echo(f"worker ran {n} episode(s)", err=True)
+
+
+@main.command("report")
+@click.argument("dirs", nargs=-1, required=True, type=click.Path(file_okay=False, exists=True, path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, help="Also write the markdown here (and CSV beside it).")
+def report(dirs: tuple[Path, ...], out: Path | None) -> None:
+    """Merge `mhrc eval` directories into one comparison table (markdown on stdout)."""
+    from .evaluation import merge_runs, summary_csv, summary_markdown
+
+    try:
+        rows = merge_runs(list(dirs))
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    if not rows:
+        raise click.UsageError("no finished episodes in " + ", ".join(map(str, dirs)))
+    text = summary_markdown(rows)
+    click.echo(text)
+    if out is not None:
+        out.write_text(text, encoding="utf-8")
+        out.with_suffix(".csv").write_text(summary_csv(rows), encoding="utf-8")
 
 
 @main.command()

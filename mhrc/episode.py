@@ -118,8 +118,9 @@ class EpisodeConfig(BaseModel):
 EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
 
 
-async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None) -> EpisodeDone:
-    """Build the scene, open the world's bus on cfg.endpoint, record, and run the episode."""
+async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, connect: str | None = None) -> EpisodeDone:
+    """Build the scene, open the world's bus (a router on cfg.endpoint, or with `connect` a
+    client of a router that already exists), record, and run the episode."""
     from mhrc.world.service import WorldConfig, WorldService
     from mhrc.world.sim import Sim
 
@@ -131,7 +132,7 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None) -
     bus = None
     recorder = None
     try:
-        bus = await Bus.open(mode="router", listen=[cfg.endpoint])
+        bus = await (open_client(connect, 30.0) if connect else Bus.open(mode="router", listen=[cfg.endpoint]))
         if cfg.trace is not None:
             recorder = Recorder(bus, cfg.run, cfg.trace).start()
         if observe is not None:
@@ -247,13 +248,16 @@ async def attach_agent(
     )
 
 
-async def up_in_process(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None) -> EpisodeDone:
-    """World and the given robots' agents (default: the episode's) as asyncio tasks of this process."""
+async def up_in_process(
+    cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None, connect: str | None = None
+) -> EpisodeDone:
+    """World and the given robots' agents (default: the episode's) as asyncio tasks of this
+    process; with `connect`, all of them join that router's bus instead of the world listening."""
     robots = cfg.robots if robots is None else robots
-    world = asyncio.create_task(serve_world(cfg, observe=observe), name="world")
+    world = asyncio.create_task(serve_world(cfg, observe=observe, connect=connect), name="world")
     agents = [
         asyncio.create_task(
-            run_agent(r, cfg.run, cfg.endpoint, llm=cfg.llm, base_url=cfg.base_url, llm_timeout=cfg.llm_timeout, **cfg.policy_options()),
+            run_agent(r, cfg.run, connect or cfg.endpoint, llm=cfg.llm, base_url=cfg.base_url, llm_timeout=cfg.llm_timeout, **cfg.policy_options()),
             name=f"agent-{r}",
         )
         for r in robots

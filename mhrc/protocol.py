@@ -287,6 +287,7 @@ class Metrics(_Model):
     messages: int = 0
     wall_time: float = 0.0
     sim_time: float = 0.0
+    lower_bound: int | None = Field(None, description="a lower bound on TS for this episode (world/bound.py)")
 
 
 class EpisodeStarted(Message):
@@ -299,6 +300,7 @@ class EpisodeStarted(Message):
     robots: list[str]
     horizon: int
     scheduler: Literal["lockstep"] = "lockstep"
+    lower_bound: int | None = None
 
 
 class TickClosed(Message):

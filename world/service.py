@@ -70,6 +70,7 @@ class SimLike(Protocol):
     def tell(self, receiver: str, sender: str, text: str) -> None: ...
     def evaluate(self) -> TaskResultLike: ...
     def views(self) -> tuple[list[FurnitureView], list[ObjectView]]: ...
+    def lower_bound(self) -> int: ...
 
 
 @dataclass
@@ -103,6 +104,7 @@ class WorldService:
         self.pending: dict[str, ActionRequest] = {}
         self._inbox: dict[str, list[RobotMessage]] = {r: [] for r in sim.robots}
         self._tally = _Tally()
+        self._bound = sim.lower_bound()
         self._sim_lock = asyncio.Lock()
         self._wake = asyncio.Event()
         self._t0 = 0.0
@@ -168,6 +170,7 @@ class WorldService:
                 n_objects=self.sim.n_objects,
                 robots=list(self.sim.robots),
                 horizon=self.cfg.horizon,
+                lower_bound=self._bound,
             ),
         )
         self._log.info("episode started", attached=sorted(self.attached))
@@ -270,6 +273,7 @@ class WorldService:
             messages=t.messages,
             wall_time=time.perf_counter() - self._t0 if self._t0 else 0.0,
             sim_time=t.sim_time,
+            lower_bound=self._bound,
         )
         self.done = EpisodeDone(run=self.cfg.run, reason=reason, metrics=metrics)  # type: ignore[arg-type]
         self.bus.put(self.keys.world_event, self.done)

@@ -393,6 +393,12 @@ class Sim:
             teammates={o: list(self.bots[o].kind.skills) for o in self.robots if o != robot},
         )
 
+    def lower_bound(self) -> int:
+        """A lower bound on the temporal steps any team needs for this episode (see bound.py)."""
+        from .bound import lower_bound, symbolic_episode
+
+        return lower_bound(symbolic_episode(self))
+
     def seen(self) -> list[Seen]:
         """Every object's end state as the goal check reads it."""
         return [Seen(o.name, o.kind, o.on if o.held_by is None else None, round(self.position(o)[2], 4)) for o in self.objects.values()]

@@ -1,0 +1,463 @@
+"""`mhrc eval`: the paper's benchmark grid as one command, episodes spread over worker processes
+on one Zenoh bus, results as traces, `episodes.jsonl` and summary tables.
+
+The coordinator opens a Zenoh router and serves the grid; workers (local processes it starts,
+or `mhrc worker --connect tcp/HOST:PORT` on other hosts) pull jobs, run each episode in-process
+with its own run id on the same bus, and push back the episode's trace. Keys, under
+`mhrc/eval/<eval id>/`:
+
+    job                   queryable: a worker asks (JobRequest) and gets a JobReply: a job,
+                          "wait" (everything is handed out, results pending) or "done"
+    result                put: a worker's EvalResult (the job's key and its zlib'd trace)
+    alive/coordinator     liveliness token of the coordinator (workers find the eval by it)
+    alive/worker/<id>     liveliness token of each worker: when one vanishes, its unfinished
+                          jobs go back to the queue
+
+Each episode's metrics are computed by the coordinator from the trace (`mhrc.metrics`), so a
+row means the same thing whichever host ran it. Rows are appended to DIR/episodes.jsonl as they
+arrive; `--resume` skips the keys already there.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import csv
+import io
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+import zlib
+from collections import defaultdict, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import structlog
+from pydantic import BaseModel, Field
+
+from .bus import Bus, Sample, endpoint, free_port
+from .episode import ConfigError, EpisodeConfig, open_client, up_in_process
+from .metrics import from_trace, summarize
+from .protocol import decode
+from .trace import read_trace
+
+log = structlog.get_logger("mhrc.eval")
+
+ROOT = "mhrc/eval"
+PAPER_OBJECTS = (3, 4, 5, 6)
+JOB_TIMEOUT = 600.0  # s an issued job may take before it goes back to the queue
+
+
+# --------------------------------------------------------------------------- messages
+
+
+class Job(BaseModel):
+    key: str
+    config: dict[str, Any]  # EpisodeConfig fields (no run, port or trace: the worker picks those)
+
+
+class JobRequest(BaseModel):
+    worker: str
+
+
+class JobReply(BaseModel):
+    status: str = Field(description="job | wait | done")
+    job: Job | None = None
+
+
+class EvalResult(BaseModel):
+    key: str
+    worker: str
+    trace_z: str = ""  # base64 of the zlib-compressed JSONL trace
+    error: str | None = None
+
+
+def _keys(eval_id: str) -> dict[str, str]:
+    base = f"{ROOT}/{eval_id}"
+    return {
+        "job": f"{base}/job",
+        "result": f"{base}/result",
+        "coordinator": f"{base}/alive/coordinator",
+        "worker": f"{base}/alive/worker",
+    }
+
+
+# --------------------------------------------------------------------------- the grid
+
+
+@dataclass(frozen=True)
+class EvalSpec:
+    """What an evaluation runs: the grid and how each episode is driven."""
+
+    tasks: tuple[str, ...]
+    scenes: tuple[str, ...]
+    objects: tuple[int, ...] = PAPER_OBJECTS
+    trials: int = 4
+    llm: str | None = None
+    ablation: str = "none"
+    horizon: int = 50
+    base_url: str | None = None
+    llm_timeout: float = 60.0
+    prompts: str | None = None
+
+    @property
+    def method(self) -> str:
+        return self.llm or "heuristic"
+
+    def identity(self) -> dict[str, Any]:
+        """What must match for --resume to continue a run."""
+        return {"method": self.method, "ablation": self.ablation, "horizon": self.horizon}
+
+    def jobs(self) -> list[Job]:
+        out = []
+        for task in self.tasks:
+            for scene in self.scenes:
+                for n in self.objects:
+                    for trial in range(self.trials):
+                        cfg: dict[str, Any] = {
+                            "task": task, "scene": scene, "seed": trial, "n_objects": n, "horizon": self.horizon,
+                            "llm": self.llm, "ablation": self.ablation, "base_url": self.base_url,
+                            "llm_timeout": self.llm_timeout, "prompts": self.prompts,
+                        }  # fmt: skip
+                        out.append(Job(key=f"{task}/{scene}/{n}/{trial}", config={k: v for k, v in cfg.items() if v is not None}))
+        return out
+
+    def validate(self) -> None:
+        """Fail before anything starts, naming the field: every cell of the grid must be a valid episode."""
+        if self.trials < 1:
+            raise ConfigError(f"trials: must be at least 1 (got {self.trials})")
+        if not (self.tasks and self.scenes and self.objects):
+            raise ConfigError("tasks, scenes and objects must each name at least one value")
+        seen: set[tuple[str, str, int]] = set()
+        for job in self.jobs():
+            c = job.config
+            cell = (c["task"], c["scene"], c["n_objects"])
+            if cell not in seen:
+                seen.add(cell)
+                EpisodeConfig.build(**c)
+
+
+# --------------------------------------------------------------------------- worker
+
+
+async def find_eval(bus: Bus, timeout: float = 10.0) -> str:
+    """The id of the only evaluation whose coordinator is alive on this bus."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        ids = sorted({k.split("/")[2] for k in await bus.alive(f"{ROOT}/*/alive/coordinator", timeout=1.0)})
+        if ids or loop.time() >= deadline:
+            break
+        await asyncio.sleep(0.3)
+    if len(ids) != 1:
+        raise ConfigError(f"pass --eval: expected exactly one evaluation on the bus, found {', '.join(ids) or 'none'}")
+    return ids[0]
+
+
+async def run_worker(connect: str, eval_id: str | None = None, worker_id: str | None = None, connect_timeout: float = 30.0) -> int:
+    """Pull jobs from the coordinator at `connect` and run them until it says done; returns
+    how many episodes this worker ran."""
+    worker_id = worker_id or f"w-{uuid.uuid4().hex[:8]}"
+    bus = await open_client(connect, connect_timeout)
+    ran = 0
+    try:
+        eval_id = eval_id or await find_eval(bus)
+        keys = _keys(eval_id)
+        bus.declare_token(f"{keys['worker']}/{worker_id}")
+        while True:
+            replies = await bus.get(keys["job"], JobRequest(worker=worker_id), timeout=10.0)
+            if not replies:
+                if not await bus.alive(keys["coordinator"], timeout=1.0):
+                    log.warning("the coordinator is gone; stopping", eval=eval_id)
+                    return ran
+                continue
+            reply = decode(replies[0], JobReply)
+            if reply.status == "done":
+                return ran
+            if reply.job is None:
+                await asyncio.sleep(0.3)
+                continue
+            result = await _run_job(reply.job, worker_id, connect)
+            bus.put(keys["result"], result)
+            ran += 1
+    finally:
+        await bus.close()
+
+
+async def _run_job(job: Job, worker_id: str, connect: str) -> EvalResult:
+    with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
+        trace = Path(tmp) / "trace.jsonl"
+        try:
+            cfg = EpisodeConfig.build(**job.config, trace=trace).resolved()
+            await up_in_process(cfg, connect=connect)
+            data = zlib.compress(trace.read_bytes(), 6)
+            return EvalResult(key=job.key, worker=worker_id, trace_z=base64.b64encode(data).decode())
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            log.warning("episode failed", key=job.key, error=str(exc))
+            return EvalResult(key=job.key, worker=worker_id, error=f"{type(exc).__name__}: {exc}")
+
+
+def worker_command(connect: str, eval_id: str) -> list[str]:
+    return [sys.executable, "-m", "mhrc", "worker", "--connect", connect, "--eval", eval_id, "--log-level", "error"]
+
+
+# --------------------------------------------------------------------------- coordinator
+
+
+@dataclass
+class Tally:
+    total: int
+    done: int = 0
+    succeeded: int = 0
+    errors: int = 0
+    by_key: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+ProgressHook = Callable[[Tally, dict[str, Any] | None], None]
+
+
+def _read_rows(path: Path) -> list[dict[str, Any]]:
+    if not path.exists():
+        return []
+    rows = []
+    for i, line in enumerate(path.read_text(encoding="utf-8").splitlines()):
+        if not line.strip():
+            continue
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            log.warning("skipping a torn line of episodes.jsonl (an interrupted write)", line=i + 1)
+    return rows
+
+
+def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
+    """Create DIR (or check it for --resume); return the keys already finished."""
+    manifest = out / "eval.json"
+    if out.exists() and any(out.iterdir()):
+        if not resume:
+            raise ConfigError(f"out: {out} is not empty; pass --resume to continue that evaluation, or choose another --out")
+        if manifest.exists():
+            old = json.loads(manifest.read_text())
+            if old.get("identity") != spec.identity():
+                raise ConfigError(f"out: {out} holds an evaluation of {old.get('identity')}, not {spec.identity()}; --resume needs the same --llm, --ablation and --horizon")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "traces").mkdir(exist_ok=True)
+    manifest.write_text(json.dumps({"identity": spec.identity(), "spec": spec.__dict__}, indent=2, default=list) + "\n")
+    rows = _read_rows(out / "episodes.jsonl")
+    if rows:  # rewrite without a torn last line, so that new rows start on a line of their own
+        (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
+    return {r["key"] for r in rows}
+
+
+async def evaluate(
+    spec: EvalSpec,
+    out: Path,
+    *,
+    workers: int = 1,
+    resume: bool = False,
+    listen: str | None = None,
+    progress: ProgressHook | None = None,
+    idle_timeout: float = 120.0,
+) -> list[dict[str, Any]]:
+    """Run the grid; returns every row of DIR/episodes.jsonl (old ones too, with --resume).
+
+    `workers` local worker processes are started; with `listen`, workers on other hosts may join
+    (with workers=0 only they run episodes). Without any worker alive for `idle_timeout`
+    seconds, the evaluation stops with an error rather than hang."""
+    spec.validate()
+    finished = prepare_out(out, spec, resume)
+    todo = deque(j for j in spec.jobs() if j.key not in finished)
+    tally = Tally(total=len(todo))
+    eval_id = f"e{uuid.uuid4().hex[:8]}"
+    keys = _keys(eval_id)
+    listen = listen or endpoint("127.0.0.1", free_port("127.0.0.1"))
+    issued: dict[str, tuple[Job, str, float]] = {}
+    attempts: dict[str, int] = defaultdict(int)
+    alive_workers: set[str] = set()
+    all_done = asyncio.Event()
+    if not todo:
+        all_done.set()
+    rows_path = out / "episodes.jsonl"
+
+    async def on_job(_key: str, _params: dict[str, str], payload: bytes) -> JobReply:
+        req = decode(payload, JobRequest)
+        now = time.monotonic()
+        for k, (job, _w, t0) in list(issued.items()):  # a job that takes far too long goes back
+            if now - t0 > JOB_TIMEOUT:
+                issued.pop(k)
+                todo.append(job)
+        if todo:
+            job = todo.popleft()
+            issued[job.key] = (job, req.worker, now)
+            attempts[job.key] += 1
+            return JobReply(status="job", job=job)
+        return JobReply(status="wait" if issued else "done")
+
+    def on_result(sample: Sample) -> None:
+        res = decode(sample.payload, EvalResult)
+        entry = issued.pop(res.key, None)
+        if entry is None:
+            return  # a duplicate (the job was re-issued and both ran)
+        job = entry[0]
+        row: dict[str, Any] | None = None
+        if res.error is not None:
+            if attempts[res.key] < 2:
+                todo.append(job)
+                return
+            tally.errors += 1
+            with (out / "errors.jsonl").open("a", encoding="utf-8") as f:
+                f.write(json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n")
+        else:
+            trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
+            trace_path.write_bytes(zlib.decompress(base64.b64decode(res.trace_z)))
+            m = from_trace(read_trace(trace_path))
+            row = {
+                "key": res.key, "method": spec.method, "ablation": spec.ablation, "trial": int(res.key.rsplit("/", 1)[1]),
+                **m.as_dict(), "worker": res.worker, "trace": str(trace_path.relative_to(out)),
+            }  # fmt: skip
+            with rows_path.open("a", encoding="utf-8") as f:
+                f.write(json.dumps(row) + "\n")
+            tally.succeeded += bool(m.success)
+        tally.done += 1
+        if progress is not None:
+            progress(tally, row)
+        if tally.done >= tally.total:
+            all_done.set()
+
+    def on_worker(sample: Sample) -> None:
+        wid = sample.key.rsplit("/", 1)[1]
+        if sample.is_put:
+            alive_workers.add(wid)
+            return
+        alive_workers.discard(wid)
+        for k, (job, w, _t) in list(issued.items()):
+            if w == wid:
+                log.warning("worker gone; its job goes back to the queue", worker=wid, job=k)
+                issued.pop(k)
+                todo.appendleft(job)
+
+    procs: list[subprocess.Popen[bytes]] = []
+    bus = await Bus.open(mode="router", listen=[listen])
+    try:
+        bus.serve(keys["job"], on_job)
+        bus.subscribe(keys["result"], on_result)
+        bus.watch_liveliness(f"{keys['worker']}/*", on_worker)
+        bus.declare_token(keys["coordinator"])
+        if progress is not None:
+            progress(tally, None)
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        for _ in range(workers if todo else 0):
+            procs.append(subprocess.Popen(worker_command(listen, eval_id), env=env, stdin=subprocess.DEVNULL))
+        idle_since = time.monotonic()
+        while not all_done.is_set():
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(all_done.wait(), timeout=1.0)
+            if alive_workers or any(p.poll() is None for p in procs):
+                idle_since = time.monotonic()
+            elif time.monotonic() - idle_since > idle_timeout:
+                raise RuntimeError(
+                    f"no worker has been alive for {idle_timeout:.0f} s with {tally.total - tally.done} episodes left; "
+                    f"start workers with: mhrc worker --connect {listen}"
+                )
+        await asyncio.sleep(0.5)  # let workers ask once more and hear "done"
+    finally:
+        for p in procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.terminate()
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    p.wait(timeout=5)
+                if p.poll() is None:
+                    p.kill()
+        await bus.close()
+    rows = _read_rows(rows_path)
+    write_summaries(rows, out)
+    return rows
+
+
+# --------------------------------------------------------------------------- tables
+
+COLUMNS = ("episodes", "succ", "ps", "ts", "ts_bound", "as", "as_per_robot", "messages", "llm_calls", "prompt_tokens", "completion_tokens", "failed_actions", "wall_time")
+AS_NOTE = (
+    "AS counts actions of all robots (wait excluded); AS/robot divides it by the number of robots. "
+    "The paper does not say which of the two its AS is. TS* is the mean lower bound on TS (world/bound.py)."
+)
+
+
+def group(rows: list[dict[str, Any]], *keys: str) -> dict[tuple[Any, ...], dict[str, Any]]:
+    buckets: dict[tuple[Any, ...], list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        buckets[tuple(r[k] for k in keys)].append(r)
+    return {k: summarize(v) for k, v in sorted(buckets.items(), key=lambda kv: tuple(str(x) for x in kv[0]))}
+
+
+def summary_csv(rows: list[dict[str, Any]]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["method", "ablation", "task", *COLUMNS])
+    for (method, ablation, task), s in group(rows, "method", "ablation", "task").items():
+        w.writerow([method, ablation, task, *(s[c] for c in COLUMNS)])
+    return buf.getvalue()
+
+
+def _cell(s: dict[str, Any]) -> str:
+    bound = f" ({s['ts_bound']:.1f})" if s.get("ts_bound") is not None else ""
+    return f"{s['succ']:.2f} / {s['ps']:.2f} / {s['ts']:.1f}{bound} / {s['as']:.1f} ({s['as_per_robot']:.1f})"
+
+
+def summary_markdown(rows: list[dict[str, Any]]) -> str:
+    """Table I (methods, ablation none) and Table II (ablations, per method) as the paper
+    lays them out, then the breakdown by scene and by object count."""
+    tasks = sorted({r["task"] for r in rows})
+    lines = ["# Evaluation summary", "", f"{len(rows)} episodes. Each cell: Succ / PS / TS (TS*) / AS (AS/robot).", "", AS_NOTE, ""]
+    full = [r for r in rows if r["ablation"] == "none"]
+    if full:
+        methods = sorted({r["method"] for r in full})
+        cells = group(full, "task", "method")
+        lines += ["## Table I: methods", "", "| task | " + " | ".join(methods) + " |", "| --- |" + " --- |" * len(methods)]
+        for t in tasks:
+            lines.append(f"| {t} | " + " | ".join(_cell(cells[(t, m)]) if (t, m) in cells else "" for m in methods) + " |")
+        lines.append("")
+    for method in sorted({r["method"] for r in rows}):
+        mine = [r for r in rows if r["method"] == method]
+        ablations = sorted({r["ablation"] for r in mine}, key=lambda a: (a == "none", a))
+        cells = group(mine, "task", "ablation")
+        lines += [f"## Table II: ablations of {method}", "", "| task | " + " | ".join(ablations) + " |", "| --- |" + " --- |" * len(ablations)]
+        for t in tasks:
+            lines.append(f"| {t} | " + " | ".join(_cell(cells[(t, a)]) if (t, a) in cells else "" for a in ablations) + " |")
+        lines.append("")
+    for key, title in (("scene", "scene"), ("n_objects", "object count")):
+        cells = group(rows, "method", "ablation", key)
+        lines += [f"## By {title}", "", f"| method | ablation | {key} | Succ / PS / TS (TS*) / AS (AS/robot) | episodes |", "| --- | --- | --- | --- | --- |"]
+        for (m, a, v), s in cells.items():
+            lines.append(f"| {m} | {a} | {v} | {_cell(s)} | {s['episodes']} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def write_summaries(rows: list[dict[str, Any]], out: Path) -> None:
+    if not rows:
+        return
+    (out / "summary.csv").write_text(summary_csv(rows), encoding="utf-8")
+    (out / "summary.md").write_text(summary_markdown(rows), encoding="utf-8")
+
+
+def merge_runs(dirs: list[Path]) -> list[dict[str, Any]]:
+    """Every episode row of several evaluation directories (for `mhrc report`)."""
+    rows = []
+    for d in dirs:
+        path = d / "episodes.jsonl"
+        if not path.exists():
+            raise ConfigError(f"{d}: no episodes.jsonl here; is it an `mhrc eval --out` directory?")
+        rows += _read_rows(path)
+    return rows

@@ -1,0 +1,122 @@
+"""The one place that defines the metrics, computed from an episode's trace.
+
+The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episode:
+
+- success, placed / total, partial_success: the world's goal check at the end, as the
+  `episode_done` event carries it (the trace holds no other ground truth of object poses).
+- temporal_steps (TS): lockstep ticks executed, i.e. the number of `tick` events; an episode
+  that fails runs to the horizon.
+- action_steps (AS): actions executed by all robots, `wait` excluded, failed ones included;
+  also per robot. The paper does not say whether its AS sums the robots or averages them, so
+  both are reported: `as` (summed) and `as_per_robot` (the sum over the number of robots).
+- failed_actions by skill; messages (communicate actions that were delivered);
+- llm_calls, prompt_tokens, completion_tokens: from the agents' `thought` events;
+- wall_time (world's measure), lower_bound (world/bound.py, from `episode_started`).
+
+Over episodes, `summarize` takes means (Succ is then the success rate).
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections import Counter
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+
+class TraceError(ValueError):
+    """A trace that lacks what the metrics need (an episode that never finished)."""
+
+
+@dataclass
+class EpisodeMetrics:
+    task: str
+    scene: str
+    seed: int
+    n_objects: int
+    robots: list[str]
+    reason: str
+    success: bool
+    placed: int
+    total: int
+    partial_success: float
+    temporal_steps: int
+    action_steps: int
+    action_steps_per_robot: dict[str, int]
+    failed_actions: dict[str, int] = field(default_factory=dict)
+    messages: int = 0
+    llm_calls: int = 0
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    wall_time: float = 0.0
+    lower_bound: int | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _msgs(rows: Iterable[dict[str, Any]], kind: str) -> list[dict[str, Any]]:
+    return [r["msg"] for r in rows if r.get("kind") == "put" and isinstance(r.get("msg"), dict) and r["msg"].get("kind") == kind]
+
+
+def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
+    """The metrics of one episode from its trace rows (`mhrc.trace.read_trace`)."""
+    started, done = _msgs(rows, "episode_started"), _msgs(rows, "episode_done")
+    if not started or not done:
+        raise TraceError("the trace has no episode_started or no episode_done event: the episode did not finish")
+    s, d = started[0], done[-1]
+    world = d["metrics"]
+    results = _msgs(rows, "action_result")
+    acting = [r for r in results if r["action"]["skill"] != "wait"]
+    per_robot = Counter(r["robot"] for r in acting)
+    failed = Counter(r["action"]["skill"] for r in results if not r["outcome"]["succeeded"])
+    thoughts = [t for t in _msgs(rows, "thought") if t.get("prompt") is not None]
+    return EpisodeMetrics(
+        task=s["task"],
+        scene=s["scene"],
+        seed=s["seed"],
+        n_objects=s["n_objects"],
+        robots=list(s["robots"]),
+        reason=d["reason"],
+        success=bool(world["success"]),
+        placed=int(world["placed"]),
+        total=int(world["total"]),
+        partial_success=float(world["partial_success"]),
+        temporal_steps=len(_msgs(rows, "tick")),
+        action_steps=len(acting),
+        action_steps_per_robot={r: per_robot.get(r, 0) for r in s["robots"]},
+        failed_actions=dict(sorted(failed.items())),
+        messages=sum(1 for r in results if r["action"]["skill"] == "communicate" and r["outcome"]["succeeded"]),
+        llm_calls=len(thoughts),
+        prompt_tokens=sum(int(t.get("prompt_tokens") or 0) for t in thoughts),
+        completion_tokens=sum(int(t.get("completion_tokens") or 0) for t in thoughts),
+        wall_time=float(world.get("wall_time", 0.0)),
+        lower_bound=s.get("lower_bound"),
+    )
+
+
+def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Means over episode rows (dicts with the EpisodeMetrics fields)."""
+    if not rows:
+        raise ValueError("no episodes to summarize")
+
+    def mean(key: str) -> float:
+        return statistics.fmean(float(r[key]) for r in rows)
+
+    bounds = [r["lower_bound"] for r in rows if r.get("lower_bound") is not None]
+    return {
+        "episodes": len(rows),
+        "succ": round(mean("success"), 4),
+        "ps": round(mean("partial_success"), 4),
+        "ts": round(mean("temporal_steps"), 3),
+        "ts_bound": round(statistics.fmean(bounds), 3) if bounds else None,
+        "as": round(mean("action_steps"), 3),
+        "as_per_robot": round(statistics.fmean(r["action_steps"] / max(1, len(r["robots"])) for r in rows), 3),
+        "messages": round(mean("messages"), 3),
+        "llm_calls": round(mean("llm_calls"), 3),
+        "prompt_tokens": round(mean("prompt_tokens"), 1),
+        "completion_tokens": round(mean("completion_tokens"), 1),
+        "failed_actions": round(statistics.fmean(sum(r["failed_actions"].values()) for r in rows), 3),
+        "wall_time": round(mean("wall_time"), 3),
+    }

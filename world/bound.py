@@ -1,0 +1,70 @@
+"""A lower bound on the temporal steps any team could need for a generated episode.
+
+The bound comes from a relaxation of the episode, solved exactly: full knowledge (nobody has to
+explore, ask or tell), no failed skills, `navigate` reaches any stand pose in one step, every
+robot acts once per lockstep tick. What the relaxation keeps are the hard constraints of the
+team and the world:
+
+- Alice is the only robot that can both move and carry, and her gripper holds one object at a
+  time. Each target that starts away from Bob's table therefore costs her at least a navigate
+  to it, a pick, a navigate back to Bob's table carrying it, and a place: 4 of her steps, none
+  shared between two objects.
+- A target inside a closed container needs that container opened once (1 step of hers).
+- A target on Bob's table beyond any pose of his arm (farther than the arm's range from his
+  base) needs her pick and place (2 steps), and, if she brings nothing else, a navigate there.
+- A target Bob can reach needs a pick and a place by some arm (2 steps).
+
+Alice's steps happen one per tick, so their sum bounds the makespan; so does half the steps of
+both arms together. The bound is the larger of the two, and ignoring order (a sandwich's stack)
+only loosens it. It is never above what a real team achieves (tests check the heuristic team).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .sim import Sim
+
+
+@dataclass(frozen=True)
+class SymbolicObject:
+    name: str
+    source: str  # the furniture it starts on or in
+    inside: bool  # in a closed container
+    on_bob_table: bool
+    bob_can_reach: bool
+
+
+@dataclass(frozen=True)
+class SymbolicEpisode:
+    objects: tuple[SymbolicObject, ...]  # the targets
+
+
+def lower_bound(ep: SymbolicEpisode) -> int:
+    """The relaxation's optimum (see the module docstring): a lower bound on temporal steps."""
+    away = [o for o in ep.objects if not o.on_bob_table]
+    far = [o for o in ep.objects if o.on_bob_table and not o.bob_can_reach]
+    near = [o for o in ep.objects if o.on_bob_table and o.bob_can_reach]
+    opens = len({o.source for o in away if o.inside})
+    alice = 4 * len(away) + 2 * len(far) + opens + (1 if far and not away else 0)
+    arms = alice + 2 * len(near)
+    return max(alice, math.ceil(arms / 2))
+
+
+def symbolic_episode(sim: Sim) -> SymbolicEpisode:
+    """The relaxation of a freshly built episode, read from the simulator's ground truth."""
+    from .skills import MAX_ARM_RANGE
+
+    bob = sim.bots.get("bob")
+    base = bob.arm_base() if bob is not None else None
+    objs = []
+    for name in sim.targets:
+        o = sim.objects[name]
+        x, y, _ = sim.position(o)
+        on_table = sim.on_bob_table(o.on)
+        reach = base is not None and on_table and math.hypot(x - base[0], y - base[1]) <= MAX_ARM_RANGE
+        objs.append(SymbolicObject(name, o.on or "", o.inside, on_table, reach))
+    return SymbolicEpisode(tuple(objs))
