@@ -105,3 +105,49 @@ def test_bad_eval_options_fail_before_anything_starts(tmp_path: Path, args: list
     out = subprocess.run([sys.executable, "-m", "mhrc", "eval", "--out", str(tmp_path / "x"), *args], capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and message in out.stderr, out.stderr
     assert not (tmp_path / "x").exists()
+
+
+GRABBER = """
+import asyncio, sys
+from mhrc.episode import open_client
+from mhrc.evaluation import JobRequest, JobReply, find_eval
+from mhrc.protocol import decode
+
+async def main():
+    bus = await open_client(sys.argv[1], 60.0)  # retries while the coordinator starts
+    try:
+        eid = await find_eval(bus)
+        bus.declare_token(f"mhrc/eval/{eid}/alive/worker/grabber")
+        reply = decode((await bus.get(f"mhrc/eval/{eid}/job", JobRequest(worker="grabber")))[0], JobReply)
+        print(reply.job.key if reply.job else "none", flush=True)
+        await asyncio.sleep(3600)  # takes the job and never finishes it
+    finally:
+        await bus.close()
+
+asyncio.run(main())
+"""
+
+
+def test_a_job_whose_worker_dies_goes_to_another_worker(tmp_path: Path) -> None:
+    listen = endpoint("127.0.0.1", free_port("127.0.0.1"))
+    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--trials", "1",
+           "--workers", "0", "--listen", listen, "--out", str(tmp_path / "ev")]  # fmt: skip
+    coordinator = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    grabber = subprocess.Popen([sys.executable, "-c", GRABBER, listen], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    worker = None
+    try:
+        assert grabber.stdout is not None
+        assert grabber.stdout.readline().strip() == "pack_objects/kitchen/3/0"  # the only job is taken
+        grabber.kill()  # ... and its worker dies with it
+        grabber.wait(timeout=10)
+        worker = subprocess.Popen([sys.executable, "-m", "mhrc", "worker", "--connect", listen], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        _, err = coordinator.communicate(timeout=120)
+        assert coordinator.returncode == 0, err
+        rows = _rows(tmp_path / "ev")
+        assert [r["key"] for r in rows] == ["pack_objects/kitchen/3/0"] and rows[0]["worker"] != "grabber" and rows[0]["success"]
+        _, werr = worker.communicate(timeout=60)
+        assert "worker ran 1 episode(s)" in werr
+    finally:
+        for p in (coordinator, grabber, worker):
+            if p is not None and p.poll() is None:
+                p.kill()
