@@ -86,7 +86,8 @@ def summary_table(done: EpisodeDone) -> Table:
     t = Table(title=f"episode {done.run}: {done.reason}", show_header=False)
     t.add_row("success", "yes" if m.success else "no")
     t.add_row("partial success", f"{m.partial_success:.2f} ({m.placed}/{m.total} placed)")
-    t.add_row("temporal steps", str(m.temporal_steps))
+    bound = f" (no team can need fewer than {m.lower_bound})" if m.lower_bound is not None else ""
+    t.add_row("temporal steps", f"{m.temporal_steps}{bound}")
     t.add_row("action steps", f"{m.action_steps} (" + ", ".join(f"{r} {n}" for r, n in m.action_steps_per_robot.items()) + ")")
     t.add_row("failed actions", ", ".join(f"{k} {v}" for k, v in sorted(m.failed_actions.items())) or "none")
     t.add_row("messages", str(m.messages))
