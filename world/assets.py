@@ -114,6 +114,25 @@ def sofa_boxes(size: Vec3, color: Color, back: float = 0.15) -> list[Box]:
     ]
 
 
+def jointed_urdf(name: str, carcass: list[Box], part: str, boxes: list[Box], joint: str, origin: Vec3, axis: Vec3, upper: float) -> str:
+    """A fixed carcass and one moving part (a drawer, a lid) on a joint opening from 0 to `upper`."""
+    return f"""<?xml version="1.0"?>
+<robot name="{name}">
+<link name="carcass">{_inertial(0.0)}
+{_boxes_xml(carcass)}
+</link>
+<link name="{part}">{_inertial(1.0)}
+{_boxes_xml(boxes)}
+</link>
+<joint name="{part}_joint" type="{joint}">
+<parent link="carcass"/><child link="{part}"/>
+<origin xyz="{_v(origin)}"/><axis xyz="{_v(axis)}"/>
+<limit lower="0" upper="{_f(upper)}" effort="100" velocity="1"/>
+</joint>
+</robot>
+"""
+
+
 @dataclass(frozen=True)
 class DrawerGeometry:
     """A drawer unit in its own frame: the drawer slides out along -y (the front)."""
@@ -163,22 +182,7 @@ def drawer_unit_urdf(name: str, g: DrawerGeometry, color: Color) -> str:
         Box((0.0, g.handle[1] + 0.025, g.handle[2] - 0.01), (0.04, 0.05, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle stem
         Box((0.0, g.handle[1], g.handle[2] - 0.01), (0.24, 0.03, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle bar
     ]
-    o = g.drawer_origin
-    return f"""<?xml version="1.0"?>
-<robot name="{name}">
-<link name="carcass">{_inertial(0.0)}
-{_boxes_xml(carcass)}
-</link>
-<link name="drawer">{_inertial(1.0)}
-{_boxes_xml(drawer)}
-</link>
-<joint name="drawer_joint" type="prismatic">
-<parent link="carcass"/><child link="drawer"/>
-<origin xyz="{_v(o)}"/><axis xyz="0 -1 0"/>
-<limit lower="0" upper="{_f(g.travel)}" effort="100" velocity="1"/>
-</joint>
-</robot>
-"""
+    return jointed_urdf(name, carcass, "drawer", drawer, "prismatic", g.drawer_origin, (0.0, -1.0, 0.0), g.travel)
 
 
 def slab_boxes(sx: float, sy: float, t: float, color: Color) -> list[Box]:
@@ -234,21 +238,7 @@ def chest_urdf(name: str, g: ChestGeometry, color: Color) -> str:
         Box((0.0, -d / 2, g.lid / 2), (w, d, g.lid), dark),
         Box((hx, hy, hz - g.lid / 2), (0.24, 0.05, g.lid), (0.3, 0.3, 0.3, 1.0)),  # handle tab
     ]
-    return f"""<?xml version="1.0"?>
-<robot name="{name}">
-<link name="carcass">{_inertial(0.0)}
-{_boxes_xml(carcass)}
-</link>
-<link name="lid">{_inertial(1.0)}
-{_boxes_xml(lid)}
-</link>
-<joint name="lid_joint" type="revolute">
-<parent link="carcass"/><child link="lid"/>
-<origin xyz="{_v(g.hinge)}"/><axis xyz="-1 0 0"/>
-<limit lower="0" upper="{_f(g.angle)}" effort="100" velocity="1"/>
-</joint>
-</robot>
-"""
+    return jointed_urdf(name, carcass, "lid", lid, "revolute", g.hinge, (-1.0, 0.0, 0.0), g.angle)
 
 
 def tray_boxes(sx: float, sy: float, color: Color, rim: float = 0.04, t: float = 0.01) -> list[Box]:

@@ -282,13 +282,18 @@ def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
         sim.set_container(f.name, 0.0)
         t += r.run(straight(r.q, q0, 10), JOINT_SPEED)
         return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), sim_time=t, pulled=round(pulled, 3))
+    return _opened(sim, r, f, pl, yaw, t, pulled)
+
+
+def _opened(sim: Sim, r: RobotBody, f: FurnitureSpec, pl: ArmPlanner, yaw: float, t: float, travel: float) -> SkillOutcome:
+    """Let go of the handle of an opened container: lift, retract, look inside."""
     lift = pl.ik((r.tip()[0], r.tip()[1], r.tip()[2] + 0.08), yaw, r.q, restarts=2)
     if lift is not None:
         t += r.run(straight(r.q, lift, 5), JOINT_SPEED)
     t += retract(sim, r)
     inside = sim.objects_on(f.name)
     sim.learn(r.name, inside)
-    return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(pulled, 3))
+    return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(travel, 3))
 
 
 def _lid_arc(sim: Sim, pl: ArmPlanner, f: FurnitureSpec, values: np.ndarray, seed: np.ndarray, yaw: float) -> list[np.ndarray]:
@@ -346,13 +351,7 @@ def _open_lid(sim: Sim, r: RobotBody, f: FurnitureSpec) -> SkillOutcome:
         for v, q in zip(np.linspace(0.0, f.lid.angle, PULL_STEPS + 1)[1:], arc[1:]):
             sim.set_container(f.name, float(v))
             t += r.run([r.q, q], JOINT_SPEED)
-        lift = pl.ik((r.tip()[0], r.tip()[1], r.tip()[2] + 0.08), yaw, r.q, restarts=2)
-        if lift is not None:
-            t += r.run(straight(r.q, lift, 5), JOINT_SPEED)
-        t += retract(sim, r)
-        inside = sim.objects_on(f.name)
-        sim.learn(r.name, inside)
-        return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(f.lid.angle, 3))
+        return _opened(sim, r, f, pl, yaw, t, f.lid.angle)
     if not grasped:
         return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle)), horizontal_distance=round(horizontal(ab, handle), 3))
     return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), pulled=round(followed * f.lid.angle / PULL_STEPS, 3))
