@@ -59,6 +59,7 @@ class RobotAgent:
         attach_timeout: float = 30.0,
         ack_timeout: float = 10.0,
         result_timeout: float | None = None,
+        final_result_grace: float = 10.0,
     ) -> None:
         self.bus = bus
         self.policy = policy
@@ -69,6 +70,7 @@ class RobotAgent:
         self.attach_timeout = attach_timeout
         self.ack_timeout = ack_timeout
         self.result_timeout = result_timeout
+        self.final_result_grace = final_result_grace
         self.episode: EpisodeDone | None = None
         self.steps = 0
         self._acks: dict[str, asyncio.Future[ActionAck]] = {}
@@ -165,7 +167,7 @@ class RobotAgent:
         self._results[req.goal_id] = res_fut
         try:
             self.bus.put(self.keys.action_request(self.robot), req)
-            ack = await self._await(ack_fut, self.ack_timeout, "ack")
+            ack = await self._await(req.goal_id, ack_fut, self.ack_timeout, "ack")
             if ack is None:
                 return None
             if not ack.accepted:
@@ -173,12 +175,16 @@ class RobotAgent:
                     self._log.info("request out of step, resynchronizing", reason=ack.reason)
                     return None
                 raise AgentError(f"the world rejected {decision.action.call()}: {ack.reason}")
-            return await self._await(res_fut, self.result_timeout, "result")
+            return await self._await(req.goal_id, res_fut, self.result_timeout, "result")
         finally:
             self._acks.pop(req.goal_id, None)
             self._results.pop(req.goal_id, None)
 
-    async def _await(self, fut: asyncio.Future, timeout: float | None, what: str):  # type: ignore[no-untyped-def]
+    async def _await(self, goal_id: str, fut: asyncio.Future, timeout: float | None, what: str):  # type: ignore[no-untyped-def]
+        """The ack or result of `goal_id`; None when the episode ended without executing it.
+
+        Results and world events travel on different keys, so `episode_done` may overtake the
+        last result: when the world says it executed this goal, the result is awaited still."""
         done_wait = asyncio.ensure_future(self._done.wait())
         gone_wait = asyncio.ensure_future(self._world_gone.wait())
         try:
@@ -191,8 +197,17 @@ class RobotAgent:
         if gone_wait in finished:
             raise WorldGone(f"the world disappeared while {self.robot} awaited its {what}")
         if done_wait in finished:
-            return None
+            return await self._await_final(goal_id, fut, what)
         raise WorldGone(f"no {what} from the world within {timeout} s")
+
+    async def _await_final(self, goal_id: str, fut: asyncio.Future, what: str):  # type: ignore[no-untyped-def]
+        if self.episode is None or self.episode.final_results.get(self.robot) != goal_id:
+            return None  # the world ended without executing this request
+        try:
+            return await asyncio.wait_for(asyncio.shield(fut), self.final_result_grace)
+        except TimeoutError:
+            self._log.warning("the world reported a final result that never arrived", goal=goal_id, what=what)
+            return None
 
     def _publish_thought(self, obs: Observation, d: Decision) -> None:
         self.bus.put(

@@ -331,6 +331,11 @@ class EpisodeDone(Message):
     run: str
     reason: Literal["success", "horizon", "no_agents", "stopped"]
     metrics: Metrics
+    final_results: dict[str, str] = Field(
+        default_factory=dict,
+        description="robot -> goal id of the result the world published in the last tick it closed: "
+        "results travel on other keys, so an agent that sees this event first still waits for that result",
+    )
 
 
 WorldEvent = Annotated[

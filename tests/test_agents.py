@@ -9,7 +9,21 @@ import pytest
 
 from mhrc.agents.agent import AttachRejected, RobotAgent
 from mhrc.agents.scripted import ScriptedPolicy
-from mhrc.protocol import OutcomeCode
+from mhrc.bus import Bus, Sample, endpoint, free_port
+from mhrc.keys import Keys
+from mhrc.protocol import (
+    ActionAck,
+    ActionRequest,
+    ActionResult,
+    AttachReply,
+    EpisodeDone,
+    Metrics,
+    Observation,
+    OutcomeCode,
+    RobotStatus,
+    SkillOutcome,
+    decode,
+)
 from mhrc.trace import read_trace
 
 
@@ -46,3 +60,59 @@ async def test_a_second_agent_for_an_attached_robot_is_refused(world_factory) ->
         finally:
             await first.close()
             await second.close()
+
+
+class _OvertakingWorld:
+    """A world that publishes `episode_done` before the result of the last tick, on purpose:
+    results and events travel on different keys, so a real world's may arrive in that order."""
+
+    def __init__(self, bus: Bus, run: str, *, name_final_result: bool) -> None:
+        self.bus, self.keys, self.name_final_result = bus, Keys(run), name_final_result
+        self.sent_result = asyncio.Event()
+
+    def start(self) -> None:
+        self.bus.serve(self.keys.attach("bob"), self._attach)
+        self.bus.subscribe(self.keys.action_request("bob"), self._request)
+        self.bus.declare_token(self.keys.alive_world)
+
+    def _observation(self) -> Observation:
+        status = RobotStatus(name="bob", kind="arm", skills=["pick", "place", "communicate", "wait"])
+        return Observation(robot="bob", tick=0, status=status, furniture=[], objects=[], task_brief="b", task_detail="d")
+
+    async def _attach(self, key: str, params: dict[str, str], payload: bytes) -> AttachReply:
+        return AttachReply(robot="bob", accepted=True, tick=0, horizon=1, observation=self._observation())
+
+    async def _request(self, sample: Sample) -> None:
+        req = decode(sample.payload, ActionRequest)
+        self.bus.put(self.keys.action_ack("bob"), ActionAck(goal_id=req.goal_id, robot="bob", accepted=True))
+        metrics = Metrics(success=False, partial_success=0.0, placed=0, total=1, temporal_steps=1, action_steps=0, action_steps_per_robot={"bob": 0})
+        final = {"bob": req.goal_id} if self.name_final_result else {}
+        self.bus.put(self.keys.world_event, EpisodeDone(run=self.keys.run, reason="horizon", metrics=metrics, final_results=final))
+        await asyncio.sleep(0.5)  # the result arrives well after the event
+        result = ActionResult(
+            goal_id=req.goal_id, robot="bob", tick=0, action=req.action, outcome=SkillOutcome.ok("You waited."),
+            observation=self._observation(), done=True,
+        )
+        self.bus.put(self.keys.action_result("bob"), result)
+        self.sent_result.set()
+
+
+@pytest.mark.parametrize("named", [True, False])
+async def test_a_result_overtaken_by_episode_done_is_still_recorded_when_the_world_names_it(named: bool) -> None:
+    port = free_port()
+    world_bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    agent_bus = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    try:
+        world = _OvertakingWorld(world_bus, "overtake", name_final_result=named)
+        world.start()
+        await asyncio.sleep(0.3)  # declarations reach the agent's session
+        policy = ScriptedPolicy("bob", ["Command: wait()"])
+        done = await asyncio.wait_for(RobotAgent(agent_bus, policy, run="overtake", robot="bob").run(), 30)
+        assert done is not None and done.reason == "horizon"
+        if named:  # the world said it executed the request: the agent waits for its result
+            assert [r.action.call() for r in policy.results] == ["wait()"]
+        else:  # the world ended without executing it: the agent does not wait for a result
+            assert policy.results == [] and not world.sent_result.is_set()
+    finally:
+        await agent_bus.close()
+        await world_bus.close()

@@ -109,6 +109,7 @@ class WorldService:
         self._wake = asyncio.Event()
         self._t0 = 0.0
         self._evaluation: TaskResultLike = sim.evaluate()
+        self._last_results: dict[str, str] = {}  # robot -> goal id, results of the last closed tick
         self._log = log.bind(run=config.run)
 
     # ------------------------------------------------------------------ running
@@ -200,6 +201,7 @@ class WorldService:
         for msgs in delivered.values():
             for m in msgs:
                 self.bus.put(self.keys.inbox(m.to, m.sender), m)
+        self._last_results = {req.robot: req.goal_id for req in batch}
         for req, outcome in zip(batch, outcomes):
             obs = observations[req.robot].model_copy(update={"new_messages": delivered[req.robot]})
             delivered[req.robot] = []
@@ -275,7 +277,7 @@ class WorldService:
             sim_time=t.sim_time,
             lower_bound=self._bound,
         )
-        self.done = EpisodeDone(run=self.cfg.run, reason=reason, metrics=metrics)  # type: ignore[arg-type]
+        self.done = EpisodeDone(run=self.cfg.run, reason=reason, metrics=metrics, final_results=dict(self._last_results))  # type: ignore[arg-type]
         self.bus.put(self.keys.world_event, self.done)
         self._log.info("episode done", reason=reason, **metrics.model_dump(exclude={"action_steps_per_robot", "failed_actions"}))
         self._wake.set()
