@@ -56,7 +56,7 @@ PLACEHOLDERS = {
     "system": frozenset({"robot", "teammates", "absent", "skills"}),
     "user": frozenset({"step", "scene_graph", "status", "task", "progress", *HISTORIES}),
 }
-DEFAULT_CAP_CHARS = 12_000  # ~3,000 tokens: fits a 4k-context local model with room for the reply
+SMALL_CONTEXT_CAP = 12_000  # ~3,000 tokens: a --history-cap that fits a 4k-context local model with room for the reply
 FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. End your reply with one line: Command: skill(arguments)."
 MODEL_DOWN = "Your planner could not reach its model ({reason}), so you waited."
 
@@ -101,7 +101,9 @@ class LLMPolicy:
     Ablations: feedback=False leaves all feedback out; history=False leaves the histories out and
     keeps only the current observation: what arrived with it this step (the last action's
     feedback, the messages delivered now). teammates_absent names robots not in this episode.
-    prompt_cap_chars bounds the whole prompt (system + user); None means no cap.
+    prompt_cap_chars bounds the whole prompt (system + user); None (the default, as the paper)
+    keeps every history whole. reach_labels (an aid, not the paper's) says for each object
+    whether it lies within the robot's arm reach.
     """
 
     def __init__(
@@ -113,10 +115,12 @@ class LLMPolicy:
         temperature: float = DEFAULT_TEMPERATURE,
         feedback: bool = True,
         history: bool = True,
-        prompt_cap_chars: int | None = DEFAULT_CAP_CHARS,
+        prompt_cap_chars: int | None = None,
         teammates_absent: tuple[str, ...] = (),
+        reach_labels: bool = False,
     ) -> None:
         self.robot = robot
+        self.reach_labels = reach_labels
         self.client = client
         self.name = f"llm:{client.model}"
         self.temperature = temperature
@@ -159,7 +163,7 @@ class LLMPolicy:
         )
         fields = {
             "step": str(obs.tick),
-            "scene_graph": describe.scene_graph(obs),
+            "scene_graph": describe.scene_graph(obs, reach_labels=self.reach_labels),
             "status": describe.robot_status(obs),
             "task": describe.task_text(obs),
             "progress": describe.progress_text(obs),

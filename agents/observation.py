@@ -48,8 +48,10 @@ def furniture_line(f: FurnitureView, navigates: bool = True) -> str:
     return f"- {f.name} ({f.kind}): " + "; ".join(parts)
 
 
-def object_line(o: ObjectView, obs: Observation) -> str:
-    """`- name: where it lies, position, distance from the robot (and reach, for an arm)`."""
+def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False) -> str:
+    """`- name: where it lies, position, distance from the robot's arm base or base`; with the
+    reach_labels aid, whether that is within the arm's reach (the paper's prompts leave that
+    judgement to the model)."""
     if o.held_by:
         where = "in your gripper" if o.held_by == obs.robot else f"held by {o.held_by}"
     elif o.on:
@@ -62,20 +64,21 @@ def object_line(o: ObjectView, obs: Observation) -> str:
     s = obs.status
     if s.arm_base is not None and s.reach is not None:
         d = _flat(o.position, s.arm_base)
-        reach = "within your reach" if d <= s.reach else "out of your reach"
-        text += f", {d:.2f} m from your arm base ({reach})"
+        text += f", {d:.2f} m from your arm base"
+        if reach_labels:
+            text += " (within your reach)" if d <= s.reach else " (out of your reach)"
     elif s.base is not None:
         text += f", {_flat(o.position, (s.base.x, s.base.y)):.2f} m from you"
     return text
 
 
-def scene_graph(obs: Observation) -> str:
+def scene_graph(obs: Observation, reach_labels: bool = False) -> str:
     """Furniture (always known), then the objects this robot knows of."""
     navigates = "navigate" in obs.status.skills
     lines = ["Furniture:"] + [furniture_line(f, navigates) for f in obs.furniture]
     if obs.objects:
         lines.append("Objects you know of:")
-        lines += [object_line(o, obs) for o in obs.objects]
+        lines += [object_line(o, obs, reach_labels) for o in obs.objects]
     else:
         lines.append("Objects you know of: none yet.")
     return "\n".join(lines)

@@ -12,7 +12,7 @@ from pathlib import Path
 from mhrc.protocol import ActionResult
 
 from .llm import DEFAULT_TEMPERATURE, ScriptedClient
-from .llm_policy import DEFAULT_CAP_CHARS, LLMPolicy
+from .llm_policy import LLMPolicy
 
 
 class ScriptedPolicy(LLMPolicy):
@@ -27,8 +27,9 @@ class ScriptedPolicy(LLMPolicy):
         temperature: float = DEFAULT_TEMPERATURE,
         feedback: bool = True,
         history: bool = True,
-        prompt_cap_chars: int | None = DEFAULT_CAP_CHARS,
+        prompt_cap_chars: int | None = None,
         teammates_absent: tuple[str, ...] = (),
+        reach_labels: bool = False,
     ) -> None:
         super().__init__(
             robot,
@@ -39,6 +40,7 @@ class ScriptedPolicy(LLMPolicy):
             history=history,
             prompt_cap_chars=prompt_cap_chars,
             teammates_absent=teammates_absent,
+            reach_labels=reach_labels,
         )
         self.results: list[ActionResult] = []
 

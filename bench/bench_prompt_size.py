@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from mhrc.agents.llm import ScriptedClient, estimate_tokens
-from mhrc.agents.llm_policy import DEFAULT_CAP_CHARS, LLMPolicy
+from mhrc.agents.llm_policy import SMALL_CONTEXT_CAP, LLMPolicy
 from report import emit
 
 from mhrc.protocol import (
@@ -162,7 +162,7 @@ async def run(cap: int) -> dict[str, Any]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cap", type=int, default=DEFAULT_CAP_CHARS, help="prompt cap in characters (default %(default)s)")
+    ap.add_argument("--cap", type=int, default=SMALL_CONTEXT_CAP, help="prompt cap in characters (default %(default)s)")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     emit(asyncio.run(run(args.cap)), args.out)

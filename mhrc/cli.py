@@ -16,8 +16,14 @@ import click
 
 from . import logs
 from .episode import ROBOTS, ConfigError, EpisodeConfig
+from .fidelity import describe as describe_aids
 
 ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
+AIDS_HELP = (
+    "Make the episode easier than the paper's (off by default; recorded in the trace and every result row): "
+    "a comma-separated list of aids, or all. " + describe_aids()
+)
+HISTORY_CAP_HELP = "Bound each LLM prompt to CHARS characters, shortening older history (for small-context models); default: whole histories, as the paper."
 
 T = TypeVar("T")
 
@@ -54,6 +60,7 @@ def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--gui", is_flag=True, help="Show the PyBullet GUI (needs a display)."),
         click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS),
                      help="Paper ablation: no_mobile leaves David out; no_feedback / no_history change LLM prompts."),
+        click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP),
         click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"])),
     ]  # fmt: skip
     for opt in reversed(opts):
@@ -96,6 +103,7 @@ def main() -> None:
 @click.option("--llm-timeout", default=60.0, show_default=True, type=float, help="Seconds per LLM request before it is retried.")
 @click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
               help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm.")
+@click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP)
 def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, **values: Any) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
@@ -151,6 +159,8 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, **values: An
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
 @click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
               help="Directory of your own prompt templates.")
+@click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP)
+@click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels); the world's aids are set on the world. " + AIDS_HELP)
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
 def agent(
     robot: str,
@@ -162,14 +172,16 @@ def agent(
     llm_timeout: float,
     ablation: str,
     prompts: Path | None,
+    history_cap: int | None,
+    aids: str | None,
     log_level: str,
 ) -> None:
     """Attach one robot's agent (heuristic or LLM policy) to a running world."""
     from .episode import attach_agent
 
     logs.configure(log_level)
+    options = _config(ablation=ablation, prompts=prompts, history_cap=history_cap, aids=aids).policy_options()
     try:
-        options = EpisodeConfig(ablation=ablation, prompts=prompts).policy_options()  # type: ignore[arg-type]
         done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, llm, base_url, llm_timeout, **options))
     except Exception as exc:  # typed agent errors: say what happened, exit non-zero
         raise click.ClickException(str(exc)) from None

@@ -24,6 +24,7 @@ import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from .bus import Bus, BusError, endpoint, free_port
+from .fidelity import AidsError, label, parse_aids
 from .keys import check_id, new_run_id
 from .protocol import EpisodeDone, ProtocolError, decode
 
@@ -34,6 +35,14 @@ ROBOTS = ("alice", "bob", "david")
 
 class ConfigError(ValueError):
     """A configuration value that cannot work; the message names the field."""
+
+
+OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}
+
+
+def option_name(field: str) -> str:
+    """The command-line option a config field comes from (n_objects -> --objects)."""
+    return OPTIONS.get(field, "--" + field.replace("_", "-"))
 
 
 class EpisodeConfig(BaseModel):
@@ -58,6 +67,16 @@ class EpisodeConfig(BaseModel):
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
     llm_timeout: float = Field(60.0, gt=0, description="seconds per LLM request before it is retried")
+    aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.fidelity); none: the paper's")
+    history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
+
+    @field_validator("aids", mode="before")
+    @classmethod
+    def _aids(cls, v: object) -> tuple[str, ...]:
+        try:
+            return parse_aids(v)  # type: ignore[arg-type]
+        except AidsError as exc:
+            raise ValueError(str(exc)) from None
 
     @field_validator("run")
     @classmethod
@@ -73,7 +92,10 @@ class EpisodeConfig(BaseModel):
         except ValidationError as exc:
             err = exc.errors()[0]
             field = ".".join(str(p) for p in err["loc"]) or "config"
-            raise ConfigError(f"{field}: {err['msg']} (got {err.get('input')!r})") from None
+            msg = err["msg"].removeprefix("Value error, ")
+            if msg.startswith("--"):  # the validator already names the option
+                raise ConfigError(msg) from None
+            raise ConfigError(f"{option_name(field)}: {msg} (got {err.get('input')!r})") from None
         from mhrc.world.sim import check_episode  # validates task and scene names without building
 
         try:
@@ -112,7 +134,13 @@ class EpisodeConfig(BaseModel):
             "history": self.ablation != "no_history",
             "teammates_absent": tuple(r for r in ROBOTS if r not in self.robots),
             "prompts_dir": self.prompts,
+            "prompt_cap_chars": self.history_cap,
+            "reach_labels": "reach_labels" in self.aids,
         }
+
+    @property
+    def fidelity(self) -> str:
+        return label(self.aids)
 
 
 EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
@@ -127,7 +155,7 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, c
     from .trace import Recorder
 
     sim = await asyncio.to_thread(
-        Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots
+        Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots, aids=cfg.aids
     )
     bus = None
     recorder = None
@@ -301,6 +329,8 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
     ]  # fmt: skip
     if cfg.trace is not None:
         cmd += ["--trace", str(cfg.trace)]
+    if cfg.aids:
+        cmd += ["--aids", ",".join(cfg.aids)]
     return cmd
 
 
@@ -310,6 +340,8 @@ def agent_command(robot: str, cfg: EpisodeConfig) -> list[str]:
         cmd += ["--llm", cfg.llm, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
         cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
         cmd += ["--llm-timeout", str(cfg.llm_timeout)]
+        cmd += ["--history-cap", str(cfg.history_cap)] if cfg.history_cap else []
+        cmd += ["--aids", ",".join(cfg.aids)] if cfg.aids else []
     return cmd
 
 

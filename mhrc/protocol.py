@@ -301,6 +301,8 @@ class EpisodeStarted(Message):
     horizon: int
     scheduler: Literal["lockstep"] = "lockstep"
     lower_bound: int | None = None
+    fidelity: str = Field("paper", description="`paper`, or `aids:` and the aids this episode ran with (mhrc.fidelity)")
+    aids: list[str] = Field(default_factory=list)
 
 
 class TickClosed(Message):

@@ -60,11 +60,14 @@ async def test_agent_attached_from_another_process(tmp_path) -> None:  # type: i
 @pytest.mark.parametrize(
     "values, field",
     [
-        ({"n_objects": 9}, "n_objects"),
-        ({"seed": -1}, "seed"),
+        ({"n_objects": 9}, "--objects"),
+        ({"seed": -1}, "--seed"),
         ({"task": "juggle"}, "juggle"),
         ({"run": "Bad/Id"}, "run"),
-        ({"horizon": 0}, "horizon"),
+        ({"horizon": 0}, "--horizon"),
+        ({"history_cap": 0}, "--history-cap"),
+        ({"history_cap": -5}, "--history-cap"),
+        ({"aids": "goal_map,telepathy"}, "--aids: unknown aid 'telepathy'"),
     ],
 )
 def test_bad_config_fails_before_anything_starts(values: dict[str, object], field: str) -> None:
@@ -74,7 +77,9 @@ def test_bad_config_fails_before_anything_starts(values: dict[str, object], fiel
 
 def test_cli_names_the_bad_field() -> None:
     out = subprocess.run([sys.executable, "-m", "mhrc", "up", "--objects", "9"], capture_output=True, text=True, timeout=60)
-    assert out.returncode == 2 and "n_objects" in out.stderr
+    assert out.returncode == 2 and "--objects" in out.stderr and "n_objects" not in out.stderr
+    out = subprocess.run([sys.executable, "-m", "mhrc", "up", "--aids", "cheat"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "--aids: unknown aid 'cheat'" in out.stderr and "Value error" not in out.stderr
 
 
 async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ignore[no-untyped-def]

@@ -192,7 +192,8 @@ def test_alice_at_step_5_sees_only_what_she_was_told_or_saw() -> None:
 
 def test_bob_sees_reach_progress_and_no_stand_poses() -> None:
     text = (GOLDEN / "bob_step5.txt").read_text(encoding="utf-8")
-    assert "book: on table_0, at (-2.40, 0.05, 0.71), 1.35 m from your arm base (out of your reach)" in text
+    assert "book: on table_0, at (-2.40, 0.05, 0.71), 1.35 m from your arm base\n" in text
+    assert "(within your reach)" not in text and "(out of your reach)" not in text  # reach labels are an aid, not the paper's prompt
     assert "phone: in the tray" in text and "# Latest task progress\nIn the tray: phone." in text
     assert "stand poses" not in text and "Gripper: empty." in text
     assert "Object list: phone, book, soap, mug." in text

@@ -18,6 +18,7 @@ from typing import Protocol
 import structlog
 
 from mhrc.bus import Bus, Sample
+from mhrc.fidelity import label as fidelity_label
 from mhrc.keys import Keys
 from mhrc.protocol import (
     Action,
@@ -71,6 +72,8 @@ class SimLike(Protocol):
     def evaluate(self) -> TaskResultLike: ...
     def views(self) -> tuple[list[FurnitureView], list[ObjectView]]: ...
     def lower_bound(self) -> int: ...
+    @property
+    def aids(self) -> frozenset[str]: ...
 
 
 @dataclass
@@ -172,6 +175,8 @@ class WorldService:
                 robots=list(self.sim.robots),
                 horizon=self.cfg.horizon,
                 lower_bound=self._bound,
+                fidelity=fidelity_label(self.sim.aids),
+                aids=sorted(self.sim.aids),
             ),
         )
         self._log.info("episode started", attached=sorted(self.attached))

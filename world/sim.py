@@ -12,8 +12,11 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import pybullet as p
 import structlog
+
+from mhrc.fidelity import parse_aids
 
 from mhrc.protocol import (
     Action,
@@ -78,8 +81,11 @@ class Sim:
         n_objects: int = 4,
         gui: bool = False,
         robots: tuple[str, ...] = ROBOTS,
+        aids: tuple[str, ...] | frozenset[str] = (),
     ) -> None:
         check_episode(task=task, scene=scene, n_objects=n_objects)
+        self.aids: frozenset[str] = frozenset(parse_aids(aids))
+        self.rng = np.random.default_rng([seed, 0x4D485243])  # motion noise; apart from the generator's stream
         if not {"alice", "bob"} <= set(robots) or not set(robots) <= set(ROBOTS):
             raise ValueError(f"robots must include alice and bob and come from {', '.join(ROBOTS)}, not {robots}")
         self.robots: tuple[str, ...] = tuple(r for r in ROBOTS if r in robots)

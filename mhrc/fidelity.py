@@ -1,0 +1,53 @@
+"""Fidelity: an episode is the paper's unless aids are asked for.
+
+By default every robot sees and hears what the paper's robots do (DESIGN.md, "Fidelity"). The
+aids below make the benchmark easier; they are useful for debugging and teaching, so they
+stay, each opt-in by name (`--aids solved_move,goal_map` or `--aids all`), and every trace
+(`episode_started`) and every `episodes.jsonl` row records which ones an episode ran with.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+AIDS: dict[str, str] = {
+    "live_state": "scene graphs show the live truth (where every known object is now, which containers are open), "
+    "not what the robot last saw or was told",
+    "solved_move": "a pick that fails for distance also says which move(dx, dy) would fix it",
+    "goal_map": "Bob's observation and task text say which goal each target goes to (the panel of each solid)",
+    "status_hints": "Bob's task status adds what is missing, what comes next and what is wrong",
+    "reach_labels": "object lines in LLM prompts say whether the object is within the robot's arm reach",
+    "exact_motion": "bases stop exactly on their stand pose and released objects are set down without physics, "
+    "so navigation never ends off target and a placed object never slides off",
+}
+PAPER = "paper"
+
+
+class AidsError(ValueError):
+    """An aid name mhrc does not know."""
+
+
+def parse_aids(value: str | Iterable[str] | None) -> tuple[str, ...]:
+    """`"all"`, `"none"`, a comma-separated list or an iterable of names -> sorted aid names."""
+    if value is None:
+        return ()
+    names = [n.strip() for n in (value.split(",") if isinstance(value, str) else value) if n.strip()]
+    if names in (["none"], []):
+        return ()
+    if names == ["all"]:
+        return tuple(sorted(AIDS))
+    unknown = [n for n in names if n not in AIDS]
+    if unknown:
+        raise AidsError(f"--aids: unknown aid {', '.join(map(repr, unknown))}; known aids: {', '.join(AIDS)}, or all, or none")
+    return tuple(sorted(set(names)))
+
+
+def label(aids: Iterable[str]) -> str:
+    """`paper`, or `aids:` and the aid names: how traces and result rows name the fidelity."""
+    names = sorted(aids)
+    return PAPER if not names else "aids:" + ",".join(names)
+
+
+def describe() -> str:
+    """One line per aid, for --help."""
+    return "; ".join(f"{k}: {v}" for k, v in AIDS.items())
