@@ -293,6 +293,12 @@ class Sim:
     def learn(self, robot: str, names: list[str]) -> None:
         self.known[robot].update(names)
 
+    def look_at(self, robot: str, furniture: str) -> None:
+        """`robot` now stands at `furniture` and sees it: whether it is open, and what lies on it
+        (or, open, in it). Skills call this when a robot arrives at furniture or opens it."""
+        if self.layout.get(furniture) is not None and (self.layout.get(furniture).container is None or self.is_open(furniture)):  # type: ignore[union-attr]
+            self.learn(robot, self.objects_on(furniture))
+
     def tell(self, receiver: str, sender: str, text: str) -> None:
         """A message was delivered: objects it names that the sender knows become known to the receiver."""
         if receiver not in self.known or sender not in self.bots:

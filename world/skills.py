@@ -71,11 +71,8 @@ def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
         r.set_base((x, y, r.base[2]))
     r.set_base(goal)
     length = path_length(path)
-    if f.container is not None and not sim.is_open(f.name):
-        seen = None
-    else:
-        seen = sim.objects_on(f.name)
-        sim.learn(r.name, seen)
+    sim.look_at(r.name, f.name)
+    seen = None if f.container is not None and not sim.is_open(f.name) else sim.objects_on(f.name)
     return SkillOutcome.ok(fb.reached(f.name, a.stand_pose, seen, container=f.container is not None), sim_time=length / NAV_SPEED, path_length=round(length, 3))
 
 
@@ -291,8 +288,8 @@ def _opened(sim: Sim, r: RobotBody, f: FurnitureSpec, pl: ArmPlanner, yaw: float
     if lift is not None:
         t += r.run(straight(r.q, lift, 5), JOINT_SPEED)
     t += retract(sim, r)
+    sim.look_at(r.name, f.name)
     inside = sim.objects_on(f.name)
-    sim.learn(r.name, inside)
     return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(travel, 3))
 
 
