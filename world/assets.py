@@ -100,6 +100,42 @@ def table_boxes(size: Vec3, color: Color, slab: float = 0.04, leg: float = 0.06)
     return boxes
 
 
+@dataclass(frozen=True)
+class Panel:
+    """A visual-only panel on a furniture front (an appliance door, a window, a fascia), in the
+    front's frame: `u` across (to the right of someone facing the front), `z` up, both its centre."""
+
+    u: float
+    z: float
+    width: float
+    height: float
+    color: Color
+    handle: str = "none"  # none | left | right | top: a bar near that edge
+
+
+PANEL_DEPTH = 0.012  # how far a panel stands out of the front
+HANDLE_GREY = (0.3, 0.3, 0.3, 1.0)
+
+
+def facade_boxes(depth: float, panels: tuple[Panel, ...] | list[Panel]) -> list[Box]:
+    """Panels (and their handles) on the front face of a body `depth` deep in its own frame,
+    where the front faces -y; each later panel stands a little further out, over the ones before.
+    Looks only: none of them collides."""
+    boxes = []
+    for i, pn in enumerate(panels):
+        out = depth / 2 + PANEL_DEPTH / 2 + 0.004 * i
+        boxes.append(Box((pn.u, -out, pn.z), (pn.width, PANEL_DEPTH, pn.height), pn.color, collide=False))
+        bar_y = -(out + PANEL_DEPTH / 2 + 0.015)
+        if pn.handle in ("left", "right"):
+            side = -1 if pn.handle == "left" else 1
+            length = min(0.5, 0.4 * pn.height)
+            boxes.append(Box((pn.u + side * (pn.width / 2 - 0.05), bar_y, pn.z), (0.025, 0.03, length), HANDLE_GREY, collide=False))
+        elif pn.handle == "top":
+            length = min(0.4, 0.5 * pn.width)
+            boxes.append(Box((pn.u, bar_y, pn.z + pn.height / 2 - 0.05), (length, 0.03, 0.025), HANDLE_GREY, collide=False))
+    return boxes
+
+
 def block_boxes(size: Vec3, color: Color) -> list[Box]:
     """A solid block (counter, cabinet) whose top surface is at size[2]."""
     return [Box((0.0, 0.0, size[2] / 2), size, color)]
@@ -144,6 +180,7 @@ class DrawerGeometry:
     inner: Vec3  # drawer inside: sx, sy, wall height
     floor: float  # z of the drawer's floor surface
     wall: float = 0.02
+    handle_out: float = 0.045  # how far the handle bar stands out of the drawer's front
 
     @property
     def drawer_origin(self) -> Vec3:
@@ -154,11 +191,12 @@ class DrawerGeometry:
     @property
     def handle(self) -> Vec3:
         """Top centre of the handle bar, in the drawer link's frame."""
-        return (0.0, -(self.inner[1] / 2 + self.wall + 0.045), self.inner[2] - 0.01)
+        return (0.0, -(self.inner[1] / 2 + self.wall + self.handle_out), self.inner[2] - 0.01)
 
 
-def drawer_unit_urdf(name: str, g: DrawerGeometry, color: Color) -> str:
-    """A carcass (plinth, top, sides, back) and a drawer on a prismatic joint, handle in front."""
+def drawer_unit_urdf(name: str, g: DrawerGeometry, color: Color, facade: list[Box] | None = None) -> str:
+    """A carcass (plinth, top, sides, back) and a drawer on a prismatic joint, handle in front;
+    `facade`: visual-only boxes on the carcass (see `facade_boxes`)."""
     t = g.wall
     w, d, h = g.width, g.depth, g.height
     cavity_lo = g.floor - t  # the drawer's floor board sits on the plinth
@@ -169,6 +207,7 @@ def drawer_unit_urdf(name: str, g: DrawerGeometry, color: Color) -> str:
         Box((-(w / 2 - t / 2), 0.0, (cavity_lo + top_lo) / 2), (t, d, top_lo - cavity_lo), color),
         Box((w / 2 - t / 2, 0.0, (cavity_lo + top_lo) / 2), (t, d, top_lo - cavity_lo), color),
         Box((0.0, d / 2 - t / 2, (cavity_lo + top_lo) / 2), (w - 2 * t, t, top_lo - cavity_lo), color),
+        *(facade or []),
     ]
     sx, sy, wall_h = g.inner
     panel = top_lo - g.floor - 0.005  # the front panel's top, above the drawer floor
@@ -179,7 +218,7 @@ def drawer_unit_urdf(name: str, g: DrawerGeometry, color: Color) -> str:
         Box((sx / 2 + t / 2, 0.0, wall_h / 2), (t, sy, wall_h), wood),
         Box((0.0, sy / 2 + t / 2, wall_h / 2), (sx + 2 * t, t, wall_h), wood),
         Box((0.0, -(sy / 2 + t / 2), (panel - t) / 2), (w - 0.01, t, panel + t), color),  # front panel
-        Box((0.0, g.handle[1] + 0.025, g.handle[2] - 0.01), (0.04, 0.05, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle stem
+        Box((0.0, g.handle[1] + (g.handle_out + 0.005) / 2, g.handle[2] - 0.01), (0.04, g.handle_out + 0.005, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle stem
         Box((0.0, g.handle[1], g.handle[2] - 0.01), (0.24, 0.03, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle bar
     ]
     return jointed_urdf(name, carcass, "drawer", drawer, "prismatic", g.drawer_origin, (0.0, -1.0, 0.0), g.travel)
@@ -221,8 +260,9 @@ class ChestGeometry:
         return (0.0, -(self.depth + 0.025), self.lid)
 
 
-def chest_urdf(name: str, g: ChestGeometry, color: Color) -> str:
-    """Walls and floor of an open box, and a lid on a revolute joint at its back edge."""
+def chest_urdf(name: str, g: ChestGeometry, color: Color, facade: list[Box] | None = None) -> str:
+    """Walls and floor of an open box, and a lid on a revolute joint at its back edge;
+    `facade`: visual-only boxes on the box (see `facade_boxes`)."""
     w, d, t = g.width, g.depth, g.wall
     rim = g.rim
     carcass = [
@@ -231,6 +271,7 @@ def chest_urdf(name: str, g: ChestGeometry, color: Color) -> str:
         Box((w / 2 - t / 2, 0.0, rim / 2), (t, d, rim), color),
         Box((0.0, -(d / 2 - t / 2), rim / 2), (w - 2 * t, t, rim), color),
         Box((0.0, d / 2 - t / 2, rim / 2), (w - 2 * t, t, rim), color),
+        *(facade or []),
     ]
     dark = (color[0] * 0.75, color[1] * 0.75, color[2] * 0.75, 1.0)
     hx, hy, hz = g.handle

@@ -26,12 +26,28 @@ The file format (every field is checked on load; an error names the file and the
                               slots: [[x, y], ...] where a task may put objects on top,
                               drawer (drawer_unit only): {axis [dx, dy] it slides out along,
                               travel, inner [width, depth, wall height], floor (z of its floor),
-                              slots [[x, y] in the drawer's frame], max_object_height},
+                              slots [[x, y] in the drawer's frame], max_object_height,
+                              handle_out (0.045: how far its handle stands out; a tall unit
+                              needs more, for the hand coming down onto it to clear its front)},
                               lid (chest only): {axis [dx, dy] its front faces, open_deg (75),
                               floor (z of its inside floor), slots [[x, y] in the chest's frame,
-                              x across, y towards the back], max_object_height}}, ...]
+                              x across, y towards the back], max_object_height},
+                              facade (block, drawer_unit, chest; looks only, nothing collides):
+                              {front [dx, dy] the side it faces (a container's is its axis),
+                              panels [{at [across, z] (across: to the right of someone facing
+                              the front), size [width, height], color, handle: none | left |
+                              right | top}, ...]: doors, windows and fascias drawn on the front}},
+                              ...]
 
-A stand pose given by side stands STAND_OFFSET from that edge, facing the furniture.
+A stand pose given by side stands STAND_OFFSET from that edge, facing the furniture. Every
+piece of furniture has a stand pose (agents read furniture without one as a task fixture).
+
+Bob's slots and goal area are checked against his reach (ARM_REACH from his arm base): near
+slots 0.3 m to ARM_REACH - 0.03, far slots FAR_SLOT or more (beyond any pose his arm has),
+the goal area at least the sort task's six panels (0.34 x 0.22 m) and the area of a tray that
+holds six objects, with its centre region (the panels' centres) 0.3 m to ARM_REACH and its
+corners within GOAL_CORNER_REACH (a tray is filled from a corner). Stand poses and starts keep
+clear of where a drawer stands when open, as they keep clear of walls and furniture.
 """
 
 from __future__ import annotations
@@ -44,11 +60,18 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .assets import ChestGeometry, Color, DrawerGeometry
+from .assets import ChestGeometry, Color, DrawerGeometry, Panel
 
 STAND_OFFSET = 0.45  # base centre to furniture edge at a stand pose
 HALF_PI = math.pi / 2
 ROBOT_CLEARANCE = 0.3  # a stand pose or start must be this far from walls and furniture
+ARM_REACH = 0.62  # Bob's conservative horizontal reach (robots.KINDS["tabletop_arm"].reach; a test keeps them equal)
+FAR_SLOT = 0.9  # far slots lie at least this far from Bob's arm base: no top-down pose reaches them
+GOAL_CORNER_REACH = 0.8  # every corner of the goal area lies within this of Bob's arm base
+PANELS = (0.34, 0.22)  # the sort task's six panels, 3 x 2 at a 0.12 m pitch: their extent
+PANEL_CENTRES = (0.12, 0.06)  # the panels' centres lie within +- these of the goal area's centre
+MIN_GOAL_AREA = 0.17  # m^2: a tray this big holds six of the pack task's objects
+HANDLE_CLEARANCE = 0.015  # an open drawer's footprint reaches this beyond its handle
 SCENES_DIR = Path(__file__).with_name("scenes")
 
 COLORS: dict[str, Color] = {
@@ -59,6 +82,9 @@ COLORS: dict[str, Color] = {
     "green": (0.35, 0.5, 0.35, 1.0),
     "grey": (0.5, 0.5, 0.52, 1.0),
     "red": (0.6, 0.25, 0.2, 1.0),
+    "steel": (0.72, 0.74, 0.76, 1.0),
+    "dark": (0.22, 0.22, 0.24, 1.0),
+    "black": (0.05, 0.05, 0.07, 1.0),
 }
 
 
@@ -79,6 +105,7 @@ class DrawerSpec:
     floor: float  # z of the drawer's floor surface
     slots: tuple[tuple[float, float], ...]  # object spots in the drawer frame (x across, y towards the back)
     max_object_height: float = 0.12
+    handle_out: float = 0.045  # how far the handle stands out of the drawer's front
 
 
 @dataclass(frozen=True)
@@ -99,11 +126,28 @@ class LidSpec:
 Container = DrawerSpec | LidSpec
 
 
+def drawer_footprint(
+    center: tuple[float, float], size: tuple[float, ...], axis: tuple[float, float], travel: float, handle_out: float
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Centre and size of the floor an open drawer (and its handle) covers in front of its unit
+    (`size`: the unit's world x, y extent; the drawer slides out along `axis` by `travel`)."""
+    along_y = abs(axis[1]) > 0.5
+    width, depth = (size[0], size[1]) if along_y else (size[1], size[0])
+    out = travel + handle_out + HANDLE_CLEARANCE
+    reach = depth / 2 + out / 2
+    return (center[0] + axis[0] * reach, center[1] + axis[1] * reach), ((width, out) if along_y else (out, width))
+
+
+def axis_yaw(axis: tuple[float, float]) -> float:
+    """Body yaw (in [-pi, pi]) of furniture whose front faces `axis`: bodies are built with their front along -y."""
+    return math.atan2(axis[0], -axis[1])
+
+
 @dataclass(frozen=True)
 class FurnitureSpec:
     name: str
     kind: str
-    style: str  # table | block | sofa | drawer_unit: how assets.py builds it
+    style: str  # table | block | sofa | drawer_unit | chest: how assets.py builds it
     center: tuple[float, float]
     size: tuple[float, float, float]  # sx, sy, height (of the top surface)
     color: Color
@@ -113,18 +157,23 @@ class FurnitureSpec:
     slots: tuple[tuple[float, float], ...] = ()  # object spots on top, absolute x, y
     drawer: DrawerSpec | None = None
     lid: LidSpec | None = None
+    front: tuple[float, float] | None = None  # the side a block's facade faces (containers face their axis)
+    panels: tuple[Panel, ...] = ()  # the facade: visual-only panels on the front
 
     @property
     def top(self) -> float:
         return self.size[2]
 
     @property
+    def facing(self) -> tuple[float, float] | None:
+        """The side its front faces: a container's axis, or the facade's front."""
+        return self.container.axis if self.container is not None else self.front
+
+    @property
     def yaw(self) -> float:
-        """Body yaw: containers are built with their front along -y of their own frame."""
-        if self.container is None:
-            return 0.0
-        ax, ay = self.container.axis
-        return math.atan2(ay, ax) + HALF_PI
+        """Body yaw: containers and blocks with a facade are built with their front along -y of their own frame."""
+        facing = self.facing
+        return 0.0 if facing is None else axis_yaw(facing)
 
     def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
         return abs(x - self.center[0]) <= self.size[0] / 2 + margin and abs(y - self.center[1]) <= self.size[1] / 2 + margin
@@ -134,22 +183,27 @@ class FurnitureSpec:
         """What makes this furniture a closed container (a drawer, a lid), if anything."""
         return self.drawer or self.lid
 
-    def _own_size(self) -> tuple[float, float]:
+    def own_size(self) -> tuple[float, float]:
         """Width and depth in the body's own frame (front along -y)."""
         turned = abs(math.sin(self.yaw)) > 0.5
         return (self.size[1], self.size[0]) if turned else (self.size[0], self.size[1])
 
+    def open_drawer_footprint(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """Centre and size of the floor its drawer covers when open, if it has one."""
+        d = self.drawer
+        return None if d is None else drawer_footprint(self.center, self.size, d.axis, d.travel, d.handle_out)
+
     def chest_geometry(self) -> ChestGeometry:
         lid = self.lid
         assert lid is not None, f"{self.name} has no lid"
-        width, depth = self._own_size()
+        width, depth = self.own_size()
         return ChestGeometry(width, depth, self.size[2], lid.floor, lid.angle)
 
     def drawer_geometry(self) -> DrawerGeometry:
         d = self.drawer
         assert d is not None, f"{self.name} has no drawer"
-        width, depth = self._own_size()
-        return DrawerGeometry(width, depth, self.size[2], d.travel, d.inner, d.floor)
+        width, depth = self.own_size()
+        return DrawerGeometry(width, depth, self.size[2], d.travel, d.inner, d.floor, handle_out=d.handle_out)
 
 
 @dataclass(frozen=True)
@@ -201,11 +255,12 @@ class DrawerFile(_Strict):
     floor: Positive
     slots: list[Vec2] = Field(min_length=1)
     max_object_height: Positive = 0.12
+    handle_out: float = Field(0.045, ge=0.03, le=0.15)
 
     @model_validator(mode="after")
     def _axis(self) -> DrawerFile:
-        if sorted(abs(c) for c in self.axis) != [0.0, 1.0]:
-            raise ValueError(f"axis must be a unit vector along x or y, e.g. [0, -1], not {list(self.axis)}")
+        if (err := _axis_error(self.axis)) is not None:
+            raise ValueError(err)
         for i, (x, y) in enumerate(self.slots):
             if abs(x) > self.inner[0] / 2 or abs(y) > self.inner[1] / 2:
                 raise ValueError(f"slots.{i}: {[x, y]} lies outside the drawer's inside {list(self.inner[:2])}")
@@ -221,8 +276,51 @@ class LidFile(_Strict):
 
     @model_validator(mode="after")
     def _axis(self) -> LidFile:
-        if sorted(abs(c) for c in self.axis) != [0.0, 1.0]:
-            raise ValueError(f"axis must be a unit vector along x or y, e.g. [0, -1], not {list(self.axis)}")
+        if (err := _axis_error(self.axis)) is not None:
+            raise ValueError(err)
+        return self
+
+
+def _axis_error(axis: Vec2) -> str | None:
+    if sorted(abs(c) for c in axis) != [0.0, 1.0]:
+        return f"axis must be a unit vector along x or y, e.g. [0, -1], not {list(axis)}"
+    return None
+
+
+ColorField = str | tuple[float, float, float, float]
+
+
+def _color_error(color: ColorField) -> str | None:
+    if isinstance(color, str) and color not in COLORS:
+        return f"unknown colour {color!r}; use one of {', '.join(COLORS)} or [r, g, b, a]"
+    return None
+
+
+def _color(color: ColorField) -> Color:
+    return COLORS[color] if isinstance(color, str) else color
+
+
+class PanelFile(_Strict):
+    at: Vec2 = Field(description="centre: across the front (to the right of someone facing it) and height")
+    size: tuple[Positive, Positive] = Field(description="width and height")
+    color: ColorField = "white"
+    handle: Literal["none", "left", "right", "top"] = "none"
+
+    @model_validator(mode="after")
+    def _color_known(self) -> PanelFile:
+        if (err := _color_error(self.color)) is not None:
+            raise ValueError(f"color: {err}")
+        return self
+
+
+class FacadeFile(_Strict):
+    front: Vec2 | None = Field(None, description="the side the front faces; a container's is its axis")
+    panels: list[PanelFile] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _front(self) -> FacadeFile:
+        if self.front is not None and (err := _axis_error(self.front)) is not None:
+            raise ValueError(f"front: {err}")
         return self
 
 
@@ -239,15 +337,39 @@ class FurnitureFile(_Strict):
     slots: list[Vec2] = Field(default_factory=list)
     drawer: DrawerFile | None = None
     lid: LidFile | None = None
+    facade: FacadeFile | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> FurnitureFile:
-        if isinstance(self.color, str) and self.color not in COLORS:
-            raise ValueError(f"color: unknown colour {self.color!r}; use one of {', '.join(COLORS)} or [r, g, b, a]")
+        if (err := _color_error(self.color)) is not None:
+            raise ValueError(f"color: {err}")
+        if self.facade is not None:
+            axis = self.drawer.axis if self.drawer is not None else self.lid.axis if self.lid is not None else None
+            if self.style not in ("block", "drawer_unit", "chest"):
+                raise ValueError(f"facade: only a block, a drawer_unit or a chest has one, not a {self.style}")
+            if axis is None and self.facade.front is None:
+                raise ValueError("facade.front: a block's facade needs the side it faces, e.g. [0, -1]")
+            if axis is not None and self.facade.front is not None and tuple(self.facade.front) != tuple(axis):
+                raise ValueError(f"facade.front: a container's front is its axis {list(axis)}; omit front")
+            width = self.size[1] if abs(self.facing()[0]) > 0.5 else self.size[0]
+            for i, pn in enumerate(self.facade.panels):
+                (u, z), (w, h) = pn.at, pn.size
+                if abs(u) + w / 2 > width / 2 + 1e-9 or z - h / 2 < -1e-9 or z + h / 2 > self.size[2] + 1e-9:
+                    raise ValueError(f"facade.panels.{i}: {[u, z]} size {[w, h]} does not fit on the front ({width} wide, {self.size[2]} high)")
         if (self.style == "drawer_unit") != (self.drawer is not None):
             raise ValueError("drawer: a drawer_unit needs a drawer, and only a drawer_unit may have one")
         if (self.style == "chest") != (self.lid is not None):
             raise ValueError("lid: a chest needs a lid, and only a chest may have one")
+        if self.drawer is not None:
+            d = self.drawer
+            width, depth = (self.size[1], self.size[0]) if abs(d.axis[0]) > 0.5 else (self.size[0], self.size[1])
+            wall = DrawerGeometry.wall
+            if d.inner[0] + 4 * wall > width + 1e-9 or d.inner[1] + 3 * wall > depth + 1e-9:
+                raise ValueError(f"drawer.inner: a drawer {list(d.inner[:2])} inside does not fit in {self.name} ({width} wide, {depth} deep) with its walls")
+            if d.floor + d.inner[2] + 0.02 > self.size[2] - 0.01:
+                raise ValueError(f"drawer.floor: a drawer at {d.floor} m with {d.inner[2]} m walls does not fit under the top of {self.name}")
+            if d.max_object_height > d.inner[2] + 0.015:
+                raise ValueError(f"drawer.max_object_height: objects that tall do not fit in the drawer of {self.name}")
         if self.lid is not None:
             turned = abs(self.lid.axis[0]) > 0.5
             width, depth = (self.size[1], self.size[0]) if turned else (self.size[0], self.size[1])
@@ -263,6 +385,20 @@ class FurnitureFile(_Strict):
             if xy is not None and not _inside(self.center, self.size, xy):
                 raise ValueError(f"{what}: {list(xy)} is not on top of {self.name}")
         return self
+
+    def facing(self) -> Vec2:
+        """The side the front faces: the container's axis, the facade's front, else -y."""
+        if self.drawer is not None:
+            return self.drawer.axis
+        if self.lid is not None:
+            return self.lid.axis
+        if self.facade is not None and self.facade.front is not None:
+            return self.facade.front
+        return (0.0, -1.0)
+
+    def open_drawer_footprint(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        assert self.drawer is not None
+        return drawer_footprint(self.center, self.size, self.drawer.axis, self.drawer.travel, self.drawer.handle_out)
 
     def stand_pose_list(self) -> list[Pose]:
         cx, cy = self.center
@@ -322,6 +458,7 @@ class LayoutFile(_Strict):
             for i, xy in enumerate(getattr(self.bob, what)):
                 if not _inside(table.center, table.size, xy):
                     raise ValueError(f"bob.{what}.{i}: {list(xy)} is not on {table.name}")
+        self._check_reach(table)
         if not any(f.drawer is not None or f.lid is not None for f in self.furniture):
             raise ValueError("furniture: a layout needs at least one closed container (a drawer_unit or a chest)")
         elsewhere = sum(len(f.slots) for f in self.furniture if f.name != table.name)
@@ -329,10 +466,11 @@ class LayoutFile(_Strict):
             raise ValueError(f"furniture: slots away from {table.name} number {elsewhere}; 6-object episodes need at least 5")
         obstacles = [(f"walls.{i}", (w[0], w[1]), (w[2], w[3])) for i, w in enumerate(self.walls)]
         obstacles += [(f"furniture.{i} ({f.name})", f.center, (f.size[0], f.size[1])) for i, f in enumerate(self.furniture)]
+        obstacles += [(f"furniture.{i} ({f.name}) with its drawer open", *f.open_drawer_footprint()) for i, f in enumerate(self.furniture) if f.drawer]
         poses = [(f"starts.{r}", s) for r, s in self.starts.items()]
         for i, f in enumerate(self.furniture):
-            if f.style not in ("drawer_unit", "chest") and f.name != table.name and f.stand_poses == [] and f.slots:
-                raise ValueError(f"furniture.{i}.stand_poses: {f.name} has slots but no stand pose")
+            if not f.stand_poses:
+                raise ValueError(f"furniture.{i}.stand_poses: {f.name} has none; every piece of furniture needs one (agents read furniture without one as a task fixture)")
             poses += [(f"furniture.{i}.stand_poses.{j} ({f.name})", sp) for j, sp in enumerate(f.stand_pose_list())]
         for what, (x, y, _) in poses:
             if not (xmin + ROBOT_CLEARANCE <= x <= xmax - ROBOT_CLEARANCE and ymin + ROBOT_CLEARANCE <= y <= ymax - ROBOT_CLEARANCE):
@@ -342,6 +480,33 @@ class LayoutFile(_Strict):
                     raise ValueError(f"{what}: ({x}, {y}) is within {ROBOT_CLEARANCE} m of {name}")
         return self
 
+    def _check_reach(self, table: FurnitureFile) -> None:
+        """Bob's slots and goal area against his reach (see the module docstring)."""
+        bx, by, _ = self.bob.base
+        if not _inside(table.center, table.size, (bx, by)):
+            raise ValueError(f"bob.base: {list(self.bob.base)} is not on {table.name}")
+
+        def dist(x: float, y: float) -> float:
+            return math.hypot(x - bx, y - by)
+
+        for i, (x, y) in enumerate(self.bob.near_slots):
+            if not 0.3 <= dist(x, y) <= ARM_REACH - 0.03:
+                raise ValueError(f"bob.near_slots.{i}: {[x, y]} is {dist(x, y):.2f} m from Bob's arm base; near slots lie 0.3 to {ARM_REACH - 0.03:.2f} m from it")
+        for i, (x, y) in enumerate(self.bob.far_slots):
+            if dist(x, y) < FAR_SLOT:
+                raise ValueError(f"bob.far_slots.{i}: {[x, y]} is {dist(x, y):.2f} m from Bob's arm base; far slots lie at least {FAR_SLOT} m from it")
+        gx, gy, gsx, gsy = self.bob.goal_area
+        where = f"bob.goal_area: {list(self.bob.goal_area)}"
+        if gsx < PANELS[0] or gsy < PANELS[1] or gsx * gsy < MIN_GOAL_AREA:
+            raise ValueError(f"{where} is too small: it needs at least {PANELS[0]} x {PANELS[1]} m and {MIN_GOAL_AREA} m^2 (six panels, a tray for six objects)")
+        for sx in (-1, 1):
+            for sy in (-1, 1):
+                if dist(gx + sx * gsx / 2, gy + sy * gsy / 2) > GOAL_CORNER_REACH:
+                    raise ValueError(f"{where}: its corner {[round(gx + sx * gsx / 2, 3), round(gy + sy * gsy / 2, 3)]} is beyond {GOAL_CORNER_REACH} m from Bob's arm base")
+                d = dist(gx + sx * PANEL_CENTRES[0], gy + sy * PANEL_CENTRES[1])
+                if not 0.3 <= d <= ARM_REACH:
+                    raise ValueError(f"{where}: its centre region (the panels' centres) is {d:.2f} m from Bob's arm base; it must lie 0.3 to {ARM_REACH} m from it")
+
     def build(self, source: str = "") -> Layout:
         furniture = []
         for f in self.furniture:
@@ -349,11 +514,13 @@ class LayoutFile(_Strict):
             furniture.append(
                 FurnitureSpec(
                     name=f.name, kind=f.kind, style=f.style, center=f.center, size=f.size,
-                    color=COLORS[f.color] if isinstance(f.color, str) else f.color,
+                    color=_color(f.color),
                     stand_poses=tuple(f.stand_pose_list()), place_pose=f.place_pose, place_radius=f.place_radius,
                     slots=tuple(f.slots),
-                    drawer=None if d is None else DrawerSpec(d.axis, d.travel, d.inner, d.floor, tuple(d.slots), d.max_object_height),
+                    drawer=None if d is None else DrawerSpec(d.axis, d.travel, d.inner, d.floor, tuple(d.slots), d.max_object_height, d.handle_out),
                     lid=None if lid is None else LidSpec(lid.axis, math.radians(lid.open_deg), lid.floor, tuple(lid.slots), lid.max_object_height),
+                    front=None if f.facade is None or d is not None or lid is not None else f.facade.front,
+                    panels=() if f.facade is None else tuple(Panel(*pn.at, *pn.size, _color(pn.color), pn.handle) for pn in f.facade.panels),
                 )
             )  # fmt: skip
         b = self.bob

@@ -67,16 +67,18 @@ def scene_statics(layout: Layout, assets_dir: AssetDir, fixtures: list[Fixture] 
         path = assets_dir.write(f"wall_{i}", assets.link_urdf(f"wall_{i}", assets.wall_boxes((sx, sy, WALL_HEIGHT), wall_color)))
         out.append(StaticBody(f"wall_{i}", path, (cx, cy, 0.0)))
     for f in layout.furniture:
+        width, depth = f.own_size()
+        facade = assets.facade_boxes(depth, f.panels)  # in the body's own frame, front along -y
         if f.style == "drawer_unit":
-            urdf = assets.drawer_unit_urdf(f.name, f.drawer_geometry(), f.color)
+            urdf = assets.drawer_unit_urdf(f.name, f.drawer_geometry(), f.color, facade)
         elif f.style == "chest":
-            urdf = assets.chest_urdf(f.name, f.chest_geometry(), f.color)
+            urdf = assets.chest_urdf(f.name, f.chest_geometry(), f.color, facade)
         elif f.style == "table":
             urdf = assets.link_urdf(f.name, assets.table_boxes(f.size, f.color))
         elif f.style == "sofa":
             urdf = assets.link_urdf(f.name, assets.sofa_boxes(f.size, f.color))
         elif f.style == "block":
-            urdf = assets.link_urdf(f.name, assets.block_boxes(f.size, f.color))
+            urdf = assets.link_urdf(f.name, assets.block_boxes((width, depth, f.top), f.color) + facade)
         else:
             raise ValueError(f"{f.name}: unknown furniture style {f.style!r}")
         out.append(StaticBody(f.name, assets_dir.write(f.name, urdf), (f.center[0], f.center[1], 0.0), f.yaw))
@@ -105,13 +107,10 @@ def occupancy(layout: Layout, margin: float, res: float = 0.05) -> Grid:
     for f in layout.furniture:
         extra = 0.15 if f.style == "sofa" else 0.0  # the backrest
         grid.add_box(f.center[0] + extra / 2, f.center[1], f.size[0] + extra, f.size[1], margin=margin)
-        if f.drawer is not None:  # the drawer may stand open: its footprint is never free floor
-            g = f.drawer_geometry()
-            ax, ay = f.drawer.axis
-            reach = g.depth / 2 + f.drawer.travel / 2 + 0.03
-            along = f.drawer.travel + 0.06
-            sx, sy = (g.width, along) if abs(ay) > 0.5 else (along, g.width)
-            grid.add_box(f.center[0] + ax * reach, f.center[1] + ay * reach, sx, sy, margin=margin)
+        footprint = f.open_drawer_footprint()
+        if footprint is not None:  # the drawer may stand open: its footprint is never free floor
+            (cx, cy), (sx, sy) = footprint
+            grid.add_box(cx, cy, sx, sy, margin=margin)
     return grid
 
 
