@@ -14,12 +14,12 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
+from mhrc.protocol import LLM_ERROR_PREFIX
 from mhrc.trace import read_trace
 
 from .llm import DEFAULT_TEMPERATURE, Completion, LLMError, Messages, prompt_text
 
 THOUGHT_SUFFIX = "/agent/{robot}/thought"
-LLM_ERROR_PREFIX = "llm error: "  # how LLMPolicy records a model that stayed down
 
 
 class ReplayMismatch(RuntimeError):

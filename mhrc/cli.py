@@ -236,46 +236,63 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--llm", default=None, help="Model spec (provider:model); default: the built-in heuristic policy.")
 @click.option("--tasks", default=None, help="Comma-separated task ids; default: every registered task.")
 @click.option("--scenes", default=None, help="Comma-separated layouts; default: every built-in layout.")
-@click.option("--objects", default="3,4,5,6", show_default=True, help="Comma-separated object counts.")
-@click.option("--trials", default=4, show_default=True, type=int, help="Episodes per cell; trial i uses seed i.")
+@click.option("--objects", default=None, show_default="3,4,5,6", help="Comma-separated object counts (each scene runs every count).")
+@click.option("--trials", default=1, show_default=True, type=int,
+              help="Episodes per task, scene and object count in each repeat (the paper: 1).")
+@click.option("--repeats", default=1, show_default=True, type=int,
+              help="Run the grid this many times; an episode's seed is repeat x trials + trial, so repeat r of the paper grid uses seed r.")
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
 @click.option("--horizon", default=50, show_default=True, type=int)
+@click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP)
+@click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP)
 @click.option("--workers", default=os.cpu_count() or 1, show_default="the number of cores", type=int,
               help="Local worker processes; 0: only workers that join with `mhrc worker --connect`.")
 @click.option("--listen", default=None, help="Endpoint for the bus, e.g. tcp/0.0.0.0:7448 to let other hosts' workers join; default: a free loopback port.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory; default runs/eval-<time>.")
 @click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
+@click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
 @click.option("--base-url", default=None, help="OpenAI-compatible base URL for --llm.")
 @click.option("--llm-timeout", default=60.0, show_default=True, type=float)
 @click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None)
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str, trials: int, ablation: str, horizon: int,
-          workers: int, listen: str | None, out: Path | None, resume: bool, base_url: str | None, llm_timeout: float,
-          prompts: Path | None, log_level: str) -> None:  # fmt: skip
-    """Run the paper's benchmark grid (tasks x scenes x objects x trials) and write, to --out,
-    one trace per episode, episodes.jsonl (every metric of every episode) and summary.md /
-    summary.csv (tables shaped like the paper's Table I and II, TS next to its lower bound).
+def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str,
+          horizon: int, aids: str | None, history_cap: int | None, workers: int, listen: str | None, out: Path | None, resume: bool,
+          dry_run: bool, base_url: str | None, llm_timeout: float, prompts: Path | None, log_level: str) -> None:  # fmt: skip
+    """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
+    (every metric of every episode, its fidelity and the LLM failures that shaped it) and
+    summary.md / summary.csv (tables shaped like the paper's Table I and II with 95% bootstrap
+    intervals, the paper's figures beside a matching configuration, TS next to its lower bound).
 
-    Without --llm the heuristic policy plays. Episodes run in --workers processes on one Zenoh
-    bus; workers on other hosts join with `mhrc worker --connect tcp/HOST:PORT` (see --listen).
-    An interrupted run continues with --resume --out DIR."""
+    The default grid is the paper's: per task, 3 scenes x one episode each with 3, 4, 5 and 6
+    objects (12 per task, 36 in all); --repeats N runs it N times with other seeds, --objects and
+    --trials build larger grids. Without --llm the heuristic policy plays. Episodes run in
+    --workers processes on one Zenoh bus; workers on other hosts join with
+    `mhrc worker --connect tcp/HOST:PORT` (see --listen). An interrupted run continues with
+    --resume --out DIR."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 
-    from .evaluation import EvalSpec, Tally, evaluate, summary_markdown
+    from .evaluation import EvalSpec, Tally, evaluate
+    from .fidelity import AidsError, parse_aids
+    from .report import PAPER_OBJECTS, summary_markdown
 
     logs.configure(log_level)
     if workers < 0:
         raise click.BadParameter("must be 0 or more", param_hint="--workers")
     if workers == 0 and listen is None:
         raise click.UsageError("--workers 0 needs --listen, so that workers can join from elsewhere")
+    try:
+        aid_names = parse_aids(aids)
+    except AidsError as exc:
+        raise click.UsageError(str(exc)) from None
     spec = EvalSpec(
-        tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS), objects=_csv(int, objects) or (),
-        trials=trials, llm=llm, ablation=ablation, horizon=horizon, base_url=base_url, llm_timeout=llm_timeout,
-        prompts=str(prompts) if prompts else None,
+        tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS),
+        objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()), trials=trials, repeats=repeats,
+        llm=llm, ablation=ablation, horizon=horizon, base_url=base_url, llm_timeout=llm_timeout,
+        prompts=str(prompts) if prompts else None, aids=aid_names, history_cap=history_cap,
     )  # fmt: skip
     out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
     console = Console(stderr=True)
@@ -283,16 +300,24 @@ def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str, 
     bar = progress.add_task("episodes", total=None)
 
     def hook(t: Tally, row: dict[str, Any] | None) -> None:
-        rate = f"{t.succeeded}/{t.done} solved" + (f", {t.errors} errors" if t.errors else "")
+        rate = f"{t.succeeded}/{t.done} solved" + (f", {t.errors} errors" if t.errors else "") + (f", {t.invalid} invalid" if t.invalid else "")
         progress.update(bar, total=t.total, completed=t.done, description=f"{spec.method} [{rate}]")
-        if row is not None and not row["success"]:
+        if row is not None and not row.get("valid", True):
+            progress.console.print(f"[red]invalid[/]: {row['key']} ({row.get('invalid_reason')}); left out of the summary")
+        elif row is not None and not row["success"]:
             progress.console.print(f"[yellow]not solved[/]: {row['key']} (PS {row['partial_success']:.2f}, TS {row['temporal_steps']})")
 
     try:
         spec.validate()
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
-    console.print(f"evaluating {spec.method} (ablation {ablation}) into {out} with {workers} worker(s)")
+    n_jobs = len(spec.jobs())
+    if dry_run:
+        for job in spec.jobs():
+            click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config['seed']}")
+        click.echo(f"{n_jobs} episodes ({spec.fidelity} fidelity)")
+        return
+    console.print(f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}) on {n_jobs} episodes into {out} with {workers} worker(s)")
     t0 = time.perf_counter()
     with progress:
         try:
@@ -323,9 +348,14 @@ def worker(connect: str, eval_id: str | None, log_level: str) -> None:
 @main.command("report")
 @click.argument("dirs", nargs=-1, required=True, type=click.Path(file_okay=False, exists=True, path_type=Path))
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, help="Also write the markdown here (and CSV beside it).")
-def report(dirs: tuple[Path, ...], out: Path | None) -> None:
-    """Merge `mhrc eval` directories into one comparison table (markdown on stdout)."""
-    from .evaluation import merge_runs, summary_csv, summary_markdown
+@click.option("--resamples", default=2000, show_default=True, type=click.IntRange(min=1), help="Bootstrap resamples per 95% confidence interval.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the bootstrap (the same rows and seed give the same intervals).")
+def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) -> None:
+    """Merge `mhrc eval` directories into one comparison (markdown on stdout): Succ, PS, TS
+    and AS per task with 95% bootstrap confidence intervals, grouped by method, ablation and
+    fidelity, and the paper's Table I / II figures beside the settings that match its
+    configuration. Invalid episodes (model unreachable throughout) are left out and listed."""
+    from .report import merge_runs, summary_csv, summary_markdown
 
     try:
         rows = merge_runs(list(dirs))
@@ -333,11 +363,11 @@ def report(dirs: tuple[Path, ...], out: Path | None) -> None:
         raise click.UsageError(str(exc)) from None
     if not rows:
         raise click.UsageError("no finished episodes in " + ", ".join(map(str, dirs)))
-    text = summary_markdown(rows)
+    text = summary_markdown(rows, resamples=resamples, seed=seed)
     click.echo(text)
     if out is not None:
         out.write_text(text, encoding="utf-8")
-        out.with_suffix(".csv").write_text(summary_csv(rows), encoding="utf-8")
+        out.with_suffix(".csv").write_text(summary_csv(rows, resamples=resamples, seed=seed), encoding="utf-8")
 
 
 @main.command()

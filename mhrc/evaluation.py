@@ -15,7 +15,14 @@ with its own run id on the same bus, and push back the episode's trace. Keys, un
 
 Each episode's metrics are computed by the coordinator from the trace (`mhrc.metrics`), so a
 row means the same thing whichever host ran it. Rows are appended to DIR/episodes.jsonl as they
-arrive; `--resume` skips the keys already there.
+arrive; `--resume` skips the keys already there. Summaries (tables, confidence intervals, the
+paper's figures) are `mhrc.report`'s.
+
+The default grid is the paper's: per task, every scene with one episode per object count 3, 4,
+5 and 6 (3 scenes x 4 = 12 episodes per task). Seeds: an episode's seed is
+`repeat * trials + trial`, so with the default one trial, repeat r of the paper grid runs every
+episode with seed r (repeat 0, seed 0, is a run without --repeats; more repeats extend it). The
+job key is `task/scene/objects/seed`.
 """
 
 from __future__ import annotations
@@ -23,8 +30,6 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
-import csv
-import io
 import json
 import os
 import subprocess
@@ -44,14 +49,17 @@ from pydantic import BaseModel, Field
 
 from .bus import Bus, Sample, endpoint, free_port
 from .episode import ConfigError, EpisodeConfig, open_client, up_in_process
-from .metrics import from_trace, summarize
+from .fidelity import label
+from .metrics import TraceError, from_trace
 from .protocol import decode
+from .report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
 from .trace import read_trace
+
+__all__ = ["EvalSpec", "evaluate", "merge_runs", "run_worker", "summary_csv", "summary_markdown", "write_summaries"]
 
 log = structlog.get_logger("mhrc.eval")
 
 ROOT = "mhrc/eval"
-PAPER_OBJECTS = (3, 4, 5, 6)
 JOB_TIMEOUT = 600.0  # s an issued job may take before it goes back to the queue
 
 
@@ -61,6 +69,8 @@ JOB_TIMEOUT = 600.0  # s an issued job may take before it goes back to the queue
 class Job(BaseModel):
     key: str
     config: dict[str, Any]  # EpisodeConfig fields (no run, port or trace: the worker picks those)
+    repeat: int = 0
+    trial: int = 0
 
 
 class JobRequest(BaseModel):
@@ -99,42 +109,64 @@ class EvalSpec:
     tasks: tuple[str, ...]
     scenes: tuple[str, ...]
     objects: tuple[int, ...] = PAPER_OBJECTS
-    trials: int = 4
+    trials: int = 1  # episodes per (task, scene, object count) in each repeat
     llm: str | None = None
     ablation: str = "none"
     horizon: int = 50
     base_url: str | None = None
     llm_timeout: float = 60.0
     prompts: str | None = None
+    repeats: int = 1  # the grid, run this many times with other seeds
+    aids: tuple[str, ...] = ()  # mhrc.fidelity names; () is the paper's fidelity
+    history_cap: int | None = None
 
     @property
     def method(self) -> str:
         return self.llm or "heuristic"
 
+    @property
+    def fidelity(self) -> str:
+        return label(self.aids)
+
     def identity(self) -> dict[str, Any]:
-        """What must match for --resume to continue a run."""
-        return {"method": self.method, "ablation": self.ablation, "horizon": self.horizon}
+        """What must match for --resume to continue a run: everything that changes the numbers
+        (the grid may grow: more trials, repeats, object counts, scenes or tasks)."""
+        return {
+            "method": self.method, "ablation": self.ablation, "horizon": self.horizon, "fidelity": self.fidelity,
+            "history_cap": self.history_cap, "prompts": self.prompts,
+        }  # fmt: skip
+
+    def seed(self, repeat: int, trial: int) -> int:
+        """The episode seed of a trial in a repeat: distinct for every (repeat, trial)."""
+        return repeat * self.trials + trial
 
     def jobs(self) -> list[Job]:
+        """Repeat by repeat (a finished repeat is a whole grid), then task, scene, objects, trial."""
         out = []
-        for task in self.tasks:
-            for scene in self.scenes:
-                for n in self.objects:
-                    for trial in range(self.trials):
-                        cfg: dict[str, Any] = {
-                            "task": task, "scene": scene, "seed": trial, "n_objects": n, "horizon": self.horizon,
-                            "llm": self.llm, "ablation": self.ablation, "base_url": self.base_url,
-                            "llm_timeout": self.llm_timeout, "prompts": self.prompts,
-                        }  # fmt: skip
-                        out.append(Job(key=f"{task}/{scene}/{n}/{trial}", config={k: v for k, v in cfg.items() if v is not None}))
+        for repeat in range(self.repeats):
+            for task in self.tasks:
+                for scene in self.scenes:
+                    for n in self.objects:
+                        for trial in range(self.trials):
+                            seed = self.seed(repeat, trial)
+                            cfg: dict[str, Any] = {
+                                "task": task, "scene": scene, "seed": seed, "n_objects": n, "horizon": self.horizon,
+                                "llm": self.llm, "ablation": self.ablation, "base_url": self.base_url,
+                                "llm_timeout": self.llm_timeout, "prompts": self.prompts,
+                                "aids": list(self.aids) or None, "history_cap": self.history_cap,
+                            }  # fmt: skip
+                            config = {k: v for k, v in cfg.items() if v is not None}
+                            out.append(Job(key=f"{task}/{scene}/{n}/{seed}", config=config, repeat=repeat, trial=trial))
         return out
 
     def validate(self) -> None:
-        """Fail before anything starts, naming the field: every cell of the grid must be a valid episode."""
+        """Fail before anything starts, naming the option: every cell of the grid must be a valid episode."""
+        if self.repeats < 1:
+            raise ConfigError(f"--repeats: must be at least 1 (got {self.repeats})")
         if self.trials < 1:
-            raise ConfigError(f"trials: must be at least 1 (got {self.trials})")
+            raise ConfigError(f"--trials: must be at least 1 (got {self.trials})")
         if not (self.tasks and self.scenes and self.objects):
-            raise ConfigError("tasks, scenes and objects must each name at least one value")
+            raise ConfigError("--tasks, --scenes and --objects must each name at least one value")
         seen: set[tuple[str, str, int]] = set()
         for job in self.jobs():
             c = job.config
@@ -219,24 +251,11 @@ class Tally:
     done: int = 0
     succeeded: int = 0
     errors: int = 0
+    invalid: int = 0
     by_key: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 ProgressHook = Callable[[Tally, dict[str, Any] | None], None]
-
-
-def _read_rows(path: Path) -> list[dict[str, Any]]:
-    if not path.exists():
-        return []
-    rows = []
-    for i, line in enumerate(path.read_text(encoding="utf-8").splitlines()):
-        if not line.strip():
-            continue
-        try:
-            rows.append(json.loads(line))
-        except json.JSONDecodeError:
-            log.warning("skipping a torn line of episodes.jsonl (an interrupted write)", line=i + 1)
-    return rows
 
 
 def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
@@ -247,12 +266,17 @@ def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
             raise ConfigError(f"out: {out} is not empty; pass --resume to continue that evaluation, or choose another --out")
         if manifest.exists():
             old = json.loads(manifest.read_text())
-            if old.get("identity") != spec.identity():
-                raise ConfigError(f"out: {out} holds an evaluation of {old.get('identity')}, not {spec.identity()}; --resume needs the same --llm, --ablation and --horizon")
+            # a manifest written before a field was part of the identity ran with its default
+            before = {"fidelity": "paper", "history_cap": None, "prompts": None} | (old.get("identity") or {})
+            if before != spec.identity():
+                raise ConfigError(
+                    f"out: {out} holds an evaluation of {before}, not {spec.identity()}; "
+                    "--resume needs the same --llm, --ablation, --horizon, --aids, --history-cap and --prompts"
+                )
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
     manifest.write_text(json.dumps({"identity": spec.identity(), "spec": spec.__dict__}, indent=2, default=list) + "\n")
-    rows = _read_rows(out / "episodes.jsonl")
+    rows = read_rows(out / "episodes.jsonl")
     if rows:  # rewrite without a torn last line, so that new rows start on a line of their own
         (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
     return {r["key"] for r in rows}
@@ -309,6 +333,13 @@ async def evaluate(
             return  # a duplicate (the job was re-issued and both ran)
         job = entry[0]
         row: dict[str, Any] | None = None
+        if res.error is None:
+            trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
+            trace_path.write_bytes(zlib.decompress(base64.b64decode(res.trace_z)))
+            try:
+                m = from_trace(read_trace(trace_path))
+            except TraceError as exc:
+                res.error = f"TraceError: {exc}"
         if res.error is not None:
             if attempts[res.key] < 2:
                 todo.append(job)
@@ -317,16 +348,15 @@ async def evaluate(
             with (out / "errors.jsonl").open("a", encoding="utf-8") as f:
                 f.write(json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n")
         else:
-            trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
-            trace_path.write_bytes(zlib.decompress(base64.b64decode(res.trace_z)))
-            m = from_trace(read_trace(trace_path))
             row = {
-                "key": res.key, "method": spec.method, "ablation": spec.ablation, "trial": int(res.key.rsplit("/", 1)[1]),
-                **m.as_dict(), "worker": res.worker, "trace": str(trace_path.relative_to(out)),
+                "key": res.key, "method": spec.method, "ablation": spec.ablation, "repeat": job.repeat, "trial": job.trial,
+                **m.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap,
+                "worker": res.worker, "trace": str(trace_path.relative_to(out)),
             }  # fmt: skip
             with rows_path.open("a", encoding="utf-8") as f:
                 f.write(json.dumps(row) + "\n")
             tally.succeeded += bool(m.success)
+            tally.invalid += not m.valid
         tally.done += 1
         if progress is not None:
             progress(tally, row)
@@ -380,84 +410,6 @@ async def evaluate(
                 if p.poll() is None:
                     p.kill()
         await bus.close()
-    rows = _read_rows(rows_path)
+    rows = read_rows(rows_path)
     write_summaries(rows, out)
-    return rows
-
-
-# --------------------------------------------------------------------------- tables
-
-COLUMNS = ("episodes", "succ", "ps", "ts", "ts_bound", "as", "as_per_robot", "messages", "llm_calls", "prompt_tokens", "completion_tokens", "failed_actions", "wall_time")
-AS_NOTE = (
-    "AS counts actions of all robots (wait excluded); AS/robot divides it by the number of robots. "
-    "The paper does not say which of the two its AS is. TS* is the mean lower bound on TS (world/bound.py)."
-)
-
-
-def group(rows: list[dict[str, Any]], *keys: str) -> dict[tuple[Any, ...], dict[str, Any]]:
-    buckets: dict[tuple[Any, ...], list[dict[str, Any]]] = defaultdict(list)
-    for r in rows:
-        buckets[tuple(r[k] for k in keys)].append(r)
-    return {k: summarize(v) for k, v in sorted(buckets.items(), key=lambda kv: tuple(str(x) for x in kv[0]))}
-
-
-def summary_csv(rows: list[dict[str, Any]]) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(["method", "ablation", "task", *COLUMNS])
-    for (method, ablation, task), s in group(rows, "method", "ablation", "task").items():
-        w.writerow([method, ablation, task, *(s[c] for c in COLUMNS)])
-    return buf.getvalue()
-
-
-def _cell(s: dict[str, Any]) -> str:
-    bound = f" ({s['ts_bound']:.1f})" if s.get("ts_bound") is not None else ""
-    return f"{s['succ']:.2f} / {s['ps']:.2f} / {s['ts']:.1f}{bound} / {s['as']:.1f} ({s['as_per_robot']:.1f})"
-
-
-def summary_markdown(rows: list[dict[str, Any]]) -> str:
-    """Table I (methods, ablation none) and Table II (ablations, per method) as the paper
-    lays them out, then the breakdown by scene and by object count."""
-    tasks = sorted({r["task"] for r in rows})
-    lines = ["# Evaluation summary", "", f"{len(rows)} episodes. Each cell: Succ / PS / TS (TS*) / AS (AS/robot).", "", AS_NOTE, ""]
-    full = [r for r in rows if r["ablation"] == "none"]
-    if full:
-        methods = sorted({r["method"] for r in full})
-        cells = group(full, "task", "method")
-        lines += ["## Table I: methods", "", "| task | " + " | ".join(methods) + " |", "| --- |" + " --- |" * len(methods)]
-        for t in tasks:
-            lines.append(f"| {t} | " + " | ".join(_cell(cells[(t, m)]) if (t, m) in cells else "" for m in methods) + " |")
-        lines.append("")
-    for method in sorted({r["method"] for r in rows}):
-        mine = [r for r in rows if r["method"] == method]
-        ablations = sorted({r["ablation"] for r in mine}, key=lambda a: (a == "none", a))
-        cells = group(mine, "task", "ablation")
-        lines += [f"## Table II: ablations of {method}", "", "| task | " + " | ".join(ablations) + " |", "| --- |" + " --- |" * len(ablations)]
-        for t in tasks:
-            lines.append(f"| {t} | " + " | ".join(_cell(cells[(t, a)]) if (t, a) in cells else "" for a in ablations) + " |")
-        lines.append("")
-    for key, title in (("scene", "scene"), ("n_objects", "object count")):
-        cells = group(rows, "method", "ablation", key)
-        lines += [f"## By {title}", "", f"| method | ablation | {key} | Succ / PS / TS (TS*) / AS (AS/robot) | episodes |", "| --- | --- | --- | --- | --- |"]
-        for (m, a, v), s in cells.items():
-            lines.append(f"| {m} | {a} | {v} | {_cell(s)} | {s['episodes']} |")
-        lines.append("")
-    return "\n".join(lines)
-
-
-def write_summaries(rows: list[dict[str, Any]], out: Path) -> None:
-    if not rows:
-        return
-    (out / "summary.csv").write_text(summary_csv(rows), encoding="utf-8")
-    (out / "summary.md").write_text(summary_markdown(rows), encoding="utf-8")
-
-
-def merge_runs(dirs: list[Path]) -> list[dict[str, Any]]:
-    """Every episode row of several evaluation directories (for `mhrc report`)."""
-    rows = []
-    for d in dirs:
-        path = d / "episodes.jsonl"
-        if not path.exists():
-            raise ConfigError(f"{d}: no episodes.jsonl here; is it an `mhrc eval --out` directory?")
-        rows += _read_rows(path)
     return rows

@@ -10,7 +10,16 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
   also per robot. The paper does not say whether its AS sums the robots or averages them, so
   both are reported: `as` (summed) and `as_per_robot` (the sum over the number of robots).
 - failed_actions by skill; messages (communicate actions that were delivered);
-- llm_calls, prompt_tokens, completion_tokens: from the agents' `thought` events;
+- llm_calls, prompt_tokens, completion_tokens: from the agents' `thought` events (an LLM step
+  is a thought with a prompt, whether or not the model answered);
+- the LLM failures that shaped the episode: parse_failures (replies that did not parse: a
+  thought whose parse_error is set and is not a model error), llm_unreachable (steps lost to a
+  model that stayed down after its retries: parse_error starting with LLM_ERROR_PREFIX),
+  rejected_actions (`action_ack` events with accepted false);
+- valid / invalid_reason: an episode whose every LLM step (at least one) found the model
+  unreachable measured the network, not the method: it is invalid and left out of summaries;
+- fidelity (`paper` or `aids:...`, from `episode_started`; `unrecorded` for traces older than
+  the field) and horizon;
 - wall_time (world's measure), lower_bound (world/bound.py, from `episode_started`).
 
 Over episodes, `summarize` takes means (Succ is then the success rate).
@@ -23,6 +32,10 @@ from collections import Counter
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any
+
+from .protocol import LLM_ERROR_PREFIX
+
+UNRECORDED = "unrecorded"  # the fidelity of a trace written before episodes recorded it
 
 
 class TraceError(ValueError):
@@ -51,6 +64,13 @@ class EpisodeMetrics:
     completion_tokens: int = 0
     wall_time: float = 0.0
     lower_bound: int | None = None
+    parse_failures: int = 0
+    llm_unreachable: int = 0
+    rejected_actions: int = 0
+    valid: bool = True
+    invalid_reason: str | None = None
+    fidelity: str = UNRECORDED
+    horizon: int | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -71,7 +91,11 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
     acting = [r for r in results if r["action"]["skill"] != "wait"]
     per_robot = Counter(r["robot"] for r in acting)
     failed = Counter(r["action"]["skill"] for r in results if not r["outcome"]["succeeded"])
-    thoughts = [t for t in _msgs(rows, "thought") if t.get("prompt") is not None]
+    every_thought = _msgs(rows, "thought")
+    thoughts = [t for t in every_thought if t.get("prompt") is not None]
+    errors = [str(t["parse_error"]) for t in every_thought if t.get("parse_error")]
+    unreachable = sum(1 for e in errors if e.startswith(LLM_ERROR_PREFIX))
+    invalid = bool(thoughts) and unreachable >= len(thoughts)
     return EpisodeMetrics(
         task=s["task"],
         scene=s["scene"],
@@ -93,11 +117,19 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         completion_tokens=sum(int(t.get("completion_tokens") or 0) for t in thoughts),
         wall_time=float(world.get("wall_time", 0.0)),
         lower_bound=s.get("lower_bound"),
+        parse_failures=len(errors) - unreachable,
+        llm_unreachable=unreachable,
+        rejected_actions=sum(1 for a in _msgs(rows, "action_ack") if a.get("accepted") is False),
+        valid=not invalid,
+        invalid_reason=f"the model was unreachable for all {len(thoughts)} LLM steps" if invalid else None,
+        fidelity=str(s.get("fidelity") or UNRECORDED),
+        horizon=s.get("horizon"),
     )
 
 
 def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Means over episode rows (dicts with the EpisodeMetrics fields)."""
+    """Means over episode rows (dicts with the EpisodeMetrics fields; rows written before a field
+    existed count it as 0). Leaving invalid episodes out is the caller's choice (mhrc.report)."""
     if not rows:
         raise ValueError("no episodes to summarize")
 
@@ -117,6 +149,9 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "llm_calls": round(mean("llm_calls"), 3),
         "prompt_tokens": round(mean("prompt_tokens"), 1),
         "completion_tokens": round(mean("completion_tokens"), 1),
+        "parse_failures": round(statistics.fmean(float(r.get("parse_failures", 0)) for r in rows), 3),
+        "llm_unreachable": round(statistics.fmean(float(r.get("llm_unreachable", 0)) for r in rows), 3),
+        "rejected_actions": round(statistics.fmean(float(r.get("rejected_actions", 0)) for r in rows), 3),
         "failed_actions": round(statistics.fmean(sum(r["failed_actions"].values()) for r in rows), 3),
         "wall_time": round(mean("wall_time"), 3),
     }

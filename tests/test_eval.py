@@ -1,5 +1,6 @@
 """`mhrc eval`, `mhrc worker` and `mhrc report` over real worker processes, a real Zenoh bus on
-loopback and real episodes (heuristic policy)."""
+loopback and real episodes (heuristic policy, and LLM agents against a scripted OpenAI-compatible
+server on loopback)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ import pytest
 
 from mhrc.bus import endpoint, free_port
 from mhrc.episode import ConfigError
-from mhrc.evaluation import EvalSpec, evaluate, merge_runs, summary_markdown
+from mhrc.evaluation import EvalSpec, evaluate
+from mhrc.report import merge_runs, summary_markdown
 
 SMALL = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2)
 VOLATILE = {"wall_time", "worker"}
@@ -39,7 +41,10 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
         assert (a / r["trace"]).exists()
     summary = (a / "summary.md").read_text()
     assert "Table I" in summary and "| pack_objects | 1.00 / 1.00 /" in summary and "does not say" in summary
-    assert (a / "summary.csv").read_text().startswith("method,ablation,task,episodes,succ,ps,ts,ts_bound,as,as_per_robot")
+    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,history_cap,horizon,task,episodes,succ,ps,ts,ts_bound,as,as_per_robot")
+    for r in rows_a:  # fidelity and the LLM failures are on every row (the heuristic has none)
+        assert (r["fidelity"], r["aids"], r["history_cap"], r["horizon"], r["repeat"], r["trial"]) == ("paper", [], None, 50, 0, r["seed"])
+        assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"], r["invalid_reason"]) == (0, 0, 0, True, None)
     # an existing directory is never overwritten by accident
     with pytest.raises(ConfigError, match="not empty; pass --resume"):
         asyncio.run(evaluate(SMALL, a, workers=1))
@@ -53,11 +58,12 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     assert sorted(r["key"] for r in rows_c) == ["pack_objects/kitchen/3/0", "pack_objects/kitchen/3/1", "pack_objects/kitchen/3/2"]
     assert json.loads(first) in rows_c  # the finished row is kept as it was
     assert _stable(rows_c)[json.loads(first)["key"]] == _stable(rows_a)[json.loads(first)["key"]]
-    with pytest.raises(ConfigError, match="--resume needs the same"):
-        asyncio.run(evaluate(EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2, ablation="no_mobile"), c, resume=True))
+    for other in ({"ablation": "no_mobile"}, {"aids": ("goal_map",)}, {"history_cap": 9000}):
+        with pytest.raises(ConfigError, match="--resume needs the same"):
+            asyncio.run(evaluate(EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2, **other), c, resume=True))  # type: ignore[arg-type]
     # mhrc report merges directories into one table
     merged = merge_runs([a, b])
-    assert len(merged) == 4 and "| heuristic | none | kitchen |" in summary_markdown(merged) and "| 4 |" in summary_markdown(merged)
+    assert len(merged) == 4 and "| heuristic | none | paper | kitchen |" in summary_markdown(merged) and "| 4 |" in summary_markdown(merged)
     out = subprocess.run([sys.executable, "-m", "mhrc", "report", str(a), str(b), "--out", str(tmp_path / "r.md")], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and "Table I" in out.stdout and (tmp_path / "r.csv").exists()
     bad = subprocess.run([sys.executable, "-m", "mhrc", "report", str(tmp_path)], capture_output=True, text=True, timeout=60)
@@ -95,9 +101,13 @@ def test_workers_on_other_processes_join_over_the_bus(tmp_path: Path) -> None:
     ("args", "message"),
     [
         (["--tasks", "juggle"], "unknown task 'juggle'"),
-        (["--objects", "3,9"], "n_objects"),
+        (["--objects", "3,9"], "--objects: Input should be less than or equal to 6"),
         (["--scenes", "castle"], "unknown scene 'castle'"),
-        (["--trials", "0"], "trials: must be at least 1"),
+        (["--trials", "0"], "--trials: must be at least 1"),
+        (["--repeats", "0"], "--repeats: must be at least 1 (got 0)"),
+        (["--repeats", "-2"], "--repeats: must be at least 1 (got -2)"),
+        (["--aids", "crystal_ball"], "--aids: unknown aid 'crystal_ball'"),
+        (["--history-cap", "0"], "--history-cap"),
         (["--workers", "0"], "--workers 0 needs --listen"),
     ],
 )
@@ -151,3 +161,169 @@ def test_a_job_whose_worker_dies_goes_to_another_worker(tmp_path: Path) -> None:
         for p in (coordinator, grabber, worker):
             if p is not None and p.poll() is None:
                 p.kill()
+
+
+# --------------------------------------------------------------------------- the paper's grid
+
+
+def _dry_run(*args: str) -> list[tuple[str, int, int]]:
+    """(key, repeat, seed) of every episode `mhrc eval --dry-run` lists."""
+    from click.testing import CliRunner
+
+    from mhrc.cli import main
+
+    res = CliRunner().invoke(main, ["eval", "--dry-run", *args])
+    assert res.exit_code == 0, res.output
+    lines = [line.split() for line in res.output.splitlines() if "repeat=" in line]
+    return [(k, int(r.split("=")[1]), int(s.split("=")[1])) for k, r, _t, s in lines]
+
+
+def test_the_default_grid_is_the_papers_and_repeats_multiply_it_with_new_seeds() -> None:
+    jobs = _dry_run()
+    assert len(jobs) == 36 and len({k for k, _, _ in jobs}) == 36
+    by_task: dict[str, list[str]] = {}
+    for key, repeat, seed in jobs:
+        by_task.setdefault(key.split("/")[0], []).append(key)
+        assert (repeat, seed) == (0, 0)
+    assert sorted(by_task) == ["make_sandwich", "pack_objects", "sort_solids"] and all(len(v) == 12 for v in by_task.values())
+    cells: dict[tuple[str, str], list[int]] = {}
+    for key, _, _ in jobs:
+        task, scene, n, _seed = key.split("/")
+        cells.setdefault((task, scene), []).append(int(n))
+    assert len(cells) == 9 and all(sorted(ns) == [3, 4, 5, 6] for ns in cells.values())  # one episode per object count
+
+    twice = _dry_run("--repeats", "2")
+    assert len(twice) == 72 and len({k for k, _, _ in twice}) == 72
+    assert {(r, s) for _, r, s in twice} == {(0, 0), (1, 1)}  # repeat r runs with seed r
+    assert [k for k, r, _ in twice if r == 0] == [k for k, _, _ in jobs]  # repeat 0 is the run without --repeats
+    # explicit --objects and --trials build larger grids: every object count x trials, per repeat
+    big = _dry_run("--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3,5", "--trials", "3", "--repeats", "2")
+    assert len(big) == 12 and sorted({s for _, _, s in big}) == [0, 1, 2, 3, 4, 5]
+
+    spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), repeats=2)
+    assert [j.config["seed"] for j in spec.jobs()] == [0, 0, 0, 0, 1, 1, 1, 1]
+    with pytest.raises(ConfigError, match="--repeats"):
+        EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), repeats=0).validate()
+
+
+def _put(kind: str, **msg: Any) -> dict[str, Any]:
+    return {"t": 0.0, "key": f"mhrc/r/{kind}", "kind": "put", "msg": {"v": 1, "kind": kind, **msg}}
+
+
+def test_llm_failures_and_validity_are_counted_from_the_trace() -> None:
+    from mhrc.agents.replay import LLM_ERROR_PREFIX
+    from mhrc.metrics import from_trace
+
+    def trace(*thoughts: str | None, fidelity: str | None = "aids:goal_map") -> list[dict[str, Any]]:
+        started: dict[str, Any] = {"run": "r", "task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3, "robots": ["bob"], "horizon": 4}
+        if fidelity is not None:
+            started["fidelity"] = fidelity
+        rows = [_put("episode_started", **started)]
+        rows += [_put("thought", robot="bob", tick=i, policy="llm:m", prompt="p", parse_error=e) for i, e in enumerate(thoughts)]
+        rows += [_put("action_ack", goal_id="g1", robot="bob", accepted=False, reason="stale"), _put("action_ack", goal_id="g2", robot="bob", accepted=True)]
+        metrics = {"success": False, "placed": 0, "total": 3, "partial_success": 0.0}
+        return rows + [_put("tick", tick=0), _put("episode_done", run="r", reason="horizon", metrics=metrics)]
+
+    down = LLM_ERROR_PREFIX + "m at http://x failed after 5 attempts: HTTP 503"
+    m = from_trace(trace(None, "no command in the reply", down, None))
+    assert (m.llm_calls, m.parse_failures, m.llm_unreachable, m.rejected_actions) == (4, 1, 1, 1)
+    assert m.valid and m.invalid_reason is None and (m.fidelity, m.horizon) == ("aids:goal_map", 4)
+    m = from_trace(trace(down, down, fidelity=None))
+    assert not m.valid and m.invalid_reason and "unreachable for all 2 LLM steps" in m.invalid_reason
+    assert m.fidelity == "unrecorded"  # a trace from before episodes recorded their fidelity
+    assert from_trace(trace()).valid  # no LLM step at all (the heuristic): valid
+
+
+# --------------------------------------------------------------------------- LLM agents over HTTP
+
+
+class ScriptedModel:
+    """An OpenAI-compatible chat endpoint on loopback (stdlib http.server in a thread).
+
+    Episodes run one after the other (one worker), so a step number lower than the last one seen
+    starts the next episode. In episode `down` the model is unreachable: HTTP 503 with Retry-After
+    0, so the client's retries (agents/llm.py) end at once in an LLMError. Elsewhere Bob's first
+    reply has no command (a parse failure) and every other reply is a wait."""
+
+    def __init__(self, down: int) -> None:
+        import threading
+        from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+        self.down = down
+        self.episode = 0
+        self.last_step = -1
+        self.requests = 0
+        self.lock = threading.Lock()
+        model = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_POST(self) -> None:  # noqa: N802
+                body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
+                status, headers, payload = model.answer(body)
+                self.send_response(status)
+                for k, v in headers.items():
+                    self.send_header(k, v)
+                self.send_header("Content-Length", str(len(payload)))
+                self.end_headers()
+                self.wfile.write(payload)
+
+            def log_message(self, *args: object) -> None:
+                pass
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+        threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+
+    def answer(self, body: dict[str, Any]) -> tuple[int, dict[str, str], bytes]:
+        import re
+
+        system, user = body["messages"][0]["content"], body["messages"][-1]["content"]
+        step = int(re.findall(r"Step (\d+):", user)[-1])
+        with self.lock:
+            self.requests += 1
+            if step < self.last_step:
+                self.episode += 1
+            self.last_step = step
+            episode = self.episode
+        if episode == self.down:
+            return 503, {"Retry-After": "0"}, b'{"error": {"message": "overloaded"}}'
+        robot = system.split()[2].rstrip(",").lower()  # "You are Bob, ..."
+        text = "Let me think about the tray first." if robot == "bob" and step == 0 else "Analysis: nothing to do yet.\nCommand: wait()"
+        reply = {"choices": [{"message": {"role": "assistant", "content": text}}], "usage": {"prompt_tokens": 50, "completion_tokens": 9}}
+        return 200, {"Content-Type": "application/json"}, json.dumps(reply).encode()
+
+    def close(self) -> None:
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_model_never_answered(tmp_path: Path) -> None:
+    model = ScriptedModel(down=1)  # the second episode (4 objects) never reaches the model
+    spec = EvalSpec(
+        tasks=("pack_objects",), scenes=("kitchen",), objects=(3, 4, 5), horizon=3, llm="openai:test-model",
+        base_url=model.url, llm_timeout=5.0, aids=("goal_map",), history_cap=50_000,
+    )  # fmt: skip
+    try:
+        rows = asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))
+    finally:
+        model.close()
+    by_key = {r["key"]: r for r in rows}
+    assert sorted(by_key) == ["pack_objects/kitchen/3/0", "pack_objects/kitchen/4/0", "pack_objects/kitchen/5/0"]
+    for r in rows:  # the configuration the episode ran with is on its row
+        assert (r["method"], r["fidelity"], r["aids"], r["history_cap"], r["horizon"]) == ("openai:test-model", "aids:goal_map", ["goal_map"], 50_000, 3)
+        assert r["temporal_steps"] == 3 and r["llm_calls"] == 9  # three robots, three steps
+    down = by_key["pack_objects/kitchen/4/0"]
+    assert (down["llm_unreachable"], down["parse_failures"], down["prompt_tokens"], down["valid"]) == (9, 0, 0, False)
+    assert "unreachable for all 9 LLM steps" in down["invalid_reason"]
+    for key in ("pack_objects/kitchen/3/0", "pack_objects/kitchen/5/0"):
+        r = by_key[key]
+        assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"]) == (1, 0, 0, True)
+        assert (r["prompt_tokens"], r["completion_tokens"]) == (9 * 50, 9 * 9)
+    summary = (tmp_path / "ev" / "summary.md").read_text()
+    assert "3 episodes, 2 valid, 1 invalid" in summary and "1 invalid episode(s) left out" in summary
+    assert "- pack_objects/kitchen/4/0 (openai:test-model · ablation none · aids:goal_map · history cap 50000 · horizon 3): the model was unreachable" in summary
+    assert "| pack_objects | 2 | 0.00 [0.00, 0.00] |" in summary  # only the two valid episodes are averaged
+    assert "paper GPT" not in summary  # no model of the paper's
+    csv_line = (tmp_path / "ev" / "summary.csv").read_text().splitlines()[1]
+    assert csv_line.startswith("openai:test-model,none,aids:goal_map,50000,3,pack_objects,2,")
