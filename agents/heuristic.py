@@ -6,10 +6,12 @@ paper's roles do:
 
 - Bob asks Alice for every target he cannot pick himself, then puts what is in his reach on
   its goal (the tray, its colour's panel, the cutting board); for an ordered task (a sandwich)
-  only the next target in the list, waiting for it if need be.
+  only the next target in the list, waiting for it if need be. Which panel a solid goes on he
+  reads from its colour (the paper's task text does not say).
 - Alice hands the open surfaces to David, explores the closed containers herself, fetches what
-  Bob asked for and puts it on table_0 near him. A grasp that fails for distance is fixed with
-  `move(dx, dy)` from the feedback; other grasp failures try the next stand pose.
+  Bob asked for and puts it on table_0 near him. A grasp that fails for distance is fixed with a
+  `move(dx, dy)` she works out from the base-to-object offsets in the feedback (the solved move
+  is an aid she uses only when the world gives it); other grasp failures try the next stand pose.
 - David explores the surfaces Alice hands him and reports what lies on each.
 
 Messages are plain sentences with a fixed shape, so any other agent (an LLM) can read them too.
@@ -45,6 +47,10 @@ REQUEST_RE = re.compile(r"bring these to table_0 within my reach:\s*" + _NAMES)
 EXPLORE_RE = re.compile(r"explore these surfaces and tell me what lies on them:\s*" + _NAMES)
 REPORT_RE = re.compile(r"On ([A-Za-z0-9_]+) I found")
 MAX_GRASP_TRIES = 4
+ARM_FORWARD = 0.2  # Alice's arm base sits this far ahead of her base centre (her system prompt says so)
+GOOD_PICK = 0.45  # m from the arm base: the middle of the good picking range her prompt gives
+MAX_MOVE = 1.0
+AT_POSE_TOL = 0.15  # m: counts as standing at a stand pose (navigation may stop a little off)
 
 
 def _names(text: str) -> list[str]:
@@ -74,7 +80,38 @@ def _nearest_stand_pose(f: FurnitureView, point: tuple[float, ...]) -> int:
     return min(range(len(f.stand_poses)), key=lambda i: _dist2((f.stand_poses[i].x, f.stand_poses[i].y), point))
 
 
-def _at_stand_pose(obs: Observation, f: FurnitureView, idx: int, tol: float = 0.05) -> bool:
+def goal_of(obs: Observation, target: str) -> str:
+    """Where `target` must end: the observation's goal map if the world gives one (an aid),
+    else the only goal fixture on Bob's table (tray, cutting board), or the panel whose colour
+    the target's name carries (red_cube -> red_panel)."""
+    if target in obs.goals:
+        return obs.goals[target]
+    fixtures = [f.name for f in obs.furniture if not f.stand_poses and f.name != HANDOVER]
+    if len(fixtures) == 1:
+        return fixtures[0]
+    words = set(target.lower().split("_"))
+    return next((f for f in fixtures if f.split("_")[0] in words), HANDOVER)
+
+
+def corrective_move(obs: Observation, offset: tuple[float, float]) -> tuple[float, float] | None:
+    """The base shift that puts the arm base GOOD_PICK from an object `offset` (x, y) away from
+    the base centre, along the line between them; None if none is needed or it is too long."""
+    b = obs.status.base
+    if b is None:
+        return None
+    ax, ay = ARM_FORWARD * math.cos(b.yaw), ARM_FORWARD * math.sin(b.yaw)  # arm base, from the base centre
+    rx, ry = offset[0] - ax, offset[1] - ay  # object from the arm base
+    d = math.hypot(rx, ry)
+    if d < 1e-6:
+        return None
+    shift = d - GOOD_PICK
+    dx, dy = rx / d * shift, ry / d * shift
+    if math.hypot(dx, dy) > MAX_MOVE or math.hypot(dx, dy) < 0.02:
+        return None
+    return round(dx, 2), round(dy, 2)
+
+
+def _at_stand_pose(obs: Observation, f: FurnitureView, idx: int, tol: float = AT_POSE_TOL) -> bool:
     base = obs.status.base
     if base is None or idx >= len(f.stand_poses):
         return False
@@ -115,8 +152,8 @@ class BobHeuristic(_RoleBase):
             self.pick_failures[name] = self.pick_failures.get(name, 0) + 1
         holding = obs.status.holding
         if holding:
-            return self._decision(Place(obj=holding, location=obs.goals.get(holding, HANDOVER)))
-        done = {o.name for o in obs.objects if o.name in obs.goals and o.on == obs.goals[o.name]}
+            return self._decision(Place(obj=holding, location=goal_of(obs, holding) if holding in obs.targets else HANDOVER))
+        done = {o.name for o in obs.objects if o.name in obs.targets and o.on == goal_of(obs, o.name)}
         todo = [t for t in obs.targets if t not in done]
         candidates = todo[:1] if obs.ordered else todo
         reachable = [t for t in candidates if self._in_reach(obs, t) and self.pick_failures.get(t, 0) < 2]
@@ -208,8 +245,8 @@ class AliceHeuristic(_RoleBase):
             self.delivered.add(a.obj)
         if isinstance(a, Pick) and not last.outcome.succeeded:
             self._count_try(a.obj)
-        if isinstance(a, Navigate) and not last.outcome.succeeded:
-            # a stand pose we cannot reach: the next fetch of an object there tries another
+        if isinstance(a, Navigate) and not last.outcome.succeeded and last.outcome.code != OutcomeCode.OFF_TARGET:
+            # a stand pose we cannot reach (stopping off target is worth another try): the next fetch of an object there tries another
             for name, idx in list(self.pose_choice.items()):
                 if idx == a.stand_pose:
                     self.pose_choice[name] = idx + 1
@@ -254,15 +291,14 @@ class AliceHeuristic(_RoleBase):
                 return self._decision(Navigate(target=f.name, stand_pose=idx))
             return self._decision(Open(target=f.name))
         last = self.last
-        if (
-            last is not None
-            and isinstance(last.action, Pick)
-            and last.action.obj == o.name
-            and last.outcome.code == OutcomeCode.TOO_FAR
-            and "dx" in last.outcome.details
-            and "dy" in last.outcome.details
-        ):
-            return self._decision(Move(dx=float(last.outcome.details["dx"]), dy=float(last.outcome.details["dy"])))
+        if last is not None and isinstance(last.action, Pick) and last.action.obj == o.name and last.outcome.code == OutcomeCode.TOO_FAR:
+            d = last.outcome.details
+            if "dx" in d and "dy" in d:  # the solved_move aid
+                return self._decision(Move(dx=float(d["dx"]), dy=float(d["dy"])))
+            if "offset_x" in d and "offset_y" in d:
+                fix = corrective_move(obs, (float(d["offset_x"]), float(d["offset_y"])))
+                if fix is not None:
+                    return self._decision(Move(dx=fix[0], dy=fix[1]))
         if last is not None and isinstance(last.action, Pick) and last.action.obj == o.name and not last.outcome.succeeded:
             # another stand pose after a failure that moving cannot fix
             self.pose_choice[o.name] = (self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position)) + 1) % len(f.stand_poses)
@@ -321,6 +357,7 @@ class DavidHeuristic(_RoleBase):
     visited: set[str] = field(default_factory=set)
     pose_try: dict[str, int] = field(default_factory=dict)
     report_to: str = "alice"
+    slips: int = 0
 
     async def decide(self, obs: Observation) -> Decision:
         for m in obs.new_messages:
@@ -338,6 +375,9 @@ class DavidHeuristic(_RoleBase):
                 text = f"On {target} I found: {', '.join(found)}." if found else f"On {target} I found nothing."
                 return self._decision(Communicate(to=self.report_to, content=text))
             f = _furniture(obs, target)
+            if last.outcome.code == OutcomeCode.OFF_TARGET and self.slips < 3:
+                self.slips += 1  # stopped short: drive there again
+                return self._decision(Navigate(target=target, stand_pose=last.action.stand_pose))
             tries = self.pose_try.get(target, 0) + 1
             self.pose_try[target] = tries
             if f is None or tries >= len(f.stand_poses):

@@ -13,7 +13,8 @@ from mhrc.protocol import FurnitureView, ObjectView, Observation, Pose2D
 
 from .parse import SIGNATURES
 
-AT_POSE_TOL = 0.05  # metres: the base counts as standing at a stand pose within this
+AT_POSE_TOL = 0.1  # metres: the base counts as standing at a stand pose within this (a navigation that stops
+# farther away fails as off target)
 
 
 def _xyz(p: tuple[float, float, float]) -> str:
@@ -51,14 +52,18 @@ def furniture_line(f: FurnitureView, navigates: bool = True) -> str:
 def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False) -> str:
     """`- name: where it lies, position, distance from the robot's arm base or base`; with the
     reach_labels aid, whether that is within the arm's reach (the paper's prompts leave that
-    judgement to the model)."""
+    judgement to the model). An object the robot looked for and no longer found where it was
+    gets neither place nor distance; one it knows only from a message says who told it."""
+    told = f" ({o.told_by.capitalize()} told you)" if o.told_by else ""
+    if o.last_seen_on and not (o.on or o.held_by):
+        return f"- {o.name}: no longer on {o.last_seen_on}, where it was last seen at {_xyz(o.position)}; where it is now is unknown{told}"
     if o.held_by:
         where = "in your gripper" if o.held_by == obs.robot else f"held by {o.held_by}"
     elif o.on:
         where = f"inside {o.on}" if o.inside else (f"in the {o.on}" if o.on == "tray" else f"on {o.on}")
     else:
         where = "on the floor"
-    text = f"- {o.name}: {where}, at {_xyz(o.position)}"
+    text = f"- {o.name}: {where}{told}, at {_xyz(o.position)}"
     if o.held_by:
         return text
     s = obs.status

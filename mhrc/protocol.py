@@ -165,17 +165,26 @@ class FurnitureView(_Model):
     position: tuple[float, float, float]
     yaw: float = 0.0
     openable: bool = False
-    is_open: bool | None = None  # None where the furniture cannot open
+    is_open: bool | None = None  # None where the furniture cannot open; in a robot's view, as it last saw it
     stand_poses: list[Pose2D] = Field(default_factory=list)
     place_pose: tuple[float, float, float] | None = None
 
 
 class ObjectView(_Model):
+    """An object as one robot last saw it or was last told of it (its scene graph is its memory);
+    ground truth only in observers' views and with the live_state aid."""
+
     name: str
     position: tuple[float, float, float]
     on: str | None = Field(None, description="furniture (or receptacle) the object lies on or in")
     inside: bool = Field(False, description="inside a container rather than on a surface")
     held_by: str | None = None
+    last_seen_on: str | None = Field(
+        None,
+        description="the robot looked again where it believed the object was and it was gone: this is that place, "
+        "`position` is where it was last seen, `on` is None, where it is now is unknown",
+    )
+    told_by: str | None = Field(None, description="the belief came from this robot's message, not the robot's own eyes")
 
 
 class RobotMessage(Message):
@@ -368,6 +377,9 @@ class WorldState(Message):
 
 
 # --------------------------------------------------------------------------- thoughts
+
+
+LLM_ERROR_PREFIX = "llm error: "  # a Thought.parse_error that starts so: the model was unreachable, not misunderstood
 
 
 class Thought(Message):

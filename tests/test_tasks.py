@@ -86,6 +86,39 @@ def _kinds(task: str, n: int = 4, seed: int = 0) -> tuple[list[ObjectKind], list
     return [p.kind for p in pls if p.target], [p.kind for p in pls if not p.target]
 
 
+HINTS = frozenset({"status_hints"})
+
+
+def test_bobs_status_says_what_the_paper_says_and_nothing_more() -> None:
+    """Pack: what is in the tray; sort: which solid lies on which panel; sandwich: the stack,
+    bottom to top. "Not yet", "next", "wrong" are the status_hints aid."""
+    pack, sort, sandwich = get_task("pack_objects"), get_task("sort_solids"), get_task("make_sandwich")
+    targets, extra = _kinds("pack_objects")
+    names = [k.name for k in targets]
+    seen = [Seen(targets[0].name, targets[0], "tray"), Seen(extra[0].name, extra[0], "tray")]
+    assert pack.status(names, seen) == f"In the tray: {targets[0].name}, {extra[0].name}."
+    solids, _ = _kinds("sort_solids", n=4)
+    a, b = solids[0], solids[1]
+    swapped = [Seen(a.name, a, f"{b.group}_panel"), Seen(b.name, b, f"{b.group}_panel")]
+    assert sort.status([k.name for k in solids], swapped) == f"On the panels: {a.name} on {b.group}_panel, {b.name} on {b.group}_panel."
+    layers, _ = _kinds("make_sandwich", n=4, seed=2)
+    stack = [Seen(layers[1].name, layers[1], "cutting_board", z=0.72)]
+    assert sandwich.status([k.name for k in layers], stack) == f"On the cutting board, bottom to top: {layers[1].name}."
+    for text in (pack.status(names, seen), sort.status([k.name for k in solids], swapped), sandwich.status([k.name for k in layers], stack)):
+        assert not any(w in text.lower() for w in ("not yet", "next", "wrong", "take", "reach"))
+
+
+def test_sort_task_text_lists_solids_and_panels_but_not_which_goes_where() -> None:
+    sort = get_task("sort_solids")
+    solids, _ = _kinds("sort_solids", n=5)
+    names = [k.name for k in solids]
+    goals = {k.name: sort.goal(k) for k in solids}
+    text = sort.detail("bob", names, goals)
+    assert all(n in text for n in names) and all(f"{c}_panel" in text for c in COLORS)
+    assert " onto " not in text and not any(f"{n} onto" in text or f"{n} on {goals[n]}" in text for n in names)
+    assert f"{names[0]} onto {goals[names[0]]}" in sort.detail("bob", names, goals, frozenset({"goal_map"}))
+
+
 def test_pack_evaluate() -> None:
     t = get_task("pack_objects")
     targets, extra = _kinds("pack_objects")
@@ -94,7 +127,7 @@ def test_pack_evaluate() -> None:
     r = t.evaluate(names, done)
     assert (r.success, r.placed, r.partial_success) == (True, 4, 1.0)
     spoiled = done[:-1] + [Seen(extra[-1].name, extra[-1], "tray")]
-    assert not t.evaluate(names, spoiled).success and "not on the list" in t.status(names, spoiled)
+    assert not t.evaluate(names, spoiled).success and "not on the list" in t.status(names, spoiled, HINTS)
     half = [Seen(k.name, k, "tray" if i < 2 else "counter") for i, k in enumerate(targets)]
     r = t.evaluate(names, half)
     assert (r.success, r.placed, r.partial_success) == (False, 2, 0.5)
@@ -108,11 +141,11 @@ def test_sort_evaluate() -> None:
     names = [k.name for k in targets]
     assert {k.group for k in targets} <= set(COLORS) and not {k.group for k in extra} & set(COLORS)
     done = [Seen(k.name, k, f"{k.group}_panel") for k in targets]
-    assert t.evaluate(names, done).success and "Every listed solid is on its panel" in t.status(names, done)
+    assert t.evaluate(names, done).success and "Every listed solid is on its panel" in t.status(names, done, HINTS)
     a, b = targets[0], targets[1]
     swapped = [Seen(a.name, a, f"{b.group}_panel"), Seen(b.name, b, f"{a.group}_panel"), *done[2:]]
     r = t.evaluate(names, swapped)
-    assert (r.success, r.placed) == (False, 3) and "On a wrong panel" in t.status(names, swapped)
+    assert (r.success, r.placed) == (False, 3) and "On a wrong panel" in t.status(names, swapped, HINTS)
     stray = done + [Seen(extra[0].name, extra[0], "red_panel")]
     assert not t.evaluate(names, stray).success and t.evaluate(names, stray).placed == 5
 
@@ -122,13 +155,13 @@ def test_sandwich_evaluate_checks_the_order_bottom_to_top() -> None:
     targets, extra = _kinds("make_sandwich", n=4, seed=2)
     names = [k.name for k in targets]
     stack = [Seen(k.name, k, "cutting_board", z=0.72 + 0.02 * i) for i, k in enumerate(targets)]
-    assert t.evaluate(names, stack).success and "complete" in t.status(names, stack)
+    assert t.evaluate(names, stack).success and "complete" in t.status(names, stack, HINTS)
     # the same pieces with the second and third swapped: only the first is right
     wrong = [stack[0], Seen(stack[1].name, stack[1].kind, "cutting_board", z=stack[2].z), Seen(stack[2].name, stack[2].kind, "cutting_board", z=stack[1].z), stack[3]]
     r = t.evaluate(names, wrong)
-    assert (r.success, r.placed) == (False, 1) and "Wrong from" in t.status(names, wrong)
+    assert (r.success, r.placed) == (False, 1) and "Wrong from" in t.status(names, wrong, HINTS)
     # a correct prefix scores partially; something extra on top spoils success
-    assert t.evaluate(names, stack[:2]).placed == 2 and "Next: " + names[2] in t.status(names, stack[:2])
+    assert t.evaluate(names, stack[:2]).placed == 2 and "Next: " + names[2] in t.status(names, stack[:2], HINTS)
     extra_on_top = stack + [Seen(extra[0].name, extra[0], "cutting_board", z=0.9)]
     assert not t.evaluate(names, extra_on_top).success
     # identical ingredients may swap places: the menu names kinds, not pieces
@@ -163,14 +196,14 @@ def test_every_builtin_layout_loads_from_its_file() -> None:
         (lambda d: d["furniture"][2].update(size=[1.4, -0.6, 0.75]), "mine.json: furniture.2.size.1: Input should be greater than 0"),
         (lambda d: d["furniture"][2].update(colour="red"), "mine.json: furniture.2.colour: Extra inputs are not permitted"),
         (lambda d: d["furniture"][2].update(style="castle"), "mine.json: furniture.2.style: Input should be 'table', 'block', 'sofa', 'drawer_unit' or 'chest'"),
-        (lambda d: d["furniture"][2]["stand_poses"].append({"side": "up", "at": 0}), "mine.json: furniture.2.stand_poses.2"),
-        (lambda d: d["furniture"][2]["stand_poses"].append([-1.0, -3.5, 0.0]), "furniture.2.stand_poses.2 (counter): (-1.0, -3.5) is within 0.3 m of furniture.2 (counter)"),
+        (lambda d: d["furniture"][2]["stand_poses"].append({"side": "up", "at": 0}), "mine.json: furniture.2.stand_poses.1"),
+        (lambda d: d["furniture"][2]["stand_poses"].append([-3.6, 3.65, 0.0]), "furniture.2.stand_poses.1 (cabinet_0): (-3.6, 3.65) is within 0.3 m of furniture.2 (cabinet_0)"),
         (lambda d: d["starts"].update(alice=[0.5, 0.0, 0.0]), "starts.alice: (0.5, 0.0) is within 0.3 m of walls.5"),
         (lambda d: d["bob"].update(table="table_9"), "bob.table: no furniture named 'table_9'"),
-        (lambda d: d["bob"].update(goal_area=[-3.33, 0.3, 0.44, 0.34]), "bob.goal_area: [-3.33, 0.3, 0.44, 0.34] does not lie on table_0"),
-        (lambda d: d["furniture"][3]["slots"].append([9.0, 9.0]), "furniture.3: Value error, slots.3: [9.0, 9.0] is not on top of table_1"),
-        (lambda d: d["furniture"].pop(1), "furniture: a layout needs at least one closed container"),
-        (lambda d: d["furniture"][3].update(name="counter"), "furniture.3.name: 'counter' is used twice"),
+        (lambda d: d["bob"].update(goal_area=[-3.3, 0.4, 0.5, 0.4]), "bob.goal_area: [-3.3, 0.4, 0.5, 0.4] does not lie on table_0"),
+        (lambda d: d["furniture"][8]["slots"].append([9.0, 9.0]), "furniture.8: Value error, slots.3: [9.0, 9.0] is not on top of table_1"),
+        (lambda d: d.update(furniture=[f for f in d["furniture"] if f["style"] not in ("drawer_unit", "chest")]), "furniture: a layout needs at least one closed container"),
+        (lambda d: d["furniture"][8].update(name="cabinet_0"), "furniture.8.name: 'cabinet_0' is used twice"),
         (lambda d: d["furniture"][1]["drawer"].update(axis=[0.7, 0.7]), "axis must be a unit vector along x or y"),
         (lambda d: d.pop("bob"), "mine.json: bob: Field required"),
     ],

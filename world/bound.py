@@ -25,6 +25,8 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from .robots import MAX_ARM_RANGE
+
 if TYPE_CHECKING:
     from .sim import Sim
 
@@ -56,8 +58,6 @@ def lower_bound(ep: SymbolicEpisode) -> int:
 
 def symbolic_episode(sim: Sim) -> SymbolicEpisode:
     """The relaxation of a freshly built episode, read from the simulator's ground truth."""
-    from .skills import MAX_ARM_RANGE
-
     bob = sim.bots.get("bob")
     base = bob.arm_base() if bob is not None else None
     objs = []

@@ -55,14 +55,30 @@ def no_path(name: str, index: int) -> str:
     return f"Navigation failed: there is no collision-free path to stand pose {index} of {name}."
 
 
-def reached(name: str, index: int, seen: list[str] | None, *, container: bool = False) -> str:
+def reached(name: str, index: int, seen: list[str] | None, *, container: bool = False, can_open: bool = True) -> str:
     """`seen` is None for a closed container (its inside cannot be seen)."""
     text = f"You reached stand pose {index} of {name}."
     if seen is None:
-        return text + f" {name} is closed: open it to see what is inside."
+        if can_open:
+            return text + f" {name} is closed: open it to see what is inside."
+        return text + f" {name} is closed: what is inside cannot be seen until it is opened."
     if container:
         return text + (f" In the open {name}: {', '.join(seen)}." if seen else f" The open {name} is empty.")
     return text + (f" On {name}: {', '.join(seen)}." if seen else f" There is nothing on {name}.")
+
+
+def off_target(name: str, index: int, distance: float, pose: tuple[float, float]) -> str:
+    return (
+        f"Navigation ended off target: your base stopped {distance:.2f} m from stand pose {index} of {name}, "
+        f"at x={pose[0]:.2f}, y={pose[1]:.2f}. Navigate to stand pose {index} of {name} again."
+    )
+
+
+def move_off_target(dx: float, dy: float, distance: float, moved: tuple[float, float]) -> str:
+    return (
+        f"Move ended off target: your base moved by dx={moved[0]:.2f} m, dy={moved[1]:.2f} m instead of "
+        f"dx={dx:.2f}, dy={dy:.2f}, stopping {distance:.2f} m from the goal."
+    )
 
 
 def move_too_long(distance: float, limit: float) -> str:
@@ -92,21 +108,28 @@ def hands_full_to_open(name: str, held: str) -> str:
     return f"Your gripper holds {held}; place it before opening {name}."
 
 
-def handle_out_of_reach(name: str, distance: float) -> str:
-    return (
-        f"The handle of {name} is out of your arm's reach: it is {distance:.2f} m from your arm base. "
-        f"Navigate to a stand pose of {name} first."
-    )
+def handle_out_of_reach(name: str, distance: float, *, mobile: bool = True) -> str:
+    text = f"The handle of {name} is out of your arm's reach: it is {distance:.2f} m from your arm base."
+    return text + (f" Navigate to a stand pose of {name} first." if mobile else "")
+
+
+def no_grip(name: str, distance: float) -> str:
+    return f"Your arm found no way to grip the handle of {name} from where your base stands ({distance:.2f} m from your arm base): it stays closed."
 
 
 def pull_failed(name: str) -> str:
     return f"Your arm could not follow the handle of {name}: it stays closed."
 
 
-def opened(name: str, inside: list[str]) -> str:
+def _at(pos: tuple[float, float, float]) -> str:
+    return f"({pos[0]:.2f}, {pos[1]:.2f}, {pos[2]:.2f})"
+
+
+def opened(name: str, inside: list[tuple[str, tuple[float, float, float]]]) -> str:
+    """`inside`: each object in the opened container and its position (m, to the cm)."""
     if not inside:
         return f"You opened {name}; it is empty."
-    return f"You opened {name}. Inside: {', '.join(inside)}."
+    return f"You opened {name}. Inside: {', '.join(f'{n} at {_at(pos)}' for n, pos in inside)}."
 
 
 # --------------------------------------------------------------------------- pick
@@ -124,14 +147,18 @@ def held_by_other(name: str, robot: str) -> str:
     return f"{name} is held by {robot}; you cannot pick it now."
 
 
-def in_closed_container(name: str, container: str) -> str:
-    return f"{name} is inside {container}, which is closed: open it first."
+def in_closed_container(name: str, container: str, *, can_open: bool = True) -> str:
+    return f"{name} is inside {container}, which is closed" + (": open it first." if can_open else ".")
 
 
-def too_far(name: str, distance: float, offset: tuple[float, float] | None) -> str:
+def too_far(name: str, distance: float, offset: tuple[float, float] | None = None, fix: tuple[float, float] | None = None) -> str:
+    """`offset`: the object from the base centre along world x and y (mobile manipulators);
+    `fix`: the solved corrective move (the solved_move aid)."""
     text = f"The end effector cannot reach {name}: it is {distance:.2f} m away from the closest pose your arm can get to."
     if offset is not None:
-        text += f" Moving your base by dx={offset[0]:.2f}, dy={offset[1]:.2f} would bring it within a good grasping distance."
+        text += f" {name} is at offset x={offset[0]:+.2f} m, y={offset[1]:+.2f} m from your base centre."
+    if fix is not None:
+        text += f" Moving your base by dx={fix[0]:.2f}, dy={fix[1]:.2f} would bring it within a good grasping distance."
     return text
 
 
@@ -170,15 +197,24 @@ def no_free_spot(name: str) -> str:
     return f"There is no free spot left on {name}."
 
 
-def place_out_of_reach(name: str, distance: float) -> str:
+def place_out_of_reach(name: str, distance: float, *, mobile: bool = True) -> str:
+    text = f"No free spot on {name} is within your arm's reach (the nearest is {distance:.2f} m from your arm base)."
+    if mobile:
+        return text + f" Navigate to a stand pose of {name} first."
+    return text + " Your arm is mounted where it stands: only places within its reach can take the object."
+
+
+def not_a_finisher(name: str, location: str, table: str, finisher: str) -> str:
     return (
-        f"No free spot on {name} is within your arm's reach (the nearest is {distance:.2f} m from your arm base). "
-        f"Navigate to a stand pose of {name} first."
+        f"Only {finisher.capitalize()} places objects on {location}: place {name} on {table} "
+        f"within {finisher.capitalize()}'s reach for {finisher.capitalize()} to finish the task."
     )
 
 
-def place_failed(name: str, location: str) -> str:
-    return f"{name} did not end up on {location}."
+def place_failed(name: str, location: str, rest: str | None, pos: tuple[float, float, float]) -> str:
+    """`rest`: what the released object came to rest on (None: the floor)."""
+    where = f"on {rest}" if rest is not None else "on the floor"
+    return f"{name} did not end up on {location}: it came to rest {where} at {_at(pos)}."
 
 
 def placed(name: str, location: str) -> str:

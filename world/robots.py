@@ -1,7 +1,7 @@
 """Robot kinds as data (skills, model, reach) and their kinematic PyBullet bodies.
 
 A new robot kind is a new `RobotKind` entry, not a new code path: the skills check
-`has_arm` / `mobile` and the capability set. Bases and arms are moved by setting poses and
+`has_arm` / `mobile` / `finishes_task` and the capability set. Bases and arms are moved by setting poses and
 joint states; an object held by suction follows the tool tip (a kinematic attachment, so
 every run of the same actions ends in the same state).
 """
@@ -31,6 +31,7 @@ class RobotKind:
     has_arm: bool
     reach: float | None = None  # conservative horizontal reach of the arm (m): picks within it usually succeed
     footprint: float = 0.0  # radius the occupancy grid is inflated by
+    finishes_task: bool = False  # may place on the task's goal fixtures (the paper: only Bob finishes the task)
 
 
 KINDS: dict[str, RobotKind] = {
@@ -43,7 +44,7 @@ KINDS: dict[str, RobotKind] = {
         ),
         RobotKind(
             "tabletop_arm", "tabletop manipulator", ("pick", "place", "communicate", "wait"),
-            "Franka Panda arm fixed on table_0, with a suction cup", mobile=False, has_arm=True, reach=0.62,
+            "Franka Panda arm fixed on table_0, with a suction cup", mobile=False, has_arm=True, reach=0.62, finishes_task=True,
         ),
         RobotKind(
             "mobile_base", "mobile robot", ("navigate", "communicate", "wait"),
@@ -57,6 +58,7 @@ ROBOTS = tuple(TEAM)  # the fixed execution order
 
 CHASSIS = (0.6, 0.5, 0.65)  # Alice's chassis: length, width, height (the arm mounts on top)
 ARM_FORWARD = 0.2  # arm base ahead of the chassis centre
+MAX_ARM_RANGE = 0.9  # no top-down pose of a Panda exists beyond this horizontal distance from its arm base
 CHASSIS_COLOR = (0.55, 0.25, 0.6, 1.0)
 PANDA = "franka_panda/panda.urdf"
 

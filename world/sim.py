@@ -3,12 +3,18 @@
 Robots move kinematically (bases set along A* paths, arms set along OMPL plans); a held
 object follows the suction cup. Every skill returns a `SkillOutcome` whose feedback sentence
 comes from what the planners and checks measured.
+
+Skills act on the real world; what a robot observes is its own memory (world/beliefs.py):
+objects where it last saw them or was told they are, containers open or closed as it last saw
+them. Furniture itself (names, poses, stand and place poses) is known to every robot.
 """
 
 from __future__ import annotations
 
 import math
 import re
+import zlib
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,6 +46,8 @@ from . import assets, skills
 from . import feedback as fb
 from .arm import ArmPlanner
 from .assets import AssetDir
+from .beliefs import Beliefs
+from .bound import lower_bound, symbolic_episode
 from .robots import KINDS, ROBOTS, TEAM, RobotBody, spawn
 from .scene import Fixture, Layout, build_scene, get_layout
 from .tasks import ObjectKind, Seen, TaskResult, get_task
@@ -85,7 +93,8 @@ class Sim:
     ) -> None:
         check_episode(task=task, scene=scene, n_objects=n_objects)
         self.aids: frozenset[str] = frozenset(parse_aids(aids))
-        self.rng = np.random.default_rng([seed, 0x4D485243])  # motion noise; apart from the generator's stream
+        # motion noise: its own stream, apart from the generator's, and different for every episode of a seed
+        self.rng = np.random.default_rng([seed, zlib.crc32(f"{task}/{scene}/{n_objects}".encode()), 0x4D485243])
         if not {"alice", "bob"} <= set(robots) or not set(robots) <= set(ROBOTS):
             raise ValueError(f"robots must include alice and bob and come from {', '.join(ROBOTS)}, not {robots}")
         self.robots: tuple[str, ...] = tuple(r for r in ROBOTS if r in robots)
@@ -123,7 +132,10 @@ class Sim:
         self.objects: dict[str, ObjectState] = {}
         self.targets: list[str] = []
         self.goals: dict[str, str] = {}  # target -> the fixture it must end on
-        self.known: dict[str, set[str]] = {r: set() for r in self.robots}
+        self.known: dict[str, set[str]] = {r: set() for r in self.robots}  # the objects in each robot's scene graph
+        # what each robot believes of them and of the containers; a fixed arm stands at its table for good
+        self.beliefs: dict[str, Beliefs] = {r: Beliefs(at=None if KINDS[TEAM[r]].mobile else lay.bob_table) for r in self.robots}
+        self._stamp = 0  # the moments robots look at things, in order (see beliefs.py)
         for pl in self.task.generate(lay, self.seed, self.n_objects):
             k = pl.kind
             path = assets.write_object(self.assets, k.name, k.shape, k.color)
@@ -241,26 +253,55 @@ class Sim:
     def grasp(self, r: RobotBody, obj: ObjectState) -> None:
         r.attach(obj.name, obj.body)
         obj.held_by, obj.on, obj.inside, obj.local = r.name, None, False, None
+        if r.name in self.beliefs:  # a robot knows what it holds
+            self.beliefs[r.name].note(self._object_view(obj), self._next_stamp())
+            self.known[r.name].add(obj.name)
 
-    def release(self, r: RobotBody, obj: ObjectState, spot: tuple[float, float, float], yaw: float) -> None:
-        """Let go of `obj`, upright at `spot` (x, y, surface z), turned to `yaw`."""
+    def release(
+        self, r: RobotBody, obj: ObjectState, spot: tuple[float, float, float], yaw: float, location: str | None = None, error: tuple[float, float] = (0.0, 0.0)
+    ) -> None:
+        """Let go of `obj` over `spot` (x, y, surface z), turned to `yaw`, placing it on `location`.
+
+        With the exact_motion aid it is set down upright on the spot. Otherwise it falls from
+        where the tool holds it, shifted by the release `error` (x, y; kept over the furniture
+        that bears `location`, so it never drops off the edge), and settles under gravity
+        (`skills.settle`): it may tip off a stack, catch a rim or slide off a panel."""
         r.release()
         obj.held_by = None
-        self._rest(obj, spot[0], spot[1], spot[2], yaw)
+        if "exact_motion" in self.aids:
+            self._rest(obj, spot[0], spot[1], spot[2], yaw)
+            return
+        x, y, z = self.position(obj)
+        x, y = x + error[0], y + error[1]
+        bearer = self.layout.get(self.layout.bob_table if location in self.fixtures else location or "")
+        if bearer is not None:
+            hx, hy = skills.half_extent(obj.kind, yaw, gap=0.0)
+            (cx, cy), (sx, sy) = bearer.center, bearer.size[:2]
+            x = min(max(x, cx - sx / 2 + hx), cx + sx / 2 - hx)
+            y = min(max(y, cy - sy / 2 + hy), cy + sy / 2 - hy)
+        orn = p.getQuaternionFromEuler((0, 0, yaw))
+        p.resetBasePositionAndOrientation(obj.body, (x, y, max(z, spot[2] + obj.kind.height / 2)), orn, physicsClientId=self.cid)
+        skills.settle(self, obj)
 
     def settled_at(self, obj: ObjectState, location: str) -> bool:
-        """Read where the released object is and record what it lies on; True if that is `location`."""
-        x, y, z = self.position(obj)
+        """Read where the released object really lies and record it; True if that is `location`.
+
+        On a fixture: its centre over the fixture and its lowest point on the fixture's surface
+        (on the top of the stack, for a stacking fixture), tilted or not. Otherwise on the furniture
+        its centre is over, if it rests on that furniture or on something lying there (Bob's
+        table, for anything that missed a fixture on it); on nothing (the floor) else."""
+        x, y, _ = self.position(obj)
         lay = self.layout
-        bottom = z - obj.kind.height / 2
+        (_, _, bottom), _ = p.getAABB(obj.body, physicsClientId=self.cid)
         obj.on, obj.inside = None, False
         fx = self.fixture_at(x, y)
-        if fx is not None and abs(bottom - self.fixture_top(fx.name, without=obj)) < 0.01:
+        if fx is not None and abs(bottom - skills.surface_top(self, fx.name, without=obj)) < 0.008:
             obj.on = fx.name
         else:
             for f in lay.furniture:
-                if f.place_pose is not None and f.contains_xy(x, y) and abs(bottom - f.top) < 0.01:
+                if f.place_pose is not None and f.contains_xy(x, y) and bottom > f.top - 0.01:
                     obj.on = f.name
+                    break
         return obj.on == location
 
     def within_handover(self, spot: tuple[float, ...]) -> bool:
@@ -278,35 +319,71 @@ class Sim:
         return sorted(o.name for o in self.objects.values() if o.on in where and o.held_by is None)
 
     # ------------------------------------------------------------------ knowledge
+    # Each robot's scene graph is its own memory: `known[robot]` names the objects in it and
+    # `beliefs[robot]` holds what the robot last saw or was told of each, and of every
+    # container's open state. They change only when the robot looks (`look_at`: on arriving at
+    # or opening furniture; then on every refresh, the furniture it stands at, for Bob his table
+    # and its fixtures), holds or lets go of something, or is told (`tell`).
     def known_objects(self, robot: str) -> set[str]:
-        """The objects in `robot`'s scene graph."""
-        if robot == "bob":  # Bob sees his own table, fixtures included, and remembers what he saw there
-            self.known[robot].update(o.name for o in self.objects.values() if self.on_bob_table(o.on))
-        known = set(self.known.get(robot, ()))
-        for o in self.objects.values():
-            if o.held_by == robot:
-                known.add(o.name)
-        return known
+        """The objects in `robot`'s scene graph, once it has looked at what it stands at."""
+        if robot not in self.beliefs:
+            return set()
+        self._refresh(robot)
+        return set(self.known[robot])
 
     _known = known_objects
 
-    def learn(self, robot: str, names: list[str]) -> None:
-        self.known[robot].update(names)
+    def _next_stamp(self) -> int:
+        self._stamp += 1
+        return self._stamp
+
+    def learn(self, robot: str, names: Iterable[str]) -> None:
+        """`robot` learns of `names` as they are now (a stand-in for a report, for tests and scripts)."""
+        stamp = self._next_stamp()
+        for name in names:
+            self.known[robot].add(name)
+            self.beliefs[robot].note(self._object_view(self.objects[name]), stamp)
 
     def look_at(self, robot: str, furniture: str) -> None:
         """`robot` now stands at `furniture` and sees it: whether it is open, and what lies on it
-        (or, open, in it). Skills call this when a robot arrives at furniture or opens it."""
-        if self.layout.get(furniture) is not None and (self.layout.get(furniture).container is None or self.is_open(furniture)):  # type: ignore[union-attr]
-            self.learn(robot, self.objects_on(furniture))
+        (or, open, in it). Skills call this when a robot arrives at furniture or opens it; the
+        robot keeps seeing it until it looks at other furniture."""
+        if robot in self.beliefs and self.layout.get(furniture) is not None:
+            self.beliefs[robot].at = furniture
+            self._see(robot, furniture)
+
+    def _see(self, robot: str, furniture: str) -> None:
+        f = self.layout.get(furniture)
+        assert f is not None
+        is_open = self.is_open(furniture) if f.container is not None else None
+        places = {furniture, *self.fixtures} if furniture == self.layout.bob_table else {furniture}
+        visible = [] if is_open is False else [self._object_view(self.objects[n]) for n in self.objects_on(furniture)]
+        self.beliefs[robot].see(furniture, places, is_open, visible, self._next_stamp())
+        self.known[robot].update(v.name for v in visible)
+
+    def _refresh(self, robot: str) -> None:
+        """What `robot` sees without acting: the furniture it stands at, what it holds and what it
+        has just let go of. A name put in `known` directly (tests, the team plan) is believed as
+        it is now."""
+        b = self.beliefs[robot]
+        if b.at is not None:
+            self._see(robot, b.at)
+        stamp = self._next_stamp()
+        for o in self.objects.values():
+            mine = b.objects.get(o.name)
+            if o.held_by == robot or (mine is None and o.name in self.known[robot]) or (mine is not None and mine.view.held_by == robot):
+                b.note(self._object_view(o), stamp)
+                self.known[robot].add(o.name)
 
     def tell(self, receiver: str, sender: str, text: str) -> None:
-        """A message was delivered: objects it names that the sender knows become known to the receiver."""
-        if receiver not in self.known or sender not in self.bots:
+        """A message was delivered: objects it names that the sender knows become known to the
+        receiver as the sender believes them (unless the receiver knows something newer)."""
+        if receiver not in self.beliefs or sender not in self.beliefs:
             return
         words = " ".join(re.findall(r"[a-z0-9]+", text.lower().replace("_", " ")))
-        for name in self.known_objects(sender):
-            if re.search(rf"\b{re.escape(name.replace('_', ' '))}\b", words):
-                self.known[receiver].add(name)
+        named = [n for n in sorted(self.known_objects(sender)) if re.search(rf"\b{re.escape(n.replace('_', ' '))}\b", words)]
+        self.known[receiver].update(named)
+        self.beliefs[receiver].told(sender, self.beliefs[sender], named)
 
     # ------------------------------------------------------------------ public API
     def capabilities(self, robot: str) -> frozenset[str]:
@@ -350,7 +427,8 @@ class Sim:
         x, y, z = self.position(o)
         return ObjectView(name=o.name, position=(round(x, 3), round(y, 3), round(z, 3)), on=o.on, inside=o.inside, held_by=o.held_by)
 
-    def _furniture_views(self) -> list[FurnitureView]:
+    def _furniture_views(self, robot: str | None = None) -> list[FurnitureView]:
+        """Every piece of furniture and fixture; open states live, or as `robot` believes them."""
         out = []
         for f in self.layout.furniture:
             out.append(
@@ -360,7 +438,7 @@ class Sim:
                     position=(f.center[0], f.center[1], f.top),
                     yaw=round(f.yaw, 4),
                     openable=f.container is not None,
-                    is_open=self.is_open(f.name) if f.container is not None else None,
+                    is_open=None if f.container is None else self.is_open(f.name) if robot is None else self.beliefs[robot].is_open(f.name),
                     stand_poses=[Pose2D(x=x, y=y, yaw=round(yaw, 4)) for x, y, yaw in f.stand_poses],
                     place_pose=(f.place_pose[0], f.place_pose[1], f.top) if f.place_pose else None,
                 )
@@ -390,16 +468,18 @@ class Sim:
             raise ValueError(f"there is no robot {robot!r} in this episode ({', '.join(self.robots)})")
         known = self.known_objects(robot)
         is_bob = robot == "bob"
+        live = "live_state" in self.aids  # the aid: known objects and containers as they are now
+        beliefs = self.beliefs[robot].objects
         return Observation(
             robot=robot,
             tick=tick,
             status=self._status(robot),
-            furniture=self._furniture_views(),
-            objects=[self._object_view(o) for o in self.objects.values() if o.name in known],
+            furniture=self._furniture_views(None if live else robot),
+            objects=[self._object_view(o) if live else beliefs[o.name].view for o in self.objects.values() if o.name in known],
             task_brief=self.task.brief,
-            task_detail=self.task.detail(robot, self.targets, self.goals),
+            task_detail=self.task.detail(robot, self.targets, self.goals, self.aids),
             targets=list(self.targets) if is_bob else [],
-            goals=dict(self.goals) if is_bob else {},
+            goals=dict(self.goals) if is_bob and "goal_map" in self.aids else {},
             ordered=self.task.ordered,
             task_status=self.task_status() if is_bob else None,
             teammates={o: list(self.bots[o].kind.skills) for o in self.robots if o != robot},
@@ -407,8 +487,6 @@ class Sim:
 
     def lower_bound(self) -> int:
         """A lower bound on the temporal steps any team needs for this episode (see bound.py)."""
-        from .bound import lower_bound, symbolic_episode
-
         return lower_bound(symbolic_episode(self))
 
     def seen(self) -> list[Seen]:
@@ -419,7 +497,7 @@ class Sim:
         return self.task.evaluate(self.targets, self.seen())
 
     def task_status(self) -> str:
-        return self.task.status(self.targets, self.seen())
+        return self.task.status(self.targets, self.seen(), self.aids)
 
     def views(self) -> tuple[list[FurnitureView], list[ObjectView]]:
         """Full ground truth, for observers."""

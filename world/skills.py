@@ -4,6 +4,12 @@ Each takes the simulator, the acting robot and the action, runs the real planner
 bases; IK and OMPL BIT* for arms), executes the result kinematically and returns a
 `SkillOutcome` whose sentence comes from `feedback`. Bad arguments are failures, never
 exceptions.
+
+At the paper's fidelity motion is not exact: a base stops where seeded noise (sim.rng) puts
+it, off target now and then, and a released object falls and settles under PyBullet physics,
+so navigation can end off target and a placed object can miss its goal, as in Table III. The
+exact_motion aid turns both off. Only a robot kind that finishes the task (Bob) places on the
+task's goal fixtures.
 """
 
 from __future__ import annotations
@@ -13,13 +19,14 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+import pybullet as p
 
 from mhrc.protocol import Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
 
 from . import feedback as fb
 from .arm import HOME, LOWER, UPPER, ArmPlanner, straight
 from .astar import astar, line_free, path_length
-from .robots import ARM_FORWARD, CHASSIS, RobotBody
+from .robots import ARM_FORWARD, CHASSIS, MAX_ARM_RANGE, RobotBody
 
 if TYPE_CHECKING:
     from .layouts import FurnitureSpec
@@ -31,7 +38,6 @@ JOINT_SPEED = 1.0  # rad/s: simulated time of arm motions
 SUCTION_TIME = 1.0  # s to grip or release
 MAX_MOVE = 1.0  # m, the longest `move`
 APPROACH = 0.12  # pre-grasp height above the grasp point
-MAX_ARM_RANGE = 0.9  # no top-down pose exists beyond this horizontal distance from the arm base
 IDEAL_PICK = (0.3, 0.58)  # horizontal arm-base-to-object distances a corrective move aims for
 PULL_STEPS = 16  # IK waypoints along a drawer's travel or a lid's swing
 LID_CLEARANCE = 0.04  # the tool holds a lid's handle this far above its (tilting) top
@@ -39,12 +45,52 @@ LID_GRASP_TRIES = 12  # grasp configurations tried for a lid before giving up
 SPOT_GAP = 0.02  # clearance between placed objects' footprints
 HANDOVER_CLEARANCE = 0.2  # m between a handed-over object and the hand of the robot that put it there
 TIP_CLEARANCE = 0.015  # the closed fingertips reach this far below the suction point
+# motion noise (off with the exact_motion aid), drawn from sim.rng: where a base stops is its goal
+# plus an error of Rayleigh-distributed length (most stops within a few cm) or, now and then, a slip
+NAV_SIGMA = 0.015  # m: the Rayleigh scale of an ordinary stop's error (mean 1.9 cm; over 5 cm 0.4%)
+NAV_SLIP_P = 0.03  # the chance that a base slips
+NAV_SLIP = (0.11, 0.3)  # m: how far a slip takes it from its goal (then pulled back onto free floor)
+OFF_TARGET = 0.1  # m: navigate and move fail when the base stops farther than this from the goal
+# a released object falls under gravity from where the tool lets go of it, that point off by a small
+# error (Rayleigh-distributed length again) or, now and then, by a slip of the object off the suction cup
+RELEASE_SIGMA = 0.003  # m: the Rayleigh scale of an ordinary release's error
+RELEASE_SLIP_P = 0.1  # the chance that the object slips as it is let go
+RELEASE_SLIP = (0.02, 0.04)  # m: how far a slip shifts it (a solid never reaches the next colour panel)
+SETTLE_STEPS = 480  # at most 2 s of PyBullet time (240 Hz) for a released object to come to rest
+SETTLE_STILL = 12  # steps in a row nearly still that count as at rest
+GRAVITY = 9.81
+ROLLING_FRICTION = 0.005  # m: what stops a tipped disc or a ball rolling (PyBullet's default is none)
 
 
 # --------------------------------------------------------------------------- bases
 
 
+def base_error(sim: Sim) -> tuple[float, float]:
+    """Where a base stops relative to its goal: one draw from sim.rng per navigate or move
+    (none with the exact_motion aid, which stops bases exactly)."""
+    if "exact_motion" in sim.aids:
+        return 0.0, 0.0
+    slip, size, heading = sim.rng.random(3)
+    if slip < NAV_SLIP_P:
+        dist = NAV_SLIP[0] + (NAV_SLIP[1] - NAV_SLIP[0]) * size
+    else:
+        dist = NAV_SIGMA * math.sqrt(-2.0 * math.log1p(-size))
+    return dist * math.cos(2 * math.pi * heading), dist * math.sin(2 * math.pi * heading)
+
+
+def stop_near(sim: Sim, goal: tuple[float, float], error: tuple[float, float]) -> tuple[float, float]:
+    """The base's real stop: `goal` plus `error`, drawn back toward the goal until the stop is on
+    free floor and reachable from the goal in a straight line (never inside furniture)."""
+    for k in range(20):
+        s = 1.0 - k / 20
+        x, y = goal[0] + s * error[0], goal[1] + s * error[1]
+        if sim.grid.free(x, y) and line_free(sim.grid, goal, (x, y)):
+            return x, y
+    return goal
+
+
 def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
+    error = base_error(sim)
     f = sim.layout.get(a.target)
     if f is None:
         if a.target in sim.fixtures:
@@ -52,8 +98,10 @@ def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
         known = sim.known_objects(r.name)
         if a.target in known:
             on = sim.objects[a.target].on
-            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, sim.layout.bob_table if sim.on_bob_table(on) else on))
-        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, sim.furniture_names()))
+            where = sim.layout.get(sim.layout.bob_table if sim.on_bob_table(on) else on or "")
+            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, where.name if where is not None and where.stand_poses else None))
+        navigable = [g.name for g in sim.layout.furniture if g.stand_poses]
+        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, navigable))
     if not f.stand_poses:
         return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(f.name, None))
     if a.stand_pose >= len(f.stand_poses):
@@ -69,11 +117,19 @@ def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
         return SkillOutcome.fail(OutcomeCode.NO_PATH, fb.no_path(f.name, a.stand_pose))
     for x, y in path[1:-1]:  # kinematic: the base visits the waypoints, heading along the path
         r.set_base((x, y, r.base[2]))
-    r.set_base(goal)
-    length = path_length(path)
-    sim.look_at(r.name, f.name)
+    sx, sy = stop_near(sim, (goal[0], goal[1]), error)
+    r.set_base((sx, sy, goal[2]))
+    off = math.hypot(sx - goal[0], sy - goal[1])
+    length = path_length(path) + off
+    sim.look_at(r.name, f.name)  # on target or not, the robot stands by f and sees it
+    if off > OFF_TARGET:
+        return SkillOutcome.fail(
+            OutcomeCode.OFF_TARGET, fb.off_target(f.name, a.stand_pose, off, (sx, sy)),
+            sim_time=length / NAV_SPEED, distance=round(off, 3), x=round(sx, 3), y=round(sy, 3), path_length=round(length, 3),
+        )  # fmt: skip
     seen = None if f.container is not None and not sim.is_open(f.name) else sim.objects_on(f.name)
-    return SkillOutcome.ok(fb.reached(f.name, a.stand_pose, seen, container=f.container is not None), sim_time=length / NAV_SPEED, path_length=round(length, 3))
+    text = fb.reached(f.name, a.stand_pose, seen, container=f.container is not None, can_open="open" in r.kind.skills)
+    return SkillOutcome.ok(text, sim_time=length / NAV_SPEED, path_length=round(length, 3), distance=round(off, 3))
 
 
 def _move_blocked(sim: Sim, x: float, y: float, dx: float, dy: float) -> bool:
@@ -82,6 +138,7 @@ def _move_blocked(sim: Sim, x: float, y: float, dx: float, dy: float) -> bool:
 
 def move(sim: Sim, r: RobotBody, a: Move) -> SkillOutcome:
     assert r.base is not None
+    error = base_error(sim)
     d = math.hypot(a.dx, a.dy)
     if d > MAX_MOVE + 1e-9:
         return SkillOutcome.fail(OutcomeCode.GOAL_INVALID, fb.move_too_long(d, MAX_MOVE))
@@ -90,8 +147,14 @@ def move(sim: Sim, r: RobotBody, a: Move) -> SkillOutcome:
         return SkillOutcome.fail(OutcomeCode.START_INVALID, fb.start_invalid())
     if _move_blocked(sim, x, y, a.dx, a.dy):
         return SkillOutcome.fail(OutcomeCode.GOAL_INVALID, fb.move_blocked(a.dx, a.dy))
-    r.set_base((x + a.dx, y + a.dy, yaw))
-    return SkillOutcome.ok(fb.moved(a.dx, a.dy), sim_time=d / NAV_SPEED, distance=round(d, 3))
+    sx, sy = stop_near(sim, (x + a.dx, y + a.dy), error)
+    r.set_base((sx, sy, yaw))
+    off = math.hypot(sx - x - a.dx, sy - y - a.dy)
+    moved = (sx - x, sy - y)
+    t = (d + off) / NAV_SPEED
+    if off > OFF_TARGET:
+        return SkillOutcome.fail(OutcomeCode.OFF_TARGET, fb.move_off_target(a.dx, a.dy, off, moved), sim_time=t, distance=round(off, 3), dx=round(moved[0], 3), dy=round(moved[1], 3))
+    return SkillOutcome.ok(fb.moved(*moved), sim_time=t, distance=round(math.hypot(*moved), 3), dx=round(moved[0], 3), dy=round(moved[1], 3))
 
 
 # --------------------------------------------------------------------------- arms: shared
@@ -221,13 +284,19 @@ def corrective_move(sim: Sim, r: RobotBody, point: tuple[float, float, float]) -
 
 
 def _too_far(sim: Sim, r: RobotBody, point: tuple[float, float, float], name: str, distance: float) -> SkillOutcome:
-    ab = r.arm_base()
-    assert ab is not None
-    details: dict[str, float | str] = {"distance": round(distance, 3), "horizontal_distance": round(horizontal(ab, point), 3)}
-    fix = corrective_move(sim, r, point) if r.kind.mobile else None
+    """The paper's too-far pick: the end effector's distance and, for a mobile manipulator, the
+    object's offsets from the base centre along x and y; the solved move only with its aid."""
+    distance = round(distance, 2)  # centimetres, in the sentence and the details alike
+    details: dict[str, float | str] = {"distance": distance}
+    offset = fix = None
+    if r.kind.mobile and r.base is not None:
+        offset = (round(point[0] - r.base[0], 2), round(point[1] - r.base[1], 2))
+        details.update(offset_x=offset[0], offset_y=offset[1])
+        if "solved_move" in sim.aids:
+            fix = corrective_move(sim, r, point)
     if fix is not None:
         details.update(dx=round(fix[0], 3), dy=round(fix[1], 3))
-    return SkillOutcome(succeeded=False, code=OutcomeCode.TOO_FAR, feedback=fb.too_far(name, distance, fix), details=details)
+    return SkillOutcome(succeeded=False, code=OutcomeCode.TOO_FAR, feedback=fb.too_far(name, distance, offset, fix), details=details)
 
 
 # --------------------------------------------------------------------------- open
@@ -256,7 +325,7 @@ def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
         return reach.failure
     if reach.path is None or reach.descent is None:
         return SkillOutcome.fail(
-            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle)),
+            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills),
             distance=round(reach.distance, 3), horizontal_distance=round(horizontal(ab, handle), 3),
         )  # fmt: skip
     q0 = r.q.copy()
@@ -289,7 +358,7 @@ def _opened(sim: Sim, r: RobotBody, f: FurnitureSpec, pl: ArmPlanner, yaw: float
         t += r.run(straight(r.q, lift, 5), JOINT_SPEED)
     t += retract(sim, r)
     sim.look_at(r.name, f.name)
-    inside = sim.objects_on(f.name)
+    inside = [(n, sim.position(sim.objects[n])) for n in sim.objects_on(f.name)]
     return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(travel, 3))
 
 
@@ -322,7 +391,10 @@ def _open_lid(sim: Sim, r: RobotBody, f: FurnitureSpec) -> SkillOutcome:
     handle = (hx, hy, hz + LID_CLEARANCE)
     above = (hx, hy, handle[2] + APPROACH)
     if horizontal(ab, handle) > MAX_ARM_RANGE:
-        return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle)), horizontal_distance=round(horizontal(ab, handle), 3))
+        return SkillOutcome.fail(
+            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills),
+            horizontal_distance=round(horizontal(ab, handle), 3),
+        )  # fmt: skip
     values = np.linspace(0.0, f.lid.angle, PULL_STEPS + 1)
     followed, grasped = 0, False
     for k in range(LID_GRASP_TRIES):
@@ -349,8 +421,8 @@ def _open_lid(sim: Sim, r: RobotBody, f: FurnitureSpec) -> SkillOutcome:
             sim.set_container(f.name, float(v))
             t += r.run([r.q, q], JOINT_SPEED)
         return _opened(sim, r, f, pl, yaw, t, f.lid.angle)
-    if not grasped:
-        return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle)), horizontal_distance=round(horizontal(ab, handle), 3))
+    if not grasped:  # within range, yet no arm configuration grips the handle from this base pose
+        return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.no_grip(f.name, horizontal(ab, handle)), horizontal_distance=round(horizontal(ab, handle), 3))
     return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), pulled=round(followed * f.lid.angle / PULL_STEPS, 3))
 
 
@@ -367,7 +439,7 @@ def pick(sim: Sim, r: RobotBody, a: Pick) -> SkillOutcome:
     if obj.held_by is not None:
         return SkillOutcome.fail(OutcomeCode.OBJECT_UNKNOWN, fb.held_by_other(obj.name, obj.held_by))
     if obj.inside and obj.on is not None and not sim.is_open(obj.on):
-        return SkillOutcome.fail(OutcomeCode.NOT_REACHABLE_CONTAINER, fb.in_closed_container(obj.name, obj.on))
+        return SkillOutcome.fail(OutcomeCode.NOT_REACHABLE_CONTAINER, fb.in_closed_container(obj.name, obj.on, can_open="open" in r.kind.skills))
     x, y, z = sim.position(obj)
     top = (x, y, z + obj.kind.height / 2 + TIP_CLEARANCE)
     reach = reach_point(sim, r, top, obj.name)
@@ -392,12 +464,25 @@ def half_extent(kind: ObjectKind, yaw: float, gap: float = SPOT_GAP) -> tuple[fl
     return (c * fx + s * fy) / 2 + gap / 2, (s * fx + c * fy) / 2 + gap / 2
 
 
+def surface_top(sim: Sim, fixture: str, without: ObjectState | None = None) -> float:
+    """Where the next object set on `fixture` comes to rest: its surface, or for a stacking
+    fixture the highest top of what lies on it (measured, so a slice lying askew counts as it lies)."""
+    fx = sim.fixtures[fixture]
+    top = sim.table_top() + fx.thickness
+    if not fx.stack:
+        return top
+    if "exact_motion" in sim.aids:  # objects lie exactly as set down: the stack is the sum of their heights
+        return sim.fixture_top(fixture, without=without)
+    tops = [p.getAABB(o.body, physicsClientId=sim.cid)[1][2] for o in sim.objects.values() if o.on == fixture and o.held_by is None and o is not without]
+    return max([top, *tops])
+
+
 def free_spots(sim: Sim, location: str, held: ObjectState) -> tuple[list[tuple[float, float, float]], float] | None:
     """Spots (x, y, yaw) at `location` where `held` fits without touching anything, best first, and the surface z."""
     lay = sim.layout
     fx = sim.fixtures.get(location)
     if fx is not None and fx.stack:  # a stack grows at the fixture's centre
-        return [(fx.center[0], fx.center[1], 0.0)], sim.fixture_top(fx.name, without=held)
+        return [(fx.center[0], fx.center[1], 0.0)], surface_top(sim, fx.name, without=held)
     if fx is not None:
         (cx, cy), (sx, sy) = fx.center, fx.size
         inset = 0.015 if fx.rim else 0.0
@@ -464,21 +549,90 @@ def tool_yaw_for(r: RobotBody, object_yaw: float) -> float:
     return min((base + k * math.pi for k in (-2, -1, 0, 1, 2)), key=lambda y: abs(_wrap(y - r.arm_yaw())))
 
 
+def release_error(sim: Sim) -> tuple[float, float]:
+    """How far (x, y) from where the tool lets go a released object starts to fall: one draw
+    from sim.rng per release (none with the exact_motion aid, which sets objects down exactly)."""
+    if "exact_motion" in sim.aids:
+        return 0.0, 0.0
+    slip, size, heading = sim.rng.random(3)
+    if slip < RELEASE_SLIP_P:
+        dist = RELEASE_SLIP[0] + (RELEASE_SLIP[1] - RELEASE_SLIP[0]) * size
+    else:
+        dist = RELEASE_SIGMA * math.sqrt(-2.0 * math.log1p(-size))
+    return dist * math.cos(2 * math.pi * heading), dist * math.sin(2 * math.pi * heading)
+
+
+def settle(sim: Sim, obj: ObjectState) -> int:
+    """Let a just released object come to rest under gravity (PyBullet physics, at most
+    SETTLE_STEPS steps); the simulation steps it alone. Every other object is static while it
+    does (mass 0), only it feels gravity (so no arm sags and no lid falls), and whatever it
+    nudged (arms, containers, a wheeled base) is set back afterwards. Returns the steps taken."""
+    cid = sim.cid
+    others = [o for o in sim.objects.values() if o is not obj]
+    masses = [p.getDynamicsInfo(o.body, -1, physicsClientId=cid)[0] for o in others]
+    for o in others:
+        p.changeDynamics(o.body, -1, mass=0.0, physicsClientId=cid)
+    mass = p.getDynamicsInfo(obj.body, -1, physicsClientId=cid)[0]
+    # what tips over slides and rolls a little, not across the table (Bullet multiplies the two
+    # bodies' friction coefficients: 1.0 against the furniture's default 0.5 makes 0.5)
+    p.changeDynamics(
+        obj.body, -1, lateralFriction=1.0, rollingFriction=ROLLING_FRICTION, spinningFriction=ROLLING_FRICTION, physicsClientId=cid
+    )  # fmt: skip
+    p.resetBaseVelocity(obj.body, (0, 0, 0), (0, 0, 0), physicsClientId=cid)
+    still, steps = 0, 0
+    while steps < SETTLE_STEPS and still < SETTLE_STILL:
+        pos, _ = p.getBasePositionAndOrientation(obj.body, physicsClientId=cid)
+        p.applyExternalForce(obj.body, -1, (0.0, 0.0, -GRAVITY * mass), pos, p.WORLD_FRAME, physicsClientId=cid)
+        p.stepSimulation(physicsClientId=cid)
+        steps += 1
+        v, w = p.getBaseVelocity(obj.body, physicsClientId=cid)
+        still = still + 1 if steps > 10 and math.hypot(*v) < 2e-3 and math.hypot(*w) < 2e-2 else 0
+    p.resetBaseVelocity(obj.body, (0, 0, 0), (0, 0, 0), physicsClientId=cid)
+    for o, m in zip(others, masses):
+        p.changeDynamics(o.body, -1, mass=m, physicsClientId=cid)
+        p.resetBaseVelocity(o.body, (0, 0, 0), (0, 0, 0), physicsClientId=cid)
+    for bot in sim.bots.values():
+        if bot.kind.has_arm:
+            bot.set_arm(bot.q)
+        elif bot.base is not None:
+            bot.set_base(bot.base)
+            p.resetBaseVelocity(bot.body, (0, 0, 0), (0, 0, 0), physicsClientId=cid)
+    for name, value in sim.opening.items():
+        p.resetJointState(sim.scene.bodies[name], sim.scene.joints[name], value, physicsClientId=cid)
+    return steps
+
+
+def _handover_margin(sim: Sim, spot: tuple[float, ...]) -> float:
+    """How far `spot` lies inside the band on Bob's table from which he picks (sim.within_handover)."""
+    bob = next((b for b in sim.bots.values() if b.kind.finishes_task), None)
+    ab = bob.arm_base() if bob is not None else None
+    if bob is None or ab is None or bob.kind.reach is None:
+        return math.inf
+    d = horizontal(spot, ab)
+    return min(d - 0.3, bob.kind.reach - 0.03 - d)
+
+
 def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
     if r.holding is None:
         return SkillOutcome.fail(OutcomeCode.GRIPPER_EMPTY, fb.gripper_empty(a.obj))
     if a.obj != r.holding:
         return SkillOutcome.fail(OutcomeCode.WRONG_OBJECT, fb.wrong_object(r.holding, a.obj))
     held = sim.objects[r.holding]
+    if a.location in sim.fixtures and not r.kind.finishes_task:  # the paper: only Bob finishes the task
+        finisher = next((b.name for b in sim.bots.values() if b.kind.finishes_task), "bob")
+        return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, fb.not_a_finisher(held.name, a.location, sim.layout.bob_table, finisher))
+    places = [n for n in sim.place_names() if r.kind.finishes_task or n not in sim.fixtures]
     f = sim.layout.get(a.location)
     if f is not None and f.place_pose is None:
-        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.not_a_surface(f.name, sim.place_names()))
+        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.not_a_surface(f.name, places))
     spots = free_spots(sim, a.location, held)
     if spots is None:
-        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.location_unknown(a.location, sim.place_names()))
+        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.location_unknown(a.location, places))
     cands, top = spots
     if a.location == sim.layout.bob_table:
         cands = [c for c in cands if sim.within_handover(c)] or cands
+        if "exact_motion" not in sim.aids and not r.kind.finishes_task:  # a slip as it is let go must not carry it out of the finisher's reach
+            cands = [c for c in cands if _handover_margin(sim, c) >= RELEASE_SLIP[1] + 3 * RELEASE_SIGMA] or cands
         if r.kind.mobile:  # not under where this arm's hand will hover once it has retracted: Bob could not reach past it
             hand = r.tip()
             cands = [c for c in cands if horizontal(c, hand) >= HANDOVER_CLEARANCE] or cands
@@ -486,10 +640,11 @@ def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
         return SkillOutcome.fail(OutcomeCode.PLACE_FAILED, fb.no_free_spot(a.location))
     ab = r.arm_base()
     assert ab is not None
+    can_go = "navigate" in r.kind.skills and f is not None and bool(f.stand_poses)  # may be told to navigate there
     reachable = [c for c in cands if horizontal(ab, c) <= MAX_ARM_RANGE - 0.1]
     if not reachable:
         nearest = min(horizontal(ab, c) for c in cands)
-        return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest), distance=round(nearest, 3))
+        return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest, mobile=can_go), distance=round(nearest, 3))
     failure: SkillOutcome | None = None
     tries = 0
     for x, y, yaw in reachable:
@@ -503,13 +658,17 @@ def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
                 break
             continue
         t = r.run(reach.path + reach.descent, JOINT_SPEED)
-        sim.release(r, held, (x, y, top), yaw)
+        sim.release(r, held, (x, y, top), yaw, a.location, release_error(sim))
         t += r.run(list(reversed(reach.descent)), JOINT_SPEED)
         t += retract(sim, r)
         if not sim.settled_at(held, a.location):
-            return SkillOutcome.fail(OutcomeCode.PLACE_FAILED, fb.place_failed(held.name, a.location), sim_time=t + SUCTION_TIME)
+            pos = sim.position(held)
+            return SkillOutcome.fail(
+                OutcomeCode.PLACE_FAILED, fb.place_failed(held.name, a.location, held.on, pos), sim_time=t + SUCTION_TIME,
+                on=held.on or "floor", x=round(pos[0], 3), y=round(pos[1], 3), z=round(pos[2], 3),
+            )  # fmt: skip
         return SkillOutcome.ok(fb.placed(held.name, a.location), sim_time=t + SUCTION_TIME)
     if failure is not None:
         return failure
     nearest = min(horizontal(ab, c) for c in reachable)
-    return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest), distance=round(nearest, 3))
+    return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest, mobile=can_go), distance=round(nearest, 3))

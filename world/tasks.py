@@ -79,8 +79,11 @@ class Task(Protocol):
     def fixtures(self, layout: Layout) -> list[Fixture]: ...
     def goal(self, kind: ObjectKind) -> str: ...
     def evaluate(self, targets: list[str], objects: list[Seen]) -> TaskResult: ...
-    def status(self, targets: list[str], objects: list[Seen]) -> str: ...
-    def detail(self, robot: str, targets: list[str], goals: dict[str, str]) -> str: ...
+    def status(self, targets: list[str], objects: list[Seen], aids: frozenset[str] = frozenset()) -> str:
+        """Bob's task status as the paper gives it; with the `status_hints` aid, also what is
+        missing, next or wrong."""
+        ...
+    def detail(self, robot: str, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str: ...
 
 
 TASKS: dict[str, Task] = {}
@@ -199,17 +202,19 @@ class PackObjects:
         placed = sum(1 for t in targets if t in in_tray)
         return TaskResult(success=placed == len(targets) and in_tray <= set(targets), placed=placed, total=len(targets))
 
-    def status(self, targets: list[str], objects: list[Seen]) -> str:
+    def status(self, targets: list[str], objects: list[Seen], aids: frozenset[str] = frozenset()) -> str:
         in_tray = [o.name for o in objects if o.on == "tray"]
+        parts = [f"In the tray: {_names(in_tray)}."]
+        if "status_hints" not in aids:
+            return parts[0]
         missing = [t for t in targets if t not in in_tray]
         wrong = [n for n in in_tray if n not in targets]
-        parts = [f"In the tray: {_names(in_tray)}."]
         parts.append(f"Not yet in the tray: {', '.join(missing)}." if missing else "Every listed object is in the tray.")
         if wrong:
             parts.append(f"In the tray but not on the list (take it out): {', '.join(wrong)}.")
         return " ".join(parts)
 
-    def detail(self, robot: str, targets: list[str], goals: dict[str, str]) -> str:
+    def detail(self, robot: str, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
         if robot == "bob":
             return f"Objects to pack: {', '.join(targets)}."
         return "Help Bob pack the listed objects into the tray on table_0: find them, fetch them and hand them over."
@@ -283,8 +288,10 @@ class SortSolids:
         stray = [o for o in objects if o.on is not None and o.on.endswith("_panel") and o.name not in targets]
         return TaskResult(success=placed == len(targets) and not stray, placed=placed, total=len(targets))
 
-    def status(self, targets: list[str], objects: list[Seen]) -> str:
+    def status(self, targets: list[str], objects: list[Seen], aids: frozenset[str] = frozenset()) -> str:
         on_panels = [o for o in objects if o.on is not None and o.on.endswith("_panel")]
+        if "status_hints" not in aids:  # the paper's: which solid lies on which panel, nothing judged
+            return f"On the panels: {_names([f'{o.name} on {o.on}' for o in on_panels])}."
         right = [f"{o.name} on {o.on}" for o in on_panels if o.name in targets and o.on == self.goal(o.kind)]
         wrong = [f"{o.name} on {o.on}" for o in on_panels if not (o.name in targets and o.on == self.goal(o.kind))]
         done = {o.name for o in on_panels if o.name in targets and o.on == self.goal(o.kind)}
@@ -295,9 +302,12 @@ class SortSolids:
             parts.append(f"On a wrong panel (move it): {', '.join(wrong)}.")
         return " ".join(parts)
 
-    def detail(self, robot: str, targets: list[str], goals: dict[str, str]) -> str:
-        if robot == "bob":
+    def detail(self, robot: str, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        if robot == "bob" and "goal_map" in aids:
             return "Solids to sort: " + ", ".join(f"{t} onto {goals[t]}" for t in targets) + "."
+        if robot == "bob":  # the paper's: the solids and the panels; matching the colours is Bob's job
+            panels = ", ".join(f"{c}_panel" for c in COLORS)
+            return f"Solids to sort: {', '.join(targets)}. Colour panels on table_0: {panels}."
         return "Help Bob sort the listed solids onto the coloured panels on table_0: find them, fetch them and hand them over."
 
 
@@ -388,10 +398,12 @@ class MakeSandwich:
         stack = self._stack(objects)
         return TaskResult(success=placed == len(targets) and len(stack) == len(targets), placed=placed, total=len(targets))
 
-    def status(self, targets: list[str], objects: list[Seen]) -> str:
+    def status(self, targets: list[str], objects: list[Seen], aids: frozenset[str] = frozenset()) -> str:
         stack = self._stack(objects)
-        good = self._correct_prefix(targets, objects)
         parts = [f"On the cutting board, bottom to top: {_names([o.name for o in stack])}."]
+        if "status_hints" not in aids:
+            return parts[0]
+        good = self._correct_prefix(targets, objects)
         if good < len(stack):
             parts.append(f"Wrong from {stack[good].name} up (take those off).")
         elif good < len(targets):
@@ -400,7 +412,7 @@ class MakeSandwich:
             parts.append("The sandwich is complete.")
         return " ".join(parts)
 
-    def detail(self, robot: str, targets: list[str], goals: dict[str, str]) -> str:
+    def detail(self, robot: str, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
         if robot == "bob":
             return f"Menu, bottom to top, on the cutting board: {', '.join(targets)}."
         return "Help Bob make a sandwich on the cutting board on table_0: find the ingredients he asks for, fetch them and hand them over."
