@@ -333,6 +333,14 @@ class Sim:
 
     _known = known_objects
 
+    def belief(self, robot: str, name: str) -> ObjectView | None:
+        """`robot`'s view of object `name` (live with the live_state aid); None if it does not know it."""
+        if name not in self.known_objects(robot):
+            return None
+        if "live_state" in self.aids:
+            return self._object_view(self.objects[name])
+        return self.beliefs[robot].objects[name].view
+
     def _next_stamp(self) -> int:
         self._stamp += 1
         return self._stamp

@@ -65,17 +65,22 @@ ROLLING_FRICTION = 0.005  # m: what stops a tipped disc or a ball rolling (PyBul
 # --------------------------------------------------------------------------- bases
 
 
-def base_error(sim: Sim) -> tuple[float, float]:
-    """Where a base stops relative to its goal: one draw from sim.rng per navigate or move
-    (none with the exact_motion aid, which stops bases exactly)."""
+def _motion_error(sim: Sim, slip_p: float, slip: tuple[float, float], sigma: float) -> tuple[float, float]:
+    """One draw from sim.rng: with chance `slip_p` a slip of a length in `slip`, else a small
+    error (Rayleigh, scale `sigma`), in a uniform direction; none with the exact_motion aid."""
     if "exact_motion" in sim.aids:
         return 0.0, 0.0
-    slip, size, heading = sim.rng.random(3)
-    if slip < NAV_SLIP_P:
-        dist = NAV_SLIP[0] + (NAV_SLIP[1] - NAV_SLIP[0]) * size
+    slipped, size, heading = sim.rng.random(3)
+    if slipped < slip_p:
+        dist = slip[0] + (slip[1] - slip[0]) * size
     else:
-        dist = NAV_SIGMA * math.sqrt(-2.0 * math.log1p(-size))
+        dist = sigma * math.sqrt(-2.0 * math.log1p(-size))
     return dist * math.cos(2 * math.pi * heading), dist * math.sin(2 * math.pi * heading)
+
+
+def base_error(sim: Sim) -> tuple[float, float]:
+    """Where a base stops relative to its goal: one draw per navigate or move."""
+    return _motion_error(sim, NAV_SLIP_P, NAV_SLIP, NAV_SIGMA)
 
 
 def stop_near(sim: Sim, goal: tuple[float, float], error: tuple[float, float]) -> tuple[float, float]:
@@ -95,9 +100,9 @@ def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
     if f is None:
         if a.target in sim.fixtures:
             return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, sim.layout.bob_table))
-        known = sim.known_objects(r.name)
-        if a.target in known:
-            on = sim.objects[a.target].on
+        belief = sim.belief(r.name, a.target)
+        if belief is not None:  # an object: point to where the robot believes it lies, not where it is
+            on = belief.on
             where = sim.layout.get(sim.layout.bob_table if sim.on_bob_table(on) else on or "")
             return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, where.name if where is not None and where.stand_poses else None))
         navigable = [g.name for g in sim.layout.furniture if g.stand_poses]
@@ -550,16 +555,8 @@ def tool_yaw_for(r: RobotBody, object_yaw: float) -> float:
 
 
 def release_error(sim: Sim) -> tuple[float, float]:
-    """How far (x, y) from where the tool lets go a released object starts to fall: one draw
-    from sim.rng per release (none with the exact_motion aid, which sets objects down exactly)."""
-    if "exact_motion" in sim.aids:
-        return 0.0, 0.0
-    slip, size, heading = sim.rng.random(3)
-    if slip < RELEASE_SLIP_P:
-        dist = RELEASE_SLIP[0] + (RELEASE_SLIP[1] - RELEASE_SLIP[0]) * size
-    else:
-        dist = RELEASE_SIGMA * math.sqrt(-2.0 * math.log1p(-size))
-    return dist * math.cos(2 * math.pi * heading), dist * math.sin(2 * math.pi * heading)
+    """How far (x, y) from where the tool lets go a released object starts to fall: one draw per release."""
+    return _motion_error(sim, RELEASE_SLIP_P, RELEASE_SLIP, RELEASE_SIGMA)
 
 
 def settle(sim: Sim, obj: ObjectState) -> int:
