@@ -49,7 +49,7 @@ class ProgressPrinter:
         if isinstance(ev, EpisodeStarted):
             c.print(
                 f"[bold]episode {ev.run}[/]: task {ev.task}, scene {ev.scene}, seed {ev.seed}, "
-                f"{ev.n_objects} objects, robots {', '.join(ev.robots)}, horizon {ev.horizon}"
+                f"{ev.n_objects} objects, robots {', '.join(ev.robots)}, horizon {ev.horizon}, fidelity {ev.fidelity}"
             )
         elif isinstance(ev, TickClosed):
             if self.verbose:
