@@ -238,7 +238,7 @@ def test_llm_failures_and_validity_are_counted_from_the_trace() -> None:
 
 
 class ScriptedModel:
-    """An OpenAI-compatible chat endpoint on loopback (stdlib http.server in a thread).
+    """The model behind an OpenAI-compatible endpoint on loopback (test_llm's FakeServer).
 
     Episodes run one after the other (one worker), so a step number lower than the last one seen
     starts the next episode. In episode `down` the model is unreachable: HTTP 503 with Retry-After
@@ -247,55 +247,35 @@ class ScriptedModel:
 
     def __init__(self, down: int) -> None:
         import threading
-        from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+        from test_llm import FakeServer
 
         self.down = down
         self.episode = 0
         self.last_step = -1
-        self.requests = 0
         self.lock = threading.Lock()
-        model = self
+        self.server = FakeServer(self.answer)
+        self.url = self.server.url
 
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:  # noqa: N802
-                body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
-                status, headers, payload = model.answer(body)
-                self.send_response(status)
-                for k, v in headers.items():
-                    self.send_header(k, v)
-                self.send_header("Content-Length", str(len(payload)))
-                self.end_headers()
-                self.wfile.write(payload)
-
-            def log_message(self, *args: object) -> None:
-                pass
-
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.httpd.daemon_threads = True
-        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
-        threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
-
-    def answer(self, body: dict[str, Any]) -> tuple[int, dict[str, str], bytes]:
+    def answer(self, body: dict[str, Any]) -> tuple[int, dict[str, str], bytes, float]:
         import re
 
         system, user = body["messages"][0]["content"], body["messages"][-1]["content"]
         step = int(re.findall(r"Step (\d+):", user)[-1])
         with self.lock:
-            self.requests += 1
             if step < self.last_step:
                 self.episode += 1
             self.last_step = step
             episode = self.episode
         if episode == self.down:
-            return 503, {"Retry-After": "0"}, b'{"error": {"message": "overloaded"}}'
+            return 503, {"Retry-After": "0"}, b'{"error": {"message": "overloaded"}}', 0.0
         robot = system.split()[2].rstrip(",").lower()  # "You are Bob, ..."
         text = "Let me think about the tray first." if robot == "bob" and step == 0 else "Analysis: nothing to do yet.\nCommand: wait()"
         reply = {"choices": [{"message": {"role": "assistant", "content": text}}], "usage": {"prompt_tokens": 50, "completion_tokens": 9}}
-        return 200, {"Content-Type": "application/json"}, json.dumps(reply).encode()
+        return 200, {"Content-Type": "application/json"}, json.dumps(reply).encode(), 0.0
 
     def close(self) -> None:
-        self.httpd.shutdown()
-        self.httpd.server_close()
+        self.server.close()
 
 
 def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_model_never_answered(tmp_path: Path) -> None:
