@@ -32,14 +32,13 @@ from string import Template
 
 import structlog
 
-from mhrc.protocol import ActionResult, Observation, Wait
+from mhrc.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
 
 from . import observation as describe
 from .llm import DEFAULT_TEMPERATURE, LLMClient, LLMError, Messages, prompt_text
 from .memory import HISTORIES, TITLES, Memory
 from .parse import SIGNATURES, ReplyFormatError, parse_command
 from .policy import Decision
-from .replay import LLM_ERROR_PREFIX
 
 log = structlog.get_logger("mhrc.llm_policy")
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import pytest
 from mhrc.agents.observation import furniture_line, object_line
 from mhrc.world.beliefs import Beliefs
 from mhrc.world.sim import Sim

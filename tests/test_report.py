@@ -75,7 +75,7 @@ def test_models_are_matched_loosely(method: str, model: str | None) -> None:
 def test_paper_figures_stand_beside_a_matching_setting_and_nowhere_else() -> None:
     rows = _rows("openai:gpt-4o") + _rows("openai:gpt-4o", ablation="no_mobile")
     text = summary_markdown(rows)
-    assert f"| paper GPT-4o (Table I) |" in text and GPT4O_PACK in text
+    assert "| paper GPT-4o (Table I) |" in text and GPT4O_PACK in text
     assert "paper GPT-4o w/o mobile robot (Table II)" in text and GPT4O_PACK_NO_MOBILE in text
     assert "0.92 / 0.94 / 37.00 / 28.33 (paper GPT-4o w/o mobile robot, Table II)" in text  # beside the CIs too
     # the same grid with repeats is still the paper's grid

@@ -117,24 +117,26 @@ def paper_episodes() -> list[Episode]:
     return out
 
 
-def _near_target(sim: Sim) -> str:
+def _table_target(sim: Sim, far: bool) -> str:
+    """A target on table_0 within Bob's reach, or (far) more than 10 cm beyond it."""
     bob = sim.bots["bob"]
     ab = bob.arm_base()
     assert ab is not None and bob.kind.reach is not None
-    return next(
-        t for t in sim.targets
-        if sim.objects[t].on == "table_0" and math.dist(sim.position(sim.objects[t])[:2], ab[:2]) <= bob.kind.reach
-    )  # fmt: skip
+    reach = bob.kind.reach
+
+    def fits(t: str) -> bool:
+        d = math.dist(sim.position(sim.objects[t])[:2], ab[:2])
+        return d > reach + 0.1 if far else d <= reach
+
+    return next(t for t in sim.targets if sim.objects[t].on == "table_0" and fits(t))
+
+
+def _near_target(sim: Sim) -> str:
+    return _table_target(sim, far=False)
 
 
 def _far_target(sim: Sim) -> str:
-    bob = sim.bots["bob"]
-    ab = bob.arm_base()
-    assert ab is not None and bob.kind.reach is not None
-    return next(
-        t for t in sim.targets
-        if sim.objects[t].on == "table_0" and math.dist(sim.position(sim.objects[t])[:2], ab[:2]) > bob.kind.reach + 0.1
-    )  # fmt: skip
+    return _table_target(sim, far=True)
 
 
 def _arrive(sim: Sim, robot: str, target: str, stand_pose: int = 0) -> SkillOutcome:
