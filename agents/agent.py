@@ -223,5 +223,9 @@ class RobotAgent:
                 prompt_tokens=d.prompt_tokens,
                 completion_tokens=d.completion_tokens,
                 latency=d.latency,
+                reasoning=d.reasoning,
+                reasoning_tokens=d.reasoning_tokens,
+                finish_reason=d.finish_reason,
+                schema_hash=d.schema_hash,
             ),
         )

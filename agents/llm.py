@@ -4,9 +4,19 @@ A model spec names the provider and the model: `openai:gpt-4o`, `ollama:llama3.1
 `vllm:MODEL`, `lmstudio:MODEL`, `llamacpp:MODEL`. With an explicit `base_url` the request goes
 to that server, and a spec without a known provider is the model name itself (`qwen2.5:7b`). The API
 key comes from the provider's variable (OPENAI_API_KEY for openai), from `api_key_env` if
-given, else from MHRC_API_KEY. Transient failures (429, 5xx, timeouts, refused connections,
-unreadable bodies) are retried with exponential backoff, honouring Retry-After, a bounded
-number of times; then LLMError.
+given, else from MHRC_API_KEY.
+
+Every call is bounded: `max_tokens` (default 1024) and, where given, `seed` go in every request.
+Transient failures (429, 5xx, refused connections, unreadable bodies) are retried with
+exponential backoff, honouring Retry-After, a bounded number of times; a timeout is retried at
+most once (a server that did not answer in time will rarely answer the same request faster);
+then LLMError. An answer that no retry can fix (401/403 bad credentials, 404 no such model or
+endpoint, 400 for a JSON-schema response format the server does not take) raises LLMFatalError
+at once: the run must stop, not wait out its horizon.
+
+A reply is kept to MAX_REPLY_CHARS; reasoning models' thoughts (a `reasoning_content` or
+`reasoning` field, or `<think>...</think>` in the text) are split off into `Completion.reasoning`
+so that they never reach the command parser.
 """
 
 from __future__ import annotations
@@ -14,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import email.utils
 import os
+import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -37,10 +48,21 @@ PROVIDERS: dict[str, tuple[str, str | None]] = {
 }
 GENERIC_KEY_ENV = "MHRC_API_KEY"
 DEFAULT_TEMPERATURE = 0.5  # the paper's
+DEFAULT_MAX_TOKENS = 1024  # the paper's reply format (analysis, reasoning, one command) with room to think
+MAX_REPLY_CHARS = 16_000  # what a reply may feed into the trace and the parser (about 4x DEFAULT_MAX_TOKENS tokens)
 
 
 class LLMError(RuntimeError):
     """The model could not be reached, or answered unusably, after the retries."""
+
+
+class LLMFatalError(LLMError):
+    """An answer no retry or later step will change (bad credentials, no such model, a request
+    the server refuses): the run stops with this message instead of burning its horizon."""
+
+
+class LLMTimeout(LLMError):
+    """The model did not answer in time (slow or endless generation), as opposed to a server that is down."""
 
 
 class LLMSpecError(ValueError):
@@ -49,18 +71,52 @@ class LLMSpecError(ValueError):
 
 @dataclass(frozen=True)
 class Completion:
-    text: str
+    text: str  # the answer without any reasoning block, at most MAX_REPLY_CHARS
     prompt_tokens: int
     completion_tokens: int
     latency: float  # seconds, the successful attempt only
+    finish_reason: str | None = None  # "stop", "length" (cut at max_tokens), ...
+    reasoning: str | None = None  # a reasoning model's thoughts, apart from the answer
+    reasoning_tokens: int = 0
+    truncated: bool = False  # the text was longer than MAX_REPLY_CHARS and was cut
 
 
 class LLMClient(Protocol):
-    """Anything that answers a chat: the policies need nothing more."""
+    """Anything that answers a chat: the policies need nothing more.
+
+    `schema`, when given, is a JSON Schema the reply must follow (structured decisions)."""
 
     model: str
 
-    async def complete(self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE) -> Completion: ...
+    async def complete(
+        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
+    ) -> Completion: ...
+
+
+THINK = re.compile(r"<think>(.*?)(?:</think>|\Z)", re.DOTALL | re.IGNORECASE)
+
+
+def split_reasoning(text: str, reasoning: str | None = None) -> tuple[str, str | None]:
+    """(answer, reasoning): `<think>` blocks leave the answer; an unclosed one (a reply cut
+    while thinking) takes the rest of the text with it; a closing tag without an opening one
+    (chat templates that open the block in the prompt) ends a thought that began the reply.
+    A separate reasoning field comes first."""
+    thoughts = [reasoning] if reasoning else []
+    lowered = text.lower()
+    if "</think>" in lowered and "<think>" not in lowered:
+        cut = lowered.index("</think>")
+        thoughts.append(text[:cut].strip())
+        text = text[cut + len("</think>") :]
+    thoughts += [m.group(1).strip() for m in THINK.finditer(text)]
+    answer = THINK.sub("", text).strip() if THINK.search(text) else text
+    return answer, ("\n\n".join(t for t in thoughts if t) or None)
+
+
+def bounded(text: str, limit: int = MAX_REPLY_CHARS) -> tuple[str, bool]:
+    """`text` cut to `limit` characters with a note saying so, and whether it was cut."""
+    if len(text) <= limit:
+        return text, False
+    return text[:limit] + f"\n[... {len(text) - limit} more characters cut by mhrc]", True
 
 
 def estimate_tokens(text: str) -> int:
@@ -89,19 +145,27 @@ class OpenAIChatClient:
         backoff: float = 0.5,
         max_backoff: float = 30.0,
         max_concurrency: int = 4,
-        max_tokens: int | None = None,
+        max_tokens: int | None = DEFAULT_MAX_TOKENS,
+        seed: int | None = None,
+        provider: str = "",
+        timeout_retries: int = 1,
         extra_body: dict[str, Any] | None = None,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
-        if retries < 0 or timeout <= 0 or max_concurrency < 1:
-            raise ValueError("need retries >= 0, timeout > 0 and max_concurrency >= 1")
+        if retries < 0 or timeout <= 0 or max_concurrency < 1 or timeout_retries < 0:
+            raise ValueError("need retries >= 0, timeout_retries >= 0, timeout > 0 and max_concurrency >= 1")
+        if max_tokens is not None and max_tokens < 1:
+            raise ValueError(f"max_tokens must be at least 1 (got {max_tokens})")
         self.model = model
         self.base_url = base_url.rstrip("/")
+        self.provider = provider
         self.timeout = timeout
         self.retries = retries
+        self.timeout_retries = timeout_retries
         self.backoff = backoff
         self.max_backoff = max_backoff
         self.max_tokens = max_tokens
+        self.seed = seed
         self.extra_body = dict(extra_body or {})
         headers = {"Authorization": f"Bearer {api_key}"} if api_key else {}
         self._http = httpx.AsyncClient(timeout=timeout, headers=headers, transport=transport)
@@ -119,16 +183,25 @@ class OpenAIChatClient:
     async def __aexit__(self, *exc: object) -> None:
         await self.aclose()
 
-    def body(self, messages: Messages, temperature: float) -> dict[str, Any]:
+    def body(self, messages: Messages, temperature: float, schema: dict[str, Any] | None = None) -> dict[str, Any]:
         body: dict[str, Any] = {"model": self.model, "messages": messages, "temperature": temperature}
         if self.max_tokens is not None:
             body["max_tokens"] = self.max_tokens
+        if self.seed is not None:
+            body["seed"] = self.seed
+        if schema is not None:
+            from .structured import response_format
+
+            body |= response_format(schema, self.provider)
         return body | self.extra_body
 
-    async def complete(self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE) -> Completion:
+    async def complete(
+        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
+    ) -> Completion:
         url = f"{self.base_url}/chat/completions"
-        body = self.body(messages, temperature)
+        body = self.body(messages, temperature, schema)
         last = ""
+        timeouts = 0
         for attempt in range(self.retries + 1):
             delay = min(self.max_backoff, self.backoff * 2**attempt)
             try:
@@ -142,16 +215,17 @@ class OpenAIChatClient:
                     last = f"HTTP {resp.status_code}: {resp.text[:200]}"
                     delay = retry_after(resp, delay, self.max_backoff)
                 elif resp.status_code >= 400:
-                    raise LLMError(f"{url} answered HTTP {resp.status_code} (not retried): {resp.text[:300]}")
+                    raise self._refusal(resp, url, schema is not None)
                 else:
                     c = _completion(resp, messages, latency)
                     self.prompt_tokens += c.prompt_tokens
                     self.completion_tokens += c.completion_tokens
                     return c
-            except TimeoutError:
-                last = f"no answer within {self.timeout:g} s"
-            except httpx.TimeoutException as exc:
-                last = f"{type(exc).__name__}: no answer within {self.timeout:g} s"
+            except (TimeoutError, httpx.TimeoutException) as exc:
+                last = f"no answer within {self.timeout:g} s" + (f" ({type(exc).__name__})" if isinstance(exc, httpx.TimeoutException) else "")
+                timeouts += 1
+                if timeouts > self.timeout_retries or attempt == self.retries:
+                    raise LLMTimeout(f"{self.model} at {self.base_url}: {last}, {timeouts} time(s); a timeout is retried at most {self.timeout_retries} time(s)") from None
             except httpx.TransportError as exc:
                 last = f"{type(exc).__name__}: {exc}"
             except _Unreadable as exc:
@@ -160,6 +234,21 @@ class OpenAIChatClient:
                 log.warning("llm call failed, retrying", model=self.model, attempt=attempt + 1, error=last, delay=delay)
                 await asyncio.sleep(delay)
         raise LLMError(f"{self.model} at {self.base_url} failed after {self.retries + 1} attempts: {last}")
+
+
+    def _refusal(self, resp: httpx.Response, url: str, structured: bool) -> LLMError:
+        """The error for a 4xx no retry will fix; fatal where the run cannot succeed at all."""
+        code, text = resp.status_code, resp.text[:300]
+        if code in (401, 403):
+            return LLMFatalError(f"{url} refused the credentials (HTTP {code}): check the API key ({text})")
+        if code == 404:
+            return LLMFatalError(f"{url} answered HTTP 404: no model {self.model!r} or no chat endpoint there; check the model name and --base-url ({text})")
+        if structured and code in (400, 422) and re.search(r"response_format|json_schema|schema|grammar|format", text, re.IGNORECASE):
+            return LLMFatalError(
+                f"{url} refused the JSON-schema response format that --structured sends (HTTP {code}: {text}); "
+                "run without --structured, or use a server that accepts response_format json_schema"
+            )
+        return LLMError(f"{url} answered HTTP {code} (not retried): {text}")
 
 
 class _Unreadable(ValueError):
@@ -185,17 +274,32 @@ def retry_after(resp: httpx.Response, default: float, cap: float) -> float:
 def _completion(resp: httpx.Response, messages: Messages, latency: float) -> Completion:
     try:
         data = resp.json()
-        text = data["choices"][0]["message"]["content"]
-        if not isinstance(text, str):
+        choice = data["choices"][0]
+        message = choice["message"]
+        text = message.get("content")
+        reasoning = message.get("reasoning_content") or message.get("reasoning")
+        if text is None and reasoning:  # a reasoning model that spent its tokens thinking
+            text = ""
+        if not isinstance(text, str) or not isinstance(reasoning, str | None):
             raise TypeError("message content is not text")
-    except (ValueError, KeyError, IndexError, TypeError) as exc:
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
         raise _Unreadable(f"unreadable completion body ({type(exc).__name__}: {exc}): {resp.text[:200]}") from None
     usage = data.get("usage") or {}
+    answer, thoughts = split_reasoning(text, reasoning)
+    answer, cut = bounded(answer)
+    if thoughts is not None:
+        thoughts = bounded(thoughts)[0]
+    details = usage.get("completion_tokens_details") or {}
+    reasoning_tokens = int(details.get("reasoning_tokens") or 0) or (estimate_tokens(thoughts) if thoughts else 0)
     return Completion(
-        text=text,
+        text=answer,
         prompt_tokens=int(usage.get("prompt_tokens") or estimate_tokens(prompt_text(messages))),
         completion_tokens=int(usage.get("completion_tokens") or estimate_tokens(text)),
         latency=latency,
+        finish_reason=choice.get("finish_reason"),
+        reasoning=thoughts,
+        reasoning_tokens=reasoning_tokens,
+        truncated=cut,
     )
 
 
@@ -218,13 +322,17 @@ class ScriptedClient:
         self._replies: list[Reply] | Callable[[Messages], Reply] = replies if callable(replies) else list(replies)
         self.latency = latency
         self.prompts: list[Messages] = []
+        self.schemas: list[dict[str, Any] | None] = []
 
     @property
     def calls(self) -> int:
         return len(self.prompts)
 
-    async def complete(self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE) -> Completion:
+    async def complete(
+        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
+    ) -> Completion:
         self.prompts.append([dict(m) for m in messages])
+        self.schemas.append(schema)
         t0 = time.perf_counter()
         if self.latency:
             await asyncio.sleep(self.latency)
@@ -234,16 +342,69 @@ class ScriptedClient:
             reply = self._replies.pop(0) if self._replies else self.EXHAUSTED
         if isinstance(reply, BaseException):
             raise reply
-        return Completion(reply, estimate_tokens(prompt_text(messages)), estimate_tokens(reply), time.perf_counter() - t0)
+        answer, thoughts = split_reasoning(reply)
+        answer, cut = bounded(answer)
+        return Completion(
+            answer, estimate_tokens(prompt_text(messages)), estimate_tokens(reply), time.perf_counter() - t0,
+            finish_reason="stop", reasoning=thoughts, reasoning_tokens=estimate_tokens(thoughts) if thoughts else 0, truncated=cut,
+        )  # fmt: skip
+
+
+ROBOT_SPEC = re.compile(r"^([a-z][a-z0-9_]*)=(.+)$")
+
+
+def split_url(spec: str) -> tuple[str, str | None]:
+    """`provider:model@http://host:port/v1` -> (provider:model, its own base URL)."""
+    at = spec.rfind("@http")
+    return (spec[:at], spec[at + 1 :]) if at > 0 else (spec, None)
+
+
+def robot_specs(text: str, robots: Sequence[str]) -> dict[str, str | None]:
+    """Which model drives which robot: `--llm SPEC` drives them all; `alice=SPEC,bob=SPEC` (any
+    subset) drives those, a bare SPEC among them the rest, and without one the rest play the
+    heuristic policy (None). A spec may end in `@URL` to name its own server. LLMSpecError names
+    a robot that is not in the episode, or one given twice."""
+    default: str | None = None
+    chosen: dict[str, str] = {}
+    for item in (i.strip() for i in text.split(",")):
+        if not item:
+            continue
+        m = ROBOT_SPEC.match(item)
+        if m is None:
+            if default is not None:
+                raise LLMSpecError(f"--llm {text!r} gives two default specs ({default!r}, {item!r}); name the robot of each: alice=SPEC")
+            default = item
+            continue
+        robot, spec = m.groups()
+        if robot not in robots:
+            raise LLMSpecError(f"--llm {text!r} names robot {robot!r}, which is not in this episode (robots: {', '.join(robots)})")
+        if robot in chosen:
+            raise LLMSpecError(f"--llm {text!r} gives robot {robot!r} two specs")
+        chosen[robot] = spec
+    if default is None and not chosen:
+        raise LLMSpecError("--llm is empty: give a model spec such as openai:gpt-4o, or alice=SPEC,bob=SPEC")
+    return {r: chosen.get(r, default) for r in robots}
 
 
 def check_spec(spec: str, base_url: str | None = None, api_key_env: str | None = None) -> tuple[str, str, str | None]:
-    """(model, base URL, API key) for a spec, or LLMSpecError (a ValueError) saying what to fix."""
+    """(model, base URL, API key) for a spec, or LLMSpecError (a ValueError) saying what to fix.
+
+    A spec's own `@URL` wins over `base_url`. `gguf:PATH` is checked as a local model file (its
+    URL is known once its server runs)."""
+    spec, own_url = split_url(spec)
+    base_url = own_url or base_url
     provider, sep, model = spec.partition(":")
     if provider == "replay":
         if not model or not os.path.isfile(model):
             raise LLMSpecError(f"replay trace {model!r} (from LLM spec {spec!r}) does not exist")
         return model, "", None
+    if provider == "gguf":
+        from .local import GGUFError, check_gguf
+
+        try:
+            return str(check_gguf(model)), "", None
+        except GGUFError as exc:
+            raise LLMSpecError(f"LLM spec {spec!r}: {exc}") from None
     if provider not in PROVIDERS:
         if base_url is None:
             hint = f"known providers: {', '.join(PROVIDERS)}; or pass a base URL for any OpenAI-compatible server"
@@ -271,4 +432,42 @@ def make_client(spec: str, base_url: str | None = None, *, api_key_env: str | No
     model, url, api_key = check_spec(spec, base_url, api_key_env)
     if spec.startswith("replay:"):
         raise LLMSpecError(f"{spec!r} is a recorded trace: use mhrc.agents.replay.replay_clients for it")
-    return OpenAIChatClient(model, url, api_key=api_key, **options)
+    if spec.startswith("gguf:"):
+        raise LLMSpecError(f"{spec!r} is a local model file: serve it with mhrc.agents.local.LocalModelServer first")
+    provider = spec.partition(":")[0]
+    return OpenAIChatClient(model, url, api_key=api_key, provider=provider if provider in PROVIDERS else "", **options)
+
+
+# episodes a worker runs at once against a provider whose parallelism cannot be asked (with no
+# answer from llama.cpp's /props): hosted APIs and vLLM batch many requests; Ollama and LM
+# Studio serve few at once by default, and a queued request spends its timeout waiting
+PROVIDER_EPISODES: dict[str, int] = {"openai": 12, "vllm": 12, "ollama": 1, "lmstudio": 1, "llamacpp": 1}
+
+
+async def server_slots(base_url: str, timeout: float = 3.0) -> int | None:
+    """How many requests the server decodes at once, where it says (llama.cpp's `/props`
+    `total_slots`); None when it does not answer that."""
+    root = base_url.rstrip("/").removesuffix("/v1")
+    try:
+        async with httpx.AsyncClient(timeout=timeout) as http:
+            resp = await http.get(f"{root}/props")
+        slots = resp.json().get("total_slots") if resp.status_code == 200 else None
+    except (httpx.HTTPError, ValueError, AttributeError):
+        return None
+    return slots if isinstance(slots, int) and slots > 0 else None
+
+
+async def episodes_at_once(specs: Sequence[str | None], base_url: str | None = None) -> int:
+    """A worker's default --concurrency for episodes whose robots use `specs`: as many episodes
+    as keep the model server's slots busy (one slot a robot), else the provider's usual
+    parallelism; 1 for the heuristic (CPU-bound), replays and in-process GGUF models (each
+    episode would load its own copy)."""
+    llm = [s for s in specs if s is not None]
+    if not llm or any(s.startswith(("gguf:", "replay:")) for s in llm):
+        return 1
+    spec, own = split_url(llm[0])
+    url = own or base_url or PROVIDERS.get(spec.partition(":")[0], ("",))[0]
+    slots = await server_slots(url) if url and url != PROVIDERS["openai"][0] else None
+    if slots is not None:
+        return max(1, slots // len(llm))
+    return PROVIDER_EPISODES.get(spec.partition(":")[0], 4)

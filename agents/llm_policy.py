@@ -1,8 +1,16 @@
 """The paper's planner: render the role's prompts from the robot's own observation and memory,
 ask the model, parse exactly one command.
 
-An unparseable reply, or a model that stays down after its retries, never crashes the agent:
-the robot waits that step and the reason becomes feedback in its next prompt.
+An unparseable reply, a reply cut at max_tokens before its command, or a model that stays down
+after its retries or misses the step deadline never crashes the agent: the robot waits that
+step and the reason (bounded to FEEDBACK_CHARS) becomes feedback in its next prompt. What no
+later step can change stops the agent with LLMFatalError instead: bad credentials, no such
+model, a server that refuses --structured's response format, or a server that was down for
+the robot's whole first step.
+
+With `structured=True` each request carries a JSON Schema built from the robot's own skills
+and scene graph (mhrc.agents.structured), the prompt ends with the JSON instructions instead of
+"Command: ...", and the reply is parsed as JSON; the default is the paper's free text.
 
 Templates are `string.Template` files `<robot>_system.txt` and `<robot>_user.txt`, from the
 package `mhrc.prompts` or from a directory of your own (`prompts_dir`). Placeholders:
@@ -25,6 +33,7 @@ An unknown placeholder in a template is an error at load time, not a silent "$na
 
 from __future__ import annotations
 
+import asyncio
 import re
 from importlib import resources
 from pathlib import Path
@@ -35,7 +44,8 @@ import structlog
 from mhrc.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
 
 from . import observation as describe
-from .llm import DEFAULT_TEMPERATURE, LLMClient, LLMError, Messages, prompt_text
+from . import structured as json_mode
+from .llm import DEFAULT_TEMPERATURE, LLMClient, LLMError, LLMFatalError, LLMTimeout, Messages, prompt_text
 from .memory import HISTORIES, TITLES, Memory
 from .parse import SIGNATURES, ReplyFormatError, parse_command
 from .policy import Decision
@@ -57,7 +67,18 @@ PLACEHOLDERS = {
 }
 SMALL_CONTEXT_CAP = 12_000  # ~3,000 tokens: a --history-cap that fits a 4k-context local model with room for the reply
 FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. End your reply with one line: Command: skill(arguments)."
+JSON_FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. Answer with one JSON object: analysis, then command."
+CUT_REPLY = "your reply was cut at the token limit before it gave a command; think more briefly"
 MODEL_DOWN = "Your planner could not reach its model ({reason}), so you waited."
+FEEDBACK_CHARS = 300  # what one error may put into the next prompt
+
+
+class LLMUnreachable(LLMFatalError):
+    """The model never answered during the robot's first step: the run cannot go on."""
+
+
+def _short(text: str, limit: int = FEEDBACK_CHARS) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 class TemplateError(ValueError):
@@ -102,7 +123,10 @@ class LLMPolicy:
     feedback, the messages delivered now). teammates_absent names robots not in this episode.
     prompt_cap_chars bounds the whole prompt (system + user); None (the default, as the paper)
     keeps every history whole. reach_labels (an aid, not the paper's) says for each object
-    whether it lies within the robot's arm reach.
+    whether it lies within the robot's arm reach. structured asks for a JSON decision that
+    follows a schema of this step's valid actions, its analysis short enough that the command
+    fits within the client's max_tokens. step_deadline bounds one step's model call,
+    every retry included: past it the robot waits that step.
     """
 
     def __init__(
@@ -117,8 +141,17 @@ class LLMPolicy:
         prompt_cap_chars: int | None = None,
         teammates_absent: tuple[str, ...] = (),
         reach_labels: bool = False,
+        structured: bool = False,
+        step_deadline: float | None = None,
+        max_tokens: int | None = None,
     ) -> None:
+        if step_deadline is not None and step_deadline <= 0:
+            raise ValueError(f"step_deadline must be positive (got {step_deadline})")
         self.robot = robot
+        self.structured = structured
+        self.max_analysis = json_mode.analysis_bound(max_tokens)
+        self.step_deadline = step_deadline
+        self._answered = False  # any reply yet: a server down before the first one is fatal
         self.reach_labels = reach_labels
         self.client = client
         self.name = f"llm:{client.model}"
@@ -172,6 +205,8 @@ class LLMPolicy:
             fixed = len(system) + 2 + len(self.user_t.substitute(fields | dict.fromkeys(HISTORIES, "")))
             budget = max(0, self.cap - fixed)
         user = self.user_t.substitute(fields | self._histories(obs, budget))
+        if self.structured:
+            user = _tidy(user) + "\n" + json_mode.STRUCTURED_INSTRUCTIONS
         return [{"role": "system", "content": _tidy(system)}, {"role": "user", "content": _tidy(user)}]
 
     def _absent_note(self) -> str:
@@ -191,20 +226,34 @@ class LLMPolicy:
             self.memory.add("messages", m.tick, f"from {m.sender.capitalize()}: {m.content}", tag=f"from {m.sender}")
         messages = self.render(obs)
         prompt = prompt_text(messages)
+        schema = json_mode.decision_schema(obs, max_analysis=self.max_analysis) if self.structured else None
+        digest = json_mode.schema_hash(schema) if schema is not None else None
         try:
-            c = await self.client.complete(messages, temperature=self.temperature)
-        except LLMError as exc:
+            async with asyncio.timeout(self.step_deadline):
+                c = await self.client.complete(messages, temperature=self.temperature, schema=schema)
+        except LLMFatalError:
+            raise
+        except (LLMError, TimeoutError) as exc:
+            if isinstance(exc, TimeoutError):
+                exc = LLMTimeout(f"no answer within the step deadline of {self.step_deadline:g} s")
+            if not self._answered and not isinstance(exc, LLMTimeout):
+                raise LLMUnreachable(f"{self.robot}'s model never answered during its first step: {exc}") from None
             self._log.warning("model unavailable, waiting", tick=obs.tick, error=str(exc))
-            self._pending = (obs.tick, MODEL_DOWN.format(reason=exc))
-            return Decision(action=Wait(), prompt=prompt, parse_error=f"{LLM_ERROR_PREFIX}{exc}")
+            self._pending = (obs.tick, MODEL_DOWN.format(reason=_short(str(exc))))
+            return Decision(action=Wait(), prompt=prompt, parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000), schema_hash=digest)
+        self._answered = True
         try:
-            action = parse_command(c.text)
+            action = json_mode.parse_structured(c.text)[0] if self.structured else parse_command(c.text)
             error = None
         except ReplyFormatError as exc:
-            self._log.info("unparseable reply, waiting", tick=obs.tick, reason=str(exc))
-            action, error = Wait(), str(exc)
-            self._pending = (obs.tick, FORMAT_ERROR.format(reason=exc))
-        return Decision(action, prompt, c.text, error, c.prompt_tokens, c.completion_tokens, c.latency)
+            reason = CUT_REPLY if c.finish_reason == "length" else _short(str(exc))
+            self._log.info("unparseable reply, waiting", tick=obs.tick, reason=reason)
+            action, error = Wait(), reason
+            self._pending = (obs.tick, (JSON_FORMAT_ERROR if self.structured else FORMAT_ERROR).format(reason=reason))
+        return Decision(
+            action, prompt, c.text, error, c.prompt_tokens, c.completion_tokens, c.latency,
+            reasoning=c.reasoning, reasoning_tokens=c.reasoning_tokens, finish_reason=c.finish_reason, schema_hash=digest,
+        )  # fmt: skip
 
     def _flush_pending(self) -> None:
         """A format or model error whose result never came back still becomes feedback."""

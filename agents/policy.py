@@ -19,6 +19,10 @@ class Decision:
     prompt_tokens: int = 0
     completion_tokens: int = 0
     latency: float = 0.0
+    reasoning: str | None = None
+    reasoning_tokens: int = 0
+    finish_reason: str | None = None
+    schema_hash: str | None = None
 
 
 class Policy(Protocol):

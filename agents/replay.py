@@ -56,7 +56,9 @@ class ReplayClient:
         """Recorded calls not replayed yet (0 once the whole episode was reproduced)."""
         return len(self._thoughts) - self.calls
 
-    async def complete(self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE) -> Completion:
+    async def complete(
+        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
+    ) -> Completion:
         if self.calls >= len(self._thoughts):
             raise ReplayMismatch(f"{self.robot} asked for call {self.calls + 1}; {self.trace} holds {len(self._thoughts)}")
         t = self._thoughts[self.calls]
@@ -69,7 +71,10 @@ class ReplayClient:
             )
         if t.get("reply") is None:  # the model stayed down in the recorded run: fail the same way
             raise LLMError(str(t.get("parse_error") or "recorded model failure").removeprefix(LLM_ERROR_PREFIX))
-        return Completion(t["reply"], t.get("prompt_tokens", 0), t.get("completion_tokens", 0), t.get("latency", 0.0))
+        return Completion(
+            t["reply"], t.get("prompt_tokens", 0), t.get("completion_tokens", 0), t.get("latency", 0.0),
+            finish_reason=t.get("finish_reason"), reasoning=t.get("reasoning"), reasoning_tokens=t.get("reasoning_tokens", 0),
+        )  # fmt: skip
 
 
 def replay_clients(trace: str | Path) -> dict[str, ReplayClient]:

@@ -24,6 +24,33 @@ AIDS_HELP = (
     "a comma-separated list of aids, or all. " + describe_aids()
 )
 HISTORY_CAP_HELP = "Bound each LLM prompt to CHARS characters, shortening older history (for small-context models); default: whole histories, as the paper."
+LLM_HELP = (
+    "Drive the robots with a model: provider:model (openai:gpt-4o, ollama:llama3.1:8b, vllm:M, lmstudio:M, llamacpp:M), "
+    "gguf:PATH (a local GGUF file served in-process by llama.cpp; needs pip install -e \".[local]\"), or per robot "
+    "alice=SPEC,bob=SPEC,david=SPEC (a bare SPEC among them drives the rest; without one the rest play the heuristic "
+    "policy); SPEC@URL names a spec's own server. Default: the heuristic policy."
+)
+
+
+def _llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
+    """The model options `up`, `agent` and `eval` share, with the same meaning in each."""
+    opts = [
+        click.option("--llm", default=None, metavar="SPEC", help=LLM_HELP),
+        click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm specs without their own, e.g. http://127.0.0.1:8000/v1."),
+        click.option("--llm-timeout", default=60.0, show_default=True, type=float, help="Seconds per LLM request; a timeout is retried once."),
+        click.option("--max-tokens", default=1024, show_default=True, type=int, help="Completion tokens per LLM call, sent on every request."),
+        click.option("--llm-seed", default=None, type=int, help="Sampling seed sent on every LLM request (honoured by llama.cpp, vLLM, Ollama, OpenAI)."),
+        click.option("--structured", is_flag=True,
+                     help="Ask for JSON decisions that follow a schema of each step's valid actions (response_format json_schema; Ollama's format). Not the paper's: its free text is the default."),
+        click.option("--step-deadline", default=None, type=float, metavar="SECONDS",
+                     help="Bound one robot's whole LLM step, retries included; past it the robot waits that step. Default: 2 x --llm-timeout + 10."),
+        click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
+                     help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm."),
+        click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP),
+    ]  # fmt: skip
+    for opt in reversed(opts):
+        f = opt(f)
+    return f
 
 T = TypeVar("T")
 
@@ -97,13 +124,7 @@ def main() -> None:
 @click.option("--quiet", "-q", is_flag=True, help="Print only the final summary.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
-@click.option("--llm", default=None, metavar="SPEC",
-              help="Drive every robot with this model (openai:gpt-4o, ollama:llama3.1:8b, vllm:M, lmstudio:M, llamacpp:M); default: the heuristic policy.")
-@click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm, e.g. http://127.0.0.1:8000/v1.")
-@click.option("--llm-timeout", default=60.0, show_default=True, type=float, help="Seconds per LLM request before it is retried.")
-@click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
-              help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm.")
-@click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP)
+@_llm_options
 def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, **values: Any) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
@@ -153,36 +174,20 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, **values: An
 @click.option("--connect", required=True, help="The world's endpoint, e.g. tcp/127.0.0.1:7447.")
 @click.option("--run", default=None, help="Run id of the world; default: the only world alive at --connect.")
 @click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
-@click.option("--llm", default=None, metavar="SPEC", help="Model spec for an LLM policy; default: the heuristic policy.")
-@click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm.")
-@click.option("--llm-timeout", default=60.0, show_default=True, type=float, help="Seconds per LLM request before it is retried.")
+@_llm_options
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
-@click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
-              help="Directory of your own prompt templates.")
-@click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP)
 @click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels); the world's aids are set on the world. " + AIDS_HELP)
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-def agent(
-    robot: str,
-    connect: str,
-    run: str | None,
-    attach_timeout: float,
-    llm: str | None,
-    base_url: str | None,
-    llm_timeout: float,
-    ablation: str,
-    prompts: Path | None,
-    history_cap: int | None,
-    aids: str | None,
-    log_level: str,
-) -> None:
+def agent(robot: str, connect: str, run: str | None, attach_timeout: float, log_level: str, **values: Any) -> None:
     """Attach one robot's agent (heuristic or LLM policy) to a running world."""
     from .episode import attach_agent
 
     logs.configure(log_level)
-    options = _config(ablation=ablation, prompts=prompts, history_cap=history_cap, aids=aids).policy_options()
+    cfg = _config(**values)
+    spec = cfg.robot_specs().get(robot) if cfg.llm else None
+    options = cfg.policy_options()
     try:
-        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, llm, base_url, llm_timeout, **options))
+        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, spec, cfg.base_url, cfg.client_options(), **options))
     except Exception as exc:  # typed agent errors: say what happened, exit non-zero
         raise click.ClickException(str(exc)) from None
     if done is not None:
@@ -233,7 +238,7 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 
 
 @main.command("eval")
-@click.option("--llm", default=None, help="Model spec (provider:model); default: the built-in heuristic policy.")
+@_llm_options
 @click.option("--tasks", default=None, help="Comma-separated task ids; default: every registered task.")
 @click.option("--scenes", default=None, help="Comma-separated layouts; default: every built-in layout.")
 @click.option("--objects", default=None, show_default="3,4,5,6", help="Comma-separated object counts (each scene runs every count).")
@@ -244,20 +249,19 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
 @click.option("--horizon", default=50, show_default=True, type=int)
 @click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP)
-@click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP)
 @click.option("--workers", default=os.cpu_count() or 1, show_default="the number of cores", type=int,
               help="Local worker processes; 0: only workers that join with `mhrc worker --connect`.")
+@click.option("--concurrency", default=None, type=int,
+              help="Episodes each local worker runs at once. Default: 1 for the heuristic (CPU-bound), replays and gguf: models; "
+                   "with a model server, enough episodes to fill its slots (llama.cpp's /props), else 12 for openai and vllm, 1 for ollama and lmstudio.")
 @click.option("--listen", default=None, help="Endpoint for the bus, e.g. tcp/0.0.0.0:7448 to let other hosts' workers join; default: a free loopback port.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory; default runs/eval-<time>.")
 @click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
-@click.option("--base-url", default=None, help="OpenAI-compatible base URL for --llm.")
-@click.option("--llm-timeout", default=60.0, show_default=True, type=float)
-@click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None)
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str,
-          horizon: int, aids: str | None, history_cap: int | None, workers: int, listen: str | None, out: Path | None, resume: bool,
-          dry_run: bool, base_url: str | None, llm_timeout: float, prompts: Path | None, log_level: str) -> None:  # fmt: skip
+def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
+          aids: str | None, workers: int, concurrency: int | None, listen: str | None, out: Path | None, resume: bool,
+          dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
     summary.md / summary.csv (tables shaped like the paper's Table I and II with 95% bootstrap
@@ -275,7 +279,7 @@ def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str |
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 
-    from .evaluation import EvalSpec, Tally, evaluate
+    from .evaluation import EvalAborted, EvalSpec, Tally, evaluate
     from .fidelity import AidsError, parse_aids
     from .report import PAPER_OBJECTS, summary_markdown
 
@@ -288,12 +292,14 @@ def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str |
         aid_names = parse_aids(aids)
     except AidsError as exc:
         raise click.UsageError(str(exc)) from None
+    prompts = llm.pop("prompts")
     spec = EvalSpec(
         tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS),
         objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()), trials=trials, repeats=repeats,
-        llm=llm, ablation=ablation, horizon=horizon, base_url=base_url, llm_timeout=llm_timeout,
-        prompts=str(prompts) if prompts else None, aids=aid_names, history_cap=history_cap,
+        ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, **llm,
     )  # fmt: skip
+    if concurrency is not None and concurrency < 1:
+        raise click.BadParameter(f"must be at least 1 (got {concurrency})", param_hint="--concurrency")
     out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
     console = Console(stderr=True)
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console)
@@ -317,13 +323,23 @@ def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str |
             click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config['seed']}")
         click.echo(f"{n_jobs} episodes ({spec.fidelity} fidelity)")
         return
-    console.print(f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}) on {n_jobs} episodes into {out} with {workers} worker(s)")
+    if concurrency is None:
+        from mhrc.agents.llm import episodes_at_once
+
+        specs = EpisodeConfig.build(**spec.jobs()[0].config).robot_specs().values() if spec.llm else [None]
+        concurrency = asyncio.run(episodes_at_once(list(specs), spec.base_url))
+    console.print(
+        f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}, {spec.mode} replies) on {n_jobs} episodes "
+        f"into {out} with {workers} worker(s), {concurrency} episode(s) at once each"
+    )
     t0 = time.perf_counter()
     with progress:
         try:
-            rows = _run(lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook))
+            rows = _run(lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook, concurrency=concurrency))
         except ConfigError as exc:
             raise click.UsageError(str(exc)) from None
+        except EvalAborted as exc:
+            raise click.ClickException(str(exc)) from None
     console.print(f"done in {time.perf_counter() - t0:.1f} s: {out / 'episodes.jsonl'}, {out / 'summary.md'}")
     if rows:
         click.echo(summary_markdown(rows))
@@ -332,14 +348,16 @@ def eval_(llm: str | None, tasks: str | None, scenes: str | None, objects: str |
 @main.command("worker")
 @click.option("--connect", required=True, help="The coordinator's endpoint, e.g. tcp/10.0.0.5:7448.")
 @click.option("--eval", "eval_id", default=None, help="Evaluation id; default: the only one on the bus.")
+@click.option("--concurrency", default=1, show_default=True, type=click.IntRange(min=1),
+              help="Episodes this worker runs at once (with an LLM, episodes mostly wait on the model).")
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-def worker(connect: str, eval_id: str | None, log_level: str) -> None:
+def worker(connect: str, eval_id: str | None, concurrency: int, log_level: str) -> None:
     """Run episodes for an `mhrc eval` coordinator until its grid is done."""
     from .evaluation import run_worker
 
     logs.configure(log_level)
     try:
-        n = _run(lambda: run_worker(connect, eval_id))
+        n = _run(lambda: run_worker(connect, eval_id, concurrency=concurrency))
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
     click.echo(f"worker ran {n} episode(s)", err=True)

@@ -16,7 +16,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from typing import Any, Literal
 from pathlib import Path
 
@@ -38,6 +38,7 @@ class ConfigError(ValueError):
 
 
 OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}
+DEFAULT_MAX_TOKENS = 1024  # mirrors mhrc.agents.llm.DEFAULT_MAX_TOKENS (not imported: the world needs no agent code)
 
 
 def option_name(field: str) -> str:
@@ -66,7 +67,11 @@ class EpisodeConfig(BaseModel):
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
-    llm_timeout: float = Field(60.0, gt=0, description="seconds per LLM request before it is retried")
+    llm_timeout: float = Field(60.0, gt=0, description="seconds per LLM request; a timeout is retried once")
+    max_tokens: int = Field(DEFAULT_MAX_TOKENS, ge=1, description="completion tokens per LLM call, sent on every request")
+    llm_seed: int | None = Field(None, ge=0, description="sampling seed sent on every LLM request (servers that honour one)")
+    structured: bool = Field(False, description="LLM replies follow a JSON Schema of the step's valid actions (not the paper's)")
+    step_deadline: float | None = Field(None, gt=0, description="seconds one robot's LLM step may take, retries included; None: 2 x --llm-timeout + 10")
     aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.fidelity); none: the paper's")
     history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
 
@@ -104,8 +109,10 @@ class EpisodeConfig(BaseModel):
                 from mhrc.agents.llm import check_spec
                 from mhrc.agents.llm_policy import load_template
 
-                check_spec(cfg.llm, cfg.base_url)
-                for robot in cfg.robots:
+                for robot, spec in cfg.robot_specs().items():
+                    if spec is None:
+                        continue
+                    check_spec(spec, cfg.base_url)
                     for part in ("system", "user"):
                         load_template(robot, part, cfg.prompts)
         except (ValueError, FileNotFoundError) as exc:
@@ -127,6 +134,14 @@ class EpisodeConfig(BaseModel):
         """The robots in this episode (no_mobile leaves David out)."""
         return tuple(r for r in ROBOTS if not (r == "david" and self.ablation == "no_mobile"))
 
+    def robot_specs(self) -> dict[str, str | None]:
+        """Each robot's model spec (None: the heuristic policy); see mhrc.agents.llm.robot_specs."""
+        if self.llm is None:
+            return dict.fromkeys(self.robots)
+        from mhrc.agents.llm import robot_specs
+
+        return robot_specs(self.llm, self.robots)
+
     def policy_options(self) -> dict[str, Any]:
         """LLMPolicy switches for the ablation (the heuristic policy ignores them)."""
         return {
@@ -136,7 +151,14 @@ class EpisodeConfig(BaseModel):
             "prompts_dir": self.prompts,
             "prompt_cap_chars": self.history_cap,
             "reach_labels": "reach_labels" in self.aids,
+            "structured": self.structured,
+            "step_deadline": self.step_deadline or 2 * self.llm_timeout + 10,
+            "max_tokens": self.max_tokens,
         }
+
+    def client_options(self) -> dict[str, Any]:
+        """OpenAIChatClient settings every LLM call of this episode uses."""
+        return {"timeout": self.llm_timeout, "max_tokens": self.max_tokens, "seed": self.llm_seed}
 
     @property
     def fidelity(self) -> str:
@@ -205,36 +227,60 @@ async def run_agent(
     *,
     llm: str | None = None,
     base_url: str | None = None,
-    llm_timeout: float = 60.0,
+    client_options: dict[str, Any] | None = None,
     attach_timeout: float = 30.0,
     **policy_options: Any,
 ) -> EpisodeDone | None:
     """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
-    the heuristic policy, or with `llm` an LLMPolicy on that model spec."""
+    the heuristic policy, or with `llm` (one robot's spec) an LLMPolicy on that model. A
+    `gguf:PATH` spec gets a one-slot local server of its own for as long as the agent runs."""
     from mhrc.agents.agent import RobotAgent
     from mhrc.agents.heuristic import heuristic_policy
 
-    client = None
-    if llm is None:
-        policy = heuristic_policy(robot)
-    else:
-        from mhrc.agents.llm import make_client
-        from mhrc.agents.llm_policy import LLMPolicy
-        from mhrc.agents.replay import ReplayClient
-
-        if llm.startswith("replay:"):
-            policy = LLMPolicy(robot, ReplayClient(llm.removeprefix("replay:"), robot), **policy_options)  # type: ignore[assignment]
+    async with contextlib.AsyncExitStack() as stack:
+        client = None
+        if llm is None:
+            policy = heuristic_policy(robot)
         else:
-            client = make_client(llm, base_url=base_url, timeout=llm_timeout)
-            policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
-    bus = await open_client(connect, attach_timeout)
-    try:
-        agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
-        return await agent.run()
-    finally:
-        await bus.close()
-        if client is not None:
-            await client.aclose()
+            from mhrc.agents.llm import make_client
+            from mhrc.agents.llm_policy import LLMPolicy
+            from mhrc.agents.replay import ReplayClient
+
+            if llm.startswith("replay:"):
+                policy = LLMPolicy(robot, ReplayClient(llm.removeprefix("replay:"), robot), **policy_options)  # type: ignore[assignment]
+            else:
+                if llm.startswith("gguf:"):
+                    llm = (await stack.enter_async_context(local_models({robot: llm}, (client_options or {}).get("seed"))))[robot]
+                client = make_client(llm, base_url=base_url, **(client_options or {}))
+                stack.push_async_callback(client.aclose)
+                policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
+        bus = await open_client(connect, attach_timeout)
+        try:
+            agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
+            return await agent.run()
+        finally:
+            await bus.close()
+
+
+@contextlib.asynccontextmanager
+async def local_models(specs: dict[str, str | None], seed: int | None = None) -> AsyncIterator[dict[str, str | None]]:
+    """Serve every `gguf:PATH` spec in-process (mhrc.agents.local): one llama.cpp server per
+    model file with one slot per robot on it, so the robots decode in parallel; yields the specs
+    with each gguf one replaced by `llamacpp:MODEL@URL` of its server. The servers stop on exit."""
+    paths = sorted({s.removeprefix("gguf:") for s in specs.values() if s and s.startswith("gguf:")})
+    if not paths:
+        yield specs
+        return
+    from mhrc.agents.local import LocalModelServer
+
+    async with contextlib.AsyncExitStack() as stack:
+        served: dict[str, str] = {}
+        for path in paths:
+            slots = sum(1 for s in specs.values() if s == f"gguf:{path}")
+            server = await stack.enter_async_context(LocalModelServer(path, slots=slots, seed=seed))
+            served[path] = f"llamacpp:{server.model}@{server.base_url}"
+            log.info("local model serving", path=path, slots=slots, url=server.base_url)
+        yield {r: served[s.removeprefix("gguf:")] if s and s.startswith("gguf:") else s for r, s in specs.items()}
 
 
 async def find_run(bus: Bus, timeout: float = 5.0) -> str:
@@ -261,10 +307,10 @@ async def attach_agent(
     attach_timeout: float = 30.0,
     llm: str | None = None,
     base_url: str | None = None,
-    llm_timeout: float = 60.0,
+    client_options: dict[str, Any] | None = None,
     **policy_options: Any,
 ) -> EpisodeDone | None:
-    """`mhrc agent`: find the run if not given, then play `robot` with the heuristic policy."""
+    """`mhrc agent`: find the run if not given, then play `robot` (heuristic policy, or `llm`)."""
     if run is None:
         bus = await open_client(connect, attach_timeout)
         try:
@@ -272,7 +318,7 @@ async def attach_agent(
         finally:
             await bus.close()
     return await run_agent(
-        robot, run, connect, llm=llm, base_url=base_url, llm_timeout=llm_timeout, attach_timeout=attach_timeout, **policy_options
+        robot, run, connect, llm=llm, base_url=base_url, client_options=client_options, attach_timeout=attach_timeout, **policy_options
     )
 
 
@@ -282,18 +328,31 @@ async def up_in_process(
     """World and the given robots' agents (default: the episode's) as asyncio tasks of this
     process; with `connect`, all of them join that router's bus instead of the world listening."""
     robots = cfg.robots if robots is None else robots
+    async with local_models({r: cfg.robot_specs()[r] for r in robots}, cfg.llm_seed) as specs:
+        return await _run_in_process(cfg, specs, observe=observe, robots=robots, connect=connect)
+
+
+async def _run_in_process(
+    cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...], connect: str | None
+) -> EpisodeDone:
     world = asyncio.create_task(serve_world(cfg, observe=observe, connect=connect), name="world")
     agents = [
         asyncio.create_task(
-            run_agent(r, cfg.run, connect or cfg.endpoint, llm=cfg.llm, base_url=cfg.base_url, llm_timeout=cfg.llm_timeout, **cfg.policy_options()),
+            run_agent(
+                r, cfg.run, connect or cfg.endpoint, llm=specs[r], base_url=cfg.base_url, client_options=cfg.client_options(),
+                **cfg.policy_options(),
+            ),
             name=f"agent-{r}",
         )
         for r in robots
-    ]
+    ]  # fmt: skip
     try:
         pending = {world, *agents}
         while world in pending:
             finished, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
+            fatal = [t.exception() for t in agents if t in finished and _is_fatal(t.exception())]
+            if fatal:  # a model that cannot answer at all: stop now, not at the horizon
+                raise fatal[0]  # type: ignore[misc]
             if world not in finished and not any(t in pending for t in agents):
                 errors = [t.exception() for t in agents if t.exception() is not None]
                 if errors:  # every agent is gone and nobody else will attach: stop the world
@@ -312,6 +371,12 @@ async def up_in_process(
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await world
     return done
+
+
+def _is_fatal(exc: BaseException | None) -> bool:
+    from mhrc.agents.llm import LLMFatalError
+
+    return isinstance(exc, LLMFatalError)
 
 
 def _child_env() -> dict[str, str]:
@@ -334,12 +399,16 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
     return cmd
 
 
-def agent_command(robot: str, cfg: EpisodeConfig) -> list[str]:
+def agent_command(robot: str, cfg: EpisodeConfig, spec: str | None = None) -> list[str]:
+    """`mhrc agent` for `robot`, driven by `spec` (its model, already resolved: no gguf) or the heuristic policy."""
     cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
-    if cfg.llm is not None:
-        cmd += ["--llm", cfg.llm, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
+    if spec is not None:
+        cmd += ["--llm", spec, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
         cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
-        cmd += ["--llm-timeout", str(cfg.llm_timeout)]
+        cmd += ["--llm-timeout", str(cfg.llm_timeout), "--max-tokens", str(cfg.max_tokens)]
+        cmd += ["--llm-seed", str(cfg.llm_seed)] if cfg.llm_seed is not None else []
+        cmd += ["--structured"] if cfg.structured else []
+        cmd += ["--step-deadline", str(cfg.step_deadline)] if cfg.step_deadline else []
         cmd += ["--history-cap", str(cfg.history_cap)] if cfg.history_cap else []
         cmd += ["--aids", ",".join(cfg.aids)] if cfg.aids else []
     return cmd
@@ -360,8 +429,16 @@ def wait_for_port(host: str, port: int, timeout: float, proc: subprocess.Popen[b
 
 
 async def up_processes(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None) -> EpisodeDone:
-    """The world and each agent as separate OS processes; this process only observes."""
+    """The world and each agent as separate OS processes; this process only observes (and
+    serves the local models that gguf specs name, for the agents to share)."""
     robots = cfg.robots if robots is None else robots
+    async with local_models({r: cfg.robot_specs()[r] for r in robots}, cfg.llm_seed) as specs:
+        return await _run_processes(cfg, specs, observe=observe, robots=robots)
+
+
+async def _run_processes(
+    cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...]
+) -> EpisodeDone:
     procs: list[subprocess.Popen[bytes]] = []
     bus = None
     try:
@@ -384,7 +461,7 @@ async def up_processes(cfg: EpisodeConfig, *, observe: EventHook | None = None, 
         if observe is not None:
             observe(bus, cfg.run)
         for r in robots:
-            procs.append(subprocess.Popen(agent_command(r, cfg), env=_child_env()))
+            procs.append(subprocess.Popen(agent_command(r, cfg, specs[r]), env=_child_env()))
         waiter = asyncio.create_task(asyncio.to_thread(world.wait))
         watched: set[asyncio.Future[Any]] = {done_fut, waiter}
         finished, _ = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)

@@ -3,7 +3,8 @@ on one Zenoh bus, results as traces, `episodes.jsonl` and summary tables.
 
 The coordinator opens a Zenoh router and serves the grid; workers (local processes it starts,
 or `mhrc worker --connect tcp/HOST:PORT` on other hosts) pull jobs, run each episode in-process
-with its own run id on the same bus, and push back the episode's trace. Keys, under
+with its own run id on the same bus, and push back the episode's trace. A worker runs up to
+`--concurrency` episodes at once (LLM episodes mostly wait on the model). Keys, under
 `mhrc/eval/<eval id>/`:
 
     job                   queryable: a worker asks (JobRequest) and gets a JobReply: a job,
@@ -40,6 +41,7 @@ import uuid
 import zlib
 from collections import defaultdict, deque
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,10 +50,11 @@ import structlog
 from pydantic import BaseModel, Field
 
 from .bus import Bus, Sample, endpoint, free_port
-from .episode import ConfigError, EpisodeConfig, open_client, up_in_process
+from .episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig, EventHook, open_client, up_in_process
 from .fidelity import label
+from .keys import Keys
 from .metrics import TraceError, from_trace
-from .protocol import decode
+from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode, decode_event
 from .report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
 from .trace import read_trace
 
@@ -60,7 +63,12 @@ __all__ = ["EvalSpec", "evaluate", "merge_runs", "run_worker", "summary_csv", "s
 log = structlog.get_logger("mhrc.eval")
 
 ROOT = "mhrc/eval"
-JOB_TIMEOUT = 600.0  # s an issued job may take before it goes back to the queue
+# s an issued job may take before it goes back to the queue. Per job, whatever a worker's
+# --concurrency: a worker asks for a job only when it has a free slot, so a job starts running
+# when it is issued (N jobs sharing one CPU-bound worker each take longer; 600 s leaves room).
+JOB_TIMEOUT = 600.0
+THREADS_PER_EPISODE = 6  # to_thread calls one episode may have in flight: its world's sim, its four sessions' opens and gets
+STARTS_AT_ONCE = 4  # episodes of one worker building their scene and attaching their agents at the same time
 
 
 # --------------------------------------------------------------------------- messages
@@ -87,6 +95,11 @@ class EvalResult(BaseModel):
     worker: str
     trace_z: str = ""  # base64 of the zlib-compressed JSONL trace
     error: str | None = None
+    fatal: bool = False  # the error will recur in every episode (bad credentials, no such model): stop the evaluation
+
+
+class EvalAborted(RuntimeError):
+    """An episode failed in a way every other episode would too; finished rows are kept."""
 
 
 def _keys(eval_id: str) -> dict[str, str]:
@@ -119,6 +132,15 @@ class EvalSpec:
     repeats: int = 1  # the grid, run this many times with other seeds
     aids: tuple[str, ...] = ()  # mhrc.fidelity names; () is the paper's fidelity
     history_cap: int | None = None
+    max_tokens: int = DEFAULT_MAX_TOKENS
+    llm_seed: int | None = None
+    structured: bool = False  # JSON decisions (not the paper's free text)
+    step_deadline: float | None = None
+
+    @property
+    def mode(self) -> str:
+        """How the model answers: free (the paper's text) or structured (JSON Schema)."""
+        return "structured" if self.structured else "free"
 
     @property
     def method(self) -> str:
@@ -133,7 +155,8 @@ class EvalSpec:
         (the grid may grow: more trials, repeats, object counts, scenes or tasks)."""
         return {
             "method": self.method, "ablation": self.ablation, "horizon": self.horizon, "fidelity": self.fidelity,
-            "history_cap": self.history_cap, "prompts": self.prompts,
+            "history_cap": self.history_cap, "prompts": self.prompts, "mode": self.mode,
+            "max_tokens": self.max_tokens if self.llm else None, "llm_seed": self.llm_seed,
         }  # fmt: skip
 
     def seed(self, repeat: int, trial: int) -> int:
@@ -154,6 +177,8 @@ class EvalSpec:
                                 "llm": self.llm, "ablation": self.ablation, "base_url": self.base_url,
                                 "llm_timeout": self.llm_timeout, "prompts": self.prompts,
                                 "aids": list(self.aids) or None, "history_cap": self.history_cap,
+                                "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
+                                "step_deadline": self.step_deadline,
                             }  # fmt: skip
                             config = {k: v for k, v in cfg.items() if v is not None}
                             out.append(Job(key=f"{task}/{scene}/{n}/{seed}", config=config, repeat=repeat, trial=trial))
@@ -193,53 +218,121 @@ async def find_eval(bus: Bus, timeout: float = 10.0) -> str:
     return ids[0]
 
 
-async def run_worker(connect: str, eval_id: str | None = None, worker_id: str | None = None, connect_timeout: float = 30.0) -> int:
+async def run_worker(
+    connect: str, eval_id: str | None = None, worker_id: str | None = None, connect_timeout: float = 30.0, concurrency: int = 1
+) -> int:
     """Pull jobs from the coordinator at `connect` and run them until it says done; returns
-    how many episodes this worker ran."""
+    how many episodes this worker ran.
+
+    Up to `concurrency` episodes run at once as tasks of this process, each with its own world
+    (its own PyBullet clients) and run id. With an LLM an episode mostly waits on the model, so
+    N at once keep a model server's batch full; the heuristic is CPU-bound and gains little.
+    A new job is asked for whenever a slot is free and fewer than STARTS_AT_ONCE episodes are
+    still starting (building their scene, attaching their agents): a burst of N scene builds
+    would hold up every world past its agents' attach timeout."""
+    if concurrency < 1:
+        raise ConfigError(f"--concurrency: must be at least 1 (got {concurrency})")
+    if concurrency > 1:
+        # asyncio's default pool (cores + 4 threads) starves with several episodes: their agents'
+        # attach gets hold threads while the worlds they wait on need one to answer
+        asyncio.get_running_loop().set_default_executor(
+            ThreadPoolExecutor(max_workers=THREADS_PER_EPISODE * concurrency + 4, thread_name_prefix="mhrc-worker")
+        )
     worker_id = worker_id or f"w-{uuid.uuid4().hex[:8]}"
     bus = await open_client(connect, connect_timeout)
+    wake = asyncio.Event()  # an episode started or a job ended
+    slots: list[_Slot] = []
     ran = 0
     try:
         eval_id = eval_id or await find_eval(bus)
         keys = _keys(eval_id)
         bus.declare_token(f"{keys['worker']}/{worker_id}")
+        done = False  # the coordinator has nothing more to hand out
         while True:
-            replies = await bus.get(keys["job"], JobRequest(worker=worker_id), timeout=10.0)
-            if not replies:
-                if not await bus.alive(keys["coordinator"], timeout=1.0):
-                    log.warning("the coordinator is gone; stopping", eval=eval_id)
+            wake.clear()
+            for slot in [s for s in slots if s.task.done()]:
+                slots.remove(slot)
+                bus.put(keys["result"], slot.task.result())
+                ran += 1
+            waiting = False  # asked and heard "wait": ask again a little later
+            while not done and len(slots) < concurrency and sum(not s.started for s in slots) < STARTS_AT_ONCE:
+                replies = await bus.get(keys["job"], JobRequest(worker=worker_id), timeout=10.0)
+                if not replies:
+                    if not await bus.alive(keys["coordinator"], timeout=1.0):
+                        log.warning("the coordinator is gone; stopping", eval=eval_id, unfinished=len(slots))
+                        return ran  # nobody would take the results: the finally block cancels what runs
+                    continue
+                reply = decode(replies[0], JobReply)
+                if reply.status == "done":
+                    done = True  # the jobs still running finish first
+                elif reply.job is None:
+                    waiting = True
+                    break
+                else:
+                    slots.append(_Slot(reply.job, worker_id, connect, wake))
+            if not slots:
+                if done:
                     return ran
-                continue
-            reply = decode(replies[0], JobReply)
-            if reply.status == "done":
-                return ran
-            if reply.job is None:
                 await asyncio.sleep(0.3)
                 continue
-            result = await _run_job(reply.job, worker_id, connect)
-            bus.put(keys["result"], result)
-            ran += 1
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(wake.wait(), timeout=0.3 if waiting else None)
     finally:
+        for slot in slots:
+            slot.task.cancel()
+        await asyncio.gather(*(s.task for s in slots), return_exceptions=True)
         await bus.close()
 
 
-async def _run_job(job: Job, worker_id: str, connect: str) -> EvalResult:
+class _Slot:
+    """One job a worker runs: its episode's task, and whether the episode has started (every
+    robot attached) or ended; either wakes the worker."""
+
+    def __init__(self, job: Job, worker_id: str, connect: str, wake: asyncio.Event) -> None:
+        self.started = False
+        self._wake = wake
+        self.task = asyncio.create_task(_run_job(job, worker_id, connect, self._observe), name=f"job-{job.key}")
+        self.task.add_done_callback(lambda _t: wake.set())
+
+    def _observe(self, bus: Bus, run: str) -> None:
+        """Hooked onto the episode's world session (`up_in_process(observe=...)`)."""
+
+        def on_event(sample: Sample) -> None:
+            if self.started:
+                return
+            try:
+                event = decode_event(sample.payload)
+            except ProtocolError:
+                return
+            if isinstance(event, (EpisodeStarted, EpisodeDone)):
+                self.started = True
+                self._wake.set()
+
+        bus.subscribe(Keys(run).world_event, on_event)
+
+
+async def _run_job(job: Job, worker_id: str, connect: str, observe: EventHook | None = None) -> EvalResult:
     with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
         trace = Path(tmp) / "trace.jsonl"
         try:
             cfg = EpisodeConfig.build(**job.config, trace=trace).resolved()
-            await up_in_process(cfg, connect=connect)
-            data = zlib.compress(trace.read_bytes(), 6)
+            await up_in_process(cfg, connect=connect, observe=observe)
+            data = await asyncio.to_thread(lambda: zlib.compress(trace.read_bytes(), 6))  # zlib lets go of the GIL
             return EvalResult(key=job.key, worker=worker_id, trace_z=base64.b64encode(data).decode())
         except asyncio.CancelledError:
             raise
         except Exception as exc:
+            from mhrc.agents.llm import LLMFatalError
+
             log.warning("episode failed", key=job.key, error=str(exc))
-            return EvalResult(key=job.key, worker=worker_id, error=f"{type(exc).__name__}: {exc}")
+            return EvalResult(key=job.key, worker=worker_id, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError))
 
 
-def worker_command(connect: str, eval_id: str) -> list[str]:
-    return [sys.executable, "-m", "mhrc", "worker", "--connect", connect, "--eval", eval_id, "--log-level", "error"]
+def worker_command(connect: str, eval_id: str, concurrency: int = 1) -> list[str]:
+    return [
+        sys.executable, "-m", "mhrc", "worker", "--connect", connect, "--eval", eval_id, "--concurrency", str(concurrency),
+        "--log-level", "error",
+    ]  # fmt: skip
 
 
 # --------------------------------------------------------------------------- coordinator
@@ -267,11 +360,12 @@ def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
         if manifest.exists():
             old = json.loads(manifest.read_text())
             # a manifest written before a field was part of the identity ran with its default
-            before = {"fidelity": "paper", "history_cap": None, "prompts": None} | (old.get("identity") or {})
+            before = {"fidelity": "paper", "history_cap": None, "prompts": None, "mode": "free", "max_tokens": None, "llm_seed": None}
+            before |= old.get("identity") or {}
             if before != spec.identity():
                 raise ConfigError(
-                    f"out: {out} holds an evaluation of {before}, not {spec.identity()}; "
-                    "--resume needs the same --llm, --ablation, --horizon, --aids, --history-cap and --prompts"
+                    f"out: {out} holds an evaluation of {before}, not {spec.identity()}; --resume needs the same --llm, "
+                    "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens and --llm-seed"
                 )
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
@@ -291,12 +385,16 @@ async def evaluate(
     listen: str | None = None,
     progress: ProgressHook | None = None,
     idle_timeout: float = 120.0,
+    concurrency: int = 1,
 ) -> list[dict[str, Any]]:
     """Run the grid; returns every row of DIR/episodes.jsonl (old ones too, with --resume).
 
-    `workers` local worker processes are started; with `listen`, workers on other hosts may join
-    (with workers=0 only they run episodes). Without any worker alive for `idle_timeout`
-    seconds, the evaluation stops with an error rather than hang."""
+    `workers` local worker processes are started, each running up to `concurrency` episodes at
+    once; with `listen`, workers on other hosts may join (with workers=0 only they run
+    episodes). Without any worker alive for `idle_timeout` seconds, the evaluation stops with
+    an error rather than hang."""
+    if concurrency < 1:
+        raise ConfigError(f"--concurrency: must be at least 1 (got {concurrency})")
     spec.validate()
     finished = prepare_out(out, spec, resume)
     todo = deque(j for j in spec.jobs() if j.key not in finished)
@@ -308,6 +406,7 @@ async def evaluate(
     attempts: dict[str, int] = defaultdict(int)
     alive_workers: set[str] = set()
     all_done = asyncio.Event()
+    aborted: list[str] = []
     if not todo:
         all_done.set()
     rows_path = out / "episodes.jsonl"
@@ -333,6 +432,12 @@ async def evaluate(
             return  # a duplicate (the job was re-issued and both ran)
         job = entry[0]
         row: dict[str, Any] | None = None
+        if res.fatal:
+            aborted.append(f"{res.key}: {res.error}")
+            todo.clear()
+            issued.clear()  # workers hear "done"; the episodes they still run would fail the same way
+            all_done.set()
+            return
         if res.error is None:
             trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
             trace_path.write_bytes(zlib.decompress(base64.b64decode(res.trace_z)))
@@ -350,7 +455,8 @@ async def evaluate(
         else:
             row = {
                 "key": res.key, "method": spec.method, "ablation": spec.ablation, "repeat": job.repeat, "trial": job.trial,
-                **m.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap,
+                **m.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap, "mode": spec.mode,
+                "max_tokens": spec.max_tokens if spec.llm else None, "llm_seed": spec.llm_seed,
                 "worker": res.worker, "trace": str(trace_path.relative_to(out)),
             }  # fmt: skip
             with rows_path.open("a", encoding="utf-8") as f:
@@ -386,7 +492,7 @@ async def evaluate(
             progress(tally, None)
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         for _ in range(workers if todo else 0):
-            procs.append(subprocess.Popen(worker_command(listen, eval_id), env=env, stdin=subprocess.DEVNULL))
+            procs.append(subprocess.Popen(worker_command(listen, eval_id, concurrency), env=env, stdin=subprocess.DEVNULL))
         idle_since = time.monotonic()
         while not all_done.is_set():
             with contextlib.suppress(asyncio.TimeoutError):
@@ -399,6 +505,12 @@ async def evaluate(
                     f"start workers with: mhrc worker --connect {listen}"
                 )
         await asyncio.sleep(0.5)  # let workers ask once more and hear "done"
+        if aborted:
+            write_summaries(read_rows(rows_path), out)
+            raise EvalAborted(
+                f"stopped: {aborted[0]}. Every episode would fail the same way; the {tally.done} finished episode(s) "
+                f"are kept in {rows_path} (fix the cause, then continue with --resume --out {out})"
+            )
     finally:
         for p in procs:
             try:

@@ -4,6 +4,7 @@ messages between robots, tick summaries, and the final metrics."""
 from __future__ import annotations
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from .bus import Bus, Sample
@@ -15,7 +16,9 @@ from .protocol import (
     ProtocolError,
     RobotAttached,
     RobotDetached,
+    LLM_ERROR_PREFIX,
     RobotMessage,
+    Thought,
     TickClosed,
     decode,
     decode_event,
@@ -36,6 +39,7 @@ class ProgressPrinter:
         bus.subscribe(k.world_event, self._on_event)
         bus.subscribe(f"{k.base}/robot/*/action/result", self._on_result)
         bus.subscribe(f"{k.base}/robot/*/inbox/*", self._on_message)
+        bus.subscribe(f"{k.base}/agent/*/thought", self._on_thought)
 
     def _robot(self, name: str) -> str:
         return f"[{COLORS.get(name, 'white')}]{name:>5}[/]"
@@ -70,6 +74,22 @@ class ProgressPrinter:
             return
         mark = "[green]ok[/]" if r.outcome.succeeded else "[red]failed[/]"
         self.console.print(f"tick {r.tick:>2} {self._robot(r.robot)} {r.action.call():<34} {mark}  [dim]{r.outcome.feedback}[/]")
+
+    def _on_thought(self, sample: Sample) -> None:
+        """A reply that gave no action is said so, before the wait it turned into."""
+        try:
+            t = decode(sample.payload, Thought)
+        except ProtocolError:
+            return
+        if t.parse_error is None or not self.verbose:
+            return
+        error = escape(t.parse_error[:200])
+        if error.startswith(LLM_ERROR_PREFIX):
+            what = "[red]model unavailable[/]: " + error.removeprefix(LLM_ERROR_PREFIX)
+        else:
+            cut = " (cut at --max-tokens)" if t.finish_reason == "length" else ""
+            what = f"[red]reply did not parse{cut}[/]: {error}"
+        self.console.print(f"tick {t.tick:>2} {self._robot(t.robot)} {what}; it waits")
 
     def _on_message(self, sample: Sample) -> None:
         if not self.verbose:

@@ -396,6 +396,10 @@ class Thought(Message):
     prompt_tokens: int = 0
     completion_tokens: int = 0
     latency: float = 0.0
+    reasoning: str | None = Field(None, description="a reasoning model's thoughts (reasoning field or <think> block), apart from the reply")
+    reasoning_tokens: int = 0
+    finish_reason: str | None = Field(None, description="the server's: stop, length (cut at max_tokens), ...")
+    schema_hash: str | None = Field(None, description="with --structured: hash of the JSON Schema the reply had to follow")
 
 
 # --------------------------------------------------------------------------- codec

@@ -41,7 +41,7 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
         assert (a / r["trace"]).exists()
     summary = (a / "summary.md").read_text()
     assert "Table I" in summary and "| pack_objects | 1.00 / 1.00 /" in summary and "does not say" in summary
-    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,history_cap,horizon,task,episodes,succ,ps,ts,ts_bound,as,as_per_robot")
+    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,history_cap,horizon,mode,task,episodes,succ,ps,ts,ts_bound,as,as_per_robot")
     for r in rows_a:  # fidelity and the LLM failures are on every row (the heuristic has none)
         assert (r["fidelity"], r["aids"], r["history_cap"], r["horizon"], r["repeat"], r["trial"]) == ("paper", [], None, 50, 0, r["seed"])
         assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"], r["invalid_reason"]) == (0, 0, 0, True, None)
@@ -241,9 +241,10 @@ class ScriptedModel:
     """The model behind an OpenAI-compatible endpoint on loopback (test_llm's FakeServer).
 
     Episodes run one after the other (one worker), so a step number lower than the last one seen
-    starts the next episode. In episode `down` the model is unreachable: HTTP 503 with Retry-After
-    0, so the client's retries (agents/llm.py) end at once in an LLMError. Elsewhere Bob's first
-    reply has no command (a parse failure) and every other reply is a wait."""
+    starts the next episode. In episode `down` the model never answers in time: every call
+    outlasts the client's timeout, is retried once and lost (a server down from the first step
+    would stop the run instead: tests/test_llm_bounds.py). Elsewhere Bob's first reply has no
+    command (a parse failure) and every other reply is a wait."""
 
     def __init__(self, down: int) -> None:
         import threading
@@ -268,7 +269,7 @@ class ScriptedModel:
             self.last_step = step
             episode = self.episode
         if episode == self.down:
-            return 503, {"Retry-After": "0"}, b'{"error": {"message": "overloaded"}}', 0.0
+            return 503, {}, b'{"error": {"message": "too late"}}', 2.5  # beyond the 1 s timeout
         robot = system.split()[2].rstrip(",").lower()  # "You are Bob, ..."
         text = "Let me think about the tray first." if robot == "bob" and step == 0 else "Analysis: nothing to do yet.\nCommand: wait()"
         reply = {"choices": [{"message": {"role": "assistant", "content": text}}], "usage": {"prompt_tokens": 50, "completion_tokens": 9}}
@@ -282,7 +283,7 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
     model = ScriptedModel(down=1)  # the second episode (4 objects) never reaches the model
     spec = EvalSpec(
         tasks=("pack_objects",), scenes=("kitchen",), objects=(3, 4, 5), horizon=3, llm="openai:test-model",
-        base_url=model.url, llm_timeout=5.0, aids=("goal_map",), history_cap=50_000,
+        base_url=model.url, llm_timeout=1.0, aids=("goal_map",), history_cap=50_000,
     )  # fmt: skip
     try:
         rows = asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))
@@ -306,4 +307,25 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
     assert "| pack_objects | 2 | 0.00 [0.00, 0.00] |" in summary  # only the two valid episodes are averaged
     assert "paper GPT" not in summary  # no model of the paper's
     csv_line = (tmp_path / "ev" / "summary.csv").read_text().splitlines()[1]
-    assert csv_line.startswith("openai:test-model,none,aids:goal_map,50000,3,pack_objects,2,")
+    assert csv_line.startswith("openai:test-model,none,aids:goal_map,50000,3,free,pack_objects,2,")
+
+
+def test_a_wrong_api_key_stops_the_evaluation_with_one_error_and_a_failing_exit(tmp_path: Path) -> None:
+    """Not a grid of PS 0.00 rows and exit 0: the first episode's 401 stops the run."""
+    from click.testing import CliRunner
+    from test_llm import FakeServer
+
+    from mhrc.cli import main
+
+    server = FakeServer(lambda body: (401, {}, b'{"error": {"message": "Incorrect API key provided"}}', 0.0))
+    try:
+        result = CliRunner().invoke(main, [
+            "eval", "--llm", "openai:gpt-4o", "--base-url", server.url, "--tasks", "pack_objects", "--scenes", "kitchen",
+            "--workers", "1", "--concurrency", "1", "--out", str(tmp_path / "ev"),
+        ])  # fmt: skip
+    finally:
+        server.close()
+    assert result.exit_code == 1, result.output
+    assert "refused the credentials (HTTP 401)" in result.output and "--resume" in result.output
+    assert not (tmp_path / "ev" / "episodes.jsonl").exists() or not (tmp_path / "ev" / "episodes.jsonl").read_text().strip()
+    assert len(server.requests) <= 6  # the first episode's robots (and at most one more episode's) asked once each

@@ -32,7 +32,8 @@ class FakeServer:
     def __init__(self, respond: Callable[[dict[str, Any]], Reply]) -> None:
         self.respond = respond
         self.requests: list[tuple[dict[str, Any], dict[str, str]]] = []
-        self.spans: list[tuple[str, float, float]] = []  # (first system line, start, end)
+        self.spans: list[tuple[str, int, int, float]] = []  # (first system line, start, end, scripted delay)
+        self.seq = 0  # one count for every request start and end: their order, never their times
         self.in_flight = 0
         self.max_in_flight = 0
         self.lock = threading.Lock()
@@ -41,8 +42,9 @@ class FakeServer:
         class Handler(BaseHTTPRequestHandler):
             def do_POST(self) -> None:  # noqa: N802
                 body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
-                start = time.monotonic()
                 with server.lock:
+                    server.seq += 1
+                    start = server.seq
                     server.requests.append((body, dict(self.headers)))
                     server.in_flight += 1
                     server.max_in_flight = max(server.max_in_flight, server.in_flight)
@@ -50,7 +52,8 @@ class FakeServer:
                 time.sleep(delay)
                 with server.lock:
                     server.in_flight -= 1
-                    server.spans.append((body["messages"][0]["content"].split("\n")[0], start, time.monotonic()))
+                    server.seq += 1
+                    server.spans.append((body["messages"][0]["content"].split("\n")[0], start, server.seq, delay))
                 try:
                     self.send_response(status)
                     for k, v in headers.items():
@@ -104,7 +107,7 @@ async def test_transient_failures_are_retried_then_usage_recorded(server_factory
     assert c.text == "Command: wait()" and (c.prompt_tokens, c.completion_tokens) == (11, 7)
     assert len(server.requests) == 5 and script == []
     body, headers = server.requests[-1]
-    assert body == {"model": "m1", "messages": [{"role": "user", "content": "hi"}], "temperature": 0.5}
+    assert body == {"model": "m1", "messages": [{"role": "user", "content": "hi"}], "temperature": 0.5, "max_tokens": 1024}
     assert headers["Authorization"] == "Bearer sekret"
 
 
@@ -188,8 +191,9 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
         sent = sum(1 for body, _ in server.requests if body["messages"][0]["content"].startswith(f"You are {robot}"))
         assert sent == sum(1 for t in thoughts if t["robot"] == robot.lower()) + extra
 
-    # planning overlapped: some call of each robot ran while another robot's call was in flight
-    spans = [(who, s, e) for who, s, e in server.spans if 0.25 <= e - s < 1.0]
+    # planning overlapped: some answered call of each robot started before another robot's answered
+    # call ended and ended after it started (the order of starts and ends, not their times)
+    spans = [(who, s, e) for who, s, e, delay in server.spans if delay == 0.3]
     overlapping = {a for a, s1, e1 in spans for b, s2, e2 in spans if a != b and s1 < e2 and s2 < e1}
     assert len(overlapping) == 3, spans
 
@@ -209,16 +213,16 @@ async def test_replay_reproduces_a_recorded_episode_exactly(server_factory, tmp_
     server = server_factory(respond)
     recorded = EpisodeConfig.build(seed=0, horizon=5, llm="openai:m", base_url=server.url, trace=tmp_path / "rec.jsonl").resolved()
     first = await up_in_process(recorded)
+    calls = len(server.requests)  # before the replay: it must add none
     replayed = EpisodeConfig.build(seed=0, horizon=5, llm=f"replay:{recorded.trace}", trace=tmp_path / "rep.jsonl").resolved()
     second = await up_in_process(replayed)
-    calls = len(server.requests)
 
     def actions(path: Any) -> list[tuple[str, int, str]]:
         return sorted((l["msg"]["robot"], l["msg"]["tick"], l["msg"]["action"]["skill"]) for l in read_trace(path) if l["key"].endswith("/action/result"))
 
     assert first.metrics.model_dump(exclude={"wall_time"}) == second.metrics.model_dump(exclude={"wall_time"})
     assert actions(recorded.trace) == actions(replayed.trace)
-    assert first.metrics.action_steps > 5 and len(server.requests) == calls  # the replay asked the server nothing
+    assert first.metrics.action_steps > 5 and calls > 0 and len(server.requests) == calls  # the replay asked the server nothing
 
     client = ReplayClient(recorded.trace, "bob")
     with pytest.raises(ReplayMismatch, match="differs"):

@@ -19,6 +19,7 @@ import pytest
 from mhrc.agents.llm import (
     GENERIC_KEY_ENV,
     LLMError,
+    LLMFatalError,
     LLMSpecError,
     OpenAIChatClient,
     ScriptedClient,
@@ -139,7 +140,7 @@ async def test_every_transient_failure_is_retried_and_then_the_reply_comes_throu
         assert reason in errors
     path, body, headers = server.requests[-1]
     assert path == "/v1/chat/completions"
-    assert body == {"model": "test-model", "messages": HI, "temperature": 0.5}
+    assert body == {"model": "test-model", "messages": HI, "temperature": 0.5, "max_tokens": 1024}
     assert headers["Authorization"] == "Bearer k-123"
 
 
@@ -161,11 +162,22 @@ async def test_a_server_that_is_not_there_is_retried_then_reported() -> None:
     assert len(_delays(logs)) == 2 and client.requests == 3
 
 
-async def test_a_client_error_is_reported_at_once(serve) -> None:  # type: ignore[no-untyped-def]
-    server = serve(lambda body: (401, {}, b'{"error": "invalid api key"}', 0.0))
+@pytest.mark.parametrize(
+    ("status", "fatal", "match"),
+    [
+        (401, True, "refused the credentials .HTTP 401.: check the API key .*invalid api key"),
+        (403, True, "refused the credentials .HTTP 403."),
+        (404, True, "HTTP 404: no model 'm'"),
+        (400, False, "HTTP 400 .not retried.: .*invalid api key"),
+    ],
+)
+async def test_a_client_error_is_reported_at_once(serve, status: int, fatal: bool, match: str) -> None:  # type: ignore[no-untyped-def]
+    """Nothing a retry can fix is retried; what no later step can fix either is fatal."""
+    server = serve(lambda body: (status, {}, b'{"error": "invalid api key"}', 0.0))
     async with OpenAIChatClient("m", server.url, retries=3, backoff=0.01) as client:
-        with pytest.raises(LLMError, match="HTTP 401 .not retried.: .*invalid api key"):
+        with pytest.raises(LLMError, match=match) as err:
             await client.complete(HI)
+    assert isinstance(err.value, LLMFatalError) is fatal
     assert len(server.requests) == 1
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 from mhrc.agents.llm import LLMError, ScriptedClient
-from mhrc.agents.llm_policy import LLMPolicy
+from mhrc.agents.llm_policy import LLMPolicy, LLMUnreachable
 from mhrc.agents.memory import Memory
 from mhrc.agents.policy import Decision
 from mhrc.agents.replay import ReplayClient, ReplayMismatch, replay_clients
@@ -102,14 +102,25 @@ async def test_an_unparseable_reply_makes_the_robot_wait_and_comes_back_as_feedb
     assert "(latest) step 0: wait()" in user(nxt).split("Your actions so far")[1]
 
 
-async def test_a_model_that_stays_down_is_a_wait_with_the_error_as_feedback() -> None:
-    policy = LLMPolicy("alice", ScriptedClient([LLMError("m at http://127.0.0.1:9/v1 failed after 5 attempts: ConnectError"), "Command: pick(apple)"]))
-    d = await policy.decide(obs(0))
+async def test_a_model_that_goes_down_later_is_a_wait_with_the_error_as_feedback() -> None:
+    down = LLMError("m at http://127.0.0.1:9/v1 failed after 5 attempts: ConnectError")
+    policy = LLMPolicy("alice", ScriptedClient(["Command: wait()", down, "Command: pick(apple)"]))
+    await policy.decide(obs(0))
+    d = await policy.decide(obs(1))
     assert d.action == Wait() and d.reply is None and d.parse_error == "llm error: m at http://127.0.0.1:9/v1 failed after 5 attempts: ConnectError"
     # no result came back for that step (e.g. the agent resynchronized): the reason is fed back anyway
-    nxt = await policy.decide(obs(1))
+    nxt = await policy.decide(obs(2))
     assert nxt.action == Pick(obj="apple")
-    assert "(latest) step 0: Your planner could not reach its model (m at http://127.0.0.1:9/v1 failed after 5 attempts" in user(nxt)
+    assert "(latest) step 1: Your planner could not reach its model (m at http://127.0.0.1:9/v1 failed after 5 attempts" in user(nxt)
+
+
+async def test_a_model_down_for_the_whole_first_step_stops_the_robot_but_a_slow_one_does_not() -> None:
+    down = LLMError("m at http://127.0.0.1:9/v1 failed after 5 attempts: ConnectError")
+    with pytest.raises(LLMUnreachable, match="alice's model never answered during its first step: .*ConnectError"):
+        await LLMPolicy("alice", ScriptedClient([down])).decide(obs(0))
+    slow = LLMPolicy("alice", ScriptedClient(["Command: wait()"], latency=5.0), step_deadline=0.05)
+    d = await slow.decide(obs(0))
+    assert d.action == Wait() and d.parse_error == "llm error: no answer within the step deadline of 0.05 s"
 
 
 async def test_results_messages_and_waits_go_into_memory() -> None:

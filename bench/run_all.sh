@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Regenerates every figure in bench/results/ (on this project's 2-core machine: about an hour,
+# most of it bench_grid.py's 720 episodes and bench_llm_grid.py's sequential grid).
+# One benchmark:  bench/run_all.sh local_model    (the names of bench/results/*.json)
+set -euo pipefail
+cd "$(dirname "$0")"
+declare -A BENCH=(
+  [bus]=bench_bus.py [skills]=bench_skills.py [episodes]=bench_episodes.py
+  [llm_concurrency]=bench_llm_concurrency.py [prompt_size]=bench_prompt_size.py [eval]=bench_eval.py
+  [eval_grid]=bench_grid.py [llm_grid]=bench_llm_grid.py [local_model]=bench_local_model.py
+)
+names=("$@")
+[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model)
+for name in "${names[@]}"; do
+  script=${BENCH[$name]:?"unknown benchmark $name; known: ${!BENCH[*]}"}
+  echo "== $name ($script)" >&2
+  python "$script" --out "results/$name.json" > /dev/null
+done

@@ -1,0 +1,326 @@
+"""Real models' ways of failing, against scripted OpenAI-compatible servers on loopback: a server
+that never stops writing, replies cut at max_tokens, reasoning blocks and fields, a 1 MB reply,
+a server that refuses the JSON-schema response format, bad credentials, a server that is down,
+and robots driven by different servers. Every episode is real (Zenoh on loopback, PyBullet)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+
+from mhrc.agents.llm import MAX_REPLY_CHARS, LLMFatalError, OpenAIChatClient, robot_specs, split_reasoning
+from mhrc.agents.llm_policy import LLMUnreachable
+from mhrc.cli import main
+from mhrc.episode import ConfigError, EpisodeConfig, up_in_process
+from mhrc.metrics import from_trace
+from mhrc.trace import read_trace
+from test_llm import FakeServer, Reply, ok
+
+
+def reply(text: str | None, *, finish: str = "stop", reasoning: str | None = None, field: str = "reasoning_content", usage: dict[str, Any] | None = None) -> Reply:
+    message: dict[str, Any] = {"role": "assistant", "content": text}
+    if reasoning is not None:
+        message[field] = reasoning
+    body = {"choices": [{"index": 0, "message": message, "finish_reason": finish}], "usage": usage or {"prompt_tokens": 10, "completion_tokens": 5}}
+    return 200, {}, json.dumps(body).encode(), 0.0
+
+
+def robot_of(body: dict[str, Any]) -> str:
+    return body["messages"][0]["content"].split()[2].rstrip(",").lower()  # "You are Alice, ..."
+
+
+def thoughts(trace: Path) -> list[dict[str, Any]]:
+    return [line["msg"] for line in read_trace(trace) if line["key"].endswith("/thought")]
+
+
+@pytest.fixture
+def servers() -> Iterator[list[FakeServer]]:
+    made: list[FakeServer] = []
+    yield made
+    for s in made:
+        s.close()
+
+
+def serve(made: list[FakeServer], respond: Any) -> FakeServer:
+    made.append(FakeServer(respond))
+    return made[-1]
+
+
+class EndlessServer:
+    """Answers 200 and then writes one byte every 50 ms for as long as the client listens."""
+
+    def __init__(self) -> None:
+        self.stop = threading.Event()
+        self.requests = 0
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_POST(self) -> None:  # noqa: N802
+                self.rfile.read(int(self.headers["Content-Length"]))
+                server.requests += 1
+                try:
+                    self.send_response(200)
+                    self.send_header("Content-Type", "application/json")
+                    self.send_header("Content-Length", str(10**9))
+                    self.end_headers()
+                    self.wfile.write(b'{"choices": [{"message": {"content": "')
+                    while not server.stop.is_set():
+                        self.wfile.write(b"a")
+                        self.wfile.flush()
+                        time.sleep(0.05)
+                except OSError:
+                    pass  # the client hung up: what a timeout should do
+
+            def log_message(self, *args: object) -> None:
+                pass
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+        threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+
+    def close(self) -> None:
+        self.stop.set()
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+async def test_an_endless_server_costs_each_step_at_most_its_deadline_and_the_row_counts_the_lost_steps(tmp_path: Path) -> None:
+    """Every call hits the timeout, is retried once, then the robot waits: the episode reaches
+    its horizon (it never stalls), and every lost step is counted as unreachable."""
+    endless = EndlessServer()
+    try:
+        cfg = EpisodeConfig.build(
+            seed=0, horizon=2, llm="openai:m", base_url=endless.url, llm_timeout=0.4, step_deadline=5.0, trace=tmp_path / "t.jsonl"
+        ).resolved()
+        done = await up_in_process(cfg)
+    finally:
+        endless.close()
+    assert done.reason == "horizon" and done.metrics.temporal_steps == 2
+    assert endless.requests == 3 * 2 * 2  # 3 robots x 2 steps x (one call + one retry of its timeout)
+    m = from_trace(read_trace(cfg.trace))
+    assert (m.llm_calls, m.llm_unreachable, m.parse_failures) == (6, 6, 0)
+    assert all("retried at most 1 time" in t["parse_error"] for t in thoughts(cfg.trace))
+
+
+async def test_the_step_deadline_bounds_all_attempts_of_one_step(tmp_path: Path) -> None:
+    endless = EndlessServer()
+    try:
+        cfg = EpisodeConfig.build(
+            seed=0, horizon=1, llm="openai:m", base_url=endless.url, llm_timeout=30.0, step_deadline=0.5, trace=tmp_path / "t.jsonl"
+        ).resolved()
+        done = await up_in_process(cfg)
+    finally:
+        endless.close()
+    assert done.metrics.temporal_steps == 1
+    assert all("step deadline of 0.5 s" in t["parse_error"] for t in thoughts(cfg.trace))
+
+
+async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_parsed_or_explained(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Bob's first reply is cut at max_tokens before any command: it becomes feedback saying so.
+    Alice's is cut too but holds a command: it runs. Then a 1 MB reply: bounded in the trace and
+    in the next prompt."""
+    script = {
+        "bob": [reply("Analysis: I should think about the tray and then about the", finish="length"), reply("x" * 1_000_000)],
+        "alice": [reply("Command: navigate(table_1, 0)\nAnalysis: this will", finish="length")],
+    }
+    lock = threading.Lock()
+
+    def respond(body: dict[str, Any]) -> Reply:
+        with lock:
+            queue = script.get(robot_of(body)) or []
+            return queue.pop(0) if queue else ok("Command: wait()")
+
+    server = serve(servers, respond)
+    cfg = EpisodeConfig.build(
+        seed=0, horizon=3, llm="openai:m", base_url=server.url, max_tokens=77, llm_seed=5, trace=tmp_path / "t.jsonl"
+    ).resolved()
+    await up_in_process(cfg)
+    assert server.requests and all(b["max_tokens"] == 77 and b["seed"] == 5 for b, _ in server.requests)
+    ts = thoughts(cfg.trace)
+    bob = [t for t in ts if t["robot"] == "bob"]
+    alice = [t for t in ts if t["robot"] == "alice"]
+    assert bob[0]["finish_reason"] == "length" and "cut at the token limit" in bob[0]["parse_error"]
+    assert "cut at the token limit" in bob[1]["prompt"]  # the reason came back as feedback
+    assert alice[0]["finish_reason"] == "length" and alice[0]["parse_error"] is None and alice[0]["action"] == "navigate(table_1, 0)"
+    # the 1 MB reply: at most MAX_REPLY_CHARS (and a note) in the trace, a short reason in the next prompt
+    assert len(bob[1]["reply"]) < MAX_REPLY_CHARS + 100 and "more characters cut by mhrc" in bob[1]["reply"]
+    assert len(bob[1]["parse_error"]) <= 300 and len(bob[2]["prompt"]) < len(bob[1]["prompt"]) + 1000
+    assert cfg.trace.stat().st_size < 2_000_000
+
+
+async def test_reasoning_never_reaches_the_parser_and_is_recorded_apart(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """A <think> block full of commands (as DeepSeek-R1 or Qwen3 write them inline) and a
+    reasoning_content / reasoning field (vLLM, llama.cpp, Ollama): the command after the
+    thinking is the one that runs; the thoughts and their tokens are recorded separately."""
+    think = "<think>Maybe pick(apple)? Or navigate(sofa, 0). Command: wait()</think>\nAnalysis: go.\nCommand: navigate(table_1, 0)"
+    script = {
+        "alice": [reply(think)],
+        "bob": [reply("Command: wait()", reasoning="I could pick(phone) now.", usage={"prompt_tokens": 9, "completion_tokens": 30, "completion_tokens_details": {"reasoning_tokens": 21}})],
+        "david": [reply("Command: navigate(sofa, 0)", reasoning="Command: wait() is tempting", field="reasoning")],
+    }
+    lock = threading.Lock()
+
+    def respond(body: dict[str, Any]) -> Reply:
+        with lock:
+            queue = script.get(robot_of(body)) or []
+            return queue.pop(0) if queue else ok("Command: wait()")
+
+    server = serve(servers, respond)
+    cfg = EpisodeConfig.build(seed=0, horizon=1, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
+    await up_in_process(cfg)
+    by = {t["robot"]: t for t in thoughts(cfg.trace)}
+    assert by["alice"]["action"] == "navigate(table_1, 0)" and by["alice"]["reasoning"].startswith("Maybe pick(apple)")
+    assert "<think>" not in by["alice"]["reply"] and by["alice"]["reasoning_tokens"] > 0
+    assert by["bob"]["action"] == "wait()" and by["bob"]["reasoning"] == "I could pick(phone) now." and by["bob"]["reasoning_tokens"] == 21
+    assert by["david"]["action"] == "navigate(sofa, 0)" and by["david"]["reasoning"] == "Command: wait() is tempting"
+
+
+def test_an_unclosed_think_block_is_all_reasoning() -> None:
+    assert split_reasoning("<think>pick(apple) then navigate(") == ("", "pick(apple) then navigate(")
+    assert split_reasoning("Command: wait()") == ("Command: wait()", None)
+    assert split_reasoning("plan pick(x)</think>\nCommand: wait()") == ("\nCommand: wait()", "plan pick(x)")  # opened by the template
+
+
+@pytest.mark.parametrize(
+    ("status", "body", "match"),
+    [
+        (401, b'{"error": "invalid api key"}', "refused the credentials"),
+        (404, b'{"error": "model not found"}', "no model 'nope'"),
+    ],
+)
+async def test_bad_credentials_or_a_missing_model_stop_the_episode_at_the_first_step(servers, tmp_path: Path, status: int, body: bytes, match: str) -> None:  # type: ignore[no-untyped-def]
+    server = serve(servers, lambda _b: (status, {}, body, 0.0))
+    cfg = EpisodeConfig.build(seed=0, horizon=50, llm="openai:nope", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
+    with pytest.raises(LLMFatalError, match=match):
+        await up_in_process(cfg)
+    assert len(server.requests) <= 3  # one call per robot, none retried, no second step
+
+
+async def test_a_server_that_refuses_the_response_format_stops_a_structured_run_naming_the_option(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    def respond(body: dict[str, Any]) -> Reply:
+        if "response_format" in body:
+            return 400, {}, b'{"error": {"message": "response_format is not supported"}}', 0.0
+        return ok("Command: wait()")
+
+    server = serve(servers, respond)
+    cfg = EpisodeConfig.build(seed=0, horizon=50, llm="openai:m", base_url=server.url, structured=True, trace=tmp_path / "t.jsonl").resolved()
+    with pytest.raises(LLMFatalError, match="--structured"):
+        await up_in_process(cfg)
+    assert len(server.requests) <= 3
+
+
+async def test_a_server_down_for_the_whole_first_step_stops_the_run(tmp_path: Path) -> None:
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cfg = EpisodeConfig.build(seed=0, horizon=50, llm="openai:m", base_url=f"http://127.0.0.1:{port}/v1", trace=tmp_path / "t.jsonl").resolved()
+    with pytest.raises(LLMUnreachable, match="never answered during its first step"):
+        await up_in_process(cfg)
+
+
+async def test_a_server_that_goes_down_later_only_costs_steps(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    calls: dict[str, int] = {}
+    lock = threading.Lock()
+
+    def respond(body: dict[str, Any]) -> Reply:
+        with lock:
+            n = calls[robot_of(body)] = calls.get(robot_of(body), 0) + 1
+        return ok("Command: wait()") if n == 1 else (503, {"Retry-After": "0"}, b"down", 0.0)
+
+    server = serve(servers, respond)
+    cfg = EpisodeConfig.build(seed=0, horizon=3, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
+    done = await up_in_process(cfg)
+    assert done.reason == "horizon" and from_trace(read_trace(cfg.trace)).llm_unreachable == 6
+
+
+async def test_each_robot_reaches_its_own_server_and_the_rest_play_the_heuristic(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    a = serve(servers, lambda _b: ok("Command: wait()"))
+    b = serve(servers, lambda _b: ok("Command: wait()"))
+    spec = f"alice=openai:model-a@{a.url},bob=vllm:model-b@{b.url}"
+    cfg = EpisodeConfig.build(seed=0, horizon=2, llm=spec, trace=tmp_path / "t.jsonl").resolved()
+    await up_in_process(cfg)
+    assert a.requests and {robot_of(body) for body, _ in a.requests} == {"alice"} and {body["model"] for body, _ in a.requests} == {"model-a"}
+    assert b.requests and {robot_of(body) for body, _ in b.requests} == {"bob"} and {body["model"] for body, _ in b.requests} == {"model-b"}
+    policies = {t["robot"]: t["policy"] for t in thoughts(cfg.trace)}
+    assert policies == {"alice": "llm:model-a", "bob": "llm:model-b", "david": "heuristic"}
+
+
+def test_per_robot_specs_are_parsed_and_checked() -> None:
+    robots = ("alice", "bob", "david")
+    assert robot_specs("ollama:q", robots) == dict.fromkeys(robots, "ollama:q")
+    assert robot_specs("ollama:q,bob=openai:gpt-4o", robots) == {"alice": "ollama:q", "bob": "openai:gpt-4o", "david": "ollama:q"}
+    assert robot_specs("david=llamacpp:m@http://127.0.0.1:9/v1", robots)["david"] == "llamacpp:m@http://127.0.0.1:9/v1"
+    with pytest.raises(ValueError, match="names robot 'david', which is not in this episode"):
+        robot_specs("david=ollama:q", ("alice", "bob"))
+    with pytest.raises(ValueError, match="two default specs"):
+        robot_specs("ollama:a,ollama:b", robots)
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (["--max-tokens", "0"], "--max-tokens"),
+        (["--llm", "ollama:q", "--step-deadline", "0"], "--step-deadline"),
+        (["--llm", "david=ollama:q", "--ablation", "no_mobile"], "not in this episode"),
+        (["--llm", "gguf:/nonexistent/model.gguf"], "does not exist"),
+    ],
+)
+def test_bad_model_options_fail_before_anything_starts(args: list[str], match: str, tmp_path: Path) -> None:
+    result = CliRunner().invoke(main, ["up", "--trace", str(tmp_path / "t.jsonl"), *args])
+    assert result.exit_code == 2 and match in result.output, result.output
+    assert not (tmp_path / "t.jsonl").exists()
+
+
+def test_a_file_that_is_not_gguf_is_refused_before_anything_starts(tmp_path: Path) -> None:
+    fake = tmp_path / "model.gguf"
+    fake.write_text("not a model")
+    with pytest.raises(ConfigError, match="not a GGUF file"):
+        EpisodeConfig.build(llm=f"gguf:{fake}")
+
+
+async def test_the_client_sends_the_schema_in_the_form_each_server_takes(servers) -> None:  # type: ignore[no-untyped-def]
+    server = serve(servers, lambda _b: ok('{"analysis": "", "command": {"skill": "wait"}}'))
+    schema = {"type": "object", "properties": {"x": {"type": "string"}}}
+    for provider, field in (("openai", "response_format"), ("ollama", "format")):
+        async with OpenAIChatClient("m", server.url, provider=provider) as client:
+            await client.complete([{"role": "user", "content": "hi"}], schema=schema)
+        body = server.requests[-1][0]
+        assert field in body
+        assert (body["format"] if field == "format" else body["response_format"]["json_schema"]["schema"]) == schema
+
+
+async def test_a_structured_episode_sends_each_robots_schema_and_runs_what_the_json_names(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The scripted server answers with the first command its request's schema allows (for
+    Alice: navigate to the first furniture in the enum); the world runs exactly that."""
+
+    def respond(body: dict[str, Any]) -> Reply:
+        schema = body["response_format"]["json_schema"]["schema"]
+        first = schema["properties"]["command"]["anyOf"][0]["properties"]
+        command = {k: (v["const"] if "const" in v else v["enum"][0] if "enum" in v else v.get("minimum", 0)) for k, v in first.items()}
+        if command["skill"] in ("move", "communicate"):
+            command = {"skill": "wait"}
+        return ok(json.dumps({"analysis": "first option", "command": command}))
+
+    server = serve(servers, respond)
+    cfg = EpisodeConfig.build(seed=0, horizon=2, llm="openai:m", base_url=server.url, structured=True, trace=tmp_path / "t.jsonl").resolved()
+    await up_in_process(cfg)
+    ts = thoughts(cfg.trace)
+    assert ts and all(t["schema_hash"] and t["parse_error"] is None for t in ts)
+    assert all('"command": {"skill"' in t["prompt"] for t in ts)  # the JSON instructions replace "Command:"
+    alice = [t for t in ts if t["robot"] == "alice"]
+    first_furniture = json.loads(alice[0]["reply"])["command"]["furniture"]
+    assert alice[0]["action"] == f"navigate({first_furniture}, 0)"
+    results = [line["msg"] for line in read_trace(cfg.trace) if line["key"].endswith("/action/result") and line["msg"]["robot"] == "alice"]
+    assert results[0]["action"] == {"skill": "navigate", "target": first_furniture, "stand_pose": 0}
+    hashes = {t["schema_hash"] for t in ts}
+    assert len(hashes) >= 2  # each robot's own schema (different skills, different names)
