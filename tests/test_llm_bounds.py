@@ -324,3 +324,38 @@ async def test_a_structured_episode_sends_each_robots_schema_and_runs_what_the_j
     assert results[0]["action"] == {"skill": "navigate", "target": first_furniture, "stand_pose": 0}
     hashes = {t["schema_hash"] for t in ts}
     assert len(hashes) >= 2  # each robot's own schema (different skills, different names)
+
+
+async def test_the_console_says_when_a_reply_did_not_parse(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Not just `wait() ok You waited.`: the reason the robot waited, on the line before."""
+    import io
+
+    from rich.console import Console
+
+    from mhrc.progress import ProgressPrinter
+
+    server = serve(servers, lambda body: ok("I will think about [bold]it[/bold]." if robot_of(body) == "bob" else "Command: wait()"))
+    out = io.StringIO()
+    printer = ProgressPrinter(Console(file=out, width=200, highlight=False))
+    cfg = EpisodeConfig.build(seed=0, horizon=1, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
+    await up_in_process(cfg, observe=printer.attach)
+    text = out.getvalue()
+    assert "bob reply did not parse: no command found" in text and "it waits" in text
+    assert "alice reply did not parse" not in text
+
+
+def test_a_process_agent_gets_every_model_option_of_the_episode() -> None:
+    """`--processes` starts `mhrc agent` command lines: the same options mean the same there."""
+    from mhrc.episode import agent_command
+
+    cfg = EpisodeConfig.build(
+        llm="openai:m", base_url="http://127.0.0.1:9/v1", max_tokens=99, llm_seed=4, structured=True, step_deadline=7.5, llm_timeout=3.0
+    ).resolved()
+    cmd = agent_command("bob", cfg, "openai:m")
+    ctx = main.make_context("mhrc", cmd[3:])  # after `python -m mhrc`
+    sub = main.get_command(ctx, cmd[3])
+    assert sub is not None
+    params = sub.make_context("agent", cmd[4:]).params
+    agent_cfg = EpisodeConfig.build(**{k: v for k, v in params.items() if k in EpisodeConfig.model_fields and v is not None})
+    assert agent_cfg.client_options() == cfg.client_options()
+    assert agent_cfg.policy_options() == cfg.policy_options()
