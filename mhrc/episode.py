@@ -39,6 +39,9 @@ class ConfigError(ValueError):
 
 OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}
 DEFAULT_MAX_TOKENS = 1024  # mirrors mhrc.agents.llm.DEFAULT_MAX_TOKENS (not imported: the world needs no agent code)
+SERVER_TIMEOUT = 60.0  # s per request to a model server
+LOCAL_TIMEOUT = 600.0  # s per request to an in-process gguf: model: on a CPU a 1024-token reply from 3 slots took 97-138 s
+# here, and a local server has no network to fail; max_tokens bounds it (a timed-out request keeps its slot decoding)
 
 
 def option_name(field: str) -> str:
@@ -67,7 +70,7 @@ class EpisodeConfig(BaseModel):
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
-    llm_timeout: float = Field(60.0, gt=0, description="seconds per LLM request; a timeout is retried once")
+    llm_timeout: float | None = Field(None, gt=0, description="seconds per LLM request (a timeout is retried once); None: 60, 600 for gguf: models")
     max_tokens: int = Field(DEFAULT_MAX_TOKENS, ge=1, description="completion tokens per LLM call, sent on every request")
     llm_seed: int | None = Field(None, ge=0, description="sampling seed sent on every LLM request (servers that honour one)")
     structured: bool = Field(False, description="LLM replies follow a JSON Schema of the step's valid actions (not the paper's)")
@@ -142,8 +145,15 @@ class EpisodeConfig(BaseModel):
 
         return robot_specs(self.llm, self.robots)
 
-    def policy_options(self) -> dict[str, Any]:
-        """LLMPolicy switches for the ablation (the heuristic policy ignores them)."""
+    def timeout_for(self, spec: str | None) -> float:
+        """Seconds per LLM request for a robot driven by `spec` (its own spec, before gguf: is served)."""
+        if self.llm_timeout is not None:
+            return self.llm_timeout
+        return LOCAL_TIMEOUT if spec is not None and spec.startswith("gguf:") else SERVER_TIMEOUT
+
+    def policy_options(self, spec: str | None = None) -> dict[str, Any]:
+        """LLMPolicy switches for the ablation (the heuristic policy ignores them), for a robot
+        driven by `spec`."""
         return {
             "feedback": self.ablation != "no_feedback",
             "history": self.ablation != "no_history",
@@ -152,13 +162,13 @@ class EpisodeConfig(BaseModel):
             "prompt_cap_chars": self.history_cap,
             "reach_labels": "reach_labels" in self.aids,
             "structured": self.structured,
-            "step_deadline": self.step_deadline or 2 * self.llm_timeout + 10,
+            "step_deadline": self.step_deadline or 2 * self.timeout_for(spec) + 10,
             "max_tokens": self.max_tokens,
         }
 
-    def client_options(self) -> dict[str, Any]:
-        """OpenAIChatClient settings every LLM call of this episode uses."""
-        return {"timeout": self.llm_timeout, "max_tokens": self.max_tokens, "seed": self.llm_seed}
+    def client_options(self, spec: str | None = None) -> dict[str, Any]:
+        """OpenAIChatClient settings of a robot driven by `spec`."""
+        return {"timeout": self.timeout_for(spec), "max_tokens": self.max_tokens, "seed": self.llm_seed}
 
     @property
     def fidelity(self) -> str:
@@ -336,11 +346,12 @@ async def _run_in_process(
     cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...], connect: str | None
 ) -> EpisodeDone:
     world = asyncio.create_task(serve_world(cfg, observe=observe, connect=connect), name="world")
+    own = cfg.robot_specs()  # before gguf: specs became their local servers' URLs
     agents = [
         asyncio.create_task(
             run_agent(
-                r, cfg.run, connect or cfg.endpoint, llm=specs[r], base_url=cfg.base_url, client_options=cfg.client_options(),
-                **cfg.policy_options(),
+                r, cfg.run, connect or cfg.endpoint, llm=specs[r], base_url=cfg.base_url, client_options=cfg.client_options(own[r]),
+                **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",
         )
@@ -405,7 +416,7 @@ def agent_command(robot: str, cfg: EpisodeConfig, spec: str | None = None) -> li
     if spec is not None:
         cmd += ["--llm", spec, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
         cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
-        cmd += ["--llm-timeout", str(cfg.llm_timeout), "--max-tokens", str(cfg.max_tokens)]
+        cmd += ["--llm-timeout", str(cfg.timeout_for(cfg.robot_specs()[robot])), "--max-tokens", str(cfg.max_tokens)]
         cmd += ["--llm-seed", str(cfg.llm_seed)] if cfg.llm_seed is not None else []
         cmd += ["--structured"] if cfg.structured else []
         cmd += ["--step-deadline", str(cfg.step_deadline)] if cfg.step_deadline else []

@@ -127,7 +127,7 @@ class EvalSpec:
     ablation: str = "none"
     horizon: int = 50
     base_url: str | None = None
-    llm_timeout: float = 60.0
+    llm_timeout: float | None = None  # None: per spec (mhrc.episode.EpisodeConfig.timeout_for)
     prompts: str | None = None
     repeats: int = 1  # the grid, run this many times with other seeds
     aids: tuple[str, ...] = ()  # mhrc.fidelity names; () is the paper's fidelity

@@ -359,3 +359,12 @@ def test_a_process_agent_gets_every_model_option_of_the_episode() -> None:
     agent_cfg = EpisodeConfig.build(**{k: v for k, v in params.items() if k in EpisodeConfig.model_fields and v is not None})
     assert agent_cfg.client_options() == cfg.client_options()
     assert agent_cfg.policy_options() == cfg.policy_options()
+
+
+def test_a_local_model_gets_a_longer_default_timeout_than_a_server(gemma: Path) -> None:
+    """A CPU takes minutes for a long reply (bench/results/local_model.json); a server does not."""
+    cfg = EpisodeConfig.build(llm=f"alice=gguf:{gemma},openai:m@http://127.0.0.1:9/v1")
+    specs = cfg.robot_specs()
+    assert cfg.client_options(specs["alice"])["timeout"] == 600.0 and cfg.client_options(specs["bob"])["timeout"] == 60.0
+    assert cfg.policy_options(specs["alice"])["step_deadline"] == 1210.0
+    assert EpisodeConfig.build(llm=f"gguf:{gemma}", llm_timeout=5.0).client_options(f"gguf:{gemma}")["timeout"] == 5.0
