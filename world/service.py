@@ -1,9 +1,8 @@
-"""The world as a bus participant: attaches agents, schedules their actions in lockstep,
-runs them in the simulator and publishes acks, results, messages and events.
+"""The world as a bus participant: attaches agents, checks and acks their action requests,
+runs the actions in the simulator and publishes results, messages and events.
 
-Lockstep (DESIGN.md, "Time"): tick t closes when every attached robot has submitted one
-action for t; the world executes them in the fixed robot order and releases all results
-together. A message sent in tick t reaches its receiver with the observation of tick t+1.
+When actions run and results go out is the time policy's (`WorldConfig.schedule`, one of
+world.schedulers.SCHEDULERS; DESIGN.md, "Time"); this module keeps the bus plumbing.
 """
 
 from __future__ import annotations
@@ -12,6 +11,7 @@ import asyncio
 import json
 import time
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -31,6 +31,7 @@ from mhrc.protocol import (
     EpisodeDone,
     EpisodeStarted,
     FurnitureView,
+    Message,
     Metrics,
     ObjectView,
     Observation,
@@ -40,20 +41,14 @@ from mhrc.protocol import (
     RobotDetached,
     RobotMessage,
     SkillOutcome,
-    TickClosed,
     Wait,
     WorldState,
     decode,
 )
 
+from .schedulers import Executed, Scheduler, TaskResultLike, make_scheduler
+
 log = structlog.get_logger("mhrc.world")
-
-
-class TaskResultLike(Protocol):
-    success: bool
-    placed: int
-    total: int
-    partial_success: float
 
 
 class SimLike(Protocol):
@@ -81,7 +76,8 @@ class WorldConfig:
     run: str
     horizon: int = 50
     start_timeout: float | None = None  # start with the robots attached by then; None: wait for all
-    tick_delay: float = 0.0  # pause between ticks, for watching with --gui
+    tick_delay: float = 0.0  # pause between scheduler steps, for watching with --gui
+    schedule: str = "lockstep"  # the time policy, a name in world.schedulers.SCHEDULERS
 
 
 @dataclass
@@ -100,11 +96,9 @@ class WorldService:
         self.sim = sim
         self.cfg = config
         self.keys = Keys(config.run)
-        self.tick = 0
         self.started = False
         self.done: EpisodeDone | None = None
         self.attached: dict[str, str] = {}  # robot -> agent id
-        self.pending: dict[str, ActionRequest] = {}
         self._inbox: dict[str, list[RobotMessage]] = {r: [] for r in sim.robots}
         self._tally = _Tally()
         self._bound = sim.lower_bound()
@@ -112,8 +106,14 @@ class WorldService:
         self._wake = asyncio.Event()
         self._t0 = 0.0
         self._evaluation: TaskResultLike = sim.evaluate()
-        self._last_results: dict[str, str] = {}  # robot -> goal id, results of the last closed tick
+        self._last_results: dict[str, str] = {}  # robot -> goal id, the results released last
         self._log = log.bind(run=config.run)
+        self.scheduler: Scheduler = make_scheduler(config.schedule, self)
+
+    @property
+    def tick(self) -> int:
+        """The scheduler's clock."""
+        return self.scheduler.tick
 
     # ------------------------------------------------------------------ running
     async def run(self) -> EpisodeDone:
@@ -129,13 +129,13 @@ class WorldService:
         await self._wait_for_start()
         self._start()
         while self.done is None:
-            if self._tick_ready():
-                await self._close_tick()
+            if self.scheduler.ready():
+                await self.scheduler.step()
                 if self.cfg.tick_delay:
                     await asyncio.sleep(self.cfg.tick_delay)
                 continue
             if not self.attached:
-                self._finish("no_agents")
+                self.finish("no_agents")
                 break
             self._wake.clear()
             await self._wake.wait()
@@ -182,66 +182,13 @@ class WorldService:
         self._log.info("episode started", attached=sorted(self.attached))
         self._wake.set()
 
-    def _tick_ready(self) -> bool:
-        return self.started and bool(self.attached) and all(r in self.pending for r in self.attached)
-
-    async def _close_tick(self) -> None:
-        tick = self.tick
-        batch = [self.pending.pop(r) for r in self.sim.robots if r in self.pending and r in self.attached]
-        self.pending.clear()
-        async with self._sim_lock:
-            outcomes, evaluation, observations = await asyncio.to_thread(self._execute_batch, batch, tick)
-        self.tick += 1
-        self._evaluation = evaluation
-        finished = evaluation.success or self.tick >= self.cfg.horizon
-        for req, outcome in zip(batch, outcomes):
-            self._tally.sim_time += outcome.sim_time
-            if not isinstance(req.action, Wait):
-                self._tally.actions[req.robot] += 1
-            if not outcome.succeeded:
-                self._tally.failed[req.action.skill] += 1
-        # deliver messages (visible from the next tick on), then results together
-        delivered: dict[str, list[RobotMessage]] = {r: self._inbox[r] for r in self.sim.robots}
-        self._inbox = {r: [] for r in self.sim.robots}
-        for msgs in delivered.values():
-            for m in msgs:
-                self.bus.put(self.keys.inbox(m.to, m.sender), m)
-        self._last_results = {req.robot: req.goal_id for req in batch}
-        for req, outcome in zip(batch, outcomes):
-            obs = observations[req.robot].model_copy(update={"new_messages": delivered[req.robot]})
-            delivered[req.robot] = []
-            self.bus.put(
-                self.keys.action_result(req.robot),
-                ActionResult(goal_id=req.goal_id, robot=req.robot, tick=tick, action=req.action, outcome=outcome, observation=obs, done=finished),
-            )
-        # messages for robots that had no action this tick wait for their next observation
-        for robot, msgs in delivered.items():
-            self._inbox[robot] = msgs + self._inbox[robot]
-        self.bus.put(
-            self.keys.world_event,
-            TickClosed(
-                tick=tick,
-                actions={r.robot: r.action.call() for r in batch},
-                outcomes={r.robot: o.succeeded for r, o in zip(batch, outcomes)},
-                placed=evaluation.placed,
-                total=evaluation.total,
-            ),
-        )
-        self._log.debug("tick closed", tick=tick, placed=evaluation.placed, total=evaluation.total)
-        if evaluation.success:
-            self._finish("success")
-        elif self.tick >= self.cfg.horizon:
-            self._finish("horizon")
-
-    def _execute_batch(
-        self, batch: list[ActionRequest], tick: int
-    ) -> tuple[list[SkillOutcome], TaskResultLike, dict[str, Observation]]:
-        """Runs in a worker thread, holding the sim lock: the tick's actions in robot order,
-        then the evaluation and every acting robot's observation of tick + 1."""
+    def _execute_batch(self, batch: Sequence[ActionRequest], tick: int) -> Executed:
+        """Runs in a worker thread, holding the sim lock: the actions in order, then the
+        evaluation and every acting robot's observation of tick + 1."""
         outcomes = [self._execute(req, tick) for req in batch]
         evaluation = self.sim.evaluate()
         observations = {req.robot: self.sim.observe(req.robot, tick + 1) for req in batch}
-        return outcomes, evaluation, observations
+        return Executed(outcomes, evaluation, observations)
 
     def _execute(self, req: ActionRequest, tick: int) -> SkillOutcome:
         action = req.action
@@ -263,7 +210,7 @@ class WorldService:
         self._tally.messages += 1
         return SkillOutcome.ok(f"Your message to {action.to} was sent.")
 
-    def _finish(self, reason: str) -> None:
+    def finish(self, reason: str) -> None:
         if self.done is not None:
             return
         evaluation = self._evaluation
@@ -289,7 +236,52 @@ class WorldService:
 
     def stop(self) -> None:
         """End the episode now (e.g. on Ctrl-C); publishes episode_done with reason 'stopped'."""
-        self._finish("stopped")
+        self.finish("stopped")
+
+    # ------------------------------------------------------------------ for the scheduler (schedulers.World)
+    @property
+    def run_id(self) -> str:
+        return self.cfg.run
+
+    @property
+    def robots(self) -> tuple[str, ...]:
+        return self.sim.robots
+
+    @property
+    def horizon(self) -> int:
+        return self.cfg.horizon
+
+    async def execute(self, batch: Sequence[ActionRequest], tick: int) -> Executed:
+        """Run `batch` in order at `tick` in a worker thread, holding the sim lock; count it."""
+        async with self._sim_lock:
+            done = await asyncio.to_thread(self._execute_batch, batch, tick)
+        self._evaluation = done.evaluation
+        for req, outcome in zip(batch, done.outcomes):
+            self._tally.sim_time += outcome.sim_time
+            if not isinstance(req.action, Wait):
+                self._tally.actions[req.robot] += 1
+            if not outcome.succeeded:
+                self._tally.failed[req.action.skill] += 1
+        return done
+
+    def deliver_messages(self) -> dict[str, list[RobotMessage]]:
+        delivered = {r: self._inbox[r] for r in self.sim.robots}
+        self._inbox = {r: [] for r in self.sim.robots}
+        for msgs in delivered.values():
+            for m in msgs:
+                self.bus.put(self.keys.inbox(m.to, m.sender), m)
+        return delivered
+
+    def hold_messages(self, robot: str, messages: Sequence[RobotMessage]) -> None:
+        self._inbox[robot] = list(messages) + self._inbox[robot]
+
+    def release(self, results: Sequence[ActionResult]) -> None:
+        self._last_results = {r.robot: r.goal_id for r in results}
+        for result in results:
+            self.bus.put(self.keys.action_result(result.robot), result)
+
+    def publish_event(self, event: Message) -> None:
+        self.bus.put(self.keys.world_event, event)
 
     # ------------------------------------------------------------------ bus handlers
     async def _on_attach(self, key: str, params: dict[str, str], payload: bytes) -> AttachReply:
@@ -328,12 +320,11 @@ class WorldService:
             self._log.warning("malformed action request rejected", robot=robot, reason=str(exc))
             self._reject(robot, _goal_id_of(sample.payload), f"malformed action request: {exc}")
             return
-        reason = self._check_request(robot, req)
+        reason = self._check_request(robot, req) or self.scheduler.admit(req)  # admit only what passed the checks
         if reason:
             self._log.info("action rejected", robot=robot, goal=req.goal_id, reason=reason)
             self._reject(robot, req.goal_id, reason)
             return
-        self.pending[robot] = req
         self.bus.put(self.keys.action_ack(robot), ActionAck(goal_id=req.goal_id, robot=robot, accepted=True))
         self._wake.set()
 
@@ -349,10 +340,6 @@ class WorldService:
             return f"robot {robot} is not attached: attach first"
         if holder != req.agent_id:
             return f"robot {robot} is attached to another agent"
-        if req.tick != self.tick:
-            return f"the request is for tick {req.tick} but the world is at tick {self.tick}"
-        if robot in self.pending:
-            return f"{robot} already submitted an action for tick {self.tick}"
         return ""
 
     def _reject(self, robot: str, goal_id: str, reason: str) -> None:
@@ -364,7 +351,7 @@ class WorldService:
         if sample.is_put or robot not in self.attached:
             return
         del self.attached[robot]
-        self.pending.pop(robot, None)
+        self.scheduler.forget(robot)
         if self.done is not None:
             return  # agents leaving after the episode: nothing to report
         self._log.warning("robot detached", robot=robot, tick=self.tick)

@@ -1,0 +1,100 @@
+"""The interface between the world service and its time policy (DESIGN.md, "Time").
+
+The service keeps the bus: it attaches robots, checks each request's robot, agent and payload,
+acks it with the scheduler's verdict, answers state queries, starts and finishes the episode.
+The scheduler decides the rest: which checked requests to accept, when their actions execute,
+when their results go out and when the clock advances. Schedulers see the service only
+through `World`, so they never import it.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import ClassVar, Protocol
+
+from mhrc.protocol import ActionRequest, ActionResult, Message, Observation, RobotMessage, SkillOutcome
+
+
+class TaskResultLike(Protocol):
+    success: bool
+    placed: int
+    total: int
+    partial_success: float
+
+
+@dataclass(frozen=True)
+class Executed:
+    """What a batch of actions did: outcomes in batch order, the task's evaluation after the
+    batch, and each actor's observation of the next tick (messages not yet attached)."""
+
+    outcomes: list[SkillOutcome]
+    evaluation: TaskResultLike
+    observations: dict[str, Observation]
+
+
+class World(Protocol):
+    """The world service as a scheduler sees it (WorldService implements it)."""
+
+    @property
+    def run_id(self) -> str: ...
+    @property
+    def robots(self) -> tuple[str, ...]:
+        """Every robot of the episode, in the fixed robot order."""
+    @property
+    def attached(self) -> Mapping[str, str]:
+        """robot -> agent id, for the robots attached now."""
+    @property
+    def horizon(self) -> int: ...
+
+    async def execute(self, batch: Sequence[ActionRequest], tick: int) -> Executed:
+        """Run the actions in order in the simulator, at `tick`, and count them for the metrics."""
+    def deliver_messages(self) -> dict[str, list[RobotMessage]]:
+        """Publish the messages not yet in any observation on their inbox keys and hand them
+        over, per robot (every robot a key), to go into the receivers' observations."""
+    def hold_messages(self, robot: str, messages: Sequence[RobotMessage]) -> None:
+        """Put back messages no observation carried: they go out (again) with the next delivery
+        and reach `robot` with its next observation (an attach reply included)."""
+    def release(self, results: Sequence[ActionResult]) -> None:
+        """Publish results that go out together; the episode's end names them as its final
+        results, so an agent that sees `episode_done` first still waits for its own."""
+    def publish_event(self, event: Message) -> None: ...
+    def finish(self, reason: str) -> None:
+        """End the episode (`success`, `horizon`, ...); later calls do nothing."""
+
+
+class Scheduler(ABC):
+    """A time policy of the world: one small class per policy, the same agent code for all.
+
+    A scheduler must guarantee that
+    - every request it admits gets exactly one result, unless its robot detaches or the
+      episode ends first (`EpisodeDone.final_results` then tells the agent whether to wait);
+    - a robot's results go out in the order of its requests;
+    - the messages an action sends reach their receivers with a later observation, never lost;
+    - the episode finishes on success, and at the latest when `tick` reaches the horizon.
+    """
+
+    name: ClassVar[str]
+    tick: int  # the world's clock: what requests name, TS when the episode ends
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+
+    @abstractmethod
+    def admit(self, req: ActionRequest) -> str:
+        """Accept `req` (return "") or say why not. The service has already checked that it
+        comes from the agent attached to its robot while the episode runs."""
+
+    @abstractmethod
+    def ready(self) -> bool:
+        """Whether `step` has work to do now (the service waits for news otherwise)."""
+
+    @abstractmethod
+    async def step(self) -> None:
+        """Execute what is due, release its results, advance the clock, and finish the
+        episode on success or at the horizon."""
+
+    @abstractmethod
+    def forget(self, robot: str) -> None:
+        """`robot` detached: drop whatever it had pending."""
