@@ -56,7 +56,11 @@ T = TypeVar("T")
 
 
 def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]]) -> T:
-    """Run a coroutine; SIGTERM cancels it like Ctrl-C, so every session closes in `finally`."""
+    """Run a coroutine; SIGTERM cancels it like Ctrl-C, so every session closes in `finally`.
+    A child of `mhrc up --processes` or `mhrc eval` gets SIGTERM when its parent dies."""
+    from .lifeline import die_with_parent
+
+    die_with_parent()
 
     async def main() -> T:
         task = asyncio.current_task()
@@ -151,6 +155,7 @@ def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, l
 @_episode_options
 @click.option("--start-timeout", type=float, default=None,
               help="Start with the robots attached after this many seconds; default: wait for all three.")
+@click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
 def world(log_level: str, start_timeout: float | None, quiet: bool, **values: Any) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import os
 import signal
 import socket
 import subprocess
@@ -391,9 +390,19 @@ def _is_fatal(exc: BaseException | None) -> bool:
 
 
 def _child_env() -> dict[str, str]:
-    env = dict(os.environ)
+    from .lifeline import child_env
+
+    env = child_env()  # the world and agents die with this process, even after a SIGKILL
     env.setdefault("PYTHONUNBUFFERED", "1")
     return env
+
+
+def _child_stdout() -> int | None:
+    """Children print to this process's stderr: stdout is for `--json` output alone."""
+    try:
+        return sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
 
 
 def world_command(cfg: EpisodeConfig) -> list[str]:
@@ -407,6 +416,8 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         cmd += ["--trace", str(cfg.trace)]
     if cfg.aids:
         cmd += ["--aids", ",".join(cfg.aids)]
+    if cfg.tick_delay:
+        cmd += ["--tick-delay", str(cfg.tick_delay)]
     return cmd
 
 
@@ -453,7 +464,7 @@ async def _run_processes(
     procs: list[subprocess.Popen[bytes]] = []
     bus = None
     try:
-        world = subprocess.Popen(world_command(cfg), env=_child_env())
+        world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=_child_stdout())
         procs.append(world)
         await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)
         bus = await Bus.open(mode="client", connect=[cfg.endpoint])
@@ -472,7 +483,7 @@ async def _run_processes(
         if observe is not None:
             observe(bus, cfg.run)
         for r in robots:
-            procs.append(subprocess.Popen(agent_command(r, cfg, specs[r]), env=_child_env()))
+            procs.append(subprocess.Popen(agent_command(r, cfg, specs[r]), env=_child_env(), stdout=_child_stdout()))
         waiter = asyncio.create_task(asyncio.to_thread(world.wait))
         watched: set[asyncio.Future[Any]] = {done_fut, waiter}
         finished, _ = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)

@@ -53,6 +53,7 @@ from .bus import Bus, Sample, endpoint, free_port
 from .episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig, EventHook, open_client, up_in_process
 from .fidelity import label
 from .keys import Keys
+from .lifeline import child_env
 from .metrics import TraceError, from_trace
 from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode, decode_event
 from .report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
@@ -490,7 +491,7 @@ async def evaluate(
         bus.declare_token(keys["coordinator"])
         if progress is not None:
             progress(tally, None)
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        env = child_env(dict(os.environ, PYTHONUNBUFFERED="1"))  # workers die with the coordinator, even after a SIGKILL
         for _ in range(workers if todo else 0):
             procs.append(subprocess.Popen(worker_command(listen, eval_id, concurrency), env=env, stdin=subprocess.DEVNULL))
         idle_since = time.monotonic()
