@@ -24,6 +24,7 @@ from mhrc.protocol import (
     Observation,
     ProtocolError,
     Thought,
+    Turn,
     decode,
     decode_event,
 )
@@ -77,6 +78,8 @@ class RobotAgent:
         self._results: dict[str, asyncio.Future[ActionResult]] = {}
         self._done = asyncio.Event()
         self._world_gone = asyncio.Event()
+        self._alive = False  # whether this agent's liveliness token is declared
+        self._turn: asyncio.Future[Turn] | None = None  # set while attaching, for a world that says wait_turn
         self._log = log.bind(run=run, robot=robot, agent=self.agent_id)
 
     # ------------------------------------------------------------------ bus handlers
@@ -90,6 +93,15 @@ class RobotAgent:
         fut = waiting.get(msg.goal_id)
         if fut is not None and not fut.done():
             fut.set_result(msg)
+
+    def _on_turn(self, sample: Sample) -> None:
+        try:
+            turn = decode(sample.payload, Turn)
+        except ProtocolError as exc:
+            self._log.warning("malformed turn ignored", reason=str(exc))
+            return
+        if turn.robot == self.robot and self._turn is not None and not self._turn.done():
+            self._turn.set_result(turn)
 
     def _on_event(self, sample: Sample) -> None:
         try:
@@ -113,22 +125,23 @@ class RobotAgent:
         self.bus.subscribe(k.action_ack(self.robot), lambda s: self._resolve(s, ActionAck, self._acks))
         self.bus.subscribe(k.action_result(self.robot), lambda s: self._resolve(s, ActionResult, self._results))
         self.bus.subscribe(k.world_event, self._on_event)
+        self.bus.subscribe(k.turn(self.robot), self._on_turn)  # before attaching: a turn may come before the reply
         self.bus.watch_liveliness(k.alive_world, self._on_world_liveliness)
-        obs = await self._attach()
-        self.bus.declare_token(k.alive_robot(self.robot))
-        while not self._done.is_set():
+        attached = await self._attach()
+        while attached is not None and not self._done.is_set():
+            obs = attached
             decision = await self.policy.decide(obs)
             self._publish_thought(obs, decision)
             result = await self._act(obs, decision)
             if result is None:
                 if self._done.is_set():
                     break
-                obs = await self._attach()  # the world moved on (tick mismatch): resynchronize
+                attached = await self._attach()  # the world moved on (tick mismatch): resynchronize
                 continue
             self.steps += 1
             self.policy.record(result)
             self._log.debug("action done", tick=result.tick, action=result.action.call(), ok=result.outcome.succeeded)
-            obs = result.observation
+            attached = result.observation
             if result.done:
                 break
         if self.episode is None:
@@ -138,24 +151,57 @@ class RobotAgent:
                 self._log.warning("no episode_done event received")
         return self.episode
 
-    async def _attach(self) -> Observation:
+    async def _attach(self) -> Observation | None:
+        """Attach and return the first observation to plan on; None when the episode ended
+        while this robot waited for its turn."""
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.attach_timeout
         request = AttachRequest(robot=self.robot, agent_id=self.agent_id)
-        while True:
-            replies = await self.bus.get(self.keys.attach(self.robot), request, timeout=2.0)
-            if replies:
-                try:
-                    reply = decode(replies[0], AttachReply)
-                except ProtocolError as exc:
-                    raise AgentError(f"the world sent a malformed attach reply: {exc}") from None
-                if not reply.accepted or reply.observation is None:
-                    raise AttachRejected(f"the world refused {self.robot}: {reply.reason}")
-                self._log.info("attached", tick=reply.tick)
-                return reply.observation
-            if loop.time() >= deadline:
-                raise WorldGone(f"no world answered for run {self.keys.run!r} within {self.attach_timeout:.0f} s")
-            await asyncio.sleep(0.2)
+        self._turn = loop.create_future()  # a Turn from before this attach is stale
+        try:
+            while True:
+                replies = await self.bus.get(self.keys.attach(self.robot), request, timeout=2.0)
+                if replies:
+                    try:
+                        reply = decode(replies[0], AttachReply)
+                    except ProtocolError as exc:
+                        raise AgentError(f"the world sent a malformed attach reply: {exc}") from None
+                    if reply.accepted and not self._alive:
+                        self.bus.declare_token(self.keys.alive_robot(self.robot))  # before any wait for the turn
+                        self._alive = True
+                    if reply.accepted and reply.wait_turn:
+                        self._log.info("attached, waiting for the turn", tick=reply.tick)
+                        turn = await self._await_turn(self._turn)
+                        return None if turn is None else turn.observation
+                    if not reply.accepted or reply.observation is None:
+                        raise AttachRejected(f"the world refused {self.robot}: {reply.reason}")
+                    self._log.info("attached", tick=reply.tick)
+                    return reply.observation
+                if loop.time() >= deadline:
+                    raise WorldGone(f"no world answered for run {self.keys.run!r} within {self.attach_timeout:.0f} s")
+                await asyncio.sleep(0.2)
+        finally:
+            self._turn = None
+
+    async def _await_turn(self, fut: asyncio.Future[Turn]) -> Turn | None:
+        """The world's Turn for this robot; None when the episode ended first. Waiting for a
+        turn is waiting for the teammates earlier in the order to plan and act, so it is bounded
+        like awaiting a result (result_timeout), not by the attach timeout."""
+        done_wait = asyncio.ensure_future(self._done.wait())
+        gone_wait = asyncio.ensure_future(self._world_gone.wait())
+        try:
+            waits: set[asyncio.Future[object]] = {fut, done_wait, gone_wait}  # type: ignore[arg-type]
+            finished, _ = await asyncio.wait(waits, timeout=self.result_timeout, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            done_wait.cancel()
+            gone_wait.cancel()
+        if fut in finished:
+            return fut.result()
+        if gone_wait in finished:
+            raise WorldGone(f"the world disappeared while {self.robot} waited for its turn")
+        if done_wait in finished:
+            return None
+        raise WorldGone(f"no turn from the world within {self.result_timeout} s")
 
     async def _act(self, obs: Observation, decision: Decision) -> ActionResult | None:
         """Request the action and await its result; None when the world rejected it as stale."""

@@ -30,6 +30,7 @@ from .protocol import EpisodeDone, ProtocolError, decode
 log = structlog.get_logger("mhrc.episode")
 
 ROBOTS = ("alice", "bob", "david")
+SCHEDULES = ("sequential", "lockstep")  # the names of world.schedulers.SCHEDULERS (not imported: assembling code stays light)
 
 
 class ConfigError(ValueError):
@@ -65,6 +66,7 @@ class EpisodeConfig(BaseModel):
     gui: bool = False
     start_timeout: float | None = Field(None, gt=0)
     tick_delay: float = Field(0.0, ge=0)
+    schedule: Literal["sequential", "lockstep"] = Field("lockstep", description="the world's time policy (DESIGN.md, \"Time\")")
     llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
@@ -199,7 +201,7 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, c
         world = WorldService(
             bus,
             sim,
-            WorldConfig(run=cfg.run, horizon=cfg.horizon, start_timeout=cfg.start_timeout, tick_delay=cfg.tick_delay),
+            WorldConfig(run=cfg.run, horizon=cfg.horizon, start_timeout=cfg.start_timeout, tick_delay=cfg.tick_delay, schedule=cfg.schedule),
         )
         try:
             return await world.run()
@@ -410,7 +412,7 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         sys.executable, "-m", "mhrc", "world",
         "--task", cfg.task, "--scene", cfg.scene, "--seed", str(cfg.seed), "--objects", str(cfg.n_objects),
         "--horizon", str(cfg.horizon), "--run", cfg.run, "--host", cfg.host, "--port", str(cfg.port), "--quiet",
-        "--ablation", cfg.ablation,
+        "--ablation", cfg.ablation, "--schedule", cfg.schedule,
     ]  # fmt: skip
     if cfg.trace is not None:
         cmd += ["--trace", str(cfg.trace)]

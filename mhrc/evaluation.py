@@ -137,6 +137,7 @@ class EvalSpec:
     llm_seed: int | None = None
     structured: bool = False  # JSON decisions (not the paper's free text)
     step_deadline: float | None = None
+    schedule: str = "lockstep"  # the world's time policy (mhrc.episode.SCHEDULES)
 
     @property
     def mode(self) -> str:
@@ -157,7 +158,7 @@ class EvalSpec:
         return {
             "method": self.method, "ablation": self.ablation, "horizon": self.horizon, "fidelity": self.fidelity,
             "history_cap": self.history_cap, "prompts": self.prompts, "mode": self.mode,
-            "max_tokens": self.max_tokens if self.llm else None, "llm_seed": self.llm_seed,
+            "max_tokens": self.max_tokens if self.llm else None, "llm_seed": self.llm_seed, "schedule": self.schedule,
         }  # fmt: skip
 
     def seed(self, repeat: int, trial: int) -> int:
@@ -179,7 +180,7 @@ class EvalSpec:
                                 "llm_timeout": self.llm_timeout, "prompts": self.prompts,
                                 "aids": list(self.aids) or None, "history_cap": self.history_cap,
                                 "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
-                                "step_deadline": self.step_deadline,
+                                "step_deadline": self.step_deadline, "schedule": None if self.schedule == "lockstep" else self.schedule,
                             }  # fmt: skip
                             config = {k: v for k, v in cfg.items() if v is not None}
                             out.append(Job(key=f"{task}/{scene}/{n}/{seed}", config=config, repeat=repeat, trial=trial))
@@ -361,12 +362,13 @@ def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
         if manifest.exists():
             old = json.loads(manifest.read_text())
             # a manifest written before a field was part of the identity ran with its default
-            before = {"fidelity": "paper", "history_cap": None, "prompts": None, "mode": "free", "max_tokens": None, "llm_seed": None}
+            before = {"fidelity": "paper", "history_cap": None, "prompts": None, "mode": "free", "max_tokens": None, "llm_seed": None,
+                      "schedule": "lockstep"}
             before |= old.get("identity") or {}
             if before != spec.identity():
                 raise ConfigError(
                     f"out: {out} holds an evaluation of {before}, not {spec.identity()}; --resume needs the same --llm, "
-                    "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens and --llm-seed"
+                    "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens, --llm-seed and --schedule"
                 )
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
@@ -457,7 +459,7 @@ async def evaluate(
             row = {
                 "key": res.key, "method": spec.method, "ablation": spec.ablation, "repeat": job.repeat, "trial": job.trial,
                 **m.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap, "mode": spec.mode,
-                "max_tokens": spec.max_tokens if spec.llm else None, "llm_seed": spec.llm_seed,
+                "max_tokens": spec.max_tokens if spec.llm else None, "llm_seed": spec.llm_seed, "schedule": spec.schedule,
                 "worker": res.worker, "trace": str(trace_path.relative_to(out)),
             }  # fmt: skip
             with rows_path.open("a", encoding="utf-8") as f:

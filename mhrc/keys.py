@@ -62,6 +62,9 @@ class Keys:
     def action_result(self, robot: str) -> str:
         return f"{self.base}/robot/{check_id(robot, 'robot')}/action/result"
 
+    def turn(self, robot: str) -> str:
+        return f"{self.base}/robot/{check_id(robot, 'robot')}/turn"
+
     def inbox(self, to: str, sender: str) -> str:
         return f"{self.base}/robot/{check_id(to, 'robot')}/inbox/{check_id(sender, 'robot')}"
 

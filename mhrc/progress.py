@@ -54,6 +54,7 @@ class ProgressPrinter:
             c.print(
                 f"[bold]episode {ev.run}[/]: task {ev.task}, scene {ev.scene}, seed {ev.seed}, "
                 f"{ev.n_objects} objects, robots {', '.join(ev.robots)}, horizon {ev.horizon}, fidelity {ev.fidelity}"
+                + (f", {ev.scheduler} schedule" if ev.scheduler != "lockstep" else "")
             )
         elif isinstance(ev, TickClosed):
             if self.verbose:

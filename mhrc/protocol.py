@@ -237,7 +237,7 @@ class ActionRequest(Message):
     goal_id: str = Field(default_factory=new_goal_id, pattern=r"^[A-Za-z0-9_-]{1,64}$")
     robot: str
     agent_id: str
-    tick: int = Field(ge=0, description="the tick this action is for (lockstep)")
+    tick: int = Field(ge=0, description="the tick of the observation the action was planned on")
     action: Action
 
 
@@ -277,6 +277,21 @@ class AttachReply(Message):
     tick: int = 0
     horizon: int = 0
     observation: Observation | None = None
+    wait_turn: bool = Field(
+        False,
+        description="the robot plans only when it is its turn (the sequential schedule): no observation now, "
+        "it comes with a Turn on the robot's turn key",
+    )
+
+
+class Turn(Message):
+    """The world's word that it is `robot`'s turn to plan, for a robot with no result pending
+    (after attaching with wait_turn); `observation` is the world as it is now."""
+
+    kind: Literal["turn"] = "turn"
+    robot: str
+    tick: int
+    observation: Observation
 
 
 # --------------------------------------------------------------------------- world events
@@ -308,7 +323,7 @@ class EpisodeStarted(Message):
     n_objects: int
     robots: list[str]
     horizon: int
-    scheduler: Literal["lockstep"] = "lockstep"
+    scheduler: Literal["sequential", "lockstep"] = "lockstep"
     lower_bound: int | None = None
     fidelity: str = Field("paper", description="`paper`, or `aids:` and the aids this episode ran with (mhrc.fidelity)")
     aids: list[str] = Field(default_factory=list)

@@ -91,7 +91,8 @@ COLUMNS = (
     "completion_tokens", "parse_failures", "llm_unreachable", "rejected_actions", "failed_actions", "wall_time",
 )  # fmt: skip
 CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as": "action_steps"}
-SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode")  # mode: free (the paper's) or structured
+# mode: free (the paper's) or structured replies; schedule: the world's time policy (world/schedulers)
+SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule")
 AS_NOTE = (
     "AS counts actions of all robots (wait excluded); AS/robot divides it by the number of robots. "
     "The paper does not say which of the two its AS is; its figures are set beside mhrc's AS. "
@@ -130,7 +131,7 @@ def merge_runs(dirs: list[Path]) -> list[dict[str, Any]]:
 
 def _setting(row: dict[str, Any]) -> tuple[Any, ...]:
     """What a row's numbers depend on besides the episode; rows written before a field existed get its old meaning."""
-    defaults = {"fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free"}
+    defaults = {"fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free", "schedule": "lockstep"}
     return tuple(row.get(k, defaults.get(k)) for k in SETTING)
 
 
@@ -143,8 +144,10 @@ def _order(key: Iterable[Any]) -> tuple[str, ...]:
 
 
 def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
-    method, abl, fidelity, cap, horizon, mode = setting
+    method, abl, fidelity, cap, horizon, mode, schedule = setting
     parts = [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["structured decisions"] if mode == "structured" else [])
+    if schedule != "lockstep":
+        parts.append(f"{schedule} schedule")
     if cap is not None:
         parts.append(f"history cap {cap}")
     if horizon is not None and horizon != PAPER_HORIZON:
@@ -226,7 +229,7 @@ def grid_problem(rows: list[dict[str, Any]]) -> str | None:
 def paper_match(setting: tuple[Any, ...], task: str, rows: list[dict[str, Any]]) -> PaperMatch | None:
     """The paper's figures for this setting and task when the configuration matches; a
     PaperMatch without figures (and the reason) when only the model matches; None otherwise."""
-    method, ablation, fidelity, cap, horizon, mode = setting
+    method, ablation, fidelity, cap, horizon, mode, _schedule = setting
     model = paper_model(str(method))
     if model is None:
         return None
@@ -378,9 +381,9 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
     for key, title in (("scene", "scene"), ("n_objects", "object count")):
         lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS/robot) | episodes |",
                   "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
-        for (m, a, fid, cap, hor, mode, v), bucket in group(valid, *SETTING, key).items():
+        for (m, a, fid, cap, hor, mode, sched, v), bucket in group(valid, *SETTING, key).items():
             s = summarize(bucket)
-            extra = "".join(f" · {x}" for x in setting_label((m, a, fid, cap, hor, mode)).split(" · ")[3:])  # mode, history cap, horizon
+            extra = "".join(f" · {x}" for x in setting_label((m, a, fid, cap, hor, mode, sched)).split(" · ")[3:])  # mode, schedule, cap, horizon
             lines.append(f"| {m}{extra} | {a} | {fid} | {v} | {_cell(s)} | {s['episodes']} |")
         lines.append("")
     return "\n".join(lines)

@@ -3,15 +3,20 @@
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import pytest
 
+from mhrc.agents.agent import RobotAgent
+from mhrc.agents.heuristic import heuristic_policy
+from mhrc.agents.policy import Decision
 from mhrc.bus import Bus
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.protocol import parse_action
+from mhrc.episode import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig, up_in_process, up_processes
+from mhrc.protocol import ActionRequest, ActionResult, Observation, SkillOutcome, parse_action
 from mhrc.trace import read_trace
-from mhrc.world.schedulers import SCHEDULERS, LockstepScheduler, Scheduler, UnknownScheduler
+from mhrc.world.scene import LAYOUTS
+from mhrc.world.schedulers import SCHEDULERS, LockstepScheduler, Scheduler, SequentialScheduler, UnknownScheduler
 from mhrc.world.service import WorldConfig, WorldService
 from mhrc.world.sim import Sim
 
@@ -54,3 +59,118 @@ async def test_same_seed_same_actions_and_outcomes(tmp_path: Path) -> None:
     a, b = runs
     assert [(tick, robot) for tick, robot, _, _ in a] == [(t, r) for t in range(6) for r in ("alice", "bob", "david")]
     assert a == b
+
+
+# --------------------------------------------------------------------------- sequential (the paper's Algorithm 1)
+
+
+def test_registry_has_sequential_and_the_cli_offers_every_schedule() -> None:
+    assert SCHEDULERS["sequential"] is SequentialScheduler
+    assert set(SCHEDULES) == set(SCHEDULERS)
+    assert EpisodeConfig.build().schedule == "lockstep"
+    with pytest.raises(ConfigError, match="--schedule"):
+        EpisodeConfig.build(schedule="warp")
+
+
+def test_unknown_schedule_option_is_a_usage_error() -> None:
+    from click.testing import CliRunner
+
+    from mhrc.cli import main
+
+    for command in ("up", "world", "eval"):
+        result = CliRunner().invoke(main, [command, "--schedule", "warp"])
+        assert result.exit_code == 2 and "'warp' is not one of 'sequential', 'lockstep'" in result.output, result.output
+
+
+async def test_sequential_same_trace_in_one_process_or_many(tmp_path: Path) -> None:
+    a = await up_in_process(EpisodeConfig.build(seed=0, horizon=8, schedule="sequential", trace=tmp_path / "a.jsonl").resolved())
+    b = await up_processes(EpisodeConfig.build(seed=0, horizon=8, schedule="sequential", trace=tmp_path / "b.jsonl").resolved())
+    assert a.reason == b.reason == "horizon" and a.metrics.temporal_steps == b.metrics.temporal_steps == 8
+    ta, tb = _executed(tmp_path / "a.jsonl"), _executed(tmp_path / "b.jsonl")
+    # results go out one at a time, each at its robot's next turn (the last tick's together at the end)
+    assert [(tick, robot) for tick, robot, _, _ in ta] == [(t, r) for t in range(8) for r in ("alice", "bob", "david")]
+    assert ta == tb
+    for name in ("a", "b"):
+        started = [line["msg"] for line in read_trace(tmp_path / f"{name}.jsonl") if line["msg"] and line["msg"].get("kind") == "episode_started"]
+        assert [m["scheduler"] for m in started] == ["sequential"]
+    turns = [line["msg"]["robot"] for line in read_trace(tmp_path / "a.jsonl") if line["key"].endswith("/turn")]
+    assert turns == ["bob", "david"]  # tick 0: Alice plans on the attach reply, the others wait for their turn
+    finals = [line["msg"] for line in read_trace(tmp_path / "a.jsonl") if line["key"].endswith("/action/result")][-3:]
+    assert all(m["done"] and m["tick"] == 7 for m in finals)
+    assert set(a.final_results) == {"alice", "bob", "david"}
+    assert a.final_results == {m["robot"]: m["goal_id"] for m in finals}
+
+
+class _Recording:
+    """The heuristic policy of `robot`, noting each decision in a log shared with the simulator."""
+
+    def __init__(self, robot: str, events: list[tuple[str, ...]], seen: dict[tuple[str, int], Observation]) -> None:
+        self.robot = robot
+        self.name = "recording"
+        self.inner = heuristic_policy(robot)
+        self.events = events
+        self.seen = seen
+
+    async def decide(self, obs: Observation) -> Decision:
+        self.events.append(("decide", self.robot, str(obs.tick)))
+        self.seen[(self.robot, obs.tick)] = obs
+        return await self.inner.decide(obs)
+
+    def record(self, result: ActionResult) -> None:
+        self.inner.record(result)
+
+
+async def test_sequential_is_algorithm_1(world_factory, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+    """Within a tick the robots plan and act one at a time, in order, each on the world the earlier
+    ones left: robot k decides only after robot k-1's action of the same tick executed, and the
+    observation it decides on already shows that action's effect."""
+    events: list[tuple[str, ...]] = []
+    seen: dict[tuple[str, int], Observation] = {}
+    execute = WorldService._execute
+
+    def logged(self: WorldService, req: ActionRequest, tick: int) -> SkillOutcome:
+        outcome = execute(self, req, tick)
+        events.append(("execute", req.robot, str(tick), req.action.call(), str(outcome.succeeded)))
+        return outcome
+
+    monkeypatch.setattr(WorldService, "_execute", logged)
+    horizon = 12
+    async with world_factory(seed=0, horizon=horizon, schedule="sequential") as world:
+        buses = [await world.client() for _ in ROBOTS]
+        try:
+            agents = [RobotAgent(bus, _Recording(r, events, seen), run=world.cfg.run, robot=r) for bus, r in zip(buses, ROBOTS)]  # type: ignore[arg-type]
+            dones = await asyncio.wait_for(asyncio.gather(*(a.run() for a in agents)), 120)
+            done = await world.task
+        finally:
+            for bus in buses:
+                await bus.close()
+    assert done.reason == "horizon" and all(d is not None and d.reason == "horizon" for d in dones)
+    order = [event[:3] for event in events]
+    assert order == [(kind, r, str(t)) for t in range(horizon) for r in ROBOTS for kind in ("decide", "execute")], (
+        "robots must plan and act one at a time, in order, on the observation of the tick they act in"
+    )
+    # Alice hands objects to Bob on table_0: Bob plans that same tick on a world where they lie there
+    handed = [(int(t), call) for kind, robot, t, *rest in events if kind == "execute" and robot == "alice"
+              for call, ok in [rest] if ok == "True" and call.startswith("place(") and call.endswith(", table_0)")]  # fmt: skip
+    assert handed, "the heuristic Alice places something on Bob's table within the horizon"
+    for tick, call in handed:
+        obj = call.removeprefix("place(").split(",")[0]
+        assert any(o.name == obj and o.on == "table_0" for o in seen[("bob", tick)].objects), (tick, call)
+
+
+@pytest.mark.parametrize("task", ["pack_objects", "sort_solids", "make_sandwich"])
+@pytest.mark.parametrize("scene", sorted(LAYOUTS))
+async def test_heuristic_team_solves_every_task_in_sequence(task: str, scene: str, tmp_path: Path) -> None:
+    cfg = EpisodeConfig.build(task=task, scene=scene, seed=0, n_objects=4, schedule="sequential", trace=tmp_path / "t.jsonl")
+    done = await up_in_process(cfg.resolved())
+    assert done.reason == "success" and done.metrics.success, (task, scene, done.metrics)
+
+
+async def test_sequential_skips_a_robot_that_never_attached(tmp_path: Path) -> None:
+    """Alice, first in the order, is missing: Bob gets the first turn when the episode starts."""
+    cfg = EpisodeConfig.build(seed=0, horizon=3, schedule="sequential", start_timeout=2, trace=tmp_path / "t.jsonl").resolved()
+    done = await asyncio.wait_for(up_in_process(cfg, robots=("bob", "david")), 60)
+    assert done.reason == "horizon" and done.metrics.temporal_steps == 3 and set(done.final_results) == {"bob", "david"}
+    lines = read_trace(tmp_path / "t.jsonl")
+    assert [line["msg"]["robot"] for line in lines if line["key"].endswith("/turn")] == ["bob", "david"]
+    assert [(t, r) for t, r, _, _ in _executed(tmp_path / "t.jsonl")] == [(t, r) for t in range(3) for r in ("bob", "david")]

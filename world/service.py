@@ -41,6 +41,7 @@ from mhrc.protocol import (
     RobotDetached,
     RobotMessage,
     SkillOutcome,
+    Turn,
     Wait,
     WorldState,
     decode,
@@ -177,6 +178,7 @@ class WorldService:
                 lower_bound=self._bound,
                 fidelity=fidelity_label(self.sim.aids),
                 aids=sorted(self.sim.aids),
+                scheduler=self.scheduler.name,  # type: ignore[arg-type]
             ),
         )
         self._log.info("episode started", attached=sorted(self.attached))
@@ -264,6 +266,11 @@ class WorldService:
                 self._tally.failed[req.action.skill] += 1
         return done
 
+    async def observe(self, robot: str, tick: int) -> Observation:
+        """`robot`'s observation now, from a worker thread holding the sim lock."""
+        async with self._sim_lock:
+            return await asyncio.to_thread(self.sim.observe, robot, tick)
+
     def deliver_messages(self) -> dict[str, list[RobotMessage]]:
         delivered = {r: self._inbox[r] for r in self.sim.robots}
         self._inbox = {r: [] for r in self.sim.robots}
@@ -279,6 +286,9 @@ class WorldService:
         self._last_results = {r.robot: r.goal_id for r in results}
         for result in results:
             self.bus.put(self.keys.action_result(result.robot), result)
+
+    def give_turn(self, turn: Turn) -> None:
+        self.bus.put(self.keys.turn(turn.robot), turn)
 
     def publish_event(self, event: Message) -> None:
         self.bus.put(self.keys.world_event, event)
@@ -302,15 +312,17 @@ class WorldService:
             self._log.warning("duplicate attach rejected", robot=robot, agent=req.agent_id)
             return AttachReply(robot=robot, accepted=False, reason=f"robot {robot} is already attached to another agent ({holder})")
         self.attached[robot] = req.agent_id
-        async with self._sim_lock:
-            obs = await asyncio.to_thread(self.sim.observe, robot, self.tick)
-        obs = obs.model_copy(update={"new_messages": self._inbox[robot]})
-        self._inbox[robot] = []
+        obs = None
+        wait_turn = self.scheduler.on_attach(robot)
+        if not wait_turn:
+            obs = await self.observe(robot, self.tick)
+            obs = obs.model_copy(update={"new_messages": self._inbox[robot]})
+            self._inbox[robot] = []
         if holder is None:
             self.bus.put(self.keys.world_event, RobotAttached(robot=robot, agent_id=req.agent_id, tick=self.tick))
             self._log.info("robot attached", robot=robot, agent=req.agent_id, tick=self.tick)
         self._wake.set()
-        return AttachReply(robot=robot, accepted=True, tick=self.tick, horizon=self.cfg.horizon, observation=obs)
+        return AttachReply(robot=robot, accepted=True, tick=self.tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn)
 
     def _on_request(self, sample: Sample) -> None:
         robot = self.keys.robot_of(sample.key)

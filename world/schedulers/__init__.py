@@ -5,8 +5,9 @@ from __future__ import annotations
 
 from .base import Executed, Scheduler, TaskResultLike, World
 from .lockstep import LockstepScheduler
+from .sequential import SequentialScheduler
 
-SCHEDULERS: dict[str, type[Scheduler]] = {"lockstep": LockstepScheduler}
+SCHEDULERS: dict[str, type[Scheduler]] = {"sequential": SequentialScheduler, "lockstep": LockstepScheduler}
 
 
 class UnknownScheduler(ValueError):
@@ -23,4 +24,4 @@ def make_scheduler(name: str, world: World) -> Scheduler:
     return cls(world)
 
 
-__all__ = ["SCHEDULERS", "Executed", "LockstepScheduler", "Scheduler", "TaskResultLike", "UnknownScheduler", "World", "make_scheduler"]
+__all__ = ["SCHEDULERS", "Executed", "LockstepScheduler", "Scheduler", "SequentialScheduler", "TaskResultLike", "UnknownScheduler", "World", "make_scheduler"]

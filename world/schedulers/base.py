@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
-from mhrc.protocol import ActionRequest, ActionResult, Message, Observation, RobotMessage, SkillOutcome
+from mhrc.protocol import ActionRequest, ActionResult, Message, Observation, RobotMessage, SkillOutcome, Turn
 
 
 class TaskResultLike(Protocol):
@@ -50,6 +50,8 @@ class World(Protocol):
 
     async def execute(self, batch: Sequence[ActionRequest], tick: int) -> Executed:
         """Run the actions in order in the simulator, at `tick`, and count them for the metrics."""
+    async def observe(self, robot: str, tick: int) -> Observation:
+        """`robot`'s observation of the world as it is now, labelled `tick` (no messages attached)."""
     def deliver_messages(self) -> dict[str, list[RobotMessage]]:
         """Publish the messages not yet in any observation on their inbox keys and hand them
         over, per robot (every robot a key), to go into the receivers' observations."""
@@ -59,6 +61,8 @@ class World(Protocol):
     def release(self, results: Sequence[ActionResult]) -> None:
         """Publish results that go out together; the episode's end names them as its final
         results, so an agent that sees `episode_done` first still waits for its own."""
+    def give_turn(self, turn: Turn) -> None:
+        """Publish `turn` on its robot's turn key (to a robot that attached with wait_turn)."""
     def publish_event(self, event: Message) -> None: ...
     def finish(self, reason: str) -> None:
         """End the episode (`success`, `horizon`, ...); later calls do nothing."""
@@ -98,3 +102,8 @@ class Scheduler(ABC):
     @abstractmethod
     def forget(self, robot: str) -> None:
         """`robot` detached: drop whatever it had pending."""
+
+    def on_attach(self, robot: str) -> bool:
+        """`robot` attached (or attached again): True when it must wait for its turn
+        (`AttachReply.wait_turn`, then a `Turn`) instead of planning on the world of now."""
+        return False
