@@ -368,3 +368,22 @@ def test_a_local_model_gets_a_longer_default_timeout_than_a_server(gemma: Path) 
     assert cfg.client_options(specs["alice"])["timeout"] == 600.0 and cfg.client_options(specs["bob"])["timeout"] == 60.0
     assert cfg.policy_options(specs["alice"])["step_deadline"] == 1210.0
     assert EpisodeConfig.build(llm=f"gguf:{gemma}", llm_timeout=5.0).client_options(f"gguf:{gemma}")["timeout"] == 5.0
+
+
+async def test_a_workers_default_concurrency_is_sized_to_the_model_server(servers) -> None:  # type: ignore[no-untyped-def]
+    from mhrc.agents.llm import episodes_at_once
+
+    plain = serve(servers, lambda _b: ok("Command: wait()"))  # answers chat, not llama.cpp's /props
+    assert await episodes_at_once([None, None, None]) == 1  # the heuristic is CPU-bound
+    assert await episodes_at_once(["gguf:/m.gguf"] * 3) == 1  # each episode would load its own model
+    assert await episodes_at_once([f"openai:m@{plain.url}"] * 3) == 12
+    assert await episodes_at_once(["ollama:q"] * 3, base_url=plain.url) == 1
+
+
+@pytest.mark.slow
+async def test_a_llama_cpp_servers_slots_size_the_default_concurrency(gemma: Path) -> None:
+    from mhrc.agents.llm import episodes_at_once
+    from mhrc.agents.local import LocalModelServer
+
+    async with LocalModelServer(gemma, slots=6, n_ctx_per_slot=512) as srv:
+        assert await episodes_at_once([f"llamacpp:m@{srv.base_url}"] * 3) == 2  # 6 slots, 3 robots an episode
