@@ -249,7 +249,6 @@ async def run_agent(
     from mhrc.agents.heuristic import heuristic_policy
 
     async with contextlib.AsyncExitStack() as stack:
-        client = None
         if llm is None:
             policy = heuristic_policy(robot)
         else:
