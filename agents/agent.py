@@ -187,21 +187,7 @@ class RobotAgent:
         """The world's Turn for this robot; None when the episode ended first. Waiting for a
         turn is waiting for the teammates earlier in the order to plan and act, so it is bounded
         like awaiting a result (result_timeout), not by the attach timeout."""
-        done_wait = asyncio.ensure_future(self._done.wait())
-        gone_wait = asyncio.ensure_future(self._world_gone.wait())
-        try:
-            waits: set[asyncio.Future[object]] = {fut, done_wait, gone_wait}  # type: ignore[arg-type]
-            finished, _ = await asyncio.wait(waits, timeout=self.result_timeout, return_when=asyncio.FIRST_COMPLETED)
-        finally:
-            done_wait.cancel()
-            gone_wait.cancel()
-        if fut in finished:
-            return fut.result()
-        if gone_wait in finished:
-            raise WorldGone(f"the world disappeared while {self.robot} waited for its turn")
-        if done_wait in finished:
-            return None
-        raise WorldGone(f"no turn from the world within {self.result_timeout} s")
+        return fut.result() if await self._until_end(fut, self.result_timeout, "its turn") else None
 
     async def _act(self, obs: Observation, decision: Decision) -> ActionResult | None:
         """Request the action and await its result; None when the world rejected it as stale."""
@@ -231,6 +217,13 @@ class RobotAgent:
 
         Results and world events travel on different keys, so `episode_done` may overtake the
         last result: when the world says it executed this goal, the result is awaited still."""
+        if await self._until_end(fut, timeout, f"its {what}"):
+            return fut.result()
+        return await self._await_final(goal_id, fut, what)
+
+    async def _until_end(self, fut: asyncio.Future, timeout: float | None, what: str) -> bool:  # type: ignore[type-arg]
+        """Wait for `fut` while watching the episode and the world: True when `fut` is done,
+        False when the episode ended first; WorldGone when the world vanished or `timeout` passed."""
         done_wait = asyncio.ensure_future(self._done.wait())
         gone_wait = asyncio.ensure_future(self._world_gone.wait())
         try:
@@ -239,12 +232,12 @@ class RobotAgent:
             done_wait.cancel()
             gone_wait.cancel()
         if fut in finished:
-            return fut.result()
+            return True
         if gone_wait in finished:
-            raise WorldGone(f"the world disappeared while {self.robot} awaited its {what}")
+            raise WorldGone(f"the world disappeared while {self.robot} awaited {what}")
         if done_wait in finished:
-            return await self._await_final(goal_id, fut, what)
-        raise WorldGone(f"no {what} from the world within {timeout} s")
+            return False
+        raise WorldGone(f"no {what.removeprefix('its ')} from the world within {timeout} s")
 
     async def _await_final(self, goal_id: str, fut: asyncio.Future, what: str):  # type: ignore[no-untyped-def]
         if self.episode is None or self.episode.final_results.get(self.robot) != goal_id:
