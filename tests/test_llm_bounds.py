@@ -22,6 +22,7 @@ from mhrc.agents.llm_policy import LLMUnreachable
 from mhrc.cli import main
 from mhrc.episode import ConfigError, EpisodeConfig, up_in_process
 from mhrc.metrics import from_trace
+from mhrc.protocol import EpisodeDone
 from mhrc.trace import read_trace
 from test_llm import FakeServer, Reply, ok
 
@@ -94,33 +95,29 @@ class EndlessServer:
         self.httpd.server_close()
 
 
+async def against_endless(tmp_path: Path, **values: Any) -> tuple[EpisodeConfig, EpisodeDone, int]:
+    """An LLM episode against an EndlessServer: its config, its end, and the requests the server saw."""
+    endless = EndlessServer()
+    try:
+        cfg = EpisodeConfig.build(seed=0, llm="openai:m", base_url=endless.url, trace=tmp_path / "t.jsonl", **values).resolved()
+        return cfg, await up_in_process(cfg), endless.requests
+    finally:
+        endless.close()
+
+
 async def test_an_endless_server_costs_each_step_at_most_its_deadline_and_the_row_counts_the_lost_steps(tmp_path: Path) -> None:
     """Every call hits the timeout, is retried once, then the robot waits: the episode reaches
     its horizon (it never stalls), and every lost step is counted as unreachable."""
-    endless = EndlessServer()
-    try:
-        cfg = EpisodeConfig.build(
-            seed=0, horizon=2, llm="openai:m", base_url=endless.url, llm_timeout=0.4, step_deadline=5.0, trace=tmp_path / "t.jsonl"
-        ).resolved()
-        done = await up_in_process(cfg)
-    finally:
-        endless.close()
+    cfg, done, requests = await against_endless(tmp_path, horizon=2, llm_timeout=0.4, step_deadline=5.0)
     assert done.reason == "horizon" and done.metrics.temporal_steps == 2
-    assert endless.requests == 3 * 2 * 2  # 3 robots x 2 steps x (one call + one retry of its timeout)
+    assert requests == 3 * 2 * 2  # 3 robots x 2 steps x (one call + one retry of its timeout)
     m = from_trace(read_trace(cfg.trace))
     assert (m.llm_calls, m.llm_unreachable, m.parse_failures) == (6, 6, 0)
     assert all("retried at most 1 time" in t["parse_error"] for t in thoughts(cfg.trace))
 
 
 async def test_the_step_deadline_bounds_all_attempts_of_one_step(tmp_path: Path) -> None:
-    endless = EndlessServer()
-    try:
-        cfg = EpisodeConfig.build(
-            seed=0, horizon=1, llm="openai:m", base_url=endless.url, llm_timeout=30.0, step_deadline=0.5, trace=tmp_path / "t.jsonl"
-        ).resolved()
-        done = await up_in_process(cfg)
-    finally:
-        endless.close()
+    cfg, done, _ = await against_endless(tmp_path, horizon=1, llm_timeout=30.0, step_deadline=0.5)
     assert done.metrics.temporal_steps == 1
     assert all("step deadline of 0.5 s" in t["parse_error"] for t in thoughts(cfg.trace))
 
