@@ -24,9 +24,12 @@ AIDS_HELP = (
     "a comma-separated list of aids, or all. " + describe_aids()
 )
 SCHEDULE_HELP = (
-    "The world's time policy: lockstep (every robot plans on the same state, the tick closes when all have acted) or "
-    "sequential (the paper's Algorithm 1: the robots plan and act one at a time, each on the world the earlier ones left)."
+    "The world's time policy: lockstep (every robot plans on the same state, the tick closes when all have acted), "
+    "sequential (the paper's Algorithm 1: the robots plan and act one at a time, each on the world the earlier ones left) or "
+    "async (not the paper's: no step barrier, each robot acts at its own pace and each action takes simulated time; "
+    "the horizon is a budget of HORIZON x 8 simulated seconds and TS is the makespan in such steps)."
 )
+TIME_SCALE_HELP = "With --schedule async: simulated seconds per wall second (1: real time); 0: as fast as possible."
 HISTORY_CAP_HELP = "Bound each LLM prompt to CHARS characters, shortening older history (for small-context models); default: whole histories, as the paper."
 LLM_HELP = (
     "Drive the robots with a model: provider:model (openai:gpt-4o, ollama:llama3.1:8b, vllm:M, lmstudio:M, llamacpp:M), "
@@ -97,6 +100,7 @@ def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
                      help="Paper ablation: no_mobile leaves David out; no_feedback / no_history change LLM prompts."),
         click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP),
         click.option("--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP),
+        click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP),
         click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"])),
     ]  # fmt: skip
     for opt in reversed(opts):
@@ -260,6 +264,7 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--horizon", default=50, show_default=True, type=int)
 @click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP)
 @click.option("--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP)
+@click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP)
 @click.option("--workers", default=os.cpu_count() or 1, show_default="the number of cores", type=int,
               help="Local worker processes; 0: only workers that join with `mhrc worker --connect`.")
 @click.option("--concurrency", default=None, type=int,
@@ -271,7 +276,7 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
 def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
-          aids: str | None, schedule: str, workers: int, concurrency: int | None, listen: str | None, out: Path | None, resume: bool,
+          aids: str | None, schedule: str, time_scale: float, workers: int, concurrency: int | None, listen: str | None, out: Path | None, resume: bool,
           dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
@@ -307,7 +312,8 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     spec = EvalSpec(
         tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS),
         objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()), trials=trials, repeats=repeats,
-        ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, schedule=schedule, **llm,
+        ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, schedule=schedule,
+        time_scale=time_scale, **llm,
     )  # fmt: skip
     if concurrency is not None and concurrency < 1:
         raise click.BadParameter(f"must be at least 1 (got {concurrency})", param_hint="--concurrency")

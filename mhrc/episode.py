@@ -30,7 +30,7 @@ from .protocol import EpisodeDone, ProtocolError, decode
 log = structlog.get_logger("mhrc.episode")
 
 ROBOTS = ("alice", "bob", "david")
-SCHEDULES = ("sequential", "lockstep")  # the names of world.schedulers.SCHEDULERS (not imported: assembling code stays light)
+SCHEDULES = ("sequential", "lockstep", "async")  # the names of world.schedulers.SCHEDULERS (not imported: assembling code stays light)
 
 
 class ConfigError(ValueError):
@@ -66,7 +66,8 @@ class EpisodeConfig(BaseModel):
     gui: bool = False
     start_timeout: float | None = Field(None, gt=0)
     tick_delay: float = Field(0.0, ge=0)
-    schedule: Literal["sequential", "lockstep"] = Field("lockstep", description="the world's time policy (DESIGN.md, \"Time\")")
+    schedule: Literal["sequential", "lockstep", "async"] = Field("lockstep", description="the world's time policy (DESIGN.md, \"Time\")")
+    time_scale: float = Field(0.0, ge=0, allow_inf_nan=False, description="async: simulated seconds per wall second; 0: as fast as possible")
     llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
@@ -105,6 +106,8 @@ class EpisodeConfig(BaseModel):
             if msg.startswith("--"):  # the validator already names the option
                 raise ConfigError(msg) from None
             raise ConfigError(f"{option_name(field)}: {msg} (got {err.get('input')!r})") from None
+        if cfg.time_scale and cfg.schedule != "async":
+            raise ConfigError(f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})")
         from mhrc.world.sim import check_episode  # validates task and scene names without building
 
         try:
@@ -201,7 +204,10 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, c
         world = WorldService(
             bus,
             sim,
-            WorldConfig(run=cfg.run, horizon=cfg.horizon, start_timeout=cfg.start_timeout, tick_delay=cfg.tick_delay, schedule=cfg.schedule),
+            WorldConfig(
+                run=cfg.run, horizon=cfg.horizon, start_timeout=cfg.start_timeout, tick_delay=cfg.tick_delay, schedule=cfg.schedule,
+                time_scale=cfg.time_scale,
+            ),  # fmt: skip
         )
         try:
             return await world.run()
@@ -419,6 +425,8 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         cmd += ["--aids", ",".join(cfg.aids)]
     if cfg.tick_delay:
         cmd += ["--tick-delay", str(cfg.tick_delay)]
+    if cfg.time_scale:
+        cmd += ["--time-scale", str(cfg.time_scale)]
     return cmd
 
 

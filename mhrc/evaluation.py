@@ -138,6 +138,7 @@ class EvalSpec:
     structured: bool = False  # JSON decisions (not the paper's free text)
     step_deadline: float | None = None
     schedule: str = "lockstep"  # the world's time policy (mhrc.episode.SCHEDULES)
+    time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
 
     @property
     def mode(self) -> str:
@@ -159,6 +160,7 @@ class EvalSpec:
             "method": self.method, "ablation": self.ablation, "horizon": self.horizon, "fidelity": self.fidelity,
             "history_cap": self.history_cap, "prompts": self.prompts, "mode": self.mode,
             "max_tokens": self.max_tokens if self.llm else None, "llm_seed": self.llm_seed, "schedule": self.schedule,
+            "time_scale": self.time_scale,
         }  # fmt: skip
 
     def seed(self, repeat: int, trial: int) -> int:
@@ -181,6 +183,7 @@ class EvalSpec:
                                 "aids": list(self.aids) or None, "history_cap": self.history_cap,
                                 "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
                                 "step_deadline": self.step_deadline, "schedule": None if self.schedule == "lockstep" else self.schedule,
+                                "time_scale": self.time_scale or None,
                             }  # fmt: skip
                             config = {k: v for k, v in cfg.items() if v is not None}
                             out.append(Job(key=f"{task}/{scene}/{n}/{seed}", config=config, repeat=repeat, trial=trial))
@@ -363,12 +366,12 @@ def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
             old = json.loads(manifest.read_text())
             # a manifest written before a field was part of the identity ran with its default
             before = {"fidelity": "paper", "history_cap": None, "prompts": None, "mode": "free", "max_tokens": None, "llm_seed": None,
-                      "schedule": "lockstep"}
+                      "schedule": "lockstep", "time_scale": 0.0}
             before |= old.get("identity") or {}
             if before != spec.identity():
                 raise ConfigError(
                     f"out: {out} holds an evaluation of {before}, not {spec.identity()}; --resume needs the same --llm, "
-                    "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens, --llm-seed and --schedule"
+                    "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens, --llm-seed, --schedule and --time-scale"
                 )
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
@@ -460,7 +463,7 @@ async def evaluate(
                 "key": res.key, "method": spec.method, "ablation": spec.ablation, "repeat": job.repeat, "trial": job.trial,
                 **m.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap, "mode": spec.mode,
                 "max_tokens": spec.max_tokens if spec.llm else None, "llm_seed": spec.llm_seed, "schedule": spec.schedule,
-                "worker": res.worker, "trace": str(trace_path.relative_to(out)),
+                "time_scale": spec.time_scale, "worker": res.worker, "trace": str(trace_path.relative_to(out)),
             }  # fmt: skip
             with rows_path.open("a", encoding="utf-8") as f:
                 f.write(json.dumps(row) + "\n")

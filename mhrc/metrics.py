@@ -4,8 +4,14 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
 
 - success, placed / total, partial_success: the world's goal check at the end, as the
   `episode_done` event carries it (the trace holds no other ground truth of object poses).
-- temporal_steps (TS): lockstep ticks executed, i.e. the number of `tick` events; an episode
-  that fails runs to the horizon.
+- temporal_steps (TS): lockstep and sequential ticks executed, i.e. the number of `tick`
+  events; an episode that fails runs to the horizon. The async schedule has no ticks: its TS is
+  the makespan in steps, makespan / step_seconds rounded up (`episode_started` records
+  step_seconds; its horizon is the same number of steps as a budget of simulated seconds).
+- makespan: simulated seconds from the start to the end of the episode on the world's clock
+  (`episode_done`); busy / idle per robot: the simulated seconds its actions took (their
+  `started`..`ended`, clipped to the makespan) and the rest of the makespan; actions_per_robot:
+  every action a robot completed, `wait` included.
 - action_steps (AS): actions executed by all robots, `wait` excluded, failed ones included;
   also per robot. The paper does not say whether its AS sums the robots or averages them, so
   both are reported: `as` (summed) and `as_per_robot` (the sum over the number of robots).
@@ -28,6 +34,7 @@ Over episodes, `summarize` takes means (Succ is then the success rate).
 from __future__ import annotations
 
 import statistics
+import math
 from collections import Counter
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
@@ -71,6 +78,11 @@ class EpisodeMetrics:
     invalid_reason: str | None = None
     fidelity: str = UNRECORDED
     horizon: int | None = None
+    scheduler: str = "lockstep"
+    makespan: float = 0.0
+    busy: dict[str, float] = field(default_factory=dict)
+    idle: dict[str, float] = field(default_factory=dict)
+    actions_per_robot: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -96,6 +108,17 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
     errors = [str(t["parse_error"]) for t in every_thought if t.get("parse_error")]
     unreachable = sum(1 for e in errors if e.startswith(LLM_ERROR_PREFIX))
     invalid = bool(thoughts) and unreachable >= len(thoughts)
+    scheduler = str(s.get("scheduler") or "lockstep")
+    makespan = float(world.get("makespan", 0.0))
+    if scheduler == "async":
+        temporal_steps = math.ceil(round(makespan / float(s["step_seconds"]), 9))
+    else:
+        temporal_steps = len(_msgs(rows, "tick"))
+    busy: dict[str, float] = {}
+    for r in results:
+        if r.get("started") is not None and r.get("ended") is not None:
+            busy[r["robot"]] = busy.get(r["robot"], 0.0) + max(0.0, min(float(r["ended"]), makespan) - float(r["started"]))
+    everything = Counter(r["robot"] for r in results)
     return EpisodeMetrics(
         task=s["task"],
         scene=s["scene"],
@@ -107,7 +130,7 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         placed=int(world["placed"]),
         total=int(world["total"]),
         partial_success=float(world["partial_success"]),
-        temporal_steps=len(_msgs(rows, "tick")),
+        temporal_steps=temporal_steps,
         action_steps=len(acting),
         action_steps_per_robot={r: per_robot.get(r, 0) for r in s["robots"]},
         failed_actions=dict(sorted(failed.items())),
@@ -124,6 +147,11 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         invalid_reason=f"the model was unreachable for all {len(thoughts)} LLM steps" if invalid else None,
         fidelity=str(s.get("fidelity") or UNRECORDED),
         horizon=s.get("horizon"),
+        scheduler=scheduler,
+        makespan=round(makespan, 3),
+        busy={r: round(busy.get(r, 0.0), 3) for r in s["robots"]},
+        idle={r: round(max(0.0, makespan - busy.get(r, 0.0)), 3) for r in s["robots"]},
+        actions_per_robot={r: everything.get(r, 0) for r in s["robots"]},
     )
 
 
@@ -154,4 +182,5 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "rejected_actions": round(statistics.fmean(float(r.get("rejected_actions", 0)) for r in rows), 3),
         "failed_actions": round(statistics.fmean(sum(r["failed_actions"].values()) for r in rows), 3),
         "wall_time": round(mean("wall_time"), 3),
+        "makespan": round(statistics.fmean(float(r.get("makespan", 0.0)) for r in rows), 3),
     }

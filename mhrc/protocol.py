@@ -241,6 +241,9 @@ class ActionRequest(Message):
     action: Action
 
 
+EPISODE_OVER = "the episode is over"  # an ActionAck's reason for a request that came after the episode's end
+
+
 class ActionAck(Message):
     kind: Literal["action_ack"] = "action_ack"
     goal_id: str
@@ -258,6 +261,8 @@ class ActionResult(Message):
     outcome: SkillOutcome
     observation: Observation
     done: bool = False
+    started: float | None = Field(None, ge=0.0, description="simulated seconds on the world's clock when the action began (DESIGN.md, \"Time\")")
+    ended: float | None = Field(None, ge=0.0, description="simulated seconds on the world's clock when it ended: `started` plus its duration")
 
 
 # --------------------------------------------------------------------------- attach
@@ -312,6 +317,7 @@ class Metrics(_Model):
     wall_time: float = 0.0
     sim_time: float = 0.0
     lower_bound: int | None = Field(None, description="a lower bound on TS for this episode (world/bound.py)")
+    makespan: float = Field(0.0, ge=0.0, description="simulated seconds from the start to the end of the episode on the world's clock")
 
 
 class EpisodeStarted(Message):
@@ -323,7 +329,11 @@ class EpisodeStarted(Message):
     n_objects: int
     robots: list[str]
     horizon: int
-    scheduler: Literal["sequential", "lockstep"] = "lockstep"
+    scheduler: Literal["sequential", "lockstep", "async"] = "lockstep"
+    time_scale: float | None = Field(None, ge=0.0, description="async: simulated seconds per wall second, 0 as fast as possible")
+    step_seconds: float | None = Field(
+        None, gt=0.0, description="async: the simulated seconds one step stands for: the horizon is horizon x step_seconds, TS is makespan / step_seconds rounded up"
+    )
     lower_bound: int | None = None
     fidelity: str = Field("paper", description="`paper`, or `aids:` and the aids this episode ran with (mhrc.fidelity)")
     aids: list[str] = Field(default_factory=list)
@@ -359,7 +369,7 @@ class EpisodeDone(Message):
     metrics: Metrics
     final_results: dict[str, str] = Field(
         default_factory=dict,
-        description="robot -> goal id of the result the world published in the last tick it closed: "
+        description="robot -> goal id of the last result the world published to it: "
         "results travel on other keys, so an agent that sees this event first still waits for that result",
     )
 

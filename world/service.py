@@ -8,6 +8,7 @@ world.schedulers.SCHEDULERS; DESIGN.md, "Time"); this module keeps the bus plumb
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import time
 from collections import Counter
@@ -28,6 +29,7 @@ from mhrc.protocol import (
     AttachReply,
     AttachRequest,
     Communicate,
+    EPISODE_OVER,
     EpisodeDone,
     EpisodeStarted,
     FurnitureView,
@@ -79,6 +81,7 @@ class WorldConfig:
     start_timeout: float | None = None  # start with the robots attached by then; None: wait for all
     tick_delay: float = 0.0  # pause between scheduler steps, for watching with --gui
     schedule: str = "lockstep"  # the time policy, a name in world.schedulers.SCHEDULERS
+    time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
 
 
 @dataclass
@@ -107,9 +110,9 @@ class WorldService:
         self._wake = asyncio.Event()
         self._t0 = 0.0
         self._evaluation: TaskResultLike = sim.evaluate()
-        self._last_results: dict[str, str] = {}  # robot -> goal id, the results released last
+        self._last_results: dict[str, str] = {}  # robot -> goal id of the last result released to it
         self._log = log.bind(run=config.run)
-        self.scheduler: Scheduler = make_scheduler(config.schedule, self)
+        self.scheduler: Scheduler = make_scheduler(config.schedule, self, time_scale=config.time_scale)
 
     @property
     def tick(self) -> int:
@@ -139,7 +142,12 @@ class WorldService:
                 self.finish("no_agents")
                 break
             self._wake.clear()
-            await self._wake.wait()
+            wake_at = self.scheduler.wake_at()
+            if wake_at is None:
+                await self._wake.wait()
+            else:  # simulated time moves on by itself: a result falls due, the budget runs out
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._wake.wait(), max(0.0, wake_at - asyncio.get_running_loop().time()))
         assert self.done is not None
         return self.done
 
@@ -165,6 +173,7 @@ class WorldService:
     def _start(self) -> None:
         self.started = True
         self._t0 = time.perf_counter()
+        self.scheduler.start()
         self.bus.put(
             self.keys.world_event,
             EpisodeStarted(
@@ -179,6 +188,7 @@ class WorldService:
                 fidelity=fidelity_label(self.sim.aids),
                 aids=sorted(self.sim.aids),
                 scheduler=self.scheduler.name,  # type: ignore[arg-type]
+                **self.scheduler.started_fields(),  # type: ignore[arg-type]
             ),
         )
         self._log.info("episode started", attached=sorted(self.attached))
@@ -230,6 +240,7 @@ class WorldService:
             wall_time=time.perf_counter() - self._t0 if self._t0 else 0.0,
             sim_time=t.sim_time,
             lower_bound=self._bound,
+            makespan=round(self.scheduler.makespan, 6),
         )
         self.done = EpisodeDone(run=self.cfg.run, reason=reason, metrics=metrics, final_results=dict(self._last_results))  # type: ignore[arg-type]
         self.bus.put(self.keys.world_event, self.done)
@@ -283,7 +294,7 @@ class WorldService:
         self._inbox[robot] = list(messages) + self._inbox[robot]
 
     def release(self, results: Sequence[ActionResult]) -> None:
-        self._last_results = {r.robot: r.goal_id for r in results}
+        self._last_results.update((r.robot, r.goal_id) for r in results)
         for result in results:
             self.bus.put(self.keys.action_result(result.robot), result)
 
@@ -306,7 +317,7 @@ class WorldService:
         if robot not in self.sim.robots:
             return AttachReply(robot=robot, accepted=False, reason=f"there is no robot {robot!r} in this episode ({', '.join(self.sim.robots)})")
         if self.done is not None:
-            return AttachReply(robot=robot, accepted=False, reason="the episode is over")
+            return AttachReply(robot=robot, accepted=False, reason=EPISODE_OVER)
         holder = self.attached.get(robot)
         if holder is not None and holder != req.agent_id:
             self._log.warning("duplicate attach rejected", robot=robot, agent=req.agent_id)
@@ -314,15 +325,16 @@ class WorldService:
         self.attached[robot] = req.agent_id
         obs = None
         wait_turn = self.scheduler.on_attach(robot)
+        tick = self.scheduler.tick_of(robot)
         if not wait_turn:
-            obs = await self.observe(robot, self.tick)
+            obs = await self.observe(robot, tick)
             obs = obs.model_copy(update={"new_messages": self._inbox[robot]})
             self._inbox[robot] = []
         if holder is None:
             self.bus.put(self.keys.world_event, RobotAttached(robot=robot, agent_id=req.agent_id, tick=self.tick))
             self._log.info("robot attached", robot=robot, agent=req.agent_id, tick=self.tick)
         self._wake.set()
-        return AttachReply(robot=robot, accepted=True, tick=self.tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn)
+        return AttachReply(robot=robot, accepted=True, tick=tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn)
 
     def _on_request(self, sample: Sample) -> None:
         robot = self.keys.robot_of(sample.key)
@@ -346,7 +358,7 @@ class WorldService:
         if robot not in self.sim.robots:
             return f"there is no robot {robot!r} in this episode ({', '.join(self.sim.robots)})"
         if self.done is not None:
-            return "the episode is over"
+            return EPISODE_OVER
         holder = self.attached.get(robot)
         if holder is None:
             return f"robot {robot} is not attached: attach first"

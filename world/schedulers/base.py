@@ -14,7 +14,25 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
-from mhrc.protocol import ActionRequest, ActionResult, Message, Observation, RobotMessage, SkillOutcome, Turn
+from mhrc.protocol import ActionRequest, ActionResult, Message, Observation, RobotMessage, SkillOutcome, Turn, Wait
+
+# How long an action takes on the world's clock (simulated seconds). Skills measure their own
+# time (navigation by path length and base speed, arm motions by trajectory and joint speeds);
+# `wait` takes WAIT_SECONDS, and an action that takes less than MIN_ACTION_SECONDS (a message,
+# a skill that failed before moving) takes MIN_ACTION_SECONDS, so no robot acts in zero time.
+MIN_ACTION_SECONDS = 0.5
+WAIT_SECONDS = 1.0
+
+
+def duration(req: ActionRequest, outcome: SkillOutcome) -> float:
+    """The simulated seconds `req`'s action took, as every scheduler counts it."""
+    if isinstance(req.action, Wait):
+        return WAIT_SECONDS
+    return max(outcome.sim_time, MIN_ACTION_SECONDS)
+
+
+class SchedulerOptionError(ValueError):
+    """An option a scheduler cannot run with (e.g. a negative time scale)."""
 
 
 class TaskResultLike(Protocol):
@@ -59,8 +77,8 @@ class World(Protocol):
         """Put back messages no observation carried: they go out (again) with the next delivery
         and reach `robot` with its next observation (an attach reply included)."""
     def release(self, results: Sequence[ActionResult]) -> None:
-        """Publish results that go out together; the episode's end names them as its final
-        results, so an agent that sees `episode_done` first still waits for its own."""
+        """Publish results that go out together; the episode's end names each robot's last
+        released result, so an agent that sees `episode_done` first still waits for its own."""
     def give_turn(self, turn: Turn) -> None:
         """Publish `turn` on its robot's turn key (to a robot that attached with wait_turn)."""
     def publish_event(self, event: Message) -> None: ...
@@ -80,10 +98,14 @@ class Scheduler(ABC):
     """
 
     name: ClassVar[str]
-    tick: int  # the world's clock: what requests name, TS when the episode ends
+    tick: int  # the world's step count: TS when the episode ends
+    makespan: float  # simulated seconds on the world's clock so far (the end of the last action counted)
 
-    def __init__(self, world: World) -> None:
+    def __init__(self, world: World, *, time_scale: float = 0.0) -> None:
+        """`time_scale` is the async scheduler's (simulated seconds per wall second); the
+        stepped schedulers have no wall clock and ignore it."""
         self.world = world
+        self.makespan = 0.0
 
     @abstractmethod
     def admit(self, req: ActionRequest) -> str:
@@ -107,3 +129,19 @@ class Scheduler(ABC):
         """`robot` attached (or attached again): True when it must wait for its turn
         (`AttachReply.wait_turn`, then a `Turn`) instead of planning on the world of now."""
         return False
+
+    def tick_of(self, robot: str) -> int:
+        """The tick `robot`'s next request must name (and its attach observation carries)."""
+        return self.tick
+
+    def start(self) -> None:
+        """The episode starts now (the attached robots are about to get their observations)."""
+
+    def wake_at(self) -> float | None:
+        """Simulated time is not only moved by news: the event loop time (`loop.time()`) at
+        which `ready` may turn true by itself; None when only a request or a detach can."""
+        return None
+
+    def started_fields(self) -> dict[str, float]:
+        """What `EpisodeStarted` records of this scheduler beyond its name."""
+        return {}

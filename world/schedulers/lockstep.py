@@ -1,6 +1,8 @@
 """Lockstep (DESIGN.md, "Time"): tick t closes when every attached robot has submitted one
 action for t; the world executes them in the fixed robot order and releases all results
 together. A message sent in tick t reaches its receiver with the observation of tick t+1.
+On the world's clock the robots of a tick act at the same time: a tick lasts as long as its
+longest action.
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ import structlog
 
 from mhrc.protocol import ActionRequest, ActionResult, TickClosed
 
-from .base import Scheduler, World
+from .base import Scheduler, World, duration
 
 log = structlog.get_logger("mhrc.world")
 
@@ -19,7 +21,7 @@ class LockstepScheduler(Scheduler):
 
     name = "lockstep"
 
-    def __init__(self, world: World) -> None:
+    def __init__(self, world: World, *, time_scale: float = 0.0) -> None:
         super().__init__(world)
         self.tick = 0
         self.pending: dict[str, ActionRequest] = {}
@@ -46,16 +48,22 @@ class LockstepScheduler(Scheduler):
         batch = [self.pending.pop(r) for r in world.robots if r in self.pending and r in world.attached]
         self.pending.clear()
         done = await world.execute(batch, tick)
+        began = self.makespan
+        took = [duration(req, outcome) for req, outcome in zip(batch, done.outcomes)]
+        self.makespan = began + max(took, default=0.0)
         self.tick += 1
         evaluation = done.evaluation
         finished = evaluation.success or self.tick >= world.horizon
         delivered = world.deliver_messages()
         results = []
-        for req, outcome in zip(batch, done.outcomes):
+        for req, outcome, seconds in zip(batch, done.outcomes, took):
             obs = done.observations[req.robot].model_copy(update={"new_messages": delivered[req.robot]})
             delivered[req.robot] = []
             results.append(
-                ActionResult(goal_id=req.goal_id, robot=req.robot, tick=tick, action=req.action, outcome=outcome, observation=obs, done=finished)
+                ActionResult(
+                    goal_id=req.goal_id, robot=req.robot, tick=tick, action=req.action, outcome=outcome, observation=obs, done=finished,
+                    started=round(began, 6), ended=round(began + seconds, 6),
+                )  # fmt: skip
             )
         world.release(results)
         # messages for robots that had no action this tick wait for their next observation

@@ -16,6 +16,9 @@ m_i^t comes back with the feedback of the receiver's own action, so what robot j
 step t is in the observation robot i plans step t+1 on; what j > i sent in step t is too). A
 message sent in tick t+1 before the receiver's turn waits for tick t+2, so that what a robot
 hears never depends on how the order interleaves with its own step. This is lockstep's rule.
+
+On the world's clock the robots act one after another: each action starts when the one before
+it (any robot's) ended.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import structlog
 
 from mhrc.protocol import ActionRequest, ActionResult, Observation, RobotMessage, SkillOutcome, TickClosed, Turn
 
-from .base import Scheduler, TaskResultLike, World
+from .base import Scheduler, TaskResultLike, World, duration
 
 log = structlog.get_logger("mhrc.world")
 
@@ -38,6 +41,8 @@ class _Held:
     req: ActionRequest
     outcome: SkillOutcome
     tick: int
+    started: float
+    ended: float
 
 
 class SequentialScheduler(Scheduler):
@@ -45,7 +50,7 @@ class SequentialScheduler(Scheduler):
 
     name = "sequential"
 
-    def __init__(self, world: World) -> None:
+    def __init__(self, world: World, *, time_scale: float = 0.0) -> None:
         super().__init__(world)
         self.tick = 0
         self.turn: str | None = world.robots[0] if world.robots else None  # the robot asked now
@@ -96,7 +101,9 @@ class SequentialScheduler(Scheduler):
             outcome = done.outcomes[0]
             self._evaluation = done.evaluation
             self._executed.append((req, outcome))
-            self.held[req.robot] = _Held(req, outcome, self.tick)
+            began = self.makespan
+            self.makespan = began + duration(req, outcome)
+            self.held[req.robot] = _Held(req, outcome, self.tick, began, self.makespan)
             self.turn, self.given = self._next(req.robot), False
         elif self.turn is not None and self.turn not in world.attached:
             self.turn, self.given = self._next(self.turn), False
@@ -160,4 +167,7 @@ class SequentialScheduler(Scheduler):
     @staticmethod
     def _result(held: _Held, obs: Observation, *, done: bool) -> ActionResult:
         req = held.req
-        return ActionResult(goal_id=req.goal_id, robot=req.robot, tick=held.tick, action=req.action, outcome=held.outcome, observation=obs, done=done)
+        return ActionResult(
+            goal_id=req.goal_id, robot=req.robot, tick=held.tick, action=req.action, outcome=held.outcome, observation=obs, done=done,
+            started=round(held.started, 6), ended=round(held.ended, 6),
+        )  # fmt: skip
