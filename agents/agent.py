@@ -8,6 +8,7 @@ in another process or on another host.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import uuid
 
 import structlog
@@ -15,6 +16,7 @@ import structlog
 from mhrc.bus import Bus, Sample
 from mhrc.keys import Keys
 from mhrc.protocol import (
+    EPISODE_OVER,
     ActionAck,
     ActionRequest,
     ActionResult,
@@ -78,6 +80,7 @@ class RobotAgent:
         self._results: dict[str, asyncio.Future[ActionResult]] = {}
         self._done = asyncio.Event()
         self._world_gone = asyncio.Event()
+        self._over = False  # the world said the episode is over
         self._alive = False  # whether this agent's liveliness token is declared
         self._turn: asyncio.Future[Turn] | None = None  # set while attaching, for a world that says wait_turn
         self._log = log.bind(run=run, robot=robot, agent=self.agent_id)
@@ -132,9 +135,11 @@ class RobotAgent:
             obs = attached
             decision = await self.policy.decide(obs)
             self._publish_thought(obs, decision)
+            if self._done.is_set():  # the episode ended while this robot planned
+                break
             result = await self._act(obs, decision)
             if result is None:
-                if self._done.is_set():
+                if self._done.is_set() or self._over:
                     break
                 attached = await self._attach()  # the world moved on (tick mismatch): resynchronize
                 continue
@@ -203,6 +208,11 @@ class RobotAgent:
             if ack is None:
                 return None
             if not ack.accepted:
+                if ack.reason == EPISODE_OVER:  # the world ended as this robot planned; its event is on the way
+                    self._over = True
+                    with contextlib.suppress(TimeoutError):
+                        await asyncio.wait_for(self._done.wait(), self.final_result_grace)
+                    return None
                 if "tick" in ack.reason and not self._done.is_set():
                     self._log.info("request out of step, resynchronizing", reason=ack.reason)
                     return None
@@ -233,10 +243,10 @@ class RobotAgent:
             gone_wait.cancel()
         if fut in finished:
             return True
+        if done_wait in finished or self._done.is_set():  # an ended episode's world may be gone too: it ended
+            return False
         if gone_wait in finished:
             raise WorldGone(f"the world disappeared while {self.robot} awaited {what}")
-        if done_wait in finished:
-            return False
         raise WorldGone(f"no {what.removeprefix('its ')} from the world within {timeout} s")
 
     async def _await_final(self, goal_id: str, fut: asyncio.Future, what: str):  # type: ignore[no-untyped-def]
