@@ -65,7 +65,8 @@ def main() -> None:
     }
     for fid in args.fidelities.split(","):
         aids = parse_aids(None if fid == "paper" else fid)
-        spec = EvalSpec(tasks=tuple(TASKS), scenes=tuple(LAYOUTS), objects=(3, 4, 5, 6), trials=args.seeds, aids=aids)
+        spec = EvalSpec(tasks=tuple(TASKS), scenes=tuple(LAYOUTS), objects=(3, 4, 5, 6), trials=args.seeds, aids=aids,
+                        schedule="lockstep")  # as its recorded figures ran (mhrc eval now defaults to sequential)
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "ev"
             t0 = time.perf_counter()

@@ -125,7 +125,8 @@ def main() -> None:
     args = ap.parse_args()
     levels = [int(x) for x in args.concurrency.split(",")]
     model = FixedLatencyModel(args.latency)
-    spec = EvalSpec(tasks=tuple(TASKS), scenes=tuple(LAYOUTS), objects=(3, 4, 5, 6), horizon=args.horizon, llm="m", base_url=model.url)
+    spec = EvalSpec(tasks=tuple(TASKS), scenes=tuple(LAYOUTS), objects=(3, 4, 5, 6), horizon=args.horizon, llm="m", base_url=model.url,
+                    schedule="lockstep")  # as its recorded figures ran (mhrc eval now defaults to sequential)
     try:
         runs = {f"concurrency_{c}": run(spec, model, c) for c in levels}
     finally:

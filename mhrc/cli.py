@@ -263,7 +263,8 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
 @click.option("--horizon", default=50, show_default=True, type=int)
 @click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP)
-@click.option("--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP)
+@click.option("--schedule", default="sequential", show_default=True, type=click.Choice(SCHEDULES),
+              help=SCHEDULE_HELP + " The paper's figures are shown beside sequential runs only.")
 @click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP)
 @click.option("--workers", default=os.cpu_count() or 1, show_default="the number of cores", type=int,
               help="Local worker processes; 0: only workers that join with `mhrc worker --connect`.")

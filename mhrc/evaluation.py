@@ -137,7 +137,7 @@ class EvalSpec:
     llm_seed: int | None = None
     structured: bool = False  # JSON decisions (not the paper's free text)
     step_deadline: float | None = None
-    schedule: str = "lockstep"  # the world's time policy (mhrc.episode.SCHEDULES)
+    schedule: str = "sequential"  # the world's time policy (mhrc.episode.SCHEDULES); the paper's loop by default
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
 
     @property
@@ -182,7 +182,7 @@ class EvalSpec:
                                 "llm_timeout": self.llm_timeout, "prompts": self.prompts,
                                 "aids": list(self.aids) or None, "history_cap": self.history_cap,
                                 "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
-                                "step_deadline": self.step_deadline, "schedule": None if self.schedule == "lockstep" else self.schedule,
+                                "step_deadline": self.step_deadline, "schedule": self.schedule,
                                 "time_scale": self.time_scale or None,
                             }  # fmt: skip
                             config = {k: v for k, v in cfg.items() if v is not None}

@@ -93,6 +93,7 @@ COLUMNS = (
 CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as": "action_steps"}
 # mode: free (the paper's) or structured replies; schedule: the world's time policy (world/schedulers)
 SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule")
+PAPER_SCHEDULE = "sequential"  # Algorithm 1; rows written before the field ran lockstep
 AS_NOTE = (
     "AS counts actions of all robots (wait excluded); AS/robot divides it by the number of robots. "
     "The paper does not say which of the two its AS is; its figures are set beside mhrc's AS. "
@@ -146,7 +147,7 @@ def _order(key: Iterable[Any]) -> tuple[str, ...]:
 def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
     method, abl, fidelity, cap, horizon, mode, schedule = setting
     parts = [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["structured decisions"] if mode == "structured" else [])
-    if schedule != "lockstep":
+    if schedule != PAPER_SCHEDULE:
         parts.append(f"{schedule} schedule")
     if cap is not None:
         parts.append(f"history cap {cap}")
@@ -229,7 +230,7 @@ def grid_problem(rows: list[dict[str, Any]]) -> str | None:
 def paper_match(setting: tuple[Any, ...], task: str, rows: list[dict[str, Any]]) -> PaperMatch | None:
     """The paper's figures for this setting and task when the configuration matches; a
     PaperMatch without figures (and the reason) when only the model matches; None otherwise."""
-    method, ablation, fidelity, cap, horizon, mode, _schedule = setting
+    method, ablation, fidelity, cap, horizon, mode, schedule = setting
     model = paper_model(str(method))
     if model is None:
         return None
@@ -245,6 +246,8 @@ def paper_match(setting: tuple[Any, ...], task: str, rows: list[dict[str, Any]])
         why = f"history cap {cap} (the paper keeps whole histories)"
     elif horizon != PAPER_HORIZON:
         why = f"horizon {horizon}, the paper's is {PAPER_HORIZON}"
+    elif schedule != PAPER_SCHEDULE:
+        why = f"the {schedule} schedule (the paper's robots act one after another: --schedule {PAPER_SCHEDULE})"
     else:
         why = grid_problem(rows) or ""
         if why:

@@ -307,7 +307,7 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
     assert "| pack_objects | 2 | 0.00 [0.00, 0.00] |" in summary  # only the two valid episodes are averaged
     assert "paper GPT" not in summary  # no model of the paper's
     csv_line = (tmp_path / "ev" / "summary.csv").read_text().splitlines()[1]
-    assert csv_line.startswith("openai:test-model,none,aids:goal_map,50000,3,free,lockstep,pack_objects,2,")
+    assert csv_line.startswith("openai:test-model,none,aids:goal_map,50000,3,free,sequential,pack_objects,2,")  # eval runs the paper's loop by default
 
 
 def test_a_wrong_api_key_stops_the_evaluation_with_one_error_and_a_failing_exit(tmp_path: Path) -> None:

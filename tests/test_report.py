@@ -18,7 +18,8 @@ GPT4O_PACK_NO_MOBILE = "0.92 / 0.94 / 37.00 / 28.33"  # Table II, w/o mobile rob
 
 
 def _rows(method: str, *, ablation: str = "none", fidelity: str = "paper", task: str = "pack_objects", scenes: tuple[str, ...] = SCENES,
-          objects: tuple[int, ...] = (3, 4, 5, 6), repeats: int = 1, horizon: int = 50, history_cap: int | None = None) -> list[dict[str, Any]]:  # fmt: skip
+          objects: tuple[int, ...] = (3, 4, 5, 6), repeats: int = 1, horizon: int = 50, history_cap: int | None = None,
+          schedule: str = "sequential") -> list[dict[str, Any]]:  # fmt: skip
     rows = []
     for repeat in range(repeats):
         for i, (scene, n) in enumerate((s, n) for s in scenes for n in objects):
@@ -30,7 +31,7 @@ def _rows(method: str, *, ablation: str = "none", fidelity: str = "paper", task:
                 "partial_success": 1.0 if ok else (i % 3) / 3, "temporal_steps": 20 + i if ok else horizon,
                 "action_steps": 15 + i, "lower_bound": 9, "messages": 2, "llm_calls": 90, "prompt_tokens": 9000,
                 "completion_tokens": 700, "failed_actions": {"pick": i % 2}, "wall_time": 1.0, "parse_failures": i % 2,
-                "llm_unreachable": 0, "rejected_actions": 0, "valid": True, "invalid_reason": None,
+                "llm_unreachable": 0, "rejected_actions": 0, "valid": True, "invalid_reason": None, "schedule": schedule,
             })  # fmt: skip
     return rows
 
@@ -91,6 +92,10 @@ def test_paper_figures_stand_beside_a_matching_setting_and_nowhere_else() -> Non
         "unrecorded fidelity": (_rows("openai:gpt-4o", fidelity="unrecorded"), "fidelity unrecorded, not paper"),
         "capped histories": (_rows("openai:gpt-4o", history_cap=12000), "history cap 12000"),
         "another horizon": (_rows("openai:gpt-4o", horizon=30), "horizon 30, the paper's is 50"),
+        "lockstep": (_rows("openai:gpt-4o", schedule="lockstep"), "the lockstep schedule (the paper's robots act one after another"),
+        "async": (_rows("openai:gpt-4o", schedule="async"), "the async schedule"),
+        "rows from before schedules were recorded (lockstep)": (
+            [{k: v for k, v in r.items() if k != "schedule"} for r in _rows("openai:gpt-4o")], "the lockstep schedule"),
         "two scenes": (_rows("openai:gpt-4o", scenes=SCENES[:2]), "not the paper grid: 2 scene(s)"),
         "other object counts": (_rows("openai:gpt-4o", objects=(3, 4)), "not the paper grid: scene bathroom has object counts 3, 4"),
         "an ablation Llama was not run with": (_rows("ollama:llama3.1:8b", ablation="no_feedback"), "reports no pack_objects figures for Llama-3.1-8B"),
