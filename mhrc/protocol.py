@@ -13,7 +13,8 @@ from typing import Annotated, Any, Literal, TypeVar, Union
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2  # 2: the world's `snapshot` event; every version-1 message is still valid
+SUPPORTED_VERSIONS = (1, 2)
 
 
 class ProtocolError(ValueError):
@@ -27,7 +28,7 @@ class _Model(BaseModel):
 class Message(_Model):
     """Base of every top-level bus payload: carries the protocol version."""
 
-    v: Literal[1] = 1  # PROTOCOL_VERSION
+    v: Literal[1, 2] = 2  # PROTOCOL_VERSION; a version-1 message reads as it always did
 
 
 # --------------------------------------------------------------------------- actions
@@ -374,8 +375,39 @@ class EpisodeDone(Message):
     )
 
 
+class RobotPose(_Model):
+    """Where a robot is: its base (a fixed arm: its arm's base) and what it holds."""
+
+    x: float
+    y: float
+    yaw: float = 0.0
+    holding: str | None = None
+
+
+class ObjectPose(_Model):
+    x: float
+    y: float
+    z: float
+    on: str | None = None
+    inside: bool = False
+    held_by: str | None = None
+
+
+class Snapshot(Message):
+    """Ground truth after the world executed actions (and once at the start, with no goals):
+    every robot's pose, every object's position, every container's state. For viewers and
+    videos (mhrc show); agents never see it in their observations."""
+
+    kind: Literal["snapshot"] = "snapshot"
+    tick: int = Field(description="the tick the actions were executed at (async: the acting robot's own tick)")
+    goals: list[str] = Field(default_factory=list, description="goal ids of the actions just executed, in order; their results say who did what")
+    robots: dict[str, RobotPose]
+    objects: dict[str, ObjectPose]
+    open: dict[str, bool] = Field(default_factory=dict, description="openable furniture -> open")
+
+
 WorldEvent = Annotated[
-    Union[EpisodeStarted, TickClosed, RobotAttached, RobotDetached, EpisodeDone],
+    Union[EpisodeStarted, TickClosed, RobotAttached, RobotDetached, EpisodeDone, Snapshot],
     Field(discriminator="kind"),
 ]
 WORLD_EVENT_ADAPTER: TypeAdapter[WorldEvent] = TypeAdapter(WorldEvent)

@@ -4,6 +4,7 @@ import pytest
 
 from mhrc.keys import InvalidId, Keys
 from mhrc.protocol import (
+    PROTOCOL_VERSION,
     ActionRequest,
     Navigate,
     Pick,
@@ -28,14 +29,16 @@ def test_actions_are_a_discriminated_union() -> None:
 def test_request_round_trip_and_version() -> None:
     req = ActionRequest(robot="alice", agent_id="a1", tick=3, action=Pick(obj="apple"))
     back = decode(encode(req), ActionRequest)
-    assert back == req and back.v == 1 and back.goal_id
+    assert back == req and back.v == PROTOCOL_VERSION == 2 and back.goal_id
+    old = decode(b'{"v": 1, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "wait"}}', ActionRequest)
+    assert old.v == 1  # a version-1 message reads as it always did
 
 
 @pytest.mark.parametrize(
     "payload, reason",
     [
         (b"not json", "Invalid JSON"),
-        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "wait"}}', "v"),
+        (b'{"v": 3, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "wait"}}', "v"),
         (b'{"v": 1, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "pick"}}', "action.pick.obj"),
         (b'{"v": 1, "robot": "alice", "agent_id": "a", "tick": -1, "action": {"skill": "wait"}}', "tick"),
         (b'{"v": 1, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "wait"}, "x": 1}', "x"),

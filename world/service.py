@@ -37,12 +37,15 @@ from mhrc.protocol import (
     Metrics,
     ObjectView,
     Observation,
+    ObjectPose,
     OutcomeCode,
     ProtocolError,
     RobotAttached,
     RobotDetached,
     RobotMessage,
+    RobotPose,
     SkillOutcome,
+    Snapshot,
     Turn,
     Wait,
     WorldState,
@@ -69,6 +72,7 @@ class SimLike(Protocol):
     def tell(self, receiver: str, sender: str, text: str) -> None: ...
     def evaluate(self) -> TaskResultLike: ...
     def views(self) -> tuple[list[FurnitureView], list[ObjectView]]: ...
+    def poses(self) -> tuple[dict[str, RobotPose], dict[str, ObjectPose], dict[str, bool]]: ...
     def lower_bound(self) -> int: ...
     @property
     def aids(self) -> frozenset[str]: ...
@@ -191,16 +195,22 @@ class WorldService:
                 **self.scheduler.started_fields(),  # type: ignore[arg-type]
             ),
         )
+        self.bus.put(self.keys.world_event, self._snapshot(0, []))  # where everything starts (nothing has run yet)
         self._log.info("episode started", attached=sorted(self.attached))
         self._wake.set()
 
-    def _execute_batch(self, batch: Sequence[ActionRequest], tick: int) -> Executed:
+    def _execute_batch(self, batch: Sequence[ActionRequest], tick: int) -> tuple[Executed, Snapshot]:
         """Runs in a worker thread, holding the sim lock: the actions in order, then the
         evaluation and every acting robot's observation of tick + 1."""
         outcomes = [self._execute(req, tick) for req in batch]
         evaluation = self.sim.evaluate()
         observations = {req.robot: self.sim.observe(req.robot, tick + 1) for req in batch}
-        return Executed(outcomes, evaluation, observations)
+        return Executed(outcomes, evaluation, observations), self._snapshot(tick, [req.goal_id for req in batch])
+
+    def _snapshot(self, tick: int, goals: list[str]) -> Snapshot:
+        """The ground truth for viewers, taken where the simulator is idle (its thread, or the start)."""
+        robots, objects, opened = self.sim.poses()
+        return Snapshot(tick=tick, goals=goals, robots=robots, objects=objects, open=opened)
 
     def _execute(self, req: ActionRequest, tick: int) -> SkillOutcome:
         action = req.action
@@ -267,7 +277,8 @@ class WorldService:
     async def execute(self, batch: Sequence[ActionRequest], tick: int) -> Executed:
         """Run `batch` in order at `tick` in a worker thread, holding the sim lock; count it."""
         async with self._sim_lock:
-            done = await asyncio.to_thread(self._execute_batch, batch, tick)
+            done, snapshot = await asyncio.to_thread(self._execute_batch, batch, tick)
+        self.bus.put(self.keys.world_event, snapshot)
         self._evaluation = done.evaluation
         for req, outcome in zip(batch, done.outcomes):
             self._tally.sim_time += outcome.sim_time

@@ -31,12 +31,14 @@ from mhrc.protocol import (
     Move,
     Navigate,
     ObjectView,
+    ObjectPose,
     Observation,
     Open,
     OutcomeCode,
     Pick,
     Place,
     Pose2D,
+    RobotPose,
     RobotStatus,
     SkillOutcome,
     Wait,
@@ -510,6 +512,18 @@ class Sim:
     def views(self) -> tuple[list[FurnitureView], list[ObjectView]]:
         """Full ground truth, for observers."""
         return self._furniture_views(), [self._object_view(o) for o in self.objects.values()]
+
+    def poses(self) -> tuple[dict[str, RobotPose], dict[str, ObjectPose], dict[str, bool]]:
+        """Ground truth for viewers (the `snapshot` event): robots, objects, containers."""
+        robots = {}
+        for r in self.bots.values():
+            x, y, yaw = r.base if r.base is not None else (*(r.fixed_arm or (0.0, 0.0, 0.0))[:2], r.fixed_yaw)
+            robots[r.name] = RobotPose(x=round(x, 4), y=round(y, 4), yaw=round(yaw, 4), holding=r.holding)
+        objects = {}
+        for o in self.objects.values():
+            x, y, z = self.position(o)
+            objects[o.name] = ObjectPose(x=round(x, 4), y=round(y, 4), z=round(z, 4), on=o.on, inside=o.inside, held_by=o.held_by)
+        return robots, objects, {name: self.is_open(name) for name in self.opening}
 
     def snapshot(self) -> dict[str, Any]:
         """Every body's pose and robot state, for comparing runs (determinism tests)."""
