@@ -118,7 +118,8 @@ class RobotAgent:
 
     def _on_world_liveliness(self, sample: Sample) -> None:
         if not sample.is_put:
-            self._log.warning("world vanished")
+            if not self._done.is_set():  # after the episode's end the world leaves as it should
+                self._log.warning("world vanished")
             self._world_gone.set()
 
     # ------------------------------------------------------------------ running

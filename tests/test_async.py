@@ -259,3 +259,19 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
         await bus.close()
     started = [line["msg"] for line in read_trace(tmp_path / "t.jsonl") if line["msg"] and line["msg"].get("kind") == "episode_started"]
     assert started and started[0]["scheduler"] == "async" and started[0]["time_scale"] == 1.0 and started[0]["step_seconds"] == STEP_SECONDS
+
+
+async def test_async_runs_across_processes_with_its_time_scale(tmp_path: Path) -> None:
+    """`--processes` gives the world process the schedule and its time scale (parsed back by the CLI)."""
+    from mhrc.cli import world as world_command_cli
+    from mhrc.episode import up_processes, world_command
+
+    cfg = EpisodeConfig.build(seed=0, schedule="async", time_scale=40.0, trace=tmp_path / "t.jsonl").resolved()
+    argv = world_command(cfg)[3:]  # after `python -m mhrc`
+    assert argv[0] == "world" and argv[argv.index("--schedule") + 1] == "async" and argv[argv.index("--time-scale") + 1] == "40.0"
+    parsed = world_command_cli.make_context("world", argv[1:])
+    assert parsed.params["schedule"] == "async" and parsed.params["time_scale"] == 40.0
+    done = await asyncio.wait_for(up_processes(cfg), WAIT)
+    assert done.reason == "success"
+    started = [line["msg"] for line in read_trace(tmp_path / "t.jsonl") if line["msg"] and line["msg"].get("kind") == "episode_started"]
+    assert [(m["scheduler"], m["time_scale"]) for m in started] == [("async", 40.0)]
