@@ -29,6 +29,7 @@ SCHEDULE_HELP = (
     "async (not the paper's: no step barrier, each robot acts at its own pace and each action takes simulated time; "
     "the horizon is a budget of HORIZON x 8 simulated seconds and TS is the makespan in such steps)."
 )
+VIDEO_HELP = "Render the episode's video to FILE (.mp4 or .gif) with PyBullet's CPU renderer: a few frames per step, each captioned with every robot's action."
 TIME_SCALE_HELP = "With --schedule async: simulated seconds per wall second (1: real time); 0: as fast as possible."
 HISTORY_CAP_HELP = "Bound each LLM prompt to CHARS characters, shortening older history (for small-context models); default: whole histories, as the paper."
 LLM_HELP = (
@@ -137,8 +138,10 @@ def main() -> None:
 @click.option("--quiet", "-q", is_flag=True, help="Print only the final summary.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
+@click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.")
 @_llm_options
-def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, **values: Any) -> None:
+def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, video: Path | None, **values: Any) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
 
@@ -155,7 +158,11 @@ def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, l
         console.print("attach the external robots with: " + "; ".join(
             f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}" for r in external))
     runner = up_processes if processes else up_in_process
+    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
+        raise click.BadParameter(f"{video.name}: the video must be a .mp4 or .gif file", param_hint="--video")
     done = _run(lambda: runner(cfg, observe=printer.attach, robots=robots))
+    if video is not None and cfg.trace is not None:
+        console.print(f"video {_render_video(cfg.trace, video)}")
     if as_json:
         click.echo(json.dumps(done.metrics.model_dump()))
 
@@ -390,7 +397,8 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     """Merge `mhrc eval` directories into one comparison (markdown on stdout): Succ, PS, TS
     and AS per task with 95% bootstrap confidence intervals, grouped by method, ablation and
     fidelity, and the paper's Table I / II figures beside the settings that match its
-    configuration. Invalid episodes (model unreachable throughout) are left out and listed."""
+    configuration. Invalid episodes (model unreachable throughout) are left out and listed.
+    With --out FILE.md, also FILE.csv and FILE.html (tables, plots, a link to each episode's report)."""
     from .report import merge_runs, summary_csv, summary_markdown
 
     try:
@@ -404,6 +412,57 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     if out is not None:
         out.write_text(text, encoding="utf-8")
         out.with_suffix(".csv").write_text(summary_csv(rows, resamples=resamples, seed=seed), encoding="utf-8")
+        from .viewer.eval_report import write_report_html
+
+        write_report_html(list(dirs), out.with_suffix(".html"), resamples=resamples, seed=seed)
+
+
+@main.command()
+@click.argument("run_or_trace", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="The HTML file to write; default: beside the trace, with .html (with --video: only when --out is given).")
+@click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None, help=VIDEO_HELP)
+def show(run_or_trace: Path, out: Path | None, video: Path | None) -> None:
+    """Write one self-contained HTML report of an episode (map, robot lanes, messages, failures)
+    from RUN_OR_TRACE: a trace file, or a run directory holding trace.jsonl. Prints its path.
+    With --video, render the episode's video instead (or as well, with --out)."""
+    from .viewer.load import NotATrace
+    from .viewer.show import write_report
+
+    if video is None or out is not None:
+        try:
+            path, warnings = write_report(run_or_trace, out)
+        except NotATrace as exc:
+            click.echo(f"mhrc show: {exc}", err=True)
+            sys.exit(2)
+        except OSError as exc:
+            click.echo(f"mhrc show: cannot read or write: {exc}", err=True)
+            sys.exit(1)
+        if warnings:
+            click.echo("mhrc show: warning: " + "; ".join(warnings), err=True)
+        click.echo(str(path))
+    if video is not None:
+        trace = run_or_trace / "trace.jsonl" if run_or_trace.is_dir() else run_or_trace
+        click.echo(str(_render_video(trace, video)))
+
+
+def _render_video(trace: Path, video: Path) -> Path:
+    """Render `trace` to `video` with a progress bar; one clear line and exit 2 on a bad input."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from .viewer.video import render_video
+
+    with Progress(TextColumn("video"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True)) as bar:
+        task = bar.add_task("frames", total=None)
+        try:
+            info = render_video(trace, video, progress=lambda done, total: bar.update(task, completed=done, total=total))
+        except (ValueError, OSError) as exc:  # VideoError is a ValueError
+            bar.stop()
+            click.echo(f"mhrc show: {exc}", err=True)
+            sys.exit(2)
+    click.echo(f"{info.frames} frames in {info.render_seconds:.1f} s ({info.bytes / 1e6:.2f} MB)", err=True)
+    return info.path
 
 
 @main.command()

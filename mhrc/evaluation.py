@@ -14,10 +14,11 @@ with its own run id on the same bus, and push back the episode's trace. A worker
     alive/worker/<id>     liveliness token of each worker: when one vanishes, its unfinished
                           jobs go back to the queue
 
-Each episode's metrics are computed by the coordinator from the trace (`mhrc.metrics`), so a
-row means the same thing whichever host ran it. Rows are appended to DIR/episodes.jsonl as they
-arrive; `--resume` skips the keys already there. Summaries (tables, confidence intervals, the
-paper's figures) are `mhrc.report`'s.
+Each episode's metrics and failure diagnostics (`diag_*` columns) are computed by the coordinator
+from the trace (`mhrc.metrics`, `mhrc.diagnostics`), so a row means the same thing whichever host
+ran it. Rows are appended to DIR/episodes.jsonl as they arrive; `--resume` skips the keys already
+there. Summaries (tables, confidence intervals, the paper's figures; summary.md, .csv and .html)
+are `mhrc.report`'s.
 
 The default grid is the paper's: per task, every scene with one episode per object count 3, 4,
 5 and 6 (3 scenes x 4 = 12 episodes per task). Seeds: an episode's seed is
@@ -50,6 +51,7 @@ import structlog
 from pydantic import BaseModel, Field
 
 from .bus import Bus, Sample, endpoint, free_port
+from .diagnostics import diagnose
 from .episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig, EventHook, open_client, up_in_process
 from .fidelity import label
 from .keys import Keys
@@ -356,6 +358,17 @@ class Tally:
 ProgressHook = Callable[[Tally, dict[str, Any] | None], None]
 
 
+def _episode_report(trace: Path) -> None:
+    """The episode's HTML report beside its trace (summary.html links it); a report that cannot
+    be drawn costs a warning, never the episode's row."""
+    from .viewer.show import write_report
+
+    try:
+        write_report(trace)
+    except Exception as exc:
+        log.warning("episode report not written", trace=str(trace), error=f"{type(exc).__name__}: {exc}")
+
+
 def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
     """Create DIR (or check it for --resume); return the keys already finished."""
     manifest = out / "eval.json"
@@ -448,9 +461,13 @@ async def evaluate(
             trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
             trace_path.write_bytes(zlib.decompress(base64.b64decode(res.trace_z)))
             try:
-                m = from_trace(read_trace(trace_path))
+                trace_rows = read_trace(trace_path)
+                m = from_trace(trace_rows)
+                diag = diagnose(trace_rows)
             except TraceError as exc:
                 res.error = f"TraceError: {exc}"
+            else:
+                _episode_report(trace_path)
         if res.error is not None:
             if attempts[res.key] < 2:
                 todo.append(job)
@@ -464,6 +481,7 @@ async def evaluate(
                 **m.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap, "mode": spec.mode,
                 "max_tokens": spec.max_tokens if spec.llm else None, "llm_seed": spec.llm_seed, "schedule": spec.schedule,
                 "time_scale": spec.time_scale, "worker": res.worker, "trace": str(trace_path.relative_to(out)),
+                **diag.columns(),
             }  # fmt: skip
             with rows_path.open("a", encoding="utf-8") as f:
                 f.write(json.dumps(row) + "\n")

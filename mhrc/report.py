@@ -11,6 +11,10 @@ The paper's figures are shown beside a setting's (per task) only when it is the 
 configuration: paper fidelity, no history cap, horizon 50, the paper grid (3 scenes, each with
 one episode per object count 3, 4, 5 and 6, or the same number of them per cell with
 `--repeats`), and a method whose model is one the paper ran, with an ablation it reports.
+
+Beside the metrics, a "Failure diagnostics" table per setting (`mhrc.diagnostics`: the rows'
+`diag_*` columns); rows written before those columns existed are unknown there, never zero.
+`write_summaries` writes summary.md, summary.csv and summary.html (`mhrc.viewer.eval_report`).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from typing import Any
 import numpy as np
 import structlog
 
+from .diagnostics import summarize_diagnostics
 from .episode import ConfigError
 from .metrics import UNRECORDED, summarize
 
@@ -381,6 +386,7 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
                 f"{s['rejected_actions']:.2f} | {s['prompt_tokens']:.0f} | {s['completion_tokens']:.0f} |"
             )
         lines.append("")
+    lines += diagnostics_markdown(valid)
     for key, title in (("scene", "scene"), ("n_objects", "object count")):
         lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS/robot) | episodes |",
                   "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
@@ -392,25 +398,91 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
     return "\n".join(lines)
 
 
+DIAG_COLUMNS = (
+    "parse_failures", "hallucinations", "not_capable", "rejected", "failed", "repeated_failures", "waits",
+    "waits_with_pending", "messages_sent", "messages_read", "steps_above_bound",
+)  # fmt: skip
+DIAG_NOTE = (
+    "Means per episode (mhrc.diagnostics defines each count). A name is hallucinated when the command names an object "
+    "or furniture the robot's own scene graph (or its task list) did not hold; waits w/ pending are waits chosen while "
+    "a teammate's message was unanswered; messages read were delivered into the receiver's observation; steps above TS* "
+    "is TS minus the lower bound."
+)
+
+
+def _mean_breakdown(total: dict[str, int] | None, n: int, top: int = 3) -> str:
+    if not total or not n:
+        return ""
+    items = sorted(total.items(), key=lambda kv: (-kv[1], kv[0]))
+    shown = ", ".join(f"{k} {v / n:.2f}" for k, v in items[:top]) + (", ..." if len(items) > top else "")
+    return f" ({shown})"
+
+
+def diagnostics_markdown(valid: list[dict[str, Any]]) -> list[str]:
+    """The "Failure diagnostics" section: per setting, a table of `summarize_diagnostics` per task.
+    Rows written before diagnostics existed are unknown (n/a), never counted as zero."""
+    lines = ["## Failure diagnostics", "", DIAG_NOTE, ""]
+    by_setting: dict[tuple[Any, ...], list[dict[str, Any]]] = defaultdict(list)
+    for r in valid:
+        by_setting[_setting(r)].append(r)
+    for setting in sorted(by_setting, key=_order):
+        head = (
+            "| task | episodes (with diagnostics) | unparsed replies | hallucinations | not capable | rejected (by kind) | "
+            "failed (by code) | repeated failures | waits w/ pending / waits | messages sent / read | steps above TS* |"
+        )
+        lines += [f"### {setting_label(setting)}", "", head, "| --- |" + " --- |" * (head.count("|") - 2)]
+        unknown = 0
+        for task, mine in group(by_setting[setting], "task").items():
+            d = summarize_diagnostics(mine)
+            unknown += d["unknown"]
+            if not d["known"]:
+                lines.append(f"| {task[0]} | {d['episodes']} (0) |" + " n/a |" * 9)
+                continue
+            m, n = d["mean"], d["known"]
+
+            def f(name: str, digits: int = 2) -> str:
+                return "n/a" if m[name] is None else f"{m[name]:.{digits}f}"
+
+            lines.append(
+                f"| {task[0]} | {d['episodes']} ({n}) | {f('parse_failures')} | {f('hallucinations')} | {f('not_capable')} | "
+                f"{f('rejected')}{_mean_breakdown(d['rejected_by_reason'], n)} | {f('failed')}{_mean_breakdown(d['failed_by_code'], n)} | "
+                f"{f('repeated_failures')} | {f('waits_with_pending')} / {f('waits')} | {f('messages_sent')} / {f('messages_read')} | "
+                f"{f('steps_above_bound', 1)} |"
+            )
+        if unknown:
+            lines += ["", f"{unknown} episode(s) of this setting were recorded before diagnostics existed: their diagnostics "
+                          "are unknown (n/a), left out of these means, not counted as zero."]  # fmt: skip
+        lines.append("")
+    return lines
+
+
 def summary_csv(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str:
     """One line per setting and task (valid episodes only): means, intervals and, where the
     configuration matches, the paper's figures."""
     buf = io.StringIO()
     w = csv.writer(buf)
     ci_cols = [f"{m}_{e}" for m in CI_METRICS for e in ("lo", "hi")]
-    w.writerow([*SETTING, "task", *COLUMNS, *ci_cols, "invalid_left_out", "paper_model", "paper_succ", "paper_ps", "paper_ts", "paper_as"])
+    diag_cols = ["diag_episodes", *(f"diag_{c}" for c in DIAG_COLUMNS)]  # means over the rows with diagnostics; empty: unknown
+    w.writerow([*SETTING, "task", *COLUMNS, *ci_cols, "invalid_left_out", "paper_model", "paper_succ", "paper_ps", "paper_ts", "paper_as", *diag_cols])
     invalid = Counter((_setting(r), r["task"]) for r in rows if not _valid(r))
     for (setting, task), mine in _by_setting_task([r for r in rows if _valid(r)]).items():
         s = cell_stats(mine, resamples=resamples, seed=seed)
         m = paper_match(setting, task, mine)
         paper: list[Any] = [m.model, *m.figures] if m is not None and m.figures is not None else ["", "", "", "", ""]
         cis = [round(x, 4) for name in CI_METRICS for x in s[f"{name}_ci"]]
-        w.writerow([*("" if x is None else x for x in setting), task, *(s[c] for c in COLUMNS), *cis, invalid[(setting, task)], *paper])
+        d = summarize_diagnostics(mine)
+        diag = [d["known"], *("" if d["mean"][c] is None else d["mean"][c] for c in DIAG_COLUMNS)]
+        w.writerow([*("" if x is None else x for x in setting), task, *(s[c] for c in COLUMNS), *cis, invalid[(setting, task)], *paper, *diag])
     return buf.getvalue()
 
 
 def write_summaries(rows: list[dict[str, Any]], out: Path) -> None:
+    """summary.csv, summary.md and summary.html (tables and plots, `mhrc.viewer.eval_report`) in `out`."""
     if not rows:
         return
+    # imported here: the HTML page is built on this module's tables (eval_report imports report)
+    from .viewer.eval_report import write_html_summary
+
     (out / "summary.csv").write_text(summary_csv(rows), encoding="utf-8")
     (out / "summary.md").write_text(summary_markdown(rows), encoding="utf-8")
+    write_html_summary(rows, out / "summary.html")

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 import zlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -524,6 +524,36 @@ class Sim:
             x, y, z = self.position(o)
             objects[o.name] = ObjectPose(x=round(x, 4), y=round(y, 4), z=round(z, 4), on=o.on, inside=o.inside, held_by=o.held_by)
         return robots, objects, {name: self.is_open(name) for name in self.opening}
+
+    def apply_snapshot(self, robots: Mapping[str, RobotPose], objects: Mapping[str, ObjectPose], open: Mapping[str, bool]) -> None:
+        """Teleport bodies to a `snapshot` event's poses (for videos; no physics is stepped):
+        containers, mobile bases, then objects; a held object hangs under its holder's tool
+        tip (the arm as it stands now). Names this episode lacks are skipped."""
+        for name, is_open in open.items():
+            f = self.layout.get(name)
+            if name in self.opening and f is not None and f.container is not None:
+                self.set_container(name, f.container.travel if is_open else 0.0)
+        for name, rp in robots.items():
+            bot = self.bots.get(name)
+            if bot is not None:
+                if bot.base is not None:
+                    bot.set_base((rp.x, rp.y, rp.yaw))
+                bot.holding = rp.holding
+        for name, op in objects.items():
+            obj = self.objects.get(name)
+            if obj is None:
+                continue
+            obj.on, obj.inside, obj.held_by = op.on, op.inside, op.held_by
+            holder = self.bots.get(op.held_by or "")
+            if holder is not None and holder.kind.has_arm:
+                x, y, z = holder.tip()
+                self._rest(obj, x, y, z - obj.kind.height, holder.tool_yaw())
+                continue
+            self._rest(obj, op.x, op.y, op.z - obj.kind.height / 2)
+            if op.inside and op.on in self.opening:  # keep its spot in the container's frame, to move along
+                (cx, cy, _), cyaw = self._container_frame(op.on)
+                c, s = math.cos(cyaw), math.sin(cyaw)
+                obj.local = (c * (op.x - cx) + s * (op.y - cy), -s * (op.x - cx) + c * (op.y - cy))
 
     def snapshot(self) -> dict[str, Any]:
         """Every body's pose and robot state, for comparing runs (determinism tests)."""

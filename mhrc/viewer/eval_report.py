@@ -1,0 +1,258 @@
+"""The evaluation's HTML summary (summary.html): one self-contained page with the tables of
+summary.md, plots of them, and a link per episode to its report.
+
+The tables are `mhrc.report.summary_markdown`'s own, rendered as HTML (the same rows, the same
+statistics, nothing recomputed here); the plots draw `mhrc.metrics.summarize` over
+`mhrc.report.group`'s buckets and `mhrc.diagnostics.summarize_diagnostics`. Plots are inline
+SVG drawn with matplotlib's object API (no pyplot state, no display), so the page needs no
+network and no other file. Each episode links to `traces/<trace file stem>.html` next to the
+evaluation's episodes.jsonl, the page `mhrc show` writes; the link is there whether or not that
+page has been written yet.
+"""
+
+from __future__ import annotations
+
+import html
+import io
+import os
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..diagnostics import summarize_diagnostics
+from ..metrics import summarize
+from ..report import CI_SEED, RESAMPLES, SETTING, _setting, _valid, group, read_rows, setting_label, summary_markdown
+
+PLOTTED_DIAGNOSTICS = (
+    ("parse_failures", "unparsed replies"),
+    ("hallucinations", "hallucinations"),
+    ("not_capable", "not capable"),
+    ("rejected", "rejected"),
+    ("failed", "failed actions"),
+    ("repeated_failures", "repeated failures"),
+    ("waits_with_pending", "waits w/ pending"),
+)
+STYLE = """
+body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 80em; padding: 0 1em; color: #222; }
+table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.9em; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; vertical-align: top; }
+th { background: #f2f2f2; }
+figure { display: inline-block; margin: 0.5em 1em 1em 0; vertical-align: top; }
+figcaption { font-size: 0.85em; color: #555; }
+.plots svg { max-width: 100%; height: auto; }
+"""
+
+
+# --------------------------------------------------------------------------- markdown tables, as HTML
+
+
+def _inline(text: str) -> str:
+    return re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", html.escape(text.strip()))
+
+
+def _cells(line: str) -> list[str]:
+    return [c.strip() for c in line.strip().strip("|").split("|")]
+
+
+def markdown_to_html(md: str) -> str:
+    """The markdown `mhrc.report` writes (headings, paragraphs, lists, pipe tables) as HTML."""
+    out: list[str] = []
+    lines = md.splitlines()
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if not line.strip():
+            i += 1
+        elif m := re.match(r"^(#{1,6}) (.*)$", line):
+            level = len(m.group(1))
+            out.append(f"<h{level}>{_inline(m.group(2))}</h{level}>")
+            i += 1
+        elif line.startswith("|"):
+            block = []
+            while i < len(lines) and lines[i].startswith("|"):
+                block.append(lines[i])
+                i += 1
+            head, body = block[0], [b for b in block[1:] if not re.fullmatch(r"\|(\s*:?-+:?\s*\|)+", b.strip())]
+            out.append("<table><thead><tr>" + "".join(f"<th>{_inline(c)}</th>" for c in _cells(head)) + "</tr></thead><tbody>")
+            out += ["<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in _cells(b)) + "</tr>" for b in body]
+            out.append("</tbody></table>")
+        elif line.startswith("- "):
+            items = []
+            while i < len(lines) and lines[i].startswith("- "):
+                items.append(f"<li>{_inline(lines[i][2:])}</li>")
+                i += 1
+            out.append("<ul>" + "".join(items) + "</ul>")
+        else:
+            para = []
+            while i < len(lines) and lines[i].strip() and not re.match(r"^(#|\||- )", lines[i]):
+                para.append(lines[i])
+                i += 1
+            out.append(f"<p>{_inline(' '.join(para))}</p>")
+    return "\n".join(out)
+
+
+# --------------------------------------------------------------------------- plots
+
+
+def _svg(fig: Any) -> str:
+    import matplotlib
+
+    buf = io.StringIO()
+    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": "mhrc"}):  # text as text; stable ids
+        fig.savefig(buf, format="svg", bbox_inches="tight", metadata={"Date": None, "Creator": None, "Format": None, "Type": None})
+    text = buf.getvalue()
+    return text[text.index("<svg") :]
+
+
+def _figure(width: float, height: float) -> Any:
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height), dpi=100)
+
+
+def _short(setting: tuple[Any, ...]) -> str:
+    return setting_label(setting)
+
+
+def success_by_objects(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
+    """Per task: Succ (solid) and PS (dashed) against the object count, one line per setting."""
+    by_task: dict[str, dict[tuple[Any, ...], list[tuple[int, dict[str, Any]]]]] = {}
+    for key, bucket in group(valid, "task", *SETTING, "n_objects").items():
+        task, setting, n = key[0], key[1:-1], key[-1]
+        by_task.setdefault(task, {}).setdefault(setting, []).append((int(n), summarize(bucket)))
+    plots = []
+    for task, settings in by_task.items():
+        fig = _figure(5.5, 3.4)
+        ax = fig.add_subplot()
+        for k, (setting, points) in enumerate(settings.items()):
+            points.sort()
+            xs = [n for n, _ in points]
+            color = f"C{k % 10}"
+            ax.plot(xs, [s["succ"] for _, s in points], "o-", color=color, label=f"{_short(setting)}: Succ")
+            ax.plot(xs, [s["ps"] for _, s in points], "s--", color=color, label=f"{_short(setting)}: PS")
+        ax.set(title=task, xlabel="objects", ylabel="rate", ylim=(-0.05, 1.05))
+        ax.set_xticks(sorted({n for pts in settings.values() for n, _ in pts}))
+        ax.legend(fontsize=7, loc="best")
+        plots.append((_svg(fig), f"{task}: success rate (solid) and partial success (dashed) by object count"))
+    return plots
+
+
+def ts_against_bound(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
+    """Every episode's TS against its lower bound TS*, one colour per setting; the diagonal is TS = TS*."""
+    have = [r for r in valid if r.get("lower_bound") is not None]
+    if not have:
+        return []
+    fig = _figure(5.5, 4.0)
+    ax = fig.add_subplot()
+    for k, (setting, bucket) in enumerate(group(have, *SETTING).items()):
+        ax.scatter([r["lower_bound"] for r in bucket], [r["temporal_steps"] for r in bucket], s=18, alpha=0.7, color=f"C{k % 10}", label=_short(setting))
+    top = max(max(r["lower_bound"], r["temporal_steps"]) for r in have) + 1
+    ax.plot([0, top], [0, top], color="#888", linewidth=1, linestyle=":", label="TS = TS*")
+    ax.set(xlabel="lower bound TS*", ylabel="TS", xlim=(0, top), ylim=(0, top * 1.05))
+    ax.legend(fontsize=7, loc="best")
+    return [(_svg(fig), "TS against its lower bound TS*, one point per episode")]
+
+
+def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
+    """Mean failure diagnostics per episode, grouped bars per method/setting (episodes without diagnostics left out)."""
+    stats = [(setting, summarize_diagnostics(bucket)) for setting, bucket in group(valid, *SETTING).items()]
+    stats = [(s, d) for s, d in stats if d["known"]]
+    if not stats:
+        return []
+    fig = _figure(7.0, 3.8)
+    ax = fig.add_subplot()
+    width = 0.8 / len(stats)
+    for k, (setting, d) in enumerate(stats):
+        xs = [i + k * width for i in range(len(PLOTTED_DIAGNOSTICS))]
+        ax.bar(xs, [d["mean"][name] or 0.0 for name, _ in PLOTTED_DIAGNOSTICS], width=width, color=f"C{k % 10}",
+               label=f"{_short(setting)} ({d['known']} episodes)")  # fmt: skip
+    ax.set_xticks([i + 0.4 - width / 2 for i in range(len(PLOTTED_DIAGNOSTICS))], [label for _, label in PLOTTED_DIAGNOSTICS], rotation=25, ha="right")
+    ax.set(ylabel="mean per episode")
+    ax.legend(fontsize=7, loc="best")
+    return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.diagnostics)")]
+
+
+# --------------------------------------------------------------------------- the page
+
+
+def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> str:
+    head = ["episode", "setting", "valid", "Succ", "PS", "TS", "TS*", "report"]
+    out = ["<table><thead><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr></thead><tbody>"]
+    order = sorted(range(len(rows)), key=lambda i: (setting_label(_setting(rows[i])), str(rows[i].get("key"))))
+    for i in order:
+        r, link = rows[i], links[i]
+        cells = [
+            html.escape(str(r.get("key", ""))), html.escape(setting_label(_setting(r))), "yes" if _valid(r) else "no",
+            "1" if r.get("success") else "0", f"{float(r.get('partial_success', 0.0)):.2f}", str(r.get("temporal_steps", "")),
+            "" if r.get("lower_bound") is None else str(r["lower_bound"]),
+            f'<a href="{html.escape(link)}">{html.escape(link)}</a>' if link else "",
+        ]  # fmt: skip
+        out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    return "\n".join(out + ["</tbody></table>"])
+
+
+def _link(row: dict[str, Any], base: Path, page_dir: Path) -> str | None:
+    """`traces/<trace file stem>.html` of the row's evaluation directory, relative to the page."""
+    trace = row.get("trace")
+    if not trace:
+        return None
+    target = base / Path(str(trace)).parent / f"{Path(str(trace)).stem}.html"
+    return Path(os.path.relpath(target, page_dir)).as_posix()
+
+
+def html_summary(
+    rows: list[dict[str, Any]],
+    links: Sequence[str | None],
+    *,
+    title: str = "Evaluation summary",
+    resamples: int = RESAMPLES,
+    seed: int = CI_SEED,
+) -> str:
+    """The page: summary.md's tables as HTML, the plots, and the episodes with their links (`links[i]` is rows[i]'s)."""
+    valid = [r for r in rows if _valid(r)]
+    plots = success_by_objects(valid) + ts_against_bound(valid) + diagnostics_by_setting(valid) if valid else []
+    figures = "\n".join(f"<figure>{svg}<figcaption>{html.escape(caption)}</figcaption></figure>" for svg, caption in plots)
+    body = markdown_to_html(summary_markdown(rows, resamples=resamples, seed=seed))
+    return "\n".join([
+        "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">', f"<title>{html.escape(title)}</title>",
+        f"<style>{STYLE}</style></head><body>",
+        body,
+        "<h2>Plots</h2>", f'<div class="plots">{figures or "<p>No valid episodes to plot.</p>"}</div>',
+        "<h2>Episodes</h2>", "<p>Each episode's report (written by <code>mhrc show</code>) is linked beside it.</p>",
+        _episode_table(rows, links),
+        "</body></html>", "",
+    ])  # fmt: skip
+
+
+def write_html_summary(
+    rows: list[dict[str, Any]],
+    out_path: Path,
+    *,
+    title: str = "Evaluation summary",
+    base: Path | None = None,
+    resamples: int = RESAMPLES,
+    seed: int = CI_SEED,
+) -> Path:
+    """Write the self-contained summary page of `rows` to `out_path`. Episode links point to
+    `traces/<stem>.html` under `base`, the evaluation directory the rows' `trace` paths are
+    relative to (default: the page's own directory, as for `mhrc eval --out DIR`)."""
+    page_dir = out_path.parent
+    links = [_link(r, base if base is not None else page_dir, page_dir) for r in rows]
+    out_path.write_text(html_summary(rows, links, title=title, resamples=resamples, seed=seed), encoding="utf-8")
+    return out_path
+
+
+def write_report_html(
+    dirs: Sequence[Path], out_path: Path, *, title: str = "Evaluation summary", resamples: int = RESAMPLES, seed: int = CI_SEED
+) -> Path:
+    """`mhrc report DIR...`'s page: the rows of several evaluation directories (as
+    `mhrc.report.merge_runs` reads them), each episode linked into its own directory."""
+    rows: list[dict[str, Any]] = []
+    links: list[str | None] = []
+    for d in dirs:
+        mine = read_rows(Path(d) / "episodes.jsonl")
+        rows += mine
+        links += [_link(r, Path(d), out_path.parent) for r in mine]
+    out_path.write_text(html_summary(rows, links, title=title, resamples=resamples, seed=seed), encoding="utf-8")
+    return out_path

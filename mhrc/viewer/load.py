@@ -1,0 +1,106 @@
+"""Reading a trace for the viewer, robustly: what could be read, and what was wrong.
+
+A trace is JSONL, one bus message a line (mhrc.trace). The viewer must render what it can of a
+trace cut off mid-line (a run killed while recording), of one from an older protocol version
+(version 1: no `snapshot` events) or with a few damaged lines, and refuse, with one sentence,
+a file that is no trace at all.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..protocol import PROTOCOL_VERSION
+
+
+class NotATrace(ValueError):
+    """A file with no line that reads as a trace line: the message says why."""
+
+
+@dataclass
+class LoadedTrace:
+    """The parsed lines of a trace, with warnings about what could not be read."""
+
+    path: Path
+    rows: list[dict[str, Any]]
+    warnings: list[str] = field(default_factory=list)
+    versions: set[int] = field(default_factory=set)
+
+    def messages(self, kind: str) -> list[dict[str, Any]]:
+        """The `msg` of every put line whose message is of `kind`, in trace order."""
+        return [r["msg"] for r in self.rows if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == kind]
+
+
+def resolve(path: str | Path) -> Path:
+    """A trace file, or the trace.jsonl of a run directory."""
+    p = Path(path)
+    if p.is_dir():
+        return p / "trace.jsonl"
+    return p
+
+
+def _is_trace_line(obj: Any) -> bool:
+    return isinstance(obj, dict) and isinstance(obj.get("key"), str) and "msg" in obj and obj["key"].startswith("mhrc/")
+
+
+def load_trace(path: str | Path) -> LoadedTrace:
+    """Read `path` (a trace file or a run directory). Raises NotATrace or OSError."""
+    p = resolve(path)
+    if not p.exists():
+        raise NotATrace(f"{p} does not exist" + (" (a run directory holds trace.jsonl)" if Path(path).is_dir() else ""))
+    raw = p.read_bytes()
+    text = raw.decode("utf-8", "replace")
+    lines = text.split("\n")
+    ends_with_newline = text.endswith("\n")
+    rows: list[dict[str, Any]] = []
+    bad: list[int] = []
+    truncated = False
+    nonblank = 0
+    for i, line in enumerate(lines):
+        if not line.strip():
+            continue
+        nonblank += 1
+        last = i == len(lines) - 1 and not ends_with_newline
+        try:
+            obj = json.loads(line)
+        except ValueError:
+            if last:
+                truncated = True
+            else:
+                bad.append(i + 1)
+            continue
+        if _is_trace_line(obj):
+            rows.append(obj)
+        else:
+            bad.append(i + 1)
+    if not rows:
+        if nonblank == 0:
+            raise NotATrace(f"{p} is empty")
+        raise NotATrace(f"{p} is not an mhrc trace: no line is a JSON object with a `key` under mhrc/ and a `msg`")
+    trace = LoadedTrace(path=p, rows=rows)
+    if truncated:
+        trace.warnings.append(f"the trace is truncated: its last line (line {len(lines)}) was cut off mid-line and is left out")
+    if bad:
+        shown = ", ".join(str(n) for n in bad[:5]) + (" ..." if len(bad) > 5 else "")
+        trace.warnings.append(f"{len(bad)} line(s) are not trace lines and are left out: line {shown}")
+    for r in rows:
+        msg = r.get("msg")
+        if isinstance(msg, dict) and isinstance(msg.get("v"), int):
+            trace.versions.add(msg["v"])
+    newer = {v for v in trace.versions if v > PROTOCOL_VERSION}
+    if newer:
+        trace.warnings.append(f"the trace has protocol version {max(newer)}, newer than this viewer's {PROTOCOL_VERSION}: some fields may be missing")
+    if not trace.messages("episode_started"):
+        trace.warnings.append("the trace has no episode_started event: task, scene and seed are unknown and the house is not drawn")
+    if not trace.messages("snapshot"):
+        old = f" (protocol version {max(trace.versions)})" if trace.versions and max(trace.versions) < 2 else ""
+        trace.warnings.append(
+            f"the trace has no snapshot events{old}: the map shows the robots' positions from their own observations "
+            "and no objects"
+        )
+    if not trace.messages("episode_done"):
+        trace.warnings.append("the trace has no episode_done event: the episode did not finish while recording, no metrics")
+    return trace

@@ -1,0 +1,40 @@
+"""`mhrc show`: a trace in, one self-contained HTML report out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from .load import load_trace, resolve
+from .model import build_view
+from .page import render_page
+
+
+def diagnostics_for(rows: list[dict[str, Any]]) -> tuple[dict[str, Any] | None, str | None]:
+    """mhrc.diagnostics' findings for the failure panel, or why there are none."""
+    from ..diagnostics import diagnose
+
+    try:
+        result = diagnose(rows).as_dict()
+    except Exception as exc:  # a diagnosis that fails must not cost the user the report
+        return None, f"the failure diagnosis failed on this trace: {type(exc).__name__}: {exc}"
+    if not isinstance(result, dict):
+        return None, f"the failure diagnosis returned {type(result).__name__}, not a dict"
+    return result, None
+
+
+def default_out(path: str | Path) -> Path:
+    """Beside the trace, with .html."""
+    return resolve(path).with_suffix(".html")
+
+
+def write_report(path: str | Path, out: str | Path | None = None) -> tuple[Path, list[str]]:
+    """Render the trace at `path` (file or run directory) to `out`; returns it and the warnings.
+    Raises load.NotATrace for a file that is no trace."""
+    trace = load_trace(path)
+    view = build_view(trace)
+    diag, note = diagnostics_for(trace.rows)
+    target = Path(out) if out is not None else default_out(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text(render_page(view, diag, note), encoding="utf-8")
+    return target, view.warnings
