@@ -149,6 +149,14 @@ def _named(data: dict[str, Any], name: str) -> dict[str, Any]:
     return next(f for f in data["furniture"] if f["name"] == name)
 
 
+def _move(furniture: dict[str, Any], dx: float, dy: float) -> None:
+    """Shift a piece of furniture with what lies on it (its stand poses are relative to it)."""
+    furniture["center"] = [furniture["center"][0] + dx, furniture["center"][1] + dy]
+    furniture["place_pose"] = [furniture["place_pose"][0] + dx, furniture["place_pose"][1] + dy]
+    furniture["slots"] = [[x + dx, y + dy] for x, y in furniture["slots"]]
+    furniture["stand_poses"] = [{**sp, "at": sp["at"] + (dx if sp["side"] in ("north", "south") else dy)} for sp in furniture["stand_poses"]]
+
+
 def _index(name: str) -> int:
     return next(i for i, f in enumerate(_kitchen()["furniture"]) if f["name"] == name)
 
@@ -176,6 +184,9 @@ def _index(name: str) -> int:
         (lambda d: _named(d, "fridge")["facade"].update(front=[1, 0]), "facade.front: a container's front is its axis [0.0, -1.0]; omit front"),
         (lambda d: _named(d, "microwave")["facade"]["panels"][0].update(size=[0.7, 0.2]), "facade.panels.0: [0.0, 0.42] size [0.7, 0.2] does not fit on the front (0.6 wide, 1.2 high)"),
         (lambda d: _named(d, "microwave")["facade"]["panels"][0].update(color="gold"), "color: unknown colour 'gold'"),
+        # a pillar through table_0: table_2 moved into it (furniture may touch, never intersect)
+        (lambda d: _move(_named(d, "table_2"), 0.0, 3.0), f"furniture.{_index('table_0')} (table_0) overlaps furniture.{_index('table_2')} (table_2) by 0.55 m: move it or shrink it"),
+        (lambda d: _move(_named(d, "table_4"), 0.0, -0.3), f"furniture.{_index('table_4')} (table_4) overlaps walls.0 by 0.")
     ],
 )
 def test_a_layout_that_would_not_be_solvable_is_refused(edit: Any, expected: str) -> None:

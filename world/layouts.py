@@ -464,6 +464,7 @@ class LayoutFile(_Strict):
         elsewhere = sum(len(f.slots) for f in self.furniture if f.name != table.name)
         if elsewhere < 5:
             raise ValueError(f"furniture: slots away from {table.name} number {elsewhere}; 6-object episodes need at least 5")
+        self._check_overlaps()
         obstacles = [(f"walls.{i}", (w[0], w[1]), (w[2], w[3])) for i, w in enumerate(self.walls)]
         obstacles += [(f"furniture.{i} ({f.name})", f.center, (f.size[0], f.size[1])) for i, f in enumerate(self.furniture)]
         obstacles += [(f"furniture.{i} ({f.name}) with its drawer open", *f.open_drawer_footprint()) for i, f in enumerate(self.furniture) if f.drawer]
@@ -479,6 +480,17 @@ class LayoutFile(_Strict):
                 if _inside(c, sz, (x, y), margin=ROBOT_CLEARANCE - 0.01):
                     raise ValueError(f"{what}: ({x}, {y}) is within {ROBOT_CLEARANCE} m of {name}")
         return self
+
+    def _check_overlaps(self) -> None:
+        """No piece of furniture may stand in another or in a wall (touching is fine): a pillar
+        through a table would load, and every action near it would fail with no hint why."""
+        pieces = [(f"furniture.{i} ({f.name})", f.center, (f.size[0], f.size[1])) for i, f in enumerate(self.furniture)]
+        walls = [(f"walls.{i}", (w[0], w[1]), (w[2], w[3])) for i, w in enumerate(self.walls)]
+        for i, (what, c, sz) in enumerate(pieces):
+            for other, oc, osz in pieces[i + 1 :] + walls:
+                depth = _overlap(c, sz, oc, osz)
+                if depth > OVERLAP_TOLERANCE:
+                    raise ValueError(f"{what} overlaps {other} by {depth:.2f} m: move it or shrink it (furniture may touch, not intersect)")
 
     def _check_reach(self, table: FurnitureFile) -> None:
         """Bob's slots and goal area against his reach (see the module docstring)."""
@@ -529,6 +541,17 @@ class LayoutFile(_Strict):
             furniture=tuple(furniture), bob_table=b.table, bob_base=b.base, bob_yaw=b.yaw, goal_area=b.goal_area,
             near_slots=tuple(b.near_slots), far_slots=tuple(b.far_slots), starts={str(k): v for k, v in self.starts.items()}, source=source,
         )  # fmt: skip
+
+
+OVERLAP_TOLERANCE = 0.01  # m: footprints that share less than this (touching, rounding) do not count as overlapping
+
+
+def _overlap(c1: Vec2, s1: tuple[float, ...], c2: Vec2, s2: tuple[float, ...]) -> float:
+    """How deep two axis-aligned footprints (centre, size) intersect: the smaller of the
+    overlaps along x and y; 0 when they are apart."""
+    ox = min(c1[0] + s1[0] / 2, c2[0] + s2[0] / 2) - max(c1[0] - s1[0] / 2, c2[0] - s2[0] / 2)
+    oy = min(c1[1] + s1[1] / 2, c2[1] + s2[1] / 2) - max(c1[1] - s1[1] / 2, c2[1] - s2[1] / 2)
+    return max(0.0, min(ox, oy))
 
 
 def _inside(center: Vec2, size: tuple[float, ...], xy: Vec2, margin: float = 1e-9) -> bool:
