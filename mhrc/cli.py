@@ -417,6 +417,20 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
         write_report_html(list(dirs), out.with_suffix(".html"), resamples=resamples, seed=seed)
 
 
+@main.command("schema")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Write one <Payload>.json per bus payload and index.json into this directory; default: print one JSON document.")
+def schema_(out: Path | None) -> None:
+    """The JSON Schema of every bus payload, for agents in any language (README, "Attaching your own agent")."""
+    from . import schema as schema_mod
+
+    if out is None:
+        click.echo(json.dumps(schema_mod.document(), indent=2))
+        return
+    for path in schema_mod.write(out):
+        click.echo(str(path))
+
+
 @main.command()
 @click.argument("run_or_trace", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
