@@ -63,9 +63,12 @@ def _llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
 T = TypeVar("T")
 
 
-def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]]) -> T:
+def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | None = None) -> T:
     """Run a coroutine; SIGTERM cancels it like Ctrl-C, so every session closes in `finally`.
-    A child of `mhrc up --processes` or `mhrc eval` gets SIGTERM when its parent dies."""
+    A child of `mhrc up --processes` or `mhrc eval` gets SIGTERM when its parent dies.
+
+    The first Ctrl-C cancels the run (saying `stopping`, what is being done, when given); a
+    second one quits at once: the children go with this process (mhrc.lifeline), never a hang."""
     from .lifeline import die_with_parent
 
     die_with_parent()
@@ -75,6 +78,21 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]]) -> T:
         loop = asyncio.get_running_loop()
         if task is not None:
             loop.add_signal_handler(signal.SIGTERM, task.cancel)
+            interrupts = 0
+
+            def on_interrupt() -> None:
+                nonlocal interrupts
+                interrupts += 1
+                if interrupts > 1:
+                    sys.stderr.write("interrupted again: quitting at once\n")
+                    sys.stderr.flush()
+                    os._exit(130)
+                if stopping:
+                    sys.stderr.write(f"\ninterrupted: {stopping} (Ctrl-C again to quit at once)\n")
+                    sys.stderr.flush()
+                task.cancel()
+
+            loop.add_signal_handler(signal.SIGINT, on_interrupt)
         return await coro_fn()
 
     try:
@@ -360,7 +378,11 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     t0 = time.perf_counter()
     with progress:
         try:
-            rows = _run(lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook, concurrency=concurrency))
+            rows = _run(
+                lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook, concurrency=concurrency),
+                stopping=f"stopping the workers; every finished episode is kept in {out / 'episodes.jsonl'} "
+                f"(continue with --resume --out {out})",
+            )
         except ConfigError as exc:
             raise click.UsageError(str(exc)) from None
         except EvalAborted as exc:

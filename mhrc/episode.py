@@ -195,6 +195,7 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, c
     )
     bus = None
     recorder = None
+    world: WorldService | None = None
     try:
         bus = await (open_client(connect, 30.0) if connect else Bus.open(mode="router", listen=[cfg.endpoint]))
         if cfg.trace is not None:
@@ -218,7 +219,7 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, c
             await asyncio.sleep(0.2)  # let the last results and the done event leave
     finally:
         if recorder is not None:
-            recorder.close()
+            recorder.close(until_done=2.0 if world is not None and world.done is not None else 0.0)
         if bus is not None:
             await bus.close()
         await asyncio.to_thread(sim.close)

@@ -358,6 +358,28 @@ class Tally:
 ProgressHook = Callable[[Tally, dict[str, Any] | None], None]
 
 
+WORKER_GRACE = 10.0  # s a worker that heard "done" has to finish before it is terminated
+STOP_GRACE = 2.0  # s workers told to stop (SIGTERM) have before they are killed: Ctrl-C exits within 3 s
+
+
+async def _reap(procs: list[subprocess.Popen[bytes]], grace: float) -> None:
+    """Wait up to `grace` seconds (without blocking the loop) for `procs` to end; terminate,
+    then kill, the ones still running."""
+    deadline = time.monotonic() + grace
+    while any(p.poll() is None for p in procs) and time.monotonic() < deadline:
+        await asyncio.sleep(0.05)
+    late = [p for p in procs if p.poll() is None]
+    for p in late:
+        p.terminate()
+    deadline = time.monotonic() + min(1.0, grace)
+    while any(p.poll() is None for p in late) and time.monotonic() < deadline:
+        await asyncio.sleep(0.05)
+    for p in late:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
 def _episode_report(trace: Path) -> None:
     """The episode's HTML report beside its trace (summary.html links it); a report that cannot
     be drawn costs a warning, never the episode's row."""
@@ -535,16 +557,14 @@ async def evaluate(
                 f"stopped: {aborted[0]}. Every episode would fail the same way; the {tally.done} finished episode(s) "
                 f"are kept in {rows_path} (fix the cause, then continue with --resume --out {out})"
             )
-    finally:
+    except BaseException:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now
         for p in procs:
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
+            if p.poll() is None:
                 p.terminate()
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    p.wait(timeout=5)
-                if p.poll() is None:
-                    p.kill()
+        await _reap(procs, STOP_GRACE)
+        raise
+    finally:
+        await _reap(procs, WORKER_GRACE)  # the workers heard "done": they end by themselves
         await bus.close()
     rows = read_rows(rows_path)
     write_summaries(rows, out)

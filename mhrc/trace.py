@@ -9,6 +9,7 @@ ack, result, message, thought and world event, whichever process sent them. Each
 from __future__ import annotations
 
 import json
+import threading
 import time
 from pathlib import Path
 from typing import IO, Any
@@ -28,6 +29,7 @@ class Recorder:
         self._file: IO[str] | None = None
         self._t0 = time.perf_counter()
         self.count = 0
+        self._ended = threading.Event()  # an episode_done event is on disk
 
     def start(self) -> Recorder:
         self._file = self.path.open("w", encoding="utf-8")
@@ -50,11 +52,18 @@ class Recorder:
         except (ValueError, UnicodeDecodeError):
             msg = {"raw": sample.payload.decode("utf-8", "replace")}
         self._write(sample.key, "put" if sample.is_put else "delete", msg)
+        if isinstance(msg, dict) and msg.get("kind") == "episode_done":
+            self._ended.set()
 
     def _on_liveliness(self, sample: Sample) -> None:
         self._write(sample.key, "alive" if sample.is_put else "gone", None)
 
-    def close(self) -> None:
+    def close(self, *, until_done: float = 0.0) -> None:
+        """Stop writing; with `until_done`, first wait up to that many seconds for the episode's
+        final event, published but maybe still on its way (a blocking wait: a second Ctrl-C or
+        SIGTERM cancelling the caller's task cannot cut it short and lose the event)."""
+        if until_done > 0:
+            self._ended.wait(until_done)
         if self._file is not None:
             self._file.close()
 
