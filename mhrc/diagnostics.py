@@ -50,7 +50,7 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from .metrics import TraceError, from_trace
+from .metrics import TraceError, from_trace, junk_rejections
 from .protocol import EPISODE_OVER, LLM_ERROR_PREFIX, OutcomeCode
 
 PREFIX = "diag_"
@@ -161,6 +161,8 @@ def diagnose(rows: list[dict[str, Any]]) -> Diagnostics:
     for m in msgs:
         if m.get("kind") == "action_ack" and m.get("accepted") is False:
             reasons[reject_kind(str(m.get("reason", "")))] += 1
+    if junk := junk_rejections(rows):  # a flood of junk, counted by the recorder
+        reasons["malformed"] += junk
     d.rejected, d.rejected_by_reason = sum(reasons.values()), dict(sorted(reasons.items()))
 
     names: Counter[str] = Counter()

@@ -21,7 +21,8 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
 - the LLM failures that shaped the episode: parse_failures (replies that did not parse: a
   thought whose parse_error is set and is not a model error), llm_unreachable (steps lost to a
   model that stayed down after its retries: parse_error starting with LLM_ERROR_PREFIX),
-  rejected_actions (`action_ack` events with accepted false);
+  rejected_actions (`action_ack` events with accepted false, and the rejections of malformed
+  requests the recorder counted as `junk` lines);
 - valid / invalid_reason: an episode whose every LLM step (at least one) found the model
   unreachable measured the network, not the method: it is invalid and left out of summaries;
 - fidelity (`paper` or `aids:...`, from `episode_started`; `unrecorded` for traces older than
@@ -92,6 +93,15 @@ def _msgs(rows: Iterable[dict[str, Any]], kind: str) -> list[dict[str, Any]]:
     return [r["msg"] for r in rows if r.get("kind") == "put" and isinstance(r.get("msg"), dict) and r["msg"].get("kind") == kind]
 
 
+def junk_rejections(rows: Iterable[dict[str, Any]]) -> int:
+    """Rejections of malformed requests, which the recorder counts instead of copying (`junk` lines)."""
+    return sum(
+        int(r["msg"].get("count", 0))
+        for r in rows
+        if r.get("kind") == "junk" and isinstance(r.get("msg"), dict) and str(r.get("key", "")).endswith("/action/ack")
+    )
+
+
 def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
     """The metrics of one episode from its trace rows (`mhrc.trace.read_trace`)."""
     started, done = _msgs(rows, "episode_started"), _msgs(rows, "episode_done")
@@ -142,7 +152,7 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         lower_bound=s.get("lower_bound"),
         parse_failures=len(errors) - unreachable,
         llm_unreachable=unreachable,
-        rejected_actions=sum(1 for a in _msgs(rows, "action_ack") if a.get("accepted") is False),
+        rejected_actions=sum(1 for a in _msgs(rows, "action_ack") if a.get("accepted") is False) + junk_rejections(rows),
         valid=not invalid,
         invalid_reason=f"the model was unreachable for all {len(thoughts)} LLM steps" if invalid else None,
         fidelity=str(s.get("fidelity") or UNRECORDED),

@@ -2,8 +2,10 @@
 
 It subscribes to `mhrc/<run>/**` and to the run's liveliness tokens, so it sees every request,
 ack, result, message, thought and world event, whichever process sent them. Each line is
-`{"t": seconds since recording started, "key": ..., "kind": "put"|"delete"|"alive"|"gone",
+`{"t": seconds since recording started, "key": ..., "kind": "put"|"delete"|"alive"|"gone"|"junk",
 "msg": the decoded JSON payload}`; a payload that is not JSON is kept as `{"raw": text}`.
+Malformed action requests and the world's rejections of them are not copied: a `junk` line per
+key and second holds their count, bytes and first reason.
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ from typing import IO, Any
 
 from .bus import Bus, Sample
 from .keys import Keys
+from .protocol import ActionRequest, ProtocolError, decode
+
+JUNK_INTERVAL = 1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
 
 
 class Recorder:
@@ -30,6 +35,8 @@ class Recorder:
         self._t0 = time.perf_counter()
         self.count = 0
         self._ended = threading.Event()  # an episode_done event is on disk
+        self._junk: dict[str, dict[str, Any]] = {}  # key -> counts not yet written
+        self._lock = threading.Lock()  # samples arrive on zenoh's threads
 
     def start(self) -> Recorder:
         self._file = self.path.open("w", encoding="utf-8")
@@ -51,9 +58,40 @@ class Recorder:
             msg: Any = json.loads(sample.payload)
         except (ValueError, UnicodeDecodeError):
             msg = {"raw": sample.payload.decode("utf-8", "replace")}
+        if sample.is_put and self._is_junk(sample, msg):
+            return
         self._write(sample.key, "put" if sample.is_put else "delete", msg)
         if isinstance(msg, dict) and msg.get("kind") == "episode_done":
             self._ended.set()
+
+    def _is_junk(self, sample: Sample, msg: Any) -> bool:
+        """A malformed action request, or the world's rejection of one: counted, not copied
+        (a flood of junk must not fill the disk). Lines of kind `junk` carry, per key and
+        interval, the count, the bytes and the first reason."""
+        reason = None
+        if sample.key.endswith("/action/request"):
+            try:
+                decode(sample.payload, ActionRequest)
+            except ProtocolError as exc:
+                reason = str(exc)
+        elif sample.key.endswith("/action/ack") and isinstance(msg, dict) and msg.get("accepted") is False:
+            if str(msg.get("reason", "")).startswith("malformed"):
+                reason = str(msg["reason"])
+        if reason is None:
+            return False
+        now = time.perf_counter()
+        with self._lock:
+            junk = self._junk.setdefault(sample.key, {"count": 0, "bytes": 0, "reason": reason[:300], "since": now})
+            junk["count"] += 1
+            junk["bytes"] += len(sample.payload)
+            if now - junk["since"] >= JUNK_INTERVAL:
+                self._flush_junk(sample.key)
+        return True
+
+    def _flush_junk(self, key: str) -> None:
+        junk = self._junk.pop(key, None)
+        if junk is not None and junk["count"]:
+            self._write(key, "junk", {"count": junk["count"], "bytes": junk["bytes"], "reason": junk["reason"]})
 
     def _on_liveliness(self, sample: Sample) -> None:
         self._write(sample.key, "alive" if sample.is_put else "gone", None)
@@ -64,6 +102,9 @@ class Recorder:
         SIGTERM cancelling the caller's task cannot cut it short and lose the event)."""
         if until_done > 0:
             self._ended.wait(until_done)
+        with self._lock:
+            for key in list(self._junk):
+                self._flush_junk(key)
         if self._file is not None:
             self._file.close()
 

@@ -8,6 +8,7 @@ machine could fail)."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import signal
@@ -168,3 +169,56 @@ def test_double_ctrl_c_on_up_processes_exits_at_once(tmp_path: Path) -> None:
     assert proc.returncode == 130 and "Traceback" not in err, err[-3000:]
     _no_strays(proc.pid)
     print(f"up --processes: exited {took:.2f} s after a double Ctrl-C")
+
+
+# --------------------------------------------------------------------------- noise under attack
+
+
+async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
+    """2,000 malformed requests of 1 kB each on Alice's key while the episode runs: the world
+    goes on and the team still succeeds; the world logs one warning per interval with the count
+    held back, and the trace holds `junk` counts instead of 2,000 copies and 2,000 rejections."""
+    import io
+
+    import structlog
+
+    from mhrc import logs
+    from mhrc.bus import Bus
+    from mhrc.episode import EpisodeConfig, up_in_process
+    from mhrc.keys import Keys
+    from mhrc.metrics import from_trace
+    from mhrc.trace import read_trace
+
+    flood = 2000
+    junk = b'{"v": 2, "robot": "alice", "agent_id": "x", "tick": 0, "action": {"skill": "teleport"}, "pad": "' + b"x" * 900 + b'"}'
+
+    def attack(bus: Bus, run: str) -> None:
+        """From the world's own session, as soon as the world has subscribed (its first await)."""
+
+        def flood_now() -> None:
+            for _ in range(flood):
+                bus.put(Keys(run).action_request("alice"), junk)
+
+        asyncio.get_running_loop().call_soon(flood_now)
+
+    clean = await up_in_process(EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "clean.jsonl").resolved())
+    out = io.StringIO()
+    structlog.configure(
+        processors=[structlog.processors.add_log_level, structlog.dev.ConsoleRenderer(colors=False)],
+        wrapper_class=structlog.make_filtering_bound_logger(30), logger_factory=structlog.PrintLoggerFactory(file=out),
+    )  # fmt: skip
+    try:
+        done = await up_in_process(EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "t.jsonl").resolved(), observe=attack)
+    finally:
+        logs.configure("info")
+    assert done.reason == clean.reason == "success" and done.metrics.temporal_steps == clean.metrics.temporal_steps
+    warnings = [line for line in out.getvalue().splitlines() if "malformed action request rejected" in line]
+    assert 1 <= len(warnings) <= 5, len(warnings)  # one per 5 s interval, not one per message
+    rows = read_trace(tmp_path / "t.jsonl")
+    counted = {key: sum(r["msg"]["count"] for r in rows if r["kind"] == "junk" and r["key"].endswith(key)) for key in ("/action/request", "/action/ack")}
+    assert counted == {"/action/request": flood, "/action/ack": flood}, counted
+    assert not any(r["kind"] == "put" and r["key"].endswith("/action/request") and "teleport" in json.dumps(r["msg"]) for r in rows)
+    size, clean_size = (tmp_path / "t.jsonl").stat().st_size, (tmp_path / "clean.jsonl").stat().st_size
+    assert size < 1.2 * clean_size + 10_000, (size, clean_size)  # 2 MB of junk would have been copied
+    assert from_trace(rows).rejected_actions == flood
+    print(f"junk flood: trace {size} B against {clean_size} B without it; {len(warnings)} warning line(s)")

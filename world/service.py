@@ -21,6 +21,7 @@ import structlog
 from mhrc.bus import Bus, Sample
 from mhrc.fidelity import label as fidelity_label
 from mhrc.keys import Keys
+from mhrc.logs import Throttle
 from mhrc.protocol import (
     Action,
     ActionAck,
@@ -116,6 +117,7 @@ class WorldService:
         self._evaluation: TaskResultLike = sim.evaluate()
         self._last_results: dict[str, str] = {}  # robot -> goal id of the last result released to it
         self._log = log.bind(run=config.run)
+        self._throttle = Throttle(interval=5.0)  # warnings about junk from the bus
         self.scheduler: Scheduler = make_scheduler(config.schedule, self, time_scale=config.time_scale)
 
     @property
@@ -352,7 +354,9 @@ class WorldService:
         try:
             req = decode(sample.payload, ActionRequest)
         except ProtocolError as exc:
-            self._log.warning("malformed action request rejected", robot=robot, reason=str(exc))
+            log_now, held = self._throttle.due(f"malformed/{robot}")
+            if log_now:  # a flood costs one line per interval, with the count held back
+                self._log.warning("malformed action request rejected", robot=robot, reason=str(exc), **({"and_before": held} if held else {}))
             self._reject(robot, _goal_id_of(sample.payload), f"malformed action request: {exc}")
             return
         reason = self._check_request(robot, req) or self.scheduler.admit(req)  # admit only what passed the checks
