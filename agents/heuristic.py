@@ -132,6 +132,14 @@ class _RoleBase:
     def _decision(self, action: Action) -> Decision:
         return Decision(action=action)
 
+    def _arrived(self, obs: Observation, teammate: str) -> bool:
+        """Whether `teammate` is present now and was not at this robot's previous step (it
+        joined, or its agent was replaced); tracks presence in `<teammate>_here`."""
+        here = teammate in obs.teammates
+        before = getattr(self, f"{teammate}_here")
+        setattr(self, f"{teammate}_here", here)
+        return here and not before and self.last is not None
+
     def _last_failed(self, skill: str) -> bool:
         return self.last is not None and self.last.action.skill == skill and not self.last.outcome.succeeded
 
@@ -145,8 +153,11 @@ class BobHeuristic(_RoleBase):
 
     requested: set[str] = field(default_factory=set)
     pick_failures: dict[str, int] = field(default_factory=dict)
+    alice_here: bool = False
 
     async def decide(self, obs: Observation) -> Decision:
+        if self._arrived(obs, "alice"):
+            self.requested.clear()  # a new Alice has not heard what I need: ask again
         if self._last_failed("pick") and isinstance(self.last.action, Pick):  # type: ignore[union-attr]
             name = self.last.action.obj  # type: ignore[union-attr]
             self.pick_failures[name] = self.pick_failures.get(name, 0) + 1
@@ -192,15 +203,18 @@ class AliceHeuristic(_RoleBase):
     grasp_tries: dict[str, int] = field(default_factory=dict)
     given_up: set[str] = field(default_factory=set)
     pose_choice: dict[str, int] = field(default_factory=dict)  # object -> stand pose to use
+    david_here: bool = False
 
     async def decide(self, obs: Observation) -> Decision:
         self._read_messages(obs)
         self._learn_from_last(obs)
+        if self._arrived(obs, "david"):
+            self.delegated = False  # a new David knows nothing of his surfaces: hand them over again
         holding = obs.status.holding
         if holding:
             return self._deliver(obs, holding)
         if not self.delegated and "david" in obs.teammates:
-            surfaces = self._open_surfaces(obs)
+            surfaces = [f for f in self._open_surfaces(obs) if f not in self.explored]
             self.delegated = True
             if surfaces:
                 return self._decision(

@@ -222,7 +222,7 @@ class Observation(_Model):
     goals: dict[str, str] = Field(default_factory=dict, description="target -> where it must end: tray, panel, board (Bob only)")
     ordered: bool = Field(False, description="whether the targets must reach their goals in the listed order (a sandwich)")
     task_status: str | None = Field(None, description="progress text (Bob only)")
-    teammates: dict[str, list[str]] = Field(default_factory=dict, description="robot -> its skills")
+    teammates: dict[str, list[str]] = Field(default_factory=dict, description="robot -> its skills, for the teammates attached now (one whose agent left is not listed)")
     new_messages: list[RobotMessage] = Field(default_factory=list)
 
 

@@ -119,7 +119,7 @@ def test_ctrl_c_on_eval_exits_soon_and_keeps_every_finished_row(times: int, tmp_
     before = _rows(rows_path)
     took = _interrupt(proc, times)
     err = _stderr(tmp_path)
-    assert proc.returncode == 130, err[-2000:]
+    assert proc.returncode == 130 or (times == 2 and proc.returncode == -signal.SIGINT), (proc.returncode, err[-2000:])
     after = _rows(rows_path)
     assert [r["key"] for r in after[: len(before)]] == [r["key"] for r in before], "a finished row was lost"
     assert len({r["key"] for r in after}) == len(after), "a row was written twice"
@@ -166,7 +166,8 @@ def test_double_ctrl_c_on_up_processes_exits_at_once(tmp_path: Path) -> None:
     _until(lambda: (tmp_path / "t.jsonl").exists() and '"tick"' in (tmp_path / "t.jsonl").read_text(), 120, "a tick", proc)
     took = _interrupt(proc, 2)
     err = _stderr(tmp_path)
-    assert proc.returncode == 130 and "Traceback" not in err, err[-3000:]
+    # 130, or killed by the second SIGINT itself when it lands while Python finalizes (handlers reset): either way, at once
+    assert proc.returncode in (130, -signal.SIGINT) and "Traceback" not in err, (proc.returncode, err[-3000:])
     _no_strays(proc.pid)
     print(f"up --processes: exited {took:.2f} s after a double Ctrl-C")
 

@@ -68,6 +68,7 @@ class SimLike(Protocol):
     n_objects: int
 
     def capabilities(self, robot: str) -> frozenset[str]: ...
+    def finishers(self) -> frozenset[str]: ...
     def execute(self, robot: str, action: Action) -> SkillOutcome: ...
     def observe(self, robot: str, tick: int) -> Observation: ...
     def tell(self, receiver: str, sender: str, text: str) -> None: ...
@@ -206,7 +207,7 @@ class WorldService:
         evaluation and every acting robot's observation of tick + 1."""
         outcomes = [self._execute(req, tick) for req in batch]
         evaluation = self.sim.evaluate()
-        observations = {req.robot: self.sim.observe(req.robot, tick + 1) for req in batch}
+        observations = {req.robot: self._present(self.sim.observe(req.robot, tick + 1)) for req in batch}
         return Executed(outcomes, evaluation, observations), self._snapshot(tick, [req.goal_id for req in batch])
 
     def _snapshot(self, tick: int, goals: list[str]) -> Snapshot:
@@ -293,7 +294,17 @@ class WorldService:
     async def observe(self, robot: str, tick: int) -> Observation:
         """`robot`'s observation now, from a worker thread holding the sim lock."""
         async with self._sim_lock:
-            return await asyncio.to_thread(self.sim.observe, robot, tick)
+            return self._present(await asyncio.to_thread(self.sim.observe, robot, tick))
+
+    def _present(self, obs: Observation) -> Observation:
+        """The observation with the teammates attached now: a teammate whose agent left is not
+        there to help (and one that joins appears), so a team can re-plan around it. Before the
+        episode starts every teammate counts: the world waits for them (attach order must not
+        change what a robot plans on)."""
+        if not self.started:
+            return obs
+        present = {r: skills for r, skills in obs.teammates.items() if r in self.attached}
+        return obs if len(present) == len(obs.teammates) else obs.model_copy(update={"teammates": present})
 
     def deliver_messages(self) -> dict[str, list[RobotMessage]]:
         delivered = {r: self._inbox[r] for r in self.sim.robots}
@@ -393,9 +404,22 @@ class WorldService:
         self.scheduler.forget(robot)
         if self.done is not None:
             return  # agents leaving after the episode: nothing to report
-        self._log.warning("robot detached", robot=robot, tick=self.tick)
-        self.bus.put(self.keys.world_event, RobotDetached(robot=robot, tick=self.tick, reason="agent vanished (liveliness lost)"))
+        stranded = self._stranded()
+        self._log.warning("robot detached", robot=robot, tick=self.tick, **({"stranded": stranded} if stranded else {}))
+        reason = "agent vanished (liveliness lost)" + (f"; {stranded} unless an agent attaches again" if stranded else "")
+        self.bus.put(self.keys.world_event, RobotDetached(robot=robot, tick=self.tick, reason=reason))
         self._wake.set()
+
+    def _stranded(self) -> str:
+        """Why the robots attached now cannot finish the task on their own, or ""."""
+        left = set(self.attached)
+        finishers = self.sim.finishers()
+        if finishers and not left & finishers:
+            return f"nobody attached can finish the task (only {', '.join(sorted(finishers))} places on the goal fixtures)"
+        fetchers = [r for r in self.sim.robots if {"navigate", "pick"} <= self.sim.capabilities(r)]
+        if fetchers and not left & set(fetchers):
+            return f"nobody attached can fetch objects from the rooms (only {', '.join(fetchers)} navigates and picks)"
+        return ""
 
     async def _on_state_query(self, key: str, params: dict[str, str], payload: bytes) -> WorldState:
         async with self._sim_lock:

@@ -399,6 +399,10 @@ class Sim:
     def capabilities(self, robot: str) -> frozenset[str]:
         return frozenset(KINDS[TEAM[robot]].skills) if robot in self.bots else frozenset()
 
+    def finishers(self) -> frozenset[str]:
+        """The robots that may place on the task's goal fixtures (the paper: Bob)."""
+        return frozenset(name for name, b in self.bots.items() if b.kind.finishes_task)
+
     def execute(self, robot: str, action: Action) -> SkillOutcome:
         """Run one action of `robot`. Bad arguments give a failure outcome, never an exception."""
         if isinstance(action, Communicate):
