@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import secrets
 import uuid
 
 import structlog
@@ -70,6 +71,7 @@ class RobotAgent:
         self.keys = Keys(run)
         self.keys.alive_robot(robot)  # validates the robot id
         self.agent_id = agent_id or f"{robot}-{uuid.uuid4().hex[:8]}"
+        self._session = secrets.token_hex(16)  # sent to the world alone, with each attach: a copy of the public agent id cannot re-attach
         self.attach_timeout = attach_timeout
         self.ack_timeout = ack_timeout
         self.result_timeout = result_timeout
@@ -166,7 +168,7 @@ class RobotAgent:
         self._turn = loop.create_future()  # a Turn from before this attach is stale
         try:
             while True:
-                replies = await self.bus.get(self.keys.attach(self.robot), request, timeout=2.0)
+                replies = await self.bus.get(f"{self.keys.attach(self.robot)}?session={self._session}", request, timeout=2.0)
                 if replies:
                     try:
                         reply = decode(replies[0], AttachReply)

@@ -14,13 +14,16 @@ import json
 import socket
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import structlog
 import zenoh
 from pydantic import BaseModel
 
 from .protocol import encode
+
+if TYPE_CHECKING:
+    from .security import Credentials
 
 log = structlog.get_logger("mhrc.bus")
 
@@ -29,6 +32,14 @@ DEFAULT_LEASE_MS = 2000
 
 class BusError(RuntimeError):
     """The bus could not be opened or used."""
+
+
+class BusRefused(BusError):
+    """The world is there but refused this session (certificate, credentials); `final`: retrying cannot help."""
+
+    def __init__(self, message: str, final: bool = True) -> None:
+        super().__init__(message)
+        self.final = final
 
 
 @dataclass(frozen=True)
@@ -49,14 +60,20 @@ def free_port(host: str = "127.0.0.1") -> int:
         return int(s.getsockname()[1])
 
 
-def endpoint(host: str, port: int) -> str:
-    return f"tcp/{host}:{port}"
+def endpoint(host: str, port: int, tls: bool = False) -> str:
+    return f"{'tls' if tls else 'tcp'}/{host}:{port}"
 
 
 def make_config(
-    *, mode: str = "peer", listen: Sequence[str] = (), connect: Sequence[str] = (), lease_ms: int = DEFAULT_LEASE_MS
+    *,
+    mode: str = "peer",
+    listen: Sequence[str] = (),
+    connect: Sequence[str] = (),
+    lease_ms: int = DEFAULT_LEASE_MS,
+    security: Credentials | None = None,
 ) -> zenoh.Config:
-    """A Zenoh config with multicast scouting off and explicit endpoints only."""
+    """A Zenoh config with multicast scouting off and explicit endpoints only; with `security`,
+    TLS and user/password authentication (and, for a router, the run's access control)."""
     if mode not in ("peer", "client", "router"):
         raise BusError(f"zenoh mode must be peer, client or router, not {mode!r}")
     conf = zenoh.Config()
@@ -67,6 +84,10 @@ def make_config(
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("transport/link/tx/lease", str(lease_ms))
     conf.insert_json5("transport/link/tx/keep_alive", "4")
+    if security is not None:
+        from .security import apply
+
+        apply(conf, security, router=mode == "router")
     return conf
 
 
@@ -83,13 +104,31 @@ class Bus:
     # ------------------------------------------------------------------ lifecycle
     @classmethod
     async def open(
-        cls, *, mode: str = "peer", listen: Sequence[str] = (), connect: Sequence[str] = (), lease_ms: int = DEFAULT_LEASE_MS
+        cls,
+        *,
+        mode: str = "peer",
+        listen: Sequence[str] = (),
+        connect: Sequence[str] = (),
+        lease_ms: int = DEFAULT_LEASE_MS,
+        security: Credentials | None = None,
     ) -> Bus:
-        conf = make_config(mode=mode, listen=listen, connect=connect, lease_ms=lease_ms)
+        """Open a session. With `security` (mhrc.security.Credentials) the links are TLS and
+        the session logs in as the credentials' user; a client that the world refuses gets a
+        BusRefused naming the cause (expired or foreign certificate, refused login)."""
+        conf = make_config(mode=mode, listen=listen, connect=connect, lease_ms=lease_ms, security=security)
         try:
             session = await asyncio.to_thread(zenoh.open, conf)
         except zenoh.ZError as exc:
             where = ", ".join([*listen, *connect]) or "no endpoints"
+            if mode == "client" and len(connect) == 1:
+                from .security import diagnose
+
+                cause = await asyncio.to_thread(diagnose, connect[0], security)
+                if "certificate" in cause or "no credentials were given" in cause:  # final: retrying cannot help
+                    raise BusRefused(f"could not open a zenoh session ({where}): {cause}") from None
+                if "refused the login" in cause:  # or a world still starting: open_client retries a little
+                    raise BusRefused(f"could not open a zenoh session ({where}): {cause}", final=False) from None
+                raise BusError(f"could not open a zenoh session ({where}): {cause}") from None
             raise BusError(f"could not open a zenoh session ({where}): {exc}") from None
         return cls(session, asyncio.get_running_loop())
 
@@ -160,7 +199,7 @@ class Bus:
                 payload = query.payload.to_bytes() if query.payload is not None else b""
                 reply = await handler(str(query.key_expr), params, payload)
                 if reply is not None:
-                    query.reply(key, encode(reply))
+                    query.reply(query.key_expr, encode(reply))  # the key asked, not the served pattern: ACL rules match it
             except Exception as exc:
                 log.warning("query handler failed", key=key, error=str(exc))
                 try:

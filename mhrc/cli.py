@@ -127,6 +127,23 @@ def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
     return f
 
 
+def _credentials(path: Path | None, insecure: bool) -> Any:
+    """The participant's credentials (mhrc.security.Credentials) from --credentials or
+    $MHRC_CREDENTIALS; None (and a warning on stderr) on the open bus."""
+    from .security import SecurityError, load
+
+    if insecure:
+        click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
+        return None
+    if path is None:
+        click.echo("no credentials (--credentials or $MHRC_CREDENTIALS): the open tcp bus, as with --insecure", err=True)
+        return None
+    try:
+        return load(path)
+    except SecurityError as exc:
+        raise click.UsageError(f"--credentials: {exc}") from None
+
+
 def _config(**values: Any) -> EpisodeConfig:
     values = {k: v for k, v in values.items() if v is not None}
     if values.get("gui") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
@@ -154,12 +171,17 @@ def main() -> None:
 @click.option("--external", multiple=True, type=click.Choice(ROBOTS),
               help="Do not start an agent for this robot: attach your own with `mhrc agent` (repeatable).")
 @click.option("--quiet", "-q", is_flag=True, help="Print only the final summary.")
+@click.option("--secure/--insecure", "secure", default=False, show_default=True,
+              help="--secure: fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, access control); "
+                   "--insecure: the open tcp bus.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.")
 @_llm_options
-def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, video: Path | None, **values: Any) -> None:
+def up(
+    processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, video: Path | None, secure: bool, **values: Any
+) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
 
@@ -168,13 +190,19 @@ def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, l
 
     logs.configure(log_level)
     cfg = _config(**values)
+    if not secure:
+        click.echo("insecure: the open tcp bus (no TLS, no login, no access control); --secure for credentials", err=True)
+    else:
+        cfg = cfg.with_credentials()
+        click.echo(f"credentials in {cfg.credentials} (TLS, one login per participant, access control)", err=True)
     robots = tuple(r for r in cfg.robots if r not in external)
     console = Console(highlight=False, stderr=as_json, soft_wrap=True)
     printer = ProgressPrinter(console, verbose=not quiet)
     console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
     if external:
         console.print("attach the external robots with: " + "; ".join(
-            f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}" for r in external))
+            f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}"
+            + (f" --credentials {cfg.credentials_file(r)}" if cfg.credentials else "") for r in external))
     runner = up_processes if processes else up_in_process
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
         raise click.BadParameter(f"{video.name}: the video must be a .mp4 or .gif file", param_hint="--video")
@@ -191,13 +219,20 @@ def up(processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, l
               help="Start with the robots attached after this many seconds; default: wait for all three.")
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
-def world(log_level: str, start_timeout: float | None, quiet: bool, **values: Any) -> None:
+@click.option("--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS",
+              help="This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "
+                   "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control.")
+@click.option("--insecure", is_flag=True, help="The open tcp bus: no TLS, no login, no access control (anyone can act as any robot).")
+def world(log_level: str, start_timeout: float | None, quiet: bool, credentials: Path | None, insecure: bool, **values: Any) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
     from .episode import serve_world
     from .progress import ProgressPrinter
 
     logs.configure(log_level)
-    cfg = _config(start_timeout=start_timeout, **values)
+    creds = _credentials(credentials, insecure)
+    if creds is not None and values.get("run") is None:
+        values["run"] = creds.run
+    cfg = _config(start_timeout=start_timeout, credentials=credentials if creds is not None else None, **values)
     if quiet:
         _run(lambda: serve_world(cfg))
         return
@@ -217,16 +252,24 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, **values: An
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
 @click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels); the world's aids are set on the world. " + AIDS_HELP)
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-def agent(robot: str, connect: str, run: str | None, attach_timeout: float, log_level: str, **values: Any) -> None:
+@click.option("--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS",
+              help="This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "
+                   "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control.")
+@click.option("--insecure", is_flag=True, help="The open tcp bus: no TLS, no login, no access control (anyone can act as any robot).")
+def agent(
+    robot: str, connect: str, run: str | None, attach_timeout: float, log_level: str, credentials: Path | None, insecure: bool, **values: Any
+) -> None:
     """Attach one robot's agent (heuristic or LLM policy) to a running world."""
     from .episode import attach_agent
 
     logs.configure(log_level)
+    creds = _credentials(credentials, insecure)
     cfg = _config(**values)
     spec = cfg.robot_specs().get(robot) if cfg.llm else None
     options = cfg.policy_options(spec)
     try:
-        done = _run(lambda: attach_agent(robot, connect, run, attach_timeout, spec, cfg.base_url, cfg.client_options(spec), **options))
+        done = _run(lambda: attach_agent(
+            robot, connect, run, attach_timeout, spec, cfg.base_url, cfg.client_options(spec), security=creds, **options))  # fmt: skip
     except Exception as exc:  # typed agent errors: say what happened, exit non-zero
         raise click.ClickException(str(exc)) from None
     if done is not None:
@@ -451,6 +494,66 @@ def schema_(out: Path | None) -> None:
         return
     for path in schema_mod.write(out):
         click.echo(str(path))
+
+
+@main.group("bus")
+def bus_group() -> None:
+    """Look at a running bus: who is alive (`list`), every message on a key (`echo`)."""
+
+
+def _bus_tool(name: str, coro_fn: Callable[[], Coroutine[Any, Any, int]]) -> None:
+    """Run a bus tool: its exit code, or one clear line on stderr and exit 1 (mhrc.bustools)."""
+    from .bustools import BusToolError
+
+    try:
+        code = _run(coro_fn)
+    except BusToolError as exc:
+        click.echo(f"mhrc {name}: {exc}", err=True)
+        sys.exit(1)
+    sys.exit(code)
+
+
+CREDENTIALS_OPT = click.option(
+    "--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS",
+    help="A participant's credentials file of a secured run (e.g. runs/RUN/credentials/observer.json), with a tls/ endpoint.",
+)  # fmt: skip
+
+
+@bus_group.command("list")
+@click.option("--connect", required=True, help="Endpoint of a world or router, e.g. tcp/127.0.0.1:7447.")
+@click.option("--json", "as_json", is_flag=True, help="One JSON object: the endpoint and every run or evaluation alive.")
+@CREDENTIALS_OPT
+def bus_list(connect: str, as_json: bool, credentials: Path | None) -> None:
+    """The runs alive (from liveliness): which have a world, which robots are attached; and evaluations."""
+    from .bustools import bus_list as run_list
+
+    _bus_tool("bus list", lambda: run_list(connect, as_json=as_json, credentials=credentials, write=click.echo))
+
+
+@bus_group.command("echo")
+@click.argument("keyexpr")
+@click.option("--connect", required=True, help="Endpoint of a world or router, e.g. tcp/127.0.0.1:7447.")
+@click.option("--json", "as_json", is_flag=True, help="One JSON object per message (a trace line: t, key, kind, msg).")
+@click.option("--count", type=click.IntRange(min=1), default=None, help="Exit after N messages.")
+@click.option("--timeout", type=click.FloatRange(min=0), default=None, help="Exit after this many seconds (exit 1 if --count was not reached).")
+@CREDENTIALS_OPT
+def bus_echo(keyexpr: str, connect: str, as_json: bool, count: int | None, timeout: float | None, credentials: Path | None) -> None:
+    """Print every message on KEYEXPR (e.g. 'mhrc/**' or 'mhrc/RUN/robot/*/action/result'),
+    decoded with the protocol, one line each: time, key, kind, summary."""
+    from .bustools import bus_echo as run_echo
+
+    _bus_tool("bus echo", lambda: run_echo(connect, keyexpr, as_json=as_json, count=count, timeout=timeout, credentials=credentials, write=click.echo))
+
+
+@main.command()
+@click.option("--connect", required=True, help="Endpoint to check, e.g. tcp/127.0.0.1:7447.")
+@CREDENTIALS_OPT
+def doctor(connect: str, credentials: Path | None) -> None:
+    """Check a bus endpoint: is a zenoh router or world there, which runs are alive, which
+    protocol version each world speaks. Exit code 0 healthy, 1 not."""
+    from .bustools import doctor as run_doctor
+
+    _bus_tool("doctor", lambda: run_doctor(connect, credentials=credentials, write=click.echo))
 
 
 @main.command()

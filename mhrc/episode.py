@@ -16,16 +16,19 @@ import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator, Callable
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 from pathlib import Path
 
 import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .bus import Bus, BusError, endpoint, free_port
+from .bus import Bus, BusError, BusRefused, endpoint, free_port
 from .fidelity import AidsError, label, parse_aids
 from .keys import check_id, new_run_id
 from .protocol import EpisodeDone, ProtocolError, decode
+
+if TYPE_CHECKING:
+    from .security import Credentials
 
 log = structlog.get_logger("mhrc.episode")
 
@@ -79,6 +82,11 @@ class EpisodeConfig(BaseModel):
     step_deadline: float | None = Field(None, gt=0, description="seconds one robot's LLM step may take, retries included; None: 2 x --llm-timeout + 10")
     aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.fidelity); none: the paper's")
     history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
+    credentials: Path | None = Field(
+        None,
+        description="the run's credentials (mhrc.security): the directory of every participant's files, or one participant's "
+        "file; the bus is then TLS with a login per participant and the world's access control; None: the open tcp bus",
+    )
 
     @field_validator("aids", mode="before")
     @classmethod
@@ -134,7 +142,31 @@ class EpisodeConfig(BaseModel):
 
     @property
     def endpoint(self) -> str:
-        return endpoint(self.host, self.port)
+        return endpoint(self.host, self.port, tls=self.credentials is not None)
+
+    def credentials_file(self, user: str) -> Path:
+        """The credentials file of `user` (the world, a robot, the observer)."""
+        if self.credentials is None:
+            raise ConfigError("this episode has no credentials (the open bus)")
+        return self.credentials / f"{user}.json" if self.credentials.is_dir() else self.credentials
+
+    def participant(self, user: str) -> Credentials | None:
+        """`user`'s credentials, checked to be of this run and this user; None on the open bus."""
+        if self.credentials is None:
+            return None
+        from .security import check_for, load
+
+        creds = load(self.credentials_file(user))
+        check_for(creds, run=self.run, user=user)
+        return creds
+
+    def with_credentials(self, directory: Path | None = None) -> EpisodeConfig:
+        """A copy with fresh credentials for this run (default: next to the trace, runs/RUN/credentials)."""
+        from .security import make_run_credentials
+
+        where = directory or ((self.trace.parent if self.trace else Path("runs") / self.run) / "credentials")
+        make_run_credentials(self.run, ROBOTS, where)
+        return self.model_copy(update={"credentials": where})
 
     @property
     def robots(self) -> tuple[str, ...]:
@@ -197,7 +229,10 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, c
     recorder = None
     world: WorldService | None = None
     try:
-        bus = await (open_client(connect, 30.0) if connect else Bus.open(mode="router", listen=[cfg.endpoint]))
+        security = cfg.participant("world")
+        bus = await (
+            open_client(connect, 30.0, security=security) if connect else Bus.open(mode="router", listen=[cfg.endpoint], security=security)
+        )
         if cfg.trace is not None:
             recorder = Recorder(bus, cfg.run, cfg.trace).start()
         if observe is not None:
@@ -225,13 +260,20 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, c
         await asyncio.to_thread(sim.close)
 
 
-async def open_client(connect: str, timeout: float) -> Bus:
-    """A client session to `connect`, retrying while the world is still starting up."""
+async def open_client(connect: str, timeout: float, *, security: Credentials | None = None) -> Bus:
+    """A client session to `connect` (logged in with `security`), retrying while the world is
+    still starting up; a world that refuses the session (BusRefused) is not retried."""
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout
+    refused_at = None
     while True:
         try:
-            return await Bus.open(mode="client", connect=[connect])
+            return await Bus.open(mode="client", connect=[connect], security=security)
+        except BusRefused as exc:
+            refused_at = loop.time() if refused_at is None else refused_at
+            if exc.final or loop.time() - refused_at > 3.0 or loop.time() >= deadline:
+                raise
+            await asyncio.sleep(0.2)
         except BusError:
             if loop.time() >= deadline:
                 raise
@@ -247,6 +289,7 @@ async def run_agent(
     base_url: str | None = None,
     client_options: dict[str, Any] | None = None,
     attach_timeout: float = 30.0,
+    security: Credentials | None = None,
     **policy_options: Any,
 ) -> EpisodeDone | None:
     """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
@@ -255,6 +298,10 @@ async def run_agent(
     from mhrc.agents.agent import RobotAgent
     from mhrc.agents.heuristic import heuristic_policy
 
+    if security is not None:
+        from .security import check_for
+
+        check_for(security, run=run, user=robot)
     async with contextlib.AsyncExitStack() as stack:
         if llm is None:
             policy = heuristic_policy(robot)
@@ -271,7 +318,7 @@ async def run_agent(
                 client = make_client(llm, base_url=base_url, **(client_options or {}))
                 stack.push_async_callback(client.aclose)
                 policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
-        bus = await open_client(connect, attach_timeout)
+        bus = await open_client(connect, attach_timeout, security=security)
         try:
             agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
             return await agent.run()
@@ -325,9 +372,13 @@ async def attach_agent(
     llm: str | None = None,
     base_url: str | None = None,
     client_options: dict[str, Any] | None = None,
+    security: Credentials | None = None,
     **policy_options: Any,
 ) -> EpisodeDone | None:
-    """`mhrc agent`: find the run if not given, then play `robot` (heuristic policy, or `llm`)."""
+    """`mhrc agent`: find the run if not given (the credentials' run, or the only world alive),
+    then play `robot` (heuristic policy, or `llm`)."""
+    if run is None and security is not None:
+        run = security.run
     if run is None:
         bus = await open_client(connect, attach_timeout)
         try:
@@ -335,8 +386,9 @@ async def attach_agent(
         finally:
             await bus.close()
     return await run_agent(
-        robot, run, connect, llm=llm, base_url=base_url, client_options=client_options, attach_timeout=attach_timeout, **policy_options
-    )
+        robot, run, connect, llm=llm, base_url=base_url, client_options=client_options, attach_timeout=attach_timeout, security=security,
+        **policy_options,
+    )  # fmt: skip
 
 
 async def up_in_process(
@@ -358,7 +410,7 @@ async def _run_in_process(
         asyncio.create_task(
             run_agent(
                 r, cfg.run, connect or cfg.endpoint, llm=specs[r], base_url=cfg.base_url, client_options=cfg.client_options(own[r]),
-                **cfg.policy_options(own[r]),
+                security=cfg.participant(r), **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",
         )
@@ -428,12 +480,16 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         cmd += ["--tick-delay", str(cfg.tick_delay)]
     if cfg.time_scale:
         cmd += ["--time-scale", str(cfg.time_scale)]
+    if cfg.credentials is not None:
+        cmd += ["--credentials", str(cfg.credentials_file("world"))]
     return cmd
 
 
 def agent_command(robot: str, cfg: EpisodeConfig, spec: str | None = None) -> list[str]:
     """`mhrc agent` for `robot`, driven by `spec` (its model, already resolved: no gguf) or the heuristic policy."""
     cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
+    if cfg.credentials is not None:
+        cmd += ["--credentials", str(cfg.credentials_file(robot))]
     if spec is not None:
         cmd += ["--llm", spec, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
         cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
@@ -477,7 +533,7 @@ async def _run_processes(
         world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=_child_stdout())
         procs.append(world)
         await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)
-        bus = await Bus.open(mode="client", connect=[cfg.endpoint])
+        bus = await open_client(cfg.endpoint, 10.0, security=cfg.participant("observer"))
         done_fut: asyncio.Future[EpisodeDone] = asyncio.get_running_loop().create_future()
         from .keys import Keys
 

@@ -7,7 +7,7 @@ import zlib
 from pathlib import Path
 
 import numpy as np
-import pybullet as p
+from mhrc.quiet import pybullet as p  # no C banner on stdout
 
 from .sim import Sim
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import pybullet as p
+from mhrc.quiet import pybullet as p  # no C banner on stdout
 import pybullet_data
 
 from . import assets

@@ -109,6 +109,7 @@ class WorldService:
         self.started = False
         self.done: EpisodeDone | None = None
         self.attached: dict[str, str] = {}  # robot -> agent id
+        self._sessions: dict[str, str] = {}  # robot -> the attaching session's secret (its attach query's `session` parameter)
         self._inbox: dict[str, list[RobotMessage]] = {r: [] for r in sim.robots}
         self._tally = _Tally()
         self._bound = sim.lower_bound()
@@ -343,10 +344,19 @@ class WorldService:
         if self.done is not None:
             return AttachReply(robot=robot, accepted=False, reason=EPISODE_OVER)
         holder = self.attached.get(robot)
+        session = params.get("session", "")
         if holder is not None and holder != req.agent_id:
             self._log.warning("duplicate attach rejected", robot=robot, agent=req.agent_id)
             return AttachReply(robot=robot, accepted=False, reason=f"robot {robot} is already attached to another agent ({holder})")
+        if holder is not None and self._sessions.get(robot, "") != session:
+            # the live agent's id, from another session: a copy, never a second driver of one robot
+            self._log.warning("duplicate attach with a live agent's id rejected", robot=robot, agent=req.agent_id)
+            return AttachReply(
+                robot=robot, accepted=False,
+                reason=f"robot {robot} is already attached to a live agent with id {holder} in another session",
+            )  # fmt: skip
         self.attached[robot] = req.agent_id
+        self._sessions[robot] = session
         obs = None
         wait_turn = self.scheduler.on_attach(robot)
         tick = self.scheduler.tick_of(robot)

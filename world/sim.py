@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pybullet as p
+from mhrc.quiet import pybullet as p  # no C banner on stdout
 import structlog
 
 from mhrc.fidelity import parse_aids

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import pybullet as p
+from mhrc.quiet import pybullet as p  # no C banner on stdout
 
 from mhrc.protocol import Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
 

@@ -27,7 +27,7 @@ from typing import Any
 import imageio.v2 as iio2
 import imageio.v3 as iio3
 import numpy as np
-import pybullet as p
+from mhrc.quiet import pybullet as p  # no C banner on stdout
 import structlog
 from PIL import Image, ImageDraw, ImageFont
 from pydantic import ValidationError

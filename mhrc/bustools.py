@@ -1,0 +1,492 @@
+"""Bus tools: `mhrc bus list`, `mhrc bus echo` and `mhrc doctor`.
+
+Each opens one short-lived Zenoh client session to the endpoint it is given (multicast
+scouting off, that endpoint only) and closes it in `finally`. Before Zenoh is asked at all, a
+TCP endpoint is probed with a plain connect, so "nothing listens there" and "something listens
+but it is not zenoh" are told apart in one clear line each (`BusToolError`), never a traceback.
+
+- presence comes from liveliness tokens (DESIGN.md, "The bus"): `mhrc/<run>/alive/world`,
+  `mhrc/<run>/alive/robot/<rid>` and an evaluation's `mhrc/<eval>/alive/coordinator` and
+  `.../alive/worker/<wid>`;
+- every message `echo` shows is decoded with `mhrc.protocol` by its `kind`; a payload that is
+  not JSON or not a valid message is shown as such;
+- the protocol version a world speaks is the `v` field of its `world/state` answer (every
+  message carries one).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import socket
+import time
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import zenoh
+from pydantic import BaseModel
+
+from .bus import Bus, Sample, make_config
+from .keys import ROOT, Keys
+from .protocol import (
+    PROTOCOL_VERSION,
+    SUPPORTED_VERSIONS,
+    ActionAck,
+    ActionRequest,
+    ActionResult,
+    AttachReply,
+    AttachRequest,
+    EpisodeDone,
+    EpisodeStarted,
+    Message,
+    ProtocolError,
+    RobotAttached,
+    RobotDetached,
+    RobotMessage,
+    Snapshot,
+    Thought,
+    TickClosed,
+    Turn,
+    WorldState,
+    decode,
+)
+
+OPEN_TIMEOUT_MS = 2000  # a zenoh handshake over loopback takes milliseconds; a silent non-zenoh listener would hold 10 s
+PROBE_TIMEOUT = 2.0  # s for the plain TCP connect
+STATE_TIMEOUT = 3.0  # s for a world's state answer
+SUMMARY_CHARS = 240
+
+Write = Callable[[str], None]
+
+
+class BusToolError(RuntimeError):
+    """The endpoint cannot be used; the message is one line that says why."""
+
+
+# --------------------------------------------------------------------------- connecting
+
+
+def split_endpoint(ep: str) -> tuple[str, str, int | None]:
+    """(protocol, host, port) of a Zenoh endpoint such as `tcp/127.0.0.1:7447`; a bare
+    `HOST:PORT` means tcp. Port None where the endpoint has none we can read."""
+    proto, sep, rest = ep.partition("/")
+    if not sep:
+        proto, rest = "tcp", ep
+    rest = rest.split("#", 1)[0].split("?", 1)[0]
+    host, colon, port = rest.rpartition(":")
+    if not colon or not port.isdigit():
+        return proto, rest, None
+    return proto, host.strip("[]"), int(port)
+
+
+def normalize_endpoint(ep: str) -> str:
+    """`HOST:PORT` -> `tcp/HOST:PORT`; anything with a protocol stays as it is."""
+    if "/" in ep:
+        return ep
+    proto, host, port = split_endpoint(ep)
+    if port is None:
+        raise BusToolError(f"{ep}: not an endpoint; expected e.g. tcp/127.0.0.1:7447")
+    return f"{proto}/{host}:{port}"
+
+
+def probe_tcp(host: str, port: int, timeout: float = PROBE_TIMEOUT) -> str | None:
+    """None if something accepts TCP connections on host:port, else why not (one phrase)."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except socket.gaierror as exc:
+        return f"cannot resolve host {host!r} ({exc.strerror})"
+    reason = "no address to connect to"
+    for family, kind, proto, _, addr in infos:
+        with socket.socket(family, kind, proto) as s:
+            s.settimeout(timeout)
+            try:
+                s.connect(addr)
+                return None
+            except ConnectionRefusedError:
+                reason = "nothing listens there (connection refused)"
+            except TimeoutError:
+                reason = f"no answer to a TCP connect within {timeout:.0f} s (host down or port filtered)"
+            except OSError as exc:
+                reason = f"cannot connect: {exc.strerror or exc}"
+    return reason
+
+
+@dataclass
+class Connection:
+    """An open tool session: the Bus, plus the Zenoh session's view of whom it reached."""
+
+    endpoint: str
+    bus: Bus
+    session: zenoh.Session
+    run: str | None = None  # the run of the credentials the session logged in with
+
+    @property
+    def token_patterns(self) -> list[str]:
+        """Where to look for liveliness tokens: everything, and for a secured run's login the
+        keys its access control lets it query (a query of `mhrc/**` would be denied there)."""
+        if self.run is None:
+            return [f"{ROOT}/**"]
+        return [f"{ROOT}/**", f"{ROOT}/{self.run}/alive/**", f"{ROOT}/*/alive/world"]
+
+    def remote(self) -> str:
+        """`zenoh router <zid>` / `zenoh peer <zid>`: what answered at the endpoint."""
+        try:
+            routers = [str(z) for z in self.session.info.routers_zid()]
+            peers = [str(z) for z in self.session.info.peers_zid()]
+        except Exception:  # informational only
+            return "zenoh"
+        if routers:
+            return "zenoh router " + ", ".join(routers)
+        if peers:
+            return "zenoh peer " + ", ".join(peers)
+        return "zenoh"
+
+
+async def open_connection(ep: str, *, credentials: Path | None = None, open_timeout_ms: int = OPEN_TIMEOUT_MS) -> Connection:
+    """A client session to `ep` (with `credentials`, a participant's file of a secured run:
+    TLS and its login; mhrc.security), or BusToolError saying clearly why there is none."""
+    ep = normalize_endpoint(ep)
+    proto, host, port = split_endpoint(ep)
+    security = None
+    if credentials is not None:
+        from .security import SecurityError, load
+
+        try:
+            security = load(credentials)
+        except SecurityError as exc:
+            raise BusToolError(f"--credentials: {exc}") from None
+    if proto in ("tcp", "tls") and port is not None:
+        reason = await asyncio.to_thread(probe_tcp, host, port)
+        if reason is not None:
+            raise BusToolError(f"{ep}: {reason}")
+    conf = make_config(mode="client", connect=[ep], security=security)
+    conf.insert_json5("transport/unicast/open_timeout", str(open_timeout_ms))
+    try:
+        session = await asyncio.to_thread(zenoh.open, conf)
+    except zenoh.ZError as exc:
+        if proto == "tcp" and security is None:
+            raise BusToolError(
+                f"{ep}: something accepts TCP connections there, but no zenoh handshake within {open_timeout_ms / 1000:.0f} s: "
+                f"it is not zenoh (or a secured world: connect to tls/{host}:{port} with --credentials)"
+            ) from None
+        if proto in ("tcp", "tls"):
+            from .security import diagnose
+
+            raise BusToolError(f"{ep}: {await asyncio.to_thread(diagnose, ep, security)}") from None
+        raise BusToolError(f"{ep}: no zenoh session could be opened: {str(exc).split(' at ')[0]}") from None
+    return Connection(ep, Bus(session, asyncio.get_running_loop()), session, security.run if security is not None else None)
+
+
+@contextlib.asynccontextmanager
+async def connected(ep: str, credentials: Path | None = None) -> AsyncIterator[Connection]:
+    conn = await open_connection(ep, credentials=credentials)
+    try:
+        yield conn
+    finally:
+        await conn.bus.close()
+
+
+# --------------------------------------------------------------------------- presence
+
+
+@dataclass
+class Group:
+    """The participants alive under one `mhrc/<id>/`: a run (world, robots) or an evaluation."""
+
+    id: str
+    world: bool = False
+    robots: list[str] = field(default_factory=list)
+    coordinator: bool = False
+    workers: list[str] = field(default_factory=list)
+    other: list[str] = field(default_factory=list)
+
+    @property
+    def is_eval(self) -> bool:
+        return self.coordinator or bool(self.workers)
+
+    def to_json(self) -> dict[str, Any]:
+        if self.is_eval and not (self.world or self.robots):
+            out: dict[str, Any] = {"eval": self.id, "coordinator": self.coordinator, "workers": self.workers}
+        else:
+            out = {"run": self.id, "world": self.world, "robots": self.robots}
+        if self.other:
+            out["other"] = self.other
+        return out
+
+    def describe(self) -> str:
+        if self.is_eval and not (self.world or self.robots):
+            text = f"eval {self.id}: coordinator {'alive' if self.coordinator else 'gone'}; "
+            text += f"workers: {', '.join(self.workers)}" if self.workers else "no workers"
+        else:
+            text = f"run {self.id}: {'world alive' if self.world else 'no world'}; "
+            text += f"robots attached: {', '.join(self.robots)}" if self.robots else "no robots attached"
+        if self.other:
+            text += f"; other tokens: {', '.join(self.other)}"
+        return text
+
+
+def group_tokens(keys: list[str]) -> list[Group]:
+    """Liveliness keys -> one Group per run or evaluation id, sorted."""
+    groups: dict[str, Group] = {}
+    for key in sorted(set(keys)):
+        parts = key.split("/")
+        if len(parts) < 4 or parts[0] != ROOT or parts[2] != "alive":
+            groups.setdefault("", Group("")).other.append(key)
+            continue
+        g = groups.setdefault(parts[1], Group(parts[1]))
+        role = parts[3:]
+        if role == ["world"]:
+            g.world = True
+        elif len(role) == 2 and role[0] == "robot":
+            g.robots.append(role[1])
+        elif role == ["coordinator"]:
+            g.coordinator = True
+        elif len(role) == 2 and role[0] == "worker":
+            g.workers.append(role[1])
+        else:
+            g.other.append("/".join(role))
+    return [groups[k] for k in sorted(groups)]
+
+
+async def alive_tokens(bus: Bus, patterns: list[str] | None = None, *, settle: float = 1.5) -> list[str]:
+    """Every liveliness token under `mhrc/` (or `patterns`); asks again for up to `settle`
+    seconds while the answer is empty (a freshly connected session may not see them at once)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + settle
+    while True:
+        keys = sorted({k for pattern in patterns or [f"{ROOT}/**"] for k in await bus.alive(pattern, timeout=1.0)})
+        if keys or loop.time() >= deadline:
+            return keys
+        await asyncio.sleep(0.25)
+
+
+async def bus_list(ep: str, *, as_json: bool = False, credentials: Path | None = None, write: Write = print) -> int:
+    """`mhrc bus list`: the runs and evaluations alive at `ep`, from liveliness. Exit code 0."""
+    async with connected(ep, credentials) as conn:
+        groups = group_tokens(await alive_tokens(conn.bus, conn.token_patterns))
+    if as_json:
+        write(json.dumps({"endpoint": conn.endpoint, "groups": [g.to_json() for g in groups]}))
+        return 0
+    if not groups:
+        write(f"{conn.endpoint}: no mhrc participants alive")
+    for g in groups:
+        write(g.describe())
+    return 0
+
+
+# --------------------------------------------------------------------------- echo
+
+
+def _message_models() -> dict[str, type[Message]]:
+    """kind -> model, for every protocol message that has a `kind` (new ones included)."""
+    models: dict[str, type[Message]] = {}
+    todo: list[type[Message]] = [Message]
+    while todo:
+        cls = todo.pop()
+        todo.extend(cls.__subclasses__())
+        kind = cls.model_fields.get("kind")
+        if kind is not None and isinstance(kind.default, str):
+            models.setdefault(kind.default, cls)
+    return models
+
+
+MODELS = _message_models()
+
+
+def _clip(text: str, n: int = SUMMARY_CHARS) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
+def summarize(msg: BaseModel) -> str:
+    """One line about a protocol message: who, what, how it went."""
+    if isinstance(msg, ActionRequest):
+        return f"{msg.robot} {msg.action.call()} tick {msg.tick} goal {msg.goal_id}"
+    if isinstance(msg, ActionAck):
+        return f"{msg.robot} goal {msg.goal_id} " + ("accepted" if msg.accepted else f"rejected: {msg.reason}")
+    if isinstance(msg, ActionResult):
+        o = msg.outcome
+        how = "succeeded" if o.succeeded else f"failed ({o.code.value})"
+        return f"{msg.robot} {msg.action.call()} {how} tick {msg.tick}{' done' if msg.done else ''}: {o.feedback}"
+    if isinstance(msg, RobotMessage):
+        return f"{msg.sender} -> {msg.to} tick {msg.tick}: {msg.content}"
+    if isinstance(msg, Thought):
+        what = msg.action or (f"parse error: {msg.parse_error}" if msg.parse_error else "no action")
+        tokens = f", {msg.prompt_tokens}+{msg.completion_tokens} tokens" if msg.prompt_tokens or msg.completion_tokens else ""
+        return f"{msg.robot} tick {msg.tick} ({msg.policy}{tokens}): {what}"
+    if isinstance(msg, EpisodeStarted):
+        return (
+            f"{msg.run}: {msg.task} in {msg.scene}, seed {msg.seed}, {msg.n_objects} objects, robots {', '.join(msg.robots)}, "
+            f"{msg.scheduler}, horizon {msg.horizon}, fidelity {msg.fidelity}"
+        )
+    if isinstance(msg, TickClosed):
+        acts = ", ".join(f"{r} {a}{'' if msg.outcomes.get(r, True) else ' (failed)'}" for r, a in msg.actions.items())
+        return f"tick {msg.tick}: {acts}; placed {msg.placed}/{msg.total}"
+    if isinstance(msg, RobotAttached):
+        return f"{msg.robot} attached (agent {msg.agent_id}) at tick {msg.tick}"
+    if isinstance(msg, RobotDetached):
+        return f"{msg.robot} detached at tick {msg.tick}: {msg.reason}"
+    if isinstance(msg, EpisodeDone):
+        m = msg.metrics
+        return f"{msg.run} ended ({msg.reason}): success={m.success} placed {m.placed}/{m.total} TS {m.temporal_steps} AS {m.action_steps}"
+    if isinstance(msg, Snapshot):
+        return f"tick {msg.tick}: {len(msg.robots)} robots, {len(msg.objects)} objects, goals {', '.join(msg.goals) or 'none'}"
+    if isinstance(msg, WorldState):
+        return (
+            f"{msg.run}: {msg.task} in {msg.scene}, tick {msg.tick}/{msg.horizon}, placed {msg.placed}/{msg.total}, "
+            f"attached {', '.join(msg.attached) or 'none'}"
+        )
+    if isinstance(msg, AttachRequest):
+        return f"{msg.robot} (agent {msg.agent_id})"
+    if isinstance(msg, AttachReply):
+        return f"{msg.robot} " + ("accepted" if msg.accepted else f"refused: {msg.reason}") + f" at tick {msg.tick}"
+    if isinstance(msg, Turn):
+        return f"{msg.robot} tick {msg.tick}"
+    return _clip(msg.model_dump_json())
+
+
+@dataclass(frozen=True)
+class Decoded:
+    """One sample as echo shows it."""
+
+    kind: str  # the message kind, or `delete`, `not-json`, `json`, `invalid:<kind>`
+    summary: str
+    msg: Any  # the payload's JSON (or {"raw": text}); None for a delete
+    error: str | None = None
+
+
+def describe_sample(sample: Sample) -> Decoded:
+    """Decode one sample with the protocol; never raises."""
+    if not sample.is_put:
+        return Decoded("delete", "", None)
+    try:
+        msg: Any = json.loads(sample.payload)
+    except (ValueError, UnicodeDecodeError):
+        text = sample.payload.decode("utf-8", "replace")
+        return Decoded("not-json", f"undecodable payload ({len(sample.payload)} bytes): {_clip(repr(sample.payload), 120)}", {"raw": text}, "not JSON")
+    kind = msg.get("kind") if isinstance(msg, dict) else None
+    model = MODELS.get(kind) if isinstance(kind, str) else None
+    if model is None:
+        what = f"unknown kind {kind!r}" if kind is not None else "JSON without a protocol kind"
+        return Decoded("json", f"{what}: {_clip(json.dumps(msg), 160)}", msg)
+    try:
+        return Decoded(str(kind), _clip(summarize(decode(sample.payload, model))), msg)
+    except ProtocolError as exc:
+        return Decoded(f"invalid:{kind}", f"not a valid {kind} (protocol v{PROTOCOL_VERSION}): {_clip(str(exc), 160)}", msg, str(exc))
+    except Exception as exc:  # a summary that tripped on an odd but valid message: still one line
+        return Decoded(str(kind), _clip(f"{type(exc).__name__}: {exc}"), msg)
+
+
+def _clock(t: float) -> str:
+    return time.strftime("%H:%M:%S", time.localtime(t)) + f".{int((t % 1) * 1000):03d}"
+
+
+async def bus_echo(
+    ep: str,
+    keyexpr: str,
+    *,
+    as_json: bool = False,
+    count: int | None = None,
+    timeout: float | None = None,
+    credentials: Path | None = None,
+    write: Write = print,
+) -> int:
+    """`mhrc bus echo`: print every message on `keyexpr` (one line each) until `count` messages
+    or `timeout` seconds. Exit code 0, or 1 when the timeout came before `count` messages."""
+    try:
+        zenoh.KeyExpr(keyexpr)
+    except zenoh.ZError as exc:
+        raise BusToolError(f"{keyexpr!r} is not a key expression: {str(exc).split(' at ')[0]}") from None
+    queue: asyncio.Queue[tuple[float, Sample]] = asyncio.Queue()
+    async with connected(ep, credentials) as conn:
+        conn.bus.subscribe(keyexpr, lambda s: queue.put_nowait((time.time(), s)))
+        loop = asyncio.get_running_loop()
+        deadline = None if timeout is None else loop.time() + timeout
+        t0 = time.time()
+        seen = 0
+        while count is None or seen < count:
+            wait = None if deadline is None else deadline - loop.time()
+            if wait is not None and wait <= 0:
+                break
+            try:
+                t, sample = await asyncio.wait_for(queue.get(), wait)
+            except asyncio.TimeoutError:
+                break
+            seen += 1
+            d = describe_sample(sample)
+            if as_json:
+                line: dict[str, Any] = {"t": round(t - t0, 6), "key": sample.key, "kind": "put" if sample.is_put else "delete", "msg": d.msg}
+                if d.error is not None:
+                    line["error"] = d.error
+                write(json.dumps(line, separators=(",", ":")))
+            else:
+                write(f"{_clock(t)} {sample.key} {d.kind} {d.summary}".rstrip())
+    return 0 if count is None or seen >= count else 1
+
+
+# --------------------------------------------------------------------------- doctor
+
+
+async def world_version(bus: Bus, run: str, timeout: float = STATE_TIMEOUT) -> tuple[bool, str]:
+    """(healthy, description) of the world of `run`, from its state answer's `v`."""
+    replies = await bus.get(Keys(run).world_state, timeout=timeout)
+    if not replies:
+        return False, f"world alive, but its state query got no answer within {timeout:.0f} s"
+    raw = replies[0]
+    try:
+        data = json.loads(raw)
+    except (ValueError, UnicodeDecodeError):
+        return False, "world alive, but its state answer is not JSON"
+    v = data.get("v") if isinstance(data, dict) else None
+    ours = f"this mhrc speaks v{PROTOCOL_VERSION}, reads {', '.join(f'v{x}' for x in SUPPORTED_VERSIONS)}"
+    if v is None:
+        return False, f"world alive, but its state answer carries no protocol version ({ours})"
+    if v not in SUPPORTED_VERSIONS:
+        return False, f"world speaks protocol v{v}, which this mhrc cannot read ({ours}): use the same mhrc version on both sides"
+    try:
+        state = decode(raw, WorldState)
+    except ProtocolError as exc:
+        return False, f"world speaks protocol v{v}, but its state answer is not valid here: {_clip(str(exc), 160)}"
+    phase = "done" if state.done else "running" if state.started else "waiting for robots"
+    attached = ", ".join(state.attached) or "none"
+    return True, (
+        f"world speaks protocol v{v} ({ours}); {state.task} in {state.scene}, seed {state.seed}, {phase}, "
+        f"tick {state.tick}/{state.horizon}, placed {state.placed}/{state.total}; robots attached: {attached}"
+    )
+
+
+async def doctor(ep: str, *, credentials: Path | None = None, write: Write = print) -> int:
+    """`mhrc doctor`: is zenoh reachable at `ep`, which runs are alive, which protocol version
+    each world speaks. Exit code 0 healthy, 1 not."""
+    try:
+        conn = await open_connection(ep, credentials=credentials)
+    except BusToolError as exc:
+        write(f"FAIL {exc}")
+        return 1
+    healthy = True
+    try:
+        write(f"ok   {conn.endpoint}: {conn.remote()} answers")
+        groups = group_tokens(await alive_tokens(conn.bus, conn.token_patterns))
+        if not groups:
+            write("ok   no runs alive (nothing has declared an mhrc liveliness token)")
+        for g in groups:
+            if g.world:
+                ok, text = await world_version(conn.bus, g.id)
+                if not ok and conn.run is not None and "no answer" in text:
+                    text += " (a secured run: its access control may not let this login query world/state)"
+                healthy &= ok
+                write(f"{'ok  ' if ok else 'FAIL'} run {g.id}: {text}")
+            elif g.robots:
+                write(f"warn run {g.id}: robots {', '.join(g.robots)} alive, but no world")
+            if g.is_eval:
+                workers = f"{len(g.workers)} worker(s)" if g.workers else "no workers"
+                write(f"ok   eval {g.id}: coordinator {'alive' if g.coordinator else 'gone'}, {workers}")
+            if g.other:
+                write(f"warn {g.id or 'bus'}: tokens mhrc does not know: {', '.join(g.other)}")
+    finally:
+        await conn.bus.close()
+    write("healthy" if healthy else "not healthy")
+    return 0 if healthy else 1
