@@ -6,7 +6,6 @@ object, a request while the robot's previous action still runs, and a clock agai
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -17,13 +16,13 @@ from test_llm import FakeServer, ok
 
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.parse import parse_command
-from mhrc.agents.policy import Decision
 from mhrc.bus import Bus
 from mhrc.cli import main
-from mhrc.episode import ConfigError, EpisodeConfig, open_client, serve_world, up_in_process
+from mhrc.episode import ConfigError, EpisodeConfig, up_in_process
 from mhrc.keys import Keys
 from mhrc.metrics import from_trace
-from mhrc.protocol import ActionAck, ActionRequest, ActionResult, EpisodeDone, Observation, Wait, decode
+from mhrc.protocol import ActionAck, ActionRequest, ActionResult, Wait, decode
+from mhrc.testing import ScriptedPolicy, run_episode, world_on_loopback
 from mhrc.trace import read_trace
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.schedulers import SCHEDULERS, STEP_SECONDS, AsyncScheduler, SchedulerOptionError
@@ -132,55 +131,15 @@ async def test_a_slow_robot_does_not_hold_back_the_fast_ones(schedule: str, tmp_
 # --------------------------------------------------------------------------- two robots, one object
 
 
-class _Script:
-    """A fixed list of actions (a stand-in for a model's judgement, as scripted replies are);
-    `until` holds the next action back, answering wait(), while it is false of the observation."""
-
-    def __init__(self, robot: str, actions: list[str], until: Any = None) -> None:
-        self.robot, self.name = robot, "script"
-        self.actions = [parse_command(f"Command: {a}") for a in actions]
-        self.until = until
-        self.results: list[ActionResult] = []
-
-    async def decide(self, obs: Observation) -> Decision:
-        if not self.actions or (self.until is not None and not self.until(obs)):
-            return Decision(action=Wait())
-        return Decision(action=self.actions.pop(0))
-
-    def record(self, result: ActionResult) -> None:
-        self.results.append(result)
-
-
-async def _play(cfg: EpisodeConfig, policies: dict[str, Any]) -> EpisodeDone:
-    """The world and one agent per policy, each on its own session, until the episode ends."""
-    world = asyncio.create_task(serve_world(cfg), name="world")
-    buses: list[Bus] = []
-    agents = []
-    try:
-        for robot, policy in policies.items():
-            buses.append(await open_client(cfg.endpoint, 30.0))
-            agents.append(asyncio.create_task(RobotAgent(buses[-1], policy, run=cfg.run, robot=robot).run()))
-        done = await asyncio.wait_for(world, WAIT)
-        await asyncio.wait_for(asyncio.gather(*agents), WAIT)
-        return done
-    finally:
-        for task in [world, *agents]:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
-        for bus in buses:
-            await bus.close()
-
-
 async def test_two_robots_go_for_the_same_object(tmp_path: Path) -> None:
     """Alice brings the soap to Bob's table and reaches for it again as Bob does: whichever
     request the world executes first gets it, the other fails with the feedback any robot would
     get; each request has exactly one result, and the soap is held by one robot."""
     trace = tmp_path / "t.jsonl"
-    cfg = EpisodeConfig.build(seed=0, horizon=12, schedule="async", start_timeout=5.0, trace=trace).resolved()  # no David
-    alice = _Script("alice", ["navigate(dishwasher, 0)", "open(dishwasher)", "pick(soap)", "navigate(table_0, 0)", "place(soap, table_0)", "pick(soap)"])  # fmt: skip
-    bob = _Script("bob", ["pick(soap)"], until=lambda obs: any(o.name == "soap" and o.on == "table_0" for o in obs.objects))
-    done = await _play(cfg, {"alice": alice, "bob": bob})
+    alice = ScriptedPolicy(["navigate(dishwasher, 0)", "open(dishwasher)", "pick(soap)", "navigate(table_0, 0)", "place(soap, table_0)", "pick(soap)"])  # fmt: skip
+    bob = ScriptedPolicy(["pick(soap)"], until=lambda obs: any(o.name == "soap" and o.on == "table_0" for o in obs.objects))
+    episode = {"seed": 0, "horizon": 12, "schedule": "async", "start_timeout": 5.0, "trace": trace}
+    done = (await run_episode({"alice": alice, "bob": bob, "david": None}, timeout=WAIT, **episode)).done  # no David
     assert done.reason == "horizon"
     picks = [r for r in _results(trace) if r["action"] == {"skill": "pick", "obj": "soap"}]
     assert [r["robot"] for r in picks[:1]] == ["alice"]  # her first pick, at the dishwasher
@@ -221,16 +180,15 @@ def _unfinished(lines: list[dict[str, Any]]) -> set[str]:
 async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_is_lost(tmp_path: Path) -> None:
     """On a clock at real time, Alice's navigation takes seconds: a second request meanwhile is
     rejected with the reason, and the first one's result still comes."""
-    cfg = EpisodeConfig.build(seed=0, horizon=5, schedule="async", time_scale=1.0, start_timeout=1.0, trace=tmp_path / "t.jsonl").resolved()
-    world = asyncio.create_task(serve_world(cfg), name="world")
-    bus = await open_client(cfg.endpoint, 30.0)
-    keys = Keys(cfg.run)
-    acks: asyncio.Queue[ActionAck] = asyncio.Queue()
-    results: asyncio.Queue[ActionResult] = asyncio.Queue()
-    try:
+    async with world_on_loopback(seed=0, horizon=5, schedule="async", time_scale=1.0, start_timeout=1.0, trace=tmp_path / "t.jsonl") as world:
+        cfg = world.config
+        bus = await world.client()
+        keys = Keys(cfg.run)
+        acks: asyncio.Queue[ActionAck] = asyncio.Queue()
+        results: asyncio.Queue[ActionResult] = asyncio.Queue()
         bus.subscribe(keys.action_ack("alice"), lambda s: acks.put_nowait(decode(s.payload, ActionAck)))
         bus.subscribe(keys.action_result("alice"), lambda s: results.put_nowait(decode(s.payload, ActionResult)))
-        agent = RobotAgent(bus, _Script("alice", []), run=cfg.run, robot="alice")
+        agent = RobotAgent(bus, ScriptedPolicy([]), run=cfg.run, robot="alice")
         obs = await asyncio.wait_for(agent._attach(), 30)  # attach (and declare liveliness) as an agent would
         assert obs is not None and obs.tick == 0
         first = ActionRequest(robot="alice", agent_id=agent.agent_id, tick=0, action=parse_command("Command: navigate(table_0, 0)"))
@@ -252,11 +210,6 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
         bus.put(keys.action_request("alice"), stale)
         ack = await asyncio.wait_for(acks.get(), 30)
         assert not ack.accepted and "is for tick 0 but alice is at tick 1" in ack.reason
-    finally:
-        world.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):
-            await world
-        await bus.close()
     started = [line["msg"] for line in read_trace(tmp_path / "t.jsonl") if line["msg"] and line["msg"].get("kind") == "episode_started"]
     assert started and started[0]["scheduler"] == "async" and started[0]["time_scale"] == 1.0 and started[0]["step_seconds"] == STEP_SECONDS
 

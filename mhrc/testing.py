@@ -1,0 +1,526 @@
+"""Test your own agent or policy the way mhrc tests its own: a public harness and a pytest plugin.
+
+Everything here runs on loopback (127.0.0.1) with Zenoh's multicast scouting off, and closes
+every session, task and server it opened, whatever happens:
+
+- `ScriptedPolicy`: a robot that plays a fixed list of commands in the paper's syntax
+  (``"navigate(table_0, 0)"``), answering ``wait()`` when the list is done or while a condition
+  on its observation is false.
+- `ScriptedModelServer`: an OpenAI-compatible chat-completions server (a real threaded HTTP
+  server) answering from a script, with per-call latency, recording every request; point an LLM
+  robot at it with ``llm="openai:test", base_url=server.url``.
+- `world_on_loopback(...)`: the world serving one episode on a free loopback port; attach
+  agents with your policies, open sessions of your own, await the end.
+- `run_episode(policies, ...)`: one whole episode, your policies for the robots you name, the
+  configured policy (heuristic, or the model ``llm`` names) for the others; returns the final
+  `EpisodeDone`, the trace and its metrics.
+
+Installed with mhrc, this module is also a pytest plugin (entry point ``mhrc`` in
+``pytest11``) providing the fixtures ``mhrc_world``, ``mhrc_model_server`` and
+``mhrc_run_episode``; async tests need pytest-asyncio (``asyncio_mode = "auto"``)::
+
+    from mhrc.testing import ScriptedPolicy
+
+    async def test_my_policy(mhrc_run_episode):
+        result = await mhrc_run_episode({"alice": MyPolicy()}, seed=0, horizon=20)
+        assert result.metrics.success
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import tempfile
+import threading
+import time
+import uuid
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from typing import Any, Literal, TypeAlias
+
+from mhrc.agents.agent import RobotAgent
+from mhrc.agents.heuristic import heuristic_policy
+from mhrc.agents.parse import parse_command
+from mhrc.agents.policy import Decision, Policy
+from mhrc.bus import Bus
+from mhrc.episode import EpisodeConfig, open_client, run_agent, serve_world
+from mhrc.metrics import EpisodeMetrics, from_trace
+from mhrc.protocol import Action, ActionResult, EpisodeDone, Observation, Wait
+from mhrc.trace import read_trace
+
+__all__ = [
+    "AgentSpec",
+    "EpisodeResult",
+    "LoopbackWorld",
+    "ModelReply",
+    "ScriptedModelServer",
+    "ScriptedPolicy",
+    "run_episode",
+    "world_on_loopback",
+]
+
+DEFAULT_TIMEOUT = 300.0  # s: a bound on a whole episode, so that a regression fails instead of hanging
+ATTACH_TIMEOUT = 30.0  # s: an agent's session and attach, while the world starts up
+
+AgentSpec: TypeAlias = "Policy | Literal['heuristic'] | None"
+"""What drives a robot: your `Policy`, ``"heuristic"`` (the built-in one), or None (in
+`LoopbackWorld.agent`: as the episode's options configure the robot, heuristic or ``llm``; in
+`run_episode`: no agent at all)."""
+
+
+# --------------------------------------------------------------------------- a scripted policy
+
+
+class ScriptedPolicy:
+    """A `Policy` playing a fixed list of commands in the paper's syntax, in order.
+
+    ``ScriptedPolicy(["navigate(table_0, 0)", "pick(apple)"])``: each command is parsed at once
+    with the LLM robots' own parser (`mhrc.agents.parse.parse_command`; a ``Command:`` label is
+    optional), so a typo fails here, not mid-episode. When the list is done the robot waits;
+    with ``until``, it also waits while ``until(observation)`` is false, and plays its next
+    command at the first observation that makes it true. Every `ActionResult` is kept in
+    `results`, every observation planned on in `observations`.
+    """
+
+    def __init__(self, commands: Iterable[str], *, until: Callable[[Observation], bool] | None = None, name: str = "script") -> None:
+        self.name = name
+        self.commands = list(commands)
+        self.actions: list[Action] = []
+        for i, command in enumerate(self.commands):
+            try:
+                self.actions.append(parse_command(f"Command: {command}"))
+            except ValueError as exc:
+                raise ValueError(f"scripted command {i} ({command!r}): {exc}") from None
+        self.until = until
+        self.results: list[ActionResult] = []
+        self.observations: list[Observation] = []
+
+    @property
+    def remaining(self) -> int:
+        """Commands not played yet."""
+        return len(self.actions)
+
+    async def decide(self, obs: Observation) -> Decision:
+        self.observations.append(obs)
+        if not self.actions or (self.until is not None and not self.until(obs)):
+            return Decision(action=Wait())
+        return Decision(action=self.actions.pop(0))
+
+    def record(self, result: ActionResult) -> None:
+        self.results.append(result)
+
+
+# --------------------------------------------------------------------------- a scripted model server
+
+
+@dataclass(frozen=True)
+class ModelReply:
+    """One scripted answer of `ScriptedModelServer`; a plain `str` in a script is ``ModelReply(text)``.
+
+    `text` becomes the assistant message (with `reasoning` as ``reasoning_content``) and
+    `finish_reason`; `body` (JSON-able or bytes) replaces the whole response body, e.g. to send
+    malformed JSON; `status` and `headers` for errors (``ModelReply(status=429, headers={"Retry-After":
+    "0"})``); `latency` (seconds) overrides the server's for this call.
+    """
+
+    text: str | None = None
+    status: int = 200
+    headers: Mapping[str, str] = field(default_factory=dict)
+    body: Any = None
+    latency: float | None = None
+    finish_reason: str = "stop"
+    reasoning: str | None = None
+
+
+Reply: TypeAlias = "str | ModelReply"
+Script: TypeAlias = "Sequence[Reply] | Mapping[str, Sequence[Reply]] | Callable[[dict[str, Any]], Reply]"
+
+WHEN_DONE = "Analysis: the script is over.\nCommand: wait()"
+
+
+class ScriptedModelServer:
+    """An OpenAI-compatible chat-completions server on 127.0.0.1 answering from a script.
+
+    `script` is a list of replies, answered in the order the requests arrive; or a mapping from
+    robot name to its own list (the robot read from the request's system prompt, "You are
+    Alice, ..."), so concurrent robots do not race for one list; or a callable on the request's
+    JSON returning the reply. A reply is a `str` (the assistant's text) or a `ModelReply`. After
+    a list runs out the server answers `when_done` (a wait command), or with `when_done=None`
+    HTTP 500. `latency` (seconds, or a callable on the request JSON) delays each answer; the
+    server is threaded, so concurrent requests are answered concurrently.
+
+    Every request is recorded: `requests` (the JSON bodies, in arrival order), `headers` (the
+    matching request headers) and `paths`. Use as a context manager, or call `close()`; the
+    endpoint to give a client is `url` (``http://127.0.0.1:PORT/v1``).
+    """
+
+    def __init__(
+        self,
+        script: Script,
+        *,
+        latency: float | Callable[[dict[str, Any]], float] = 0.0,
+        when_done: Reply | None = WHEN_DONE,
+    ) -> None:
+        self.script = script
+        self.latency = latency
+        self.when_done = when_done
+        self.requests: list[dict[str, Any]] = []
+        self.headers: list[dict[str, str]] = []
+        self.paths: list[str] = []
+        self._lock = threading.Lock()
+        self._queues: dict[str | None, list[Reply]] = {}
+        if isinstance(script, Mapping):
+            self._queues = {robot: list(replies) for robot, replies in script.items()}
+        elif not callable(script):
+            self._queues = {None: list(script)}
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_POST(self) -> None:  # noqa: N802
+                raw = self.rfile.read(int(self.headers.get("Content-Length") or 0))
+                try:
+                    body = json.loads(raw or b"{}")
+                except ValueError:
+                    self._send(400, {}, b'{"error": "the request body is not JSON"}')
+                    return
+                with server._lock:
+                    server.requests.append(body)
+                    server.headers.append(dict(self.headers))
+                    server.paths.append(self.path)
+                status, headers, payload, delay = server._answer(body)
+                if delay > 0:
+                    time.sleep(delay)
+                self._send(status, headers, payload)
+
+            def do_GET(self) -> None:  # noqa: N802
+                self._send(404, {}, b'{"error": "only POST /v1/chat/completions is served"}')
+
+            def _send(self, status: int, headers: Mapping[str, str], payload: bytes) -> None:
+                try:
+                    self.send_response(status)
+                    self.send_header("Content-Type", "application/json")
+                    for k, v in headers.items():
+                        self.send_header(k, v)
+                    self.send_header("Content-Length", str(len(payload)))
+                    self.end_headers()
+                    self.wfile.write(payload)
+                except (BrokenPipeError, ConnectionResetError):  # the client gave up (its timeout)
+                    pass
+
+            def log_message(self, *args: object) -> None:
+                pass
+
+        self._httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self._httpd.daemon_threads = True
+        self.port = int(self._httpd.server_address[1])
+        self.url = f"http://127.0.0.1:{self.port}/v1"
+        self._thread = threading.Thread(target=self._httpd.serve_forever, name="mhrc-scripted-model", daemon=True)
+        self._thread.start()
+        self._closed = False
+
+    @staticmethod
+    def robot_of(request: Mapping[str, Any]) -> str | None:
+        """The robot a request comes from, read from its system prompt ("You are Alice, ...")."""
+        messages = request.get("messages") or []
+        text = str(messages[0].get("content") or "") if messages else ""
+        if not text.startswith("You are "):
+            return None
+        return text.removeprefix("You are ").split(",")[0].split()[0].strip(".").lower() or None
+
+    def requests_of(self, robot: str) -> list[dict[str, Any]]:
+        """The recorded requests of one robot, in arrival order."""
+        with self._lock:
+            return [r for r in self.requests if self.robot_of(r) == robot]
+
+    def _next(self, body: dict[str, Any]) -> Reply | None:
+        if isinstance(self.script, Mapping):
+            key = self.robot_of(body)
+        elif callable(self.script):
+            return self.script(body)
+        else:
+            key = None
+        with self._lock:
+            queue = self._queues.get(key)
+            if queue:
+                return queue.pop(0)
+        return self.when_done
+
+    def _answer(self, body: dict[str, Any]) -> tuple[int, Mapping[str, str], bytes, float]:
+        try:
+            reply = self._next(body)
+        except Exception as exc:  # a bug in the test's script: answer it, visibly
+            return 500, {}, json.dumps({"error": f"the script raised {exc!r}"}).encode(), 0.0
+        if reply is None:
+            return 500, {}, b'{"error": "the script is exhausted"}', 0.0
+        if isinstance(reply, str):
+            reply = ModelReply(text=reply)
+        delay = reply.latency if reply.latency is not None else (self.latency(body) if callable(self.latency) else self.latency)
+        if reply.body is not None:
+            payload = reply.body if isinstance(reply.body, bytes) else json.dumps(reply.body).encode()
+            return reply.status, reply.headers, payload, delay
+        if reply.text is None:  # an error status with no content
+            return reply.status, reply.headers, json.dumps({"error": f"scripted HTTP {reply.status}"}).encode(), delay
+        message: dict[str, Any] = {"role": "assistant", "content": reply.text}
+        if reply.reasoning is not None:
+            message["reasoning_content"] = reply.reasoning
+        prompt = sum(len(str(m.get("content") or "")) for m in body.get("messages") or [])
+        completion = {
+            "id": f"chatcmpl-{uuid.uuid4().hex[:12]}",
+            "object": "chat.completion",
+            "created": int(time.time()),
+            "model": body.get("model", "scripted"),
+            "choices": [{"index": 0, "message": message, "finish_reason": reply.finish_reason}],
+            "usage": {"prompt_tokens": max(1, prompt // 4), "completion_tokens": max(1, len(reply.text) // 4)},
+        }
+        return reply.status, reply.headers, json.dumps(completion).encode(), delay
+
+    def close(self) -> None:
+        """Stop serving and free the port (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._httpd.shutdown()
+        self._httpd.server_close()
+        self._thread.join(timeout=5.0)
+
+    def __enter__(self) -> ScriptedModelServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# --------------------------------------------------------------------------- a world on loopback
+
+
+def _default_trace() -> Path:
+    return Path(tempfile.mkdtemp(prefix="mhrc-episode-")) / "trace.jsonl"
+
+
+class LoopbackWorld:
+    """The handle `world_on_loopback` yields: one episode's world, serving on 127.0.0.1."""
+
+    def __init__(self, config: EpisodeConfig, world: asyncio.Task[EpisodeDone]) -> None:
+        self.config = config
+        self.world = world
+        self.agents: dict[str, asyncio.Task[EpisodeDone | None]] = {}
+        self._buses: list[Bus] = []
+
+    @property
+    def endpoint(self) -> str:
+        """The world's Zenoh endpoint (``tcp/127.0.0.1:PORT``), for `open_client` or ``mhrc agent --connect``."""
+        return self.config.endpoint
+
+    @property
+    def run(self) -> str:
+        """The run id: every key of the episode is under ``mhrc/<run>/``."""
+        return self.config.run
+
+    @property
+    def trace(self) -> Path:
+        """The trace file the world writes (complete once `done()` returned)."""
+        assert self.config.trace is not None
+        return self.config.trace
+
+    async def client(self, timeout: float = ATTACH_TIMEOUT) -> Bus:
+        """A client session of your own on the world's bus, closed when the world's context exits."""
+        bus = await open_client(self.endpoint, timeout)
+        self._buses.append(bus)
+        return bus
+
+    async def agent(self, robot: str, policy: AgentSpec = None, *, attach_timeout: float = ATTACH_TIMEOUT) -> asyncio.Task[EpisodeDone | None]:
+        """Start an agent for `robot` on its own session, driven by `policy` (a `Policy`,
+        ``"heuristic"``, or None: as the episode's options configure the robot, heuristic or
+        the model ``llm`` names). Returns its task, which ends with the episode (its result:
+        the `EpisodeDone` the agent saw); it is cancelled, and its session closed, on exit."""
+        if robot not in self.config.robots:
+            raise ValueError(f"robot {robot!r} is not in this episode: {', '.join(self.config.robots)}")
+        if robot in self.agents:
+            raise ValueError(f"an agent for {robot} was already started")
+        cfg = self.config
+        if policy is None:
+            spec = cfg.robot_specs()[robot]
+            coro: Awaitable[EpisodeDone | None] = run_agent(
+                robot, cfg.run, cfg.endpoint, llm=spec, base_url=cfg.base_url, client_options=cfg.client_options(spec),
+                attach_timeout=attach_timeout, **cfg.policy_options(spec),
+            )  # fmt: skip
+        else:
+            chosen: Policy = heuristic_policy(robot) if policy == "heuristic" else policy  # type: ignore[assignment]
+            coro = self._drive(robot, chosen, attach_timeout)
+        task: asyncio.Task[EpisodeDone | None] = asyncio.ensure_future(coro)
+        task.set_name(f"agent-{robot}")
+        self.agents[robot] = task
+        return task
+
+    async def _drive(self, robot: str, policy: Policy, attach_timeout: float) -> EpisodeDone | None:
+        bus = await open_client(self.endpoint, attach_timeout)
+        try:
+            return await RobotAgent(bus, policy, run=self.run, robot=robot, attach_timeout=attach_timeout).run()
+        finally:
+            await bus.close()
+
+    async def done(self, timeout: float | None = DEFAULT_TIMEOUT) -> EpisodeDone:
+        """The episode's final event, once the world has ended it (its trace is then complete).
+        Raises TimeoutError after `timeout` seconds (the world keeps running)."""
+        return await asyncio.wait_for(asyncio.shield(self.world), timeout)
+
+    async def _close(self) -> None:
+        tasks = [*self.agents.values(), self.world]
+        for task in tasks:
+            if not task.done():
+                task.cancel()
+        for task in tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        for bus in self._buses:
+            with contextlib.suppress(Exception):
+                await bus.close()
+        self._buses.clear()
+
+
+@contextlib.asynccontextmanager
+async def world_on_loopback(**options: Any) -> AsyncIterator[LoopbackWorld]:
+    """Serve one episode's world on a free port of 127.0.0.1 (a Zenoh router, multicast
+    scouting off) as a task of this event loop, and yield its `LoopbackWorld`.
+
+    `options` are `EpisodeConfig`'s fields (``task``, ``scene``, ``seed``, ``n_objects``,
+    ``horizon``, ``schedule``, ``start_timeout``, ``trace``, ``llm``, ``base_url``, ...),
+    checked as ``mhrc up`` checks them (`mhrc.episode.ConfigError` names the bad one); the host
+    is always 127.0.0.1, and without ``trace`` the trace goes to a fresh temporary directory.
+    The world waits for every robot of the episode to attach (``start_timeout`` starts it with
+    whoever came). On exit the agents and the world are cancelled if still running and every
+    session opened through the handle is closed.
+    """
+    if options.get("host", "127.0.0.1") != "127.0.0.1":
+        raise ValueError("world_on_loopback serves on 127.0.0.1 only")
+    options["host"] = "127.0.0.1"
+    if options.get("trace") is None:
+        options["trace"] = _default_trace()
+    cfg = EpisodeConfig.build(**options).resolved()
+    world = LoopbackWorld(cfg, asyncio.create_task(serve_world(cfg), name=f"world-{cfg.run}"))
+    try:
+        yield world
+    finally:
+        await world._close()
+
+
+# --------------------------------------------------------------------------- one whole episode
+
+
+@dataclass
+class EpisodeResult:
+    """What `run_episode` returns: the world's final event, the trace and the metrics from it."""
+
+    done: EpisodeDone
+    trace: Path
+    rows: list[dict[str, Any]]
+    metrics: EpisodeMetrics
+    config: EpisodeConfig
+
+    def messages(self, kind: str, robot: str | None = None) -> list[dict[str, Any]]:
+        """The decoded messages of one kind in the trace (``action_result``, ``thought``,
+        ``action_request``, ``episode_started``, ...), optionally of one robot, in order."""
+        out = []
+        for row in self.rows:
+            msg = row.get("msg")
+            if row.get("kind") == "put" and isinstance(msg, dict) and msg.get("kind") == kind:
+                if robot is None or msg.get("robot") == robot:
+                    out.append(msg)
+        return out
+
+    def results(self, robot: str | None = None) -> list[dict[str, Any]]:
+        """Every action result in the trace (or one robot's), in order."""
+        return self.messages("action_result", robot)
+
+    def thoughts(self, robot: str | None = None) -> list[dict[str, Any]]:
+        """Every published thought (prompt, reply, parse error, action), or one robot's."""
+        return self.messages("thought", robot)
+
+
+async def run_episode(
+    policies: Mapping[str, AgentSpec] | None = None, *, timeout: float = DEFAULT_TIMEOUT, **options: Any
+) -> EpisodeResult:
+    """Run one episode on loopback and return its `EpisodeResult`.
+
+    `policies` maps a robot to your `Policy`, ``"heuristic"``, or None to leave it out (no
+    agent attaches: pass ``start_timeout`` so the world starts without it). Robots not named
+    play as `options` configure them: the heuristic policy, or the model ``llm`` names for them
+    (``llm="bob=openai:test", base_url=server.url``). `options` are `world_on_loopback`'s.
+    Each agent has its own Zenoh session. An agent that fails (your policy raised, the world
+    refused it, a model that cannot answer at all) fails the call at once with its error; the
+    whole episode is bounded by `timeout` seconds (TimeoutError). Everything is closed on return.
+    """
+    policies = dict(policies or {})
+    async with asyncio.timeout(timeout), world_on_loopback(**options) as world:
+        unknown = sorted(set(policies) - set(world.config.robots))
+        if unknown:
+            raise ValueError(f"no such robot in this episode: {', '.join(unknown)} (robots: {', '.join(world.config.robots)})")
+        for robot in world.config.robots:
+            if robot in policies and policies[robot] is None:
+                continue
+            await world.agent(robot, policies.get(robot))
+        pending: set[asyncio.Future[Any]] = {world.world, *world.agents.values()}
+        while world.world in pending:
+            finished, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
+            for task in finished:
+                error = None if task is world.world else task.exception()
+                if error is not None:
+                    raise error
+        done = world.world.result()
+        for task in world.agents.values():  # they end on the world's episode_done
+            await task
+        trace = world.trace
+        rows = read_trace(trace)
+        return EpisodeResult(done=done, trace=trace, rows=rows, metrics=from_trace(rows), config=world.config)
+
+
+# --------------------------------------------------------------------------- the pytest plugin
+
+try:
+    import pytest
+except ImportError:  # pragma: no cover - the harness works without pytest, the fixtures need it
+    pytest = None  # type: ignore[assignment]
+
+if pytest is not None:
+
+    @pytest.fixture
+    def mhrc_world(tmp_path: Path) -> Callable[..., contextlib.AbstractAsyncContextManager[LoopbackWorld]]:
+        """A factory of `world_on_loopback`: ``async with mhrc_world(seed=0, horizon=5) as world``;
+        each world's trace goes to the test's tmp_path unless you pass ``trace``."""
+        count = itertools.count()
+
+        def make(**options: Any) -> contextlib.AbstractAsyncContextManager[LoopbackWorld]:
+            options.setdefault("trace", tmp_path / f"mhrc-world-{next(count)}" / "trace.jsonl")
+            return world_on_loopback(**options)
+
+        return make
+
+    @pytest.fixture
+    def mhrc_model_server() -> Iterator[Callable[..., ScriptedModelServer]]:
+        """A factory of `ScriptedModelServer` (same arguments); every server it made is closed
+        at teardown."""
+        servers: list[ScriptedModelServer] = []
+
+        def make(script: Script, **kwargs: Any) -> ScriptedModelServer:
+            servers.append(ScriptedModelServer(script, **kwargs))
+            return servers[-1]
+
+        yield make
+        for server in servers:
+            server.close()
+
+    @pytest.fixture
+    def mhrc_run_episode(tmp_path: Path) -> Callable[..., Awaitable[EpisodeResult]]:
+        """`run_episode`, with each episode's trace in the test's tmp_path unless you pass ``trace``:
+        ``result = await mhrc_run_episode({"alice": MyPolicy()}, seed=0)``."""
+        count = itertools.count()
+
+        async def run(policies: Mapping[str, AgentSpec] | None = None, **options: Any) -> EpisodeResult:
+            options.setdefault("trace", tmp_path / f"mhrc-episode-{next(count)}" / "trace.jsonl")
+            return await run_episode(policies, **options)
+
+        return run
