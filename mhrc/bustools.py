@@ -451,7 +451,7 @@ async def world_version(bus: Bus, run: str, timeout: float = STATE_TIMEOUT) -> t
     except ProtocolError as exc:
         return False, f"world speaks protocol v{v}, but its state answer is not valid here: {_clip(str(exc), 160)}"
     phase = "done" if state.done else "running" if state.started else "waiting for robots"
-    attached = ", ".join(state.attached) or "none"
+    attached = ", ".join(r for r in state.robots if r in state.attached) or "none"  # in the episode's robot order
     return True, (
         f"world speaks protocol v{v} ({ours}); {state.task} in {state.scene}, seed {state.seed}, {phase}, "
         f"tick {state.tick}/{state.horizon}, placed {state.placed}/{state.total}; robots attached: {attached}"

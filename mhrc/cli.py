@@ -171,9 +171,9 @@ def main() -> None:
 @click.option("--external", multiple=True, type=click.Choice(ROBOTS),
               help="Do not start an agent for this robot: attach your own with `mhrc agent` (repeatable).")
 @click.option("--quiet", "-q", is_flag=True, help="Print only the final summary.")
-@click.option("--secure/--insecure", "secure", default=False, show_default=True,
-              help="--secure: fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, access control); "
-                   "--insecure: the open tcp bus.")
+@click.option("--secure/--insecure", "secure", default=True, show_default=True,
+              help="--secure (the default): fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, "
+                   "access control: an agent can act only as its own robot); --insecure: the open tcp bus, for loopback experiments.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -191,7 +191,7 @@ def up(
     logs.configure(log_level)
     cfg = _config(**values)
     if not secure:
-        click.echo("insecure: the open tcp bus (no TLS, no login, no access control); --secure for credentials", err=True)
+        click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
     else:
         cfg = cfg.with_credentials()
         click.echo(f"credentials in {cfg.credentials} (TLS, one login per participant, access control)", err=True)

@@ -117,6 +117,7 @@ async def test_list_and_doctor_show_the_run_and_its_robots(world_factory) -> Non
 async def test_echo_prints_an_episodes_action_results(world_factory) -> None:  # type: ignore[no-untyped-def]
     async with world_factory(run="bt-echo", n_objects=3, tick_delay=0.2) as world:
         ep = world.cfg.endpoint
+        await (await world.client()).close()  # the world listens (open_client waits for it) before the echoes connect
         key = "mhrc/bt-echo/robot/*/action/result"
         text = asyncio.create_task(amhrc("bus", "echo", key, "--connect", ep, "--count", "4", "--timeout", "60", timeout=90))
         as_json = asyncio.create_task(amhrc("bus", "echo", key, "--json", "--connect", ep, "--count", "4", "--timeout", "60", timeout=90))
