@@ -42,6 +42,36 @@ class BusRefused(BusError):
         self.final = final
 
 
+class ListenError(BusError):
+    """This process cannot listen where it was told to (port taken, no permission)."""
+
+
+def _listen_error(listen: Sequence[str], detail: str) -> BusError:
+    """Zenoh's error for a listener that could not be created, said in one sentence with what to do."""
+    where = ", ".join(listen)
+    port = where.rsplit(":", 1)[-1]
+    if "Address already in use" in detail:
+        return ListenError(f"cannot listen on {where}: port {port} is already in use (another mhrc world, or another program): "
+                           "choose another --port, or leave --port out for a free one")  # fmt: skip
+    if "Permission denied" in detail:
+        return ListenError(f"cannot listen on {where}: port {port} needs privileges this process lacks: choose a port above 1023")
+    if "Cannot assign requested address" in detail or "Can not assign" in detail:
+        return ListenError(f"cannot listen on {where}: no network interface of this host has that address: check --host")
+    return ListenError(f"cannot listen on {where}: {detail.split(' at /')[0]}")
+
+
+def check_listen(host: str, port: int) -> None:
+    """Raise ListenError if this process could not listen on host:port now (taken, no permission)."""
+    import errno
+
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind((host, port))
+        except OSError as exc:
+            detail = "Address already in use" if exc.errno == errno.EADDRINUSE else "Permission denied" if exc.errno == errno.EACCES else str(exc)
+            raise _listen_error([f"tcp/{host}:{port}"], detail) from None
+
+
 @dataclass(frozen=True)
 class Sample:
     key: str
@@ -129,6 +159,8 @@ class Bus:
                 if "refused the login" in cause:  # or a world still starting: open_client retries a little
                     raise BusRefused(f"could not open a zenoh session ({where}): {cause}", final=False) from None
                 raise BusError(f"could not open a zenoh session ({where}): {cause}") from None
+            if listen:
+                raise _listen_error(listen, str(exc)) from None
             raise BusError(f"could not open a zenoh session ({where}): {exc}") from None
         return cls(session, asyncio.get_running_loop())
 

@@ -95,11 +95,16 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | None 
             loop.add_signal_handler(signal.SIGINT, on_interrupt)
         return await coro_fn()
 
+    from .bus import BusError
+
     try:
         return asyncio.run(main())
     except (KeyboardInterrupt, asyncio.CancelledError):
         click.echo("interrupted", err=True)
         sys.exit(130)
+    except BusError as exc:  # the bus cannot start (port taken, refused): one line that says what to do
+        click.echo(f"mhrc: {exc}", err=True)
+        sys.exit(2)
 
 
 def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
@@ -236,11 +241,15 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, credentials:
     if quiet:
         _run(lambda: serve_world(cfg))
         return
-    click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
-    for r in ROBOTS:
-        click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}", err=True)
     printer = ProgressPrinter(verbose=False)
-    _run(lambda: serve_world(cfg, observe=printer.attach))
+
+    def listening(bus: Any, run: str) -> None:  # said once the world listens, not before
+        click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
+        for r in ROBOTS:
+            click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}", err=True)
+        printer.attach(bus, run)
+
+    _run(lambda: serve_world(cfg, observe=listening))
 
 
 @main.command()

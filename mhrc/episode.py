@@ -22,7 +22,7 @@ from pathlib import Path
 import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .bus import Bus, BusError, BusRefused, endpoint, free_port
+from .bus import Bus, BusError, BusRefused, check_listen, endpoint, free_port
 from .fidelity import AidsError, label, parse_aids
 from .keys import check_id, new_run_id
 from .protocol import EpisodeDone, ProtocolError, decode
@@ -404,7 +404,19 @@ async def up_in_process(
 async def _run_in_process(
     cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...], connect: str | None
 ) -> EpisodeDone:
-    world = asyncio.create_task(serve_world(cfg, observe=observe, connect=connect), name="world")
+    listening = asyncio.Event()
+
+    def on_open(bus: Bus, run: str) -> None:
+        if observe is not None:
+            observe(bus, run)
+        listening.set()
+
+    world = asyncio.create_task(serve_world(cfg, observe=on_open, connect=connect), name="world")
+    ready = asyncio.create_task(listening.wait())
+    await asyncio.wait({world, ready}, return_when=asyncio.FIRST_COMPLETED)
+    if world.done():  # the world could not start (its port is taken, ...): say so now, no agent is left connecting
+        ready.cancel()
+        return world.result()
     own = cfg.robot_specs()  # before gguf: specs became their local servers' URLs
     agents = [
         asyncio.create_task(
@@ -530,6 +542,7 @@ async def _run_processes(
     procs: list[subprocess.Popen[bytes]] = []
     bus = None
     try:
+        check_listen(cfg.host, cfg.port)  # a port taken is one line now, not a world process failing behind a client that waits
         world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=_child_stdout())
         procs.append(world)
         await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)

@@ -223,3 +223,50 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
     assert size < 1.2 * clean_size + 10_000, (size, clean_size)  # 2 MB of junk would have been copied
     assert from_trace(rows).rejected_actions == flood
     print(f"junk flood: trace {size} B against {clean_size} B without it; {len(warnings)} warning line(s)")
+
+
+# --------------------------------------------------------------------------- startup errors
+
+
+@pytest.mark.parametrize("holder", ["another program", "another mhrc world"])
+def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> None:
+    import socket
+
+    from mhrc.bus import free_port
+
+    port = free_port()
+    sock = None
+    world = None
+    try:
+        if holder == "another program":
+            sock = socket.socket()
+            sock.bind(("127.0.0.1", port))
+            sock.listen()
+        else:
+            (tmp_path / "first").mkdir()
+            world = _start(["world", "--port", str(port), "--run", "first", "--insecure", "--quiet"], tmp_path / "first")
+            from mhrc.bus import ListenError, check_listen
+
+            deadline = time.monotonic() + 60
+            while True:  # until the first world listens
+                try:
+                    check_listen("127.0.0.1", port)
+                except ListenError:
+                    break
+                assert time.monotonic() < deadline and world.poll() is None, "the first world never listened"
+                time.sleep(0.1)
+        for args in (["world", "--port", str(port), "--insecure"], ["up", "--port", str(port)], ["up", "--processes", "--port", str(port), "--insecure"]):
+            t0 = time.monotonic()
+            out = subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+            took = time.monotonic() - t0
+            lines = [line for line in out.stderr.splitlines() if line.startswith("mhrc:")]
+            assert out.returncode == 2, (args, out.returncode, out.stderr[-2000:])
+            assert len(lines) == 1 and f"port {port} is already in use" in lines[0] and "--port" in lines[0], out.stderr
+            assert "Traceback" not in out.stderr and "Unable to connect" not in out.stderr, out.stderr
+            assert took < EXIT_BOUND, took
+            print(f"{holder}: mhrc {args[0]}{' --processes' if '--processes' in args else ''} -> exit 2 in {took:.2f} s")
+    finally:
+        if sock is not None:
+            sock.close()
+        if world is not None:
+            _kill_group(world)
