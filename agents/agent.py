@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import socket
 import secrets
 import uuid
 
@@ -49,6 +50,29 @@ class WorldGone(AgentError):
     """The world's liveliness token disappeared or it never answered."""
 
 
+class _WorldLost(Exception):
+    """The world's liveliness token went away while this agent waited for `what`: the world may
+    have died, or this agent's own link was cut (frozen with SIGSTOP, a network blip)."""
+
+    def __init__(self, what: str) -> None:
+        super().__init__(what)
+        self.what = what
+
+
+def _listening(endpoint: str | None) -> bool | None:
+    """Whether something accepts TCP connections at a zenoh endpoint (tcp/ or tls/HOST:PORT); None if unknown."""
+    if not endpoint or "/" not in endpoint:
+        return None
+    host, _, port = endpoint.split("/", 1)[1].rpartition(":")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=1.0):
+            return True
+    except ValueError:
+        return None
+    except OSError:
+        return False
+
+
 class RobotAgent:
     """Drives `policy` for `robot` in run `run` until the episode ends."""
 
@@ -64,6 +88,7 @@ class RobotAgent:
         ack_timeout: float = 10.0,
         result_timeout: float | None = None,
         final_result_grace: float = 10.0,
+        endpoint: str | None = None,
     ) -> None:
         self.bus = bus
         self.policy = policy
@@ -76,6 +101,8 @@ class RobotAgent:
         self.ack_timeout = ack_timeout
         self.result_timeout = result_timeout
         self.final_result_grace = final_result_grace
+        # the world's endpoint, to tell a dead world from a cut link
+        self.endpoint = endpoint or (bus.connected_to[0] if len(getattr(bus, "connected_to", ())) == 1 else None)
         self.episode: EpisodeDone | None = None
         self.steps = 0
         self._acks: dict[str, asyncio.Future[ActionAck]] = {}
@@ -140,7 +167,11 @@ class RobotAgent:
             self._publish_thought(obs, decision)
             if self._done.is_set():  # the episode ended while this robot planned
                 break
-            result = await self._act(obs, decision)
+            try:
+                result = await self._act(obs, decision)
+            except _WorldLost as lost:
+                attached = await self._reattach(lost.what)
+                continue
             if result is None:
                 if self._done.is_set() or self._over:
                     break
@@ -158,6 +189,19 @@ class RobotAgent:
             except TimeoutError:
                 self._log.warning("no episode_done event received")
         return self.episode
+
+    async def _reattach(self, what: str) -> Observation | None:
+        """The world's token went away while this robot awaited `what`. A world that no longer
+        listens is gone: say so now. Otherwise this agent's own link was cut (it was frozen, the
+        network blinked) and the world detached it: attach again and go on."""
+        if _listening(self.endpoint) is False:
+            raise WorldGone(f"the world disappeared while {self.robot} awaited {what}: nothing listens at {self.endpoint} any more")
+        self._log.warning("lost the world's token, but the world may be there: attaching again", awaited=what)
+        self._world_gone.clear()
+        try:
+            return await self._attach()
+        except WorldGone:
+            raise WorldGone(f"the world disappeared while {self.robot} awaited {what} and did not answer an attach since") from None
 
     async def _attach(self) -> Observation | None:
         """Attach and return the first observation to plan on; None when the episode ended
@@ -195,7 +239,10 @@ class RobotAgent:
         """The world's Turn for this robot; None when the episode ended first. Waiting for a
         turn is waiting for the teammates earlier in the order to plan and act, so it is bounded
         like awaiting a result (result_timeout), not by the attach timeout."""
-        return fut.result() if await self._until_end(fut, self.result_timeout, "its turn") else None
+        try:
+            return fut.result() if await self._until_end(fut, self.result_timeout, "its turn") else None
+        except _WorldLost:
+            raise WorldGone(f"the world disappeared while {self.robot} awaited its turn") from None
 
     async def _act(self, obs: Observation, decision: Decision) -> ActionResult | None:
         """Request the action and await its result; None when the world rejected it as stale."""
@@ -249,7 +296,7 @@ class RobotAgent:
         if done_wait in finished or self._done.is_set():  # an ended episode's world may be gone too: it ended
             return False
         if gone_wait in finished:
-            raise WorldGone(f"the world disappeared while {self.robot} awaited {what}")
+            raise _WorldLost(what)
         raise WorldGone(f"no {what.removeprefix('its ')} from the world within {timeout} s")
 
     async def _await_final(self, goal_id: str, fut: asyncio.Future, what: str):  # type: ignore[no-untyped-def]

@@ -130,6 +130,7 @@ class Bus:
         self._entities: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._closed = False
+        self.connected_to: tuple[str, ...] = ()  # the endpoints a client session was opened to
 
     # ------------------------------------------------------------------ lifecycle
     @classmethod
@@ -162,7 +163,9 @@ class Bus:
             if listen:
                 raise _listen_error(listen, str(exc)) from None
             raise BusError(f"could not open a zenoh session ({where}): {exc}") from None
-        return cls(session, asyncio.get_running_loop())
+        bus = cls(session, asyncio.get_running_loop())
+        bus.connected_to = tuple(connect)
+        return bus
 
     async def close(self) -> None:
         if self._closed:

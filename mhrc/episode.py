@@ -320,7 +320,7 @@ async def run_agent(
                 policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
         bus = await open_client(connect, attach_timeout, security=security)
         try:
-            agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout)  # type: ignore[arg-type]
+            agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout, endpoint=connect)  # type: ignore[arg-type]
             return await agent.run()
         finally:
             await bus.close()

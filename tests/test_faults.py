@@ -270,3 +270,60 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
             sock.close()
         if world is not None:
             _kill_group(world)
+
+
+# --------------------------------------------------------------------------- a frozen agent
+
+
+async def test_an_agent_frozen_and_resumed_attaches_again(tmp_path: Path) -> None:
+    """David's agent (its own process) is frozen with SIGSTOP until the world has detached him
+    (his lease expired), then resumed: he attaches again and plays on, instead of exiting with
+    "the world disappeared" while the world was fine."""
+    from mhrc.episode import EpisodeConfig
+    from mhrc.protocol import RobotAttached, RobotDetached
+    from mhrc.testing import world_on_loopback
+
+    async with world_on_loopback(seed=0, n_objects=4, tick_delay=0.4, trace=tmp_path / "t.jsonl") as world:
+        events: list[Any] = []
+        news = asyncio.Event()
+        client = await world.client()
+
+        def on_event(sample: Any) -> None:
+            from mhrc.protocol import decode_event
+
+            events.append(decode_event(sample.payload))
+            news.set()
+
+        from mhrc.keys import Keys
+
+        client.subscribe(Keys(world.run).world_event, on_event)
+        log = (tmp_path / "david.txt").open("w")
+        david = subprocess.Popen(
+            [sys.executable, "-m", "mhrc", "agent", "--robot", "david", "--run", world.run, "--connect", world.endpoint, "--insecure"],
+            stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+        )  # fmt: skip
+        try:
+            alice = asyncio.create_task(world.agent("alice", "heuristic"))
+            bob = asyncio.create_task(world.agent("bob", "heuristic"))
+
+            async def until(pred: Any) -> None:
+                while not pred():
+                    news.clear()
+                    await asyncio.wait_for(news.wait(), 120)
+
+            await until(lambda: sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) == 1 and any(getattr(e, "kind", "") == "tick" for e in events))
+            os.kill(david.pid, signal.SIGSTOP)
+            await until(lambda: any(isinstance(e, RobotDetached) and e.robot == "david" for e in events))  # his lease ran out
+            os.kill(david.pid, signal.SIGCONT)
+            await until(lambda: sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) >= 2)
+            done = await world.done(180)
+            code = await asyncio.to_thread(david.wait, 60)
+        finally:
+            if david.poll() is None:
+                os.killpg(david.pid, signal.SIGKILL)
+                david.wait()
+            await client.close()
+        out = (tmp_path / "david.txt").read_text()
+        assert code == 0 and "world disappeared" not in out and f"david: episode {world.run} ended" in out, out[-2000:]
+        assert done.reason == "success", done.metrics
+        await asyncio.gather(alice, bob, return_exceptions=True)
