@@ -336,11 +336,13 @@ class LoopbackWorld:
         """Start an agent for `robot` on its own session, driven by `policy` (a `Policy`,
         ``"heuristic"``, or None: as the episode's options configure the robot, heuristic or
         the model ``llm`` names). Returns its task, which ends with the episode (its result:
-        the `EpisodeDone` the agent saw); it is cancelled, and its session closed, on exit."""
+        the `EpisodeDone` the agent saw); it is cancelled, and its session closed, on exit.
+        Cancelling the task is a crash as the world sees it (its liveliness goes); a new agent
+        for the same robot may then be started, as a replacement."""
         if robot not in self.config.robots:
             raise ValueError(f"robot {robot!r} is not in this episode: {', '.join(self.config.robots)}")
-        if robot in self.agents:
-            raise ValueError(f"an agent for {robot} was already started")
+        if robot in self.agents and not self.agents[robot].done():
+            raise ValueError(f"an agent for {robot} is running; cancel its task first to replace it")
         cfg = self.config
         if policy is None:
             spec = cfg.robot_specs()[robot]

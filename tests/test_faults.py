@@ -279,7 +279,6 @@ async def test_an_agent_frozen_and_resumed_attaches_again(tmp_path: Path) -> Non
     """David's agent (its own process) is frozen with SIGSTOP until the world has detached him
     (his lease expired), then resumed: he attaches again and plays on, instead of exiting with
     "the world disappeared" while the world was fine."""
-    from mhrc.episode import EpisodeConfig
     from mhrc.protocol import RobotAttached, RobotDetached
     from mhrc.testing import world_on_loopback
 
@@ -303,8 +302,8 @@ async def test_an_agent_frozen_and_resumed_attaches_again(tmp_path: Path) -> Non
             stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
         try:
-            alice = asyncio.create_task(world.agent("alice", "heuristic"))
-            bob = asyncio.create_task(world.agent("bob", "heuristic"))
+            alice = await world.agent("alice", "heuristic")
+            bob = await world.agent("bob", "heuristic")
 
             async def until(pred: Any) -> None:
                 while not pred():
