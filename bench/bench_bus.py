@@ -25,10 +25,11 @@ from report import emit, percentile
 from mhrc.episode import EpisodeConfig, open_client, serve_world, wait_for_port, world_command
 from mhrc.keys import Keys
 from mhrc.protocol import ActionAck, ActionRequest, ActionResult, AttachReply, AttachRequest, Wait, decode
+from mhrc.security import Credentials
 
 
-async def _round_trips(endpoint: str, run: str, n: int) -> dict[str, float]:
-    bus = await open_client(endpoint, 30.0)
+async def _round_trips(endpoint: str, run: str, n: int, security: Credentials | None = None) -> dict[str, float]:
+    bus = await open_client(endpoint, 30.0, security=security)
     try:
         k = Keys(run)
         acks: asyncio.Queue[ActionAck] = asyncio.Queue()
@@ -67,11 +68,15 @@ def _stats(name: str, xs: list[float]) -> dict[str, float]:
     return {f"{name}_p50": round(statistics.median(xs), 3), f"{name}_p99": round(percentile(xs, 0.99), 3)}
 
 
-async def in_process(n: int, tmp: Path) -> dict[str, float]:
-    cfg = EpisodeConfig.build(horizon=n + 5, start_timeout=0.5, run="bench-inproc", trace=tmp / "in.jsonl").resolved()
+async def in_process(n: int, tmp: Path, *, run: str = "bench-inproc", secure: bool = False) -> dict[str, float]:
+    """The world and the agent as two sessions of this process; with `secure`, on the run's own
+    credentials (TLS, logins, the world's access control), the agent logged in as alice."""
+    cfg = EpisodeConfig.build(horizon=n + 5, start_timeout=0.5, run=run, trace=tmp / f"{run}.jsonl").resolved()
+    if secure:
+        cfg = cfg.with_credentials(tmp / f"{run}-credentials")
     world = asyncio.create_task(serve_world(cfg))
     try:
-        return await _round_trips(cfg.endpoint, cfg.run, n)
+        return await _round_trips(cfg.endpoint, cfg.run, n, security=cfg.participant("alice"))
     finally:
         world.cancel()
         with contextlib.suppress(asyncio.CancelledError):
