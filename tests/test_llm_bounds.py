@@ -51,6 +51,18 @@ def servers() -> Iterator[list[FakeServer]]:
         s.close()
 
 
+def per_robot(script: dict[str, list[Reply]]) -> Any:
+    """A responder that answers each robot from its own queue of replies, then `wait()`."""
+    lock = threading.Lock()
+
+    def respond(body: dict[str, Any]) -> Reply:
+        with lock:
+            queue = script.get(robot_of(body)) or []
+            return queue.pop(0) if queue else ok("Command: wait()")
+
+    return respond
+
+
 def serve(made: list[FakeServer], respond: Any) -> FakeServer:
     made.append(FakeServer(respond))
     return made[-1]
@@ -130,14 +142,7 @@ async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_pars
         "bob": [reply("Analysis: I should think about the tray and then about the", finish="length"), reply("x" * 1_000_000)],
         "alice": [reply("Command: navigate(table_1, 0)\nAnalysis: this will", finish="length")],
     }
-    lock = threading.Lock()
-
-    def respond(body: dict[str, Any]) -> Reply:
-        with lock:
-            queue = script.get(robot_of(body)) or []
-            return queue.pop(0) if queue else ok("Command: wait()")
-
-    server = serve(servers, respond)
+    server = serve(servers, per_robot(script))
     cfg = EpisodeConfig.build(
         seed=0, horizon=3, llm="openai:m", base_url=server.url, max_tokens=77, llm_seed=5, trace=tmp_path / "t.jsonl"
     ).resolved()
@@ -165,14 +170,7 @@ async def test_reasoning_never_reaches_the_parser_and_is_recorded_apart(servers,
         "bob": [reply("Command: wait()", reasoning="I could pick(phone) now.", usage={"prompt_tokens": 9, "completion_tokens": 30, "completion_tokens_details": {"reasoning_tokens": 21}})],
         "david": [reply("Command: navigate(sofa, 0)", reasoning="Command: wait() is tempting", field="reasoning")],
     }
-    lock = threading.Lock()
-
-    def respond(body: dict[str, Any]) -> Reply:
-        with lock:
-            queue = script.get(robot_of(body)) or []
-            return queue.pop(0) if queue else ok("Command: wait()")
-
-    server = serve(servers, respond)
+    server = serve(servers, per_robot(script))
     cfg = EpisodeConfig.build(seed=0, horizon=1, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
     await up_in_process(cfg)
     by = {t["robot"]: t for t in thoughts(cfg.trace)}
