@@ -7,8 +7,9 @@ every session, task and server it opened, whatever happens:
   (``"navigate(table_0, 0)"``), answering ``wait()`` when the list is done or while a condition
   on its observation is false.
 - `ScriptedModelServer`: an OpenAI-compatible chat-completions server (a real threaded HTTP
-  server) answering from a script, with per-call latency, recording every request; point an LLM
-  robot at it with ``llm="openai:test", base_url=server.url``.
+  server) answering from a script, with per-call latency, errors, reasoning fields and
+  trickling or endless bodies, recording every request (and which ones overlapped); point an
+  LLM robot at it with ``llm="openai:test", base_url=server.url``.
 - `world_on_loopback(...)`: the world serving one episode on a free loopback port; attach
   agents with your policies, open sessions of your own, await the end.
 - `run_episode(policies, ...)`: one whole episode, your policies for the robots you name, the
@@ -56,6 +57,7 @@ __all__ = [
     "AgentSpec",
     "EpisodeResult",
     "LoopbackWorld",
+    "ModelCall",
     "ModelReply",
     "ScriptedModelServer",
     "ScriptedPolicy",
@@ -121,10 +123,24 @@ class ScriptedPolicy:
 class ModelReply:
     """One scripted answer of `ScriptedModelServer`; a plain `str` in a script is ``ModelReply(text)``.
 
-    `text` becomes the assistant message (with `reasoning` as ``reasoning_content``) and
-    `finish_reason`; `body` (JSON-able or bytes) replaces the whole response body, e.g. to send
-    malformed JSON; `status` and `headers` for errors (``ModelReply(status=429, headers={"Retry-After":
-    "0"})``); `latency` (seconds) overrides the server's for this call.
+    `text` becomes the assistant message (with `reasoning` under `reasoning_field`:
+    ``"reasoning_content"`` as vLLM and llama.cpp send it, or ``"reasoning"`` as Ollama does)
+    and `finish_reason`; `usage` is the completion's ``usage`` object: True (the default)
+    estimates it from the lengths of the prompt and the text, a mapping is sent as it is (e.g.
+    with ``completion_tokens_details``), False leaves it out, as some servers do. `body`
+    (JSON-able or bytes) replaces the whole response body, e.g. to send malformed JSON; `status`
+    and `headers` for errors (``ModelReply(status=429, headers={"Retry-After": "0"})``);
+    `headers` also override the server's own ``Content-Type`` and ``Content-Length`` (a
+    ``Content-Length`` of your own may lie: the connection is closed after such a reply).
+    `latency` (seconds) overrides the server's for this call.
+
+    `stream` (an iterable of bytes, which may be endless, e.g. ``itertools.repeat(b"a")``)
+    makes the body be written chunk by chunk, flushed each time, `stream_interval` seconds apart,
+    after the status and headers (no ``Content-Length`` unless `headers` give one; the end of the
+    body is the end of the connection): a server that trickles or never stops writing. The
+    stream ends when the iterable does, the client hangs up, or the server is closed. A
+    generator is consumed by the one call it answers: return a fresh reply from a callable
+    script to stream to every call.
     """
 
     text: str | None = None
@@ -134,6 +150,32 @@ class ModelReply:
     latency: float | None = None
     finish_reason: str = "stop"
     reasoning: str | None = None
+    reasoning_field: str = "reasoning_content"
+    usage: Mapping[str, Any] | bool = True
+    stream: Iterable[bytes] | None = None
+    stream_interval: float = 0.0
+
+
+@dataclass
+class ModelCall:
+    """One request `ScriptedModelServer` received, as kept in its `calls`.
+
+    `request` (the JSON body), `headers`, `path` and `robot` (`ScriptedModelServer.robot_of`)
+    are what came in; `reply` is the `ModelReply` the script gave (None when it raised or was
+    exhausted) and `latency` the delay applied before answering. `started` and `ended` are
+    positions in one count of every call's start and end (a call ends when its latency is over
+    and its answer is about to be written; `ended` is None until then): two calls overlapped
+    in time exactly when each started before the other ended, whatever the machine's speed.
+    """
+
+    request: dict[str, Any]
+    headers: dict[str, str]
+    path: str
+    robot: str | None
+    started: int
+    ended: int | None = None
+    latency: float = 0.0
+    reply: ModelReply | None = None
 
 
 Reply: TypeAlias = "str | ModelReply"
@@ -142,20 +184,38 @@ Script: TypeAlias = "Sequence[Reply] | Mapping[str, Sequence[Reply]] | Callable[
 WHEN_DONE = "Analysis: the script is over.\nCommand: wait()"
 
 
+@dataclass
+class _Answer:
+    status: int
+    headers: Mapping[str, str]
+    payload: bytes
+    delay: float
+    reply: ModelReply | None = None
+    stream: Iterable[bytes] | None = None
+    interval: float = 0.0
+
+
 class ScriptedModelServer:
     """An OpenAI-compatible chat-completions server on 127.0.0.1 answering from a script.
 
     `script` is a list of replies, answered in the order the requests arrive; or a mapping from
     robot name to its own list (the robot read from the request's system prompt, "You are
     Alice, ..."), so concurrent robots do not race for one list; or a callable on the request's
-    JSON returning the reply. A reply is a `str` (the assistant's text) or a `ModelReply`. After
-    a list runs out the server answers `when_done` (a wait command), or with `when_done=None`
-    HTTP 500. `latency` (seconds, or a callable on the request JSON) delays each answer; the
-    server is threaded, so concurrent requests are answered concurrently.
+    JSON returning the reply (called from the server's threads, one per request: guard any
+    state it shares). A reply is a `str` (the assistant's text) or a `ModelReply`. After a list
+    runs out the server answers `when_done` (a wait command), or with `when_done=None` HTTP 500.
+    `latency` (seconds, or a callable on the request JSON) delays each answer; the server is
+    threaded, so concurrent requests are answered concurrently. `close()` cuts short the
+    latencies and streams still running. With `keep_alive` the server speaks HTTP/1.1 and keeps
+    connections open between requests, as production servers do, so that a client's
+    connection pool is exercised (the default is HTTP/1.0: one connection a request).
 
     Every request is recorded: `requests` (the JSON bodies, in arrival order), `headers` (the
-    matching request headers) and `paths`. Use as a context manager, or call `close()`; the
-    endpoint to give a client is `url` (``http://127.0.0.1:PORT/v1``).
+    matching request headers) and `paths`, and `calls` (a `ModelCall` each: the request, the
+    reply, its latency and the order of its start and end); `in_flight` counts the requests
+    being answered and `max_in_flight` the most at once, e.g. to check a client's concurrency
+    limit; `remaining()` counts the scripted replies not given yet. Use as a context manager,
+    or call `close()`; the endpoint to give a client is `url` (``http://127.0.0.1:PORT/v1``).
     """
 
     def __init__(
@@ -164,6 +224,7 @@ class ScriptedModelServer:
         *,
         latency: float | Callable[[dict[str, Any]], float] = 0.0,
         when_done: Reply | None = WHEN_DONE,
+        keep_alive: bool = False,
     ) -> None:
         self.script = script
         self.latency = latency
@@ -171,7 +232,12 @@ class ScriptedModelServer:
         self.requests: list[dict[str, Any]] = []
         self.headers: list[dict[str, str]] = []
         self.paths: list[str] = []
+        self.calls: list[ModelCall] = []
+        self.in_flight = 0
+        self.max_in_flight = 0
+        self._seq = 0
         self._lock = threading.Lock()
+        self._closing = threading.Event()
         self._queues: dict[str | None, list[Reply]] = {}
         if isinstance(script, Mapping):
             self._queues = {robot: list(replies) for robot, replies in script.items()}
@@ -180,36 +246,50 @@ class ScriptedModelServer:
         server = self
 
         class Handler(BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1" if keep_alive else "HTTP/1.0"
+
             def do_POST(self) -> None:  # noqa: N802
                 raw = self.rfile.read(int(self.headers.get("Content-Length") or 0))
                 try:
                     body = json.loads(raw or b"{}")
                 except ValueError:
-                    self._send(400, {}, b'{"error": "the request body is not JSON"}')
+                    self._send(_Answer(400, {}, b'{"error": "the request body is not JSON"}', 0.0))
                     return
-                with server._lock:
-                    server.requests.append(body)
-                    server.headers.append(dict(self.headers))
-                    server.paths.append(self.path)
-                status, headers, payload, delay = server._answer(body)
-                if delay > 0:
-                    time.sleep(delay)
-                self._send(status, headers, payload)
+                call = server._begin(body, dict(self.headers), self.path)
+                answer = server._answer(body)
+                if answer.delay > 0:
+                    server._closing.wait(answer.delay)
+                server._end(call, answer)
+                self._send(answer)
 
             def do_GET(self) -> None:  # noqa: N802
-                self._send(404, {}, b'{"error": "only POST /v1/chat/completions is served"}')
+                self._send(_Answer(404, {}, b'{"error": "only POST /v1/chat/completions is served"}', 0.0))
 
-            def _send(self, status: int, headers: Mapping[str, str], payload: bytes) -> None:
+            def _send(self, answer: _Answer) -> None:
+                names = {k.lower() for k in answer.headers}
                 try:
-                    self.send_response(status)
-                    self.send_header("Content-Type", "application/json")
-                    for k, v in headers.items():
+                    self.send_response(answer.status)
+                    if "content-type" not in names:
+                        self.send_header("Content-Type", "application/json")
+                    for k, v in answer.headers.items():
                         self.send_header(k, v)
-                    self.send_header("Content-Length", str(len(payload)))
+                    if answer.stream is not None or "content-length" in names:
+                        self.close_connection = True  # the body may not be what a length says
+                        if self.protocol_version != "HTTP/1.0":
+                            self.send_header("Connection", "close")
+                    if answer.stream is None and "content-length" not in names:
+                        self.send_header("Content-Length", str(len(answer.payload)))
                     self.end_headers()
-                    self.wfile.write(payload)
-                except (BrokenPipeError, ConnectionResetError):  # the client gave up (its timeout)
-                    pass
+                    if answer.stream is None:
+                        self.wfile.write(answer.payload)
+                        return
+                    for i, chunk in enumerate(answer.stream):
+                        if server._closing.is_set() or (i and answer.interval > 0 and server._closing.wait(answer.interval)):
+                            break
+                        self.wfile.write(chunk)
+                        self.wfile.flush()
+                except OSError:  # the client gave up (its timeout): what a timeout should do
+                    self.close_connection = True
 
             def log_message(self, *args: object) -> None:
                 pass
@@ -218,7 +298,9 @@ class ScriptedModelServer:
         self._httpd.daemon_threads = True
         self.port = int(self._httpd.server_address[1])
         self.url = f"http://127.0.0.1:{self.port}/v1"
-        self._thread = threading.Thread(target=self._httpd.serve_forever, name="mhrc-scripted-model", daemon=True)
+        self._thread = threading.Thread(
+            target=self._httpd.serve_forever, kwargs={"poll_interval": 0.05}, name="mhrc-scripted-model", daemon=True
+        )
         self._thread.start()
         self._closed = False
 
@@ -236,6 +318,32 @@ class ScriptedModelServer:
         with self._lock:
             return [r for r in self.requests if self.robot_of(r) == robot]
 
+    def remaining(self, robot: str | None = None) -> int:
+        """The scripted replies not given yet: of the list, of one robot's list, or (with a
+        mapping and no `robot`) of all robots' lists; 0 for a callable script."""
+        with self._lock:
+            if robot is None:
+                return sum(len(queue) for queue in self._queues.values())
+            return len(self._queues.get(robot, []))
+
+    def _begin(self, body: dict[str, Any], headers: dict[str, str], path: str) -> ModelCall:
+        with self._lock:
+            self.requests.append(body)
+            self.headers.append(headers)
+            self.paths.append(path)
+            self._seq += 1
+            call = ModelCall(request=body, headers=headers, path=path, robot=self.robot_of(body) if isinstance(body, Mapping) else None, started=self._seq)
+            self.calls.append(call)
+            self.in_flight += 1
+            self.max_in_flight = max(self.max_in_flight, self.in_flight)
+            return call
+
+    def _end(self, call: ModelCall, answer: _Answer) -> None:
+        with self._lock:
+            self.in_flight -= 1
+            self._seq += 1
+            call.ended, call.latency, call.reply = self._seq, answer.delay, answer.reply
+
     def _next(self, body: dict[str, Any]) -> Reply | None:
         if isinstance(self.script, Mapping):
             key = self.robot_of(body)
@@ -249,40 +357,49 @@ class ScriptedModelServer:
                 return queue.pop(0)
         return self.when_done
 
-    def _answer(self, body: dict[str, Any]) -> tuple[int, Mapping[str, str], bytes, float]:
+    def _answer(self, body: dict[str, Any]) -> _Answer:
         try:
             reply = self._next(body)
         except Exception as exc:  # a bug in the test's script: answer it, visibly
-            return 500, {}, json.dumps({"error": f"the script raised {exc!r}"}).encode(), 0.0
+            return _Answer(500, {}, json.dumps({"error": f"the script raised {exc!r}"}).encode(), 0.0)
         if reply is None:
-            return 500, {}, b'{"error": "the script is exhausted"}', 0.0
+            return _Answer(500, {}, b'{"error": "the script is exhausted"}', 0.0)
         if isinstance(reply, str):
             reply = ModelReply(text=reply)
         delay = reply.latency if reply.latency is not None else (self.latency(body) if callable(self.latency) else self.latency)
+        answer = _Answer(reply.status, reply.headers, b"", delay, reply, reply.stream, reply.stream_interval)
+        if reply.stream is not None:
+            return answer
         if reply.body is not None:
-            payload = reply.body if isinstance(reply.body, bytes) else json.dumps(reply.body).encode()
-            return reply.status, reply.headers, payload, delay
+            answer.payload = reply.body if isinstance(reply.body, bytes) else json.dumps(reply.body).encode()
+            return answer
         if reply.text is None:  # an error status with no content
-            return reply.status, reply.headers, json.dumps({"error": f"scripted HTTP {reply.status}"}).encode(), delay
+            answer.payload = json.dumps({"error": f"scripted HTTP {reply.status}"}).encode()
+            return answer
         message: dict[str, Any] = {"role": "assistant", "content": reply.text}
         if reply.reasoning is not None:
-            message["reasoning_content"] = reply.reasoning
-        prompt = sum(len(str(m.get("content") or "")) for m in body.get("messages") or [])
-        completion = {
+            message[reply.reasoning_field] = reply.reasoning
+        completion: dict[str, Any] = {
             "id": f"chatcmpl-{uuid.uuid4().hex[:12]}",
             "object": "chat.completion",
             "created": int(time.time()),
             "model": body.get("model", "scripted"),
             "choices": [{"index": 0, "message": message, "finish_reason": reply.finish_reason}],
-            "usage": {"prompt_tokens": max(1, prompt // 4), "completion_tokens": max(1, len(reply.text) // 4)},
         }
-        return reply.status, reply.headers, json.dumps(completion).encode(), delay
+        if reply.usage is True:
+            prompt = sum(len(str(m.get("content") or "")) for m in body.get("messages") or [])
+            completion["usage"] = {"prompt_tokens": max(1, prompt // 4), "completion_tokens": max(1, len(reply.text) // 4)}
+        elif reply.usage is not False:
+            completion["usage"] = dict(reply.usage)
+        answer.payload = json.dumps(completion).encode()
+        return answer
 
     def close(self) -> None:
         """Stop serving and free the port (idempotent)."""
         if self._closed:
             return
         self._closed = True
+        self._closing.set()  # ends the latencies and streams still running
         self._httpd.shutdown()
         self._httpd.server_close()
         self._thread.join(timeout=5.0)

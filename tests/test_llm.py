@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import asyncio
 import json
-import threading
-import time
-from collections.abc import Callable, Iterator
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 
 from mhrc.agents.llm import LLMError, OpenAIChatClient, check_spec
 from mhrc.episode import EpisodeConfig, up_in_process
+from mhrc.testing import ModelReply, ScriptedModelServer
 from mhrc.trace import read_trace
 
 Reply = tuple[int, dict[str, str], bytes, float]  # status, headers, body, delay
@@ -27,92 +25,59 @@ def ok(text: str, usage: bool = True) -> Reply:
 
 
 class FakeServer:
-    """An OpenAI-style endpoint whose answers come from `respond(request_json)`."""
+    """`mhrc.testing.ScriptedModelServer` scripted with `Reply` tuples: `respond(request_json)`
+    returns (status, headers, body bytes, delay). Kept for the test modules that import it
+    (test_async, test_eval, test_eval_concurrency, test_viewer, test_diagnostics); new tests
+    use ScriptedModelServer and ModelReply directly. `requests` pairs each body with its headers."""
 
     def __init__(self, respond: Callable[[dict[str, Any]], Reply]) -> None:
-        self.respond = respond
-        self.requests: list[tuple[dict[str, Any], dict[str, str]]] = []
-        self.spans: list[tuple[str, int, int, float]] = []  # (first system line, start, end, scripted delay)
-        self.seq = 0  # one count for every request start and end: their order, never their times
-        self.in_flight = 0
-        self.max_in_flight = 0
-        self.lock = threading.Lock()
-        server = self
+        def reply(body: dict[str, Any]) -> ModelReply:
+            status, headers, payload, delay = respond(body)
+            return ModelReply(status=status, headers=headers, body=payload, latency=delay)
 
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:  # noqa: N802
-                body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
-                with server.lock:
-                    server.seq += 1
-                    start = server.seq
-                    server.requests.append((body, dict(self.headers)))
-                    server.in_flight += 1
-                    server.max_in_flight = max(server.max_in_flight, server.in_flight)
-                status, headers, payload, delay = server.respond(body)
-                time.sleep(delay)
-                with server.lock:
-                    server.in_flight -= 1
-                    server.seq += 1
-                    server.spans.append((body["messages"][0]["content"].split("\n")[0], start, server.seq, delay))
-                try:
-                    self.send_response(status)
-                    for k, v in headers.items():
-                        self.send_header(k, v)
-                    self.send_header("Content-Length", str(len(payload)))
-                    self.end_headers()
-                    self.wfile.write(payload)
-                except (BrokenPipeError, ConnectionResetError):
-                    pass
+        self.server = ScriptedModelServer(reply, when_done=None)
+        self.url = self.server.url
 
-            def log_message(self, *args: object) -> None:
-                pass
+    @property
+    def requests(self) -> list[tuple[dict[str, Any], dict[str, str]]]:
+        return [(call.request, call.headers) for call in self.server.calls]
 
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
-        self.thread = threading.Thread(target=self.httpd.serve_forever, daemon=True)
-        self.thread.start()
+    @property
+    def max_in_flight(self) -> int:
+        return self.server.max_in_flight
 
     def close(self) -> None:
-        self.httpd.shutdown()
-        self.httpd.server_close()
+        self.server.close()
 
 
-@pytest.fixture
-def server_factory() -> Iterator[Callable[[Callable[[dict[str, Any]], Reply]], FakeServer]]:
-    servers: list[FakeServer] = []
-
-    def make(respond: Callable[[dict[str, Any]], Reply]) -> FakeServer:
-        servers.append(FakeServer(respond))
-        return servers[-1]
-
-    yield make
-    for s in servers:
-        s.close()
+USAGE = {"prompt_tokens": 11, "completion_tokens": 7}
 
 
-async def test_transient_failures_are_retried_then_usage_recorded(server_factory) -> None:  # type: ignore[no-untyped-def]
-    script = [
-        (429, {"Retry-After": "0"}, b'{"error": "slow down"}', 0.0),
-        (500, {}, b"oops", 0.0),
-        (200, {}, b"{not json", 0.0),
-        ok("slow", usage=True)[:3] + (2.0,),  # longer than the client's timeout
-        ok("Command: wait()"),
-    ]
-    server = server_factory(lambda body: script.pop(0))
+async def test_transient_failures_are_retried_then_usage_recorded(mhrc_model_server) -> None:  # type: ignore[no-untyped-def]
+    server = mhrc_model_server(
+        [
+            ModelReply(status=429, headers={"Retry-After": "0"}, body=b'{"error": "slow down"}'),
+            ModelReply(status=500, body=b"oops"),
+            ModelReply(body=b"{not json"),
+            ModelReply("slow", usage=USAGE, latency=2.0),  # longer than the client's timeout
+            ModelReply("Command: wait()", usage=USAGE),
+        ],
+        when_done=None,
+    )
     client = OpenAIChatClient("m1", server.url, api_key="sekret", timeout=0.5, retries=5, backoff=0.01)
     try:
         c = await client.complete([{"role": "user", "content": "hi"}], temperature=0.5)
     finally:
         await client.aclose()
     assert c.text == "Command: wait()" and (c.prompt_tokens, c.completion_tokens) == (11, 7)
-    assert len(server.requests) == 5 and script == []
-    body, headers = server.requests[-1]
+    assert len(server.requests) == 5 and server.remaining() == 0
+    body, headers = server.requests[-1], server.headers[-1]
     assert body == {"model": "m1", "messages": [{"role": "user", "content": "hi"}], "temperature": 0.5, "max_tokens": 1024}
     assert headers["Authorization"] == "Bearer sekret"
 
 
-async def test_the_retry_budget_ends_in_a_typed_error(server_factory) -> None:  # type: ignore[no-untyped-def]
-    server = server_factory(lambda body: (503, {}, b"down", 0.0))
+async def test_the_retry_budget_ends_in_a_typed_error(mhrc_model_server) -> None:  # type: ignore[no-untyped-def]
+    server = mhrc_model_server(lambda body: ModelReply(status=503, body=b"down"))
     client = OpenAIChatClient("m", server.url, retries=2, backoff=0.01)
     try:
         with pytest.raises(LLMError, match="after 3 attempts: HTTP 503"):
@@ -122,8 +87,8 @@ async def test_the_retry_budget_ends_in_a_typed_error(server_factory) -> None:  
     assert len(server.requests) == 3
 
 
-async def test_a_client_error_is_not_retried(server_factory) -> None:  # type: ignore[no-untyped-def]
-    server = server_factory(lambda body: (401, {}, b'{"error": "bad key"}', 0.0))
+async def test_a_client_error_is_not_retried(mhrc_model_server) -> None:  # type: ignore[no-untyped-def]
+    server = mhrc_model_server(lambda body: ModelReply(status=401, body=b'{"error": "bad key"}'))
     client = OpenAIChatClient("m", server.url, retries=3, backoff=0.01)
     try:
         with pytest.raises(LLMError, match="401"):
@@ -133,8 +98,8 @@ async def test_a_client_error_is_not_retried(server_factory) -> None:  # type: i
     assert len(server.requests) == 1
 
 
-async def test_the_concurrency_limit_holds(server_factory) -> None:  # type: ignore[no-untyped-def]
-    server = server_factory(lambda body: ok("Command: wait()")[:3] + (0.2,))
+async def test_the_concurrency_limit_holds(mhrc_model_server) -> None:  # type: ignore[no-untyped-def]
+    server = mhrc_model_server(lambda body: "Command: wait()", latency=0.2)
     client = OpenAIChatClient("m", server.url, max_concurrency=2)
     try:
         await asyncio.gather(*(client.complete([{"role": "user", "content": str(i)}]) for i in range(6)))
@@ -154,26 +119,15 @@ def test_specs_are_checked_before_any_request(monkeypatch: pytest.MonkeyPatch) -
     assert check_spec("openai:m", "http://127.0.0.1:9/v1")[1] == "http://127.0.0.1:9/v1"
 
 
-async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning(server_factory, tmp_path) -> None:  # type: ignore[no-untyped-def]
+async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning(mhrc_model_server, tmp_path) -> None:  # type: ignore[no-untyped-def]
     """Three LLM agents against one scripted server: malformed replies, a 500 and a 429 along
     the way; the episode runs to its horizon, and the robots' calls overlap in time."""
-    hiccups = {
-        "bob": [(500, {}, b"boom", 0.0), (200, {}, b"not json at all", 0.0)],
-        "alice": [(429, {"Retry-After": "0"}, b"", 0.0)],
-        "david": [ok("Command: wait()")[:3] + (3.0,)],  # beyond the request timeout: retried
+    script = {  # each robot's hiccups (answered at once), then its replies (0.3 s each), then waits
+        "bob": [ModelReply(status=500, body=b"boom", latency=0.0), ModelReply(body=b"not json at all", latency=0.0), "I am thinking about the tray.", "Command: pick(ghost)"],
+        "alice": [ModelReply(status=429, headers={"Retry-After": "0"}, body=b"", latency=0.0)],
+        "david": [ModelReply("Command: wait()", latency=3.0), "Command: navigate(table_1, 0)"],  # beyond the request timeout: retried
     }
-    replies = {"bob": ["I am thinking about the tray.", "Command: pick(ghost)"], "alice": [], "david": ["Command: navigate(table_1, 0)"]}
-    lock = threading.Lock()
-
-    def respond(body: dict[str, Any]) -> Reply:
-        robot = body["messages"][0]["content"].split()[2].rstrip(",").lower()  # "You are Alice, ..."
-        with lock:
-            if hiccups.get(robot):
-                return hiccups[robot].pop(0)
-            text = replies[robot].pop(0) if replies[robot] else "Analysis: nothing to do.\nCommand: wait()"
-        return ok(text)[:3] + (0.3,)
-
-    server = server_factory(respond)
+    server = mhrc_model_server(script, latency=0.3, when_done="Analysis: nothing to do.\nCommand: wait()")
     cfg = EpisodeConfig.build(
         seed=0, horizon=4, llm="openai:test-model", base_url=server.url, llm_timeout=1.0, trace=tmp_path / "t.jsonl"
     ).resolved()
@@ -188,29 +142,30 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
     assert all(t["policy"] == "llm:test-model" and t["prompt"] and t["prompt_tokens"] > 0 for t in thoughts)
 
     for robot, extra in (("David", 1), ("Bob", 2), ("Alice", 1)):  # each hiccup cost one retried request
-        sent = sum(1 for body, _ in server.requests if body["messages"][0]["content"].startswith(f"You are {robot}"))
+        sent = sum(1 for body in server.requests if body["messages"][0]["content"].startswith(f"You are {robot}"))
         assert sent == sum(1 for t in thoughts if t["robot"] == robot.lower()) + extra
 
     # planning overlapped: some answered call of each robot started before another robot's answered
     # call ended and ended after it started (the order of starts and ends, not their times)
-    spans = [(who, s, e) for who, s, e, delay in server.spans if delay == 0.3]
+    spans = [(call.robot, call.started, call.ended) for call in server.calls if call.latency == 0.3]
+    assert all(e is not None for _, _, e in spans)
     overlapping = {a for a, s1, e1 in spans for b, s2, e2 in spans if a != b and s1 < e2 and s2 < e1}
     assert len(overlapping) == 3, spans
 
 
-async def test_replay_reproduces_a_recorded_episode_exactly(server_factory, tmp_path) -> None:  # type: ignore[no-untyped-def]
+async def test_replay_reproduces_a_recorded_episode_exactly(mhrc_model_server, tmp_path) -> None:  # type: ignore[no-untyped-def]
     """An LLM episode recorded against the server, then replayed from its trace alone."""
     from mhrc.agents.replay import ReplayClient, ReplayMismatch
 
-    def respond(body: dict[str, Any]) -> Reply:
+    def respond(body: dict[str, Any]) -> str:
         system, user = body["messages"][0]["content"], body["messages"][1]["content"]
         if system.startswith("You are Bob"):
-            return ok("Command: pick(phone)" if "Gripper: empty" in user else "Command: place(phone, tray)")
+            return "Command: pick(phone)" if "Gripper: empty" in user else "Command: place(phone, tray)"
         if system.startswith("You are Alice"):
-            return ok("Analysis: look around.\nCommand: navigate(drawer_unit, 0)" if "drawer_unit" not in user.split("actions so far")[-1] else "Command: open(drawer_unit)")
-        return ok("Command: navigate(sofa, 0)" if "sofa" not in user.split("actions so far")[-1] else "I should wait maybe?")
+            return "Analysis: look around.\nCommand: navigate(drawer_unit, 0)" if "drawer_unit" not in user.split("actions so far")[-1] else "Command: open(drawer_unit)"
+        return "Command: navigate(sofa, 0)" if "sofa" not in user.split("actions so far")[-1] else "I should wait maybe?"
 
-    server = server_factory(respond)
+    server = mhrc_model_server(respond)
     recorded = EpisodeConfig.build(seed=0, horizon=5, llm="openai:m", base_url=server.url, trace=tmp_path / "rec.jsonl").resolved()
     first = await up_in_process(recorded)
     calls = len(server.requests)  # before the replay: it must add none

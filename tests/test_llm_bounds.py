@@ -5,12 +5,10 @@ and robots driven by different servers. Every episode is real (Zenoh on loopback
 
 from __future__ import annotations
 
+import itertools
 import json
 import socket
 import threading
-import time
-from collections.abc import Iterator
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Any
 
@@ -23,16 +21,14 @@ from mhrc.cli import main
 from mhrc.episode import ConfigError, EpisodeConfig, up_in_process
 from mhrc.metrics import from_trace
 from mhrc.protocol import EpisodeDone
+from mhrc.testing import ModelReply, ScriptedModelServer
 from mhrc.trace import read_trace
-from test_llm import FakeServer, Reply, ok
+
+WAIT = "Command: wait()"
 
 
-def reply(text: str | None, *, finish: str = "stop", reasoning: str | None = None, field: str = "reasoning_content", usage: dict[str, Any] | None = None) -> Reply:
-    message: dict[str, Any] = {"role": "assistant", "content": text}
-    if reasoning is not None:
-        message[field] = reasoning
-    body = {"choices": [{"index": 0, "message": message, "finish_reason": finish}], "usage": usage or {"prompt_tokens": 10, "completion_tokens": 5}}
-    return 200, {}, json.dumps(body).encode(), 0.0
+def reply(text: str, *, finish: str = "stop", reasoning: str | None = None, field: str = "reasoning_content", usage: dict[str, Any] | None = None) -> ModelReply:
+    return ModelReply(text, finish_reason=finish, reasoning=reasoning, reasoning_field=field, usage=usage or {"prompt_tokens": 10, "completion_tokens": 5})
 
 
 def robot_of(body: dict[str, Any]) -> str:
@@ -43,78 +39,18 @@ def thoughts(trace: Path) -> list[dict[str, Any]]:
     return [line["msg"] for line in read_trace(trace) if line["key"].endswith("/thought")]
 
 
-@pytest.fixture
-def servers() -> Iterator[list[FakeServer]]:
-    made: list[FakeServer] = []
-    yield made
-    for s in made:
-        s.close()
-
-
-def per_robot(script: dict[str, list[Reply]]) -> Any:
-    """A responder that answers each robot from its own queue of replies, then `wait()`."""
-    lock = threading.Lock()
-
-    def respond(body: dict[str, Any]) -> Reply:
-        with lock:
-            queue = script.get(robot_of(body)) or []
-            return queue.pop(0) if queue else ok("Command: wait()")
-
-    return respond
-
-
-def serve(made: list[FakeServer], respond: Any) -> FakeServer:
-    made.append(FakeServer(respond))
-    return made[-1]
-
-
-class EndlessServer:
+def endless(body: dict[str, Any]) -> ModelReply:
     """Answers 200 and then writes one byte every 50 ms for as long as the client listens."""
-
-    def __init__(self) -> None:
-        self.stop = threading.Event()
-        self.requests = 0
-        server = self
-
-        class Handler(BaseHTTPRequestHandler):
-            def do_POST(self) -> None:  # noqa: N802
-                self.rfile.read(int(self.headers["Content-Length"]))
-                server.requests += 1
-                try:
-                    self.send_response(200)
-                    self.send_header("Content-Type", "application/json")
-                    self.send_header("Content-Length", str(10**9))
-                    self.end_headers()
-                    self.wfile.write(b'{"choices": [{"message": {"content": "')
-                    while not server.stop.is_set():
-                        self.wfile.write(b"a")
-                        self.wfile.flush()
-                        time.sleep(0.05)
-                except OSError:
-                    pass  # the client hung up: what a timeout should do
-
-            def log_message(self, *args: object) -> None:
-                pass
-
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.httpd.daemon_threads = True
-        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
-        threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
-
-    def close(self) -> None:
-        self.stop.set()
-        self.httpd.shutdown()
-        self.httpd.server_close()
+    prefix = b'{"choices": [{"message": {"content": "'
+    return ModelReply(headers={"Content-Length": str(10**9)}, stream=itertools.chain([prefix], itertools.repeat(b"a")), stream_interval=0.05)
 
 
 async def against_endless(tmp_path: Path, **values: Any) -> tuple[EpisodeConfig, EpisodeDone, int]:
-    """An LLM episode against an EndlessServer: its config, its end, and the requests the server saw."""
-    endless = EndlessServer()
-    try:
-        cfg = EpisodeConfig.build(seed=0, llm="openai:m", base_url=endless.url, trace=tmp_path / "t.jsonl", **values).resolved()
-        return cfg, await up_in_process(cfg), endless.requests
-    finally:
-        endless.close()
+    """An LLM episode against a server that never stops writing: its config, its end, and the
+    requests the server saw."""
+    with ScriptedModelServer(endless) as server:
+        cfg = EpisodeConfig.build(seed=0, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl", **values).resolved()
+        return cfg, await up_in_process(cfg), len(server.requests)
 
 
 async def test_an_endless_server_costs_each_step_at_most_its_deadline_and_the_row_counts_the_lost_steps(tmp_path: Path) -> None:
@@ -134,7 +70,7 @@ async def test_the_step_deadline_bounds_all_attempts_of_one_step(tmp_path: Path)
     assert all("step deadline of 0.5 s" in t["parse_error"] for t in thoughts(cfg.trace))
 
 
-async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_parsed_or_explained(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_parsed_or_explained(mhrc_model_server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """Bob's first reply is cut at max_tokens before any command: it becomes feedback saying so.
     Alice's is cut too but holds a command: it runs. Then a 1 MB reply: bounded in the trace and
     in the next prompt."""
@@ -142,12 +78,12 @@ async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_pars
         "bob": [reply("Analysis: I should think about the tray and then about the", finish="length"), reply("x" * 1_000_000)],
         "alice": [reply("Command: navigate(table_1, 0)\nAnalysis: this will", finish="length")],
     }
-    server = serve(servers, per_robot(script))
+    server = mhrc_model_server(script, when_done=WAIT)
     cfg = EpisodeConfig.build(
         seed=0, horizon=3, llm="openai:m", base_url=server.url, max_tokens=77, llm_seed=5, trace=tmp_path / "t.jsonl"
     ).resolved()
     await up_in_process(cfg)
-    assert server.requests and all(b["max_tokens"] == 77 and b["seed"] == 5 for b, _ in server.requests)
+    assert server.requests and all(b["max_tokens"] == 77 and b["seed"] == 5 for b in server.requests)
     ts = thoughts(cfg.trace)
     bob = [t for t in ts if t["robot"] == "bob"]
     alice = [t for t in ts if t["robot"] == "alice"]
@@ -160,7 +96,7 @@ async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_pars
     assert cfg.trace.stat().st_size < 2_000_000
 
 
-async def test_reasoning_never_reaches_the_parser_and_is_recorded_apart(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+async def test_reasoning_never_reaches_the_parser_and_is_recorded_apart(mhrc_model_server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """A <think> block full of commands (as DeepSeek-R1 or Qwen3 write them inline) and a
     reasoning_content / reasoning field (vLLM, llama.cpp, Ollama): the command after the
     thinking is the one that runs; the thoughts and their tokens are recorded separately."""
@@ -170,7 +106,7 @@ async def test_reasoning_never_reaches_the_parser_and_is_recorded_apart(servers,
         "bob": [reply("Command: wait()", reasoning="I could pick(phone) now.", usage={"prompt_tokens": 9, "completion_tokens": 30, "completion_tokens_details": {"reasoning_tokens": 21}})],
         "david": [reply("Command: navigate(sofa, 0)", reasoning="Command: wait() is tempting", field="reasoning")],
     }
-    server = serve(servers, per_robot(script))
+    server = mhrc_model_server(script, when_done=WAIT)
     cfg = EpisodeConfig.build(seed=0, horizon=1, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
     await up_in_process(cfg)
     by = {t["robot"]: t for t in thoughts(cfg.trace)}
@@ -193,21 +129,21 @@ def test_an_unclosed_think_block_is_all_reasoning() -> None:
         (404, b'{"error": "model not found"}', "no model 'nope'"),
     ],
 )
-async def test_bad_credentials_or_a_missing_model_stop_the_episode_at_the_first_step(servers, tmp_path: Path, status: int, body: bytes, match: str) -> None:  # type: ignore[no-untyped-def]
-    server = serve(servers, lambda _b: (status, {}, body, 0.0))
+async def test_bad_credentials_or_a_missing_model_stop_the_episode_at_the_first_step(mhrc_model_server, tmp_path: Path, status: int, body: bytes, match: str) -> None:  # type: ignore[no-untyped-def]
+    server = mhrc_model_server(lambda _b: ModelReply(status=status, body=body))
     cfg = EpisodeConfig.build(seed=0, horizon=50, llm="openai:nope", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
     with pytest.raises(LLMFatalError, match=match):
         await up_in_process(cfg)
     assert len(server.requests) <= 3  # one call per robot, none retried, no second step
 
 
-async def test_a_server_that_refuses_the_response_format_stops_a_structured_run_naming_the_option(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    def respond(body: dict[str, Any]) -> Reply:
+async def test_a_server_that_refuses_the_response_format_stops_a_structured_run_naming_the_option(mhrc_model_server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    def respond(body: dict[str, Any]) -> ModelReply | str:
         if "response_format" in body:
-            return 400, {}, b'{"error": {"message": "response_format is not supported"}}', 0.0
-        return ok("Command: wait()")
+            return ModelReply(status=400, body=b'{"error": {"message": "response_format is not supported"}}')
+        return WAIT
 
-    server = serve(servers, respond)
+    server = mhrc_model_server(respond)
     cfg = EpisodeConfig.build(seed=0, horizon=50, llm="openai:m", base_url=server.url, structured=True, trace=tmp_path / "t.jsonl").resolved()
     with pytest.raises(LLMFatalError, match="--structured"):
         await up_in_process(cfg)
@@ -223,29 +159,29 @@ async def test_a_server_down_for_the_whole_first_step_stops_the_run(tmp_path: Pa
         await up_in_process(cfg)
 
 
-async def test_a_server_that_goes_down_later_only_costs_steps(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+async def test_a_server_that_goes_down_later_only_costs_steps(mhrc_model_server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     calls: dict[str, int] = {}
     lock = threading.Lock()
 
-    def respond(body: dict[str, Any]) -> Reply:
+    def respond(body: dict[str, Any]) -> ModelReply | str:
         with lock:
             n = calls[robot_of(body)] = calls.get(robot_of(body), 0) + 1
-        return ok("Command: wait()") if n == 1 else (503, {"Retry-After": "0"}, b"down", 0.0)
+        return WAIT if n == 1 else ModelReply(status=503, headers={"Retry-After": "0"}, body=b"down")
 
-    server = serve(servers, respond)
+    server = mhrc_model_server(respond)
     cfg = EpisodeConfig.build(seed=0, horizon=3, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
     done = await up_in_process(cfg)
     assert done.reason == "horizon" and from_trace(read_trace(cfg.trace)).llm_unreachable == 6
 
 
-async def test_each_robot_reaches_its_own_server_and_the_rest_play_the_heuristic(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    a = serve(servers, lambda _b: ok("Command: wait()"))
-    b = serve(servers, lambda _b: ok("Command: wait()"))
+async def test_each_robot_reaches_its_own_server_and_the_rest_play_the_heuristic(mhrc_model_server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    a = mhrc_model_server(lambda _b: WAIT)
+    b = mhrc_model_server(lambda _b: WAIT)
     spec = f"alice=openai:model-a@{a.url},bob=vllm:model-b@{b.url}"
     cfg = EpisodeConfig.build(seed=0, horizon=2, llm=spec, trace=tmp_path / "t.jsonl").resolved()
     await up_in_process(cfg)
-    assert a.requests and {robot_of(body) for body, _ in a.requests} == {"alice"} and {body["model"] for body, _ in a.requests} == {"model-a"}
-    assert b.requests and {robot_of(body) for body, _ in b.requests} == {"bob"} and {body["model"] for body, _ in b.requests} == {"model-b"}
+    assert a.requests and {robot_of(body) for body in a.requests} == {"alice"} and {body["model"] for body in a.requests} == {"model-a"}
+    assert b.requests and {robot_of(body) for body in b.requests} == {"bob"} and {body["model"] for body in b.requests} == {"model-b"}
     policies = {t["robot"]: t["policy"] for t in thoughts(cfg.trace)}
     assert policies == {"alice": "llm:model-a", "bob": "llm:model-b", "david": "heuristic"}
 
@@ -283,30 +219,30 @@ def test_a_file_that_is_not_gguf_is_refused_before_anything_starts(tmp_path: Pat
         EpisodeConfig.build(llm=f"gguf:{fake}")
 
 
-async def test_the_client_sends_the_schema_in_the_form_each_server_takes(servers) -> None:  # type: ignore[no-untyped-def]
-    server = serve(servers, lambda _b: ok('{"analysis": "", "command": {"skill": "wait"}}'))
+async def test_the_client_sends_the_schema_in_the_form_each_server_takes(mhrc_model_server) -> None:  # type: ignore[no-untyped-def]
+    server = mhrc_model_server(lambda _b: '{"analysis": "", "command": {"skill": "wait"}}')
     schema = {"type": "object", "properties": {"x": {"type": "string"}}}
     for provider, field in (("openai", "response_format"), ("ollama", "format")):
         async with OpenAIChatClient("m", server.url, provider=provider) as client:
             await client.complete([{"role": "user", "content": "hi"}], schema=schema)
-        body = server.requests[-1][0]
+        body = server.requests[-1]
         assert field in body
         assert (body["format"] if field == "format" else body["response_format"]["json_schema"]["schema"]) == schema
 
 
-async def test_a_structured_episode_sends_each_robots_schema_and_runs_what_the_json_names(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+async def test_a_structured_episode_sends_each_robots_schema_and_runs_what_the_json_names(mhrc_model_server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """The scripted server answers with the first command its request's schema allows (for
     Alice: navigate to the first furniture in the enum); the world runs exactly that."""
 
-    def respond(body: dict[str, Any]) -> Reply:
+    def respond(body: dict[str, Any]) -> str:
         schema = body["response_format"]["json_schema"]["schema"]
         first = schema["properties"]["command"]["anyOf"][0]["properties"]
         command = {k: (v["const"] if "const" in v else v["enum"][0] if "enum" in v else v.get("minimum", 0)) for k, v in first.items()}
         if command["skill"] in ("move", "communicate"):
             command = {"skill": "wait"}
-        return ok(json.dumps({"analysis": "first option", "command": command}))
+        return json.dumps({"analysis": "first option", "command": command})
 
-    server = serve(servers, respond)
+    server = mhrc_model_server(respond)
     cfg = EpisodeConfig.build(seed=0, horizon=2, llm="openai:m", base_url=server.url, structured=True, trace=tmp_path / "t.jsonl").resolved()
     await up_in_process(cfg)
     ts = thoughts(cfg.trace)
@@ -321,7 +257,7 @@ async def test_a_structured_episode_sends_each_robots_schema_and_runs_what_the_j
     assert len(hashes) >= 2  # each robot's own schema (different skills, different names)
 
 
-async def test_the_console_says_when_a_reply_did_not_parse(servers, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+async def test_the_console_says_when_a_reply_did_not_parse(mhrc_model_server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """Not just `wait() ok You waited.`: the reason the robot waited, on the line before."""
     import io
 
@@ -329,7 +265,7 @@ async def test_the_console_says_when_a_reply_did_not_parse(servers, tmp_path: Pa
 
     from mhrc.progress import ProgressPrinter
 
-    server = serve(servers, lambda body: ok("I will think about [bold]it[/bold]." if robot_of(body) == "bob" else "Command: wait()"))
+    server = mhrc_model_server(lambda body: "I will think about [bold]it[/bold]." if robot_of(body) == "bob" else WAIT)
     out = io.StringIO()
     printer = ProgressPrinter(Console(file=out, width=200, highlight=False))
     cfg = EpisodeConfig.build(seed=0, horizon=1, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
@@ -365,10 +301,10 @@ def test_a_local_model_gets_a_longer_default_timeout_than_a_server(gemma: Path) 
     assert EpisodeConfig.build(llm=f"gguf:{gemma}", llm_timeout=5.0).client_options(f"gguf:{gemma}")["timeout"] == 5.0
 
 
-async def test_a_workers_default_concurrency_is_sized_to_the_model_server(servers) -> None:  # type: ignore[no-untyped-def]
+async def test_a_workers_default_concurrency_is_sized_to_the_model_server(mhrc_model_server) -> None:  # type: ignore[no-untyped-def]
     from mhrc.agents.llm import episodes_at_once
 
-    plain = serve(servers, lambda _b: ok("Command: wait()"))  # answers chat, not llama.cpp's /props
+    plain = mhrc_model_server(lambda _b: WAIT)  # answers chat, not llama.cpp's /props
     assert await episodes_at_once([None, None, None]) == 1  # the heuristic is CPU-bound
     assert await episodes_at_once(["gguf:/m.gguf"] * 3) == 1  # each episode would load its own model
     assert await episodes_at_once([f"openai:m@{plain.url}"] * 3) == 12

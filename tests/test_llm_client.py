@@ -1,4 +1,4 @@
-"""The OpenAI-compatible client against a real HTTP server on 127.0.0.1 (stdlib, in a thread).
+"""The OpenAI-compatible client against a real HTTP server on 127.0.0.1 (`mhrc.testing.ScriptedModelServer`).
 
 The server answers from a script: OpenAI-style JSON, a 429 with Retry-After, a 500, a reply
 slower than the client's timeout, a malformed body. Nothing here needs an API key or a network
@@ -8,11 +8,8 @@ beyond loopback, and no assertion depends on how long anything took.
 from __future__ import annotations
 
 import asyncio
-import json
 import socket
-import threading
 from collections.abc import Callable, Iterator, MutableMapping
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
 import pytest
@@ -27,74 +24,20 @@ from mhrc.agents.llm import (
     estimate_tokens,
     make_client,
 )
+from mhrc.testing import ModelReply, Script, ScriptedModelServer
 from structlog.testing import capture_logs
 
-Answer = tuple[int, dict[str, str], bytes, float]  # status, headers, body, delay before answering
 HI = [{"role": "system", "content": "You are a test."}, {"role": "user", "content": "Say something."}]
 
 
-def completion(text: str, usage: dict[str, int] | None = None) -> Answer:
-    body: dict[str, Any] = {"id": "c1", "object": "chat.completion", "choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
-    if usage is not None:
-        body["usage"] = usage
-    return 200, {"Content-Type": "application/json"}, json.dumps(body).encode(), 0.0
-
-
-class Server:
-    """A chat-completions endpoint on loopback; records requests and counts concurrent ones."""
-
-    def __init__(self, answer: Callable[[dict[str, Any]], Answer]) -> None:
-        self.answer = answer
-        self.requests: list[tuple[str, dict[str, Any], dict[str, str]]] = []
-        self.in_flight = self.max_in_flight = 0
-        self.lock = threading.Lock()
-        self.release = threading.Event()  # ends the slow answers early when the test is over
-        server = self
-
-        class Handler(BaseHTTPRequestHandler):
-            protocol_version = "HTTP/1.1"
-
-            def do_POST(self) -> None:
-                raw = self.rfile.read(int(self.headers["Content-Length"]))
-                with server.lock:
-                    server.requests.append((self.path, json.loads(raw), dict(self.headers)))
-                    server.in_flight += 1
-                    server.max_in_flight = max(server.max_in_flight, server.in_flight)
-                    status, headers, body, delay = server.answer(json.loads(raw))
-                server.release.wait(delay)
-                with server.lock:
-                    server.in_flight -= 1
-                try:
-                    self.send_response(status)
-                    for k, v in headers.items():
-                        self.send_header(k, v)
-                    self.send_header("Content-Length", str(len(body)))
-                    self.end_headers()
-                    self.wfile.write(body)
-                except OSError:
-                    pass  # the client gave up (timeout)
-
-            def log_message(self, *args: object) -> None:
-                pass
-
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self.httpd.daemon_threads = True
-        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
-        threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
-
-    def close(self) -> None:
-        self.release.set()
-        self.httpd.shutdown()
-        self.httpd.server_close()
-
-
 @pytest.fixture
-def serve() -> Iterator[Callable[..., Server]]:
-    servers: list[Server] = []
+def serve() -> Iterator[Callable[[Script], ScriptedModelServer]]:
+    """Scripted servers that keep connections alive (HTTP/1.1, as real ones do) and answer HTTP
+    500 once a list script is exhausted, so that an extra request shows; closed at teardown."""
+    servers: list[ScriptedModelServer] = []
 
-    def start(answers: list[Answer] | Callable[[dict[str, Any]], Answer]) -> Server:
-        script = answers if callable(answers) else (lambda body, queue=list(answers): queue.pop(0))
-        servers.append(Server(script))
+    def start(script: Script) -> ScriptedModelServer:
+        servers.append(ScriptedModelServer(script, when_done=None, keep_alive=True))
         return servers[-1]
 
     yield start
@@ -115,12 +58,12 @@ def _delays(logs: list[MutableMapping[str, Any]]) -> list[float]:
 async def test_every_transient_failure_is_retried_and_then_the_reply_comes_through(serve) -> None:  # type: ignore[no-untyped-def]
     server = serve(
         [
-            (429, {"Retry-After": "0.05"}, b'{"error": {"message": "rate limited"}}', 0.0),
-            (500, {}, b"internal error", 0.0),
-            completion("too late", {"prompt_tokens": 1, "completion_tokens": 1})[:3] + (5.0,),  # beyond the timeout
-            (200, {"Content-Type": "application/json"}, b'{"choices": [{"message": ', 0.0),  # malformed JSON
-            (200, {}, b'{"choices": []}', 0.0),  # JSON, but no completion in it
-            completion("Command: wait()", {"prompt_tokens": 123, "completion_tokens": 45}),
+            ModelReply(status=429, headers={"Retry-After": "0.05"}, body=b'{"error": {"message": "rate limited"}}'),
+            ModelReply(status=500, body=b"internal error"),
+            ModelReply("too late", usage={"prompt_tokens": 1, "completion_tokens": 1}, latency=5.0),  # beyond the timeout
+            ModelReply(body=b'{"choices": [{"message": '),  # malformed JSON
+            ModelReply(body=b'{"choices": []}'),  # JSON, but no completion in it
+            ModelReply("Command: wait()", usage={"prompt_tokens": 123, "completion_tokens": 45}),
         ]
     )
     client = OpenAIChatClient("test-model", server.url, api_key="k-123", timeout=0.5, retries=5, backoff=0.01)
@@ -138,14 +81,14 @@ async def test_every_transient_failure_is_retried_and_then_the_reply_comes_throu
     errors = " | ".join(e["error"] for e in logs if e["event"] == "llm call failed, retrying")
     for reason in ("HTTP 429", "HTTP 500", "no answer within 0.5 s", "unreadable completion body"):
         assert reason in errors
-    path, body, headers = server.requests[-1]
+    path, body, headers = server.paths[-1], server.requests[-1], server.headers[-1]
     assert path == "/v1/chat/completions"
     assert body == {"model": "test-model", "messages": HI, "temperature": 0.5, "max_tokens": 1024}
     assert headers["Authorization"] == "Bearer k-123"
 
 
 async def test_the_retry_budget_ends_in_a_typed_error(serve) -> None:  # type: ignore[no-untyped-def]
-    server = serve(lambda body: (503, {"Retry-After": "0"}, b"overloaded", 0.0))
+    server = serve(lambda body: ModelReply(status=503, headers={"Retry-After": "0"}, body=b"overloaded"))
     async with OpenAIChatClient("m", server.url, retries=2, backoff=0.01) as client:
         with pytest.raises(LLMError, match=r"m at http://127\.0\.0\.1:\d+/v1 failed after 3 attempts: HTTP 503: overloaded"):
             await client.complete(HI)
@@ -173,7 +116,7 @@ async def test_a_server_that_is_not_there_is_retried_then_reported() -> None:
 )
 async def test_a_client_error_is_reported_at_once(serve, status: int, fatal: bool, match: str) -> None:  # type: ignore[no-untyped-def]
     """Nothing a retry can fix is retried; what no later step can fix either is fatal."""
-    server = serve(lambda body: (status, {}, b'{"error": "invalid api key"}', 0.0))
+    server = serve(lambda body: ModelReply(status=status, body=b'{"error": "invalid api key"}'))
     async with OpenAIChatClient("m", server.url, retries=3, backoff=0.01) as client:
         with pytest.raises(LLMError, match=match) as err:
             await client.complete(HI)
@@ -183,16 +126,16 @@ async def test_a_client_error_is_reported_at_once(serve, status: int, fatal: boo
 
 async def test_usage_is_estimated_when_the_server_reports_none(serve) -> None:  # type: ignore[no-untyped-def]
     reply = "Analysis: the tray is empty.\nCommand: pick(apple)"
-    server = serve([completion(reply)])
+    server = serve([ModelReply(reply, usage=False)])
     async with OpenAIChatClient("m", server.url) as client:
         c = await client.complete(HI, temperature=0.2)
     prompt = "You are a test.\n\nSay something."
     assert (c.prompt_tokens, c.completion_tokens) == (estimate_tokens(prompt), estimate_tokens(reply)) == (len(prompt) // 4, len(reply) // 4)
-    assert server.requests[0][1]["temperature"] == 0.2 and "Authorization" not in server.requests[0][2]
+    assert server.requests[0]["temperature"] == 0.2 and "Authorization" not in server.headers[0]
 
 
 async def test_the_concurrency_limit_is_shared_by_all_calls_of_a_client(serve) -> None:  # type: ignore[no-untyped-def]
-    server = serve(lambda body: completion("Command: wait()")[:3] + (0.15,))
+    server = serve(lambda body: ModelReply("Command: wait()", latency=0.15))
     async with OpenAIChatClient("m", server.url, max_concurrency=2) as client:
         replies = await asyncio.gather(*(client.complete([{"role": "user", "content": str(i)}]) for i in range(6)))
     assert len(replies) == 6 and len(server.requests) == 6
@@ -200,7 +143,7 @@ async def test_the_concurrency_limit_is_shared_by_all_calls_of_a_client(serve) -
 
 
 async def test_make_client_takes_the_key_from_the_named_variable_or_the_generic_one(serve, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
-    server = serve([completion("Command: wait()"), completion("Command: wait()"), completion("Command: wait()")])
+    server = serve(["Command: wait()"] * 3)
     monkeypatch.setenv("MY_LLM_KEY", "from-my-var")
     monkeypatch.setenv(GENERIC_KEY_ENV, "from-generic")
     for spec, kw, key, model in (
@@ -213,7 +156,7 @@ async def test_make_client_takes_the_key_from_the_named_variable_or_the_generic_
             await client.complete(HI)
         finally:
             await client.aclose()
-        _, body, headers = server.requests[-1]
+        body, headers = server.requests[-1], server.headers[-1]
         assert headers["Authorization"] == f"Bearer {key}"
         assert body["model"] == model and body["max_tokens"] == 64
 

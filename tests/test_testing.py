@@ -5,7 +5,11 @@ against a scripted model server, and a world with agents attached by hand."""
 from __future__ import annotations
 
 import asyncio
+import itertools
+import socket
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import httpx
@@ -13,7 +17,7 @@ import pytest
 
 from mhrc.keys import Keys
 from mhrc.protocol import EpisodeDone, decode_event
-from mhrc.testing import ModelReply, ScriptedModelServer, ScriptedPolicy
+from mhrc.testing import ModelCall, ModelReply, ScriptedModelServer, ScriptedPolicy
 
 
 def test_the_plugin_is_registered(pytestconfig: pytest.Config) -> None:
@@ -44,6 +48,114 @@ def test_the_model_server_answers_from_its_script_with_latency(mhrc_model_server
         assert http.post(f"{server.url}/chat/completions", json=ask).status_code == 500  # the script is exhausted
     assert server.requests == [ask] * 3 and server.paths == ["/v1/chat/completions"] * 3
     assert ScriptedModelServer.robot_of(ask) == "alice" and len(server.requests_of("alice")) == 3
+
+
+def test_model_replies_set_usage_reasoning_and_headers(mhrc_model_server: Any) -> None:
+    """`usage` estimated, given or left out; reasoning under the field a server uses; headers
+    that replace the server's own; `remaining()` counts what the script has not said yet."""
+    server = mhrc_model_server(
+        [
+            "Command: wait()",
+            ModelReply("Command: wait()", usage={"prompt_tokens": 9, "completion_tokens": 30, "completion_tokens_details": {"reasoning_tokens": 21}}),
+            ModelReply("Command: wait()", usage=False, reasoning="think", reasoning_field="reasoning"),
+            ModelReply(body=b"plain", headers={"Content-Type": "text/plain", "X-Test": "1"}),
+        ],
+        when_done=None,
+    )
+    ask = {"model": "m", "messages": [{"role": "user", "content": "x" * 40}]}
+    assert server.remaining() == 4
+    with httpx.Client() as http:
+        replies = [http.post(f"{server.url}/chat/completions", json=ask) for _ in range(4)]
+    assert replies[0].json()["usage"] == {"prompt_tokens": 10, "completion_tokens": 3}
+    assert replies[1].json()["usage"]["completion_tokens_details"] == {"reasoning_tokens": 21}
+    third = replies[2].json()
+    assert "usage" not in third and third["choices"][0]["message"]["reasoning"] == "think"
+    assert "reasoning_content" not in third["choices"][0]["message"]
+    assert replies[3].headers.get_list("Content-Type") == ["text/plain"] and replies[3].headers["X-Test"] == "1"
+    assert replies[3].content == b"plain" and server.remaining() == 0
+
+
+def test_the_model_server_records_which_calls_overlapped(mhrc_model_server: Any) -> None:
+    """Each call's start and end in one count, its reply and latency; in-flight requests counted."""
+    both_in = threading.Barrier(2, timeout=10.0)  # the two first calls answer once both arrived
+
+    def script(body: dict[str, Any]) -> ModelReply:
+        if body["latency"]:
+            both_in.wait()
+        return ModelReply("Command: wait()", latency=body["latency"])
+
+    server = mhrc_model_server(script)
+    ask = [{"model": "m", "messages": [{"role": "system", "content": f"You are {name}, a robot."}], "latency": 0.1} for name in ("Alice", "Bob")]
+    with ThreadPoolExecutor(2) as pool:
+        assert [r.status_code for r in pool.map(lambda body: httpx.post(f"{server.url}/chat/completions", json=body), ask)] == [200, 200]
+    with httpx.Client() as http:
+        http.post(f"{server.url}/chat/completions", json={**ask[0], "latency": 0.0})
+    calls = server.calls
+    assert all(isinstance(c, ModelCall) for c in calls) and [c.request for c in calls] == server.requests
+    assert sorted(c.robot for c in calls) == ["alice", "alice", "bob"] and calls[-1].latency == 0.0
+    first, second, third = sorted(calls, key=lambda c: c.started)
+    assert first.ended is not None and second.ended is not None and third.ended is not None
+    assert second.started < first.ended and first.started < second.ended  # the two slow calls overlapped
+    assert max(first.ended, second.ended) < third.started < third.ended  # the last came after both
+    assert all(c.reply is not None and c.reply.text == "Command: wait()" for c in calls)
+    assert server.max_in_flight == 2 and server.in_flight == 0
+
+
+def test_an_endless_stream_is_written_until_the_client_hangs_up_or_the_server_closes() -> None:
+    """A body trickled chunk by chunk for ever: the client reads what it likes and leaves; closing
+    the server ends every stream and latency still running."""
+    def stream(body: dict[str, Any]) -> ModelReply:
+        return ModelReply(stream=itertools.chain([b'{"choices": ['], itertools.repeat(b" ")), stream_interval=0.01)
+
+    server = ScriptedModelServer(stream)
+    try:
+        with httpx.Client() as http, http.stream("POST", f"{server.url}/chat/completions", json={}) as resp:
+            assert resp.status_code == 200 and "Content-Length" not in resp.headers
+            got = b""
+            for chunk in resp.iter_bytes():
+                got += chunk
+                if len(got) > 40:
+                    break
+        assert got.startswith(b'{"choices": [') and got[13:].strip() == b""
+        with socket.create_connection(("127.0.0.1", server.port)) as sock:  # a client that listens on
+            sock.sendall(b"POST /v1/chat/completions HTTP/1.0\r\nContent-Length: 2\r\n\r\n{}")
+            assert sock.recv(12).startswith(b"HTTP/1.0 200")
+            sock.settimeout(10.0)
+            ender = threading.Timer(0.2, server.close)
+            ender.start()
+            started = time.monotonic()
+            while sock.recv(4096):
+                pass  # the stream ends when the server closes
+            assert time.monotonic() - started < 5.0
+            ender.join()
+    finally:
+        server.close()
+    slow = ScriptedModelServer(["Command: wait()"], latency=30.0)
+    with socket.create_connection(("127.0.0.1", slow.port)) as sock:
+        sock.sendall(b"POST /v1/chat/completions HTTP/1.0\r\nContent-Length: 2\r\n\r\n{}")
+        while len(slow.requests) < 1:
+            time.sleep(0.01)
+        started = time.monotonic()
+        slow.close()  # cuts the 30 s latency short
+        sock.settimeout(10.0)
+        assert sock.recv(12).startswith(b"HTTP/1.0 200") and time.monotonic() - started < 5.0
+
+
+def test_a_keep_alive_server_answers_many_requests_on_one_connection(mhrc_model_server: Any) -> None:
+    server = mhrc_model_server(["Command: wait()"] * 3, keep_alive=True)
+    with socket.create_connection(("127.0.0.1", server.port)) as sock:
+        sock.settimeout(10.0)
+        reader = sock.makefile("rb")
+        for _ in range(3):
+            sock.sendall(b"POST /v1/chat/completions HTTP/1.1\r\nHost: x\r\nContent-Length: 2\r\n\r\n{}")
+            assert reader.readline().startswith(b"HTTP/1.1 200")
+            headers = {}
+            while (line := reader.readline()) not in (b"\r\n", b""):
+                name, _, value = line.decode().partition(":")
+                headers[name.lower()] = value.strip()
+            assert b"Command: wait()" in reader.read(int(headers["content-length"]))
+        reader.close()
+    assert len(server.requests) == 3 and server.remaining() == 0
 
 
 async def test_a_scripted_robot_among_heuristic_teammates(mhrc_run_episode: Any) -> None:
