@@ -235,8 +235,12 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, credentials:
 
     logs.configure(log_level)
     creds = _credentials(credentials, insecure)
-    if creds is not None and values.get("run") is None:
-        values["run"] = creds.run
+    if creds is not None:
+        from .zenoh_log import watch_refusals
+
+        watch_refusals()  # a refused login is said here too, not only on the refused agent's side
+        if values.get("run") is None:
+            values["run"] = creds.run
     cfg = _config(start_timeout=start_timeout, credentials=credentials if creds is not None else None, **values)
     if quiet:
         _run(lambda: serve_world(cfg))
@@ -276,11 +280,19 @@ def agent(
     cfg = _config(**values)
     spec = cfg.robot_specs().get(robot) if cfg.llm else None
     options = cfg.policy_options(spec)
+    from mhrc.agents.agent import AgentError
+    from mhrc.agents.llm import LLMFatalError
+
+    from .security import SecurityError
+
     try:
         done = _run(lambda: attach_agent(
             robot, connect, run, attach_timeout, spec, cfg.base_url, cfg.client_options(spec), security=creds, **options))  # fmt: skip
-    except Exception as exc:  # typed agent errors: say what happened, exit non-zero
-        raise click.ClickException(str(exc)) from None
+    except (AgentError, LLMFatalError, SecurityError, ConfigError) as exc:  # the world, the model or the setup: one line, exit 2
+        click.echo(f"mhrc agent {robot}: {exc}", err=True)
+        sys.exit(2)
+    except Exception as exc:  # anything else: say what happened, exit 1
+        raise click.ClickException(f"{type(exc).__name__}: {exc}") from None
     if done is not None:
         m = done.metrics
         click.echo(f"{robot}: episode {done.run} ended ({done.reason}): success={m.success} placed={m.placed}/{m.total} TS={m.temporal_steps}")
@@ -348,14 +360,20 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--concurrency", default=None, type=int,
               help="Episodes each local worker runs at once. Default: 1 for the heuristic (CPU-bound), replays and gguf: models; "
                    "with a model server, enough episodes to fill its slots (llama.cpp's /props), else 12 for openai and vllm, 1 for ollama and lmstudio.")
-@click.option("--listen", default=None, help="Endpoint for the bus, e.g. tcp/0.0.0.0:7448 to let other hosts' workers join; default: a free loopback port.")
+@click.option("--listen", default=None,
+              help="Endpoint for the bus, e.g. tls/0.0.0.0:7448 (tcp/ with --insecure) to let other hosts' workers join; default: a free loopback port.")
+@click.option("--secure/--insecure", "secure", default=True, show_default=True,
+              help="--secure (the default): TLS and a login for every worker (the login is written to OUT/credentials/worker/ "
+                   "while the evaluation runs; workers elsewhere need a copy); --insecure: the open tcp bus.")
+@click.option("--host", "hosts", multiple=True, metavar="NAME",
+              help="A name workers reach the coordinator by, for its TLS certificate (repeatable), e.g. eval in docker compose.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory; default runs/eval-<time>.")
 @click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
 def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
-          aids: str | None, schedule: str, time_scale: float, workers: int, concurrency: int | None, listen: str | None, out: Path | None, resume: bool,
-          dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
+          aids: str | None, schedule: str, time_scale: float, workers: int, concurrency: int | None, listen: str | None, secure: bool,
+          hosts: tuple[str, ...], out: Path | None, resume: bool, dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
     summary.md / summary.csv (tables shaped like the paper's Table I and II with 95% bootstrap
@@ -431,7 +449,8 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     with progress:
         try:
             rows = _run(
-                lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook, concurrency=concurrency),
+                lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook, concurrency=concurrency,
+                                 secure=secure, hosts=hosts),
                 stopping=f"stopping the workers; every finished episode is kept in {out / 'episodes.jsonl'} "
                 f"(continue with --resume --out {out})",
             )
@@ -450,13 +469,19 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
 @click.option("--concurrency", default=1, show_default=True, type=click.IntRange(min=1),
               help="Episodes this worker runs at once (with an LLM, episodes mostly wait on the model).")
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-def worker(connect: str, eval_id: str | None, concurrency: int, log_level: str) -> None:
+@click.option("--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS",
+              help="The evaluation's worker login (OUT/credentials/worker/worker.json, written by `mhrc eval`); default $MHRC_CREDENTIALS.")
+@click.option("--insecure", is_flag=True, help="Join a coordinator on the open tcp bus (mhrc eval --insecure).")
+def worker(connect: str, eval_id: str | None, concurrency: int, log_level: str, credentials: Path | None, insecure: bool) -> None:
     """Run episodes for an `mhrc eval` coordinator until its grid is done."""
     from .evaluation import run_worker
 
     logs.configure(log_level)
+    login = _credentials(credentials, insecure)
+    if login is not None and login.kind != "eval":
+        raise click.UsageError(f"--credentials: {login.describe()} are a run's, not an evaluation's worker login")
     try:
-        n = _run(lambda: run_worker(connect, eval_id, concurrency=concurrency))
+        n = _run(lambda: run_worker(connect, eval_id, concurrency=concurrency, login=login))
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
     click.echo(f"worker ran {n} episode(s)", err=True)
@@ -503,6 +528,37 @@ def schema_(out: Path | None) -> None:
         return
     for path in schema_mod.write(out):
         click.echo(str(path))
+
+
+@main.command("credentials")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="The directory to write them into (created 0700).")
+@click.option("--run", default=None, help="The run id they are for; default: a new random one (the world and agents take it from them).")
+@click.option("--host", "hosts", multiple=True, metavar="NAME",
+              help="A name or address the agents reach the world by, besides 127.0.0.1 and localhost (repeatable): "
+                   "e.g. world, the compose service. The world's certificate names it.")
+@click.option("--days", default=7.0, show_default=True, type=float, help="How long the CA and the world's certificate stay valid.")
+@click.option("--split", is_flag=True, help="One directory per participant (DIR/world/, DIR/alice/, ...), each for that participant's container only.")
+@click.option("--force", is_flag=True, help="Replace credentials already in DIR (a world running with the old ones refuses the new).")
+def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float, split: bool, force: bool) -> None:
+    """Issue one run's credentials for a world and agents started by hand or in containers
+    (`mhrc up` makes its own): a CA, the world's TLS certificate, one login per participant.
+    Start the world with --credentials DIR/world.json and each agent with its own file."""
+    from .keys import new_run_id
+    from .security import SecurityError, make_run_credentials
+
+    if days <= 0:
+        raise click.BadParameter("must be more than 0", param_hint="--days")
+    existing = out.is_dir() and (any(out.glob("*.json")) or any(out.glob("*/*.json")))
+    if existing and not force:
+        raise click.UsageError(f"--out: {out} already holds credentials; pass --force to replace them")
+    run = run or new_run_id()
+    try:
+        files = make_run_credentials(run, ROBOTS, out, days=days, hosts=hosts, split=split)
+    except (SecurityError, ValueError, OSError) as exc:
+        raise click.UsageError(str(exc)) from None
+    click.echo(f"run {run}: credentials in {out} (valid {days:g} days; keep them private)", err=True)
+    for user, path in files.items():
+        click.echo(f"  {user}: {path}", err=True)
 
 
 @main.group("bus")

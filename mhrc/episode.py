@@ -214,9 +214,12 @@ class EpisodeConfig(BaseModel):
 EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
 
 
-async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, connect: str | None = None) -> EpisodeDone:
+async def serve_world(
+    cfg: EpisodeConfig, *, observe: EventHook | None = None, connect: str | None = None, login: Credentials | None = None
+) -> EpisodeDone:
     """Build the scene, open the world's bus (a router on cfg.endpoint, or with `connect` a
-    client of a router that already exists), record, and run the episode."""
+    client of a router that already exists, logged in with `login` if given: an evaluation
+    worker's), record, and run the episode."""
     from mhrc.world.service import WorldConfig, WorldService
     from mhrc.world.sim import Sim
 
@@ -229,7 +232,7 @@ async def serve_world(cfg: EpisodeConfig, *, observe: EventHook | None = None, c
     recorder = None
     world: WorldService | None = None
     try:
-        security = cfg.participant("world")
+        security = login if connect and login is not None else cfg.participant("world")
         bus = await (
             open_client(connect, 30.0, security=security) if connect else Bus.open(mode="router", listen=[cfg.endpoint], security=security)
         )
@@ -298,7 +301,7 @@ async def run_agent(
     from mhrc.agents.agent import RobotAgent
     from mhrc.agents.heuristic import heuristic_policy
 
-    if security is not None:
+    if security is not None and security.kind == "run":  # (an evaluation worker's login hosts every robot)
         from .security import check_for
 
         check_for(security, run=run, user=robot)
@@ -392,18 +395,31 @@ async def attach_agent(
 
 
 async def up_in_process(
-    cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None, connect: str | None = None
+    cfg: EpisodeConfig,
+    *,
+    observe: EventHook | None = None,
+    robots: tuple[str, ...] | None = None,
+    connect: str | None = None,
+    login: Credentials | None = None,
 ) -> EpisodeDone:
     """World and the given robots' agents (default: the episode's) as asyncio tasks of this
-    process; with `connect`, all of them join that router's bus instead of the world listening."""
+    process; with `connect`, all of them join that router's bus instead of the world listening,
+    each logged in with `login` when given (an evaluation worker's credentials)."""
     robots = cfg.robots if robots is None else robots
     async with local_models({r: cfg.robot_specs()[r] for r in robots}, cfg.llm_seed) as specs:
-        return await _run_in_process(cfg, specs, observe=observe, robots=robots, connect=connect)
+        return await _run_in_process(cfg, specs, observe=observe, robots=robots, connect=connect, login=login)
 
 
 async def _run_in_process(
-    cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...], connect: str | None
+    cfg: EpisodeConfig,
+    specs: dict[str, str | None],
+    *,
+    observe: EventHook | None,
+    robots: tuple[str, ...],
+    connect: str | None,
+    login: Credentials | None = None,
 ) -> EpisodeDone:
+    login = login if connect else None
     listening = asyncio.Event()
 
     def on_open(bus: Bus, run: str) -> None:
@@ -411,7 +427,7 @@ async def _run_in_process(
             observe(bus, run)
         listening.set()
 
-    world = asyncio.create_task(serve_world(cfg, observe=on_open, connect=connect), name="world")
+    world = asyncio.create_task(serve_world(cfg, observe=on_open, connect=connect, login=login), name="world")
     ready = asyncio.create_task(listening.wait())
     await asyncio.wait({world, ready}, return_when=asyncio.FIRST_COMPLETED)
     if world.done():  # the world could not start (its port is taken, ...): say so now, no agent is left connecting
@@ -422,7 +438,7 @@ async def _run_in_process(
         asyncio.create_task(
             run_agent(
                 r, cfg.run, connect or cfg.endpoint, llm=specs[r], base_url=cfg.base_url, client_options=cfg.client_options(own[r]),
-                security=cfg.participant(r), **cfg.policy_options(own[r]),
+                security=login or cfg.participant(r), **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",
         )

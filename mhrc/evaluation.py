@@ -14,6 +14,11 @@ with its own run id on the same bus, and push back the episode's trace. A worker
     alive/worker/<id>     liveliness token of each worker: when one vanishes, its unfinished
                           jobs go back to the queue
 
+Secured (`secure=True`, the default of `mhrc eval`): the router listens on tls/ with the
+coordinator's certificate and logs in every worker with the evaluation's one worker login
+(`mhrc.security.make_eval_credentials`, in DIR/credentials/ while the evaluation runs); a
+worker's episodes (world and agents) log in with it too.
+
 Each episode's metrics and failure diagnostics (`diag_*` columns) are computed by the coordinator
 from the trace (`mhrc.metrics`, `mhrc.diagnostics`), so a row means the same thing whichever host
 ran it. Rows are appended to DIR/episodes.jsonl as they arrive; `--resume` skips the keys already
@@ -34,6 +39,7 @@ import base64
 import contextlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -45,7 +51,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import structlog
 from pydantic import BaseModel, Field
@@ -60,6 +66,9 @@ from .metrics import TraceError, from_trace
 from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode, decode_event
 from .report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
 from .trace import read_trace
+
+if TYPE_CHECKING:
+    from .security import Credentials
 
 __all__ = ["EvalSpec", "evaluate", "merge_runs", "run_worker", "summary_csv", "summary_markdown", "write_summaries"]
 
@@ -226,10 +235,16 @@ async def find_eval(bus: Bus, timeout: float = 10.0) -> str:
 
 
 async def run_worker(
-    connect: str, eval_id: str | None = None, worker_id: str | None = None, connect_timeout: float = 30.0, concurrency: int = 1
+    connect: str,
+    eval_id: str | None = None,
+    worker_id: str | None = None,
+    connect_timeout: float = 30.0,
+    concurrency: int = 1,
+    login: Credentials | None = None,
 ) -> int:
     """Pull jobs from the coordinator at `connect` and run them until it says done; returns
-    how many episodes this worker ran.
+    how many episodes this worker ran. With `login` (the evaluation's worker credentials, for
+    a secured coordinator) this worker and every participant of its episodes log in with it.
 
     Up to `concurrency` episodes run at once as tasks of this process, each with its own world
     (its own PyBullet clients) and run id. With an LLM an episode mostly waits on the model, so
@@ -246,7 +261,9 @@ async def run_worker(
             ThreadPoolExecutor(max_workers=THREADS_PER_EPISODE * concurrency + 4, thread_name_prefix="mhrc-worker")
         )
     worker_id = worker_id or f"w-{uuid.uuid4().hex[:8]}"
-    bus = await open_client(connect, connect_timeout)
+    if login is not None and eval_id is None:
+        eval_id = login.run  # an evaluation's credentials name it
+    bus = await open_client(connect, connect_timeout, security=login)
     wake = asyncio.Event()  # an episode started or a job ended
     slots: list[_Slot] = []
     ran = 0
@@ -276,7 +293,7 @@ async def run_worker(
                     waiting = True
                     break
                 else:
-                    slots.append(_Slot(reply.job, worker_id, connect, wake))
+                    slots.append(_Slot(reply.job, worker_id, connect, wake, login))
             if not slots:
                 if done:
                     return ran
@@ -295,10 +312,10 @@ class _Slot:
     """One job a worker runs: its episode's task, and whether the episode has started (every
     robot attached) or ended; either wakes the worker."""
 
-    def __init__(self, job: Job, worker_id: str, connect: str, wake: asyncio.Event) -> None:
+    def __init__(self, job: Job, worker_id: str, connect: str, wake: asyncio.Event, login: Credentials | None = None) -> None:
         self.started = False
         self._wake = wake
-        self.task = asyncio.create_task(_run_job(job, worker_id, connect, self._observe), name=f"job-{job.key}")
+        self.task = asyncio.create_task(_run_job(job, worker_id, connect, self._observe, login), name=f"job-{job.key}")
         self.task.add_done_callback(lambda _t: wake.set())
 
     def _observe(self, bus: Bus, run: str) -> None:
@@ -318,12 +335,14 @@ class _Slot:
         bus.subscribe(Keys(run).world_event, on_event)
 
 
-async def _run_job(job: Job, worker_id: str, connect: str, observe: EventHook | None = None) -> EvalResult:
+async def _run_job(
+    job: Job, worker_id: str, connect: str, observe: EventHook | None = None, login: Credentials | None = None
+) -> EvalResult:
     with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
         trace = Path(tmp) / "trace.jsonl"
         try:
             cfg = EpisodeConfig.build(**job.config, trace=trace).resolved()
-            await up_in_process(cfg, connect=connect, observe=observe)
+            await up_in_process(cfg, connect=connect, observe=observe, login=login)
             data = await asyncio.to_thread(lambda: zlib.compress(trace.read_bytes(), 6))  # zlib lets go of the GIL
             return EvalResult(key=job.key, worker=worker_id, trace_z=base64.b64encode(data).decode())
         except asyncio.CancelledError:
@@ -335,14 +354,20 @@ async def _run_job(job: Job, worker_id: str, connect: str, observe: EventHook | 
             return EvalResult(key=job.key, worker=worker_id, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError))
 
 
-def worker_command(connect: str, eval_id: str, concurrency: int = 1) -> list[str]:
+def worker_command(connect: str, eval_id: str, concurrency: int = 1, credentials: Path | None = None) -> list[str]:
     return [
         sys.executable, "-m", "mhrc", "worker", "--connect", connect, "--eval", eval_id, "--concurrency", str(concurrency),
-        "--log-level", "error",
+        "--log-level", "error", *(["--credentials", str(credentials)] if credentials else ["--insecure"]),
     ]  # fmt: skip
 
 
 # --------------------------------------------------------------------------- coordinator
+def _forget(creds_dir: Path, secure: bool) -> None:
+    """The evaluation's credentials live as long as it runs: nobody can log in to a later one with them."""
+    if secure:
+        shutil.rmtree(creds_dir, ignore_errors=True)
+
+
 
 
 @dataclass
@@ -427,22 +452,43 @@ async def evaluate(
     progress: ProgressHook | None = None,
     idle_timeout: float = 120.0,
     concurrency: int = 1,
+    secure: bool = False,
+    hosts: tuple[str, ...] = (),
 ) -> list[dict[str, Any]]:
     """Run the grid; returns every row of DIR/episodes.jsonl (old ones too, with --resume).
 
     `workers` local worker processes are started, each running up to `concurrency` episodes at
     once; with `listen`, workers on other hosts may join (with workers=0 only they run
     episodes). Without any worker alive for `idle_timeout` seconds, the evaluation stops with
-    an error rather than hang."""
+    an error rather than hang.
+
+    `secure` puts the bus on TLS with logins (`mhrc.security.make_eval_credentials`): the
+    coordinator's certificate names 127.0.0.1, localhost, the --listen host and `hosts`; the
+    workers' login is written to DIR/credentials/worker/worker.json for as long as the
+    evaluation runs (workers elsewhere need a copy)."""
     if concurrency < 1:
         raise ConfigError(f"--concurrency: must be at least 1 (got {concurrency})")
     spec.validate()
+    if listen is not None and secure and not listen.startswith("tls/"):
+        raise ConfigError(f"--listen: a secured evaluation listens on tls/ (e.g. tls/0.0.0.0:7448), not {listen}; or pass --insecure")
+    if listen is not None and not secure and listen.startswith("tls/"):
+        raise ConfigError(f"--listen: {listen} is tls/, which needs the evaluation's credentials: drop --insecure, or listen on tcp/")
     finished = prepare_out(out, spec, resume)
     todo = deque(j for j in spec.jobs() if j.key not in finished)
     tally = Tally(total=len(todo))
     eval_id = f"e{uuid.uuid4().hex[:8]}"
     keys = _keys(eval_id)
-    listen = listen or endpoint("127.0.0.1", free_port("127.0.0.1"))
+    listen = listen or endpoint("127.0.0.1", free_port("127.0.0.1"), tls=secure)
+    coordinator: Credentials | None = None
+    worker_login: Path | None = None
+    creds_dir = out / "credentials"
+    if secure:
+        from .security import COORDINATOR, WORKER, load, make_eval_credentials
+
+        listen_host = listen.split("/", 1)[1].rsplit(":", 1)[0].strip("[]")
+        names = tuple(h for h in (listen_host, *hosts) if h not in ("0.0.0.0", "::", ""))
+        files = make_eval_credentials(eval_id, creds_dir, hosts=names)
+        coordinator, worker_login = load(files[COORDINATOR]), files[WORKER]
     issued: dict[str, tuple[Job, str, float]] = {}
     attempts: dict[str, int] = defaultdict(int)
     alive_workers: set[str] = set()
@@ -528,7 +574,11 @@ async def evaluate(
                 todo.appendleft(job)
 
     procs: list[subprocess.Popen[bytes]] = []
-    bus = await Bus.open(mode="router", listen=[listen])
+    try:
+        bus = await Bus.open(mode="router", listen=[listen], security=coordinator)
+    except BaseException:
+        _forget(creds_dir, secure)
+        raise
     try:
         bus.serve(keys["job"], on_job)
         bus.subscribe(keys["result"], on_result)
@@ -538,7 +588,7 @@ async def evaluate(
             progress(tally, None)
         env = child_env(dict(os.environ, PYTHONUNBUFFERED="1"))  # workers die with the coordinator, even after a SIGKILL
         for _ in range(workers if todo else 0):
-            procs.append(subprocess.Popen(worker_command(listen, eval_id, concurrency), env=env, stdin=subprocess.DEVNULL))
+            procs.append(subprocess.Popen(worker_command(listen, eval_id, concurrency, worker_login), env=env, stdin=subprocess.DEVNULL))
         idle_since = time.monotonic()
         while not all_done.is_set():
             with contextlib.suppress(asyncio.TimeoutError):
@@ -549,6 +599,7 @@ async def evaluate(
                 raise RuntimeError(
                     f"no worker has been alive for {idle_timeout:.0f} s with {tally.total - tally.done} episodes left; "
                     f"start workers with: mhrc worker --connect {listen}"
+                    + (f" --credentials {worker_login}" if worker_login else " --insecure")
                 )
         await asyncio.sleep(0.5)  # let workers ask once more and hear "done"
         if aborted:
@@ -566,6 +617,7 @@ async def evaluate(
     finally:
         await _reap(procs, WORKER_GRACE)  # the workers heard "done": they end by themselves
         await bus.close()
+        _forget(creds_dir, secure)
     rows = read_rows(rows_path)
     write_summaries(rows, out)
     return rows

@@ -5,10 +5,15 @@ authentication and access-control rules on the world's router.
 
 - `ca.pem`: the run's certificate authority (its private key is never written: nobody can
   sign another certificate for this run once the files exist);
-- `world.pem` / `world.key`: the world's server certificate (SAN 127.0.0.1, localhost);
+- `world.pem` / `world.key`: the world's server certificate (SAN 127.0.0.1, localhost and any
+  `hosts` the agents reach it by, e.g. a compose service name);
 - `users.txt`: the zenoh user/password dictionary (`user:password` per line), the world's only;
 - `<user>.json` per participant (`world`, each robot, `observer`): its run, user name,
   password and the files it may read. Each participant gets only its own.
+
+With `split`, each participant's files go to a directory of its own (`mhrc credentials --split`,
+for containers: each mounts only its own). `mhrc up` calls this for every secured run;
+`mhrc credentials` for a world and agents started by hand or by docker compose.
 
 The world's router (`apply(conf, creds, router=True)`) listens on TLS with its certificate,
 authenticates every client against the dictionary (`transport/auth/usrpwd/dictionary_file`)
@@ -39,6 +44,9 @@ from cryptography.x509.oid import NameOID
 ENV = "MHRC_CREDENTIALS"
 WORLD = "world"
 OBSERVER = "observer"  # subscribes to everything of the run, publishes nothing (the recorder of `mhrc up --processes`)
+COORDINATOR = "coordinator"  # an evaluation's router (`mhrc eval`)
+WORKER = "worker"  # the login every worker of an evaluation shares (`mhrc worker`)
+RUN, EVAL = "run", "eval"  # the kinds of credentials: one episode's participants, or one evaluation's
 
 
 class SecurityError(RuntimeError):
@@ -88,10 +96,18 @@ def make_server_cert(
     name: str = "localhost",
     days: float = 7.0,
     not_before: datetime.datetime | None = None,
+    hosts: Sequence[str] = (),
 ) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
-    """A server certificate signed by `ca` for 127.0.0.1 and localhost (`not_before` and a
-    negative `days` make an expired one, for tests)."""
+    """A server certificate signed by `ca` for 127.0.0.1, localhost and `hosts` (names or IP
+    addresses the agents connect to, e.g. a compose service name); `not_before` and a short
+    `days` make an expired one, for tests."""
     key = _key()
+    names: list[x509.GeneralName] = []
+    for h in dict.fromkeys(("localhost", "127.0.0.1", *hosts)):
+        try:
+            names.append(x509.IPAddress(ipaddress.ip_address(h)))
+        except ValueError:
+            names.append(x509.DNSName(h))
     start = not_before or datetime.datetime.now(datetime.timezone.utc) - datetime.timedelta(minutes=5)
     cert = (
         x509.CertificateBuilder()
@@ -102,7 +118,7 @@ def make_server_cert(
         .not_valid_before(start)
         .not_valid_after(start + datetime.timedelta(days=days))
         .add_extension(
-            x509.SubjectAlternativeName([x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]),
+            x509.SubjectAlternativeName(names),
             critical=False,
         )
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
@@ -129,21 +145,28 @@ def _write(path: Path, data: bytes | str, private: bool = True) -> Path:
 # ---------------------------------------------------------------------------------- credentials
 @dataclass(frozen=True)
 class Credentials:
-    """One participant's credentials for one run."""
+    """One participant's credentials for one run (kind "run"), or for one evaluation (kind
+    "eval": `run` is then the evaluation's id, the coordinator serves, the workers log in)."""
 
     run: str
     user: str
     password: str
     ca: Path  # the run's CA certificate, that the world's certificate must chain to
     robots: tuple[str, ...] = ()
-    cert: Path | None = None  # the world's server certificate, key and user dictionary
+    cert: Path | None = None  # the server's (world's, coordinator's) certificate, key and user dictionary
     key: Path | None = None
     users: Path | None = None
     path: Path | None = None  # the file these came from
+    kind: str = RUN
 
     @property
     def is_world(self) -> bool:
         return self.user == WORLD
+
+    @property
+    def is_server(self) -> bool:
+        """The credentials of the participant whose router the others log in to."""
+        return self.user == (COORDINATOR if self.kind == EVAL else WORLD)
 
     def describe(self) -> str:
         return f"user {self.user!r} of run {self.run!r}" + (f" ({self.path})" if self.path else "")
@@ -156,30 +179,75 @@ def make_run_credentials(
     *,
     days: float = 7.0,
     observer: bool = True,
+    hosts: Sequence[str] = (),
+    split: bool = False,
 ) -> dict[str, Path]:
-    """Generate a CA, the world's certificate and one user per participant into `directory`;
-    returns each user's credentials file."""
+    """Generate a CA, the world's certificate (for 127.0.0.1, localhost and `hosts`) and one
+    user per participant into `directory`; returns each user's credentials file.
+
+    With `split`, each participant's files go to a directory of its own (DIR/alice/alice.json
+    beside its own copy of ca.pem; DIR/world/ also holds the certificate, key and user
+    dictionary), to be mounted into that participant's container and no other."""
     from .keys import check_id
 
     check_id(run, "run id")
     for r in robots:
         check_id(r, "robot")
+    users = [WORLD, *robots] + ([OBSERVER] if observer else [])
+    return _issue(run, RUN, users, directory, robots=robots, days=days, hosts=hosts, split=split)
+
+
+def make_eval_credentials(eval_id: str, directory: Path, *, days: float = 7.0, hosts: Sequence[str] = ()) -> dict[str, Path]:
+    """An evaluation's credentials: the coordinator's router (its files in `directory`) and the
+    one login its workers share (in `directory`/worker/, to hand to workers on other hosts or
+    mount into their containers). A worker hosts whole episodes, world and agents alike, so the
+    login proves "a worker of this evaluation"; the per-robot access control of a run does not
+    apply inside it."""
+    return _issue(eval_id, EVAL, [COORDINATOR, WORKER], directory, days=days, hosts=hosts, split_users=(WORKER,))
+
+
+def _issue(
+    run: str,
+    kind: str,
+    users: Sequence[str],
+    directory: Path,
+    *,
+    robots: Sequence[str] = (),
+    days: float,
+    hosts: Sequence[str],
+    split: bool = False,
+    split_users: Sequence[str] = (),
+) -> dict[str, Path]:
+    """Write a CA, the server's (users[0]'s) certificate and a login per user; each user's
+    files go to `directory`, or to a directory of its own with `split` (or if in `split_users`)."""
     directory.mkdir(parents=True, exist_ok=True)
     os.chmod(directory, 0o700)
     ca, ca_key = make_ca(run, days=days)
-    cert, key = make_server_cert(ca, ca_key, days=days)
-    ca_path = _write(directory / "ca.pem", _pem_cert(ca), private=False)
-    cert_path = _write(directory / "world.pem", _pem_cert(cert))
-    key_path = _write(directory / "world.key", _pem_key(key))
-    users = [WORLD, *robots] + ([OBSERVER] if observer else [])
+    cert, key = make_server_cert(ca, ca_key, days=days, hosts=hosts)
+    server = users[0]
     passwords = {u: secrets.token_urlsafe(24) for u in users}
-    users_path = _write(directory / "users.txt", "".join(f"{u}:{p}\n" for u, p in passwords.items()))
+
+    def home(user: str) -> Path:
+        if not split and user not in split_users:
+            return directory
+        d = directory / user
+        d.mkdir(exist_ok=True)
+        os.chmod(d, 0o700)
+        return d
+
     out: dict[str, Path] = {}
     for u in users:
-        entry: dict[str, Any] = {"run": run, "user": u, "password": passwords[u], "ca": ca_path.name, "robots": list(robots)}
-        if u == WORLD:
-            entry.update(cert=cert_path.name, key=key_path.name, users=users_path.name)
-        out[u] = _write(directory / f"{u}.json", json.dumps(entry, indent=2) + "\n")
+        d = home(u)
+        _write(d / "ca.pem", _pem_cert(ca), private=False)
+        entry: dict[str, Any] = {"run": run, "user": u, "password": passwords[u], "ca": "ca.pem", "robots": list(robots)}
+        if kind != RUN:
+            entry["kind"] = kind
+        if u == server:
+            _write(d / f"{u}.pem", _pem_cert(cert))
+            _write(d / f"{u}.key", _pem_key(key))
+            _write(d / "users.txt", "".join(f"{name}:{pw}\n" for name, pw in passwords.items()))
+            entry.update(cert=f"{u}.pem", key=f"{u}.key", users="users.txt")
+        out[u] = _write(d / f"{u}.json", json.dumps(entry, indent=2) + "\n")
     return out
 
 
@@ -203,6 +271,7 @@ def load(path: Path | str) -> Credentials:
             key=rel(data.get("key")),
             users=rel(data.get("users")),
             path=p,
+            kind=str(data.get("kind", RUN)),
         )
     except FileNotFoundError:
         raise SecurityError(f"credentials file {p} does not exist") from None
@@ -211,9 +280,30 @@ def load(path: Path | str) -> Credentials:
     for f in (creds.ca, creds.cert, creds.key, creds.users):
         if f is not None and not f.is_file():
             raise SecurityError(f"credentials file {p} names {f}, which does not exist")
-    if creds.is_world and (creds.cert is None or creds.key is None or creds.users is None):
-        raise SecurityError(f"credentials file {p}: the world needs cert, key and users")
+    if creds.kind not in (RUN, EVAL):
+        raise SecurityError(f"credentials file {p}: unknown kind {creds.kind!r} (run or eval)")
+    if creds.is_server and (creds.cert is None or creds.key is None or creds.users is None):
+        raise SecurityError(f"credentials file {p}: the {creds.user} needs cert, key and users")
+    for f in (creds.ca, creds.cert):
+        if f is not None:
+            _check_current(f, p)
     return creds
+
+
+def _check_current(pem: Path, source: Path) -> None:
+    """Raise unless the certificate in `pem` is valid now (not expired, not yet valid)."""
+    try:
+        cert = x509.load_pem_x509_certificate(pem.read_bytes())
+    except (OSError, ValueError) as exc:
+        raise SecurityError(f"credentials file {source} names {pem}, which is not a PEM certificate ({exc})") from None
+    now = datetime.datetime.now(datetime.timezone.utc)
+    if cert.not_valid_after_utc < now:
+        raise SecurityError(
+            f"the certificate {pem} (of {source}) expired on {cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC: "
+            "issue new credentials (mhrc credentials, or mhrc up makes fresh ones)"
+        )
+    if cert.not_valid_before_utc > now:
+        raise SecurityError(f"the certificate {pem} (of {source}) is not valid before {cert.not_valid_before_utc:%Y-%m-%d %H:%M} UTC")
 
 
 def from_env_or(path: Path | str | None) -> Credentials | None:
@@ -330,12 +420,14 @@ def apply(conf: Any, creds: Credentials, *, router: bool) -> None:
     put("transport/link/tls/verify_name_on_connect", True)
     put("transport/link/tls/close_link_on_expiration", True)
     if router:
-        if not creds.is_world:
-            raise SecurityError(f"only the world's credentials can serve the run's bus, not {creds.describe()}")
+        if not creds.is_server:
+            whose = "the coordinator's" if creds.kind == EVAL else "the world's"
+            raise SecurityError(f"only {whose} credentials can serve the bus, not {creds.describe()}")
         put("transport/link/tls/listen_certificate", str(creds.cert))
         put("transport/link/tls/listen_private_key", str(creds.key))
         put("transport/auth/usrpwd/dictionary_file", str(creds.users))
-        put("access_control", acl(creds.run, creds.robots))
+        if creds.kind == RUN:  # an evaluation's workers host whole episodes: a login, no per-robot rules
+            put("access_control", acl(creds.run, creds.robots))
     else:
         put("transport/auth/usrpwd/user", creds.user)
         put("transport/auth/usrpwd/password", creds.password)

@@ -182,14 +182,21 @@ def test_episode_compose_wiring() -> None:
     assert ctx.params["host"] == "0.0.0.0"  # reachable from the agents' containers
     port = ctx.params["port"]
     assert ctx.params["task"] == "pack_objects" and ctx.params["seed"] == 0
-    assert ctx.params.get("insecure", True) and not ctx.params.get("credentials")  # the open bus, said explicitly
+    # secured: a one-shot service issues the run's credentials, each participant mounts only its own
+    issue = parse(argv_of(services["credentials"], {})).params
+    assert issue["split"] and "world" in issue["hosts"] and issue["out"] == Path("/credentials")
+    assert parse(argv_of(services["credentials"], FULL_ENV)).params["run"] == "docker-run"
+    assert not ctx.params["insecure"] and ctx.params["credentials"] == Path("/credentials/world.json")
+    assert _subpath(services["world"]) == "world"
     for robot in ROBOT_SERVICES:
         argv = argv_of(services[robot], {})
         params = parse(argv).params
         assert params["robot"] == robot
-        assert params["connect"] == f"tcp/world:{port}"
-        assert params["llm"] is None and params["run"] is None  # defaults: heuristic, the only world on the bus
-        assert params.get("insecure", True) and not params.get("credentials")
+        assert params["connect"] == f"tls/world:{port}"
+        assert params["llm"] is None and params["run"] is None  # defaults: heuristic, the credentials' run
+        assert not params["insecure"] and params["credentials"] == Path(f"/credentials/{robot}.json")
+        assert _subpath(services[robot]) == robot  # never another robot's password
+        assert services[robot]["depends_on"]["credentials"]["condition"] == "service_completed_successfully"
         full = parse(argv_of(services[robot], FULL_ENV)).params
         assert (full["llm"], full["base_url"], full["run"]) == ("llamacpp:local", "http://llm:8080/v1", "docker-run")
         assert service_env(services[robot], FULL_ENV)["OPENAI_API_KEY"] == "sk-test"
@@ -208,14 +215,27 @@ def test_episode_compose_wiring() -> None:
     assert "--port 8080" in interpolate(llm["command"], {}) and "llm:8080" in FULL_ENV["MHRC_BASE_URL"]
 
 
+def _subpath(service: dict[str, Any]) -> str | None:
+    """The subdirectory of the `credentials` volume a service mounts (read-only) at /credentials."""
+    for v in service.get("volumes", []):
+        if isinstance(v, dict) and v.get("source") == "credentials":
+            assert v["target"] == "/credentials" and v.get("read_only") is True
+            return str(v["volume"]["subpath"])
+    return None
+
+
 def test_eval_compose_wiring() -> None:
     services = load(COMPOSE_EVAL)["services"]
     coordinator, worker = argv_of(services["eval"], {}), argv_of(services["worker"], {})
     cparams, wparams = parse(coordinator).params, parse(worker).params
     assert cparams["workers"] == 0 and cparams["resume"] is True
     listen = cparams["listen"]
-    assert listen.startswith("tcp/0.0.0.0:")
-    assert wparams["connect"] == "tcp/eval:" + listen.rsplit(":", 1)[1]
+    assert listen.startswith("tls/0.0.0.0:") and cparams["secure"] and "eval" in cparams["hosts"]
+    assert wparams["connect"] == "tls/eval:" + listen.rsplit(":", 1)[1]
+    assert wparams["credentials"] == Path("/credentials/worker.json") and not wparams["insecure"]
+    mount = next(v for v in services["worker"]["volumes"] if isinstance(v, dict))  # only the workers' login, read-only
+    assert (mount["source"], mount["target"], mount["read_only"]) == ("results", "/credentials", True)
+    assert interpolate(mount["volume"]["subpath"], FULL_ENV) == "gemma/credentials/worker"
     assert str(cparams["out"]).startswith("/data/results/")
     assert any(str(v).endswith(":/data/results") for v in services["eval"]["volumes"])
     assert interpolate(str(services["worker"]["deploy"]["replicas"]), {}) == "2"
@@ -279,7 +299,7 @@ def _to_loopback(argv: list[str], port: int) -> list[str]:
         elif a == "--port":
             argv[i + 1] = str(port)
         elif a in ("--connect", "--listen"):
-            argv[i + 1] = re.sub(r"^tcp/[^:]+:\d+$", f"tcp/127.0.0.1:{port}", argv[i + 1])
+            argv[i + 1] = re.sub(r"^(tcp|tls)/[^:]+:\d+$", rf"\1/127.0.0.1:{port}", argv[i + 1])
     return argv
 
 
@@ -361,9 +381,12 @@ def test_compose_episode_runs_as_local_processes(tmp_path: Path) -> None:
     services = load(COMPOSE)["services"]
     env = _compose_env()
     port = free_port("127.0.0.1")
+    creds = tmp_path / "credentials"  # the volume; a service's subpath mount is its subdirectory
     with Processes(tmp_path) as ps:
+        ps.start("credentials", services["credentials"], env, port, rewrite={"/credentials": str(creds)})
+        assert ps.wait("credentials", 60) == 0, ps.out("credentials")
         for name in ("world", *ROBOT_SERVICES):
-            ps.start(name, services[name], env, port)
+            ps.start(name, services[name], env, port, rewrite={"/credentials": str(creds / str(_subpath(services[name])))})
         code = ps.wait("world", 240)
         assert code == 0, f"world: {code}\n{ps.out('world')}\n" + "\n".join(map(ps.out, ROBOT_SERVICES))
         for name in ROBOT_SERVICES:
@@ -376,6 +399,7 @@ def test_compose_episode_runs_as_local_processes(tmp_path: Path) -> None:
     assert kinds.count("episode_started") == 1 and kinds.count("episode_done") == 1
     done = next(m for m in msgs if isinstance(m, dict) and m.get("kind") == "episode_done")
     assert set(done["metrics"]["action_steps_per_robot"]) == set(ROBOT_SERVICES)
+    assert "tls/127.0.0.1" in ps.out("world") and "insecure" not in ps.out("world")  # the secured bus
 
 
 def test_compose_eval_runs_as_local_processes(tmp_path: Path) -> None:
@@ -384,10 +408,14 @@ def test_compose_eval_runs_as_local_processes(tmp_path: Path) -> None:
     env = _compose_env(MHRC_TASKS="pack_objects", MHRC_SCENES="kitchen", MHRC_OBJECTS="3")
     port = free_port("127.0.0.1")
     results = tmp_path / "results"
+    login = results / "eval" / "credentials" / "worker"  # the workers' subpath mount
     with Processes(tmp_path) as ps:
         ps.start("eval", services["eval"], env, port, rewrite={"/data/results": str(results)})
+        deadline = time.monotonic() + 60  # compose waits for the coordinator's healthcheck: it listens after writing the login
+        while not (login / "worker.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
         for i in range(2):  # the replicas
-            ps.start(f"worker-{i}", services["worker"], env, port)
+            ps.start(f"worker-{i}", services["worker"], env, port, rewrite={"/credentials": str(login)})
         assert ps.wait("eval", 240) == 0, ps.out("eval")
         for i in range(2):
             assert ps.wait(f"worker-{i}", 60) == 0, ps.out(f"worker-{i}")

@@ -28,10 +28,11 @@ def _creds(tmp_path: Path, run: str = "sec", name: str = "cred") -> dict[str, Pa
 
 
 @contextlib.asynccontextmanager
-async def _router(files: dict[str, Path]):  # type: ignore[no-untyped-def]
+async def _router(files: dict[str, Path], world: security.Credentials | None = None):  # type: ignore[no-untyped-def]
     """A bare router with the world's credentials (TLS, logins, access control)."""
     port = free_port()
-    bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port, tls=True)], security=security.load(files["world"]))
+    creds = world or security.load(files["world"])
+    bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port, tls=True)], security=creds)
     try:
         yield bus, endpoint("127.0.0.1", port, tls=True)
     finally:
@@ -114,15 +115,18 @@ async def test_foreign_ca_and_wrong_run_fail_clearly(tmp_path: Path) -> None:
 async def test_expired_certificate_fails_clearly(tmp_path: Path) -> None:
     files = _creds(tmp_path)
     d = tmp_path / "cred"
+    world = security.load(files["world"])  # loaded while valid: a certificate that expires under a running world
     ca, ca_key = security.make_ca("sec")
     past = datetime.datetime.now(datetime.timezone.utc) - datetime.timedelta(days=10)
     cert, key = security.make_server_cert(ca, ca_key, not_before=past, days=1)
     (d / "ca.pem").write_bytes(security._pem_cert(ca))
     (d / "world.pem").write_bytes(security._pem_cert(cert))
     (d / "world.key").write_bytes(security._pem_key(key))
-    async with _router(files) as (_world, ep):
+    async with _router(files, world) as (_world, ep):
         with pytest.raises(BusRefused, match="expired"):
             await open_client(ep, 10, security=security.load(files["alice"]))
+    with pytest.raises(security.SecurityError, match=r"world.pem .* expired on"):  # a world never starts with one
+        security.load(files["world"])
 
 
 async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> None:
@@ -204,3 +208,106 @@ async def test_up_processes_with_credentials(tmp_path: Path) -> None:
     done = await up_processes(cfg)
     assert done.reason == "success"
     assert done.metrics.success
+
+
+def _wait_for(path: Path, text: str, timeout: float = 60.0) -> str:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        out = path.read_text(errors="replace") if path.exists() else ""
+        if text in out:
+            return out
+        time.sleep(0.2)
+    raise AssertionError(f"{text!r} never appeared in {path}:\n{path.read_text(errors='replace')[-3000:]}")
+
+
+def _open_without_login(port: int, ca: Path) -> None:
+    """A raw zenoh client that trusts the run's CA but sends no user and password (our own
+    clients refuse to try: mhrc.bus says "no credentials" before connecting)."""
+    import zenoh
+
+    conf = zenoh.Config()
+    for key, value in {
+        "mode": "client", "connect/endpoints": [f"tls/127.0.0.1:{port}"], "connect/timeout_ms": 1500,
+        "scouting/multicast/enabled": False, "transport/link/tls/root_ca_certificate": str(ca),
+    }.items():  # fmt: skip
+        conf.insert_json5(key, json.dumps(value))
+    with pytest.raises(zenoh.ZError):
+        zenoh.open(conf).close()
+
+
+async def test_the_world_says_which_logins_it_refused(tmp_path: Path) -> None:
+    """Bad input on the world's side: `mhrc world` names the cause of every refused login (a wrong
+    password, no login at all, another run's credentials), and keeps serving."""
+    import subprocess
+    import sys
+
+    files = _creds(tmp_path)
+    other = _creds(tmp_path, run="other", name="other")
+    wrong = json.loads(files["alice"].read_text())
+    wrong["password"] = "guessed"
+    (tmp_path / "cred" / "wrong.json").write_text(json.dumps(wrong))
+    port = free_port()
+    err = tmp_path / "world.err"
+    with err.open("wb") as sink:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "mhrc", "world", "--credentials", str(files["world"]), "--port", str(port), "--objects", "3"],
+            stdout=subprocess.DEVNULL, stderr=sink, stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+        try:
+            _wait_for(err, "world listening")
+            ep = endpoint("127.0.0.1", port, tls=True)
+            with pytest.raises(BusRefused):
+                await open_client(ep, 10, security=security.load(tmp_path / "cred" / "wrong.json"))
+            await asyncio.to_thread(_open_without_login, port, security.load(files["alice"]).ca)
+            with pytest.raises(BusRefused):
+                await open_client(ep, 10, security=security.load(other["alice"]))
+            out = _wait_for(err, "another run (another CA)")
+            assert "refused a login" in out and "a wrong password" in out and "no login" in out
+            assert "Cannot monitor expiration" not in out and "\x1b[" not in out  # zenoh's per-link noise stays out
+            alice = await open_client(ep, 10, security=security.load(files["alice"]))  # the world still serves
+            await alice.close()
+            assert proc.poll() is None
+        finally:
+            proc.terminate()
+            proc.wait(timeout=20)
+
+
+def test_mhrc_credentials_issues_a_run_for_containers(tmp_path: Path) -> None:
+    """`mhrc credentials --split --host world`: each participant's directory holds only its own
+    login (and the CA), the world's certificate names `world`, and DIR is never overwritten by accident."""
+    import subprocess
+    import sys
+
+    from cryptography import x509
+
+    out = tmp_path / "creds"
+    cmd = [sys.executable, "-m", "mhrc", "credentials", "--out", str(out), "--split", "--host", "world", "--run", "dock"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "run dock" in done.stderr and done.stdout == ""
+    for user in ("world", *ROBOTS, "observer"):
+        files = sorted(p.name for p in (out / user).iterdir())
+        expected = ["ca.pem", "users.txt", "world.json", "world.key", "world.pem"] if user == "world" else sorted(["ca.pem", f"{user}.json"])
+        assert files == expected, (user, files)
+        creds = security.load(out / user / f"{user}.json")
+        assert (creds.run, creds.user, creds.kind) == ("dock", user, "run")
+    cert = x509.load_pem_x509_certificate((out / "world" / "world.pem").read_bytes())
+    names = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert "world" in names.get_values_for_type(x509.DNSName) and "localhost" in names.get_values_for_type(x509.DNSName)
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert again.returncode == 2 and "already holds credentials; pass --force" in again.stderr
+    before = (out / "alice" / "alice.json").read_text()
+    assert subprocess.run([*cmd, "--force"], capture_output=True, text=True, timeout=60).returncode == 0
+    assert (out / "alice" / "alice.json").read_text() != before  # new passwords
+    bad = subprocess.run([sys.executable, "-m", "mhrc", "credentials", "--out", str(tmp_path / "b"), "--run", "Bad Id!"],
+                         capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert bad.returncode == 2 and "run id" in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
+
+
+def test_an_evaluation_login_serves_without_per_robot_rules(tmp_path: Path) -> None:
+    files = security.make_eval_credentials("e1234", tmp_path / "ev", hosts=("eval",))
+    coord, worker = security.load(files["coordinator"]), security.load(files["worker"])
+    assert coord.is_server and not worker.is_server and worker.kind == "eval" and worker.run == "e1234"
+    assert files["worker"].parent.name == "worker" and sorted(p.name for p in files["worker"].parent.iterdir()) == ["ca.pem", "worker.json"]
+    with pytest.raises(security.SecurityError, match="coordinator's credentials can serve"):
+        security.apply(__import__("zenoh").Config(), worker, router=True)

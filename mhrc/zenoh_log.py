@@ -1,0 +1,125 @@
+"""Zenoh's own log, read back by the world: refused logins said on the world's side too.
+
+A login refused by the world's router (a wrong password, an unknown user, a client without
+credentials) or a TLS handshake the client gave up (it does not trust the world's certificate)
+happens inside zenoh's transport, where no Python code of ours runs: zenoh says so only in its
+Rust log, which writes straight to file descriptor 1 (tracing's default, stdout). The agent's side learns the cause from
+`mhrc.security.diagnose`; this module gives the world's side the same, as one warning per cause
+(throttled, so a flood of bad logins costs a count per interval, not a line per attempt):
+
+    refused a login  cause='a wrong password: the client's credentials are altered, or of another run'
+
+`watch_refusals` turns zenoh's log on for just the lines that matter and points descriptor 1 at a
+pipe read by a thread: a known line becomes the world's warning (on stderr), the per-connection
+noise is dropped and anything else (a user's RUST_LOG, a C library's printf) is passed through
+unchanged to the real stdout. Python's own `sys.stdout` is re-pointed at the real stdout first,
+so the process's own output never goes through the pipe.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+import sys
+import threading
+from collections.abc import Callable
+
+import structlog
+
+from .logs import Throttle
+
+log = structlog.get_logger("mhrc.world")
+
+# zenoh's log for the world: the accept side of the transport (logins) and TLS link warnings
+# (alerts the client sent), nothing else; RUST_LOG, when set, replaces it (zenoh reads it first)
+FILTER = "off,zenoh_transport::unicast::establishment::accept=debug,zenoh_link_tls::unicast=warn"
+
+_ALERTS = {
+    "UnknownCA": "the client does not trust the world's certificate: its credentials are of another run (another CA)",
+    "CertificateExpired": "the client found the world's certificate expired: issue new credentials (mhrc credentials)",
+    "BadCertificate": "the client rejected the world's certificate: it does not name the host the client connected to",
+}
+_CAUSES: tuple[tuple[re.Pattern[str], str], ...] = (
+    (re.compile(r"UsrPwd extension - Recv OpenSyn\. Invalid password"),
+     "a wrong password: the client's credentials are altered, or of another run"),
+    (re.compile(r"UsrPwd extension - Recv OpenSyn\. Invalid user"), "an unknown user: not a participant of this run"),
+    (re.compile(r"UsrPwd extension - Recv InitSyn\. Expected extension"),
+     "no login: a client without credentials (or with --insecure) on the secured bus"),
+)  # fmt: skip
+_ALERT = re.compile(r"received fatal alert: (\w+)")
+_NOISE = ("Cannot monitor expiration", "New transport link accepted", "Accepted TLS connection")
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+_installed = False
+
+
+def classify(line: str) -> str | None:
+    """The cause a line of zenoh's log reports (a refused login or a rejected certificate), or
+    None for any other line."""
+    text = _ANSI.sub("", line)
+    for pattern, cause in _CAUSES:
+        if pattern.search(text):
+            return cause
+    alert = _ALERT.search(text)
+    if alert is not None:
+        name = alert.group(1)
+        return _ALERTS.get(name, f"the client ended the TLS handshake ({name}): it rejected the world's certificate")
+    return None
+
+
+def is_noise(line: str) -> bool:
+    """A per-connection line of zenoh's log that says nothing wrong."""
+    return any(n in line for n in _NOISE)
+
+
+def watch_refusals(on_refusal: Callable[[str], None] | None = None) -> bool:
+    """Report every login the world's router refuses (`on_refusal(cause)`; default: a throttled
+    warning). Call once, before the world's session opens; later calls do nothing. Returns
+    whether the watch is on (False where descriptor 1 cannot be redirected)."""
+    global _installed
+    if _installed:
+        return True
+    import zenoh
+
+    report = on_refusal or _warner()
+    try:
+        sys.stdout.flush()
+        real = os.dup(1)
+        r, w = os.pipe()
+    except (OSError, AttributeError, ValueError):
+        return False
+    # Python writes to the real stdout from now on; only native writes to fd 1 reach the pipe
+    sys.stdout = io.TextIOWrapper(io.FileIO(real, "w", closefd=False), encoding="utf-8", errors="backslashreplace",
+                                  line_buffering=True)  # fmt: skip
+    os.dup2(w, 1)
+    os.close(w)
+    threading.Thread(target=_pump, args=(r, real, report), name="mhrc-zenoh-log", daemon=True).start()
+    zenoh.init_log_from_env_or(FILTER)
+    _installed = True
+    return True
+
+
+def _warner() -> Callable[[str], None]:
+    throttle = Throttle()
+
+    def warn(cause: str) -> None:
+        due, held = throttle.due(cause)
+        if due:
+            log.warning("refused a login", cause=cause, **({"also_refused": held} if held else {}))
+
+    return warn
+
+
+def _pump(fd: int, real: int, report: Callable[[str], None]) -> None:
+    with os.fdopen(fd, "rb") as pipe:
+        for raw in pipe:
+            line = raw.decode("utf-8", errors="replace")
+            cause = classify(line)
+            try:
+                if cause is not None:
+                    report(cause)
+                elif not is_noise(line):
+                    os.write(real, raw)
+            except Exception:  # noqa: BLE001 - the pump must outlive any one bad line
+                continue
