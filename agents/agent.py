@@ -26,6 +26,7 @@ from mhrc.protocol import (
     AttachRequest,
     EpisodeDone,
     Observation,
+    RobotDetached,
     ProtocolError,
     Thought,
     Turn,
@@ -144,6 +145,10 @@ class RobotAgent:
         if isinstance(event, EpisodeDone):
             self.episode = event
             self._done.set()
+        elif isinstance(event, RobotDetached) and event.agent_id == self.agent_id and not self._done.is_set():
+            # the world let this robot go (its token was late or lost) while the agent lives: attach again
+            self._log.warning("the world detached this robot", reason=event.reason)
+            self._world_gone.set()
 
     def _on_world_liveliness(self, sample: Sample) -> None:
         if not sample.is_put:
@@ -223,7 +228,10 @@ class RobotAgent:
                         self._alive = True
                     if reply.accepted and reply.wait_turn:
                         self._log.info("attached, waiting for the turn", tick=reply.tick)
-                        turn = await self._await_turn(self._turn)
+                        try:
+                            turn = await self._await_turn(self._turn)
+                        except _WorldLost:  # frozen or cut off while the teammates acted: probe, attach again
+                            return await self._reattach("its turn")
                         return None if turn is None else turn.observation
                     if not reply.accepted or reply.observation is None:
                         raise AttachRejected(f"the world refused {self.robot}: {reply.reason}")
@@ -238,11 +246,9 @@ class RobotAgent:
     async def _await_turn(self, fut: asyncio.Future[Turn]) -> Turn | None:
         """The world's Turn for this robot; None when the episode ended first. Waiting for a
         turn is waiting for the teammates earlier in the order to plan and act, so it is bounded
-        like awaiting a result (result_timeout), not by the attach timeout."""
-        try:
-            return fut.result() if await self._until_end(fut, self.result_timeout, "its turn") else None
-        except _WorldLost:
-            raise WorldGone(f"the world disappeared while {self.robot} awaited its turn") from None
+        like awaiting a result (result_timeout), not by the attach timeout. _WorldLost when the
+        world's token went away meanwhile (the caller probes and attaches again)."""
+        return fut.result() if await self._until_end(fut, self.result_timeout, "its turn") else None
 
     async def _act(self, obs: Observation, decision: Decision) -> ActionResult | None:
         """Request the action and await its result; None when the world rejected it as stale."""

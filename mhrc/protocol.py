@@ -361,6 +361,7 @@ class RobotDetached(Message):
     robot: str
     tick: int
     reason: str
+    agent_id: str | None = None  # the agent let go (None from worlds before it was sent): it may attach again
 
 
 class EpisodeDone(Message):

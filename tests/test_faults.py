@@ -272,17 +272,57 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
             _kill_group(world)
 
 
+def test_a_world_killed_under_its_agent_is_one_line_and_exit_2(tmp_path: Path) -> None:
+    """`mhrc agent` whose world is killed (SIGKILL) mid-episode, and one with no world at all:
+    one line naming the cause, exit 2, no traceback."""
+    from mhrc.bus import free_port
+
+    port = free_port()
+    (tmp_path / "w").mkdir()
+    (tmp_path / "a").mkdir()
+    world = _start(["world", "--port", str(port), "--run", "gone", "--insecure", "--tick-delay", "0.5"], tmp_path / "w")
+    agent = None
+    try:
+        _until(lambda: "world listening" in _stderr(tmp_path / "w"), 60, "the world listening", world)
+        agent = _start(["agent", "--robot", "alice", "--run", "gone", "--connect", f"tcp/127.0.0.1:{port}", "--insecure", "--log-level", "info"],
+                       tmp_path / "a")  # fmt: skip
+        _until(lambda: "attached" in _stderr(tmp_path / "a"), 60, "alice attached", agent)
+        os.killpg(world.pid, signal.SIGKILL)
+        t0 = time.monotonic()
+        try:
+            code = agent.wait(timeout=EXIT_BOUND)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"the agent still ran {EXIT_BOUND} s after its world was killed")
+        took = time.monotonic() - t0
+        err = _stderr(tmp_path / "a")
+        lines = [line for line in err.splitlines() if line.startswith("mhrc agent alice:")]
+        assert code == 2 and len(lines) == 1 and "world disappeared" in lines[0] and "Traceback" not in err, err[-2000:]
+        print(f"world killed under alice: exit 2 in {took:.2f} s: {lines[0]}")
+        nobody = subprocess.run(
+            [sys.executable, "-m", "mhrc", "agent", "--robot", "bob", "--connect", f"tcp/127.0.0.1:{port}", "--insecure", "--attach-timeout", "3"],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert nobody.returncode == 2 and "Traceback" not in nobody.stderr, nobody.stderr[-2000:]
+        assert len([line for line in nobody.stderr.splitlines() if line.startswith("mhrc")]) == 1, nobody.stderr
+    finally:
+        _kill_group(world)
+        if agent is not None:
+            _kill_group(agent)
+
+
 # --------------------------------------------------------------------------- a frozen agent
 
 
-async def test_an_agent_frozen_and_resumed_attaches_again(tmp_path: Path) -> None:
+@pytest.mark.parametrize("schedule", ["lockstep", "sequential"])
+async def test_an_agent_frozen_and_resumed_attaches_again(schedule: str, tmp_path: Path) -> None:
     """David's agent (its own process) is frozen with SIGSTOP until the world has detached him
     (his lease expired), then resumed: he attaches again and plays on, instead of exiting with
-    "the world disappeared" while the world was fine."""
+    "the world disappeared" while the world was fine; under the sequential schedule he is
+    mostly frozen while awaiting his turn, which probes and attaches again the same way."""
     from mhrc.protocol import RobotAttached, RobotDetached
     from mhrc.testing import world_on_loopback
 
-    async with world_on_loopback(seed=0, n_objects=4, tick_delay=0.4, trace=tmp_path / "t.jsonl") as world:
+    async with world_on_loopback(seed=0, n_objects=4, tick_delay=0.4, schedule=schedule, trace=tmp_path / "t.jsonl") as world:
         events: list[Any] = []
         news = asyncio.Event()
         client = await world.client()
@@ -310,7 +350,11 @@ async def test_an_agent_frozen_and_resumed_attaches_again(tmp_path: Path) -> Non
                     news.clear()
                     await asyncio.wait_for(news.wait(), 120)
 
-            await until(lambda: sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) == 1 and any(getattr(e, "kind", "") == "tick" for e in events))
+            if schedule == "sequential":  # frozen at once: David, last in the order, awaits his first turn
+                await until(lambda: sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) == 1)
+            else:  # frozen mid-episode, awaiting a result
+                await until(lambda: sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) == 1
+                            and any(getattr(e, "kind", "") == "tick" for e in events))  # fmt: skip
             os.kill(david.pid, signal.SIGSTOP)
             await until(lambda: any(isinstance(e, RobotDetached) and e.robot == "david" for e in events))  # his lease ran out
             os.kill(david.pid, signal.SIGCONT)
@@ -326,3 +370,46 @@ async def test_an_agent_frozen_and_resumed_attaches_again(tmp_path: Path) -> Non
         assert code == 0 and "world disappeared" not in out and f"david: episode {world.run} ended" in out, out[-2000:]
         assert done.reason == "success", done.metrics
         await asyncio.gather(alice, bob, return_exceptions=True)
+
+
+async def test_an_agent_that_attaches_without_a_token_is_detached_not_waited_for(tmp_path: Path) -> None:
+    """A client that attaches and never declares its liveliness token (killed or frozen right
+    after the attach reply, or a hand-written agent that skips it) is detached within the token
+    grace, with the reason and its agent id, so the sequential schedule does not wait for it forever."""
+    from mhrc.keys import Keys
+    from mhrc.protocol import AttachReply, AttachRequest, RobotDetached, decode, decode_event
+    from mhrc.testing import world_on_loopback
+    from mhrc.world.service import TOKEN_GRACE
+
+    async with world_on_loopback(seed=0, n_objects=3, schedule="sequential", trace=tmp_path / "t.jsonl") as world:
+        client = await world.client()
+        detached: list[RobotDetached] = []
+        got = asyncio.Event()
+
+        def on_event(sample: Any) -> None:
+            event = decode_event(sample.payload)
+            if isinstance(event, RobotDetached):
+                detached.append(event)
+                got.set()
+
+        try:
+            k = Keys(world.run)
+            client.subscribe(k.world_event, on_event)
+            replies: list[bytes] = []
+            deadline = time.monotonic() + 120
+            while not replies and time.monotonic() < deadline:  # until the world serves attaches (its scene is built)
+                replies = await client.get(k.attach("alice"), AttachRequest(robot="alice", agent_id="tokenless"), timeout=2)
+            assert replies and decode(replies[0], AttachReply).accepted
+            t0 = time.monotonic()
+            await asyncio.wait_for(got.wait(), TOKEN_GRACE + 30)
+            took = time.monotonic() - t0
+            assert detached[0].robot == "alice" and detached[0].agent_id == "tokenless" and "no liveliness token" in detached[0].reason
+            assert took >= TOKEN_GRACE - 0.5
+            print(f"tokenless attach detached after {took:.1f} s")
+            # a real agent takes the robot afterwards, and the episode is played to the end
+            agents = [await world.agent(r, "heuristic") for r in ("alice", "bob", "david")]
+            done = await world.done(180)
+            assert done.reason == "success"
+            await asyncio.gather(*agents, return_exceptions=True)
+        finally:
+            await client.close()

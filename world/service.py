@@ -57,6 +57,8 @@ from .schedulers import Executed, Scheduler, TaskResultLike, make_scheduler
 
 log = structlog.get_logger("mhrc.world")
 
+TOKEN_GRACE = 3.0  # s after an accepted attach by which the agent's liveliness token must exist (the lease is 2 s)
+
 
 class SimLike(Protocol):
     """What the service needs of a simulator (world.sim.Sim provides it)."""
@@ -120,6 +122,7 @@ class WorldService:
         self._last_results: dict[str, str] = {}  # robot -> goal id of the last result released to it
         self._log = log.bind(run=config.run)
         self._throttle = Throttle(interval=5.0)  # warnings about junk from the bus
+        self._token_checks: set[asyncio.Task[None]] = set()
         self.scheduler: Scheduler = make_scheduler(config.schedule, self, time_scale=config.time_scale)
 
     @property
@@ -157,6 +160,8 @@ class WorldService:
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self._wake.wait(), max(0.0, wake_at - asyncio.get_running_loop().time()))
         assert self.done is not None
+        for check in self._token_checks:
+            check.cancel()
         return self.done
 
     async def _wait_for_start(self) -> None:
@@ -367,6 +372,9 @@ class WorldService:
         if holder is None:
             self.bus.put(self.keys.world_event, RobotAttached(robot=robot, agent_id=req.agent_id, tick=self.tick))
             self._log.info("robot attached", robot=robot, agent=req.agent_id, tick=self.tick)
+            check = asyncio.create_task(self._expect_token(robot, req.agent_id), name=f"token-{robot}")
+            self._token_checks.add(check)
+            check.add_done_callback(self._token_checks.discard)
         self._wake.set()
         return AttachReply(robot=robot, accepted=True, tick=tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn)
 
@@ -410,14 +418,30 @@ class WorldService:
         robot = self.keys.robot_of(sample.key)
         if sample.is_put or robot not in self.attached:
             return
-        del self.attached[robot]
+        self._detach(robot, "agent vanished (liveliness lost)")
+
+    async def _expect_token(self, robot: str, agent_id: str) -> None:
+        """An attached agent declares its liveliness token at once (DESIGN.md, attach); one that
+        has none TOKEN_GRACE seconds later (frozen or killed right after attaching, or a client
+        that skips it) would never be seen to leave: the sequential schedule would wait for its
+        turn forever. Detach it; it may attach again."""
+        await asyncio.sleep(TOKEN_GRACE)
+        if self.done is not None or self.attached.get(robot) != agent_id:
+            return
+        if await self.bus.alive(self.keys.alive_robot(robot), timeout=1.0):
+            return
+        if self.done is None and self.attached.get(robot) == agent_id:
+            self._detach(robot, f"its agent declared no liveliness token ({self.keys.alive_robot(robot)}) within {TOKEN_GRACE:.0f} s of attaching")
+
+    def _detach(self, robot: str, why: str) -> None:
+        agent_id = self.attached.pop(robot)
         self.scheduler.forget(robot)
         if self.done is not None:
             return  # agents leaving after the episode: nothing to report
         stranded = self._stranded()
-        self._log.warning("robot detached", robot=robot, tick=self.tick, **({"stranded": stranded} if stranded else {}))
-        reason = "agent vanished (liveliness lost)" + (f"; {stranded} unless an agent attaches again" if stranded else "")
-        self.bus.put(self.keys.world_event, RobotDetached(robot=robot, tick=self.tick, reason=reason))
+        self._log.warning("robot detached", robot=robot, tick=self.tick, why=why, **({"stranded": stranded} if stranded else {}))
+        reason = why + (f"; {stranded} unless an agent attaches again" if stranded else "")
+        self.bus.put(self.keys.world_event, RobotDetached(robot=robot, tick=self.tick, reason=reason, agent_id=agent_id))
         self._wake.set()
 
     def _stranded(self) -> str:
