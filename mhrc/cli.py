@@ -211,7 +211,15 @@ def up(
     runner = up_processes if processes else up_in_process
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
         raise click.BadParameter(f"{video.name}: the video must be a .mp4 or .gif file", param_hint="--video")
-    done = _run(lambda: runner(cfg, observe=printer.attach, robots=robots))
+    from mhrc.agents.agent import AgentError
+    from mhrc.agents.llm import LLMError
+    from mhrc.agents.replay import ReplayMismatch
+
+    try:
+        done = _run(lambda: runner(cfg, observe=printer.attach, robots=robots))
+    except (AgentError, LLMError, ReplayMismatch) as exc:  # an agent could not play (its model, its replay, the world): one line
+        click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(2)
     if video is not None and cfg.trace is not None:
         console.print(f"video {_render_video(cfg.trace, video)}")
     if as_json:

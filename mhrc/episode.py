@@ -24,8 +24,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from .bus import Bus, BusError, BusRefused, check_listen, endpoint, free_port
 from .fidelity import AidsError, label, parse_aids
-from .keys import check_id, new_run_id
-from .protocol import EpisodeDone, ProtocolError, decode
+from .keys import Keys, check_id, new_run_id
+from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode, decode_event
 
 if TYPE_CHECKING:
     from .security import Credentials
@@ -421,10 +421,18 @@ async def _run_in_process(
 ) -> EpisodeDone:
     login = login if connect else None
     listening = asyncio.Event()
+    started = asyncio.Event()  # the world started the episode: a robot whose agent fails now is only detached
 
     def on_open(bus: Bus, run: str) -> None:
         if observe is not None:
             observe(bus, run)
+
+        def on_event(sample: Any) -> None:
+            with contextlib.suppress(ProtocolError):
+                if isinstance(decode_event(sample.payload), EpisodeStarted):
+                    started.set()
+
+        bus.subscribe(Keys(run).world_event, on_event)
         listening.set()
 
     world = asyncio.create_task(serve_world(cfg, observe=on_open, connect=connect, login=login), name="world")
@@ -451,6 +459,9 @@ async def _run_in_process(
             fatal = [t.exception() for t in agents if t in finished and _is_fatal(t.exception())]
             if fatal:  # a model that cannot answer at all: stop now, not at the horizon
                 raise fatal[0]  # type: ignore[misc]
+            early = [t.exception() for t in agents if t in finished and t.exception() is not None]
+            if early and not started.is_set():  # an agent gave up before the start (e.g. its attach timed out):
+                raise early[0]  # type: ignore[misc]  # the world would wait for its robot forever
             if world not in finished and not any(t in pending for t in agents):
                 errors = [t.exception() for t in agents if t.exception() is not None]
                 if errors:  # every agent is gone and nobody else will attach: stop the world

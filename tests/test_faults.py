@@ -310,6 +310,25 @@ def test_a_world_killed_under_its_agent_is_one_line_and_exit_2(tmp_path: Path) -
             _kill_group(agent)
 
 
+def test_an_agent_failing_before_the_start_ends_the_episode_at_once(tmp_path: Path) -> None:
+    """Alice's agent fails before it attaches (here: a replay of a heuristic trace, which holds no
+    prompts to replay): the world would wait for her forever; `mhrc up` says why in one line and
+    exits 2 instead (it hung until killed before)."""
+    (tmp_path / "h").mkdir()
+    heuristic = tmp_path / "h" / "trace.jsonl"
+    first = subprocess.run([sys.executable, "-m", "mhrc", "up", "--insecure", "-q", "--trace", str(heuristic)],
+                           cwd=tmp_path / "h", capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert first.returncode == 0, first.stderr[-2000:]
+    t0 = time.monotonic()
+    out = subprocess.run([sys.executable, "-m", "mhrc", "up", "--insecure", "-q", "--llm", f"alice=replay:{heuristic}"],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=300)  # fmt: skip
+    took = time.monotonic() - t0
+    lines = [line for line in out.stderr.splitlines() if line.startswith("mhrc up:")]
+    assert out.returncode == 2 and len(lines) == 1 and "holds no LLM prompts for alice" in lines[0], out.stderr[-2000:]
+    assert "Traceback" not in out.stderr and took < EXIT_BOUND * 3, (took, out.stderr[-2000:])
+    print(f"alice's agent failing before the start: exit 2 in {took:.1f} s")
+
+
 # --------------------------------------------------------------------------- a frozen agent
 
 

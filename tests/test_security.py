@@ -202,8 +202,10 @@ async def test_duplicate_attach_with_a_live_agents_id_is_refused(tmp_path: Path)
             await episode
 
 
-async def test_up_processes_with_credentials(tmp_path: Path) -> None:
-    cfg = EpisodeConfig.build(seed=0, n_objects=4, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
+@pytest.mark.parametrize("task", ["pack_objects", "sort_solids", "make_sandwich"])
+async def test_up_processes_with_credentials(task: str, tmp_path: Path) -> None:
+    """`mhrc up --processes`' way (the world and every agent a process of its own), secured as by default, finishes every task."""
+    cfg = EpisodeConfig.build(task=task, seed=0, n_objects=4, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
     assert cfg.endpoint.startswith("tls/")
     done = await up_processes(cfg)
     assert done.reason == "success"
