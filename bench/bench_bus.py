@@ -14,7 +14,6 @@ import asyncio
 import contextlib
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -109,4 +108,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

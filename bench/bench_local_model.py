@@ -36,7 +36,7 @@ async def episode(model: Path, horizon: int, max_tokens: int, structured: bool, 
         t0 = time.perf_counter()
         await up_in_process(cfg)
         wall = time.perf_counter() - t0
-        lines = read_trace(cfg.trace)
+        lines = read_trace(Path(tmp) / "t.jsonl")
     thoughts = [line["msg"] for line in lines if line["key"].endswith("/thought")]
     ticks = [line for line in lines if line["key"].endswith("/world/event") and line["msg"].get("kind") == "tick"]
     stamps = [line["t"] for line in ticks]
