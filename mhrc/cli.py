@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 import signal
@@ -63,6 +64,24 @@ def _llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
 T = TypeVar("T")
 
 
+def _quit_now(signum: int, frame: Any) -> None:
+    """A signal while the run winds down: it is over anyway, so quit at once (130, as Ctrl-C)."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(130)
+
+
+def _plain_signals(loop: asyncio.AbstractEventLoop) -> None:
+    """Take SIGINT and SIGTERM back from the event loop before it closes. asyncio closes its
+    self-pipe before it removes its signal handlers; a signal landing in between (a parent's
+    SIGTERM right after the group's Ctrl-C) printed "Exception ignored when trying to write to
+    the signal wakeup fd" and a traceback."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.remove_signal_handler(sig)  # also clears the wakeup fd once none is left
+        signal.signal(sig, _quit_now)
+
+
 def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | None = None) -> T:
     """Run a coroutine; SIGTERM cancels it like Ctrl-C, so every session closes in `finally`.
     A child of `mhrc up --processes` or `mhrc eval` gets SIGTERM when its parent dies.
@@ -93,10 +112,15 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | None 
                 task.cancel()
 
             loop.add_signal_handler(signal.SIGINT, on_interrupt)
-        return await coro_fn()
+        try:
+            return await coro_fn()
+        finally:
+            if task is not None:
+                _plain_signals(loop)
 
     from .bus import BusError
 
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         return asyncio.run(main())
     except (KeyboardInterrupt, asyncio.CancelledError):
@@ -105,6 +129,9 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | None 
     except BusError as exc:  # the bus cannot start (port taken, refused): one line that says what to do
         click.echo(f"mhrc: {exc}", err=True)
         sys.exit(2)
+    finally:
+        for sig, handler in before.items():  # what the caller had (a test's CliRunner, a later _run)
+            signal.signal(sig, handler)
 
 
 def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:

@@ -1,30 +1,31 @@
 """More on the world's time policies: lockstep's determinism across process layouts, and the
 sequential scheduler when a robot's agent leaves mid-episode (and when a new one comes back).
 
-The detach tests run the world and the three heuristic agents in this process, each agent on a
-Zenoh session of its own (a client of the world's router on loopback). An agent "detaches" the
-way a crashed one would: its task is cancelled and its session closed, which drops its
-liveliness token. Where the robots stand when that happens is made deterministic by a gate in a
-policy (the agent blocks in `decide` at a chosen tick), so nothing here waits on wall-clock time:
-every wait is on an event or on the episode's end, bounded by asyncio.wait_for.
+The detach tests use the public harness, `mhrc.testing.world_on_loopback`: the world and the
+three heuristic agents run in this process, each agent on a Zenoh session of its own (a client
+of the world's router on loopback), plus an observer session of ours collecting world events.
+An agent "detaches" the way a crashed one would: its task is cancelled, which closes its
+session and drops its liveliness token. Where the robots stand when that happens is made
+deterministic by a gate in a policy (the agent blocks in `decide` at a chosen tick), so nothing
+here waits on wall-clock time: every wait is on an event or on the episode's end, bounded.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
-from mhrc.bus import Bus
-from mhrc.episode import ROBOTS, EpisodeConfig, open_client, serve_world, up_in_process, up_processes
+from mhrc.episode import ROBOTS, EpisodeConfig, up_in_process, up_processes
 from mhrc.keys import Keys
 from mhrc.protocol import ActionResult, EpisodeDone, Message, Observation, RobotAttached, RobotDetached, decode_event, parse_action
+from mhrc.testing import LoopbackWorld, world_on_loopback
 from mhrc.trace import read_trace
 
 WAIT = 120.0  # s: generous bound on every wait, so a regression fails instead of hanging
@@ -86,71 +87,43 @@ class _Gated:
         self.inner.record(result)
 
 
-class _Team:
-    """The world (serve_world, with a trace) and agents on sessions of their own, plus an
-    observer session collecting world events; everything cancelled and closed by `close`."""
+class _Events:
+    """The world events an observer session of ours sees, in order."""
 
-    def __init__(self, cfg: EpisodeConfig) -> None:
-        self.cfg = cfg
-        self.world: asyncio.Task[EpisodeDone] | None = None
-        self.buses: list[Bus] = []
-        self.tasks: list[asyncio.Task[EpisodeDone | None]] = []
-        self.events: list[Message] = []
+    def __init__(self) -> None:
+        self.seen: list[Message] = []
         self._news = asyncio.Event()
 
-    async def start(self) -> None:
-        self.world = asyncio.create_task(serve_world(self.cfg), name="world")
-        observer = await self._bus()
-        observer.subscribe(Keys(self.cfg.run).world_event, self._on_event)
+    @classmethod
+    async def observe(cls, world: LoopbackWorld) -> _Events:
+        events = cls()
+        (await world.client()).subscribe(Keys(world.run).world_event, events._on_event)
+        return events
 
     def _on_event(self, sample: Any) -> None:
-        self.events.append(decode_event(sample.payload))
+        self.seen.append(decode_event(sample.payload))
         self._news.set()
 
-    async def _bus(self) -> Bus:
-        bus = await open_client(self.cfg.endpoint, 30.0)
-        self.buses.append(bus)
-        return bus
-
-    async def agent(self, robot: str, policy: Any) -> tuple[Bus, asyncio.Task[EpisodeDone | None]]:
-        bus = await self._bus()
-        task = asyncio.create_task(RobotAgent(bus, policy, run=self.cfg.run, robot=robot).run(), name=f"agent-{robot}")
-        self.tasks.append(task)
-        return bus, task
-
-    @staticmethod
-    async def detach(bus: Bus, task: asyncio.Task[EpisodeDone | None]) -> None:
-        """Kill the agent: cancel its task, close its session (its liveliness token goes)."""
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
-        await bus.close()
-
-    async def event(self, match: Any) -> Message:
+    async def first(self, match: Callable[[Message], bool]) -> Message:
         """The first world event (seen so far or still to come) for which `match` is true."""
 
         async def wait() -> Message:
             while True:
                 self._news.clear()
-                for ev in self.events:
+                for ev in self.seen:
                     if match(ev):
                         return ev
                 await self._news.wait()
 
         return await asyncio.wait_for(wait(), WAIT)
 
-    async def close(self) -> None:
-        for task in self.tasks:
-            if not task.done():
-                task.cancel()
-        await asyncio.gather(*self.tasks, return_exceptions=True)
-        if self.world is not None and not self.world.done():
-            self.world.cancel()
-        if self.world is not None:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await self.world
-        for bus in self.buses:
-            await bus.close()
+
+async def _detach(agent: asyncio.Task[EpisodeDone | None]) -> None:
+    """Kill an agent started by `LoopbackWorld.agent` as a crash would: cancel its task, which
+    closes its session (its liveliness token goes)."""
+    agent.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await agent
 
 
 def _ticks_closed(trace: Path) -> list[dict[str, Any]]:
@@ -172,22 +145,16 @@ async def test_sequential_goes_on_without_a_robot_whose_agent_left(tmp_path: Pat
     The world publishes robot_detached, the turn passes on, every tick still closes with Alice
     and Bob acting, the episode reaches its horizon, and David gets no result after leaving."""
     trace = tmp_path / "t.jsonl"
-    cfg = EpisodeConfig.build(seed=0, horizon=HORIZON, schedule="sequential", trace=trace).resolved()
-    team = _Team(cfg)
-    try:
-        await team.start()
+    async with world_on_loopback(seed=0, horizon=HORIZON, schedule="sequential", trace=trace) as world:
+        events = await _Events.observe(world)
         gated = _Gated("david" if on_turn else "alice", K)
-        policies = {r: (gated if r == gated.robot else heuristic_policy(r)) for r in ROBOTS}
-        agents = {r: await team.agent(r, policies[r]) for r in ROBOTS}
+        agents = {r: await world.agent(r, gated if r == gated.robot else "heuristic") for r in ROBOTS}
         await asyncio.wait_for(gated.reached.wait(), WAIT)  # the world now waits for the gated robot's tick-K action
-        await team.detach(*agents["david"])
-        detached = await team.event(lambda ev: isinstance(ev, RobotDetached))
+        await _detach(agents["david"])
+        detached = await events.first(lambda ev: isinstance(ev, RobotDetached))
         gated.release.set()  # Alice plans on (a no-op when David was the gated one: its task is gone)
-        assert team.world is not None
-        done = await asyncio.wait_for(team.world, WAIT)
-        ends = await asyncio.wait_for(asyncio.gather(agents["alice"][1], agents["bob"][1]), WAIT)
-    finally:
-        await team.close()
+        done = await world.done(WAIT)
+        ends = await asyncio.wait_for(asyncio.gather(agents["alice"], agents["bob"]), WAIT)
 
     assert isinstance(detached, RobotDetached) and detached.robot == "david" and detached.tick == K
     assert done.reason == "horizon" and done.metrics.temporal_steps == HORIZON, done
@@ -226,24 +193,19 @@ async def test_sequential_gives_turns_to_a_replacement_agent(tmp_path: Path) -> 
     the episode ends at its horizon for everyone, the replacement included."""
     trace = tmp_path / "t.jsonl"
     back = K + 2
-    cfg = EpisodeConfig.build(seed=0, horizon=HORIZON, schedule="sequential", trace=trace).resolved()
-    team = _Team(cfg)
-    try:
-        await team.start()
+    async with world_on_loopback(seed=0, horizon=HORIZON, schedule="sequential", trace=trace) as world:
+        events = await _Events.observe(world)
         david, alice = _Gated("david", K), _Gated("alice", back)
-        agents = {r: await team.agent(r, {"alice": alice, "david": david}.get(r) or heuristic_policy(r)) for r in ROBOTS}
+        agents = {r: await world.agent(r, {"alice": alice, "david": david}.get(r) or "heuristic") for r in ROBOTS}
         await asyncio.wait_for(david.reached.wait(), WAIT)
-        await team.detach(*agents["david"])
-        await team.event(lambda ev: isinstance(ev, RobotDetached) and ev.robot == "david")
+        await _detach(agents["david"])
+        await events.first(lambda ev: isinstance(ev, RobotDetached) and ev.robot == "david")
         await asyncio.wait_for(alice.reached.wait(), WAIT)  # tick K+2, ticks K and K+1 closed without David
-        _, replacement = await team.agent("david", heuristic_policy("david"))
-        again = await team.event(lambda ev: isinstance(ev, RobotAttached) and ev.robot == "david" and ev.tick > 0)
+        replacement = await world.agent("david", "heuristic")
+        again = await events.first(lambda ev: isinstance(ev, RobotAttached) and ev.robot == "david" and ev.tick > 0)
         alice.release.set()
-        assert team.world is not None
-        done = await asyncio.wait_for(team.world, WAIT)
-        ends = await asyncio.wait_for(asyncio.gather(agents["alice"][1], agents["bob"][1], replacement), WAIT)
-    finally:
-        await team.close()
+        done = await world.done(WAIT)
+        ends = await asyncio.wait_for(asyncio.gather(agents["alice"], agents["bob"], replacement), WAIT)
 
     assert isinstance(again, RobotAttached) and again.tick == back
     assert done.reason == "horizon" and done.metrics.temporal_steps == HORIZON, done
