@@ -114,6 +114,9 @@ def make_config(
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("transport/link/tx/lease", str(lease_ms))
     conf.insert_json5("transport/link/tx/keep_alive", "4")
+    # zenoh's shared-memory transport maps a 16 MB pool per session for messages over 3 KB and
+    # never unmaps it when the session closes: an eval worker grew ~16 MB an episode (bench/bench_memory.py)
+    conf.insert_json5("transport/shared_memory/enabled", "false")
     if security is not None:
         from .security import apply
 

@@ -57,6 +57,7 @@ import structlog
 from pydantic import BaseModel, Field
 
 from .bus import Bus, Sample, endpoint, free_port
+from . import memory
 from .diagnostics import diagnose
 from .episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig, EventHook, open_client, up_in_process
 from .fidelity import label
@@ -352,6 +353,8 @@ async def _run_job(
 
             log.warning("episode failed", key=job.key, error=str(exc))
             return EvalResult(key=job.key, worker=worker_id, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError))
+        finally:
+            memory.release()  # a worker runs hundreds of episodes: give back what this one freed
 
 
 def worker_command(connect: str, eval_id: str, concurrency: int = 1, credentials: Path | None = None) -> list[str]:

@@ -1,0 +1,98 @@
+"""Resident memory of one long-lived process running episode after episode, as an `mhrc eval`
+worker does (heuristic team, sequential schedule, every task x scene in turn, 4 objects).
+
+Three configurations, each in a fresh process, measured in the same run:
+- `before`: zenoh's shared-memory transport on (zenoh's default, which mhrc used until this
+  benchmark found it: each session maps a 16 MB pool for messages over 3 KB and never unmaps
+  it), no trim between episodes;
+- `shm_off`: shared memory off (mhrc.bus's configuration now), no trim;
+- `now`: shared memory off and `mhrc.memory.release()` after every episode (what a worker does).
+
+Reports the resident size (MB) after each episode and the growth per episode over the second
+half. Prints JSON (or writes it with --out).
+
+    python bench/bench_memory.py [--episodes 18] [--out bench/results/memory.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from report import emit
+
+CHILD = r"""
+import asyncio, itertools, json, os, sys, tempfile
+from pathlib import Path
+
+import mhrc.bus
+from mhrc import memory
+from mhrc.episode import EpisodeConfig, up_in_process
+
+episodes, shm, trim = int(sys.argv[1]), sys.argv[2] == "1", sys.argv[3] == "1"
+if shm:  # the configuration before: zenoh's default shared-memory transport
+    plain = mhrc.bus.make_config
+
+    def with_shm(**kw):
+        conf = plain(**kw)
+        conf.insert_json5("transport/shared_memory/enabled", "true")
+        return conf
+
+    mhrc.bus.make_config = with_shm
+
+
+def rss_mb() -> int:
+    return int(open(f"/proc/{os.getpid()}/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE") // 2**20
+
+
+async def main() -> None:
+    grid = list(itertools.product(["pack_objects", "sort_solids", "make_sandwich"], ["kitchen", "bathroom", "bedroom"]))
+    out = []
+    with tempfile.TemporaryDirectory() as d:
+        for i in range(episodes):
+            task, scene = grid[i % len(grid)]
+            cfg = EpisodeConfig.build(task=task, scene=scene, seed=i, n_objects=4, schedule="sequential",
+                                      trace=Path(d) / f"{i}.jsonl").resolved()
+            done = await up_in_process(cfg)
+            assert done.metrics.success, (task, scene, i)
+            if trim:
+                memory.release()
+            out.append(rss_mb())
+    print(json.dumps(out))
+
+
+asyncio.run(main())
+"""
+
+CONFIGS = {"before": ("1", "0"), "shm_off": ("0", "0"), "now": ("0", "1")}
+
+
+def run(episodes: int, shm: str, trim: str) -> list[int]:
+    done = subprocess.run([sys.executable, "-c", CHILD, str(episodes), shm, trim], capture_output=True, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def growth(rss: list[int]) -> float:
+    """MB per episode over the second half (after the first episodes' one-off allocations)."""
+    half = len(rss) // 2
+    return round((rss[-1] - rss[half]) / max(1, len(rss) - 1 - half), 1)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--episodes", type=int, default=18)
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args()
+    report: dict[str, Any] = {"bench": "worker_memory", "episodes": args.episodes, "unit": "MB resident after each episode"}
+    for name, (shm, trim) in CONFIGS.items():
+        rss = run(args.episodes, shm, trim)
+        report[name] = {"rss_mb": rss, "last_mb": rss[-1], "growth_mb_per_episode": growth(rss)}
+    emit(report, args.out)
+
+
+if __name__ == "__main__":
+    main()
