@@ -54,6 +54,7 @@ async def test_a_structured_episode_against_llama_cpp_parses_every_reply_into_a_
     async with LocalModelServer(gemma, slots=3, n_ctx_per_slot=CTX, seed=3) as srv:
         cfg = EpisodeConfig.build(
             seed=0, horizon=2, llm=f"llamacpp:{srv.model}", base_url=srv.base_url, structured=True, max_tokens=400, llm_seed=3,
+            llm_timeout=300,  # up to 400 grammar-constrained tokens on 3 slots of 2 shared cores: under load, over the default 60 s
             trace=tmp_path / "t.jsonl",
         ).resolved()  # fmt: skip
         await up_in_process(cfg)
