@@ -418,8 +418,8 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     objects (12 per task, 36 in all); --repeats N runs it N times with other seeds, --objects and
     --trials build larger grids. Without --llm the heuristic policy plays. Episodes run in
     --workers processes on one Zenoh bus; workers on other hosts join with
-    `mhrc worker --connect tcp/HOST:PORT` (see --listen). An interrupted run continues with
-    --resume --out DIR."""
+    `mhrc worker --connect tls/HOST:PORT --credentials OUT/credentials/worker/worker.json`
+    (see --listen, --host). An interrupted run continues with --resume --out DIR."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -499,7 +499,7 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
 
 
 @main.command("worker")
-@click.option("--connect", required=True, help="The coordinator's endpoint, e.g. tcp/10.0.0.5:7448.")
+@click.option("--connect", required=True, help="The coordinator's endpoint, e.g. tls/10.0.0.5:7448 (tcp/ for an --insecure evaluation).")
 @click.option("--eval", "eval_id", default=None, help="Evaluation id; default: the only one on the bus.")
 @click.option("--concurrency", default=1, show_default=True, type=click.IntRange(min=1),
               help="Episodes this worker runs at once (with an LLM, episodes mostly wait on the model).")

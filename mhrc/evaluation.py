@@ -2,7 +2,7 @@
 on one Zenoh bus, results as traces, `episodes.jsonl` and summary tables.
 
 The coordinator opens a Zenoh router and serves the grid; workers (local processes it starts,
-or `mhrc worker --connect tcp/HOST:PORT` on other hosts) pull jobs, run each episode in-process
+or `mhrc worker --connect tls/HOST:PORT --credentials ...` on other hosts) pull jobs, run each episode in-process
 with its own run id on the same bus, and push back the episode's trace. A worker runs up to
 `--concurrency` episodes at once (LLM episodes mostly wait on the model). Keys, under
 `mhrc/eval/<eval id>/`:
