@@ -300,10 +300,7 @@ class AliceHeuristic(_RoleBase):
             self.given_up.add(o.name)
             return self._decision(Wait())
         if f.openable and not f.is_open:
-            idx = _nearest_stand_pose(f, f.position)
-            if not _at_stand_pose(obs, f, idx):
-                return self._decision(Navigate(target=f.name, stand_pose=idx))
-            return self._decision(Open(target=f.name))
+            return self._open(obs, f)
         last = self.last
         if last is not None and isinstance(last.action, Pick) and last.action.obj == o.name and last.outcome.code == OutcomeCode.TOO_FAR:
             d = last.outcome.details
@@ -351,13 +348,27 @@ class AliceHeuristic(_RoleBase):
         if here is not None:
             todo.sort(key=lambda f: _dist2(f.position, (here.x, here.y)))
         f = todo[0]
+        if f.openable:
+            return self._open(obs, f)
         idx = _nearest_stand_pose(f, f.position)
         if not _at_stand_pose(obs, f, idx):
             return self._decision(Navigate(target=f.name, stand_pose=idx))
-        if f.openable:
-            return self._decision(Open(target=f.name))
         self.explored.add(f.name)
         return None
+
+    def _open(self, obs: Observation, f: FurnitureView) -> Decision:
+        """Open `f` from a stand pose. After a failed open (the arm could not follow the handle
+        from where the base stopped, within the stand pose's tolerance) approach again first,
+        from the next stand pose: opening again from the same spot fails the same way (seen:
+        34 failed opens in a row, the episode lost)."""
+        idx = self.pose_choice.get(f.name, _nearest_stand_pose(f, f.position)) % len(f.stand_poses)
+        if self._last_failed("open") and self.last is not None and getattr(self.last.action, "target", None) == f.name:
+            idx = (idx + 1) % len(f.stand_poses)
+            self.pose_choice[f.name] = idx
+            return self._decision(Navigate(target=f.name, stand_pose=idx))
+        if not _at_stand_pose(obs, f, idx):
+            return self._decision(Navigate(target=f.name, stand_pose=idx))
+        return self._decision(Open(target=f.name))
 
 
 # --------------------------------------------------------------------------- David
