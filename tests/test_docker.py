@@ -422,3 +422,20 @@ def test_compose_eval_runs_as_local_processes(tmp_path: Path) -> None:
     rows = [json.loads(line) for line in (results / "eval" / "episodes.jsonl").read_text().splitlines() if line.strip()]
     assert len(rows) == 1 and rows[0]["success"] is True
     assert (results / "eval" / "summary.md").is_file()
+
+
+def test_documented_up_commands_survive_the_one_shot_services() -> None:
+    """`--exit-code-from` implies `--abort-on-container-exit`: the `credentials` service's exit
+    (or a worker's, an agent's a moment before the world's) would stop the whole stack. Every
+    documented `up` that names a service's exit code also passes `--abort-on-container-failure`."""
+    lines = [
+        line
+        for path in (DOCKER / "README.md", COMPOSE, COMPOSE_EVAL)
+        for line in path.read_text(encoding="utf-8").splitlines()
+        if "docker compose" in line and " up" in line
+    ]
+    assert lines
+    for line in lines:
+        if "--exit-code-from" in line:
+            assert "--abort-on-container-failure" in line, line
+    assert any("--exit-code-from world" in line for line in lines) and any("--exit-code-from eval" in line for line in lines)
