@@ -123,6 +123,7 @@ class WorldService:
         self._log = log.bind(run=config.run)
         self._throttle = Throttle(interval=5.0)  # warnings about junk from the bus
         self._token_checks: set[asyncio.Task[None]] = set()
+        self._tokens: set[str] = set()  # robots whose liveliness token is declared now
         self.scheduler: Scheduler = make_scheduler(config.schedule, self, time_scale=config.time_scale)
 
     @property
@@ -416,7 +417,11 @@ class WorldService:
 
     def _on_liveliness(self, sample: Sample) -> None:
         robot = self.keys.robot_of(sample.key)
-        if sample.is_put or robot not in self.attached:
+        if sample.is_put:
+            self._tokens.add(robot)
+            return
+        self._tokens.discard(robot)
+        if robot not in self.attached:
             return
         self._detach(robot, "agent vanished (liveliness lost)")
 
@@ -426,9 +431,9 @@ class WorldService:
         that skips it) would never be seen to leave: the sequential schedule would wait for its
         turn forever. Detach it; it may attach again."""
         await asyncio.sleep(TOKEN_GRACE)
-        if self.done is not None or self.attached.get(robot) != agent_id:
+        if self.done is not None or self.attached.get(robot) != agent_id or robot in self._tokens:
             return
-        if await self.bus.alive(self.keys.alive_robot(robot), timeout=1.0):
+        if await self.bus.alive(self.keys.alive_robot(robot), timeout=2.0):  # its put may have gone unseen: ask
             return
         if self.done is None and self.attached.get(robot) == agent_id:
             self._detach(robot, f"its agent declared no liveliness token ({self.keys.alive_robot(robot)}) within {TOKEN_GRACE:.0f} s of attaching")
