@@ -210,11 +210,14 @@ class Bus:
             self._publishers[key] = pub
         pub.put(payload)
 
-    def _bridge(self, handler: Handler) -> Callable[[zenoh.Sample], None]:
+    def _bridge(self, handler: Handler, on_thread: bool = False) -> Callable[[zenoh.Sample], None]:
         loop = self._loop
 
         def on_sample(sample: zenoh.Sample) -> None:
             copy = Sample(str(sample.key_expr), sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT)
+            if on_thread:
+                _run_handler(handler, copy)
+                return
             try:
                 loop.call_soon_threadsafe(_run_handler, handler, copy)
             except RuntimeError:  # loop closed while zenoh still delivers
@@ -222,9 +225,11 @@ class Bus:
 
         return on_sample
 
-    def subscribe(self, key_expr: str, handler: Handler) -> None:
-        """Call `handler(Sample)` on the event loop for every sample matching `key_expr`."""
-        self._entities.append(self._session.declare_subscriber(key_expr, self._bridge(handler)))
+    def subscribe(self, key_expr: str, handler: Handler, *, on_thread: bool = False) -> None:
+        """Call `handler(Sample)` on the event loop for every sample matching `key_expr`; with
+        `on_thread`, on zenoh's thread at once (a quick, thread-safe handler that must not depend
+        on the loop: the trace recorder, which keeps writing while the loop is busy or stopping)."""
+        self._entities.append(self._session.declare_subscriber(key_expr, self._bridge(handler, on_thread)))
 
     # ------------------------------------------------------------------ queries
     def serve(self, key: str, handler: QueryHandler) -> None:
@@ -275,11 +280,12 @@ class Bus:
     def declare_token(self, key: str) -> None:
         self._entities.append(self._session.liveliness().declare_token(key))
 
-    def watch_liveliness(self, key_expr: str, handler: Handler) -> None:
-        """`handler(Sample)` with is_put True when a token appears, False when it vanishes.
+    def watch_liveliness(self, key_expr: str, handler: Handler, *, on_thread: bool = False) -> None:
+        """`handler(Sample)` with is_put True when a token appears, False when it vanishes
+        (`on_thread` as in `subscribe`).
 
         Tokens alive at the time of the call are reported too (history)."""
-        self._entities.append(self._session.liveliness().declare_subscriber(key_expr, self._bridge(handler), history=True))
+        self._entities.append(self._session.liveliness().declare_subscriber(key_expr, self._bridge(handler, on_thread), history=True))
 
     async def alive(self, key_expr: str, timeout: float = 2.0) -> list[str]:
         """Keys of the liveliness tokens currently matching `key_expr`."""

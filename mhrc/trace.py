@@ -36,22 +36,26 @@ class Recorder:
         self.count = 0
         self._ended = threading.Event()  # an episode_done event is on disk
         self._junk: dict[str, dict[str, Any]] = {}  # key -> counts not yet written
-        self._lock = threading.Lock()  # samples arrive on zenoh's threads
+        self._lock = threading.RLock()  # samples arrive on zenoh's threads (the data's and the liveliness')
 
     def start(self) -> Recorder:
         self._file = self.path.open("w", encoding="utf-8")
         self._t0 = time.perf_counter()
-        self._bus.subscribe(self._keys.all, self._on_sample)
-        self._bus.watch_liveliness(f"{self._keys.base}/alive/**", self._on_liveliness)
+        # on zenoh's threads, not the event loop: the world's final event is on disk even when
+        # the loop is being cancelled (a second Ctrl-C, a parent's SIGTERM) or blocked in close()
+        self._bus.subscribe(self._keys.all, self._on_sample, on_thread=True)
+        self._bus.watch_liveliness(f"{self._keys.base}/alive/**", self._on_liveliness, on_thread=True)
         return self
 
     def _write(self, key: str, kind: str, msg: Any) -> None:
-        if self._file is None or self._file.closed:
-            return
         line = {"t": round(time.perf_counter() - self._t0, 6), "key": key, "kind": kind, "msg": msg}
-        self._file.write(json.dumps(line, separators=(",", ":")) + "\n")
-        self._file.flush()
-        self.count += 1
+        text = json.dumps(line, separators=(",", ":")) + "\n"
+        with self._lock:  # one whole line at a time, whichever thread
+            if self._file is None or self._file.closed:
+                return
+            self._file.write(text)
+            self._file.flush()
+            self.count += 1
 
     def _on_sample(self, sample: Sample) -> None:
         try:
@@ -105,8 +109,9 @@ class Recorder:
         with self._lock:
             for key in list(self._junk):
                 self._flush_junk(key)
-        if self._file is not None:
-            self._file.close()
+        with self._lock:
+            if self._file is not None:
+                self._file.close()
 
 
 def read_trace(path: str | Path) -> list[dict[str, Any]]:
