@@ -1,5 +1,6 @@
-"""`mhrc up --processes` as a user runs it: its children die with it even when it is killed with
-SIGKILL, `--tick-delay` reaches the world process, and `--json` prints nothing but JSON."""
+"""`mhrc up --processes` and `mhrc eval` as a user runs them: their children die with them even
+when they are killed with SIGKILL, `--tick-delay` reaches the world process, and `--json` prints
+nothing but JSON."""
 
 from __future__ import annotations
 
@@ -52,6 +53,32 @@ def test_the_world_and_agents_die_with_a_killed_parent(tmp_path: Path) -> None:
     finally:
         for k in children(parent.pid) if alive(parent.pid) else set():
             os.kill(k, signal.SIGKILL)
+        if parent.poll() is None:
+            parent.kill()
+
+
+def test_eval_workers_die_with_a_killed_coordinator(tmp_path: Path) -> None:
+    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "6", "--trials", "20",
+           "--workers", "2", "--out", str(tmp_path / "ev")]  # fmt: skip
+    parent = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    kids: set[int] = set()
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and len(kids) < 2:  # the two workers
+            time.sleep(0.5)
+            kids = children(parent.pid)
+        assert len(kids) == 2, f"expected 2 workers as children, found {kids}"
+        time.sleep(3)  # they are running episodes
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and any(alive(k) for k in kids):
+            time.sleep(0.2)
+        assert not any(alive(k) for k in kids), "workers outlived their SIGKILLed coordinator"
+    finally:
+        for k in kids:
+            if alive(k):
+                os.kill(k, signal.SIGKILL)
         if parent.poll() is None:
             parent.kill()
 
