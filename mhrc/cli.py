@@ -402,13 +402,17 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
                    "while the evaluation runs; workers elsewhere need a copy); --insecure: the open tcp bus.")
 @click.option("--host", "hosts", multiple=True, metavar="NAME",
               help="A name workers reach the coordinator by, for its TLS certificate (repeatable), e.g. eval in docker compose.")
+@click.option("--credentials", "eval_credentials", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Use (and keep) an evaluation's credentials issued by `mhrc credentials --eval --out DIR --host NAME`: remote "
+                   "workers keep one login (DIR/worker/) across evaluations. Default: new ones for each evaluation.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory; default runs/eval-<time>.")
 @click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
 def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
           aids: str | None, schedule: str, time_scale: float, workers: int, concurrency: int | None, listen: str | None, secure: bool,
-          hosts: tuple[str, ...], out: Path | None, resume: bool, dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
+          hosts: tuple[str, ...], eval_credentials: Path | None, out: Path | None, resume: bool, dry_run: bool, log_level: str,
+          **llm: Any) -> None:  # fmt: skip
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
     summary.md / summary.csv (tables shaped like the paper's Table I and II with 95% bootstrap
@@ -435,6 +439,10 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         raise click.BadParameter("must be 0 or more", param_hint="--workers")
     if workers == 0 and listen is None:
         raise click.UsageError("--workers 0 needs --listen, so that workers can join from elsewhere")
+    if eval_credentials is not None and not secure:
+        raise click.UsageError("--credentials and --insecure contradict each other")
+    if eval_credentials is not None and hosts:
+        raise click.UsageError("--host: the certificate in --credentials is already issued; name hosts with mhrc credentials --eval --host")
     try:
         aid_names = parse_aids(aids)
     except AidsError as exc:
@@ -485,7 +493,7 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         try:
             rows = _run(
                 lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook, concurrency=concurrency,
-                                 secure=secure, hosts=hosts),
+                                 secure=secure, hosts=hosts, credentials=eval_credentials),
                 stopping=f"stopping the workers; every finished episode is kept in {out / 'episodes.jsonl'} "
                 f"(continue with --resume --out {out})",
             )
@@ -573,25 +581,37 @@ def schema_(out: Path | None) -> None:
                    "e.g. world, the compose service. The world's certificate names it.")
 @click.option("--days", default=7.0, show_default=True, type=float, help="How long the CA and the world's certificate stay valid.")
 @click.option("--split", is_flag=True, help="One directory per participant (DIR/world/, DIR/alice/, ...), each for that participant's container only.")
+@click.option("--eval", "for_eval", is_flag=True,
+              help="An evaluation's instead: the coordinator's certificate and files in DIR (mhrc eval --credentials DIR), "
+                   "the one worker login in DIR/worker/ (mhrc worker --credentials DIR/worker/worker.json); --host names the coordinator.")
 @click.option("--force", is_flag=True, help="Replace credentials already in DIR (a world running with the old ones refuses the new).")
-def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float, split: bool, force: bool) -> None:
+def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float, split: bool, for_eval: bool, force: bool) -> None:
     """Issue one run's credentials for a world and agents started by hand or in containers
     (`mhrc up` makes its own): a CA, the world's TLS certificate, one login per participant.
-    Start the world with --credentials DIR/world.json and each agent with its own file."""
-    from .keys import new_run_id
-    from .security import SecurityError, make_run_credentials
+    Start the world with --credentials DIR/world.json and each agent with its own file.
+    With --eval, an evaluation's: the coordinator's and its workers' one login."""
+    import uuid
+
+    from .keys import check_id, new_run_id
+    from .security import SecurityError, make_eval_credentials, make_run_credentials
 
     if days <= 0:
         raise click.BadParameter("must be more than 0", param_hint="--days")
     existing = out.is_dir() and (any(out.glob("*.json")) or any(out.glob("*/*.json")))
     if existing and not force:
         raise click.UsageError(f"--out: {out} already holds credentials; pass --force to replace them")
-    run = run or new_run_id()
+    if for_eval and split:
+        raise click.UsageError("--split: an evaluation's workers share one login, already in a directory of its own")
+    run = run or (f"e{uuid.uuid4().hex[:8]}" if for_eval else new_run_id())
     try:
-        files = make_run_credentials(run, ROBOTS, out, days=days, hosts=hosts, split=split)
+        if for_eval:
+            check_id(run, "evaluation id")
+            files = make_eval_credentials(run, out, days=days, hosts=hosts)
+        else:
+            files = make_run_credentials(run, ROBOTS, out, days=days, hosts=hosts, split=split)
     except (SecurityError, ValueError, OSError) as exc:
         raise click.UsageError(str(exc)) from None
-    click.echo(f"run {run}: credentials in {out} (valid {days:g} days; keep them private)", err=True)
+    click.echo(f"{'evaluation' if for_eval else 'run'} {run}: credentials in {out} (valid {days:g} days; keep them private)", err=True)
     for user, path in files.items():
         click.echo(f"  {user}: {path}", err=True)
 

@@ -112,7 +112,7 @@ class EvalResult(BaseModel):
 
 
 class EvalAborted(RuntimeError):
-    """An episode failed in a way every other episode would too; finished rows are kept."""
+    """The evaluation cannot go on (an error every episode would hit, or no worker left); finished rows are kept."""
 
 
 def _keys(eval_id: str) -> dict[str, str]:
@@ -271,6 +271,7 @@ async def run_worker(
     try:
         eval_id = eval_id or await find_eval(bus)
         keys = _keys(eval_id)
+        await _await_coordinator(bus, keys["coordinator"], eval_id, connect_timeout)
         bus.declare_token(f"{keys['worker']}/{worker_id}")
         done = False  # the coordinator has nothing more to hand out
         while True:
@@ -307,6 +308,17 @@ async def run_worker(
             slot.task.cancel()
         await asyncio.gather(*(s.task for s in slots), return_exceptions=True)
         await bus.close()
+
+
+async def _await_coordinator(bus: Bus, token: str, eval_id: str, timeout: float) -> None:
+    """Wait for the coordinator's token: a worker may connect the moment the router listens,
+    before the coordinator serves jobs (it would take the silence for a coordinator gone)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while not await bus.alive(token, timeout=1.0):
+        if loop.time() >= deadline:
+            raise ConfigError(f"no evaluation {eval_id!r} on this bus within {timeout:.0f} s (pass --eval, or none for the only one)")
+        await asyncio.sleep(0.2)
 
 
 class _Slot:
@@ -365,10 +377,25 @@ def worker_command(connect: str, eval_id: str, concurrency: int = 1, credentials
 
 
 # --------------------------------------------------------------------------- coordinator
-def _forget(creds_dir: Path, secure: bool) -> None:
-    """The evaluation's credentials live as long as it runs: nobody can log in to a later one with them."""
-    if secure:
+def _forget(creds_dir: Path, ephemeral: bool) -> None:
+    """The evaluation's own credentials live as long as it runs: nobody can log in to a later one with them."""
+    if ephemeral:
         shutil.rmtree(creds_dir, ignore_errors=True)
+
+
+def _given_credentials(directory: Path) -> tuple[Credentials, Path]:
+    """The coordinator's credentials and the workers' login file in a directory issued by
+    `mhrc credentials --eval`."""
+    from .security import COORDINATOR, EVAL, WORKER, SecurityError, load
+
+    try:
+        creds = load(directory / f"{COORDINATOR}.json")
+    except SecurityError as exc:
+        raise ConfigError(f"--credentials: {exc} (issue them with: mhrc credentials --eval --out {directory})") from None
+    login = directory / WORKER / f"{WORKER}.json"
+    if creds.kind != EVAL or not creds.is_server or not login.is_file():
+        raise ConfigError(f"--credentials: {directory} does not hold an evaluation's credentials (mhrc credentials --eval --out DIR)")
+    return creds, login
 
 
 
@@ -457,6 +484,7 @@ async def evaluate(
     concurrency: int = 1,
     secure: bool = False,
     hosts: tuple[str, ...] = (),
+    credentials: Path | None = None,
 ) -> list[dict[str, Any]]:
     """Run the grid; returns every row of DIR/episodes.jsonl (old ones too, with --resume).
 
@@ -468,10 +496,17 @@ async def evaluate(
     `secure` puts the bus on TLS with logins (`mhrc.security.make_eval_credentials`): the
     coordinator's certificate names 127.0.0.1, localhost, the --listen host and `hosts`; the
     workers' login is written to DIR/credentials/worker/worker.json for as long as the
-    evaluation runs (workers elsewhere need a copy)."""
+    evaluation runs (workers elsewhere need a copy). With `credentials` (a directory issued by
+    `mhrc credentials --eval`) those are used instead and kept: remote workers keep one login
+    across evaluations; the evaluation id is theirs."""
     if concurrency < 1:
         raise ConfigError(f"--concurrency: must be at least 1 (got {concurrency})")
     spec.validate()
+    coordinator: Credentials | None = None
+    worker_login: Path | None = None
+    if credentials is not None:
+        coordinator, worker_login = _given_credentials(credentials)
+        secure = True
     if listen is not None and secure and not listen.startswith("tls/"):
         raise ConfigError(f"--listen: a secured evaluation listens on tls/ (e.g. tls/0.0.0.0:7448), not {listen}; or pass --insecure")
     if listen is not None and not secure and listen.startswith("tls/"):
@@ -479,13 +514,12 @@ async def evaluate(
     finished = prepare_out(out, spec, resume)
     todo = deque(j for j in spec.jobs() if j.key not in finished)
     tally = Tally(total=len(todo))
-    eval_id = f"e{uuid.uuid4().hex[:8]}"
+    eval_id = coordinator.run if coordinator is not None else f"e{uuid.uuid4().hex[:8]}"
     keys = _keys(eval_id)
     listen = listen or endpoint("127.0.0.1", free_port("127.0.0.1"), tls=secure)
-    coordinator: Credentials | None = None
-    worker_login: Path | None = None
     creds_dir = out / "credentials"
-    if secure:
+    ephemeral = secure and coordinator is None  # made for this evaluation, deleted at its end
+    if ephemeral:
         from .security import COORDINATOR, WORKER, load, make_eval_credentials
 
         listen_host = listen.split("/", 1)[1].rsplit(":", 1)[0].strip("[]")
@@ -580,7 +614,7 @@ async def evaluate(
     try:
         bus = await Bus.open(mode="router", listen=[listen], security=coordinator)
     except BaseException:
-        _forget(creds_dir, secure)
+        _forget(creds_dir, ephemeral)
         raise
     try:
         bus.serve(keys["job"], on_job)
@@ -599,7 +633,7 @@ async def evaluate(
             if alive_workers or any(p.poll() is None for p in procs):
                 idle_since = time.monotonic()
             elif time.monotonic() - idle_since > idle_timeout:
-                raise RuntimeError(
+                raise EvalAborted(
                     f"no worker has been alive for {idle_timeout:.0f} s with {tally.total - tally.done} episodes left; "
                     f"start workers with: mhrc worker --connect {listen}"
                     + (f" --credentials {worker_login}" if worker_login else " --insecure")
@@ -620,7 +654,7 @@ async def evaluate(
     finally:
         await _reap(procs, WORKER_GRACE)  # the workers heard "done": they end by themselves
         await bus.close()
-        _forget(creds_dir, secure)
+        _forget(creds_dir, ephemeral)
     rows = read_rows(rows_path)
     write_summaries(rows, out)
     return rows

@@ -109,6 +109,36 @@ def test_workers_on_other_processes_join_over_the_bus(tmp_path: Path) -> None:
                 p.kill()
 
 
+def test_workers_keep_one_login_across_evaluations(tmp_path: Path) -> None:
+    """`mhrc credentials --eval` once; two evaluations use it (`--credentials DIR`) and a worker
+    logs in to each with the same file; the credentials are kept."""
+    creds = tmp_path / "evcreds"
+    issued = subprocess.run([sys.executable, "-m", "mhrc", "credentials", "--eval", "--out", str(creds), "--run", "enightly"],
+                            capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert issued.returncode == 0 and "evaluation enightly" in issued.stderr, issued.stderr
+    login = creds / "worker" / "worker.json"
+    for n in range(2):
+        listen = endpoint("127.0.0.1", free_port("127.0.0.1"), tls=True)
+        coordinator = subprocess.Popen(
+            [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--workers", "0",
+             "--listen", listen, "--credentials", str(creds), "--out", str(tmp_path / f"ev{n}")],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        worker = subprocess.Popen([sys.executable, "-m", "mhrc", "worker", "--connect", listen, "--credentials", str(login)],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+        try:
+            _, err = coordinator.communicate(timeout=240)
+            assert coordinator.returncode == 0, err
+            _, werr = worker.communicate(timeout=60)
+            assert worker.returncode == 0 and "worker ran 1 episode(s)" in werr, werr
+        finally:
+            for p in (coordinator, worker):
+                if p.poll() is None:
+                    p.kill()
+        assert [r["success"] for r in _rows(tmp_path / f"ev{n}")] == [True]
+        assert login.is_file() and not (tmp_path / f"ev{n}" / "credentials").exists()  # kept where issued, none made
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -123,6 +153,8 @@ def test_workers_on_other_processes_join_over_the_bus(tmp_path: Path) -> None:
         (["--workers", "0"], "--workers 0 needs --listen"),
         (["--listen", "tcp/127.0.0.1:7448"], "--listen: a secured evaluation listens on tls/"),
         (["--listen", "tls/127.0.0.1:7448", "--insecure"], "needs the evaluation's credentials"),
+        (["--credentials", "/nonexistent/creds"], "--credentials: credentials file /nonexistent/creds/coordinator.json does not exist"),
+        (["--credentials", "/nonexistent/creds", "--insecure"], "--credentials and --insecure contradict each other"),
     ],
 )
 def test_bad_eval_options_fail_before_anything_starts(tmp_path: Path, args: list[str], message: str) -> None:
