@@ -90,6 +90,19 @@ def free_port(host: str = "127.0.0.1") -> int:
         return int(s.getsockname()[1])
 
 
+def split_endpoint(ep: str) -> tuple[str, str, int | None]:
+    """(protocol, host, port) of a Zenoh endpoint such as `tcp/127.0.0.1:7447`; a bare
+    `HOST:PORT` means tcp. Port None where the endpoint has none we can read."""
+    proto, sep, rest = ep.partition("/")
+    if not sep:
+        proto, rest = "tcp", ep
+    rest = rest.split("#", 1)[0].split("?", 1)[0]
+    host, colon, port = rest.rpartition(":")
+    if not colon or not port.isdigit():
+        return proto, rest, None
+    return proto, host.strip("[]"), int(port)
+
+
 def endpoint(host: str, port: int, tls: bool = False) -> str:
     return f"{'tls' if tls else 'tcp'}/{host}:{port}"
 

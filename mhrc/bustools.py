@@ -29,7 +29,7 @@ from typing import Any
 import zenoh
 from pydantic import BaseModel
 
-from .bus import Bus, Sample, make_config
+from .bus import Bus, Sample, make_config, split_endpoint
 from .keys import ROOT, Keys
 from .protocol import (
     PROTOCOL_VERSION,
@@ -67,19 +67,6 @@ class BusToolError(RuntimeError):
 
 
 # --------------------------------------------------------------------------- connecting
-
-
-def split_endpoint(ep: str) -> tuple[str, str, int | None]:
-    """(protocol, host, port) of a Zenoh endpoint such as `tcp/127.0.0.1:7447`; a bare
-    `HOST:PORT` means tcp. Port None where the endpoint has none we can read."""
-    proto, sep, rest = ep.partition("/")
-    if not sep:
-        proto, rest = "tcp", ep
-    rest = rest.split("#", 1)[0].split("?", 1)[0]
-    host, colon, port = rest.rpartition(":")
-    if not colon or not port.isdigit():
-        return proto, rest, None
-    return proto, host.strip("[]"), int(port)
 
 
 def normalize_endpoint(ep: str) -> str:

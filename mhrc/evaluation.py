@@ -56,8 +56,8 @@ from typing import TYPE_CHECKING, Any
 import structlog
 from pydantic import BaseModel, Field
 
-from .bus import Bus, Sample, endpoint, free_port
 from . import memory
+from .bus import Bus, Sample, endpoint, free_port, split_endpoint
 from .diagnostics import diagnose
 from .episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig, EventHook, open_client, up_in_process
 from .fidelity import label
@@ -522,7 +522,7 @@ async def evaluate(
     if ephemeral:
         from .security import COORDINATOR, WORKER, load, make_eval_credentials
 
-        listen_host = listen.split("/", 1)[1].rsplit(":", 1)[0].strip("[]")
+        _, listen_host, _ = split_endpoint(listen)
         names = tuple(h for h in (listen_host, *hosts) if h not in ("0.0.0.0", "::", ""))
         files = make_eval_credentials(eval_id, creds_dir, hosts=names)
         coordinator, worker_login = load(files[COORDINATOR]), files[WORKER]

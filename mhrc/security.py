@@ -438,11 +438,10 @@ def diagnose(endpoint: str, creds: Credentials | None, timeout: float = 3.0) -> 
     """Why a client session to `endpoint` could not open, as far as a plain TLS handshake with
     the run's CA can tell: nothing listening, a plain tcp world, an expired or foreign
     certificate, or (the handshake succeeding) credentials the world refused."""
-    proto, _, addr = endpoint.partition("/")
-    host, _, port_s = addr.rpartition(":")
-    try:
-        port = int(port_s)
-    except ValueError:
+    from .bus import split_endpoint
+
+    proto, host, port = split_endpoint(endpoint)
+    if port is None:
         return f"bad endpoint {endpoint!r}"
     try:
         raw = socket.create_connection((host, port), timeout=timeout)
