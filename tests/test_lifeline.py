@@ -33,54 +33,41 @@ def alive(pid: int) -> bool:
     return state != "Z"
 
 
-def test_the_world_and_agents_die_with_a_killed_parent(tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "mhrc", "up", "--processes", "--quiet", "--tick-delay", "1", "--trace", str(tmp_path / "t.jsonl")]
-    parent = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    try:
-        deadline = time.monotonic() + 60
-        kids: set[int] = set()
-        while time.monotonic() < deadline and len(kids) < 4:  # the world and three agents
-            time.sleep(0.5)
-            kids = children(parent.pid)
-        assert len(kids) == 4, f"expected the world and 3 agents as children, found {kids}"
-        time.sleep(2)  # the episode is running (ticks take a second each)
-        parent.send_signal(signal.SIGKILL)
-        parent.wait()
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline and any(alive(k) for k in kids):
-            time.sleep(0.2)
-        assert not any(alive(k) for k in kids), "children outlived their SIGKILLed parent"
-    finally:
-        for k in children(parent.pid) if alive(parent.pid) else set():
-            os.kill(k, signal.SIGKILL)
-        if parent.poll() is None:
-            parent.kill()
-
-
-def test_eval_workers_die_with_a_killed_coordinator(tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "6", "--trials", "20",
-           "--workers", "2", "--out", str(tmp_path / "ev")]  # fmt: skip
+def _children_die_with_a_killed_parent(cmd: list[str], expected: int, running: float, what: str) -> None:
+    """Start `cmd`, wait for its `expected` children, let them work `running` seconds, SIGKILL
+    the parent: every child must be gone within 20 s."""
     parent = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     kids: set[int] = set()
     try:
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and len(kids) < 2:  # the two workers
+        while time.monotonic() < deadline and len(kids) < expected:
             time.sleep(0.5)
             kids = children(parent.pid)
-        assert len(kids) == 2, f"expected 2 workers as children, found {kids}"
-        time.sleep(3)  # they are running episodes
+        assert len(kids) == expected, f"expected {expected} children ({what}), found {kids}"
+        time.sleep(running)
         parent.send_signal(signal.SIGKILL)
         parent.wait()
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline and any(alive(k) for k in kids):
             time.sleep(0.2)
-        assert not any(alive(k) for k in kids), "workers outlived their SIGKILLed coordinator"
+        assert not any(alive(k) for k in kids), f"{what} outlived their SIGKILLed parent"
     finally:
         for k in kids:
             if alive(k):
                 os.kill(k, signal.SIGKILL)
         if parent.poll() is None:
             parent.kill()
+
+
+def test_the_world_and_agents_die_with_a_killed_parent(tmp_path: Path) -> None:
+    cmd = [sys.executable, "-m", "mhrc", "up", "--processes", "--quiet", "--tick-delay", "1", "--trace", str(tmp_path / "t.jsonl")]
+    _children_die_with_a_killed_parent(cmd, 4, 2.0, "the world and 3 agents")  # running: ticks take a second each
+
+
+def test_eval_workers_die_with_a_killed_coordinator(tmp_path: Path) -> None:
+    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "6", "--trials", "20",
+           "--workers", "2", "--out", str(tmp_path / "ev")]  # fmt: skip
+    _children_die_with_a_killed_parent(cmd, 2, 3.0, "the 2 workers")  # running: they are in episodes
 
 
 def test_processes_json_prints_only_json_and_the_tick_delay_reaches_the_world(tmp_path: Path) -> None:
