@@ -236,9 +236,12 @@ def _issue(
         return d
 
     out: dict[str, Path] = {}
+    with_ca: set[Path] = set()
     for u in users:
         d = home(u)
-        _write(d / "ca.pem", _pem_cert(ca), private=False)
+        if d not in with_ca:  # once per directory: all of them share it flat, each has its own split
+            _write(d / "ca.pem", _pem_cert(ca), private=False)
+            with_ca.add(d)
         entry: dict[str, Any] = {"run": run, "user": u, "password": passwords[u], "ca": "ca.pem", "robots": list(robots)}
         if kind != RUN:
             entry["kind"] = kind
