@@ -325,9 +325,17 @@ def check_for(creds: Credentials, *, run: str | None = None, user: str | None = 
 
 # ---------------------------------------------------------------------------------- zenoh config
 def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
-    """The world router's `access_control`: default deny; the world and the observer have the
-    run's key space (the observer to read only), each robot only its own keys."""
+    """The world router's `access_control`: default deny. Only the world's user speaks for the
+    world: it alone may put world events, acks, results, turns and inbox copies, reply to
+    queries and hold `alive/world`. The observer reads the whole run (and may ask `world/state`),
+    and every robot reads the world's events and liveliness; a robot sends only its own requests
+    and thoughts, queries only its own attach key and holds only its own liveliness token.
+
+    Zenoh matches a rule by key inclusion: a declaration is allowed when its key expression lies
+    inside one of the rule's, a message when its key does. Ingress is what a client sends to the
+    router, egress what the router sends to that client."""
     base = f"mhrc/{run}"
+    events = [f"{base}/world/event", f"{base}/alive/world", "mhrc/*/alive/world"]  # anyone logged in reads these
     rules: list[dict[str, Any]] = [
         {
             "id": "world-all",
@@ -337,27 +345,42 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
             "permission": "allow",
             "key_exprs": [f"{base}/**"],
         },
-        {
-            "id": "observer-read",
-            "messages": ["declare_subscriber", "put", "delete", "liveliness_token", "liveliness_query", "declare_liveliness_subscriber",
-                         "query", "reply"],
+        {  # what the observer receives: everything of the run, and replies to its world/state queries
+            "id": "observer-receive",
+            "messages": ["put", "delete", "liveliness_token", "reply", "declare_subscriber", "declare_queryable",
+                         "declare_liveliness_subscriber"],
             "flows": ["egress"],
             "permission": "allow",
             "key_exprs": [f"{base}/**"],
         },
-        {
-            "id": "observer-subscribe",
+        {  # what the observer may ask for: subscriptions anywhere under mhrc/ (the router carries this run only, and
+            # egress filters what reaches it) and the world's state; it sends nothing of its own
+            "id": "observer-ask",
             "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
             "flows": ["ingress"],
             "permission": "allow",
-            "key_exprs": [f"{base}/**", "mhrc/*/alive/world"],
+            "key_exprs": ["mhrc/**"],
         },
-        {  # anyone authenticated may see the world's liveliness (find_run) and its events
-            "id": "world-visible",
-            "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query", "put", "liveliness_token"],
-            "flows": ["ingress", "egress"],
+        {
+            "id": "observer-query",
+            "messages": ["query"],
+            "flows": ["ingress"],
             "permission": "allow",
-            "key_exprs": [f"{base}/world/event", f"{base}/alive/world", "mhrc/*/alive/world"],
+            "key_exprs": [f"{base}/world/state"],
+        },
+        {  # every login may watch the world's events and liveliness (find_run, an agent's world watch), never speak there
+            "id": "world-events-watch",
+            "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+            "flows": ["ingress"],
+            "permission": "allow",
+            "key_exprs": events,
+        },
+        {
+            "id": "world-events-receive",
+            "messages": ["put", "liveliness_token"],
+            "flows": ["egress"],
+            "permission": "allow",
+            "key_exprs": events,
         },
         {  # the world's (and the recorder's) subscriptions and queryables, wildcards included: without them a
             # client's declared publisher sees no subscriber and sends nothing
@@ -375,23 +398,22 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
     ]
     policies: list[dict[str, Any]] = [
         {"id": "p-world", "rules": ["world-all"], "subjects": ["s-world"]},
-        {"id": "p-observer", "rules": ["observer-read", "observer-subscribe", "world-visible"], "subjects": ["s-observer"]},
-        {"id": "p-visible", "rules": ["world-visible", "declarations-visible"], "subjects": ["s-robots"]},
-    ]
+        {"id": "p-observer", "rules": ["observer-receive", "observer-ask", "observer-query", "world-events-watch",
+                                       "world-events-receive"], "subjects": ["s-observer"]},
+        {"id": "p-visible", "rules": ["world-events-watch", "world-events-receive", "declarations-visible"], "subjects": ["s-robots"]},
+    ]  # fmt: skip
     for r in robots:
         k = f"{base}/robot/{r}"
-        own_in = f"{r}-in"
-        own_out = f"{r}-out"
-        own_put = f"{r}-put"
+        own_put, own_in, own_out = f"{r}-put", f"{r}-in", f"{r}-out"
         rules += [
-            {  # what robot r may send: its requests and thoughts, its attach query, its liveliness
+            {  # what robot r may send: its requests and thoughts
                 "id": own_put,
                 "messages": ["put"],
                 "flows": ["ingress"],
                 "permission": "allow",
                 "key_exprs": [f"{k}/action/request", f"{base}/agent/{r}/thought"],
             },
-            {
+            {  # its attach query, its liveliness token, its subscriptions to what the world sends it
                 "id": own_in,
                 "messages": ["query", "liveliness_token", "declare_subscriber"],
                 "flows": ["ingress"],

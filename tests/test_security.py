@@ -313,3 +313,101 @@ def test_an_evaluation_login_serves_without_per_robot_rules(tmp_path: Path) -> N
     assert files["worker"].parent.name == "worker" and sorted(p.name for p in files["worker"].parent.iterdir()) == ["ca.pem", "worker.json"]
     with pytest.raises(security.SecurityError, match="coordinator's credentials can serve"):
         security.apply(__import__("zenoh").Config(), worker, router=True)
+
+
+# ---------------------------------------------------------------------------------- only the world speaks for the world
+WORLD_ONLY_PUTS = ("world/event", "robot/alice/action/ack", "robot/alice/action/result", "robot/alice/turn", "robot/alice/inbox/bob",
+                   "robot/bob/action/ack", "robot/bob/action/result", "robot/bob/turn", "robot/bob/inbox/alice")  # fmt: skip
+
+
+@pytest.mark.parametrize("attacker", ["bob", "observer"])
+async def test_only_the_world_speaks_for_the_world(attacker: str, tmp_path: Path) -> None:
+    """A robot's login and the observer's put on every world-only key, hold the world's
+    liveliness token (of this run and of another), and answer world/state; the world, alice and
+    the recorder never see any of it, while the world's own messages reach them all."""
+    files = _creds(tmp_path)
+    k = Keys("sec")
+    async with _router(files) as (world, ep):
+
+        async def attach(key: str, params: dict[str, str], payload: bytes) -> AttachReply:
+            return AttachReply(robot=k.robot_of(key), accepted=False, reason="test")
+
+        async def state(key: str, params: dict[str, str], payload: bytes) -> RobotAttached:
+            return RobotAttached(robot="alice", agent_id="the-world", tick=0)
+
+        world.serve(f"{k.base}/robot/*/attach", attach)
+        world.serve(k.world_state, state)
+        world.declare_token(k.alive_world)
+        seen: dict[str, list[tuple[str, bytes]]] = {"world": [], "alice": [], "recorder": []}
+        world.subscribe(k.all, lambda s: seen["world"].append((s.key, s.payload)))
+        alice = await open_client(ep, 10, security=security.load(files["alice"]))
+        recorder = await open_client(ep, 10, security=security.load(files["observer"]))
+        mallory = await open_client(ep, 10, security=security.load(files[attacker]))
+        try:
+            alice_keys = [f"{k.base}/{key}" for key in WORLD_ONLY_PUTS if not key.startswith("robot/bob")]
+            for key in (*alice_keys[1:-1], f"{k.base}/robot/alice/inbox/**"):
+                alice.subscribe(key, lambda s: seen["alice"].append((s.key, s.payload)))
+            alice.subscribe(k.world_event, lambda s: seen["alice"].append((s.key, s.payload)))
+            recorder.subscribe(k.all, lambda s: seen["recorder"].append((s.key, s.payload)))
+            for key in WORLD_ONLY_PUTS:
+                mallory.put(f"{k.base}/{key}", b"forged")
+            mallory.declare_token(k.alive_world)
+            mallory.declare_token("mhrc/other-run/alive/world")
+            mallory.declare_token(k.alive_robot("alice"))
+            mallory.serve(k.world_state, state)  # answers as the world would, if the router let it
+            # mallory's own request, answered by the world, orders everything it sent before on its link
+            if attacker == "observer":
+                assert len(await mallory.get(k.world_state, timeout=5)) == 1
+            else:
+                assert len(await mallory.get(k.attach("bob"), AttachRequest(robot="bob", agent_id="m"), timeout=5)) == 1
+            for key in WORLD_ONLY_PUTS:  # then the world's own messages, which follow any forged one on each link
+                world.put(f"{k.base}/{key}", b"genuine")
+            everything = {f"{k.base}/{key}" for key in WORLD_ONLY_PUTS}
+            for who, expected in (("world", everything), ("alice", set(alice_keys)), ("recorder", everything)):
+                for _ in range(200):
+                    if {key for key, p in seen[who] if p == b"genuine"} >= expected:
+                        break
+                    await asyncio.sleep(0.05)
+                assert sorted(key for key, p in seen[who] if p == b"genuine") == sorted(expected), who
+            for who, got in seen.items():
+                assert [key for key, p in got if p == b"forged"] == [], f"{who} saw a message forged by {attacker}"
+            assert await alice.alive("mhrc/*/alive/world") == [k.alive_world]  # no phantom world, here or in another run
+            assert await recorder.alive(f"{k.base}/alive/**") == [k.alive_world]  # no liveliness token for alice either
+            replies = await recorder.get(k.world_state, timeout=5)
+            assert [decode(r, RobotAttached).agent_id for r in replies] == ["the-world"]  # one reply: the world's
+        finally:
+            await mallory.close()
+            await recorder.close()
+            await alice.close()
+
+
+async def test_a_forged_episode_done_cannot_end_a_secured_run(tmp_path: Path) -> None:
+    """`mhrc up --processes`, secured: the observer's and bob's logins put a forged `episode_done`
+    ("success 99/99") on world/event as soon as the episode starts; the run ends on its own
+    terms, and neither the runner nor the trace ever sees the forgery."""
+    from mhrc.protocol import EpisodeDone, EpisodeStarted, Metrics
+
+    cfg = EpisodeConfig.build(seed=1, n_objects=3, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
+    k = Keys(cfg.run)
+    forged = EpisodeDone(run=cfg.run, reason="success", metrics=Metrics(
+        success=True, partial_success=1.0, placed=99, total=99, temporal_steps=1, action_steps=1, action_steps_per_robot={}))  # fmt: skip
+    episode = asyncio.create_task(up_processes(cfg))
+    forgers: list[Bus] = []
+    try:
+        for user in ("observer", "bob"):
+            forgers.append(await open_client(cfg.endpoint, 60, security=cfg.participant(user)))
+        started = asyncio.Event()
+        forgers[0].subscribe(k.world_event, lambda s: started.set() if isinstance(decode_event(s.payload), EpisodeStarted) else None)
+        await asyncio.wait_for(started.wait(), 120)
+        for bus in forgers:
+            bus.put(k.world_event, forged)
+        done = await asyncio.wait_for(episode, 300)
+    finally:
+        for bus in forgers:
+            await bus.close()
+        if not episode.done():
+            episode.cancel()
+    assert done.metrics.total == 3 and done.metrics.placed != 99, done
+    assert done.reason in ("success", "horizon")
+    trace = cfg.trace.read_text()  # type: ignore[union-attr]
+    assert trace.count('"episode_done"') == 1 and '"placed":99' not in trace.replace(" ", "")
