@@ -6,7 +6,7 @@ TCP endpoint is probed with a plain connect, so "nothing listens there" and "som
 but it is not zenoh" are told apart in one clear line each (`BusToolError`), never a traceback.
 
 - presence comes from liveliness tokens (DESIGN.md, "The bus"): `mhrc/<run>/alive/world`,
-  `mhrc/<run>/alive/robot/<rid>` and an evaluation's `mhrc/<eval>/alive/coordinator` and
+  `mhrc/<run>/alive/robot/<rid>` and an evaluation's `mhrc/eval/<id>/alive/coordinator` and
   `.../alive/worker/<wid>`;
 - every message `echo` shows is decoded with `mhrc.protocol` by its `kind`; a payload that is
   not JSON or not a valid message is shown as such;
@@ -53,6 +53,7 @@ from .protocol import (
     WorldState,
     decode,
 )
+from .security import OBSERVER, WORLD
 
 OPEN_TIMEOUT_MS = 2000  # a zenoh handshake over loopback takes milliseconds; a silent non-zenoh listener would hold 10 s
 PROBE_TIMEOUT = 2.0  # s for the plain TCP connect
@@ -109,6 +110,7 @@ class Connection:
     bus: Bus
     session: zenoh.Session
     run: str | None = None  # the run of the credentials the session logged in with
+    user: str | None = None  # and their user (world, a robot, observer)
 
     @property
     def token_patterns(self) -> list[str]:
@@ -164,7 +166,10 @@ async def open_connection(ep: str, *, credentials: Path | None = None, open_time
 
             raise BusToolError(f"{ep}: {await asyncio.to_thread(diagnose, ep, security)}") from None
         raise BusToolError(f"{ep}: no zenoh session could be opened: {str(exc).split(' at ')[0]}") from None
-    return Connection(ep, Bus(session, asyncio.get_running_loop()), session, security.run if security is not None else None)
+    bus = Bus(session, asyncio.get_running_loop())
+    if security is None:
+        return Connection(ep, bus, session)
+    return Connection(ep, bus, session, security.run, security.user)
 
 
 @contextlib.asynccontextmanager
@@ -216,15 +221,19 @@ class Group:
 
 
 def group_tokens(keys: list[str]) -> list[Group]:
-    """Liveliness keys -> one Group per run or evaluation id, sorted."""
+    """Liveliness keys -> one Group per run or evaluation id, sorted. A run's tokens are
+    `mhrc/<run>/alive/...`, an evaluation's `mhrc/eval/<id>/alive/...` (mhrc.evaluation)."""
     groups: dict[str, Group] = {}
     for key in sorted(set(keys)):
         parts = key.split("/")
-        if len(parts) < 4 or parts[0] != ROOT or parts[2] != "alive":
+        if len(parts) >= 5 and parts[0] == ROOT and parts[1] == "eval" and parts[3] == "alive":
+            gid, role = parts[2], parts[4:]
+        elif len(parts) >= 4 and parts[0] == ROOT and parts[2] == "alive":
+            gid, role = parts[1], parts[3:]
+        else:
             groups.setdefault("", Group("")).other.append(key)
             continue
-        g = groups.setdefault(parts[1], Group(parts[1]))
-        role = parts[3:]
+        g = groups.setdefault(gid, Group(gid))
         if role == ["world"]:
             g.world = True
         elif len(role) == 2 and role[0] == "robot":
@@ -419,9 +428,13 @@ async def bus_echo(
 
 async def world_version(bus: Bus, run: str, timeout: float = STATE_TIMEOUT) -> tuple[bool, str]:
     """(healthy, description) of the world of `run`, from its state answer's `v`."""
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
     replies = await bus.get(Keys(run).world_state, timeout=timeout)
     if not replies:
-        return False, f"world alive, but its state query got no answer within {timeout:.0f} s"
+        if loop.time() - t0 >= timeout * 0.9:
+            return False, f"world alive, but its state query got no answer within {timeout:.0f} s"
+        return False, "world alive, but nothing answers its state query (world/state)"
     raw = replies[0]
     try:
         data = json.loads(raw)
@@ -460,10 +473,11 @@ async def doctor(ep: str, *, credentials: Path | None = None, write: Write = pri
         if not groups:
             write("ok   no runs alive (nothing has declared an mhrc liveliness token)")
         for g in groups:
-            if g.world:
+            if g.world and conn.user is not None and conn.user not in (OBSERVER, WORLD):
+                write(f"ok   run {g.id}: world alive (its state answers only the observer's login: "
+                      f"--credentials .../observer.json, not {conn.user}'s)")
+            elif g.world:
                 ok, text = await world_version(conn.bus, g.id)
-                if not ok and conn.run is not None and "no answer" in text:
-                    text += " (a secured run: its access control may not let this login query world/state)"
                 healthy &= ok
                 write(f"{'ok  ' if ok else 'FAIL'} run {g.id}: {text}")
             elif g.robots:

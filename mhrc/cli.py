@@ -635,7 +635,8 @@ def _bus_tool(name: str, coro_fn: Callable[[], Coroutine[Any, Any, int]]) -> Non
 
 CREDENTIALS_OPT = click.option(
     "--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS",
-    help="A participant's credentials file of a secured run (e.g. runs/RUN/credentials/observer.json), with a tls/ endpoint.",
+    help="A login of a secured run, with a tls/ endpoint: the observer's (runs/RUN/credentials/observer.json, or "
+         "DIR/observer.json of mhrc credentials) reads the whole run and asks the world's state; a robot's sees only its own keys.",
 )  # fmt: skip
 
 

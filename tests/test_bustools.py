@@ -211,7 +211,7 @@ def test_bus_tools_fail_in_one_line_when_nothing_listens() -> None:
 def test_group_tokens() -> None:
     groups = group_tokens([
         "mhrc/r1/alive/world", "mhrc/r1/alive/robot/bob", "mhrc/r1/alive/robot/alice",
-        "mhrc/r2/alive/robot/david", "mhrc/ev/alive/coordinator", "mhrc/ev/alive/worker/w1",
+        "mhrc/r2/alive/robot/david", "mhrc/eval/ev/alive/coordinator", "mhrc/eval/ev/alive/worker/w1",
     ])  # fmt: skip
     assert [g.describe() for g in groups] == [
         "eval ev: coordinator alive; workers: w1",
@@ -247,3 +247,69 @@ def test_commands_print_no_pybullet_banner(tmp_path: Path) -> None:
 def test_importing_pybullet_modules_is_silent(module: str) -> None:
     out = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and out.stdout == "" and out.stderr == "", out.stderr
+
+
+# --------------------------------------------------------------------------- a secured run, read with the observer's login
+
+
+async def test_the_observers_login_reads_a_secured_run(tmp_path: Path) -> None:
+    """`mhrc doctor` and `mhrc bus echo 'mhrc/**'` with the observer's login: a healthy world is
+    called healthy (its state answered), and echo prints the run's messages, as the README says;
+    a robot's login is told which login asks the world's state, without calling it unhealthy."""
+    from mhrc.episode import EpisodeConfig, open_client, up_in_process
+
+    cfg = EpisodeConfig.build(seed=0, n_objects=4, tick_delay=0.2, trace=tmp_path / "t.jsonl").resolved().with_credentials(tmp_path / "cred")
+    observer, alice = str(cfg.credentials_file("observer")), str(cfg.credentials_file("alice"))
+    world = asyncio.create_task(up_in_process(cfg, robots=("alice", "bob")))  # waits for david: alive, not started
+    client = await open_client(cfg.endpoint, 60, security=cfg.participant("observer"))
+    try:
+        await wait_attached(client, cfg.run, {"alice", "bob"})
+        doc, as_alice = await asyncio.gather(
+            amhrc("doctor", "--connect", cfg.endpoint, "--credentials", observer),
+            amhrc("doctor", "--connect", cfg.endpoint, "--credentials", alice),
+        )
+        assert doc.returncode == 0, doc.stdout + doc.stderr
+        assert f"run {cfg.run}: world speaks protocol v{PROTOCOL_VERSION}" in doc.stdout and doc.stdout.splitlines()[-1] == "healthy"
+        assert as_alice.returncode == 0, as_alice.stdout
+        assert "observer's login" in as_alice.stdout
+        echo = asyncio.create_task(amhrc("bus", "echo", "mhrc/**", "--connect", cfg.endpoint, "--credentials", observer,
+                                         "--count", "5", "--timeout", "60", timeout=90))  # fmt: skip
+        listing = await amhrc("bus", "list", "--connect", cfg.endpoint, "--credentials", observer)  # echo is subscribed by now
+        assert listing.stdout.startswith(f"run {cfg.run}: world alive"), listing.stdout + listing.stderr
+        david = asyncio.create_task(run_agent("david", cfg.run, cfg.endpoint, security=cfg.participant("david")))
+        out = await echo
+        assert out.returncode == 0, out.stdout + out.stderr
+        assert len(out.stdout.splitlines()) == 5 and all(f"mhrc/{cfg.run}/" in line for line in out.stdout.splitlines())
+        await asyncio.wait_for(world, 300)
+        await david
+    finally:
+        await client.close()
+        world.cancel()
+        await asyncio.gather(world, return_exceptions=True)
+
+
+def test_bus_list_shows_a_running_evaluation(tmp_path: Path) -> None:
+    """A real `mhrc eval` (its coordinator and one local worker): `mhrc bus list` names the
+    evaluation, its coordinator and its worker (their tokens live under mhrc/eval/<id>/)."""
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    cmd = [*MHRC, "eval", "--insecure", "--listen", ep, "--workers", "1", "--tasks", "pack_objects", "--scenes", "kitchen",
+           "--objects", "3", "--repeats", "3", "--out", str(tmp_path / "ev")]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+    try:
+        groups: list[dict[str, Any]] = []
+        for _ in range(120):  # until the worker has joined, or the evaluation is over
+            if proc.poll() is not None:
+                break
+            out = mhrc("bus", "list", "--json", "--connect", ep)
+            groups = [g for g in json.loads(out.stdout)["groups"] if "eval" in g] if out.returncode == 0 and out.stdout.strip() else []
+            if groups and groups[0]["workers"]:
+                break
+            time.sleep(0.5)
+        assert len(groups) == 1, groups  # (its episodes' runs, on the same bus, are listed beside it)
+        assert groups[0]["coordinator"] is True and len(groups[0]["workers"]) == 1, groups
+        text = mhrc("bus", "list", "--connect", ep).stdout
+        assert f"eval {groups[0]['eval']}: coordinator alive; workers: w-" in text, text
+    finally:
+        proc.terminate()
+        proc.wait(timeout=60)
