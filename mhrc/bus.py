@@ -170,12 +170,12 @@ class Bus:
             if mode == "client" and len(connect) == 1:
                 from .security import diagnose
 
-                cause = await asyncio.to_thread(diagnose, connect[0], security)
-                if "certificate" in cause or "no credentials were given" in cause:  # final: retrying cannot help
-                    raise BusRefused(f"could not open a zenoh session ({where}): {cause}") from None
-                if "refused the login" in cause:  # or a world still starting: open_client retries a little
-                    raise BusRefused(f"could not open a zenoh session ({where}): {cause}", final=False) from None
-                raise BusError(f"could not open a zenoh session ({where}): {cause}") from None
+                why = await asyncio.to_thread(diagnose, connect[0], security)
+                if why.final:  # retrying cannot help: a certificate, a missing login, the wrong transport
+                    raise BusRefused(f"could not open a zenoh session ({where}): {why}") from None
+                if why.login_refused:  # or a world still starting: open_client retries a little
+                    raise BusRefused(f"could not open a zenoh session ({where}): {why}", final=False) from None
+                raise BusError(f"could not open a zenoh session ({where}): {why}") from None
             if listen:
                 raise _listen_error(listen, str(exc)) from None
             raise BusError(f"could not open a zenoh session ({where}): {exc}") from None

@@ -53,7 +53,7 @@ from .protocol import (
     WorldState,
     decode,
 )
-from .security import OBSERVER, WORLD
+from .security import OBSERVER, WORLD, diagnose, speaks_tls
 
 OPEN_TIMEOUT_MS = 2000  # a zenoh handshake over loopback takes milliseconds; a silent non-zenoh listener would hold 10 s
 PROBE_TIMEOUT = 2.0  # s for the plain TCP connect
@@ -156,14 +156,12 @@ async def open_connection(ep: str, *, credentials: Path | None = None, open_time
     try:
         session = await asyncio.to_thread(zenoh.open, conf)
     except zenoh.ZError as exc:
-        if proto == "tcp" and security is None:
+        if proto == "tcp" and security is None and port is not None and not await asyncio.to_thread(speaks_tls, host, port):
             raise BusToolError(
                 f"{ep}: something accepts TCP connections there, but no zenoh handshake within {open_timeout_ms / 1000:.0f} s: "
                 f"it is not zenoh (or a secured world: connect to tls/{host}:{port} with --credentials)"
             ) from None
         if proto in ("tcp", "tls"):
-            from .security import diagnose
-
             raise BusToolError(f"{ep}: {await asyncio.to_thread(diagnose, ep, security)}") from None
         raise BusToolError(f"{ep}: no zenoh session could be opened: {str(exc).split(' at ')[0]}") from None
     bus = Bus(session, asyncio.get_running_loop())

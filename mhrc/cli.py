@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import json
 import os
+import shlex
 import signal
 import sys
 import time
@@ -159,15 +160,21 @@ def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
     return f
 
 
-def _credentials(path: Path | None, insecure: bool) -> Any:
+def _credentials(path: Path | None, insecure: bool, connect: str | None = None) -> Any:
     """The participant's credentials (mhrc.security.Credentials) from --credentials or
-    $MHRC_CREDENTIALS; None (and a warning on stderr) on the open bus."""
+    $MHRC_CREDENTIALS; None (and a warning on stderr) on the open bus. A tls/ `connect`
+    without credentials is a usage error: it cannot work."""
     from .security import SecurityError, load
 
     if insecure:
         click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
         return None
     if path is None:
+        if connect is not None and connect.startswith("tls/"):
+            raise click.UsageError(
+                f"--credentials: {connect} is a secured world (tls/); pass this participant's credentials file "
+                "(e.g. runs/RUN/credentials/<robot>.json, or DIR/<robot>.json of mhrc credentials) or set $MHRC_CREDENTIALS"
+            )
         click.echo("no credentials (--credentials or $MHRC_CREDENTIALS): the open tcp bus, as with --insecure", err=True)
         return None
     try:
@@ -285,10 +292,22 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, credentials:
     def listening(bus: Any, run: str) -> None:  # said once the world listens, not before
         click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
         for r in ROBOTS:
-            click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}", err=True)
+            login = "" if creds is None else f" --credentials {_login_of(creds, r)}"
+            click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}{login}", err=True)
         printer.attach(bus, run)
 
     _run(lambda: serve_world(cfg, observe=listening))
+
+
+def _login_of(world: Any, user: str) -> str:
+    """Where `user`'s credentials file lies beside the world's (`mhrc credentials` flat or
+    --split, `mhrc up`'s runs/RUN/credentials/), or a placeholder naming it."""
+    if world.path is not None:
+        here = world.path.parent
+        for candidate in (here / f"{user}.json", here.parent / user / f"{user}.json"):
+            if candidate.is_file():
+                return shlex.quote(str(candidate))
+    return f"<{user}'s credentials file>"
 
 
 @main.command()
@@ -311,7 +330,7 @@ def agent(
     from .episode import attach_agent
 
     logs.configure(log_level)
-    creds = _credentials(credentials, insecure)
+    creds = _credentials(credentials, insecure, connect)
     cfg = _config(**values)
     spec = cfg.robot_specs().get(robot) if cfg.llm else None
     options = cfg.policy_options(spec)

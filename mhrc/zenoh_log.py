@@ -46,9 +46,17 @@ _CAUSES: tuple[tuple[re.Pattern[str], str], ...] = (
     (re.compile(r"UsrPwd extension - Recv OpenSyn\. Invalid user"), "an unknown user: not a participant of this run"),
     (re.compile(r"UsrPwd extension - Recv InitSyn\. Expected extension"),
      "no login: a client without credentials (or with --insecure) on the secured bus"),
+    (re.compile(r"received corrupt message of type InvalidContentType"),
+     "a client spoke plain tcp to the secured world: it must connect to tls/ with its credentials"),
 )  # fmt: skip
 _ALERT = re.compile(r"received fatal alert: (\w+)")
-_NOISE = ("Cannot monitor expiration", "New transport link accepted", "Accepted TLS connection")
+_NOISE = (
+    "Cannot monitor expiration", "New transport link accepted", "Accepted TLS connection",
+    "tls handshake eof",  # a client that closed before the handshake: a port probe (mhrc up's wait for the world, diagnose)
+)  # fmt: skip
+# one line of zenoh's own log: time, level, thread, target, message
+_LINE = re.compile(r"^\S+\s+(TRACE|DEBUG|INFO|WARN|ERROR)\s+.*?\b(zenoh[\w:]*):\s?(.*)$")
+_HINT = re.compile(r"\s*Hint: increase the system open file limit\.?")
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 _installed = False
@@ -71,6 +79,20 @@ def classify(line: str) -> str | None:
 def is_noise(line: str) -> bool:
     """A per-connection line of zenoh's log that says nothing wrong."""
     return any(n in line for n in _NOISE)
+
+
+def translate(line: str) -> tuple[str, str] | None:
+    """(level, message) of a line of zenoh's own log that is neither a known cause nor noise,
+    in our words: no colours, no timestamp, no misleading "increase the open file limit" hint
+    (zenoh adds it to every TLS accept error). Debug lines (the login watch's own level) are
+    dropped: ("", ""). None: not a zenoh log line (a user's RUST_LOG, a C library's printf)."""
+    m = _LINE.match(_ANSI.sub("", line).strip())
+    if m is None:
+        return None
+    level, target, message = m.groups()
+    if level in ("TRACE", "DEBUG", "INFO"):
+        return "", ""
+    return level.lower(), f"{_HINT.sub('', message).strip()} ({target})"
 
 
 def watch_refusals(on_refusal: Callable[[str], None] | None = None) -> bool:
@@ -112,14 +134,24 @@ def _warner() -> Callable[[str], None]:
 
 
 def _pump(fd: int, real: int, report: Callable[[str], None]) -> None:
+    raw_log = bool(os.environ.get("RUST_LOG"))  # the user asked for zenoh's own log: theirs, unchanged
+    throttle = Throttle()
     with os.fdopen(fd, "rb") as pipe:
         for raw in pipe:
             line = raw.decode("utf-8", errors="replace")
-            cause = classify(line)
             try:
+                cause = classify(line)
                 if cause is not None:
                     report(cause)
-                elif not is_noise(line):
+                    continue
+                if is_noise(line):
+                    continue
+                said = None if raw_log else translate(line)
+                if said is None:
                     os.write(real, raw)
+                elif said[0]:
+                    due, held = throttle.due(said[1])
+                    if due:
+                        log.warning("zenoh says", message=said[1], **({"also": held} if held else {}))
             except Exception:  # noqa: BLE001 - the pump must outlive any one bad line
                 continue

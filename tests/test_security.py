@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from mhrc import security
-from mhrc.bus import Bus, BusError, BusRefused, endpoint, free_port
+from mhrc.bus import Bus, BusRefused, endpoint, free_port
 from mhrc.episode import EpisodeConfig, open_client, up_in_process, up_processes
 from mhrc.keys import Keys
 from mhrc.protocol import ActionRequest, AttachReply, AttachRequest, RobotAttached, Wait, decode, decode_event
@@ -95,8 +95,8 @@ async def test_no_credentials_refused_with_a_clear_error(tmp_path: Path) -> None
         with pytest.raises(BusRefused, match="no credentials"):
             await open_client(ep, 10)
         assert time.monotonic() - t0 < 5  # refused at once, not retried until the timeout
-        with pytest.raises(BusError, match="requires credentials"):  # the open bus retries (a world starting up) until the timeout
-            await open_client(ep.replace("tls/", "tcp/"), 2)
+        with pytest.raises(BusRefused, match="is secured"):  # a plain tcp client is told at once to use tls/
+            await open_client(ep.replace("tls/", "tcp/"), 60)
         wrong = json.loads(files["alice"].read_text())
         wrong["password"] = "guessed"
         (tmp_path / "cred" / "wrong.json").write_text(json.dumps(wrong))
@@ -411,3 +411,53 @@ async def test_a_forged_episode_done_cannot_end_a_secured_run(tmp_path: Path) ->
     assert done.reason in ("success", "horizon")
     trace = cfg.trace.read_text()  # type: ignore[union-attr]
     assert trace.count('"episode_done"') == 1 and '"placed":99' not in trace.replace(" ", "")
+
+
+def test_a_hand_started_secured_world_says_how_to_attach_and_why_not(tmp_path: Path) -> None:
+    """`mhrc world --credentials`: the attach commands it prints carry each robot's login and
+    work as printed; a plain-tcp agent and one without credentials each fail at once with one
+    line naming the fix, the world names the plain-tcp client, and nothing of zenoh's own log
+    (its "increase the system open file limit" hints) reaches the world's output."""
+    import shlex
+    import subprocess
+    import sys
+
+    d = tmp_path / "creds"
+    made = subprocess.run([sys.executable, "-m", "mhrc", "credentials", "--out", str(d), "--run", "hand"], capture_output=True, text=True)
+    assert made.returncode == 0, made.stderr
+    port = free_port()
+    err, out = tmp_path / "world.err", tmp_path / "world.out"
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("MHRC_CREDENTIALS", "RUST_LOG")}
+    with err.open("wb") as e_sink, out.open("wb") as o_sink:
+        world = subprocess.Popen([sys.executable, "-m", "mhrc", "world", "--credentials", str(d / "world.json"), "--port", str(port),
+                                  "--objects", "3"], stdout=o_sink, stderr=e_sink, stdin=subprocess.DEVNULL, env=env)  # fmt: skip
+        agent = None
+        try:
+            text = _wait_for(err, "mhrc agent --robot david")
+            printed = [line.strip() for line in text.splitlines() if line.strip().startswith("mhrc agent --robot")]
+            assert printed[0].endswith(f"--credentials {d / 'alice.json'}"), printed
+            agent_cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", "alice", "--attach-timeout", "300"]
+            plain = subprocess.run([*agent_cmd, "--connect", f"tcp/127.0.0.1:{port}", "--insecure"],
+                                   capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
+            assert plain.returncode == 2, plain.stderr
+            assert f"is secured (it speaks TLS): connect to tls/127.0.0.1:{port}" in plain.stderr and "Traceback" not in plain.stderr
+            bare = subprocess.run([*agent_cmd, "--connect", f"tls/127.0.0.1:{port}"], capture_output=True, text=True, timeout=120, env=env)
+            assert bare.returncode == 2 and "--credentials" in bare.stderr and "open tcp bus" not in bare.stderr, bare.stderr
+            _wait_for(err, "a client spoke plain tcp to the secured world")
+            agent = subprocess.Popen([sys.executable, "-m", "mhrc", *shlex.split(printed[0])[1:]], stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env)  # fmt: skip
+            for _ in range(120):  # the command as printed attaches alice
+                listed = subprocess.run([sys.executable, "-m", "mhrc", "bus", "list", "--connect", f"tls/127.0.0.1:{port}",
+                                         "--credentials", str(d / "observer.json")], capture_output=True, text=True, env=env)  # fmt: skip
+                if "robots attached: alice" in listed.stdout:
+                    break
+                time.sleep(0.5)
+            assert "robots attached: alice" in listed.stdout, listed.stdout + listed.stderr
+        finally:
+            for p in (agent, world):
+                if p is not None:
+                    p.terminate()
+                    p.wait(timeout=20)
+    everything = err.read_text(errors="replace") + out.read_text(errors="replace")
+    for raw in ("Hint: increase", "zenoh_link_tls", "tls handshake eof", "zenoh_transport", "\x1b["):
+        assert raw not in everything, (raw, everything[-2000:])
