@@ -60,8 +60,9 @@ def _listen_error(listen: Sequence[str], detail: str) -> BusError:
     return ListenError(f"cannot listen on {where}: {detail.split(' at /')[0]}")
 
 
-def check_listen(host: str, port: int) -> None:
-    """Raise ListenError if this process could not listen on host:port now (taken, no permission)."""
+def check_listen(host: str, port: int, proto: str = "tcp") -> None:
+    """Raise ListenError if this process could not listen on host:port now (taken, no permission);
+    `proto` (tcp, tls) only names the endpoint in the message."""
     import errno
 
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
@@ -69,7 +70,7 @@ def check_listen(host: str, port: int) -> None:
             s.bind((host, port))
         except OSError as exc:
             detail = "Address already in use" if exc.errno == errno.EADDRINUSE else "Permission denied" if exc.errno == errno.EACCES else str(exc)
-            raise _listen_error([f"tcp/{host}:{port}"], detail) from None
+            raise _listen_error([f"{proto}/{host}:{port}"], detail) from None
 
 
 @dataclass(frozen=True)

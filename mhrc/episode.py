@@ -569,7 +569,7 @@ async def _run_processes(
     procs: list[subprocess.Popen[bytes]] = []
     bus = None
     try:
-        check_listen(cfg.host, cfg.port)  # a port taken is one line now, not a world process failing behind a client that waits
+        check_listen(cfg.host, cfg.port, cfg.endpoint.split("/", 1)[0])  # a port taken is one line now, not a world process failing behind a client that waits
         world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=_child_stdout())
         procs.append(world)
         await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)

@@ -255,13 +255,16 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
                     break
                 assert time.monotonic() < deadline and world.poll() is None, "the first world never listened"
                 time.sleep(0.1)
-        for args in (["world", "--port", str(port), "--insecure"], ["up", "--port", str(port)], ["up", "--processes", "--port", str(port), "--insecure"]):
+        for args in (["world", "--port", str(port), "--insecure"], ["up", "--port", str(port)], ["up", "--processes", "--port", str(port), "--insecure"],
+                     ["up", "--processes", "--port", str(port)]):  # fmt: skip
             t0 = time.monotonic()
             out = subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=tmp_path, capture_output=True, text=True, timeout=120)
             took = time.monotonic() - t0
             lines = [line for line in out.stderr.splitlines() if line.startswith("mhrc:")]
             assert out.returncode == 2, (args, out.returncode, out.stderr[-2000:])
             assert len(lines) == 1 and f"port {port} is already in use" in lines[0] and "--port" in lines[0], out.stderr
+            proto = "tcp" if "--insecure" in args else "tls"  # the endpoint as the world would have listened
+            assert f"{proto}/127.0.0.1:{port}" in lines[0], (args, lines[0])
             assert "Traceback" not in out.stderr and "Unable to connect" not in out.stderr, out.stderr
             assert took < EXIT_BOUND, took
             print(f"{holder}: mhrc {args[0]}{' --processes' if '--processes' in args else ''} -> exit 2 in {took:.2f} s")
