@@ -50,7 +50,7 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from .metrics import TraceError, from_trace, junk_rejections
+from .metrics import TraceError, from_trace
 from .protocol import EPISODE_OVER, LLM_ERROR_PREFIX, OutcomeCode
 
 PREFIX = "diag_"
@@ -93,6 +93,41 @@ class Diagnostics:
 
 COUNTS = tuple(f.name for f in fields(Diagnostics) if f.type in ("int", "int | None"))
 BREAKDOWNS = ("hallucinated_names", "rejected_by_reason", "failed_by_code")
+
+# What people read for each key, in every report (the episode report's failure panel, the
+# evaluation page's plots): the Diagnostics fields, then the REJECT_KINDS. Outcome codes and
+# anything else unlisted read as the key with spaces (`label`).
+LABELS: dict[str, str] = {
+    "llm_steps": "LLM steps",
+    "parse_failures": "unparsed replies",
+    "llm_unreachable": "steps lost to an unreachable model",
+    "hallucinations": "hallucinations",
+    "hallucinated_names": "hallucinated names",
+    "not_capable": "not capable",
+    "rejected": "rejected requests",
+    "rejected_by_reason": "rejected requests, by reason",
+    "failed": "failed actions",
+    "failed_by_code": "failed actions, by outcome",
+    "failed_by_skill": "failed actions, by skill and outcome",
+    "repeated_failures": "repeated failures",
+    "waits": "waits chosen",
+    "waits_with_pending": "waits with a message pending",
+    "messages_sent": "messages sent",
+    "messages_read": "messages read",
+    "steps_above_bound": "steps above the TS lower bound",
+    "stale_tick": "planned on an old tick",
+    "busy": "robot still busy",
+    "out_of_turn": "out of turn",
+    "episode_over": "episode over",
+    "malformed": "malformed",
+    "not_attached": "not attached",
+    "other": "other",
+}
+
+
+def label(key: str) -> str:
+    """The human label of a diagnostics key, a rejection kind or an outcome code."""
+    return LABELS.get(key, key.replace("_", " "))
 
 
 def reject_kind(reason: str) -> str:
@@ -161,8 +196,9 @@ def diagnose(rows: list[dict[str, Any]]) -> Diagnostics:
     for m in msgs:
         if m.get("kind") == "action_ack" and m.get("accepted") is False:
             reasons[reject_kind(str(m.get("reason", "")))] += 1
-    if junk := junk_rejections(rows):  # a flood of junk, counted by the recorder
-        reasons["malformed"] += junk
+    for row in rows:  # a flood of junk or of rejections, counted by the recorder (mhrc.trace)
+        if row.get("kind") == "junk" and str(row.get("key", "")).endswith("/action/ack") and isinstance(row.get("msg"), dict):
+            reasons[reject_kind(str(row["msg"].get("reason", "")).removeprefix("rejected: "))] += int(row["msg"].get("count", 0))
     d.rejected, d.rejected_by_reason = sum(reasons.values()), dict(sorted(reasons.items()))
 
     names: Counter[str] = Counter()

@@ -141,6 +141,9 @@ class SkillOutcome(_Model):
     feedback: str = Field(description="the paper-style sentence the robot's agent reads")
     details: dict[str, float | str] = Field(default_factory=dict)
     sim_time: float = Field(0.0, ge=0.0, description="simulated seconds the skill took")
+    path: list[tuple[float, float]] | None = Field(
+        None, description="navigate: the base's planned route in metres, start to stop (a few dozen points at most), for viewers"
+    )
 
     @classmethod
     def ok(cls, feedback: str, *, sim_time: float = 0.0, **details: Any) -> SkillOutcome:

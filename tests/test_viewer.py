@@ -6,6 +6,7 @@ import asyncio
 import json
 import re
 import threading
+from html import escape
 from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,18 @@ from test_llm import FakeServer, Reply, ok
 
 def record_heuristic(path: Path, horizon: int = 30) -> Path:
     asyncio.run(up_in_process(EpisodeConfig.build(seed=0, horizon=horizon, trace=path).resolved()))
+    return path
+
+
+FAILED_HORIZON = 5  # seed 0's heuristic team places 1 of 4 targets by then (its TS lower bound is 11)
+
+
+def record_failed(path: Path) -> Path:
+    """A heuristic episode cut off by a tiny horizon: some targets placed, some not."""
+    record_heuristic(path, horizon=FAILED_HORIZON)
+    done = next(r["msg"] for r in read_trace(path) if isinstance(r["msg"], dict) and r["msg"]["kind"] == "episode_done")
+    m = done["metrics"]
+    assert not m["success"] and 0 < m["placed"] < m["total"], m  # the test needs a partial failure
     return path
 
 
@@ -105,7 +118,8 @@ def show(*args: str) -> Any:
 @pytest.fixture(scope="module")
 def traces(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("viewer")
-    return {"heuristic": record_heuristic(d / "heuristic" / "trace.jsonl"), "llm": record_llm(d / "llm.jsonl")}
+    return {"heuristic": record_heuristic(d / "heuristic" / "trace.jsonl"), "llm": record_llm(d / "llm.jsonl"),
+            "failed": record_failed(d / "failed.jsonl")}
 
 
 def _self_contained(html: str) -> None:
@@ -184,8 +198,6 @@ def test_llm_steps_show_the_analysis_command_prompt_and_reply(traces: dict[str, 
     assert "I will look at table_1 first." in html and "pick(ghost)" in html
     assert "prompt + 7 completion tokens" in html
     first_prompt = thoughts[0]["prompt"]
-    from html import escape
-
     assert escape(first_prompt, quote=True) in html  # the full prompt, not a summary
 
 
@@ -263,10 +275,246 @@ def test_the_failure_panel_renders_the_diagnosis_or_a_note(traces: dict[str, Pat
     html = out.read_text(encoding="utf-8")
     section = html[html.index('<section id="failures">'):]
     section = section[: section.index("</section>")]
+    from mhrc.diagnostics import LABELS
+
     diag, note = diagnostics_for(read_trace(traces["llm"]))
-    if diag is None:
-        assert note and "note" in section
-    else:
-        assert "<table" in section
-        for key in diag:
-            assert f"<th>{key}</th>" in section
+    assert diag is not None, note
+    assert "<table" in section
+    for key in diag:  # every finding, under the label people read, the key in its title
+        assert f'<th title="{key}">{escape(LABELS[key])}</th>' in section
+    assert "hallucinated names" in section and "hallucinated_names</th>" not in section
+    assert not re.search(r"<th[^>]*>[a-z]+_[a-z_]+</th>", section)  # no raw key as a row's heading
+
+
+def test_the_failure_panel_says_why_when_the_diagnosis_fails(traces: dict[str, Path], tmp_path: Path) -> None:
+    from mhrc.viewer.load import load_trace
+    from mhrc.viewer.model import build_view
+    from mhrc.viewer.page import render_page
+
+    html = render_page(build_view(load_trace(traces["llm"])), None, "the failure diagnosis failed on this trace: KeyError: 'x'")
+    section = html[html.index('<section id="failures">'):]
+    assert "KeyError" in section[: section.index("</section>")] and 'class="note"' in section
+
+
+def _data(html: str) -> dict[str, Any]:
+    return json.loads(parse(html).data_json)
+
+
+def _report(trace: Path, tmp_path: Path, name: str = "r.html") -> str:
+    out = tmp_path / name
+    result = show(str(trace), "--out", str(out))
+    assert result.exit_code == 0, result.output
+    return out.read_text(encoding="utf-8")
+
+
+class Rows(HTMLParser):
+    """The Targets section's rows: data-name, data-role, data-placed and the cells' text."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.rows: list[dict[str, Any]] = []
+        self._row: dict[str, Any] | None = None
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        a = dict(attrs)
+        if tag == "tr" and a.get("data-role"):
+            self._row = {"name": a["data-name"], "role": a["data-role"], "placed": a["data-placed"], "cells": []}
+            self.rows.append(self._row)
+        elif tag == "td" and self._row is not None:
+            self._row["cells"].append("")
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag == "tr":
+            self._row = None
+
+    def handle_data(self, data: str) -> None:
+        if self._row is not None and self._row["cells"]:
+            self._row["cells"][-1] += data
+
+
+def _targets_section(html: str) -> str:
+    start = html.index('<section id="targets">')
+    return html[start: html.index("</section>", start)]
+
+
+def _truth(trace: Path) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
+    """Bob's target list, the last snapshot's objects and the world's metrics, straight from the trace."""
+    msgs = [r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict)]
+    targets = next(m["observation"]["targets"] for m in msgs if m["kind"] == "action_result" and m["robot"] == "bob")
+    last = [m for m in msgs if m["kind"] == "snapshot"][-1]["objects"]
+    return targets, last, next(m for m in msgs if m["kind"] == "episode_done")["metrics"]
+
+
+def test_a_failed_episode_names_its_targets_the_unplaced_ones_and_where_they_ended(traces: dict[str, Path], tmp_path: Path) -> None:
+    html = _report(traces["failed"], tmp_path)
+    targets, last, metrics = _truth(traces["failed"])
+    section = _targets_section(html)
+    assert html.index('<section id="targets">') < html.index('<section id="map-section">')  # near the top, before the map
+    parser = Rows()
+    parser.feed(section)
+    rows = {r["name"]: r for r in parser.rows}
+    assert [r["name"] for r in parser.rows if r["role"] == "target"] == targets  # in the task's order
+    assert {n for n, r in rows.items() if r["role"] == "distractor"} == set(last) - set(targets) != set()
+    unplaced = [t for t in targets if last[t]["on"] != "tray" or last[t]["held_by"]]
+    assert [n for n, r in rows.items() if r["placed"] == "no"] == unplaced
+    assert len(targets) - len(unplaced) == metrics["placed"] and len(targets) == metrics["total"]
+    assert f"{len(unplaced)} of {len(targets)} targets not placed" in section
+    for t in unplaced:  # where each unplaced target was last
+        pose = last[t]
+        where = f"held by {pose['held_by']}" if pose["held_by"] else f"{'in' if pose['inside'] else 'on'} {pose['on']}"
+        assert rows[t]["cells"][3] == where and f"<b>{t}</b> ({where})" in section
+        assert rows[t]["cells"][2] == "tray"
+    # the map's script styles each object by its role and goal
+    data = _data(html)
+    assert data["roles"] == {n: r["role"] for n, r in rows.items()}
+    assert data["goals"] == {t: "tray" for t in targets}
+
+
+def test_a_solved_episode_has_every_target_placed(traces: dict[str, Path], tmp_path: Path) -> None:
+    html = _report(traces["heuristic"], tmp_path)
+    targets, _, metrics = _truth(traces["heuristic"])
+    assert metrics["success"]
+    parser = Rows()
+    parser.feed(_targets_section(html))
+    assert [r["name"] for r in parser.rows if r["placed"] == "yes"] == targets
+    assert f"All {len(targets)} targets placed." in html
+
+
+def test_targets_come_from_the_task_when_the_trace_does_not_name_them(traces: dict[str, Path], tmp_path: Path) -> None:
+    """A trace whose observations carry no target list (say, Bob never acted): the task's generator names them, and says so."""
+    bare = tmp_path / "bare.jsonl"
+    with bare.open("w", encoding="utf-8") as f:
+        for row in read_trace(traces["failed"]):
+            msg = row["msg"]
+            if isinstance(msg, dict) and isinstance(msg.get("observation"), dict):
+                msg["observation"]["targets"] = []
+            f.write(json.dumps(row) + "\n")
+    targets, _, _ = _truth(traces["failed"])
+    section = _targets_section(_report(bare, tmp_path))
+    parser = Rows()
+    parser.feed(section)
+    assert sorted(r["name"] for r in parser.rows if r["role"] == "target") == sorted(targets)
+    assert "task&#x27;s generator" in section or "task's generator" in section
+
+
+def test_targets_and_goals_in_the_started_event_come_first(traces: dict[str, Path], tmp_path: Path) -> None:
+    """A world that sends the task's targets and goals in episode_started: the report takes them from there."""
+    targets, last, _ = _truth(traces["failed"])
+    named = tmp_path / "named.jsonl"
+    with named.open("w", encoding="utf-8") as f:
+        for row in read_trace(traces["failed"]):
+            msg = row["msg"]
+            if isinstance(msg, dict) and msg.get("kind") == "episode_started":
+                msg["targets"], msg["goals"] = targets[::-1], {t: "tray" for t in targets}
+            f.write(json.dumps(row) + "\n")
+    section = _targets_section(_report(named, tmp_path))
+    parser = Rows()
+    parser.feed(section)
+    assert [r["name"] for r in parser.rows if r["role"] == "target"] == targets[::-1]
+    assert "targets from the episode_started event; goals from the episode_started event" in section
+
+
+def test_partial_success_reads_the_same_everywhere(traces: dict[str, Path], tmp_path: Path) -> None:
+    from mhrc.viewer.eval_report import html_summary
+
+    for kind in ("failed", "heuristic"):
+        _, _, m = _truth(traces[kind])
+        expected = f"{m['partial_success']:.2f} ({m['placed']}/{m['total']} placed)"
+        html = _report(traces[kind], tmp_path, f"{kind}.html")
+        box = re.search(r'data-metric="partial_success"><div class="mv">(.*?)</div>', html)
+        assert box and re.sub(r"<[^>]+>", "", box.group(1)) == expected
+        assert f"<td>{expected}</td>" in html  # the "all metrics" table
+    row = {"key": "pack_objects/kitchen/3/0", "method": "heuristic", "ablation": "none", "fidelity": "paper", "history_cap": None,
+           "horizon": 30, "aids": [], "repeat": 0, "trial": 0, "task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3,
+           "robots": ["alice", "bob", "david"], "success": False, "partial_success": 1 / 3, "placed": 1, "total": 3,
+           "temporal_steps": 30, "action_steps": 20, "lower_bound": 9, "valid": True, "invalid_reason": None, "schedule": "lockstep",
+           "messages": 2, "llm_calls": 0, "prompt_tokens": 0, "completion_tokens": 0, "failed_actions": {}, "wall_time": 1.0,
+           "parse_failures": 0, "llm_unreachable": 0, "rejected_actions": 0}  # fmt: skip
+    assert "<td>0.33 (1/3 placed)</td>" in html_summary([row], [None], resamples=50)
+
+
+def test_the_page_opens_on_the_last_frame(traces: dict[str, Path], tmp_path: Path) -> None:
+    html = _report(traces["failed"], tmp_path)
+    n = len(_data(html)["frames"])
+    slider = re.search(r'<input type="range" id="tick-slider"[^>]*>', html)
+    assert slider and f'max="{n - 1}"' in slider.group(0) and f'value="{n - 1}"' in slider.group(0)
+    assert "draw(last)" in html
+
+
+WALL_MARGIN = 0.02  # m: a route may graze a wall's box by a rounding centimetre
+
+
+def _crosses_wall(a: tuple[float, float], b: tuple[float, float], walls: list[list[float]]) -> bool:
+    for k in range(101):
+        x, y = a[0] + (b[0] - a[0]) * k / 100, a[1] + (b[1] - a[1]) * k / 100
+        for cx, cy, sx, sy in walls:
+            if abs(x - cx) < sx / 2 - WALL_MARGIN and abs(y - cy) < sy / 2 - WALL_MARGIN:
+                return True
+    return False
+
+
+def test_paths_follow_the_planned_routes_around_walls(traces: dict[str, Path], tmp_path: Path) -> None:
+    from mhrc.world.layouts import get_layout
+
+    trace = traces["heuristic"]
+    data = _data(_report(trace, tmp_path))
+    walls = [list(w) for w in get_layout("kitchen").walls]
+    msgs = [r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict)]
+    navigates = [m for m in msgs if m["kind"] == "action_result" and m["action"]["skill"] == "navigate" and m["outcome"]["code"] in ("ok", "off_target")]
+    assert navigates and set(data["routes"]) == {m["goal_id"] for m in navigates}
+    frame_of = {g: i for i, f in enumerate(data["frames"]) for g in f["goals"]}
+    straight_crossings = 0
+    for m in navigates:
+        route = data["routes"][m["goal_id"]]
+        assert 2 <= len(route) <= 40 and all(round(v, 2) == v for p in route for v in p)
+        i = frame_of[m["goal_id"]]
+        before, after = data["frames"][i - 1]["robots"][m["robot"]], data["frames"][i]["robots"][m["robot"]]
+        assert route[0] == pytest.approx([before["x"], before["y"]], abs=0.006)  # from where it stood
+        assert route[-1] == pytest.approx([after["x"], after["y"]], abs=0.006)  # to where it stopped
+        assert not any(_crosses_wall(tuple(a), tuple(b), walls) for a, b in zip(route, route[1:])), route
+        straight_crossings += _crosses_wall((before["x"], before["y"]), (after["x"], after["y"]), walls)
+    assert straight_crossings > 0  # the straight lines the map drew before went through walls
+
+
+def test_an_older_trace_without_routes_still_loads_and_draws_straight_lines(traces: dict[str, Path], tmp_path: Path) -> None:
+    from mhrc.protocol import ActionResult
+
+    old = tmp_path / "noroutes.jsonl"
+    with old.open("w", encoding="utf-8") as f:
+        for row in read_trace(traces["heuristic"]):
+            msg = row["msg"]
+            if isinstance(msg, dict) and msg.get("kind") == "action_result":
+                msg["outcome"].pop("path", None)
+                assert ActionResult.model_validate(msg).outcome.path is None  # still a valid message
+            f.write(json.dumps(row) + "\n")
+    html = _report(old, tmp_path)
+    assert _data(html)["routes"] == {} and parse(html).warnings == 0
+
+
+def _label_boxes(html: str) -> list[tuple[str, float, float, float, float]]:
+    """The fixed labels of the map's SVG as boxes, estimated independently of the page's own
+    estimate: 0.55 em a character, 1.2 em high, anchored in the middle on the baseline."""
+    svg = html[html.index('<g id="static">'): html.index('<g id="dyn">')]
+    boxes = []
+    for m in re.finditer(r"<text\b([^>]*)>([^<]*)</text>", svg):
+        attrs = dict(re.findall(r'([\w-]+)="([^"]*)"', m.group(1)))
+        font = float(attrs.get("font-size", 11))
+        x, y, w = float(attrs["x"]), float(attrs["y"]), len(m.group(2)) * font * 0.55
+        boxes.append((m.group(2), x - w / 2, y - 0.95 * font, x + w / 2, y + 0.25 * font))
+    return boxes
+
+
+def test_no_two_map_labels_overlap_in_the_kitchen(traces: dict[str, Path], tmp_path: Path) -> None:
+    from mhrc.world.layouts import get_layout
+
+    for kind in ("heuristic", "failed"):
+        html = _report(traces[kind], tmp_path, f"{kind}.html")
+        boxes = _label_boxes(html)
+        names = {f.name for f in get_layout("kitchen").furniture}
+        assert {b[0].removesuffix(" ▣") for b in boxes} == names | {"goal area"}
+        vb = re.search(r'<svg id="map" viewBox="0 0 ([\d.]+) ([\d.]+)"', html)
+        assert vb
+        for i, a in enumerate(boxes):
+            assert a[1] >= 0 and a[2] >= 0 and a[3] <= float(vb.group(1)) and a[4] <= float(vb.group(2)), a
+            for b in boxes[i + 1:]:
+                assert min(a[3], b[3]) <= max(a[1], b[1]) or min(a[4], b[4]) <= max(a[2], b[2]), (a, b)

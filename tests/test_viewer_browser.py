@@ -13,7 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from mhrc.cli import main
-from test_viewer import record_heuristic
+from test_viewer import record_failed, record_heuristic
 
 pytestmark = pytest.mark.slow
 
@@ -52,12 +52,20 @@ def driver(browser_installed: None) -> Iterator[Any]:
         drv.quit()
 
 
-@pytest.fixture(scope="module")
-def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    trace = record_heuristic(tmp_path_factory.mktemp("browser") / "trace.jsonl")
+def _show(trace: Path) -> Path:
     result = CliRunner().invoke(main, ["show", str(trace)])
     assert result.exit_code == 0, result.output
     return Path(result.output.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _show(record_heuristic(tmp_path_factory.mktemp("browser") / "trace.jsonl"))
+
+
+@pytest.fixture(scope="module")
+def failed_report(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _show(record_failed(tmp_path_factory.mktemp("browser-failed") / "trace.jsonl"))
 
 
 def _robots(drv: Any) -> dict[str, tuple[float, float]]:
@@ -96,16 +104,29 @@ def test_the_report_renders_and_scrubs_in_a_browser(driver: Any, report: Path, t
     assert all(lane.is_displayed() for lane in lanes)
     assert len(driver.find_elements(By.CSS_SELECTOR, ".lane li.step")) == len(data["calls"])
 
-    # the slider
+    # the slider, at the end: the state the episode was judged on, no step greyed as still to come
     slider = driver.find_element(By.ID, "tick-slider")
     label = driver.find_element(By.ID, "tick-label")
-    assert slider.is_displayed() and int(slider.get_attribute("max")) == len(frames) - 1
+    last = len(frames) - 1
+    assert slider.is_displayed() and int(slider.get_attribute("max")) == last
+    assert label.get_attribute("data-frame") == str(last) and int(driver.execute_script("return arguments[0].value", slider)) == last
+    assert _robots(driver) == {r: (p["x"], p["y"]) for r, p in frames[last]["robots"].items()}
+    assert not driver.find_elements(By.CSS_SELECTOR, ".step.future")
+    steps = driver.find_elements(By.CSS_SELECTOR, ".lane li.step")
+    assert all(float(el.value_of_css_property("opacity")) == 1.0 for el in steps)
+
+    # Home: the start; every executed step is then still to come
+    body = driver.find_element(By.TAG_NAME, "body")
+    body.send_keys(Keys.HOME)
     assert label.get_attribute("data-frame") == "0"
     start = _robots(driver)
     assert start == {r: (p["x"], p["y"]) for r, p in frames[0]["robots"].items()}
+    future = driver.find_elements(By.CSS_SELECTOR, ".step.future")
+    assert len(future) == len(driver.find_elements(By.CSS_SELECTOR, ".step[data-frame]")) > 0
+    assert all(float(el.value_of_css_property("opacity")) < 1.0 for el in future)
 
     # the right arrow key, with the focus on the page: one frame on
-    driver.find_element(By.TAG_NAME, "body").send_keys(Keys.ARROW_RIGHT)
+    body.send_keys(Keys.ARROW_RIGHT)
     assert label.get_attribute("data-frame") == "1"
     assert label.get_attribute("data-tick") == str(frames[1]["tick"])
     assert _robots(driver) == {r: (p["x"], p["y"]) for r, p in frames[1]["robots"].items()}
@@ -129,3 +150,91 @@ def test_the_report_renders_and_scrubs_in_a_browser(driver: Any, report: Path, t
 
     shot = tmp_path / "report.png"
     assert driver.save_screenshot(str(shot)) and shot.stat().st_size > 10_000
+
+
+def _boxes(drv: Any, selector: str) -> list[dict[str, Any]]:
+    """The rendered boxes (getBBox, SVG user units) of the map's elements matching `selector`."""
+    return drv.execute_script(
+        "return Array.from(document.querySelectorAll(arguments[0])).filter(e => e.textContent !== '' || e.tagName !== 'text')"
+        ".map(e => { const b = e.getBBox(); return {text: e.textContent, cls: e.getAttribute('class'), x0: b.x, y0: b.y, x1: b.x + b.width, y1: b.y + b.height}; });",
+        selector,
+    )
+
+
+def _overlap(a: dict[str, Any], b: dict[str, Any]) -> float:
+    w = min(a["x1"], b["x1"]) - max(a["x0"], b["x0"])
+    h = min(a["y1"], b["y1"]) - max(a["y0"], b["y0"])
+    return w * h if w > 0 and h > 0 else 0.0
+
+
+def test_a_failed_episode_shows_its_unplaced_targets_in_a_browser(driver: Any, failed_report: Path) -> None:
+    """The report of an episode cut off with targets unplaced: the Targets section lists them
+    with where they ended, the map marks them at the end, and no label covers another."""
+    from selenium.webdriver.common.by import By
+
+    driver.get(failed_report.as_uri())
+    assert not [e for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
+    data = json.loads(driver.find_element(By.ID, "mhrc-data").get_attribute("textContent"))
+    frames, last = data["frames"], len(data["frames"]) - 1
+    end = frames[last]["objects"]
+    targets = [n for n, r in data["roles"].items() if r == "target"]
+    unplaced = [t for t in targets if end[t]["on"] != data["goals"][t] or end[t]["held_by"]]
+    assert targets and unplaced and len(unplaced) < len(targets)
+
+    # the Targets section, above the map, visible, naming each unplaced target and where it is
+    section = driver.find_element(By.ID, "targets")
+    assert section.is_displayed() and section.location["y"] < driver.find_element(By.ID, "map").location["y"]
+    summary = section.find_element(By.CSS_SELECTOR, ".tsum").text
+    assert f"{len(unplaced)} of {len(targets)} targets not placed" in summary
+    rows = {r.get_attribute("data-name"): r for r in section.find_elements(By.CSS_SELECTOR, "tr[data-role]")}
+    assert [n for n, r in rows.items() if r.get_attribute("data-role") == "target"] == targets
+    for t in unplaced:
+        row = rows[t]
+        assert row.is_displayed() and row.get_attribute("data-placed") == "no"
+        assert "not placed" in row.text and t in summary
+        tint = row.find_element(By.CSS_SELECTOR, "td").value_of_css_property("background-color")
+        assert tint.startswith("rgb") and tint not in ("rgba(0, 0, 0, 0)", "rgb(255, 255, 255)"), tint  # the row stands out
+        where = f"held by {end[t]['held_by']}" if end[t]["held_by"] else f"{'in' if end[t]['inside'] else 'on'} {end[t]['on']}"
+        assert where in row.text and where in summary
+    for n, row in rows.items():
+        if row.get_attribute("data-role") == "distractor":
+            assert "distractor" in row.text and n in summary
+
+    # the map at the end: each object styled by its role; the unplaced targets ringed
+    drawn = {g.get_attribute("data-name"): g for g in driver.find_elements(By.CSS_SELECTOR, "#map g.object")}
+    assert set(drawn) == set(end)
+    for name, g in drawn.items():
+        role = g.get_attribute("data-role")
+        assert role == ("target unplaced" if name in unplaced else "target placed" if name in targets else "distractor")
+        assert bool(g.find_elements(By.CSS_SELECTOR, "circle.ring")) == (name in unplaced)
+    fills = {g.get_attribute("data-role"): g.find_element(By.CSS_SELECTOR, "circle.obj").value_of_css_property("fill") for g in drawn.values()}
+    assert len(set(fills.values())) == len(fills) == 3  # three roles, three colours
+
+    # the paths follow the planned routes: every route's waypoints are on its robot's path
+    paths = {p.get_attribute("data-robot"): p for p in driver.find_elements(By.CSS_SELECTOR, "#map polyline.path")}
+    svg = driver.find_element(By.ID, "map")
+    xmin, ymax, scale = (float(svg.get_attribute(f"data-{k}")) for k in ("xmin", "ymax", "scale"))
+    routed = 0
+    for goal, route in data["routes"].items():
+        robot = data["calls"][goal]["robot"]
+        points = [tuple(map(float, p.split(","))) for p in paths[robot].get_attribute("points").split()]
+        for x, y in route:
+            assert any(abs(px - (x - xmin) * scale) < 0.2 and abs(py - (ymax - y) * scale) < 0.2 for px, py in points), (goal, x, y)
+        routed += 1
+    assert routed and sum(int(p.get_attribute("data-routes")) for p in paths.values()) == routed
+
+    # no label covers another, nor a robot's or an object's dot, at any frame
+    for i in [last, *range(last)]:
+        driver.execute_script(
+            "const s = arguments[0]; s.value = arguments[1]; s.dispatchEvent(new Event('input', {bubbles: true}));",
+            driver.find_element(By.ID, "tick-slider"), i,
+        )
+        labels = _boxes(driver, "#map text")
+        assert len(labels) >= len(frames[i]["objects"]) + len(frames[i]["robots"]) + 1
+        for k, a in enumerate(labels):
+            for b in labels[k + 1:]:
+                assert _overlap(a, b) < 0.5, (i, a, b)
+        dots = _boxes(driver, "#map g.robot circle, #map g.object circle.obj")
+        for a in _boxes(driver, "#labels text"):
+            for d in dots:
+                assert _overlap(a, d) < 1.0, (i, a, d)

@@ -51,6 +51,7 @@ NAV_SIGMA = 0.015  # m: the Rayleigh scale of an ordinary stop's error (mean 1.9
 NAV_SLIP_P = 0.03  # the chance that a base slips
 NAV_SLIP = (0.11, 0.3)  # m: how far a slip takes it from its goal (then pulled back onto free floor)
 OFF_TARGET = 0.1  # m: navigate and move fail when the base stops farther than this from the goal
+ROUTE_POINTS = 40  # at most this many points of a navigate's route go into its outcome (for viewers)
 # a released object falls under gravity from where the tool lets go of it, that point off by a small
 # error (Rayleigh-distributed length again) or, now and then, by a slip of the object off the suction cup
 RELEASE_SIGMA = 0.003  # m: the Rayleigh scale of an ordinary release's error
@@ -94,6 +95,22 @@ def stop_near(sim: Sim, goal: tuple[float, float], error: tuple[float, float]) -
     return goal
 
 
+def route(path: list[tuple[float, float]], stop: tuple[float, float]) -> list[tuple[float, float]]:
+    """The route a viewer draws: the planned path, then the real stop (the goal plus the stop's
+    error, in a free straight line from it), at most ROUTE_POINTS points (ends kept), rounded to
+    centimetres."""
+    pts = [*path, stop]
+    if len(pts) > ROUTE_POINTS:
+        step = (len(pts) - 1) / (ROUTE_POINTS - 1)
+        pts = [pts[round(i * step)] for i in range(ROUTE_POINTS)]
+    out: list[tuple[float, float]] = []
+    for x, y in pts:
+        q = (round(float(x), 2), round(float(y), 2))
+        if not out or out[-1] != q:
+            out.append(q)
+    return out
+
+
 def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
     error = base_error(sim)
     f = sim.layout.get(a.target)
@@ -127,14 +144,16 @@ def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
     off = math.hypot(sx - goal[0], sy - goal[1])
     length = path_length(path) + off
     sim.look_at(r.name, f.name)  # on target or not, the robot stands by f and sees it
+    drawn = route(path, (sx, sy))
     if off > OFF_TARGET:
         return SkillOutcome.fail(
             OutcomeCode.OFF_TARGET, fb.off_target(f.name, a.stand_pose, off, (sx, sy)),
             sim_time=length / NAV_SPEED, distance=round(off, 3), x=round(sx, 3), y=round(sy, 3), path_length=round(length, 3),
-        )  # fmt: skip
+        ).model_copy(update={"path": drawn})  # fmt: skip
     seen = None if f.container is not None and not sim.is_open(f.name) else sim.objects_on(f.name)
     text = fb.reached(f.name, a.stand_pose, seen, container=f.container is not None, can_open="open" in r.kind.skills)
-    return SkillOutcome.ok(text, sim_time=length / NAV_SPEED, path_length=round(length, 3), distance=round(off, 3))
+    out = SkillOutcome.ok(text, sim_time=length / NAV_SPEED, path_length=round(length, 3), distance=round(off, 3))
+    return out.model_copy(update={"path": drawn})
 
 
 def _move_blocked(sim: Sim, x: float, y: float, dx: float, dy: float) -> bool:

@@ -23,16 +23,12 @@ from typing import Any
 from ..diagnostics import summarize_diagnostics
 from ..metrics import summarize
 from ..report import CI_SEED, RESAMPLES, SETTING, _setting, _valid, group, read_rows, setting_label, summary_markdown
+from .wording import diagnostic_label, partial_success
 
-PLOTTED_DIAGNOSTICS = (
-    ("parse_failures", "unparsed replies"),
-    ("hallucinations", "hallucinations"),
-    ("not_capable", "not capable"),
-    ("rejected", "rejected"),
-    ("failed", "failed actions"),
-    ("repeated_failures", "repeated failures"),
-    ("waits_with_pending", "waits w/ pending"),
-)
+PLOTTED_DIAGNOSTICS = tuple(
+    (name, diagnostic_label(name))
+    for name in ("parse_failures", "hallucinations", "not_capable", "rejected", "failed", "repeated_failures", "waits_with_pending")
+)  # labelled as in every report (mhrc.diagnostics.LABELS)
 STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 80em; padding: 0 1em; color: #222; }
 table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.9em; }
@@ -184,7 +180,8 @@ def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> s
         r, link = rows[i], links[i]
         cells = [
             html.escape(str(r.get("key", ""))), html.escape(setting_label(_setting(r))), "yes" if _valid(r) else "no",
-            "1" if r.get("success") else "0", f"{float(r.get('partial_success', 0.0)):.2f}", str(r.get("temporal_steps", "")),
+            "1" if r.get("success") else "0", html.escape(partial_success(r.get("partial_success", 0.0), r.get("placed"), r.get("total"))),
+            str(r.get("temporal_steps", "")),
             "" if r.get("lower_bound") is None else str(r["lower_bound"]),
             f'<a href="{html.escape(link)}">{html.escape(link)}</a>' if link else "",
         ]  # fmt: skip

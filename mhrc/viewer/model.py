@@ -3,7 +3,8 @@
 Steps are keyed by goal id: a request, its ack, its result; each robot's thoughts are paired with
 its requests in order (an agent publishes its thought, then its request). Map frames are the
 world's `snapshot` events; a trace without them (protocol version 1) gets frames from the
-robots' own observations in their results, with no objects.
+robots' own observations in their results, with no objects. The task's targets and their ends
+come from mhrc.viewer.targets; each navigate's planned route from its outcome's `path`.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import Any
 from ..world.layouts import Layout, get_layout
 
 from .load import LoadedTrace
+from .targets import TaskView, task_view
 
 
 @dataclass
@@ -50,6 +52,8 @@ class EpisodeView:
     frames_from: str  # "snapshots", "observations" or "none"
     messages: list[MapMessage]
     scene: dict[str, Any] | None
+    task: TaskView | None = None
+    routes: dict[str, list[list[float]]] = field(default_factory=dict)  # goal id -> a navigate's planned route
     warnings: list[str] = field(default_factory=list)
 
 
@@ -220,7 +224,23 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
         "trace": str(trace.path),
     }
     return EpisodeView(header=header, robots=robots, steps=out, frames=frames, frames_from=frames_from,
-                       messages=messages, scene=scene, warnings=warnings)
+                       messages=messages, scene=scene, task=task_view(trace, started, frames, frames_from, metrics),
+                       routes=_routes(out), warnings=warnings)
+
+
+def _routes(lanes: dict[str, list[Step]]) -> dict[str, list[list[float]]]:
+    """The planned route of every navigate whose outcome carries one (traces before routes have none:
+    the map joins the stops with straight lines)."""
+    out: dict[str, list[list[float]]] = {}
+    for lane in lanes.values():
+        for s in lane:
+            path = ((s.result or {}).get("outcome") or {}).get("path")
+            if isinstance(path, list) and len(path) >= 2:
+                try:
+                    out[s.goal_id] = [[float(p[0]), float(p[1])] for p in path]
+                except (TypeError, ValueError, IndexError):
+                    continue  # a damaged route: the straight line it is
+    return out
 
 
 def _frames(trace: LoadedTrace, lanes: dict[str, list[Step]], started: dict[str, Any]) -> tuple[list[dict[str, Any]], str]:
