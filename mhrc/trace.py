@@ -5,12 +5,16 @@ ack, result, message, thought and world event, whichever process sent them. Each
 `{"t": seconds since recording started, "key": ..., "kind": "put"|"delete"|"alive"|"gone"|"junk",
 "msg": the decoded JSON payload}`; a payload that is not JSON is kept as `{"raw": text}`.
 Malformed action requests and the world's rejections of them are not copied: a `junk` line per
-key and second holds their count, bytes and first reason.
+key and second holds their count, bytes and first reason. So are well-formed requests the world
+rejects, past the first REJECTIONS_IN_FULL per robot and interval (a robot flooding its own key
+must not fill the disk either): the recorder holds each well-formed request until its ack, then
+writes both (the request with the time it was seen) or counts both.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
 from pathlib import Path
@@ -21,6 +25,8 @@ from .keys import Keys
 from .protocol import ActionRequest, ProtocolError, decode
 
 JUNK_INTERVAL = 1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
+REJECTIONS_IN_FULL = 5  # well-formed requests rejected per robot and interval that are copied in full; the rest are counted
+MAX_HELD = 20_000  # requests awaiting their ack (a flood arrives faster than the world acks); past it the oldest is written at once
 
 
 class Recorder:
@@ -36,6 +42,8 @@ class Recorder:
         self.count = 0
         self._ended = threading.Event()  # an episode_done event is on disk
         self._junk: dict[str, dict[str, Any]] = {}  # key -> counts not yet written
+        self._held: dict[str, tuple[float, str, Any]] = {}  # goal id -> (t, key, msg) of a request awaiting its ack
+        self._rejected: dict[str, tuple[float, int]] = {}  # ack key -> (interval start, rejections copied in it)
         self._lock = threading.RLock()  # samples arrive on zenoh's threads (the data's and the liveliness')
 
     def start(self) -> Recorder:
@@ -47,8 +55,8 @@ class Recorder:
         self._bus.watch_liveliness(f"{self._keys.base}/alive/**", self._on_liveliness, on_thread=True)
         return self
 
-    def _write(self, key: str, kind: str, msg: Any) -> None:
-        line = {"t": round(time.perf_counter() - self._t0, 6), "key": key, "kind": kind, "msg": msg}
+    def _write(self, key: str, kind: str, msg: Any, t: float | None = None) -> None:
+        line = {"t": round((time.perf_counter() if t is None else t) - self._t0, 6), "key": key, "kind": kind, "msg": msg}
         text = json.dumps(line, separators=(",", ":")) + "\n"
         with self._lock:  # one whole line at a time, whichever thread
             if self._file is None or self._file.closed:
@@ -62,7 +70,7 @@ class Recorder:
             msg: Any = json.loads(sample.payload)
         except (ValueError, UnicodeDecodeError):
             msg = {"raw": sample.payload.decode("utf-8", "replace")}
-        if sample.is_put and self._is_junk(sample, msg):
+        if sample.is_put and (self._is_junk(sample, msg) or self._held_or_counted(sample, msg)):
             return
         self._write(sample.key, "put" if sample.is_put else "delete", msg)
         if isinstance(msg, dict) and msg.get("kind") == "episode_done":
@@ -85,12 +93,48 @@ class Recorder:
             return False
         now = time.perf_counter()
         with self._lock:
-            junk = self._junk.setdefault(sample.key, {"count": 0, "bytes": 0, "reason": reason[:300], "since": now})
-            junk["count"] += 1
-            junk["bytes"] += len(sample.payload)
-            if now - junk["since"] >= JUNK_INTERVAL:
-                self._flush_junk(sample.key)
+            self._count_junk(sample.key, reason, len(sample.payload), now)
         return True
+
+    def _held_or_counted(self, sample: Sample, msg: Any) -> bool:
+        """Hold a well-formed request until its ack; at the ack, write the request then let the
+        ack be written, or, for a rejection past REJECTIONS_IN_FULL in this interval, count both
+        as junk. True when the sample is held or counted (not to be written now)."""
+        if not isinstance(msg, dict) or not isinstance(msg.get("goal_id"), str):
+            return False
+        now = time.perf_counter()
+        with self._lock:
+            if sample.key.endswith("/action/request"):
+                self._held[msg["goal_id"]] = (now, sample.key, msg)
+                if len(self._held) > MAX_HELD:  # acks that never come (a world gone): do not hold forever
+                    oldest = next(iter(self._held))
+                    t, key, old = self._held.pop(oldest)
+                    self._write(key, "put", old, t)
+                return True
+            if not sample.key.endswith("/action/ack"):
+                return False
+            held = self._held.pop(msg["goal_id"], None)
+            if msg.get("accepted") is False:
+                start, copied = self._rejected.get(sample.key, (now, 0))
+                if now - start >= JUNK_INTERVAL:
+                    start, copied = now, 0
+                if copied >= REJECTIONS_IN_FULL:
+                    reason = "rejected: " + str(msg.get("reason", ""))
+                    if held is not None:
+                        self._count_junk(held[1], reason, len(json.dumps(held[2])), now)
+                    self._count_junk(sample.key, reason, len(sample.payload), now)
+                    return True
+                self._rejected[sample.key] = (start, copied + 1)
+            if held is not None:
+                self._write(held[1], "put", held[2], held[0])
+            return False
+
+    def _count_junk(self, key: str, reason: str, size: int, now: float) -> None:
+        junk = self._junk.setdefault(key, {"count": 0, "bytes": 0, "reason": reason[:300], "since": now})
+        junk["count"] += 1
+        junk["bytes"] += size
+        if now - junk["since"] >= JUNK_INTERVAL:
+            self._flush_junk(key)
 
     def _flush_junk(self, key: str) -> None:
         junk = self._junk.pop(key, None)
@@ -107,11 +151,34 @@ class Recorder:
         if until_done > 0:
             self._ended.wait(until_done)
         with self._lock:
+            for t, key, msg in self._held.values():  # requests never acked (the episode ended first)
+                self._write(key, "put", msg, t)
+            self._held.clear()
             for key in list(self._junk):
                 self._flush_junk(key)
         with self._lock:
             if self._file is not None:
                 self._file.close()
+
+
+def unwritable(path: Path, *, directory: bool = False) -> str | None:
+    """Why `path` (a file, or with `directory` a directory) could not be created and written,
+    or None. Creates nothing: checked before a run starts, a bad `--trace` or `--out` costs one
+    line instead of a traceback from a half-started run."""
+    if path.exists():
+        if directory and not path.is_dir():
+            return f"{path} is not a directory"
+        if not directory and path.is_dir():
+            return f"{path} is a directory, not a file"
+        if not os.access(path, os.W_OK | (os.X_OK if directory else 0)):
+            return f"{path} is not writable"
+        return None
+    parent = next(p for p in path.parents if p.exists())  # the root always exists
+    if not parent.is_dir():
+        return f"cannot create {path}: {parent} is not a directory"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"cannot create {path}: {parent} is not writable"
+    return None
 
 
 def read_trace(path: str | Path) -> list[dict[str, Any]]:

@@ -225,6 +225,43 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
     print(f"junk flood: trace {size} B against {clean_size} B without it; {len(warnings)} warning line(s)")
 
 
+async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Path) -> None:
+    """2,000 well-formed requests on Alice's key from an agent the world does not know: each is
+    rejected; the trace copies the first few (request and ack) and counts the rest as `junk`,
+    and the metrics and diagnostics still count every rejection, by reason."""
+    from mhrc.bus import Bus
+    from mhrc.diagnostics import diagnose
+    from mhrc.episode import EpisodeConfig, up_in_process
+    from mhrc.keys import Keys
+    from mhrc.metrics import from_trace
+    from mhrc.protocol import ActionRequest, Wait
+    from mhrc.trace import REJECTIONS_IN_FULL, read_trace
+
+    flood = 2000
+    forged = [ActionRequest(robot="alice", agent_id="not-attached", tick=0, action=Wait()) for _ in range(flood)]
+
+    def attack(bus: Bus, run: str) -> None:
+        def flood_now() -> None:
+            for req in forged:
+                bus.put(Keys(run).action_request("alice"), req)
+
+        asyncio.get_running_loop().call_soon(flood_now)
+
+    done = await up_in_process(EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "t.jsonl").resolved(), observe=attack)
+    assert done.reason == "success"
+    rows = read_trace(tmp_path / "t.jsonl")
+    ids = {r.goal_id for r in forged}
+    copied = [r for r in rows if r["kind"] == "put" and isinstance(r["msg"], dict) and r["msg"].get("goal_id") in ids]
+    counted = {key: sum(r["msg"]["count"] for r in rows if r["kind"] == "junk" and r["key"].endswith(key)) for key in ("/action/request", "/action/ack")}
+    requests = sum(1 for r in copied if r["key"].endswith("/action/request"))
+    acks = sum(1 for r in copied if r["key"].endswith("/action/ack"))
+    assert requests == acks and 1 <= acks < 40 * REJECTIONS_IN_FULL, (requests, acks)  # a few per interval, each request beside its ack
+    assert counted == {"/action/request": flood - requests, "/action/ack": flood - acks}, counted
+    assert (tmp_path / "t.jsonl").stat().st_size < 1_000_000  # 2,000 of each copied came to ~1 MB
+    assert from_trace(rows).rejected_actions >= flood
+    assert diagnose(rows).rejected_by_reason.get("not_attached", 0) >= flood
+
+
 # --------------------------------------------------------------------------- startup errors
 
 
