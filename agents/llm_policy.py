@@ -13,22 +13,27 @@ and scene graph (mhrc.agents.structured), the prompt ends with the JSON instruct
 "Command: ...", and the reply is parsed as JSON; the default is the paper's free text.
 
 Templates are `string.Template` files `<robot>_system.txt` and `<robot>_user.txt`, from the
-package `mhrc.prompts` or from a directory of your own (`prompts_dir`). Placeholders:
+package `mhrc.prompts` or from a directory of your own (`prompts_dir`). The default set carries
+the paper's appendix (role, background, profile, constraints, skills, response format; scene
+graph, status, task, histories) and nothing more. Placeholders (* required):
 
 system  $robot      the robot's name, capitalized (Alice)
         $teammates  one line per teammate present: name and skill signatures
         $absent     a note naming the teammates left out of this episode, or nothing
-        $skills     one line per skill of this robot: signature and what it does
+        $skills*    one line per skill of this robot: signature and what it does
+        $hints      the prompt_hints aid's advice (`<robot>_hints.txt`), or nothing; a system
+                    template without it gets the advice at its end when the aid is on
 user    $step       the current step (tick)
-        $scene_graph  furniture (position, yaw, open/closed, stand poses, place pose) and known objects
-        $status     base pose and where the robot stands, arm base and reach, gripper
-        $task       brief and detailed task (Bob: the object list)
-        $progress   the latest task progress status (Bob's; a placeholder for the others)
-        $feedback, $messages, $actions
+        $scene_graph*  furniture (position, yaw, open/closed, stand poses, place pose) and known objects
+        $status*    position, orientation and where the robot stands, gripper
+        $task*      brief and detailed task (Bob: the object list)
+        $progress   the latest task progress status (Bob's, required in his; a placeholder for the others)
+        $feedback*, $messages*, $actions*
                     each history as a titled section, older entries first and the newest tagged
                     "(latest)"; empty where an ablation removes it
 
-An unknown placeholder in a template is an error at load time, not a silent "$name" in a prompt.
+An unknown placeholder, or a required one missing, is an error at load time naming the file and
+the placeholder, not a silent "$name" in a prompt or a prompt without its scene graph.
 """
 
 from __future__ import annotations
@@ -49,24 +54,34 @@ from .llm import DEFAULT_TEMPERATURE, LLMClient, LLMError, LLMFatalError, LLMTim
 from .memory import HISTORIES, TITLES, Memory
 from .parse import SIGNATURES, ReplyFormatError, parse_command
 from .policy import Decision
+from .replay import ReplayClient
 
 log = structlog.get_logger("mhrc.llm_policy")
 
 MEANINGS = {
-    "navigate": "drive your base to that stand pose (numbered from 0) of a piece of furniture",
-    "move": "shift your base by dx, dy metres along the world x and y axes (small corrections, at most 1 m)",
-    "open": "open the closed drawer or door of the furniture you stand at",
-    "pick": "grasp an object within your arm's reach with the suction cup",
-    "place": "put the object you hold on a furniture surface (e.g. table_0) or on a goal (tray, a colour panel, cutting_board)",
-    "communicate": "send the message content to a teammate, named in lower case (alice, bob, david)",
+    "navigate": "go to the stand pose with that id of that piece of furniture",
+    "move": "move your base dx metres along the x axis and dy metres along the y axis (at most 1 m each)",
+    "open": "open that piece of furniture, whose drawer runs on rails or whose door or lid turns on hinges",
+    "pick": "pick up that object",
+    "place": "put the object in your gripper at that location",
+    "communicate": "send content to that robot",
     "wait": "do nothing this step",
 }
+ROLE_MEANINGS = {  # the appendix words some skills differently for Bob and David
+    "bob": {"communicate": "send content to that robot; when objects are missing and you need help, sum up how things stand in it"},
+    "david": {
+        "navigate": "go to the stand pose with that id of that piece of furniture, both taken from your scene graph",
+        "communicate": "send content to that robot; when you discover new objects, send one too, summing up what you did and how things stand",
+    },
+}
 PLACEHOLDERS = {
-    "system": frozenset({"robot", "teammates", "absent", "skills"}),
+    "system": frozenset({"robot", "teammates", "absent", "skills", "hints"}),
     "user": frozenset({"step", "scene_graph", "status", "task", "progress", *HISTORIES}),
 }
+REQUIRED = {"system": frozenset({"skills"}), "user": frozenset({"scene_graph", "status", "task", *HISTORIES})}
+REQUIRED_FOR = {("bob", "user"): frozenset({"progress"})}  # the appendix gives Bob his task progress
 SMALL_CONTEXT_CAP = 12_000  # ~3,000 tokens: a --history-cap that fits a 4k-context local model with room for the reply
-FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. End your reply with one line: Command: skill(arguments)."
+FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. Give your command on one line: Command: skill(arguments)."
 JSON_FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. Answer with one JSON object: analysis, then command."
 CUT_REPLY = "your reply was cut at the token limit before it gave a command; think more briefly"
 MODEL_DOWN = "Your planner could not reach its model ({reason}), so you waited."
@@ -86,12 +101,14 @@ class TemplateError(ValueError):
 
 
 def load_template(robot: str, part: str, prompts_dir: str | Path | None = None) -> Template:
-    """`<robot>_<part>.txt` from `prompts_dir`, else from the package's prompts; placeholders checked."""
+    """`<robot>_<part>.txt` from `prompts_dir`, else from the package's prompts; placeholders
+    checked (none unknown, none required missing). Errors about `prompts_dir` name --prompts."""
     name = f"{robot}_{part}.txt"
+    opt = "--prompts: " if prompts_dir is not None else ""
     if prompts_dir is not None:
         path = Path(prompts_dir) / name
         if not path.is_file():
-            raise TemplateError(f"prompt template {path} is missing (expected {name} in {prompts_dir})")
+            raise TemplateError(f"{opt}prompt template {path} is missing (expected {name} in {prompts_dir})")
         text, where = path.read_text(encoding="utf-8"), str(path)
     else:
         res = resources.files("mhrc.prompts").joinpath(name)
@@ -100,14 +117,30 @@ def load_template(robot: str, part: str, prompts_dir: str | Path | None = None) 
         text, where = res.read_text(encoding="utf-8"), f"mhrc.prompts/{name}"
     template = Template(text)
     if not template.is_valid():
-        raise TemplateError(f"{where}: a '$' that starts no placeholder; write '$$' for a dollar sign")
-    unknown = set(template.get_identifiers()) - PLACEHOLDERS[part]
+        raise TemplateError(f"{opt}{where}: a '$' that starts no placeholder; write '$$' for a dollar sign")
+    used = set(template.get_identifiers())
+    unknown = used - PLACEHOLDERS[part]
     if unknown:
         raise TemplateError(
-            f"{where}: unknown placeholder(s) {', '.join(sorted('$' + u for u in unknown))}; "
+            f"{opt}{where}: unknown placeholder(s) {', '.join(sorted('$' + u for u in unknown))}; "
             f"{part} templates may use {', '.join(sorted('$' + p for p in PLACEHOLDERS[part]))}"
         )
+    missing = (REQUIRED[part] | REQUIRED_FOR.get((robot, part), frozenset())) - used
+    if missing:
+        raise TemplateError(
+            f"{opt}{where}: required placeholder(s) {', '.join(sorted('$' + m for m in missing))} missing; "
+            f"a {robot} {part} template must use {', '.join(sorted('$' + p for p in REQUIRED[part] | REQUIRED_FOR.get((robot, part), frozenset())))}"
+        )
     return template
+
+
+def load_hints(robot: str, prompts_dir: str | Path | None = None) -> str:
+    """The prompt_hints aid's advice for `robot`: `<robot>_hints.txt` from `prompts_dir` if it
+    holds one, else the package's (plain text, no placeholders); "" for a robot without any."""
+    if prompts_dir is not None and (path := Path(prompts_dir) / f"{robot}_hints.txt").is_file():
+        return path.read_text(encoding="utf-8").strip()
+    res = resources.files("mhrc.prompts").joinpath(f"{robot}_hints.txt")
+    return res.read_text(encoding="utf-8").strip() if res.is_file() else ""
 
 
 def _tidy(text: str) -> str:
@@ -123,7 +156,9 @@ class LLMPolicy:
     feedback, the messages delivered now). teammates_absent names robots not in this episode.
     prompt_cap_chars bounds the whole prompt (system + user); None (the default, as the paper)
     keeps every history whole. reach_labels (an aid, not the paper's) says for each object
-    whether it lies within the robot's arm reach. structured asks for a JSON decision that
+    whether it lies within the robot's arm reach. prompt_hints (an aid, not the paper's) adds the
+    role's advice (`<robot>_hints.txt`) to the system prompt and distances, reach and the arm
+    base to the scene graph and status. structured asks for a JSON decision that
     follows a schema of this step's valid actions, its analysis short enough that the command
     fits within the client's max_tokens. step_deadline bounds one step's model call,
     every retry included: past it the robot waits that step.
@@ -141,6 +176,7 @@ class LLMPolicy:
         prompt_cap_chars: int | None = None,
         teammates_absent: tuple[str, ...] = (),
         reach_labels: bool = False,
+        prompt_hints: bool = False,
         structured: bool = False,
         step_deadline: float | None = None,
         max_tokens: int | None = None,
@@ -153,6 +189,7 @@ class LLMPolicy:
         self.step_deadline = step_deadline
         self._answered = False  # any reply yet: a server down before the first one is fatal
         self.reach_labels = reach_labels
+        self.prompt_hints = prompt_hints
         self.client = client
         self.name = f"llm:{client.model}"
         self.temperature = temperature
@@ -163,6 +200,9 @@ class LLMPolicy:
         self.memory = Memory()
         self.system_t = load_template(robot, "system", prompts_dir)
         self.user_t = load_template(robot, "user", prompts_dir)
+        self.hints = load_hints(robot, prompts_dir) if prompt_hints else ""
+        if isinstance(client, ReplayClient):  # a trace recorded with other prompts is refused now, not at its first step
+            client.check_templates({f"{robot}_system.txt": self.system_t, f"{robot}_user.txt": self.user_t})
         self._pending: tuple[int, str] | None = None  # (tick, why this step's reply gave no action)
         self._log = log.bind(robot=robot, model=client.model)
 
@@ -187,16 +227,20 @@ class LLMPolicy:
 
     def render(self, obs: Observation) -> Messages:
         """The system and user messages for this observation and the memory so far."""
+        meanings = MEANINGS | ROLE_MEANINGS.get(self.robot, {})
         system = self.system_t.substitute(
             robot=self.robot.capitalize(),
             teammates=describe.teammates(obs, self.absent),
             absent=self._absent_note(),
-            skills="\n".join(f"- {SIGNATURES[s]}: {MEANINGS[s]}" for s in obs.status.skills if s in SIGNATURES),
+            skills="\n".join(f"- {SIGNATURES[s]}: {meanings[s]}" for s in obs.status.skills if s in SIGNATURES),
+            hints=self.hints,
         )
+        if self.hints and "hints" not in self.system_t.get_identifiers():
+            system = _tidy(system) + "\n" + self.hints
         fields = {
             "step": str(obs.tick),
-            "scene_graph": describe.scene_graph(obs, reach_labels=self.reach_labels),
-            "status": describe.robot_status(obs),
+            "scene_graph": describe.scene_graph(obs, reach_labels=self.reach_labels, hints=self.prompt_hints),
+            "status": describe.robot_status(obs, hints=self.prompt_hints),
             "task": describe.task_text(obs),
             "progress": describe.progress_text(obs),
         }

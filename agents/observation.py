@@ -3,13 +3,19 @@
 It reads nothing but that robot's `Observation`, so a prompt never shows what the robot has
 not seen or been told. Every number is rounded to centimetres and whole degrees, so the
 text (and a replayed prompt) is stable across platforms.
+
+By default the text holds what the paper's scene graph and status hold: positions,
+orientations, open or closed, stand poses, place poses, the gripper. With `hints` (the
+prompt_hints aid) it adds what the paper leaves to the model: each furniture's kind, which
+furniture is no navigation target, each object's distance from the robot's arm base, and
+where that arm base is and how far it reaches.
 """
 
 from __future__ import annotations
 
 import math
 
-from mhrc.protocol import FurnitureView, ObjectView, Observation, Pose2D
+from mhrc.protocol import FurnitureView, ObjectView, Observation
 
 from .parse import SIGNATURES
 
@@ -26,34 +32,32 @@ def _deg(rad: float) -> str:
     return f"{0 if d == 0 else d} deg"  # no "-0 deg"
 
 
-def _pose(s: Pose2D) -> str:
-    return f"({s.x:.2f}, {s.y:.2f}), yaw {_deg(s.yaw)}"
-
-
 def _flat(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     return math.hypot(a[0] - b[0], a[1] - b[1])
 
 
-def furniture_line(f: FurnitureView, navigates: bool = True) -> str:
-    """`- name (kind): position, yaw; state; stand poses (for robots that navigate); place pose`."""
+def furniture_line(f: FurnitureView, navigates: bool = True, hints: bool = False) -> str:
+    """`- name: position, yaw; state; stand poses (for robots that navigate); place pose`; with
+    `hints`, the kind after the name and "no stand pose (not a navigation target)"."""
     parts = [f"position {_xyz(f.position)}, yaw {_deg(f.yaw)}"]
     if f.openable:
         parts.append("open" if f.is_open else "closed (open it to see inside)")
     if navigates and f.stand_poses:
         poses = ", ".join(f"{i} = ({s.x:.2f}, {s.y:.2f}, yaw {_deg(s.yaw)})" for i, s in enumerate(f.stand_poses))
         parts.append(f"stand poses {poses}")
-    elif navigates:
+    elif navigates and hints:
         parts.append("no stand pose (not a navigation target)")
     if f.place_pose is not None:
         parts.append(f"place pose {_xyz(f.place_pose)}")
-    return f"- {f.name} ({f.kind}): " + "; ".join(parts)
+    kind = f" ({f.kind})" if hints else ""
+    return f"- {f.name}{kind}: " + "; ".join(parts)
 
 
-def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False) -> str:
-    """`- name: where it lies, position, distance from the robot's arm base or base`; with the
-    reach_labels aid, whether that is within the arm's reach (the paper's prompts leave that
-    judgement to the model). An object the robot looked for and no longer found where it was
-    gets neither place nor distance; one it knows only from a message says who told it."""
+def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False, hints: bool = False) -> str:
+    """`- name: where it lies, position`; with `hints`, its distance from the robot's arm base
+    (or base); with the reach_labels aid, whether that is within the arm's reach (the paper's
+    prompts leave both to the model). An object the robot looked for and no longer found where
+    it was gets neither place nor distance; one it knows only from a message says who told it."""
     told = f" ({o.told_by.capitalize()} told you)" if o.told_by else ""
     if o.last_seen_on and not (o.on or o.held_by):
         return f"- {o.name}: no longer on {o.last_seen_on}, where it was last seen at {_xyz(o.position)}; where it is now is unknown{told}"
@@ -69,21 +73,22 @@ def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False) -> 
     s = obs.status
     if s.arm_base is not None and s.reach is not None:
         d = _flat(o.position, s.arm_base)
-        text += f", {d:.2f} m from your arm base"
+        if hints:
+            text += f", {d:.2f} m from your arm base"
         if reach_labels:
             text += " (within your reach)" if d <= s.reach else " (out of your reach)"
-    elif s.base is not None:
+    elif s.base is not None and hints:
         text += f", {_flat(o.position, (s.base.x, s.base.y)):.2f} m from you"
     return text
 
 
-def scene_graph(obs: Observation, reach_labels: bool = False) -> str:
+def scene_graph(obs: Observation, reach_labels: bool = False, hints: bool = False) -> str:
     """Furniture (always known), then the objects this robot knows of."""
     navigates = "navigate" in obs.status.skills
-    lines = ["Furniture:"] + [furniture_line(f, navigates) for f in obs.furniture]
+    lines = ["Furniture:"] + [furniture_line(f, navigates, hints) for f in obs.furniture]
     if obs.objects:
         lines.append("Objects you know of:")
-        lines += [object_line(o, obs, reach_labels) for o in obs.objects]
+        lines += [object_line(o, obs, reach_labels, hints) for o in obs.objects]
     else:
         lines.append("Objects you know of: none yet.")
     return "\n".join(lines)
@@ -101,16 +106,18 @@ def standing_at(obs: Observation) -> str | None:
     return None
 
 
-def robot_status(obs: Observation) -> str:
-    """Pose, where the robot stands, arm and gripper."""
+def robot_status(obs: Observation, hints: bool = False) -> str:
+    """Position and orientation, where the robot stands, gripper; with `hints`, the arm base and
+    its reach."""
     s = obs.status
     lines = [f"You are {s.name.capitalize()}, a {s.kind}. Current step: {obs.tick}."]
     if s.base is not None:
         at = standing_at(obs)
-        lines.append(f"Base pose: {_pose(s.base)}" + (f", at {at}." if at else ", not at any stand pose."))
+        lines.append(f"Position: ({s.base.x:.2f}, {s.base.y:.2f}); orientation: yaw {_deg(s.base.yaw)}" + (f"; at {at}." if at else "; not at any stand pose."))
     else:
-        lines.append("Your base is fixed: you cannot move.")
-    if s.arm_base is not None and s.reach is not None:
+        where = f" at {_xyz(s.arm_base)}" if s.arm_base is not None else ""
+        lines.append(f"Your base is fixed{where}: you cannot move.")
+    if hints and s.arm_base is not None and s.reach is not None:
         lines.append(f"Arm base: {_xyz(s.arm_base)}; reach about {s.reach:.2f} m from it.")
     if "pick" in s.skills:
         lines.append(f"Gripper: holding {s.holding}." if s.holding else "Gripper: empty.")

@@ -1,9 +1,10 @@
 """Turning a model's reply into exactly one action.
 
-Replies come as `**Command:** navigate(table_1, stand pose 0).`, in code fences, quoted, with
-trailing periods. The parser takes the command after the last "Command" label (or, without a
-label, the only skill call in the reply) and raises `ReplyFormatError` with a reason the robot
-can act on when the reply is ambiguous or names no skill.
+Replies come in the paper's format (Command, Analysis, Reasoning, in any order: the command
+line first or last), as `**Command:** navigate(table_1, stand pose 0).`, in code fences,
+quoted, with trailing periods. The parser takes the first skill call after the last "Command"
+label (or, without a label, the only skill call in the reply) and raises `ReplyFormatError`
+with a reason the robot can act on when the reply is ambiguous or names no skill.
 """
 
 from __future__ import annotations
@@ -100,7 +101,7 @@ def parse_command(reply: str) -> Action:
     scope = reply[labels[-1].end() :] if labels else reply
     calls = list(SKILL_CALL.finditer(scope))
     if not calls:
-        raise ReplyFormatError("no command found: end the reply with one command such as pick(apple)")
+        raise ReplyFormatError("no command found: give one command, such as Command: pick(apple)")
     if not labels and len(calls) > 1:
         names = ", ".join(c.group(1) for c in calls)
         raise ReplyFormatError(f"several commands found ({names}): give exactly one, after 'Command:'")

@@ -6,12 +6,19 @@ recorded reply, after checking that the prompt it is given (the messages' conten
 `prompt_text` joins them, which is what a Thought records) equals the recorded one. Equal
 prompts at every call prove the episode is reproduced exactly; the first difference stops the
 replay with ReplayMismatch, naming the call, tick and first differing line.
+
+Before the first call, `check_templates` compares the first recorded prompt with the templates
+the replaying policy renders from: a trace recorded with other prompts (an older mhrc's prompt
+set, or other --prompts) is refused up front, saying so, instead of running until its first step.
 """
 
 from __future__ import annotations
 
+import re
 from collections import defaultdict
+from collections.abc import Mapping
 from pathlib import Path
+from string import Template
 from typing import Any
 
 from mhrc.protocol import LLM_ERROR_PREFIX
@@ -24,6 +31,20 @@ THOUGHT_SUFFIX = "/agent/{robot}/thought"
 
 class ReplayMismatch(RuntimeError):
     """The replayed episode asked something the recorded one did not."""
+
+
+def _words(text: str) -> str:
+    return " ".join(text.split())
+
+
+def literal_parts(template: Template) -> list[str]:
+    """The template's own text between its placeholders, whitespace collapsed ("$$" as "$")."""
+    parts, at = [], 0
+    for m in template.pattern.finditer(template.template):
+        parts.append(template.template[at : m.start()] + ("$" if m.group("escaped") is not None else ""))
+        at = m.end()
+    parts.append(template.template[at:])
+    return [w for p in parts if (w := _words(p))]
 
 
 def _first_difference(got: str, want: str) -> str:
@@ -50,6 +71,23 @@ class ReplayClient:
                 f"{trace} holds no LLM prompts for {robot}: only episodes run with an LLM policy can be replayed"
             )
         self.calls = 0
+
+    def check_templates(self, templates: Mapping[str, Template]) -> None:
+        """ReplayMismatch unless the first recorded prompt holds the text of every template, in
+        order: a prompt rendered from other templates cannot be replayed step by step."""
+        recorded = _words(str(self._thoughts[0].get("prompt") or ""))
+        at = 0
+        for name, template in templates.items():
+            for part in literal_parts(template):
+                found = recorded.find(part, at)
+                if found < 0:
+                    shown = re.sub(r"\s+", " ", part)[:120]
+                    raise ReplayMismatch(
+                        f"{self.trace} was recorded with other prompts than the ones {self.robot} is given now: its first "
+                        f"prompt (tick {self._thoughts[0].get('tick')}) lacks {shown!r} from {name}, so its replies no longer "
+                        "match (an older mhrc's prompt set, or other --prompts); record the episode again to replay it"
+                    )
+                at = found + len(part)
 
     @property
     def remaining(self) -> int:

@@ -38,12 +38,12 @@ ARGUMENTS: dict[str, dict[str, str]] = {
 
 STRUCTURED_INSTRUCTIONS = (
     'Answer with one JSON object and nothing else: {"analysis": "...", "command": {"skill": "...", ...}}. '
-    'In "analysis", think step by step as the response format above asks: task understanding, scene graph, '
-    'exploration strategy, then your reasoning. In "command", give the one skill to run now: "skill" names it '
+    'In "analysis", think step by step and write the analysis and the reasoning the response format above asks for. '
+    'In "command", give the one skill to run now: "skill" names it '
     "and the other fields are its arguments, for example "
     '{"skill": "navigate", "furniture": "table_1", "stand_pose": 0}, {"skill": "pick", "object": "apple"}, '
     '{"skill": "place", "object": "apple", "location": "table_0"}, '
-    '{"skill": "communicate", "content": "Bob, I placed apple on table_0 for you.", "to": "bob"} or {"skill": "wait"}. '
+    '{"skill": "communicate", "content": "Hello, Bob.", "to": "bob"} or {"skill": "wait"}. '
     'Use only names from your scene graph. This JSON object replaces the "Command:" line.'
 )
 

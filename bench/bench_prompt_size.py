@@ -1,10 +1,15 @@
-"""Prompt size (characters, estimated tokens = chars/4) at steps 1, 25 and 50 of a synthetic
-long episode, for each role, with and without the prompt cap.
+"""Prompt size (characters, estimated tokens = chars/4) per role: at steps 1, 25 and 50 of a
+synthetic long episode, with and without the prompt cap; and at steps 1 and 25 of a real
+heuristic-driven episode, with the paper's prompts and with the prompt_hints aid.
 
-The observations are hand-built in the paper's example house (15 pieces of furniture, 6 target
-objects found along the way); every step goes through LLMPolicy.decide and record with a
-scripted model, so the memory fills the way a real episode fills it: one action and one
-feedback entry per step, a message every few steps.
+The synthetic observations are hand-built in the paper's example house (15 pieces of
+furniture, 6 target objects found along the way); every step goes through LLMPolicy.decide and
+record with a scripted model, so the memory fills the way a real episode fills it: one action
+and one feedback entry per step, a message every few steps.
+
+The heuristic episode runs the heuristic team on the simulator (as tests/test_table3.py does:
+actions in robot order, messages arriving with the next observation); beside each robot an
+LLMPolicy renders the prompt it would be given for the same observation and history.
 
     python bench/bench_prompt_size.py [--cap 12000] [--out bench/results/prompt_size.json]
 """
@@ -33,6 +38,8 @@ from mhrc.protocol import (
 )
 
 STEPS = (1, 25, 50)
+HEURISTIC_STEPS = (1, 25)
+HEURISTIC_EPISODE = {"task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 6}
 SKILLS = {
     "alice": ["navigate", "move", "open", "pick", "place", "communicate", "wait"],
     "bob": ["pick", "place", "communicate", "wait"],
@@ -153,10 +160,63 @@ async def sizes(robot: str, cap: int | None) -> dict[int, dict[str, int]]:
     return out
 
 
+async def heuristic_sizes() -> dict[str, Any]:
+    """Each robot's prompt size at HEURISTIC_STEPS of a heuristic-driven episode (step n is the
+    prompt for tick n - 1, so step 1 is the first prompt), paper prompts and prompt_hints."""
+    from mhrc.agents.heuristic import heuristic_policy
+    from mhrc.world.sim import Sim
+
+    from mhrc.protocol import Communicate
+
+    variants = {"paper": {}, "prompt_hints": {"prompt_hints": True}}
+    out: dict[str, Any] = {"episode": HEURISTIC_EPISODE, "steps": list(HEURISTIC_STEPS), "roles": {}}
+    with Sim(**HEURISTIC_EPISODE) as sim:  # type: ignore[arg-type]
+        robots = sim.robots
+        team = {r: heuristic_policy(r) for r in robots}
+        prompters = {(r, v): LLMPolicy(r, ScriptedClient([]), **kw) for r in robots for v, kw in variants.items()}
+        sizes_: dict[str, dict[str, dict[int, dict[str, int]]]] = {r: {v: {} for v in variants} for r in robots}
+        obs = {r: sim.observe(r, 0) for r in robots}
+        for tick in range(max(HEURISTIC_STEPS)):
+            inbox: dict[str, list[RobotMessage]] = {r: [] for r in robots}
+            batch = []
+            for r in robots:
+                action = (await team[r].decide(obs[r])).action
+                for v in variants:
+                    p = prompters[(r, v)]
+                    p.client = ScriptedClient(["Command: wait()"])
+                    text = (await p.decide(obs[r])).prompt or ""
+                    if tick + 1 in HEURISTIC_STEPS:
+                        sizes_[r][v][tick + 1] = {"chars": len(text), "est_tokens": estimate_tokens(text)}
+                batch.append((r, action))
+            done = False
+            outcomes = []
+            for r, a in batch:
+                if isinstance(a, Communicate):
+                    inbox[a.to].append(RobotMessage(sender=r, to=a.to, content=a.content, tick=tick))
+                    sim.tell(a.to, r, a.content)
+                    outcomes.append(SkillOutcome.ok(f"Message sent to {a.to}."))
+                else:
+                    outcomes.append(sim.execute(r, a))
+            done = sim.evaluate().success
+            for (r, a), outcome in zip(batch, outcomes):
+                o = sim.observe(r, tick + 1).model_copy(update={"new_messages": inbox[r]})
+                result = ActionResult(goal_id=f"{r}-{tick}", robot=r, tick=tick, action=a, outcome=outcome, observation=o, done=done)
+                team[r].record(result)
+                for v in variants:
+                    prompters[(r, v)].record(result)
+                obs[r] = o
+            if done:
+                out["solved_at_tick"] = tick
+                break
+        out["roles"] = sizes_
+    return out
+
+
 async def run(cap: int) -> dict[str, Any]:
     report: dict[str, Any] = {"bench": "prompt_size", "cap_chars": cap, "steps": list(STEPS), "est_tokens": "chars // 4", "roles": {}}
     for robot in SCRIPT:
         report["roles"][robot] = {"capped": await sizes(robot, cap), "uncapped": await sizes(robot, None)}
+    report["heuristic"] = await heuristic_sizes()
     return report
 
 

@@ -14,9 +14,12 @@ AIDS: dict[str, str] = {
     "live_state": "scene graphs show the live truth (where every known object is now, which containers are open), "
     "not what the robot last saw or was told",
     "solved_move": "a pick that fails for distance also says which move(dx, dy) would fix it",
+    "feedback_advice": "failed actions' feedback also says what to do next and lists the names the robot could have used",
     "goal_map": "Bob's observation and task text say which goal each target goes to (the panel of each solid)",
     "status_hints": "Bob's task status adds what is missing, what comes next and what is wrong",
     "reach_labels": "object lines in LLM prompts say whether the object is within the robot's arm reach",
+    "prompt_hints": "LLM prompts add advice beyond the paper's appendix: distances, reach, arm base and pick window, "
+    "proactive strategy, message templates, furniture kinds",
     "exact_motion": "bases stop exactly on their stand pose and released objects are set down without physics, "
     "so navigation never ends off target and a placed object never slides off",
 }

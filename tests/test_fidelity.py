@@ -54,12 +54,13 @@ def test_reach_labels_are_an_aid_of_the_prompt() -> None:
     apple = ObjectView(name="apple", position=(-3.3, -0.1, 0.74), on="table_0")
     plain = LLMPolicy("bob", ScriptedClient([])).render(obs(robot="bob", objects=[apple]))[1]["content"]
     aided = LLMPolicy("bob", ScriptedClient([]), reach_labels=True).render(obs(robot="bob", objects=[apple]))[1]["content"]
-    assert "m from your arm base\n" in plain and "reach)" not in plain.split("# Your status")[0]
-    assert "m from your arm base (within your reach)" in aided
+    assert "at (-3.30, -0.10, 0.74)\n" in plain and "reach)" not in plain.split("# Your status")[0]
+    assert "at (-3.30, -0.10, 0.74) (within your reach)" in aided
 
 
 def test_alices_prompt_gives_the_simulators_real_picking_distances() -> None:
-    text = resources.files("mhrc.prompts").joinpath("alice_system.txt").read_text(encoding="utf-8")
+    # the paper's prompt says 1 m or less; the simulator's figures are the prompt_hints aid's
+    text = resources.files("mhrc.prompts").joinpath("alice_hints.txt").read_text(encoding="utf-8")
     assert "about 1 m" not in text
     ahead = re.search(r"arm base sits ([0-9.]+) m ahead", text)
     good = re.search(r"object ([0-9.]+) to ([0-9.]+) m \(horizontally\) from your arm base", text)

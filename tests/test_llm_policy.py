@@ -166,7 +166,7 @@ def long_memory(steps: int = 50) -> Memory:
     return m
 
 
-@pytest.mark.parametrize("cap", [7000, 9000, 12000])
+@pytest.mark.parametrize("cap", [7000, 9000, 11000])  # each below the whole 50-step prompt (about 12,000 characters)
 def test_a_50_step_memory_stays_under_the_cap_with_the_latest_entries_whole(cap: int) -> None:
     capped, uncapped = LLMPolicy("alice", ScriptedClient([]), prompt_cap_chars=cap), LLMPolicy("alice", ScriptedClient([]), prompt_cap_chars=None)
     capped.memory = uncapped.memory = long_memory()

@@ -1,4 +1,6 @@
-"""Golden tests of the rendered prompts: each role at step 1 and at a later step.
+"""Golden tests of the rendered prompts: each role at step 1 and at a later step; the paper's
+appendix (../shared/seed/MHRC_appendix.txt) element by element in the default prompts, none of
+the prompt_hints aid's text there, and exactly that text with the aid.
 
 The observations are built by hand in the shape the world sends (the example house of the
 paper, Pack Objects), so these goldens change only when the prompts, the description function
@@ -12,13 +14,18 @@ Regenerate after a deliberate prompt change and review the diff of tests/golden/
 
 from __future__ import annotations
 
+import json
 import os
+import re
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 from mhrc.agents.llm import ScriptedClient
-from mhrc.agents.llm_policy import LLMPolicy, TemplateError, load_template
+from mhrc.agents.llm_policy import LLMPolicy, TemplateError, load_hints, load_template
+from mhrc.agents.replay import ReplayClient, ReplayMismatch
 
 from mhrc.protocol import (
     ActionResult,
@@ -30,6 +37,7 @@ from mhrc.protocol import (
     RobotMessage,
     RobotStatus,
     SkillOutcome,
+    Thought,
 )
 
 GOLDEN = Path(__file__).parent / "golden"
@@ -165,14 +173,26 @@ def check_golden(name: str, text: str) -> None:
     assert text == path.read_text(encoding="utf-8"), f"{name} changed: if deliberate, regenerate with MHRC_UPDATE_GOLDEN=1"
 
 
-@pytest.mark.parametrize("robot", ["alice", "bob", "david"])
+ROBOTS = ("alice", "bob", "david")
+# Text of the prompt_hints aid that the observation adds (the rest is <robot>_hints.txt)
+DYNAMIC_HINTS = ("m from your arm base", "m from you", "reach about", "Arm base:", "not a navigation target", "(drawer unit)", "(table)", "(tray on table_0)")
+# Sentences of the old prompts that the issue moves into the aid: none may be in the default
+AID_PHRASES = (
+    "0.20 m ahead", "0.30 to 0.58", "compare it with your reach", "with your reach", "Do not repeat work",
+    "Do not visit a surface twice", "Until Alice asks", "please explore these surfaces", "I placed soap on table_0 for you",
+    "On table_1 I found:", "please bring these to table_0 within my reach", "hand the open surfaces",
+    "not a navigation target", "reach about", "from your arm base", "## Hints",
+)
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
 async def test_prompts_at_step_1_and_step_5(robot: str) -> None:
     prompts = await play(LLMPolicy(robot, ScriptedClient([])), robot)
     first, later = prompts[0], prompts[-1]
     check_golden(f"{robot}_step1.txt", first)
     check_golden(f"{robot}_step5.txt", later)
 
-    assert first.startswith(f"You are {robot.capitalize()},") and "Think step by step." in first
+    assert first.startswith(f"You are {robot.capitalize()}, a smart robot")  # the role first (mhrc.testing reads the robot from it) and "Think step by step." in first
     assert first.count("- (none yet)") == 3 and "(latest)" not in first
     # the later step: each history's newest entry tagged, the oldest shown before it
     _, rest = later.split("Feedback on your actions")
@@ -182,21 +202,133 @@ async def test_prompts_at_step_1_and_step_5(robot: str) -> None:
     assert "(latest) step 3:" in actions and "- step 0:" in actions
 
 
-def test_alice_at_step_5_sees_only_what_she_was_told_or_saw() -> None:
-    text = (GOLDEN / "alice_step5.txt").read_text(encoding="utf-8")
-    assert "soap: inside drawer_unit" in text and "phone" not in text.split("# Scene graph")[1].split("# Your status")[0]
-    assert "could not be executed" in text  # the unparseable reply at step 2 came back as feedback
-    assert "at stand pose 0 of drawer_unit" in text and "drawer_unit (drawer unit): position (-3.00, 3.45, 0.60), yaw 0 deg; open" in text
-    assert "(latest) step 3: from David: On table_1 I found: mug." in text
+def _sections(text: str, heads: list[str]) -> list[str]:
+    """The text under each heading, in the order given; fails if a heading is missing or out of order."""
+    at = [text.index(h) for h in heads]
+    assert at == sorted(at), f"sections out of order: {heads}"
+    return [text[a:b] for a, b in zip(at, at[1:] + [len(text)])]
 
 
-def test_bob_sees_reach_progress_and_no_stand_poses() -> None:
-    text = (GOLDEN / "bob_step5.txt").read_text(encoding="utf-8")
-    assert "book: on table_0, at (-2.40, 0.05, 0.71), 1.35 m from your arm base\n" in text
-    assert "(within your reach)" not in text and "(out of your reach)" not in text  # reach labels are an aid, not the paper's prompt
-    assert "phone: in the tray" in text and "# Latest task progress\nIn the tray: phone." in text
-    assert "stand poses" not in text and "Gripper: empty." in text
-    assert "Object list: phone, book, soap, mug." in text
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None:
+    system = (GOLDEN / f"{robot}_step1.txt").read_text(encoding="utf-8").split("# Scene graph")[0]
+    heads = ["You are", "## Background", "## Profile", "## Constraints", "## Skills", "## Response format", "Think step by step."]
+    role, background, profile, constraints, skills, fmt, _ = _sections(system, heads)
+    low = {k: v.lower() for k, v in {"role": role, "background": background, "profile": profile, "constraints": constraints}.items()}
+    # role: name and capabilities; the arms' ideal picking distance
+    assert f"you are {robot}" in low["role"]
+    assert ("navigate" in low["role"]) is (robot != "bob") and ("manipulate" in low["role"]) is (robot != "david")
+    assert ("no more than 1 m" in role) is (robot != "david")
+    # background: who the teammates are and what they can do
+    assert "cooperating" in background and "communicating" in background
+    if robot == "alice":
+        assert "Bob is a robot arm" in background and "manipulate" in background and "David is a mobile base" in background
+    else:
+        assert "Alice" in background and "navigate" in background and "manipulate" in background
+    if robot == "david":
+        assert "You do what Alice asks of you" in background
+    # profile: an unexplored house whose scene graph shows furniture, not what lies on or in it; the robot's job
+    if robot == "bob":
+        assert "You stand on table_0" in profile and "ask Alice for help" in profile and "answer her as soon as you can" in profile
+    else:
+        assert "unexplored" in profile and "not which objects lie on them or inside them" in profile
+    if robot == "alice":
+        assert "explore the whole house, find the objects the task needs, pick them up and move them" in profile
+    if robot == "david":
+        assert "needs no opening" in profile
+    # constraints as the appendix gives them
+    expected = {
+        "alice": ["Your first step in the episode: communicate with Bob and ask him whether he needs your help finding objects",
+                  "placed an object on the table, tell Bob right away", "you may give David the objects that still have to be found",
+                  "cannot go on without another robot, execute wait()",
+                  "When a pick fails, first navigate to the furniture again at another stand pose id, and only after that adjust your position with move"],
+        "bob": ["Your first step in the episode: communicate with Alice and tell her what you need, judging from the whole task",
+                "Answer a request as soon as it arrives", "Do not send the same content again and again", "cannot go on without another robot, execute wait()"],
+        "david": ["Follow Alice's instructions and explore the whole house together with her", "Tell Alice what you discover without delay"],
+    }[robot]
+    for item in expected:
+        assert item in constraints, item
+    assert len(re.findall(r"^\d\. ", constraints, re.M)) == {"alice": 5, "bob": 3, "david": 2}[robot]
+    # skills with signatures, then the Command / Analysis / Reasoning format
+    from mhrc.agents.parse import SIGNATURES
+
+    for skill in SKILLS[robot]:
+        assert f"- {SIGNATURES[skill]}: " in skills
+    assert [line.split(":")[0] for line in fmt.splitlines() if re.match(r"\d\. ", line)] == ["1. Command", "2. Analysis", "3. Reasoning"]
+    assert "exactly one action per reply" in fmt and "only things that are in your scene graph" in fmt
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_the_user_prompt_carries_the_appendix_in_its_order(robot: str) -> None:
+    user = "# Scene graph" + (GOLDEN / f"{robot}_step5.txt").read_text(encoding="utf-8").split("# Scene graph")[1]
+    heads = ["# Scene graph", "# Your status", "# Task"] + (["# Latest task progress"] if robot == "bob" else [])
+    heads += ["Feedback on your actions", "Messages you received", "Your actions so far"]
+    graph, status, task, *rest = _sections(user, heads)
+    # every piece of furniture: position, orientation, state, stand poses (robots that navigate), place pose
+    assert "- drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; " in graph
+    assert ("open;" if robot == "alice" else "closed (open it to see inside)") in graph
+    assert ("stand poses 0 = (-3.30, -0.85, yaw 90 deg)" in graph) is (robot != "bob")
+    assert "place pose (-3.30, -0.22, 0.70)" in graph
+    known = {"alice": "- soap: inside drawer_unit, at (-3.10, 3.30, 0.45)\n", "bob": "- book: on table_0, at (-2.40, 0.05, 0.71)\n",
+             "david": "- mug: on table_1, at (2.60, 2.40, 0.75)\n"}[robot]
+    assert known in graph
+    # status: position, orientation (where the base moves), gripper (where there is one)
+    if robot == "bob":
+        assert "Your base is fixed at (-3.75, 0.00, 0.70): you cannot move." in status
+    else:
+        assert re.search(r"Position: \(-?[\d.]+, -?[\d.]+\); orientation: yaw -?\d+ deg; at stand pose \d of \w+\.", status)
+    assert ("Gripper: empty." in status) is (robot != "david")
+    assert task.startswith("# Task\nTask: Pack the listed objects") and "Details: " in task
+    if robot == "bob":
+        assert rest[0] == "# Latest task progress\nIn the tray: phone. Not yet in the tray: book, soap, mug.\n\n"
+    for section in rest[-3:]:
+        assert "(latest) step" in section
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+async def test_the_default_prompts_hold_none_of_the_aids_text(robot: str) -> None:
+    hints = load_hints(robot)
+    assert hints.startswith("## Hints\n") and len(hints.splitlines()) >= 5
+    for prompt in await play(LLMPolicy(robot, ScriptedClient([])), robot):
+        text = prompt.split("Feedback on your actions")[0]  # the histories quote what the (scripted) models wrote
+        for phrase in AID_PHRASES + DYNAMIC_HINTS:
+            assert phrase not in text, phrase
+        for line in hints.splitlines()[1:]:
+            assert line.strip("- ").strip() not in text, line
+
+
+def _without_hints(text: str, hints: str) -> str:
+    """An aided prompt with exactly the aid's text taken out."""
+    assert text.count(hints) == 1
+    text = text.replace(hints + "\n\n", "")
+    text = re.sub(r", \d+\.\d\d m from (your arm base|you)", "", text)
+    text = re.sub(r"\nArm base: \([^)]*\); reach about \d+\.\d\d m from it\.", "", text)
+    text = text.replace("; no stand pose (not a navigation target)", "")
+    return re.sub(r"^(- \w+) \([^)]*\):", r"\1:", text, flags=re.M)
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+async def test_prompt_hints_adds_exactly_its_text(robot: str) -> None:
+    plain = await play(LLMPolicy(robot, ScriptedClient([])), robot)
+    aided = await play(LLMPolicy(robot, ScriptedClient([]), prompt_hints=True), robot)
+    hints = load_hints(robot)
+    for p, a in zip(plain, aided):
+        assert _without_hints(a, hints) == p
+        constraints_end, skills_at = a.index("## Constraints"), a.index("## Skills")
+        assert constraints_end < a.index(hints) < skills_at
+    # and it does add each kind of text it stands for
+    last = aided[-1]
+    assert "(drawer unit)" in last and ("m from your arm base" in last) is (robot != "david") and ("reach about" in last) is (robot != "david")
+    assert ("not a navigation target" in last) is (robot != "bob")
+    assert ("m from you\n" in last) is (robot == "david")
+
+
+def test_the_pick_window_and_message_templates_live_in_the_aid() -> None:
+    alice, bob, david = (load_hints(r) for r in ROBOTS)
+    assert "0.20 m ahead" in alice and "0.30 to 0.58 m" in alice and 'to Bob: "Bob, I placed soap on table_0 for you."' in alice
+    assert "Right at the start, hand the open surfaces" in alice and "Do not repeat work" in alice
+    assert "compare it with your reach" in bob and "please bring these to table_0 within my reach" in bob
+    assert "Until Alice asks" in david and "Do not visit a surface twice" in david and "On sofa I found nothing." in david
 
 
 def test_skill_signatures_in_the_prompts_are_what_the_parser_accepts() -> None:
@@ -206,19 +338,124 @@ def test_skill_signatures_in_the_prompts_are_what_the_parser_accepts() -> None:
         text = (GOLDEN / f"{robot}_step1.txt").read_text(encoding="utf-8")
         for skill in skills:
             assert f"- {SIGNATURES[skill]}:" in text
-        example = text.split("Command: exactly one skill call on one line, e.g. ")[1].split("\n")[0]
-        assert parse_command(f"Command: {example}").skill in skills
+            call = SIGNATURES[skill].replace("stand_pose_id", "0").replace("dx", "0.1").replace("dy", "0.2")
+            # the paper's own order (Command first) and its example's (Command last) both parse
+            assert parse_command(f"Command: {call}\nAnalysis: I could also navigate(sofa, 0).\nReasoning: it matters.").skill == skill
+            assert parse_command(f"Analysis: ...\nReasoning: ...\nCommand: {call}").skill == skill
+
+
+def test_alice_at_step_5_sees_only_what_she_was_told_or_saw() -> None:
+    text = (GOLDEN / "alice_step5.txt").read_text(encoding="utf-8")
+    assert "soap: inside drawer_unit" in text and "phone" not in text.split("# Scene graph")[1].split("# Your status")[0]
+    assert "could not be executed" in text  # the unparseable reply at step 2 came back as feedback
+    assert "at stand pose 0 of drawer_unit" in text and "drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; open" in text
+    assert "(latest) step 3: from David: On table_1 I found: mug." in text
+
+
+def test_bob_sees_progress_and_no_stand_poses() -> None:
+    text = (GOLDEN / "bob_step5.txt").read_text(encoding="utf-8")
+    assert "book: on table_0, at (-2.40, 0.05, 0.71)\n" in text
+    assert "(within your reach)" not in text and "(out of your reach)" not in text  # reach labels are an aid, not the paper's prompt
+    assert "phone: in the tray" in text and "# Latest task progress\nIn the tray: phone." in text
+    assert "stand poses" not in text and "Gripper: empty." in text
+    assert "Object list: phone, book, soap, mug." in text
+
+
+# --------------------------------------------------------------------------- your own templates
+
+SYSTEM_OK = "You are $robot. Skills:\n$skills"
+USER_OK = "$scene_graph\n$status\n$task\n$progress\n$feedback\n$messages\n$actions\nCommand?"
 
 
 def test_custom_templates_are_checked_when_loaded(tmp_path: Path) -> None:
     (tmp_path / "bob_system.txt").write_text("You are $robot. Skills:\n$skills\n$colour", encoding="utf-8")
-    (tmp_path / "bob_user.txt").write_text("$scene_graph\n$status\nCommand?", encoding="utf-8")
-    with pytest.raises(TemplateError, match=r"unknown placeholder\(s\) \$colour"):
+    (tmp_path / "bob_user.txt").write_text(USER_OK, encoding="utf-8")
+    with pytest.raises(TemplateError, match=r"--prompts: .*bob_system.txt: unknown placeholder\(s\) \$colour"):
         load_template("bob", "system", tmp_path)
-    with pytest.raises(TemplateError, match="missing"):
+    with pytest.raises(TemplateError, match=r"--prompts: prompt template .*alice_user.txt is missing"):
         load_template("alice", "user", tmp_path)
-    (tmp_path / "bob_system.txt").write_text("You are $robot. Skills:\n$skills", encoding="utf-8")
+    (tmp_path / "bob_user.txt").write_text("$scene_graph\n$status\n$task\n$feedback\n$messages\nCommand?", encoding="utf-8")
+    with pytest.raises(TemplateError, match=r"bob_user.txt: required placeholder\(s\) \$actions, \$progress missing"):
+        load_template("bob", "user", tmp_path)
+    (tmp_path / "bob_system.txt").write_text("You are $robot.", encoding="utf-8")
+    with pytest.raises(TemplateError, match=r"bob_system.txt: required placeholder\(s\) \$skills missing"):
+        load_template("bob", "system", tmp_path)
+
+    (tmp_path / "bob_system.txt").write_text(SYSTEM_OK, encoding="utf-8")
+    (tmp_path / "bob_user.txt").write_text(USER_OK, encoding="utf-8")
     policy = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path)
     system, user = (m["content"] for m in policy.render(observe("bob")))
     assert system.startswith("You are Bob. Skills:\n- pick(object):")
-    assert user.startswith("Furniture:\n- table_0 (table)") and user.endswith("Gripper: empty.\nCommand?\n")
+    assert user.startswith("Furniture:\n- table_0: ") and user.endswith("Your actions so far (oldest first):\n- (none yet)\nCommand?\n")
+    # a template without $hints gets the aid's text at its end; a hints file of your own replaces the built-in one
+    aided = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path, prompt_hints=True).render(observe("bob"))[0]["content"]
+    assert aided.endswith(load_hints("bob") + "\n")
+    (tmp_path / "bob_hints.txt").write_text("## Hints\n- Be quick.\n", encoding="utf-8")
+    aided = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path, prompt_hints=True).render(observe("bob"))[0]["content"]
+    assert aided.endswith("Skills:\n- pick(object): pick up that object\n- place(object, location): put the object in your gripper at that location\n"
+                          "- communicate(content, robot): send content to that robot; when objects are missing and you need help, sum up how things stand in it\n"
+                          "- wait(): do nothing this step\n\n## Hints\n- Be quick.\n")
+
+
+def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=180)
+
+
+def _thought_line(robot: str, tick: int, prompt: str, reply: str) -> str:
+    t = Thought(robot=robot, tick=tick, policy="llm:m", prompt=prompt, reply=reply, action="wait()")
+    return json.dumps({"t": 0.1 * tick, "key": f"mhrc/run-1/agent/{robot}/thought", "kind": "put", "msg": t.model_dump(mode="json")}) + "\n"
+
+
+def test_up_refuses_prompts_missing_a_placeholder_before_anything_starts(tmp_path: Path) -> None:
+    prompts, work = tmp_path / "prompts", tmp_path / "work"
+    prompts.mkdir()
+    work.mkdir()
+    trace = tmp_path / "trace.jsonl"
+    trace.write_text(_thought_line("alice", 0, "x", "Command: wait()"), encoding="utf-8")
+    for robot in ROBOTS:
+        (prompts / f"{robot}_system.txt").write_text(SYSTEM_OK, encoding="utf-8")
+        (prompts / f"{robot}_user.txt").write_text(USER_OK.replace("$progress\n", "") if robot != "bob" else USER_OK, encoding="utf-8")
+    (prompts / "alice_user.txt").write_text("$scene_graph\n$status\n$task\n$feedback\n$actions\n", encoding="utf-8")
+    out = _mhrc("up", "--insecure", "-q", "--llm", f"alice=replay:{trace}", "--prompts", str(prompts), cwd=work)
+    errors = [line for line in out.stderr.splitlines() if line.startswith("Error:")]
+    assert out.returncode == 2 and "Traceback" not in out.stderr and len(errors) == 1, out.stderr[-3000:]
+    assert "--prompts" in errors[0] and "alice_user.txt" in errors[0] and "$messages" in errors[0], errors[0]
+    assert list(work.iterdir()) == []  # nothing left behind
+
+    (prompts / "david_system.txt").unlink()
+    out = _mhrc("up", "--insecure", "-q", "--llm", f"david=replay:{trace}", "--prompts", str(prompts), cwd=work)
+    errors = [line for line in out.stderr.splitlines() if line.startswith("Error:")]
+    assert out.returncode == 2 and len(errors) == 1 and "--prompts" in errors[0] and "david_system.txt is missing" in errors[0], out.stderr[-3000:]
+    assert list(work.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- replays of older prompts
+
+OLD = GOLDEN / "recorded_before_issue21_alice_step1.txt"  # Alice's first prompt as mhrc wrote it before issue 21
+
+
+def test_a_trace_recorded_with_the_old_prompts_is_refused_with_the_reason(tmp_path: Path) -> None:
+    trace = tmp_path / "trace.jsonl"
+    trace.write_text(_thought_line("alice", 0, OLD.read_text(encoding="utf-8"), "Command: wait()"), encoding="utf-8")
+    client = ReplayClient(trace, "alice")
+    with pytest.raises(ReplayMismatch, match=r"recorded with other prompts than the ones alice is given now: .*lacks 'You are Alice, a smart robot .*alice_system.txt"):
+        LLMPolicy("alice", client)
+
+
+@pytest.mark.parametrize("options", [{}, {"prompt_hints": True}, {"structured": True}, {"prompt_cap_chars": 3000}])
+async def test_a_trace_recorded_with_the_current_prompts_replays(tmp_path: Path, options: dict[str, Any]) -> None:
+    recorded = await LLMPolicy("alice", ScriptedClient(["Command: wait()"]), **options).decide(observe("alice"))
+    trace = tmp_path / "trace.jsonl"
+    trace.write_text(_thought_line("alice", 0, recorded.prompt or "", "Command: navigate(sofa, 1)"), encoding="utf-8")
+    d = await LLMPolicy("alice", ReplayClient(trace, "alice"), **options).decide(observe("alice"))
+    assert d.prompt == recorded.prompt and d.reply == "Command: navigate(sofa, 1)"
+
+
+@pytest.mark.slow
+def test_up_refuses_to_replay_a_trace_recorded_with_the_old_prompts(tmp_path: Path) -> None:
+    trace = tmp_path / "old.jsonl"
+    trace.write_text(_thought_line("alice", 0, OLD.read_text(encoding="utf-8"), "Command: wait()"), encoding="utf-8")
+    out = _mhrc("up", "--insecure", "-q", "--llm", f"alice=replay:{trace}", "--trace", str(tmp_path / "new.jsonl"), cwd=tmp_path)
+    lines = [line for line in out.stderr.splitlines() if line.startswith("mhrc up:")]
+    assert out.returncode == 2 and "Traceback" not in out.stderr and len(lines) == 1, out.stderr[-3000:]
+    assert "recorded with other prompts" in lines[0] and "record the episode again" in lines[0], lines[0]
