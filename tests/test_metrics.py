@@ -62,6 +62,27 @@ def test_summary_means_and_both_action_step_readings() -> None:
     s = summarize(rows)
     assert s["episodes"] == 2 and s["succ"] == 0.5 and s["ps"] == pytest.approx((1 + 1 / 3) / 2, abs=1e-4)
     assert s["ts"] == 3 and s["as"] == 4 and s["as_per_robot"] == 2 and s["ts_bound"] == 7
+    assert s["as_ticks"] == 3  # ticks 0, 1 and 2 each had a non-wait action (tick 1: alice's navigate beside bob's wait)
+    old = [{k: v for k, v in r.items() if k != "active_ticks"} for r in rows]  # rows written before the reading existed
+    assert summarize(old)["as_ticks"] is None
+
+
+def test_the_three_action_step_readings_differ_as_the_paper_needs() -> None:
+    """On a hand-built trace with a tick where only waits happen and a tick where two robots act:
+    summed 3, per-robot mean 1.5, active ticks 2 (of TS 3): only the last can sit below TS
+    the way every row of the paper's tables does while robots act in parallel."""
+    rows = [
+        _put("episode_started", run="r", task="pack_objects", scene="kitchen", seed=0, n_objects=3, robots=["alice", "bob"], horizon=50),
+        _result("alice", 0, "navigate", target="table_0", stand_pose=0), _result("bob", 0, "pick", obj="apple"),
+        _put("tick", tick=0),
+        _result("alice", 1, "wait"), _result("bob", 1, "wait"),
+        _put("tick", tick=1),
+        _result("bob", 2, "place", obj="apple", target="tray"),
+        _put("tick", tick=2),
+        _put("episode_done", run="r", reason="horizon", metrics={"success": False, "placed": 1, "total": 3, "partial_success": 1 / 3}),
+    ]  # fmt: skip
+    m = from_trace(rows)
+    assert (m.temporal_steps, m.action_steps, m.action_steps / len(m.robots), m.active_ticks) == (3, 3, 1.5, 2)
     with pytest.raises(ValueError):
         summarize([])
 

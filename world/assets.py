@@ -7,6 +7,7 @@ the scene can place it with a plain position and yaw.
 
 from __future__ import annotations
 
+import math
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -280,6 +281,86 @@ def chest_urdf(name: str, g: ChestGeometry, color: Color, facade: list[Box] | No
         Box((hx, hy, hz - g.lid / 2), (0.24, 0.05, g.lid), (0.3, 0.3, 0.3, 1.0)),  # handle tab
     ]
     return jointed_urdf(name, carcass, "lid", lid, "revolute", g.hinge, (-1.0, 0.0, 0.0), g.angle)
+
+
+@dataclass(frozen=True)
+class CupboardGeometry:
+    """A cupboard (a kitchen cabinet, a microwave) in its own frame, front along -y: a solid body
+    with one cavity behind a side-hinged door. The door covers `u0` to `u0 + door_width` across
+    the front (x), `floor` to `ceiling` high; it hinges on a vertical axis at its `hinge` edge
+    (left: -x, right: +x, for someone facing the front) and swings out to `angle` rad. The door
+    link's origin is on the hinge line at the front face; closed, the door lies along x."""
+
+    width: float  # along x
+    depth: float  # along y
+    height: float
+    u0: float  # x of the door's left edge
+    door_width: float
+    hinge: str  # left | right
+    floor: float  # z of the cavity's floor
+    ceiling: float  # z of the cavity's top
+    angle: float  # rad the door opens to
+    handle_out: float = 0.1  # how far the handle bar stands out of the door
+    wall: float = 0.02
+    door: float = 0.02  # door thickness
+
+    @property
+    def side(self) -> float:
+        """+1 when the door extends towards +x from its hinge (a left hinge), else -1."""
+        return 1.0 if self.hinge == "left" else -1.0
+
+    @property
+    def hinge_point(self) -> Vec3:
+        return (self.u0 if self.hinge == "left" else self.u0 + self.door_width, -self.depth / 2, 0.0)
+
+    @property
+    def axis(self) -> Vec3:
+        """Positive rotation swings the free edge out of the front (towards -y)."""
+        return (0.0, 0.0, -self.side)
+
+    @property
+    def cavity(self) -> tuple[Vec3, Vec3]:
+        """Centre (of its floor) and size of the cavity, in the body frame."""
+        x0, x1 = self.u0 + self.wall, self.u0 + self.door_width - self.wall
+        y0, y1 = -self.depth / 2, self.depth / 2 - self.wall
+        return ((x0 + x1) / 2, (y0 + y1) / 2, self.floor), (x1 - x0, y1 - y0, self.ceiling - self.floor)
+
+    @property
+    def handle(self) -> Vec3:
+        """Top centre of the handle bar near the door's free edge, in the door link's frame."""
+        return (self.side * (self.door_width - 0.1), -(self.door + self.handle_out), self.ceiling - 0.06)
+
+    @property
+    def swing_radius(self) -> float:
+        """How far from the hinge line the door and its handle reach."""
+        return math.hypot(self.door_width, self.door + self.handle_out + 0.015)
+
+
+def cupboard_urdf(name: str, g: CupboardGeometry, color: Color, facade: list[Box] | None = None) -> str:
+    """A solid carcass around one cavity and its door on a revolute joint (vertical axis) at the
+    hinge edge, a handle bar near the free edge; `facade`: visual-only boxes on the carcass."""
+    w, d, t = g.width, g.depth, g.wall
+    x0, x1 = g.u0 + t, g.u0 + g.door_width - t  # the cavity across
+    mid = (g.floor + g.ceiling) / 2
+    span = g.ceiling - g.floor
+    carcass = [
+        Box((0.0, 0.0, g.floor / 2), (w, d, g.floor), color),  # plinth up to the cavity floor
+        Box((0.0, 0.0, (g.ceiling + g.height) / 2), (w, d, g.height - g.ceiling), color),  # top
+        Box(((-w / 2 + x0) / 2, 0.0, mid), (x0 + w / 2, d, span), color),  # solid left of the cavity
+        Box(((x1 + w / 2) / 2, 0.0, mid), (w / 2 - x1, d, span), color),  # solid right of it
+        Box(((x0 + x1) / 2, d / 2 - t / 2, mid), (x1 - x0, t, span), color),  # back
+        *(facade or []),
+    ]
+    s, hw = g.side, g.door_width
+    hx, hy, hz = g.handle
+    dark = (color[0] * 0.85, color[1] * 0.85, color[2] * 0.85, 1.0)
+    grey = (0.3, 0.3, 0.3, 1.0)
+    door = [
+        Box((s * hw / 2, -g.door / 2, mid), (hw - 0.004, g.door, span), dark),
+        Box((hx, hy + (g.handle_out + 0.005) / 2, hz - 0.01), (0.03, g.handle_out + 0.005, 0.02), grey),  # stem
+        Box((hx, hy, hz - 0.01), (0.14, 0.03, 0.02), grey),  # bar
+    ]
+    return jointed_urdf(name, carcass, "door", door, "revolute", g.hinge_point, g.axis, g.angle)
 
 
 def tray_boxes(sx: float, sy: float, color: Color, rim: float = 0.04, t: float = 0.01) -> list[Box]:

@@ -1,7 +1,12 @@
 """The feedback sentences a robot's agent reads after each skill (after the paper's Table III).
 
-One function per row of the table: each takes what the skill measured and says it plainly,
-with the numbers the agent needs to recover (distances, offsets, valid indices, known names).
+One function per row of the table: each takes what the skill measured and says it plainly: what
+failed, why, and the measured quantities (distances, Alice's x/y offsets, valid stand pose
+indices). Like the paper's, the sentences give causes and numbers, never advice. What would tell
+a robot what to do next (navigate somewhere instead, open or place something first, try again)
+and the lists of names it could have used instead are the `feedback_advice` aid
+(mhrc.fidelity.AIDS): the functions that have such help take `advice=True` to append it, and
+without it they say the same sentence without the help.
 """
 
 from __future__ import annotations
@@ -29,14 +34,16 @@ def waited() -> str:
 # --------------------------------------------------------------------------- navigate / move
 
 
-def unknown_furniture(name: str, furniture: list[str]) -> str:
-    return f"There is no {name!r} in your scene graph; furniture: {_names(furniture)}."
+def unknown_furniture(name: str, furniture: list[str], *, advice: bool = False) -> str:
+    """`furniture`: the names the robot could use (listed only with the feedback_advice aid)."""
+    text = f"There is no {name!r} in your scene graph"
+    return text + (f"; furniture: {_names(furniture)}." if advice else ".")
 
 
-def not_navigable(name: str, where: str | None) -> str:
-    if where:
-        return f"{name} has no stand pose: it is not something you can navigate to. Navigate to {where} instead."
-    return f"{name} has no stand pose: it is not something you can navigate to."
+def not_navigable(name: str, where: str | None, *, advice: bool = False) -> str:
+    """`where`: the furniture to go to instead (said only with the feedback_advice aid)."""
+    text = f"{name} has no stand pose: it is not something you can navigate to."
+    return text + (f" Navigate to {where} instead." if where and advice else "")
 
 
 def stand_pose_invalid(name: str, count: int, index: int) -> str:
@@ -55,11 +62,12 @@ def no_path(name: str, index: int) -> str:
     return f"Navigation failed: there is no collision-free path to stand pose {index} of {name}."
 
 
-def reached(name: str, index: int, seen: list[str] | None, *, container: bool = False, can_open: bool = True) -> str:
-    """`seen` is None for a closed container (its inside cannot be seen)."""
+def reached(name: str, index: int, seen: list[str] | None, *, container: bool = False, can_open: bool = True, advice: bool = False) -> str:
+    """`seen` is None for a closed container (its inside cannot be seen): the paper says opening is
+    needed to see inside; telling a robot that can open it to do so is the feedback_advice aid."""
     text = f"You reached stand pose {index} of {name}."
     if seen is None:
-        if can_open:
+        if can_open and advice:
             return text + f" {name} is closed: open it to see what is inside."
         return text + f" {name} is closed: what is inside cannot be seen until it is opened."
     if container:
@@ -67,11 +75,12 @@ def reached(name: str, index: int, seen: list[str] | None, *, container: bool = 
     return text + (f" On {name}: {', '.join(seen)}." if seen else f" There is nothing on {name}.")
 
 
-def off_target(name: str, index: int, distance: float, pose: tuple[float, float]) -> str:
-    return (
+def off_target(name: str, index: int, distance: float, pose: tuple[float, float], *, advice: bool = False) -> str:
+    text = (
         f"Navigation ended off target: your base stopped {distance:.2f} m from stand pose {index} of {name}, "
-        f"at x={pose[0]:.2f}, y={pose[1]:.2f}. Navigate to stand pose {index} of {name} again."
+        f"at x={pose[0]:.2f}, y={pose[1]:.2f}."
     )
+    return text + (f" Navigate to stand pose {index} of {name} again." if advice else "")
 
 
 def move_off_target(dx: float, dy: float, distance: float, moved: tuple[float, float]) -> str:
@@ -104,13 +113,14 @@ def already_open(name: str) -> str:
     return f"{name} is already open."
 
 
-def hands_full_to_open(name: str, held: str) -> str:
-    return f"Your gripper holds {held}; place it before opening {name}."
+def hands_full_to_open(name: str, held: str, *, advice: bool = False) -> str:
+    text = f"You cannot open {name}: your gripper holds {held}."
+    return text + (f" Place {held} before opening {name}." if advice else "")
 
 
-def handle_out_of_reach(name: str, distance: float, *, mobile: bool = True) -> str:
+def handle_out_of_reach(name: str, distance: float, *, mobile: bool = True, advice: bool = False) -> str:
     text = f"The handle of {name} is out of your arm's reach: it is {distance:.2f} m from your arm base."
-    return text + (f" Navigate to a stand pose of {name} first." if mobile else "")
+    return text + (f" Navigate to a stand pose of {name} first." if mobile and advice else "")
 
 
 def no_grip(name: str, distance: float) -> str:
@@ -135,20 +145,22 @@ def opened(name: str, inside: list[tuple[str, tuple[float, float, float]]]) -> s
 # --------------------------------------------------------------------------- pick
 
 
-def gripper_full(held: str) -> str:
-    return f"Your gripper already holds {held}; place it first."
+def gripper_full(held: str, *, advice: bool = False) -> str:
+    return f"Your gripper already holds {held}" + ("; place it first." if advice else ".")
 
 
-def object_unknown(name: str, known: list[str]) -> str:
-    return f"There is no {name!r} in your scene graph; objects you know: {_names(known)}."
+def object_unknown(name: str, known: list[str], *, advice: bool = False) -> str:
+    """`known`: the objects the robot knows of (listed only with the feedback_advice aid)."""
+    text = f"There is no {name!r} in your scene graph"
+    return text + (f"; objects you know: {_names(known)}." if advice else ".")
 
 
 def held_by_other(name: str, robot: str) -> str:
     return f"{name} is held by {robot}; you cannot pick it now."
 
 
-def in_closed_container(name: str, container: str, *, can_open: bool = True) -> str:
-    return f"{name} is inside {container}, which is closed" + (": open it first." if can_open else ".")
+def in_closed_container(name: str, container: str, *, can_open: bool = True, advice: bool = False) -> str:
+    return f"{name} is inside {container}, which is closed" + (": open it first." if can_open and advice else ".")
 
 
 def too_far(name: str, distance: float, offset: tuple[float, float] | None = None, fix: tuple[float, float] | None = None) -> str:
@@ -164,6 +176,12 @@ def too_far(name: str, distance: float, offset: tuple[float, float] | None = Non
 
 def config_invalid(what: str, which: str) -> str:
     return f"The arm planner found the {which} configuration invalid (in collision) for {what}."
+
+
+def no_goal_configuration(what: str, error: float) -> str:
+    """Inverse kinematics came within `error` of the point (less than the sentence's centimetre)
+    but found no verified pose there: the goal configuration is invalid, not too far away."""
+    return f"The arm planner found no valid goal configuration for {what}: the closest pose it found leaves the end effector {error * 1000:.0f} mm off."
 
 
 def plan_failed(what: str) -> str:
@@ -185,30 +203,33 @@ def wrong_object(held: str, named: str) -> str:
     return f"You hold {held}, not {named}."
 
 
-def location_unknown(name: str, places: list[str]) -> str:
-    return f"There is no place called {name!r}; places: {_names(places)}."
+def location_unknown(name: str, places: list[str], *, advice: bool = False) -> str:
+    """`places`: where the robot may place (listed only with the feedback_advice aid)."""
+    return f"There is no place called {name!r}" + (f"; places: {_names(places)}." if advice else ".")
 
 
-def not_a_surface(name: str, places: list[str]) -> str:
-    return f"Objects cannot be placed on or into {name}: it has no place pose. Places: {_names(places)}."
+def not_a_surface(name: str, places: list[str], *, advice: bool = False) -> str:
+    text = f"Objects cannot be placed on or into {name}: it has no place pose."
+    return text + (f" Places: {_names(places)}." if advice else "")
 
 
 def no_free_spot(name: str) -> str:
     return f"There is no free spot left on {name}."
 
 
-def place_out_of_reach(name: str, distance: float, *, mobile: bool = True) -> str:
+def place_out_of_reach(name: str, distance: float, *, mobile: bool = True, advice: bool = False) -> str:
     text = f"No free spot on {name} is within your arm's reach (the nearest is {distance:.2f} m from your arm base)."
     if mobile:
-        return text + f" Navigate to a stand pose of {name} first."
+        return text + (f" Navigate to a stand pose of {name} first." if advice else "")
     return text + " Your arm is mounted where it stands: only places within its reach can take the object."
 
 
-def not_a_finisher(name: str, location: str, table: str, finisher: str) -> str:
-    return (
-        f"Only {finisher.capitalize()} places objects on {location}: place {name} on {table} "
-        f"within {finisher.capitalize()}'s reach for {finisher.capitalize()} to finish the task."
-    )
+def not_a_finisher(name: str, location: str, table: str, finisher: str, *, advice: bool = False) -> str:
+    """The paper's task constraint (only Bob finishes the task); where to put the object instead is the feedback_advice aid."""
+    who = finisher.capitalize()
+    if not advice:
+        return f"Only {who} places objects on {location}."
+    return f"Only {who} places objects on {location}: place {name} on {table} within {who}'s reach for {who} to finish the task."
 
 
 def place_failed(name: str, location: str, rest: str | None, pos: tuple[float, float, float]) -> str:

@@ -18,7 +18,7 @@ The file format (every field is checked on load; an error names the file and the
                               within / beyond his reach}
     starts                   {alice: [x, y, yaw], david: [x, y, yaw]}
     furniture                [{name, kind (how robots are told of it), style (table | block | sofa
-                              | drawer_unit | chest: how it is built), center [x, y], size [sx, sy, top z],
+                              | drawer_unit | chest | cupboard: how it is built), center [x, y], size [sx, sy, top z],
                               color (a name from COLORS or [r, g, b, a]),
                               stand_poses: [[x, y, yaw] or {side: north|south|east|west, at: the
                               coordinate along that side}, ...],
@@ -32,7 +32,13 @@ The file format (every field is checked on load; an error names the file and the
                               lid (chest only): {axis [dx, dy] its front faces, open_deg (75),
                               floor (z of its inside floor), slots [[x, y] in the chest's frame,
                               x across, y towards the back], max_object_height},
-                              facade (block, drawer_unit, chest; looks only, nothing collides):
+                              door (cupboard only: one cavity behind a side-hinged door):
+                              {axis [dx, dy] its front faces, hinge (left | right, for someone
+                              facing the front), at (the door's left edge across the front, from
+                              the centre), width, open_deg (85, at most 90), floor and ceiling (z of
+                              the cavity), slots [[x, y] in the cavity's frame, x across, y towards
+                              the back], max_object_height, handle_out (0.1)},
+                              facade (block, drawer_unit, chest, cupboard; looks only, nothing collides):
                               {front [dx, dy] the side it faces (a container's is its axis),
                               panels [{at [across, z] (across: to the right of someone facing
                               the front), size [width, height], color, handle: none | left |
@@ -47,7 +53,10 @@ slots 0.3 m to ARM_REACH - 0.03, far slots FAR_SLOT or more (beyond any pose his
 the goal area at least the sort task's six panels (0.34 x 0.22 m) and the area of a tray that
 holds six objects, with its centre region (the panels' centres) 0.3 m to ARM_REACH and its
 corners within GOAL_CORNER_REACH (a tray is filled from a corner). Stand poses and starts keep
-clear of where a drawer stands when open, as they keep clear of walls and furniture.
+clear of where a drawer stands when open and of the floor a door sweeps (the square of its
+swing's radius beside its hinge), as they keep clear of walls and furniture; a door's sweep
+must not cross a wall, other furniture or another open drawer or door. Every layout has at
+least MIN_CONTAINERS closed containers a target can hide in.
 """
 
 from __future__ import annotations
@@ -58,9 +67,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .assets import ChestGeometry, Color, DrawerGeometry, Panel
+from .assets import ChestGeometry, Color, CupboardGeometry, DrawerGeometry, Panel
 
 STAND_OFFSET = 0.45  # base centre to furniture edge at a stand pose
 HALF_PI = math.pi / 2
@@ -72,6 +82,12 @@ PANELS = (0.34, 0.22)  # the sort task's six panels, 3 x 2 at a 0.12 m pitch: th
 PANEL_CENTRES = (0.12, 0.06)  # the panels' centres lie within +- these of the goal area's centre
 MIN_GOAL_AREA = 0.17  # m^2: a tray this big holds six of the pack task's objects
 HANDLE_CLEARANCE = 0.015  # an open drawer's footprint reaches this beyond its handle
+MIN_CONTAINERS = 2  # closed containers a target can hide in, in every layout
+DOOR_CLEARANCE = 0.03  # m between a swinging door and a chassis at a stand pose or start
+CHASSIS_FOOTPRINT = (0.6, 0.5)  # Alice's chassis, length x width (robots.CHASSIS; a test keeps them equal)
+# Alice's arm in its carry posture (arm.HOME), seen from above: from this far behind to this far
+# ahead of her base centre, this wide (measured from panda.urdf's link boxes; a test keeps it so)
+HOME_FOOTPRINT = (-0.18, 0.53, 0.27)
 SCENES_DIR = Path(__file__).with_name("scenes")
 
 COLORS: dict[str, Color] = {
@@ -123,7 +139,29 @@ class LidSpec:
         return self.angle
 
 
-Container = DrawerSpec | LidSpec
+@dataclass(frozen=True)
+class DoorSpec:
+    """A cupboard's side-hinged door over its one cavity: the door covers `at` to `at + width`
+    across the front (to the right of someone facing it, from the unit's centre), hinges at its
+    `hinge` edge and swings out to `angle` rad; the front faces `axis`."""
+
+    axis: tuple[float, float]
+    hinge: str  # left | right, for someone facing the front
+    at: float  # the door's left edge, across the front from the unit's centre
+    width: float
+    angle: float
+    floor: float  # z of the cavity's floor
+    ceiling: float  # z of the cavity's top
+    slots: tuple[tuple[float, float], ...]  # object spots in the cavity's frame (x across, y towards the back)
+    max_object_height: float = 0.12
+    handle_out: float = 0.1
+
+    @property
+    def travel(self) -> float:
+        return self.angle
+
+
+Container = DrawerSpec | LidSpec | DoorSpec
 
 
 def drawer_footprint(
@@ -138,6 +176,56 @@ def drawer_footprint(
     return (center[0] + axis[0] * reach, center[1] + axis[1] * reach), ((width, out) if along_y else (out, width))
 
 
+def door_footprint(
+    center: tuple[float, float], size: tuple[float, ...], door: DoorSpec
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Centre and size of the floor a side-hinged door (and its handle) sweeps in front of its
+    unit while it opens (`size`: the unit's world x, y extent): out of the front by the swing's
+    radius, across from the hinge by that radius on the door's side and by the handle's reach
+    on the other (a door opens at most 90 degrees: its handle then stands out past the hinge)."""
+    along_y = abs(door.axis[1]) > 0.5
+    width, depth = (size[0], size[1]) if along_y else (size[1], size[0])
+    g = CupboardGeometry(width, depth, 1.0, door.at, door.width, door.hinge, door.floor, door.ceiling, door.angle, door.handle_out)
+    radius = g.swing_radius
+    behind = g.door + g.handle_out + HANDLE_CLEARANCE  # the handle, past the hinge line at 90 degrees
+    hinge_u = g.hinge_point[0]
+    mid_u = hinge_u + g.side * (radius - behind) / 2  # across the front, in the body frame
+    across = radius + behind
+    # body frame (front along -y) to world: the body is turned by axis_yaw(axis)
+    yaw = axis_yaw(door.axis)
+    c, s = round(math.cos(yaw)), round(math.sin(yaw))
+    lx, ly = mid_u, -(depth / 2 + radius / 2)
+    world = (center[0] + c * lx - s * ly, center[1] + s * lx + c * ly)
+    return world, ((across, radius) if along_y else (radius, across))
+
+
+SWEEP_STEPS = 12  # door positions sampled over its swing (the base planners' grid, the stand-pose check)
+
+
+def door_sweep(
+    center: tuple[float, float], size: tuple[float, ...], door: DoorSpec
+) -> list[tuple[tuple[float, float], tuple[float, float], float]]:
+    """The door (with its handle) at SWEEP_STEPS + 1 angles from shut to open, each as a world
+    rectangle: centre, size and yaw. Their union is the floor the door sweeps, closer than
+    `door_footprint`'s square."""
+    along_y = abs(door.axis[1]) > 0.5
+    width, depth = (size[0], size[1]) if along_y else (size[1], size[0])
+    g = CupboardGeometry(width, depth, 1.0, door.at, door.width, door.hinge, door.floor, door.ceiling, door.angle, door.handle_out)
+    thick = g.door + g.handle_out + HANDLE_CLEARANCE
+    hx, hy, _ = g.hinge_point
+    body_yaw = axis_yaw(door.axis)
+    c, s = math.cos(body_yaw), math.sin(body_yaw)
+    out = []
+    for k in range(SWEEP_STEPS + 1):
+        a = -g.side * door.angle * k / SWEEP_STEPS  # the door's turn about +z in the body frame
+        lx, ly = g.side * g.door_width / 2, -thick / 2  # the door's centre in its link frame, shut
+        bx = hx + math.cos(a) * lx - math.sin(a) * ly
+        by = hy + math.sin(a) * lx + math.cos(a) * ly
+        world = (center[0] + c * bx - s * by, center[1] + s * bx + c * by)
+        out.append((world, (g.door_width, thick), body_yaw + a))
+    return out
+
+
 def axis_yaw(axis: tuple[float, float]) -> float:
     """Body yaw (in [-pi, pi]) of furniture whose front faces `axis`: bodies are built with their front along -y."""
     return math.atan2(axis[0], -axis[1])
@@ -147,7 +235,7 @@ def axis_yaw(axis: tuple[float, float]) -> float:
 class FurnitureSpec:
     name: str
     kind: str
-    style: str  # table | block | sofa | drawer_unit | chest: how assets.py builds it
+    style: str  # table | block | sofa | drawer_unit | chest | cupboard: how assets.py builds it
     center: tuple[float, float]
     size: tuple[float, float, float]  # sx, sy, height (of the top surface)
     color: Color
@@ -157,6 +245,7 @@ class FurnitureSpec:
     slots: tuple[tuple[float, float], ...] = ()  # object spots on top, absolute x, y
     drawer: DrawerSpec | None = None
     lid: LidSpec | None = None
+    door: DoorSpec | None = None
     front: tuple[float, float] | None = None  # the side a block's facade faces (containers face their axis)
     panels: tuple[Panel, ...] = ()  # the facade: visual-only panels on the front
 
@@ -180,8 +269,8 @@ class FurnitureSpec:
 
     @property
     def container(self) -> Container | None:
-        """What makes this furniture a closed container (a drawer, a lid), if anything."""
-        return self.drawer or self.lid
+        """What makes this furniture a closed container (a drawer, a lid, a door), if anything."""
+        return self.drawer or self.lid or self.door
 
     def own_size(self) -> tuple[float, float]:
         """Width and depth in the body's own frame (front along -y)."""
@@ -192,6 +281,18 @@ class FurnitureSpec:
         """Centre and size of the floor its drawer covers when open, if it has one."""
         d = self.drawer
         return None if d is None else drawer_footprint(self.center, self.size, d.axis, d.travel, d.handle_out)
+
+    def swept_footprint(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """Centre and size of the floor its drawer covers when open, or its door sweeps, if any."""
+        if self.door is not None:
+            return door_footprint(self.center, self.size, self.door)
+        return self.open_drawer_footprint()
+
+    def cupboard_geometry(self) -> CupboardGeometry:
+        d = self.door
+        assert d is not None, f"{self.name} has no door"
+        width, depth = self.own_size()
+        return CupboardGeometry(width, depth, self.size[2], d.at, d.width, d.hinge, d.floor, d.ceiling, d.angle, d.handle_out)
 
     def chest_geometry(self) -> ChestGeometry:
         lid = self.lid
@@ -281,6 +382,31 @@ class LidFile(_Strict):
         return self
 
 
+class DoorFile(_Strict):
+    axis: Vec2 = Field(description="the side the cupboard's front faces, e.g. [0, -1]")
+    hinge: Literal["left", "right"] = Field(description="the door's hinged edge, for someone facing the front")
+    at: float = Field(description="the door's left edge, across the front from the unit's centre")
+    width: Positive
+    open_deg: float = Field(85.0, gt=30, le=90)
+    floor: Positive
+    ceiling: Positive
+    slots: list[Vec2] = Field(min_length=1)
+    max_object_height: Positive = 0.12
+    handle_out: float = Field(0.1, ge=0.03, le=0.15)
+
+    @model_validator(mode="after")
+    def _axis(self) -> DoorFile:
+        if (err := _axis_error(self.axis)) is not None:
+            raise ValueError(err)
+        if self.ceiling <= self.floor + self.max_object_height:
+            raise ValueError(f"ceiling: the cavity from {self.floor} to {self.ceiling} m is too low for objects {self.max_object_height} m tall")
+        inner = (self.width / 2 - CupboardGeometry.wall, 0.0)
+        for i, (x, _) in enumerate(self.slots):
+            if abs(x) > inner[0]:
+                raise ValueError(f"slots.{i}: {x} lies outside the cavity's width {self.width - 2 * CupboardGeometry.wall:.2f}")
+        return self
+
+
 def _axis_error(axis: Vec2) -> str | None:
     if sorted(abs(c) for c in axis) != [0.0, 1.0]:
         return f"axis must be a unit vector along x or y, e.g. [0, -1], not {list(axis)}"
@@ -327,7 +453,7 @@ class FacadeFile(_Strict):
 class FurnitureFile(_Strict):
     name: Name
     kind: str = Field(min_length=1)
-    style: Literal["table", "block", "sofa", "drawer_unit", "chest"]
+    style: Literal["table", "block", "sofa", "drawer_unit", "chest", "cupboard"]
     center: Vec2
     size: tuple[Positive, Positive, Positive]
     color: str | tuple[float, float, float, float] = "light"
@@ -337,6 +463,7 @@ class FurnitureFile(_Strict):
     slots: list[Vec2] = Field(default_factory=list)
     drawer: DrawerFile | None = None
     lid: LidFile | None = None
+    door: DoorFile | None = None
     facade: FacadeFile | None = None
 
     @model_validator(mode="after")
@@ -344,9 +471,10 @@ class FurnitureFile(_Strict):
         if (err := _color_error(self.color)) is not None:
             raise ValueError(f"color: {err}")
         if self.facade is not None:
-            axis = self.drawer.axis if self.drawer is not None else self.lid.axis if self.lid is not None else None
-            if self.style not in ("block", "drawer_unit", "chest"):
-                raise ValueError(f"facade: only a block, a drawer_unit or a chest has one, not a {self.style}")
+            container = self.drawer or self.lid or self.door
+            axis = None if container is None else container.axis
+            if self.style not in ("block", "drawer_unit", "chest", "cupboard"):
+                raise ValueError(f"facade: only a block, a drawer_unit, a chest or a cupboard has one, not a {self.style}")
             if axis is None and self.facade.front is None:
                 raise ValueError("facade.front: a block's facade needs the side it faces, e.g. [0, -1]")
             if axis is not None and self.facade.front is not None and tuple(self.facade.front) != tuple(axis):
@@ -360,6 +488,10 @@ class FurnitureFile(_Strict):
             raise ValueError("drawer: a drawer_unit needs a drawer, and only a drawer_unit may have one")
         if (self.style == "chest") != (self.lid is not None):
             raise ValueError("lid: a chest needs a lid, and only a chest may have one")
+        if (self.style == "cupboard") != (self.door is not None):
+            raise ValueError("door: a cupboard needs a door, and only a cupboard may have one")
+        if self.door is not None:
+            self._check_door(self.door)
         if self.drawer is not None:
             d = self.drawer
             width, depth = (self.size[1], self.size[0]) if abs(d.axis[0]) > 0.5 else (self.size[0], self.size[1])
@@ -386,19 +518,38 @@ class FurnitureFile(_Strict):
                 raise ValueError(f"{what}: {list(xy)} is not on top of {self.name}")
         return self
 
+    def _check_door(self, door: DoorFile) -> None:
+        width, depth = (self.size[1], self.size[0]) if abs(door.axis[0]) > 0.5 else (self.size[0], self.size[1])
+        if door.at < -width / 2 - 1e-9 or door.at + door.width > width / 2 + 1e-9:
+            raise ValueError(f"door: a door from {door.at} to {door.at + door.width} across does not fit on the front of {self.name} ({width} wide)")
+        if door.ceiling > self.size[2] - 0.02:
+            raise ValueError(f"door.ceiling: {door.ceiling} m leaves no top on {self.name} ({self.size[2]} high)")
+        for i, (_, y) in enumerate(door.slots):
+            if abs(y) > (depth - CupboardGeometry.wall) / 2 - 0.05:
+                raise ValueError(f"door.slots.{i}: {y} lies outside the cavity's depth")
+
     def facing(self) -> Vec2:
         """The side the front faces: the container's axis, the facade's front, else -y."""
         if self.drawer is not None:
             return self.drawer.axis
         if self.lid is not None:
             return self.lid.axis
+        if self.door is not None:
+            return self.door.axis
         if self.facade is not None and self.facade.front is not None:
             return self.facade.front
         return (0.0, -1.0)
 
-    def open_drawer_footprint(self) -> tuple[tuple[float, float], tuple[float, float]]:
-        assert self.drawer is not None
+    def open_drawer_footprint(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        if self.drawer is None:
+            return None
         return drawer_footprint(self.center, self.size, self.drawer.axis, self.drawer.travel, self.drawer.handle_out)
+
+    def swept_footprint(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """The floor an open drawer covers or a door sweeps (its bounding square), if it has either."""
+        if self.door is not None:
+            return door_footprint(self.center, self.size, _door_spec(self.door))
+        return self.open_drawer_footprint()
 
     def stand_pose_list(self) -> list[Pose]:
         cx, cy = self.center
@@ -459,26 +610,41 @@ class LayoutFile(_Strict):
                 if not _inside(table.center, table.size, xy):
                     raise ValueError(f"bob.{what}.{i}: {list(xy)} is not on {table.name}")
         self._check_reach(table)
-        if not any(f.drawer is not None or f.lid is not None for f in self.furniture):
-            raise ValueError("furniture: a layout needs at least one closed container (a drawer_unit or a chest)")
+        containers = [f.name for f in self.furniture if f.drawer is not None or f.lid is not None or f.door is not None]
+        if len(containers) < MIN_CONTAINERS:
+            raise ValueError(
+                f"furniture: a layout needs at least {MIN_CONTAINERS} closed containers a target can hide in "
+                f"(drawer_unit, chest or cupboard); it has {len(containers)}{': ' + ', '.join(containers) if containers else ''}"
+            )
         elsewhere = sum(len(f.slots) for f in self.furniture if f.name != table.name)
         if elsewhere < 5:
             raise ValueError(f"furniture: slots away from {table.name} number {elsewhere}; 6-object episodes need at least 5")
         self._check_overlaps()
         obstacles = [(f"walls.{i}", (w[0], w[1]), (w[2], w[3])) for i, w in enumerate(self.walls)]
         obstacles += [(f"furniture.{i} ({f.name})", f.center, (f.size[0], f.size[1])) for i, f in enumerate(self.furniture)]
-        obstacles += [(f"furniture.{i} ({f.name}) with its drawer open", *f.open_drawer_footprint()) for i, f in enumerate(self.furniture) if f.drawer]
+        for i, f in enumerate(self.furniture):
+            swept = f.open_drawer_footprint()
+            if swept is not None:
+                obstacles.append((f"furniture.{i} ({f.name}) with its drawer open", *swept))
         poses = [(f"starts.{r}", s) for r, s in self.starts.items()]
         for i, f in enumerate(self.furniture):
             if not f.stand_poses:
                 raise ValueError(f"furniture.{i}.stand_poses: {f.name} has none; every piece of furniture needs one (agents read furniture without one as a task fixture)")
             poses += [(f"furniture.{i}.stand_poses.{j} ({f.name})", sp) for j, sp in enumerate(f.stand_pose_list())]
-        for what, (x, y, _) in poses:
+        sweeps = [(f"furniture.{i} ({f.name}) with its door swinging open", door_sweep(f.center, f.size, _door_spec(f.door))) for i, f in enumerate(self.furniture) if f.door]
+        for what, (x, y, _yaw) in poses:
             if not (xmin + ROBOT_CLEARANCE <= x <= xmax - ROBOT_CLEARANCE and ymin + ROBOT_CLEARANCE <= y <= ymax - ROBOT_CLEARANCE):
                 raise ValueError(f"{what}: ({x}, {y}) is off the floor or too close to its edge")
             for name, c, sz in obstacles:
                 if _inside(c, sz, (x, y), margin=ROBOT_CLEARANCE - 0.01):
                     raise ValueError(f"{what}: ({x}, {y}) is within {ROBOT_CLEARANCE} m of {name}")
+            outline, arm = chassis_outline((x, y, _yaw)), home_outline((x, y, _yaw))
+            for name, boxes in sweeps:
+                if any(_inside_turned(c, sz, yaw, pt, DOOR_CLEARANCE) for c, sz, yaw in boxes for pt in outline):
+                    raise ValueError(f"{what}: a chassis at ({x}, {y}) would be within {DOOR_CLEARANCE} m of {name}")
+                c, sz, yaw = boxes[-1]  # the door open: the arm in its carry posture clears it
+                if any(_inside_turned(c, sz, yaw, pt, DOOR_CLEARANCE) for pt in arm):
+                    raise ValueError(f"{what}: an arm in its carry posture at ({x}, {y}) would be within {DOOR_CLEARANCE} m of the open door of {name.split(' with ')[0]}")
         return self
 
     def _check_overlaps(self) -> None:
@@ -491,6 +657,16 @@ class LayoutFile(_Strict):
                 depth = _overlap(c, sz, oc, osz)
                 if depth > OVERLAP_TOLERANCE:
                     raise ValueError(f"{what} overlaps {other} by {depth:.2f} m: move it or shrink it (furniture may touch, not intersect)")
+        # a door swinging open must not hit a wall, other furniture or another drawer or door standing open
+        swept = [(f"furniture.{i} ({f.name}) with its door swinging open", i, s) for i, f in enumerate(self.furniture) if f.door is not None and (s := f.swept_footprint()) is not None]
+        opened = [(f"furniture.{i} ({f.name}) open", i, s) for i, f in enumerate(self.furniture) if (s := f.swept_footprint()) is not None]
+        for what, i, (c, sz) in swept:
+            others = [(o, oc, osz) for j, (o, oc, osz) in enumerate(pieces) if j != i] + walls
+            others += [(o, *s) for o, j, s in opened if j != i]
+            for other, oc, osz in others:
+                depth = _overlap(c, sz, oc, osz)
+                if depth > OVERLAP_TOLERANCE:
+                    raise ValueError(f"{what} overlaps {other} by {depth:.2f} m: move it, narrow its door or hinge it on the other side")
 
     def _check_reach(self, table: FurnitureFile) -> None:
         """Bob's slots and goal area against his reach (see the module docstring)."""
@@ -522,7 +698,7 @@ class LayoutFile(_Strict):
     def build(self, source: str = "") -> Layout:
         furniture = []
         for f in self.furniture:
-            d, lid = f.drawer, f.lid
+            d, lid, door = f.drawer, f.lid, f.door
             furniture.append(
                 FurnitureSpec(
                     name=f.name, kind=f.kind, style=f.style, center=f.center, size=f.size,
@@ -531,7 +707,8 @@ class LayoutFile(_Strict):
                     slots=tuple(f.slots),
                     drawer=None if d is None else DrawerSpec(d.axis, d.travel, d.inner, d.floor, tuple(d.slots), d.max_object_height, d.handle_out),
                     lid=None if lid is None else LidSpec(lid.axis, math.radians(lid.open_deg), lid.floor, tuple(lid.slots), lid.max_object_height),
-                    front=None if f.facade is None or d is not None or lid is not None else f.facade.front,
+                    door=None if door is None else _door_spec(door),
+                    front=None if f.facade is None or d is not None or lid is not None or door is not None else f.facade.front,
                     panels=() if f.facade is None else tuple(Panel(*pn.at, *pn.size, _color(pn.color), pn.handle) for pn in f.facade.panels),
                 )
             )  # fmt: skip
@@ -543,6 +720,13 @@ class LayoutFile(_Strict):
         )  # fmt: skip
 
 
+def _door_spec(door: DoorFile) -> DoorSpec:
+    return DoorSpec(
+        door.axis, door.hinge, door.at, door.width, math.radians(door.open_deg), door.floor, door.ceiling,
+        tuple(door.slots), door.max_object_height, door.handle_out,
+    )  # fmt: skip
+
+
 OVERLAP_TOLERANCE = 0.01  # m: footprints that share less than this (touching, rounding) do not count as overlapping
 
 
@@ -552,6 +736,37 @@ def _overlap(c1: Vec2, s1: tuple[float, ...], c2: Vec2, s2: tuple[float, ...]) -
     ox = min(c1[0] + s1[0] / 2, c2[0] + s2[0] / 2) - max(c1[0] - s1[0] / 2, c2[0] - s2[0] / 2)
     oy = min(c1[1] + s1[1] / 2, c2[1] + s2[1] / 2) - max(c1[1] - s1[1] / 2, c2[1] - s2[1] / 2)
     return max(0.0, min(ox, oy))
+
+
+def chassis_outline(pose: tuple[float, float, float], step: float = 0.05) -> list[Vec2]:
+    """Points every `step` along the outline of Alice's chassis standing at `pose` (x, y, yaw)."""
+    hl, hw = CHASSIS_FOOTPRINT[0] / 2, CHASSIS_FOOTPRINT[1] / 2
+    return _outline(pose, (-hl, hl), (-hw, hw), step)
+
+
+def home_outline(pose: tuple[float, float, float], step: float = 0.05) -> list[Vec2]:
+    """Points every `step` along the outline of Alice's arm in its carry posture, seen from above."""
+    back, ahead, wide = HOME_FOOTPRINT
+    return _outline(pose, (back, ahead), (-wide / 2, wide / 2), step)
+
+
+def _outline(pose: tuple[float, float, float], us: tuple[float, float], vs: tuple[float, float], step: float) -> list[Vec2]:
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    local: list[Vec2] = []
+    for u in np.linspace(us[0], us[1], int(round((us[1] - us[0]) / step)) + 1):
+        local += [(float(u), vs[0]), (float(u), vs[1])]
+    for v in np.linspace(vs[0], vs[1], int(round((vs[1] - vs[0]) / step)) + 1):
+        local += [(us[0], float(v)), (us[1], float(v))]
+    return [(x + c * u - s * v, y + s * u + c * v) for u, v in local]
+
+
+def _inside_turned(center: Vec2, size: tuple[float, ...], yaw: float, xy: Vec2, margin: float) -> bool:
+    """Whether `xy` lies within `margin` (straight-line distance) of a rectangle turned by `yaw`."""
+    dx, dy = xy[0] - center[0], xy[1] - center[1]
+    c, s = math.cos(yaw), math.sin(yaw)
+    ox, oy = max(abs(c * dx + s * dy) - size[0] / 2, 0.0), max(abs(-s * dx + c * dy) - size[1] / 2, 0.0)
+    return math.hypot(ox, oy) <= margin
 
 
 def _inside(center: Vec2, size: tuple[float, ...], xy: Vec2, margin: float = 1e-9) -> bool:

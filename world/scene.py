@@ -4,7 +4,10 @@ fixtures into PyBullet bodies and the base planners' occupancy grid.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from mhrc.quiet import pybullet as p  # no C banner on stdout
 import pybullet_data
@@ -12,7 +15,7 @@ import pybullet_data
 from . import assets
 from .assets import AssetDir, Color
 from .astar import Grid
-from .layouts import LAYOUTS, DrawerSpec, FurnitureSpec, Layout, LayoutError, get_layout, load_layout
+from .layouts import LAYOUTS, DrawerSpec, FurnitureSpec, Layout, LayoutError, door_sweep, get_layout, load_layout
 
 __all__ = ["LAYOUTS", "DrawerSpec", "FurnitureSpec", "Layout", "LayoutError", "get_layout", "load_layout"]
 
@@ -38,7 +41,7 @@ class BuiltScene:
 
     statics: list[StaticBody]
     bodies: dict[str, int]  # static name -> body id
-    joints: dict[str, int]  # container name -> the joint that opens it (a drawer's prismatic, a lid's revolute)
+    joints: dict[str, int]  # container name -> the joint that opens it (a drawer's prismatic, a lid's or door's revolute)
     grid: Grid
 
 
@@ -73,6 +76,8 @@ def scene_statics(layout: Layout, assets_dir: AssetDir, fixtures: list[Fixture] 
             urdf = assets.drawer_unit_urdf(f.name, f.drawer_geometry(), f.color, facade)
         elif f.style == "chest":
             urdf = assets.chest_urdf(f.name, f.chest_geometry(), f.color, facade)
+        elif f.style == "cupboard":
+            urdf = assets.cupboard_urdf(f.name, f.cupboard_geometry(), f.color, facade)
         elif f.style == "table":
             urdf = assets.link_urdf(f.name, assets.table_boxes(f.size, f.color))
         elif f.style == "sofa":
@@ -99,7 +104,7 @@ def load_statics(cid: int, statics: list[StaticBody]) -> dict[str, int]:
 
 
 def occupancy(layout: Layout, margin: float, res: float = 0.05) -> Grid:
-    """Walls and furniture footprints (open drawers included) grown by `margin`."""
+    """Walls and furniture footprints (open drawers and the floor doors sweep included) grown by `margin`."""
     xmin, xmax, ymin, ymax = layout.bounds
     grid = Grid.empty(xmin, xmax, ymin, ymax, res)
     for cx, cy, sx, sy in layout.walls:
@@ -111,7 +116,30 @@ def occupancy(layout: Layout, margin: float, res: float = 0.05) -> Grid:
         if footprint is not None:  # the drawer may stand open: its footprint is never free floor
             (cx, cy), (sx, sy) = footprint
             grid.add_box(cx, cy, sx, sy, margin=margin)
+        if f.door is not None:  # nor is the floor a door sweeps
+            for (cx, cy), (sx, sy), yaw in door_sweep(f.center, f.size, f.door):
+                _block_near(grid, (cx, cy), (sx, sy), yaw, margin)
     return grid
+
+
+def _block_near(grid: Grid, center: tuple[float, float], size: tuple[float, float], yaw: float, margin: float) -> None:
+    """Block the cells within `margin` (straight-line distance) of a turned rectangle: rounded
+    corners, unlike `Grid.add_box`'s grown rectangle, which would block floor a base can use
+    beside a door swung half open."""
+    reach = math.hypot(*size) / 2 + margin
+    i0, j0 = grid.cell(center[0] - reach, center[1] - reach)
+    i1, j1 = grid.cell(center[0] + reach, center[1] + reach)
+    i0, j0 = max(i0, 0), max(j0, 0)
+    i1, j1 = min(i1 + 1, grid.blocked.shape[0]), min(j1 + 1, grid.blocked.shape[1])
+    if i0 >= i1 or j0 >= j1:
+        return
+    xs = grid.x0 + (np.arange(i0, i1) + 0.5) * grid.res - center[0]
+    ys = grid.y0 + (np.arange(j0, j1) + 0.5) * grid.res - center[1]
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    c, s = math.cos(yaw), math.sin(yaw)
+    ox = np.maximum(np.abs(c * gx + s * gy) - size[0] / 2, 0.0)
+    oy = np.maximum(np.abs(-s * gx + c * gy) - size[1] / 2, 0.0)
+    grid.blocked[i0:i1, j0:j1] |= np.hypot(ox, oy) <= margin
 
 
 def build_scene(cid: int, layout: Layout, assets_dir: AssetDir, margin: float, fixtures: list[Fixture] | tuple[Fixture, ...] = ()) -> BuiltScene:

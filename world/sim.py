@@ -188,13 +188,19 @@ class Sim:
 
     def _container_frame(self, name: str) -> tuple[tuple[float, float, float], float]:
         """World position and yaw of where a container's contents lie: a drawer link's origin (the
-        centre of its floor surface), or the centre of a chest's inside floor."""
+        centre of its floor surface), the centre of a chest's inside floor or of a cupboard's
+        cavity floor (neither moves with its lid or door)."""
         f = self.layout.get(name)
         assert f is not None
         body = self.scene.bodies[name]
         if f.lid is not None:
             pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=self.cid)
             return (float(pos[0]), float(pos[1]), f.lid.floor), float(p.getEulerFromQuaternion(orn)[2])
+        if f.door is not None:
+            pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=self.cid)
+            cavity, _ = f.cupboard_geometry().cavity
+            world, _ = p.multiplyTransforms(pos, orn, cavity, (0, 0, 0, 1))
+            return (float(world[0]), float(world[1]), float(world[2])), float(p.getEulerFromQuaternion(orn)[2])
         st = p.getLinkState(body, self.scene.joints[name], computeForwardKinematics=True, physicsClientId=self.cid)
         yaw = p.getEulerFromQuaternion(st[5])[2]
         return (float(st[4][0]), float(st[4][1]), float(st[4][2])), float(yaw)
@@ -223,12 +229,13 @@ class Sim:
                 self._follow_container(o)
 
     def handle_position(self, name: str) -> tuple[float, float, float]:
-        """Top centre of a container's handle, wherever its drawer or lid now is."""
+        """Top centre of a container's handle, wherever its drawer, lid or door now is."""
         f = self.layout.get(name)
         assert f is not None
-        if f.lid is not None:
+        if f.lid is not None or f.door is not None:
             st = p.getLinkState(self.scene.bodies[name], self.scene.joints[name], computeForwardKinematics=True, physicsClientId=self.cid)
-            pos, _ = p.multiplyTransforms(st[4], st[5], f.chest_geometry().handle, (0, 0, 0, 1))
+            handle = f.chest_geometry().handle if f.lid is not None else f.cupboard_geometry().handle
+            pos, _ = p.multiplyTransforms(st[4], st[5], handle, (0, 0, 0, 1))
             return (float(pos[0]), float(pos[1]), float(pos[2]))
         return self._to_world(name, f.drawer_geometry().handle)
 
@@ -502,6 +509,11 @@ class Sim:
     def lower_bound(self) -> int:
         """A lower bound on the temporal steps any team needs for this episode (see bound.py)."""
         return lower_bound(symbolic_episode(self))
+
+    def answer_key(self) -> tuple[list[str], dict[str, str], bool]:
+        """The task's targets (in task order), each one's goal fixture, and whether they must
+        arrive in order: said once the episode is over, for reports (EpisodeDone)."""
+        return list(self.targets), dict(self.goals), bool(self.task.ordered)
 
     def seen(self) -> list[Seen]:
         """Every object's end state as the goal check reads it."""

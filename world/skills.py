@@ -24,7 +24,7 @@ from mhrc.quiet import pybullet as p  # no C banner on stdout
 from mhrc.protocol import Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
 
 from . import feedback as fb
-from .arm import HOME, LOWER, UPPER, ArmPlanner, straight
+from .arm import HOME, LOWER, UPPER, ArmPlanner, IKResult, straight
 from .astar import astar, line_free, path_length
 from .robots import ARM_FORWARD, CHASSIS, MAX_ARM_RANGE, RobotBody
 
@@ -38,6 +38,9 @@ JOINT_SPEED = 1.0  # rad/s: simulated time of arm motions
 SUCTION_TIME = 1.0  # s to grip or release
 MAX_MOVE = 1.0  # m, the longest `move`
 APPROACH = 0.12  # pre-grasp height above the grasp point
+IK_RETRY_BELOW = 0.03  # m: an IK search that misses the point by less than this searches again, harder
+IK_SLACK = 0.005  # m: a miss below this (0.00 m in the feedback) is an invalid goal configuration, not a distance
+IK_RETRY_RESTARTS = 32  # IK restarts per tool turn when the first search just missed
 IDEAL_PICK = (0.3, 0.58)  # horizontal arm-base-to-object distances a corrective move aims for
 PULL_STEPS = 16  # IK waypoints along a drawer's travel or a lid's swing
 LID_CLEARANCE = 0.04  # the tool holds a lid's handle this far above its (tilting) top
@@ -79,6 +82,11 @@ def _motion_error(sim: Sim, slip_p: float, slip: tuple[float, float], sigma: flo
     return dist * math.cos(2 * math.pi * heading), dist * math.sin(2 * math.pi * heading)
 
 
+def advice(sim: Sim) -> bool:
+    """Whether failed actions' feedback may say what to do next (the feedback_advice aid; not the paper's)."""
+    return "feedback_advice" in sim.aids
+
+
 def base_error(sim: Sim) -> tuple[float, float]:
     """Where a base stops relative to its goal: one draw per navigate or move."""
     return _motion_error(sim, NAV_SLIP_P, NAV_SLIP, NAV_SIGMA)
@@ -116,14 +124,15 @@ def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
     f = sim.layout.get(a.target)
     if f is None:
         if a.target in sim.fixtures:
-            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, sim.layout.bob_table))
+            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, sim.layout.bob_table, advice=advice(sim)))
         belief = sim.belief(r.name, a.target)
         if belief is not None:  # an object: point to where the robot believes it lies, not where it is
             on = belief.on
             where = sim.layout.get(sim.layout.bob_table if sim.on_bob_table(on) else on or "")
-            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, where.name if where is not None and where.stand_poses else None))
+            where_name = where.name if where is not None and where.stand_poses else None
+            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, where_name, advice=advice(sim)))
         navigable = [g.name for g in sim.layout.furniture if g.stand_poses]
-        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, navigable))
+        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, navigable, advice=advice(sim)))
     if not f.stand_poses:
         return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(f.name, None))
     if a.stand_pose >= len(f.stand_poses):
@@ -147,11 +156,11 @@ def navigate(sim: Sim, r: RobotBody, a: Navigate) -> SkillOutcome:
     drawn = route(path, (sx, sy))
     if off > OFF_TARGET:
         return SkillOutcome.fail(
-            OutcomeCode.OFF_TARGET, fb.off_target(f.name, a.stand_pose, off, (sx, sy)),
+            OutcomeCode.OFF_TARGET, fb.off_target(f.name, a.stand_pose, off, (sx, sy), advice=advice(sim)),
             sim_time=length / NAV_SPEED, distance=round(off, 3), x=round(sx, 3), y=round(sy, 3), path_length=round(length, 3),
         ).model_copy(update={"path": drawn})  # fmt: skip
     seen = None if f.container is not None and not sim.is_open(f.name) else sim.objects_on(f.name)
-    text = fb.reached(f.name, a.stand_pose, seen, container=f.container is not None, can_open="open" in r.kind.skills)
+    text = fb.reached(f.name, a.stand_pose, seen, container=f.container is not None, can_open="open" in r.kind.skills, advice=advice(sim))
     out = SkillOutcome.ok(text, sim_time=length / NAV_SPEED, path_length=round(length, 3), distance=round(off, 3))
     return out.model_copy(update={"path": drawn})
 
@@ -225,10 +234,26 @@ def horizontal(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     return math.hypot(a[0] - b[0], a[1] - b[1])
 
 
-def reach_point(sim: Sim, r: RobotBody, point: tuple[float, float, float], what: str, tool_yaw: float | None = None) -> Reach:
+def _solve_above_and_at(
+    pl: ArmPlanner, above: tuple[float, float, float], point: tuple[float, float, float], yaw: float, seed: np.ndarray, restarts: int = 8
+) -> tuple[IKResult, IKResult]:
+    """Verified IK for the pose above `point`, then for `point` seeded by it (the pose above's
+    result twice when it has none)."""
+    sol_above = pl.solve(above, yaw, seed, restarts)
+    sol_at = pl.solve(point, yaw, sol_above.q, restarts) if sol_above.q is not None else sol_above
+    return sol_above, sol_at
+
+
+def reach_point(
+    sim: Sim, r: RobotBody, point: tuple[float, float, float], what: str, tool_yaw: float | None = None, *, any_yaw: bool = False
+) -> Reach:
     """IK (verified) for `point` and a point above it, then BIT* from r's arm to the one above.
 
-    The tool points down, turned to `tool_yaw` (default: the arm base's heading).
+    The tool points down, turned to `tool_yaw` (default: the arm base's heading). IK is a
+    randomised search: when it ends within IK_RETRY_BELOW of the point without a verified pose (a
+    near miss, e.g. low and close to the arm's base), it searches again with more restarts and, with
+    `any_yaw` (a suction pick, where the tool's turn does not matter), with the tool turned by
+    quarter turns. A near miss that remains is an invalid goal configuration, never "too far".
     """
     pl = planner_for(sim, r)
     ab = r.arm_base()
@@ -237,12 +262,21 @@ def reach_point(sim: Sim, r: RobotBody, point: tuple[float, float, float], what:
     if horizontal(ab, point) > MAX_ARM_RANGE:
         return Reach(distance=horizontal(ab, point) - 0.75)
     above = (point[0], point[1], point[2] + APPROACH)
-    sol_above = pl.solve(above, yaw, r.q)
-    sol_at = pl.solve(point, yaw, sol_above.q) if sol_above.q is not None else sol_above
+    sol_above, sol_at = _solve_above_and_at(pl, above, point, yaw, r.q)
+    if (sol_above.q is None or sol_at.q is None) and not sol_at.collided and sol_at.error < IK_RETRY_BELOW:
+        turns = (0.0, math.pi / 2, -math.pi / 2, math.pi) if any_yaw else (0.0,)
+        for turn in turns:
+            again = _solve_above_and_at(pl, above, point, _wrap(yaw + turn), r.q, IK_RETRY_RESTARTS)
+            if again[0].q is not None and again[1].q is not None:
+                (sol_above, sol_at), yaw = again, _wrap(yaw + turn)
+                break
+            sol_at = min(sol_at, again[1], key=lambda s: (not s.collided, s.error))
     q_above, q_at = sol_above.q, sol_at.q
     if q_above is None or q_at is None:
         if sol_at.collided:  # the pose exists, but every solution found collides
             return Reach(failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.config_invalid(what, "goal")))
+        if sol_at.error < IK_SLACK:  # "0.00 m away" would be no distance the robot could act on
+            return Reach(failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.no_goal_configuration(what, sol_at.error)))
         return Reach(distance=sol_at.error)
     descent = cartesian_descent(pl, above, point, yaw, q_above, q_at)
     if not all(pl.valid(q) for q in descent[1:-1]):
@@ -331,14 +365,14 @@ def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
     if f is None:
         if a.target in sim.fixtures or a.target in sim.known_objects(r.name):
             return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(a.target))
-        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, sim.furniture_names()))
+        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, sim.furniture_names(), advice=advice(sim)))
     if f.container is None:
         return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(f.name))
     if sim.is_open(f.name):
         return SkillOutcome.fail(OutcomeCode.ALREADY_OPEN, fb.already_open(f.name))
     if r.holding is not None:
-        return SkillOutcome.fail(OutcomeCode.GRIPPER_FULL, fb.hands_full_to_open(f.name, r.holding))
-    if f.lid is not None:
+        return SkillOutcome.fail(OutcomeCode.GRIPPER_FULL, fb.hands_full_to_open(f.name, r.holding, advice=advice(sim)))
+    if f.lid is not None or f.door is not None:
         return _open_lid(sim, r, f)
     hx, hy, hz = sim.handle_position(f.name)
     handle = (hx, hy, hz + TIP_CLEARANCE)
@@ -349,7 +383,7 @@ def open_(sim: Sim, r: RobotBody, a: Open) -> SkillOutcome:
         return reach.failure
     if reach.path is None or reach.descent is None:
         return SkillOutcome.fail(
-            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills),
+            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills, advice=advice(sim)),
             distance=round(reach.distance, 3), horizontal_distance=round(horizontal(ab, handle), 3),
         )  # fmt: skip
     q0 = r.q.copy()
@@ -386,16 +420,25 @@ def _opened(sim: Sim, r: RobotBody, f: FurnitureSpec, pl: ArmPlanner, yaw: float
     return SkillOutcome.ok(fb.opened(f.name, inside), sim_time=t + 2 * SUCTION_TIME, travel=round(travel, 3))
 
 
+def _swing(f: FurnitureSpec) -> tuple[float, float, float]:
+    """A lid's or a side-hinged door's angle (rad), how far above its handle the tool holds it,
+    and how the tool turns per radian of swing (a door's handle turns about the vertical hinge)."""
+    if f.lid is not None:
+        return f.lid.angle, LID_CLEARANCE, 0.0
+    assert f.door is not None
+    return f.door.angle, TIP_CLEARANCE, -f.cupboard_geometry().side
+
+
 def _lid_arc(sim: Sim, pl: ArmPlanner, f: FurnitureSpec, values: np.ndarray, seed: np.ndarray, yaw: float) -> list[np.ndarray]:
-    """Joint waypoints that keep the tool on the handle while the lid passes through `values`
-    (rad, in either order), starting from an IK solution seeded by `seed`, as far as IK follows
-    without a jump. The lid is left shut again."""
-    assert f.lid is not None
+    """Joint waypoints that keep the tool on the handle while the lid or door passes through
+    `values` (rad, in either order), starting from an IK solution seeded by `seed`, as far as IK
+    follows without a jump. The lid or door is left shut again."""
+    _, clearance, turn = _swing(f)
     path: list[np.ndarray] = []
     for v in values:
         sim.set_container(f.name, float(v))
         hx, hy, hz = sim.handle_position(f.name)
-        q = pl.ik((hx, hy, hz + LID_CLEARANCE), yaw, path[-1] if path else seed, restarts=1)
+        q = pl.ik((hx, hy, hz + clearance), yaw + turn * float(v), path[-1] if path else seed, restarts=1)
         if q is None or (path and float(np.max(np.abs(q - path[-1]))) > 0.6):
             break
         path.append(q)
@@ -404,22 +447,23 @@ def _lid_arc(sim: Sim, pl: ArmPlanner, f: FurnitureSpec, values: np.ndarray, see
 
 
 def _open_lid(sim: Sim, r: RobotBody, f: FurnitureSpec) -> SkillOutcome:
-    """Grip the lid's handle and swing it up. Several grasp configurations are tried, each
-    checked along the whole arc before the arm moves: the first that follows it is used."""
-    assert f.lid is not None
+    """Grip the handle of a lid (and swing it up) or of a side-hinged door (and swing it out).
+    Several grasp configurations are tried, each checked along the whole arc before the arm
+    moves: the first that follows it is used."""
+    angle, clearance, _ = _swing(f)
     pl = planner_for(sim, r)
     yaw = r.arm_yaw()
     ab = r.arm_base()
     assert ab is not None
     hx, hy, hz = sim.handle_position(f.name)
-    handle = (hx, hy, hz + LID_CLEARANCE)
+    handle = (hx, hy, hz + clearance)
     above = (hx, hy, handle[2] + APPROACH)
     if horizontal(ab, handle) > MAX_ARM_RANGE:
         return SkillOutcome.fail(
-            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills),
+            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills, advice=advice(sim)),
             horizontal_distance=round(horizontal(ab, handle), 3),
         )  # fmt: skip
-    values = np.linspace(0.0, f.lid.angle, PULL_STEPS + 1)
+    values = np.linspace(0.0, angle, PULL_STEPS + 1)
     followed, grasped = 0, False
     for k in range(LID_GRASP_TRIES):
         seed = HOME if k == 0 else pl.rng.uniform(LOWER, UPPER)
@@ -441,13 +485,13 @@ def _open_lid(sim: Sim, r: RobotBody, f: FurnitureSpec) -> SkillOutcome:
         if res.path is None:
             continue
         t = r.run(res.path + descent, JOINT_SPEED)
-        for v, q in zip(np.linspace(0.0, f.lid.angle, PULL_STEPS + 1)[1:], arc[1:]):
+        for v, q in zip(values[1:], arc[1:]):
             sim.set_container(f.name, float(v))
             t += r.run([r.q, q], JOINT_SPEED)
-        return _opened(sim, r, f, pl, yaw, t, f.lid.angle)
+        return _opened(sim, r, f, pl, yaw + _swing(f)[2] * angle, t, angle)
     if not grasped:  # within range, yet no arm configuration grips the handle from this base pose
         return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.no_grip(f.name, horizontal(ab, handle)), horizontal_distance=round(horizontal(ab, handle), 3))
-    return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), pulled=round(followed * f.lid.angle / PULL_STEPS, 3))
+    return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), pulled=round(followed * angle / PULL_STEPS, 3))
 
 
 # --------------------------------------------------------------------------- pick
@@ -455,18 +499,19 @@ def _open_lid(sim: Sim, r: RobotBody, f: FurnitureSpec) -> SkillOutcome:
 
 def pick(sim: Sim, r: RobotBody, a: Pick) -> SkillOutcome:
     if r.holding is not None:
-        return SkillOutcome.fail(OutcomeCode.GRIPPER_FULL, fb.gripper_full(r.holding))
+        return SkillOutcome.fail(OutcomeCode.GRIPPER_FULL, fb.gripper_full(r.holding, advice=advice(sim)))
     known = sim.known_objects(r.name)
     if a.obj not in known:
-        return SkillOutcome.fail(OutcomeCode.OBJECT_UNKNOWN, fb.object_unknown(a.obj, sorted(known)))
+        return SkillOutcome.fail(OutcomeCode.OBJECT_UNKNOWN, fb.object_unknown(a.obj, sorted(known), advice=advice(sim)))
     obj = sim.objects[a.obj]
     if obj.held_by is not None:
         return SkillOutcome.fail(OutcomeCode.OBJECT_UNKNOWN, fb.held_by_other(obj.name, obj.held_by))
     if obj.inside and obj.on is not None and not sim.is_open(obj.on):
-        return SkillOutcome.fail(OutcomeCode.NOT_REACHABLE_CONTAINER, fb.in_closed_container(obj.name, obj.on, can_open="open" in r.kind.skills))
+        can_open = "open" in r.kind.skills
+        return SkillOutcome.fail(OutcomeCode.NOT_REACHABLE_CONTAINER, fb.in_closed_container(obj.name, obj.on, can_open=can_open, advice=advice(sim)))
     x, y, z = sim.position(obj)
     top = (x, y, z + obj.kind.height / 2 + TIP_CLEARANCE)
-    reach = reach_point(sim, r, top, obj.name)
+    reach = reach_point(sim, r, top, obj.name, any_yaw=True)  # a suction cup grips at any turn of the tool
     if reach.failure is not None:
         return reach.failure
     if reach.path is None or reach.descent is None:
@@ -636,14 +681,14 @@ def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
     held = sim.objects[r.holding]
     if a.location in sim.fixtures and not r.kind.finishes_task:  # the paper: only Bob finishes the task
         finisher = next((b.name for b in sim.bots.values() if b.kind.finishes_task), "bob")
-        return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, fb.not_a_finisher(held.name, a.location, sim.layout.bob_table, finisher))
+        return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, fb.not_a_finisher(held.name, a.location, sim.layout.bob_table, finisher, advice=advice(sim)))
     places = [n for n in sim.place_names() if r.kind.finishes_task or n not in sim.fixtures]
     f = sim.layout.get(a.location)
     if f is not None and f.place_pose is None:
-        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.not_a_surface(f.name, places))
+        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.not_a_surface(f.name, places, advice=advice(sim)))
     spots = free_spots(sim, a.location, held)
     if spots is None:
-        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.location_unknown(a.location, places))
+        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.location_unknown(a.location, places, advice=advice(sim)))
     cands, top = spots
     if a.location == sim.layout.bob_table:
         cands = [c for c in cands if sim.within_handover(c)] or cands
@@ -660,7 +705,7 @@ def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
     reachable = [c for c in cands if horizontal(ab, c) <= MAX_ARM_RANGE - 0.1]
     if not reachable:
         nearest = min(horizontal(ab, c) for c in cands)
-        return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest, mobile=can_go), distance=round(nearest, 3))
+        return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest, mobile=can_go, advice=advice(sim)), distance=round(nearest, 3))
     failure: SkillOutcome | None = None
     tries = 0
     for x, y, yaw in reachable:
@@ -687,4 +732,4 @@ def place(sim: Sim, r: RobotBody, a: Place) -> SkillOutcome:
     if failure is not None:
         return failure
     nearest = min(horizontal(ab, c) for c in reachable)
-    return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest, mobile=can_go), distance=round(nearest, 3))
+    return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest, mobile=can_go, advice=advice(sim)), distance=round(nearest, 3))
