@@ -66,7 +66,7 @@ from .lifeline import child_env
 from .metrics import TraceError, from_trace
 from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode, decode_event
 from .report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
-from .trace import read_trace
+from .trace import read_trace, unwritable
 
 if TYPE_CHECKING:
     from .security import Credentials
@@ -377,6 +377,11 @@ def worker_command(connect: str, eval_id: str, concurrency: int = 1, credentials
 
 
 # --------------------------------------------------------------------------- coordinator
+def own_credentials(out: Path) -> Path:
+    """Where an evaluation without --credentials writes its own (deleted when it ends, however it ends)."""
+    return out / "credentials"
+
+
 def _forget(creds_dir: Path, ephemeral: bool) -> None:
     """The evaluation's own credentials live as long as it runs: nobody can log in to a later one with them."""
     if ephemeral:
@@ -402,12 +407,18 @@ def _given_credentials(directory: Path) -> tuple[Credentials, Path]:
 
 @dataclass
 class Tally:
+    """The progress of one `evaluate` call: `total` episodes to run now, `done` of them ended
+    (finished or given up); `before` and `before_succeeded` count the grid's episodes an earlier
+    run finished (--resume), not run again."""
+
     total: int
     done: int = 0
     succeeded: int = 0
     errors: int = 0
     invalid: int = 0
     by_key: dict[str, dict[str, Any]] = field(default_factory=dict)
+    before: int = 0
+    before_succeeded: int = 0
 
 
 ProgressHook = Callable[[Tally, dict[str, Any] | None], None]
@@ -446,12 +457,15 @@ def _episode_report(trace: Path) -> None:
         log.warning("episode report not written", trace=str(trace), error=f"{type(exc).__name__}: {exc}")
 
 
-def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
-    """Create DIR (or check it for --resume); return the keys already finished."""
+def check_out(out: Path, spec: EvalSpec, resume: bool) -> None:
+    """Raise ConfigError naming --out when DIR cannot hold this evaluation (not creatable, or
+    holding another one); creates nothing, so the CLI checks it before anything starts."""
+    if why := unwritable(out, directory=True):
+        raise ConfigError(f"--out: {why}")
     manifest = out / "eval.json"
     if out.exists() and any(out.iterdir()):
         if not resume:
-            raise ConfigError(f"out: {out} is not empty; pass --resume to continue that evaluation, or choose another --out")
+            raise ConfigError(f"--out: {out} is not empty; pass --resume to continue that evaluation, or choose another --out")
         if manifest.exists():
             old = json.loads(manifest.read_text())
             # a manifest written before a field was part of the identity ran with its default
@@ -460,16 +474,22 @@ def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> set[str]:
             before |= old.get("identity") or {}
             if before != spec.identity():
                 raise ConfigError(
-                    f"out: {out} holds an evaluation of {before}, not {spec.identity()}; --resume needs the same --llm, "
+                    f"--out: {out} holds an evaluation of {before}, not {spec.identity()}; --resume needs the same --llm, "
                     "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens, --llm-seed, --schedule and --time-scale"
                 )
+
+
+def prepare_out(out: Path, spec: EvalSpec, resume: bool) -> dict[str, dict[str, Any]]:
+    """Create DIR (or check it for --resume); return the rows already finished, by key."""
+    check_out(out, spec, resume)
+    manifest = out / "eval.json"
     out.mkdir(parents=True, exist_ok=True)
     (out / "traces").mkdir(exist_ok=True)
     manifest.write_text(json.dumps({"identity": spec.identity(), "spec": spec.__dict__}, indent=2, default=list) + "\n")
     rows = read_rows(out / "episodes.jsonl")
     if rows:  # rewrite without a torn last line, so that new rows start on a line of their own
         (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
-    return {r["key"] for r in rows}
+    return {r["key"]: r for r in rows}
 
 
 async def evaluate(
@@ -513,11 +533,12 @@ async def evaluate(
         raise ConfigError(f"--listen: {listen} is tls/, which needs the evaluation's credentials: drop --insecure, or listen on tcp/")
     finished = prepare_out(out, spec, resume)
     todo = deque(j for j in spec.jobs() if j.key not in finished)
-    tally = Tally(total=len(todo))
+    earlier = [finished[j.key] for j in spec.jobs() if j.key in finished]
+    tally = Tally(total=len(todo), before=len(earlier), before_succeeded=sum(bool(r.get("success")) for r in earlier))
     eval_id = coordinator.run if coordinator is not None else f"e{uuid.uuid4().hex[:8]}"
     keys = _keys(eval_id)
     listen = listen or endpoint("127.0.0.1", free_port("127.0.0.1"), tls=secure)
-    creds_dir = out / "credentials"
+    creds_dir = own_credentials(out)
     ephemeral = secure and coordinator is None  # made for this evaluation, deleted at its end
     if ephemeral:
         from .security import COORDINATOR, WORKER, load, make_eval_credentials
@@ -640,10 +661,12 @@ async def evaluate(
                 )
         await asyncio.sleep(0.5)  # let workers ask once more and hear "done"
         if aborted:
-            write_summaries(read_rows(rows_path), out)
+            kept = read_rows(rows_path)
+            write_summaries(kept, out)
             raise EvalAborted(
-                f"stopped: {aborted[0]}. Every episode would fail the same way; the {tally.done} finished episode(s) "
-                f"are kept in {rows_path} (fix the cause, then continue with --resume --out {out})"
+                f"stopped: {aborted[0]}. Every episode would fail the same way; "
+                + (f"the {len(kept)} finished episode(s) are kept in {rows_path}" if kept else "no episode finished")
+                + f" (fix the cause, then continue with --resume --out {out})"
             )
     except BaseException:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now
         for p in procs:

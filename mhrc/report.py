@@ -92,17 +92,19 @@ PAPER_MODELS: tuple[tuple[str, re.Pattern[str]], ...] = (
 )
 
 COLUMNS = (
-    "episodes", "succ", "ps", "ts", "ts_bound", "as", "as_per_robot", "messages", "llm_calls", "prompt_tokens",
+    "episodes", "succ", "ps", "ts", "ts_bound", "as_ticks", "as", "as_per_robot", "messages", "llm_calls", "prompt_tokens",
     "completion_tokens", "parse_failures", "llm_unreachable", "rejected_actions", "failed_actions", "wall_time",
 )  # fmt: skip
-CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as": "action_steps"}
+CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as_ticks": "active_ticks", "as": "action_steps"}
 # mode: free (the paper's) or structured replies; schedule: the world's time policy (world/schedulers)
 SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule")
 PAPER_SCHEDULE = "sequential"  # Algorithm 1; rows written before the field ran lockstep
 AS_NOTE = (
-    "AS counts actions of all robots (wait excluded); AS/robot divides it by the number of robots. "
-    "The paper does not say which of the two its AS is; its figures are set beside mhrc's AS. "
-    "TS* is the mean lower bound on TS (world/bound.py)."
+    "AS is the number of steps in which any robot did a non-wait action: the reading set beside the paper's AS, "
+    "because the paper's AS is below its TS in every row of its tables (48.56 of 50 where episodes fail), which a "
+    "sum over three robots cannot be and a per-robot mean reaches only if every robot acts in nearly every step. "
+    "The other readings are columns: AS sum (actions of all robots, wait excluded) and AS/robot (that sum over the "
+    "number of robots); rows written before AS existed show '-'. TS* is the mean lower bound on TS (world/bound.py)."
 )
 
 
@@ -185,6 +187,9 @@ def cell_stats(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed: 
     """`summarize` plus a bootstrap interval (`<metric>_ci`) for Succ, PS, TS and AS."""
     s = summarize(rows)
     for name, field in CI_METRICS.items():
+        if s.get(name) is None:  # a reading older rows do not have
+            s[f"{name}_ci"] = None
+            continue
         s[f"{name}_ci"] = bootstrap_ci([float(r[field]) for r in rows], resamples=resamples, seed=seed)
     return s
 
@@ -283,10 +288,13 @@ def _by_setting_task(rows: list[dict[str, Any]]) -> dict[tuple[tuple[Any, ...], 
 
 def _cell(s: dict[str, Any]) -> str:
     bound = f" ({s['ts_bound']:.1f})" if s.get("ts_bound") is not None else ""
-    return f"{s['succ']:.2f} / {s['ps']:.2f} / {s['ts']:.1f}{bound} / {s['as']:.1f} ({s['as_per_robot']:.1f})"
+    steps = "-" if s.get("as_ticks") is None else f"{s['as_ticks']:.1f}"
+    return f"{s['succ']:.2f} / {s['ps']:.2f} / {s['ts']:.1f}{bound} / {steps} (sum {s['as']:.1f}, per robot {s['as_per_robot']:.1f})"
 
 
 def _ci(s: dict[str, Any], name: str, digits: int) -> str:
+    if s.get(f"{name}_ci") is None:
+        return "-"
     lo, hi = s[f"{name}_ci"]
     return f"{s[name]:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
 
@@ -365,12 +373,13 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
         mine_tasks = [t for t in tasks if (setting, t) in cells]
         shown = [matches.get((setting, t)) for t in mine_tasks]
         paper_col = any(m is not None and m.figures is not None for m in shown)
-        head = "| task | episodes | Succ | PS | TS | AS | TS* | AS/robot |" + (" paper Succ / PS / TS / AS |" if paper_col else "")
+        head = "| task | episodes | Succ | PS | TS | AS | TS* | AS sum | AS/robot |" + (" paper Succ / PS / TS / AS |" if paper_col else "")
         lines += [f"### {setting_label(setting)}", "", head, "| --- |" + " --- |" * (head.count("|") - 2)]
         for t, m in zip(mine_tasks, shown):
             s = cells[(setting, t)]
             bound = f"{s['ts_bound']:.1f}" if s.get("ts_bound") is not None else ""
-            row = f"| {t} | {s['episodes']} | {_ci(s, 'succ', 2)} | {_ci(s, 'ps', 2)} | {_ci(s, 'ts', 1)} | {_ci(s, 'as', 1)} | {bound} | {s['as_per_robot']:.1f} |"
+            row = (f"| {t} | {s['episodes']} | {_ci(s, 'succ', 2)} | {_ci(s, 'ps', 2)} | {_ci(s, 'ts', 1)} | {_ci(s, 'as_ticks', 1)} | {bound} | "
+                   f"{_ci(s, 'as', 1)} | {s['as_per_robot']:.1f} |")
             if paper_col:
                 row += f" {_paper_cell(m.figures)} ({m.title}, {m.table}) |" if m is not None and m.figures is not None else " |"
             lines.append(row)
@@ -388,7 +397,7 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
         lines.append("")
     lines += diagnostics_markdown(valid)
     for key, title in (("scene", "scene"), ("n_objects", "object count")):
-        lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS/robot) | episodes |",
+        lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS sum, AS/robot) | episodes |",
                   "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
         for (m, a, fid, cap, hor, mode, sched, v), bucket in group(valid, *SETTING, key).items():
             s = summarize(bucket)
@@ -469,20 +478,24 @@ def summary_csv(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed:
         s = cell_stats(mine, resamples=resamples, seed=seed)
         m = paper_match(setting, task, mine)
         paper: list[Any] = [m.model, *m.figures] if m is not None and m.figures is not None else ["", "", "", "", ""]
-        cis = [round(x, 4) for name in CI_METRICS for x in s[f"{name}_ci"]]
+        cis = ["" if s[f"{name}_ci"] is None else round(x, 4) for name in CI_METRICS for x in (s[f"{name}_ci"] or (0.0, 0.0))]
         d = summarize_diagnostics(mine)
         diag = [d["known"], *("" if d["mean"][c] is None else d["mean"][c] for c in DIAG_COLUMNS)]
         w.writerow([*("" if x is None else x for x in setting), task, *(s[c] for c in COLUMNS), *cis, invalid[(setting, task)], *paper, *diag])
     return buf.getvalue()
 
 
+SUMMARY_FILES = ("summary.md", "summary.csv", "summary.html")  # what write_summaries writes, in the order people read them
+
+
 def write_summaries(rows: list[dict[str, Any]], out: Path) -> None:
-    """summary.csv, summary.md and summary.html (tables and plots, `mhrc.viewer.eval_report`) in `out`."""
+    """SUMMARY_FILES in `out`: summary.md, summary.csv and summary.html (tables and plots, `mhrc.viewer.eval_report`)."""
     if not rows:
         return
     # imported here: the HTML page is built on this module's tables (eval_report imports report)
     from .viewer.eval_report import write_html_summary
 
-    (out / "summary.csv").write_text(summary_csv(rows), encoding="utf-8")
-    (out / "summary.md").write_text(summary_markdown(rows), encoding="utf-8")
-    write_html_summary(rows, out / "summary.html")
+    md, csv, html = (out / name for name in SUMMARY_FILES)
+    csv.write_text(summary_csv(rows), encoding="utf-8")
+    md.write_text(summary_markdown(rows), encoding="utf-8")
+    write_html_summary(rows, html)

@@ -67,7 +67,8 @@ def _pem_cert(cert: x509.Certificate) -> bytes:
 
 
 def make_ca(name: str, *, days: float = 7.0) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
-    """A self-signed certificate authority `mhrc <name> CA`."""
+    """A self-signed certificate authority `mhrc <name> CA`, valid from 5 minutes ago (clock
+    skew) until `days` from now."""
     key = _key()
     subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"mhrc {name} CA")])
     now = datetime.datetime.now(datetime.timezone.utc)
@@ -99,8 +100,9 @@ def make_server_cert(
     hosts: Sequence[str] = (),
 ) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
     """A server certificate signed by `ca` for 127.0.0.1, localhost and `hosts` (names or IP
-    addresses the agents connect to, e.g. a compose service name); `not_before` and a short
-    `days` make an expired one, for tests."""
+    addresses the agents connect to, e.g. a compose service name), valid from 5 minutes ago
+    (clock skew) until `days` from now; a `not_before` in the past and a short `days` (valid
+    `days` from `not_before`) make an expired one, for tests."""
     key = _key()
     names: list[x509.GeneralName] = []
     for h in dict.fromkeys(("localhost", "127.0.0.1", *hosts)):
@@ -108,7 +110,9 @@ def make_server_cert(
             names.append(x509.IPAddress(ipaddress.ip_address(h)))
         except ValueError:
             names.append(x509.DNSName(h))
-    start = not_before or datetime.datetime.now(datetime.timezone.utc) - datetime.timedelta(minutes=5)
+    now = datetime.datetime.now(datetime.timezone.utc)
+    start = not_before or now - datetime.timedelta(minutes=5)  # backdated: a peer whose clock is a little behind accepts it
+    end = (not_before or now) + datetime.timedelta(days=days)  # what `days` says, not 5 minutes short of it
     cert = (
         x509.CertificateBuilder()
         .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)]))
@@ -116,7 +120,7 @@ def make_server_cert(
         .public_key(key.public_key())
         .serial_number(x509.random_serial_number())
         .not_valid_before(start)
-        .not_valid_after(start + datetime.timedelta(days=days))
+        .not_valid_after(end)
         .add_extension(
             x509.SubjectAlternativeName(names),
             critical=False,

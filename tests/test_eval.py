@@ -42,7 +42,7 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
         assert (a / r["trace"]).exists()
     summary = (a / "summary.md").read_text()
     assert "Table I" in summary and "| pack_objects | 1.00 / 1.00 /" in summary and "does not say" in summary
-    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,history_cap,horizon,mode,schedule,task,episodes,succ,ps,ts,ts_bound,as,as_per_robot")
+    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,history_cap,horizon,mode,schedule,task,episodes,succ,ps,ts,ts_bound,as_ticks,as,as_per_robot")
     for r in rows_a:  # fidelity and the LLM failures are on every row (the heuristic has none)
         assert (r["fidelity"], r["aids"], r["history_cap"], r["horizon"], r["repeat"], r["trial"]) == ("paper", [], None, 50, 0, r["seed"])
         assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"], r["invalid_reason"]) == (0, 0, 0, True, None)
@@ -66,7 +66,7 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     merged = merge_runs([a, b])
     assert len(merged) == 4 and "| heuristic | none | paper | kitchen |" in summary_markdown(merged) and "| 4 |" in summary_markdown(merged)
     out = subprocess.run([sys.executable, "-m", "mhrc", "report", str(a), str(b), "--out", str(tmp_path / "r.md")], capture_output=True, text=True, timeout=60)
-    assert out.returncode == 0 and "Table I" in out.stdout and (tmp_path / "r.csv").exists()
+    assert out.returncode == 0 and "Table I" in (tmp_path / "r.md").read_text() and (tmp_path / "r.csv").exists()
     bad = subprocess.run([sys.executable, "-m", "mhrc", "report", str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "no episodes.jsonl" in bad.stderr
 
@@ -376,3 +376,83 @@ def test_a_wrong_api_key_stops_the_evaluation_with_one_error_and_a_failing_exit(
     assert "refused the credentials (HTTP 401)" in result.output and "--resume" in result.output
     assert not (tmp_path / "ev" / "episodes.jsonl").exists() or not (tmp_path / "ev" / "episodes.jsonl").read_text().strip()
     assert len(server.requests) <= 6  # the first episode's robots (and at most one more episode's) asked once each
+
+
+SMALL_ARGS = ["eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--workers", "1"]
+
+
+def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def test_eval_names_every_file_it_wrote_and_a_resume_counts_the_earlier_episodes(tmp_path: Path) -> None:
+    first = _mhrc(*SMALL_ARGS, "--insecure", "--out", "ev", cwd=tmp_path)
+    assert first.returncode == 0, first.stderr[-2000:]
+    last = first.stderr.strip().splitlines()[-1]
+    written = ["episodes.jsonl", "summary.md", "summary.csv", "summary.html"]
+    assert last.startswith("done in") and all(str(Path("ev") / name) in last for name in written), last
+    assert all((tmp_path / "ev" / name).exists() for name in written)
+    # a resume of the finished grid: the totals are the grid's, not "0/0"
+    again = _mhrc(*SMALL_ARGS, "--insecure", "--out", "ev", "--resume", cwd=tmp_path)
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert "[1/1 solved (all from before)]" in again.stderr and "0/0" not in again.stderr, again.stderr[-2000:]
+    # mhrc report --out: the markdown goes to the file, the files written are named on stderr
+    rep = _mhrc("report", "ev", "--out", "r.md", cwd=tmp_path)
+    assert rep.returncode == 0 and rep.stdout == "", (rep.stdout[:500], rep.stderr)
+    assert rep.stderr.strip() == "wrote r.md, r.csv, r.html" and "Table I" in (tmp_path / "r.md").read_text()
+    assert (tmp_path / "r.csv").exists() and (tmp_path / "r.html").exists()
+    assert "Table I" in _mhrc("report", "ev", cwd=tmp_path).stdout  # without --out, on stdout
+    for bad in ("/dev/null/r.md", "r.csv"):  # not writable; overwritten by the CSV beside it
+        refused = _mhrc("report", "ev", "--out", bad, cwd=tmp_path)
+        assert refused.returncode == 2 and "Error: Invalid value for --out" in refused.stderr and "Traceback" not in refused.stderr, refused.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "r.csv", "r.html", "r.md"]
+
+
+def test_a_model_server_that_is_down_stops_the_evaluation_without_claiming_finished_rows(tmp_path: Path) -> None:
+    down = f"http://127.0.0.1:{free_port('127.0.0.1')}/v1"  # nothing listens there
+    out = _mhrc(*SMALL_ARGS, "--llm", "openai:x", "--base-url", down, "--concurrency", "1", "--out", "ev", cwd=tmp_path)
+    assert out.returncode == 1, out.stderr[-2000:]
+    assert "no episode finished" in out.stderr and "kept in" not in out.stderr, out.stderr[-2000:]
+    assert "--resume --out ev" in out.stderr and not (tmp_path / "ev" / "episodes.jsonl").exists()
+    assert not (tmp_path / "ev" / "credentials").exists()
+
+
+def test_a_second_ctrl_c_on_eval_still_removes_the_worker_login(tmp_path: Path) -> None:
+    """The first Ctrl-C stops the workers; the second, while they stop, quits at once, skipping
+    every `finally`: the evaluation's worker login must go all the same (issue 20)."""
+    import os
+    import signal
+
+    err = tmp_path / "stderr.txt"
+    with err.open("w") as stderr:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3,4,5,6", "--workers", "2",
+             "--out", "ev"],
+            cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr, text=True, start_new_session=True,
+        )  # fmt: skip  (a session of its own: the signals go to its group, as a terminal's Ctrl-C)
+
+    def until(what: str, predicate: Any) -> None:
+        deadline = time.monotonic() + 240
+        while not predicate():
+            if proc.poll() is not None:
+                pytest.fail(f"eval ended (exit {proc.returncode}) before {what}: {err.read_text()[-2000:]}")
+            if time.monotonic() > deadline:
+                os.killpg(proc.pid, signal.SIGKILL)
+                pytest.fail(f"no {what}")
+            time.sleep(0.02)
+
+    login = tmp_path / "ev" / "credentials" / "worker" / "worker.json"
+    rows = tmp_path / "ev" / "episodes.jsonl"
+    try:
+        until("worker login and first episode", lambda: login.exists() and rows.exists() and rows.read_text().endswith("\n"))
+        os.killpg(proc.pid, signal.SIGINT)
+        until("'interrupted' line", lambda: "interrupted: stopping the workers" in err.read_text())
+        os.killpg(proc.pid, signal.SIGINT)  # while the workers stop
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    text = err.read_text()
+    assert "quitting at once" in text and proc.returncode == 130, (proc.returncode, text[-2000:])
+    assert not (tmp_path / "ev" / "credentials").exists(), "the worker login outlived the evaluation"
