@@ -12,6 +12,7 @@ import contextlib
 import socket
 import secrets
 import uuid
+from typing import TYPE_CHECKING
 
 import structlog
 
@@ -29,6 +30,7 @@ from mhrc.protocol import (
     ProtocolError,
     RobotDetached,
     Thought,
+    TickClosed,
     Turn,
     decode,
     decode_event,
@@ -36,7 +38,13 @@ from mhrc.protocol import (
 
 from .policy import Decision, Policy
 
+if TYPE_CHECKING:
+    from mhrc.security import Credentials
+
 log = structlog.get_logger("mhrc.agent")
+
+RESYNC_BACKOFF = 0.5  # s: the first wait before attaching again for a tick whose action is already taken; doubles each time
+RESYNC_BACKOFF_MAX = 8.0  # s
 
 
 class AgentError(RuntimeError):
@@ -90,8 +98,10 @@ class RobotAgent:
         result_timeout: float | None = None,
         final_result_grace: float = 10.0,
         endpoint: str | None = None,
+        security: Credentials | None = None,
     ) -> None:
         self.bus = bus
+        self.security = security  # this agent's login, to name why a secured link closed (an expired certificate)
         self.policy = policy
         self.robot = robot
         self.keys = Keys(run)
@@ -113,6 +123,8 @@ class RobotAgent:
         self._over = False  # the world said the episode is over
         self._alive = False  # whether this agent's liveliness token is declared
         self._turn: asyncio.Future[Turn] | None = None  # set while attaching, for a world that says wait_turn
+        self._clock = asyncio.Event()  # set on every tick the world closes (the stepped schedules)
+        self._via_turn = False  # whether the last attach's observation came with a Turn (a fresh turn, not a repeat)
         self._log = log.bind(run=run, robot=robot, agent=self.agent_id)
 
     # ------------------------------------------------------------------ bus handlers
@@ -145,6 +157,8 @@ class RobotAgent:
         if isinstance(event, EpisodeDone):
             self.episode = event
             self._done.set()
+        elif isinstance(event, TickClosed):
+            self._clock.set()
         elif isinstance(event, RobotDetached) and event.agent_id == self.agent_id and not self._done.is_set():
             # the world let this robot go (its token was late or lost) while the agent lives: attach again
             self._log.warning("the world detached this robot", reason=event.reason)
@@ -180,7 +194,7 @@ class RobotAgent:
             if result is None:
                 if self._done.is_set() or self._over:
                     break
-                attached = await self._attach()  # the world moved on (tick mismatch): resynchronize
+                attached = await self._resync(obs.tick)  # the world moved on (tick mismatch), or the tick is taken
                 continue
             self.steps += 1
             self.policy.record(result)
@@ -201,12 +215,47 @@ class RobotAgent:
         network blinked) and the world detached it: attach again and go on."""
         if _listening(self.endpoint) is False:
             raise WorldGone(f"the world disappeared while {self.robot} awaited {what}: nothing listens at {self.endpoint} any more")
+        if self.security is not None and self.endpoint is not None:  # a secured link also closes when a certificate expires
+            from mhrc.security import diagnose
+
+            why = await asyncio.to_thread(diagnose, self.endpoint, self.security)
+            if why.final:
+                raise WorldGone(f"the link to the world closed while {self.robot} awaited {what}: {why}")
         self._log.warning("lost the world's token, but the world may be there: attaching again", awaited=what)
         self._world_gone.clear()
         try:
             return await self._attach()
         except WorldGone:
             raise WorldGone(f"the world disappeared while {self.robot} awaited {what} and did not answer an attach since") from None
+
+    async def _resync(self, tick: int) -> Observation | None:
+        """The world rejected this robot's request for `tick` as out of step: attach again to
+        plan on the world's tick of now. If that is `tick` still, with no new turn, the robot's
+        action of it is already taken (its own earlier request, sent again after its link blinked,
+        or another process driving the same robot on the open bus): a new request would be
+        rejected at once, again and again. Wait for the world to close a tick, or for a backoff
+        that doubles each time, before attaching again."""
+        delay = RESYNC_BACKOFF
+        while True:
+            self._clock.clear()
+            attached = await self._attach()
+            if attached is None or attached.tick != tick or self._via_turn or self._done.is_set():
+                return attached
+            if delay == RESYNC_BACKOFF:
+                self._log.warning(
+                    "this robot's action of the tick is already taken (its own earlier request, or another agent "
+                    "process driving it): waiting for the tick to close", tick=tick,
+                )  # fmt: skip
+            clock = asyncio.ensure_future(self._clock.wait())
+            done = asyncio.ensure_future(self._done.wait())
+            try:
+                await asyncio.wait({clock, done}, timeout=delay, return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                clock.cancel()
+                done.cancel()
+            if self._done.is_set():
+                return None
+            delay = min(delay * 2, RESYNC_BACKOFF_MAX)
 
     async def _attach(self) -> Observation | None:
         """Attach and return the first observation to plan on; None when the episode ended
@@ -215,6 +264,7 @@ class RobotAgent:
         deadline = loop.time() + self.attach_timeout
         request = AttachRequest(robot=self.robot, agent_id=self.agent_id)
         self._turn = loop.create_future()  # a Turn from before this attach is stale
+        self._via_turn = False
         try:
             while True:
                 replies = await self.bus.get(f"{self.keys.attach(self.robot)}?session={self._session}", request, timeout=2.0)
@@ -232,6 +282,7 @@ class RobotAgent:
                             turn = await self._await_turn(self._turn)
                         except _WorldLost:  # frozen or cut off while the teammates acted: probe, attach again
                             return await self._reattach("its turn")
+                        self._via_turn = turn is not None
                         return None if turn is None else turn.observation
                     if not reply.accepted or reply.observation is None:
                         raise AttachRejected(f"the world refused {self.robot}: {reply.reason}")

@@ -70,7 +70,7 @@ def _stats(name: str, xs: list[float]) -> dict[str, float]:
 async def in_process(n: int, tmp: Path, *, run: str = "bench-inproc", secure: bool = False) -> dict[str, float]:
     """The world and the agent as two sessions of this process; with `secure`, on the run's own
     credentials (TLS, logins, the world's access control), the agent logged in as alice."""
-    cfg = EpisodeConfig.build(horizon=n + 5, start_timeout=0.5, run=run, trace=tmp / f"{run}.jsonl").resolved()
+    cfg = EpisodeConfig.build(horizon=n + 5, start_timeout=3.0, run=run, trace=tmp / f"{run}.jsonl").resolved()
     if secure:
         cfg = cfg.with_credentials(tmp / f"{run}-credentials")
     world = asyncio.create_task(serve_world(cfg))
@@ -84,7 +84,7 @@ async def in_process(n: int, tmp: Path, *, run: str = "bench-inproc", secure: bo
 
 async def cross_process(n: int, tmp: Path) -> dict[str, float]:
     cfg = EpisodeConfig.build(horizon=n + 5, run="bench-xproc", trace=tmp / "x.jsonl").resolved()
-    proc = subprocess.Popen([*world_command(cfg), "--start-timeout", "0.5"])
+    proc = subprocess.Popen([*world_command(cfg), "--start-timeout", "3.0"])
     try:
         await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60, proc)
         return await _round_trips(cfg.endpoint, cfg.run, n)

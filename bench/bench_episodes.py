@@ -15,12 +15,17 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Coroutine
 from pathlib import Path
+from typing import Any
 
 from mhrc.episode import EpisodeConfig, up_in_process, up_processes
-from mhrc.protocol import Metrics
+from mhrc.protocol import EpisodeDone, Metrics
 
-RUNNERS = {"in_process": up_in_process, "processes": up_processes}
+RUNNERS: dict[str, Callable[[EpisodeConfig], Coroutine[Any, Any, EpisodeDone]]] = {
+    "in_process": lambda cfg: up_in_process(cfg),
+    "processes": lambda cfg: up_processes(cfg),
+}
 
 
 def _range(text: str) -> list[int]:

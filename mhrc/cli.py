@@ -5,14 +5,16 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 import os
 import shlex
+import shutil
 import signal
 import sys
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Iterator
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 import click
 
@@ -65,12 +67,34 @@ def _llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
 T = TypeVar("T")
 
 
-def _quit_now(signum: int, frame: Any) -> None:
-    """A signal while the run winds down: it is over anyway, so quit at once (130, as Ctrl-C)."""
+_AT_QUIT: list[Callable[[], None]] = []  # run by a quit at once, which skips every `finally` (see _at_quit)
+
+
+@contextlib.contextmanager
+def _at_quit(cleanup: Callable[[], None]) -> Iterator[None]:
+    """Run `cleanup` if the process quits at once (a second Ctrl-C) inside this block: what must
+    not outlive the run (an evaluation's worker login) goes even then."""
+    _AT_QUIT.append(cleanup)
+    try:
+        yield
+    finally:
+        _AT_QUIT.remove(cleanup)
+
+
+def _quit(code: int = 130) -> NoReturn:
+    """Quit at once (os._exit: no `finally`, no waiting on threads) after the _at_quit cleanups."""
+    for cleanup in reversed(_AT_QUIT):
+        with contextlib.suppress(Exception):
+            cleanup()
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
             stream.flush()
-    os._exit(130)
+    os._exit(code)
+
+
+def _quit_now(signum: int, frame: Any) -> None:
+    """A signal while the run winds down: it is over anyway, so quit at once (130, as Ctrl-C)."""
+    _quit(130)
 
 
 def _plain_signals(loop: asyncio.AbstractEventLoop) -> None:
@@ -83,12 +107,13 @@ def _plain_signals(loop: asyncio.AbstractEventLoop) -> None:
         signal.signal(sig, _quit_now)
 
 
-def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | None = None) -> T:
+def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | Callable[[], str] | None = None) -> T:
     """Run a coroutine; SIGTERM cancels it like Ctrl-C, so every session closes in `finally`.
     A child of `mhrc up --processes` or `mhrc eval` gets SIGTERM when its parent dies.
 
-    The first Ctrl-C cancels the run (saying `stopping`, what is being done, when given); a
-    second one quits at once: the children go with this process (mhrc.lifeline), never a hang."""
+    The first Ctrl-C cancels the run (saying `stopping`, what is being done, when given: a
+    callable is asked at that moment); a second one quits at once after the `_at_quit`
+    cleanups: the children go with this process (mhrc.lifeline), never a hang."""
     from .lifeline import die_with_parent
 
     die_with_parent()
@@ -105,10 +130,10 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | None 
                 interrupts += 1
                 if interrupts > 1:
                     sys.stderr.write("interrupted again: quitting at once\n")
-                    sys.stderr.flush()
-                    os._exit(130)
-                if stopping:
-                    sys.stderr.write(f"\ninterrupted: {stopping} (Ctrl-C again to quit at once)\n")
+                    _quit(130)
+                said = stopping() if callable(stopping) else stopping
+                if said:
+                    sys.stderr.write(f"\ninterrupted: {said} (Ctrl-C again to quit at once)\n")
                     sys.stderr.flush()
                 task.cancel()
 
@@ -209,7 +234,9 @@ def main() -> None:
 @click.option("--processes", is_flag=True, help="Run the world and each agent as separate OS processes.")
 @click.option("--external", multiple=True, type=click.Choice(ROBOTS),
               help="Do not start an agent for this robot: attach your own with `mhrc agent` (repeatable).")
-@click.option("--quiet", "-q", is_flag=True, help="Print only the final summary.")
+@click.option("--quiet", "-q", is_flag=True, help="Print only the final summary table (errors still go to stderr).")
+@click.option("--start-timeout", type=float, default=None,
+              help="Start with the robots attached after this many seconds (fail if none is); default: wait for all of them.")
 @click.option("--secure/--insecure", "secure", default=True, show_default=True,
               help="--secure (the default): fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, "
                    "access control: an agent can act only as its own robot); --insecure: the open tcp bus, for loopback experiments.")
@@ -222,48 +249,84 @@ def up(
     processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, video: Path | None, secure: bool, **values: Any
 ) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
+    import functools
+
     from rich.console import Console
 
-    from .episode import up_in_process, up_processes
-    from .progress import ProgressPrinter
+    from mhrc.world.service import NobodyAttached
+
+    from .episode import ModelServerDown, ProcessFailed, check_model_servers, up_in_process, up_processes
+    from .progress import ProgressPrinter, summary_table
 
     logs.configure(log_level)
     cfg = _config(**values)
+    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
+        raise click.BadParameter(f"{video.name}: the video must be a .mp4 or .gif file", param_hint="--video")
+    robots = tuple(r for r in cfg.robots if r not in external)
+    try:
+        check_model_servers(cfg, robots)  # before anything is written or started
+    except ModelServerDown as exc:
+        click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(2)
     if not secure:
         click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
     else:
         cfg = cfg.with_credentials()
-        click.echo(f"credentials in {cfg.credentials} (TLS, one login per participant, access control)", err=True)
-    robots = tuple(r for r in cfg.robots if r not in external)
+        if not quiet:
+            click.echo(f"credentials in {cfg.credentials} (TLS, one login per participant, access control)", err=True)
     console = Console(highlight=False, stderr=as_json, soft_wrap=True)
-    printer = ProgressPrinter(console, verbose=not quiet)
-    console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
-    if external:
-        console.print("attach the external robots with: " + "; ".join(
+    printer = None if quiet else ProgressPrinter(console, summary=False)  # the table is printed below, once the run returned
+    if not quiet:
+        console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
+    if external:  # needed to go on at all: said with --quiet too, on stderr
+        click.echo("attach the external robots with: " + "; ".join(
             f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}"
-            + (f" --credentials {cfg.credentials_file(r)}" if cfg.credentials else "") for r in external))
-    runner = up_processes if processes else up_in_process
-    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
-        raise click.BadParameter(f"{video.name}: the video must be a .mp4 or .gif file", param_hint="--video")
+            + (f" --credentials {cfg.credentials_file(r)}" if cfg.credentials else "") for r in external), err=quiet or as_json)
+    runner = functools.partial(up_processes, quiet=quiet) if processes else up_in_process
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMError
     from mhrc.agents.replay import ReplayMismatch
 
     try:
-        done = _run(lambda: runner(cfg, observe=printer.attach, robots=robots))
+        done = _run(lambda: runner(cfg, observe=None if printer is None else printer.attach, robots=robots))
     except (AgentError, LLMError, ReplayMismatch) as exc:  # an agent could not play (its model, its replay, the world): one line
         click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(2)
+    except NobodyAttached as exc:
+        click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(1)
+    except ProcessFailed as exc:
+        if exc.returncode <= 0:  # killed, or gone without a word (a positive code: the process said why on stderr)
+            click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(exc.returncode if exc.returncode > 0 else 1)
+    if printer is not None:
+        printer.close()  # what arrived late for its tick, then nothing more: the table is the last line
+    console.print(summary_table(done))
     if video is not None and cfg.trace is not None:
-        console.print(f"video {_render_video(cfg.trace, video)}")
+        path = _render_video(cfg.trace, video)
+        if not quiet:
+            console.print(f"video {path}")
     if as_json:
         click.echo(json.dumps(done.metrics.model_dump()))
+
+
+def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None = None) -> None:
+    """`mhrc world`'s run: one line and exit 1 when no robot attached within --start-timeout."""
+    from mhrc.world.service import NobodyAttached
+
+    from .episode import serve_world
+
+    try:
+        _run(lambda: serve_world(cfg, observe=observe))
+    except NobodyAttached as exc:
+        click.echo(f"mhrc world: {exc}", err=True)
+        sys.exit(1)
 
 
 @main.command()
 @_episode_options
 @click.option("--start-timeout", type=float, default=None,
-              help="Start with the robots attached after this many seconds; default: wait for all three.")
+              help="Start with the robots attached after this many seconds (fail if none is); default: wait for all three.")
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
 @click.option("--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS",
@@ -272,7 +335,6 @@ def up(
 @click.option("--insecure", is_flag=True, help="The open tcp bus: no TLS, no login, no access control (anyone can act as any robot).")
 def world(log_level: str, start_timeout: float | None, quiet: bool, credentials: Path | None, insecure: bool, **values: Any) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
-    from .episode import serve_world
     from .progress import ProgressPrinter
 
     logs.configure(log_level)
@@ -285,7 +347,7 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, credentials:
             values["run"] = creds.run
     cfg = _config(start_timeout=start_timeout, credentials=credentials if creds is not None else None, **values)
     if quiet:
-        _run(lambda: serve_world(cfg))
+        _serve_world(cfg)
         return
     printer = ProgressPrinter(verbose=False)
 
@@ -296,7 +358,7 @@ def world(log_level: str, start_timeout: float | None, quiet: bool, credentials:
             click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}{login}", err=True)
         printer.attach(bus, run)
 
-    _run(lambda: serve_world(cfg, observe=listening))
+    _serve_world(cfg, listening)
 
 
 def _login_of(world: Any, user: str) -> str:
@@ -317,7 +379,7 @@ def _login_of(world: Any, user: str) -> str:
 @click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
 @_llm_options
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
-@click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels); the world's aids are set on the world. " + AIDS_HELP)
+@click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels, prompt_hints); the world's aids are set on the world. " + AIDS_HELP)
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
 @click.option("--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS",
               help="This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "
@@ -394,6 +456,46 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
         raise click.BadParameter(f"expected a comma-separated list, got {text!r}") from None
 
 
+MAX_DAYS = 36500  # a certificate's end date must be a date: 100 years is plenty and far from datetime's year 9999
+
+
+def _days(_ctx: click.Context, _param: click.Parameter, value: float) -> float:
+    """--days: a finite number of days in (0, MAX_DAYS]; checked before anything is written."""
+    if not (math.isfinite(value) and 0 < value <= MAX_DAYS):
+        raise click.BadParameter(f"must be more than 0 and at most {MAX_DAYS} (got {value:g})")
+    return value
+
+
+def _cert_hosts(_ctx: click.Context, _param: click.Parameter, value: tuple[str, ...]) -> tuple[str, ...]:
+    """--host: each a name or address a certificate can hold (ASCII, no spaces), checked before anything is written."""
+    for h in value:
+        if _is_ip(h):
+            continue
+        if not h or not h.isascii() or any(c.isspace() or c in "/:@" for c in h):
+            raise click.BadParameter(f"{h!r} is not a host name or address (a name outside ASCII goes in its xn-- form)")
+    return value
+
+
+def _is_ip(text: str) -> bool:
+    import ipaddress
+
+    try:
+        ipaddress.ip_address(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _first_missing(path: Path) -> Path | None:
+    """The outermost directory of `path` that does not exist yet (None if `path` exists): what creating it would add."""
+    missing = None
+    for p in (path, *path.parents):
+        if p.exists():
+            break
+        missing = p
+    return missing
+
+
 @main.command("eval")
 @_llm_options
 @click.option("--tasks", default=None, help="Comma-separated task ids; default: every registered task.")
@@ -419,7 +521,7 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--secure/--insecure", "secure", default=True, show_default=True,
               help="--secure (the default): TLS and a login for every worker (the login is written to OUT/credentials/worker/ "
                    "while the evaluation runs; workers elsewhere need a copy); --insecure: the open tcp bus.")
-@click.option("--host", "hosts", multiple=True, metavar="NAME",
+@click.option("--host", "hosts", multiple=True, metavar="NAME", callback=_cert_hosts,
               help="A name workers reach the coordinator by, for its TLS certificate (repeatable), e.g. eval in docker compose.")
 @click.option("--credentials", "eval_credentials", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Use (and keep) an evaluation's credentials issued by `mhrc credentials --eval --out DIR --host NAME`: remote "
@@ -435,7 +537,8 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
     summary.md / summary.csv (tables shaped like the paper's Table I and II with 95% bootstrap
-    intervals, the paper's figures beside a matching configuration, TS next to its lower bound).
+    intervals, the paper's figures beside a matching configuration, TS next to its lower bound)
+    and summary.html (the tables, plots, a link to each episode's report).
 
     The default grid is the paper's: per task, 3 scenes x one episode each with 3, 4, 5 and 6
     objects (12 per task, 36 in all); --repeats N runs it N times with other seeds, --objects and
@@ -449,9 +552,9 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 
-    from .evaluation import EvalAborted, EvalSpec, Tally, evaluate
+    from .evaluation import EvalAborted, EvalSpec, Tally, check_out, evaluate, own_credentials
     from .fidelity import AidsError, parse_aids
-    from .report import PAPER_OBJECTS, summary_markdown
+    from .report import PAPER_OBJECTS, SUMMARY_FILES, summary_markdown
 
     logs.configure(log_level)
     if workers < 0:
@@ -481,8 +584,12 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     bar = progress.add_task("episodes", total=None)
 
     def hook(t: Tally, row: dict[str, Any] | None) -> None:
-        rate = f"{t.succeeded}/{t.done} solved" + (f", {t.errors} errors" if t.errors else "") + (f", {t.invalid} invalid" if t.invalid else "")
-        progress.update(bar, total=t.total, completed=t.done, description=f"{spec.method} [{rate}]")
+        # the whole grid: with --resume, the episodes an earlier run finished count too
+        rate = f"{t.before_succeeded + t.succeeded}/{t.before + t.done} solved" + (f", {t.errors} errors" if t.errors else "")
+        rate += f", {t.invalid} invalid" if t.invalid else ""
+        if t.before:
+            rate += " (all from before)" if t.total == 0 else f" ({t.before} from before)"
+        progress.update(bar, total=t.before + t.total, completed=t.before + t.done, description=f"{spec.method} [{rate}]")
         if row is not None and not row.get("valid", True):
             progress.console.print(f"[red]invalid[/]: {row['key']} ({row.get('invalid_reason')}); left out of the summary")
         elif row is not None and not row["success"]:
@@ -498,6 +605,18 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
             click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config['seed']}")
         click.echo(f"{n_jobs} episodes ({spec.fidelity} fidelity)")
         return
+    try:
+        check_out(out, spec, resume)  # before the model server is asked or a worker starts
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    rows_path = out / "episodes.jsonl"
+
+    def stopping() -> str:
+        """What the first Ctrl-C says: where the finished episodes are, only if one has finished."""
+        kept = rows_path.exists() and rows_path.stat().st_size > 0
+        where = f"every finished episode is kept in {rows_path}" if kept else "no episode has finished yet"
+        return f"stopping the workers; {where} (continue with --resume --out {out})"
+
     if concurrency is None:
         from mhrc.agents.llm import episodes_at_once
 
@@ -508,19 +627,27 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         f"into {out} with {workers} worker(s), {concurrency} episode(s) at once each"
     )
     t0 = time.perf_counter()
-    with progress:
+    # the worker login written for this evaluation goes when it ends, a second Ctrl-C included (evaluate's
+    # `finally` removes it otherwise); --credentials DIR are the user's and stay
+    forget = (lambda: shutil.rmtree(own_credentials(out), ignore_errors=True)) if secure and eval_credentials is None else (lambda: None)
+    with progress, _at_quit(forget):
         try:
             rows = _run(
                 lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook, concurrency=concurrency,
                                  secure=secure, hosts=hosts, credentials=eval_credentials),
-                stopping=f"stopping the workers; every finished episode is kept in {out / 'episodes.jsonl'} "
-                f"(continue with --resume --out {out})",
+                stopping=stopping,
             )
         except ConfigError as exc:
             raise click.UsageError(str(exc)) from None
         except EvalAborted as exc:
             raise click.ClickException(str(exc)) from None
-    console.print(f"done in {time.perf_counter() - t0:.1f} s: {out / 'episodes.jsonl'}, {out / 'summary.md'}")
+    written = [p for p in (rows_path, *(out / name for name in SUMMARY_FILES)) if p.exists()]
+    errors = out / "errors.jsonl"
+    console.print(
+        f"done in {time.perf_counter() - t0:.1f} s: "
+        + (", ".join(map(str, written)) if rows else "no episode finished")
+        + (f" (episodes given up: {errors})" if errors.exists() else "")
+    )
     if rows:
         click.echo(summary_markdown(rows))
 
@@ -551,7 +678,8 @@ def worker(connect: str, eval_id: str | None, concurrency: int, log_level: str, 
 
 @main.command("report")
 @click.argument("dirs", nargs=-1, required=True, type=click.Path(file_okay=False, exists=True, path_type=Path))
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, help="Also write the markdown here (and CSV beside it).")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.md",
+              help="Write the markdown to FILE.md instead of stdout, FILE.csv and FILE.html beside it; the files written are named on stderr.")
 @click.option("--resamples", default=2000, show_default=True, type=click.IntRange(min=1), help="Bootstrap resamples per 95% confidence interval.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the bootstrap (the same rows and seed give the same intervals).")
 def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) -> None:
@@ -559,9 +687,18 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     and AS per task with 95% bootstrap confidence intervals, grouped by method, ablation and
     fidelity, and the paper's Table I / II figures beside the settings that match its
     configuration. Invalid episodes (model unreachable throughout) are left out and listed.
-    With --out FILE.md, also FILE.csv and FILE.html (tables, plots, a link to each episode's report)."""
+    With --out FILE.md, the markdown goes there instead, with FILE.csv and FILE.html (tables,
+    plots, a link to each episode's report) beside it."""
     from .report import merge_runs, summary_csv, summary_markdown
+    from .trace import unwritable
 
+    if out is not None:
+        files = [out, out.with_suffix(".csv"), out.with_suffix(".html")]
+        if len(set(files)) < len(files):
+            raise click.BadParameter(f"{out} would be overwritten by the CSV or HTML beside it; name a .md file", param_hint="--out")
+        for f in files:
+            if why := unwritable(f):
+                raise click.BadParameter(why, param_hint="--out")
     try:
         rows = merge_runs(list(dirs))
     except ConfigError as exc:
@@ -569,13 +706,16 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     if not rows:
         raise click.UsageError("no finished episodes in " + ", ".join(map(str, dirs)))
     text = summary_markdown(rows, resamples=resamples, seed=seed)
-    click.echo(text)
-    if out is not None:
-        out.write_text(text, encoding="utf-8")
-        out.with_suffix(".csv").write_text(summary_csv(rows, resamples=resamples, seed=seed), encoding="utf-8")
-        from .viewer.eval_report import write_report_html
+    if out is None:
+        click.echo(text)
+        return
+    from .viewer.eval_report import write_report_html
 
-        write_report_html(list(dirs), out.with_suffix(".html"), resamples=resamples, seed=seed)
+    md, csv, html = files
+    md.write_text(text, encoding="utf-8")
+    csv.write_text(summary_csv(rows, resamples=resamples, seed=seed), encoding="utf-8")
+    write_report_html(list(dirs), html, resamples=resamples, seed=seed)
+    click.echo(f"wrote {md}, {csv}, {html}", err=True)
 
 
 @main.command("schema")
@@ -596,9 +736,11 @@ def schema_(out: Path | None) -> None:
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="The directory to write them into (created 0700).")
 @click.option("--run", default=None, help="The run id they are for; default: a new random one (the world and agents take it from them).")
 @click.option("--host", "hosts", multiple=True, metavar="NAME",
+              callback=_cert_hosts,
               help="A name or address the agents reach the world by, besides 127.0.0.1 and localhost (repeatable): "
                    "e.g. world, the compose service. The world's certificate names it.")
-@click.option("--days", default=7.0, show_default=True, type=float, help="How long the CA and the world's certificate stay valid.")
+@click.option("--days", default=7.0, show_default=True, type=float, callback=_days,
+              help=f"How long the CA and the world's certificate stay valid from now: more than 0, at most {MAX_DAYS} (fractions allowed: 0.5 is 12 hours).")
 @click.option("--split", is_flag=True, help="One directory per participant (DIR/world/, DIR/alice/, ...), each for that participant's container only.")
 @click.option("--eval", "for_eval", is_flag=True,
               help="An evaluation's instead: the coordinator's certificate and files in DIR (mhrc eval --credentials DIR), "
@@ -614,8 +756,6 @@ def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float
     from .keys import check_id, new_run_id
     from .security import SecurityError, make_eval_credentials, make_run_credentials
 
-    if days <= 0:
-        raise click.BadParameter("must be more than 0", param_hint="--days")
     existing = out.is_dir() and (any(out.glob("*.json")) or any(out.glob("*/*.json")))
     if existing and not force:
         raise click.UsageError(f"--out: {out} already holds credentials; pass --force to replace them")
@@ -623,12 +763,20 @@ def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float
         raise click.UsageError("--split: an evaluation's workers share one login, already in a directory of its own")
     run = run or (f"e{uuid.uuid4().hex[:8]}" if for_eval else new_run_id())
     try:
+        check_id(run, "evaluation id" if for_eval else "run id")
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--run") from None
+    created = _first_missing(out)
+    try:
         if for_eval:
-            check_id(run, "evaluation id")
             files = make_eval_credentials(run, out, days=days, hosts=hosts)
         else:
             files = make_run_credentials(run, ROBOTS, out, days=days, hosts=hosts, split=split)
     except (SecurityError, ValueError, OSError) as exc:
+        if created is not None:  # nothing left behind: what this command created goes again
+            shutil.rmtree(created, ignore_errors=True)
+        if isinstance(exc, OSError):
+            raise click.UsageError(f"--out: cannot write the credentials into {out}: {exc.strerror or exc}") from None
         raise click.UsageError(str(exc)) from None
     click.echo(f"{'evaluation' if for_eval else 'run'} {run}: credentials in {out} (valid {days:g} days; keep them private)", err=True)
     for user, path in files.items():

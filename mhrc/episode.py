@@ -15,7 +15,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Sequence
 from typing import TYPE_CHECKING, Any, Literal
 from pathlib import Path
 
@@ -25,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from .bus import Bus, BusError, BusRefused, check_listen, endpoint, free_port
 from .fidelity import AidsError, label, parse_aids
 from .keys import Keys, check_id, new_run_id
-from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode, decode_event
+from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 
 if TYPE_CHECKING:
     from .security import Credentials
@@ -38,6 +38,24 @@ SCHEDULES = ("sequential", "lockstep", "async")  # the names of world.schedulers
 
 class ConfigError(ValueError):
     """A configuration value that cannot work; the message names the field."""
+
+
+class ModelServerDown(ConfigError):
+    """Nothing listens where a robot's model server should be (connection refused): no step could
+    ever be planned, so the run does not start."""
+
+
+class ProcessFailed(RuntimeError):
+    """A process of `mhrc up --processes` failed the run: the world's ended before the episode
+    did, or an agent's before the episode started (the world would wait for its robot forever).
+    With a positive exit code the process has said why on stderr itself; a negative one is the
+    signal that killed it."""
+
+    def __init__(self, who: str, returncode: int, before: str) -> None:
+        self.who = who
+        self.returncode = returncode
+        how = f"was killed by signal {-returncode}" if returncode < 0 else f"exited with code {returncode}"
+        super().__init__(f"{who} {how} before the episode {before}")
 
 
 OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}
@@ -114,6 +132,11 @@ class EpisodeConfig(BaseModel):
             if msg.startswith("--"):  # the validator already names the option
                 raise ConfigError(msg) from None
             raise ConfigError(f"{option_name(field)}: {msg} (got {err.get('input')!r})") from None
+        if cfg.trace is not None:
+            from .trace import unwritable
+
+            if why := unwritable(cfg.trace):  # before anything starts: not a traceback from the recorder
+                raise ConfigError(f"--trace: {why}")
         if cfg.time_scale and cfg.schedule != "async":
             raise ConfigError(f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})")
         from mhrc.world.sim import check_episode  # validates task and scene names without building
@@ -197,6 +220,7 @@ class EpisodeConfig(BaseModel):
             "prompts_dir": self.prompts,
             "prompt_cap_chars": self.history_cap,
             "reach_labels": "reach_labels" in self.aids,
+            "prompt_hints": "prompt_hints" in self.aids,
             "structured": self.structured,
             "step_deadline": self.step_deadline or 2 * self.timeout_for(spec) + 10,
             "max_tokens": self.max_tokens,
@@ -215,11 +239,17 @@ EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
 
 
 async def serve_world(
-    cfg: EpisodeConfig, *, observe: EventHook | None = None, connect: str | None = None, login: Credentials | None = None
+    cfg: EpisodeConfig,
+    *,
+    observe: EventHook | None = None,
+    connect: str | None = None,
+    login: Credentials | None = None,
+    on_service: Callable[[Any], None] | None = None,
 ) -> EpisodeDone:
     """Build the scene, open the world's bus (a router on cfg.endpoint, or with `connect` a
     client of a router that already exists, logged in with `login` if given: an evaluation
-    worker's), record, and run the episode."""
+    worker's), record, and run the episode. `on_service` gets the WorldService once it exists
+    (the in-process runner stops it when an agent fails for good)."""
     from mhrc.world.service import WorldConfig, WorldService
     from mhrc.world.sim import Sim
 
@@ -248,6 +278,8 @@ async def serve_world(
                 time_scale=cfg.time_scale,
             ),  # fmt: skip
         )
+        if on_service is not None:
+            on_service(world)
         try:
             return await world.run()
         except asyncio.CancelledError:
@@ -293,11 +325,14 @@ async def run_agent(
     client_options: dict[str, Any] | None = None,
     attach_timeout: float = 30.0,
     security: Credentials | None = None,
+    on_error: Callable[[BaseException], None] | None = None,
     **policy_options: Any,
 ) -> EpisodeDone | None:
     """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
     the heuristic policy, or with `llm` (one robot's spec) an LLMPolicy on that model. A
-    `gguf:PATH` spec gets a one-slot local server of its own for as long as the agent runs."""
+    `gguf:PATH` spec gets a one-slot local server of its own for as long as the agent runs.
+    `on_error` hears an error that ends the agent while its session is still open: before the
+    world sees the robot vanish."""
     from mhrc.agents.agent import RobotAgent
     from mhrc.agents.heuristic import heuristic_policy
 
@@ -323,8 +358,13 @@ async def run_agent(
                 policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
         bus = await open_client(connect, attach_timeout, security=security)
         try:
-            agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout, endpoint=connect)  # type: ignore[arg-type]
+            agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout, endpoint=connect,  # type: ignore[arg-type]
+                               security=security)
             return await agent.run()
+        except Exception as exc:
+            if on_error is not None:
+                on_error(exc)
+            raise
         finally:
             await bus.close()
 
@@ -422,6 +462,8 @@ async def _run_in_process(
     login = login if connect else None
     listening = asyncio.Event()
     started = asyncio.Event()  # the world started the episode: a robot whose agent fails now is only detached
+    services: list[Any] = []  # the WorldService, once built
+    failures: list[BaseException] = []  # an agent's error that ends the run: a model that cannot answer at all
 
     def on_open(bus: Bus, run: str) -> None:
         if observe is not None:
@@ -435,7 +477,15 @@ async def _run_in_process(
         bus.subscribe(Keys(run).world_event, on_event)
         listening.set()
 
-    world = asyncio.create_task(serve_world(cfg, observe=on_open, connect=connect, login=login), name="world")
+    def on_agent_error(exc: BaseException) -> None:
+        """Heard while the failing agent's session is still open: stop the world first, so that
+        its robot is not reported as vanished and no episode is scored for a run that failed."""
+        if _is_fatal(exc):
+            failures.append(exc)
+            for service in services:
+                service.stop()
+
+    world = asyncio.create_task(serve_world(cfg, observe=on_open, connect=connect, login=login, on_service=services.append), name="world")
     ready = asyncio.create_task(listening.wait())
     await asyncio.wait({world, ready}, return_when=asyncio.FIRST_COMPLETED)
     if world.done():  # the world could not start (its port is taken, ...): say so now, no agent is left connecting
@@ -446,7 +496,7 @@ async def _run_in_process(
         asyncio.create_task(
             run_agent(
                 r, cfg.run, connect or cfg.endpoint, llm=specs[r], base_url=cfg.base_url, client_options=cfg.client_options(own[r]),
-                security=login or cfg.participant(r), **cfg.policy_options(own[r]),
+                security=login or cfg.participant(r), on_error=on_agent_error, **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",
         )
@@ -456,9 +506,8 @@ async def _run_in_process(
         pending = {world, *agents}
         while world in pending:
             finished, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
-            fatal = [t.exception() for t in agents if t in finished and _is_fatal(t.exception())]
-            if fatal:  # a model that cannot answer at all: stop now, not at the horizon
-                raise fatal[0]  # type: ignore[misc]
+            if failures:  # a model that cannot answer at all: stop now, not at the horizon
+                raise failures[0]
             early = [t.exception() for t in agents if t in finished and t.exception() is not None]
             if early and not started.is_set():  # an agent gave up before the start (e.g. its attach timed out):
                 raise early[0]  # type: ignore[misc]  # the world would wait for its robot forever
@@ -473,13 +522,51 @@ async def _run_in_process(
                 t.cancel()
         results = await asyncio.gather(*agents, return_exceptions=True)
         for r, res in zip(robots, results):
-            if isinstance(res, BaseException) and not isinstance(res, asyncio.CancelledError):
-                log.warning("agent ended with an error", robot=r, error=str(res))
+            if isinstance(res, BaseException) and not isinstance(res, asyncio.CancelledError) and not (failures and _is_fatal(res)):
+                log.warning("agent ended with an error", robot=r, error=str(res))  # (the run's own failure is raised, not logged)
         if not world.done():
             world.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await world
     return done
+
+
+def check_model_servers(cfg: EpisodeConfig, robots: Sequence[str]) -> None:
+    """ModelServerDown when nothing listens (connection refused) at the server a robot's model
+    spec names: said at once, in one line, instead of every robot retrying into the void. A
+    server that does not answer the connection (a slow network, a name that does not resolve)
+    is left to the agents' own retries."""
+    from urllib.parse import urlsplit
+
+    from mhrc.agents.llm import check_spec, split_url
+
+    servers: dict[str, tuple[str, list[str]]] = {}  # url -> (where it came from, its robots)
+    specs = cfg.robot_specs()
+    for robot in robots:
+        spec = specs.get(robot)
+        if spec is None or spec.startswith(("gguf:", "replay:")):
+            continue
+        bare, own = split_url(spec)
+        url = check_spec(spec, cfg.base_url)[1]
+        if own:
+            advice = f"start the server there, or fix the @URL in --llm {spec!r}"
+        elif cfg.base_url:
+            advice = "start the server there, or point --base-url at one"
+        else:
+            advice = f"start {bare.partition(':')[0]} there, or pass --base-url for a server elsewhere"
+        servers.setdefault(url, (advice, []))[1].append(robot)
+    for url, (advice, users) in servers.items():
+        parts = urlsplit(url)
+        try:
+            port = parts.port or (443 if parts.scheme == "https" else 80)
+            with socket.create_connection((parts.hostname or "", port), timeout=2.0):
+                pass
+        except ConnectionRefusedError:
+            raise ModelServerDown(
+                f"nothing listens at {url}, the model server of {', '.join(users)} (connection refused): {advice}"
+            ) from None
+        except (OSError, ValueError):
+            continue
 
 
 def _is_fatal(exc: BaseException | None) -> bool:
@@ -517,10 +604,14 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         cmd += ["--aids", ",".join(cfg.aids)]
     if cfg.tick_delay:
         cmd += ["--tick-delay", str(cfg.tick_delay)]
+    if cfg.start_timeout is not None:
+        cmd += ["--start-timeout", str(cfg.start_timeout)]
     if cfg.time_scale:
         cmd += ["--time-scale", str(cfg.time_scale)]
     if cfg.credentials is not None:
         cmd += ["--credentials", str(cfg.credentials_file("world"))]
+    else:  # said, so that a $MHRC_CREDENTIALS of another run is not picked up
+        cmd += ["--insecure"]
     return cmd
 
 
@@ -529,6 +620,8 @@ def agent_command(robot: str, cfg: EpisodeConfig, spec: str | None = None) -> li
     cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
     if cfg.credentials is not None:
         cmd += ["--credentials", str(cfg.credentials_file(robot))]
+    else:  # said, so that a $MHRC_CREDENTIALS of another run is not picked up
+        cmd += ["--insecure"]
     if spec is not None:
         cmd += ["--llm", spec, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
         cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
@@ -555,49 +648,71 @@ def wait_for_port(host: str, port: int, timeout: float, proc: subprocess.Popen[b
     raise TimeoutError(f"nothing listened on {host}:{port} within {timeout:.0f} s")
 
 
-async def up_processes(cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None) -> EpisodeDone:
+async def up_processes(
+    cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None, quiet: bool = False
+) -> EpisodeDone:
     """The world and each agent as separate OS processes; this process only observes (and
-    serves the local models that gguf specs name, for the agents to share)."""
+    serves the local models that gguf specs name, for the agents to share). With `quiet` the
+    children's own output (an agent's closing line) is dropped; their errors still show."""
     robots = cfg.robots if robots is None else robots
     async with local_models({r: cfg.robot_specs()[r] for r in robots}, cfg.llm_seed) as specs:
-        return await _run_processes(cfg, specs, observe=observe, robots=robots)
+        return await _run_processes(cfg, specs, observe=observe, robots=robots, quiet=quiet)
 
 
 async def _run_processes(
-    cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...]
+    cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...], quiet: bool = False
 ) -> EpisodeDone:
+    stdout = subprocess.DEVNULL if quiet else _child_stdout()
     procs: list[subprocess.Popen[bytes]] = []
     bus = None
     try:
         check_listen(cfg.host, cfg.port, cfg.endpoint.split("/", 1)[0])  # a port taken is one line now, not a world process failing behind a client that waits
-        world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=_child_stdout())
+        world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=stdout)
         procs.append(world)
         await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)
         bus = await open_client(cfg.endpoint, 10.0, security=cfg.participant("observer"))
         done_fut: asyncio.Future[EpisodeDone] = asyncio.get_running_loop().create_future()
+        started = asyncio.Event()
         from .keys import Keys
 
         def on_event(sample: object) -> None:
             try:
-                ev = decode(sample.payload, EpisodeDone)  # type: ignore[attr-defined]
+                ev = decode_event(sample.payload)  # type: ignore[attr-defined]
             except ProtocolError:
                 return
-            if not done_fut.done():
+            if isinstance(ev, EpisodeStarted):
+                started.set()
+            elif isinstance(ev, EpisodeDone) and not done_fut.done():
                 done_fut.set_result(ev)
 
         bus.subscribe(Keys(cfg.run).world_event, on_event)
         if observe is not None:
             observe(bus, cfg.run)
+        exits: dict[asyncio.Future[Any], str] = {asyncio.ensure_future(asyncio.to_thread(world.wait)): "the world process"}
         for r in robots:
-            procs.append(subprocess.Popen(agent_command(r, cfg, specs[r]), env=_child_env(), stdout=_child_stdout()))
-        waiter = asyncio.create_task(asyncio.to_thread(world.wait))
-        watched: set[asyncio.Future[Any]] = {done_fut, waiter}
-        finished, _ = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
-        if done_fut not in finished:
-            raise RuntimeError(f"the world process exited with code {world.returncode} before the episode ended")
+            agent = subprocess.Popen(agent_command(r, cfg, specs[r]), env=_child_env(), stdout=stdout)
+            procs.append(agent)
+            exits[asyncio.ensure_future(asyncio.to_thread(agent.wait))] = f"{r}'s agent process"
+        watched: set[asyncio.Future[Any]] = {done_fut, *exits}
+        while not done_fut.done():
+            finished, watched = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
+            for fut in finished - {done_fut}:
+                code, who = fut.result(), exits[fut]
+                if fut is next(iter(exits)) and not done_fut.done():
+                    if code == 0:  # it ended the episode: its last event may still be on the way
+                        with contextlib.suppress(TimeoutError):
+                            await asyncio.wait_for(asyncio.shield(done_fut), 5.0)
+                    if not done_fut.done():
+                        raise ProcessFailed(who, code, "ended")
+                if code != 0 and not started.is_set() and not done_fut.done():  # as up_in_process: its robot would be waited for forever
+                    raise ProcessFailed(who, code, "started")
         done = done_fut.result()
         for p in procs:
             await asyncio.to_thread(_wait_or_kill, p, 20.0)
+        if done.reason == "no_agents":  # as up_in_process: every agent gone, with an error, is the run's failure
+            failed = [(r, p.returncode) for r, p in zip(robots, procs[1:]) if p.returncode != 0]
+            if failed:
+                raise ProcessFailed(f"{failed[0][0]}'s agent process", failed[0][1], "ended")
         return done
     finally:
         for p in procs:

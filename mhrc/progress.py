@@ -1,7 +1,14 @@
 """Live progress of an episode for a person at a terminal: each robot's action and outcome,
-messages between robots, tick summaries, and the final metrics."""
+messages between robots, tick summaries, and the final metrics.
+
+Results, messages, thoughts and world events travel on different keys, so they can arrive out
+of the order the world published them in. The printer puts them back in tick order: a robot's
+thought goes just before its result, and a tick's messages and its "tick N closed" line wait
+until every result that tick is known to have (`TickClosed.actions`) has printed."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 from rich.console import Console
 from rich.markup import escape
@@ -11,6 +18,7 @@ from .bus import Bus, Sample
 from .keys import Keys
 from .protocol import (
     ActionResult,
+    Communicate,
     EpisodeDone,
     EpisodeStarted,
     ProtocolError,
@@ -27,12 +35,38 @@ from .protocol import (
 COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
 
 
-class ProgressPrinter:
-    """Subscribes to one run's results, messages and world events and prints them."""
+@dataclass
+class _Tick:
+    """What the printer holds back of one tick until its results have printed."""
 
-    def __init__(self, console: Console | None = None, *, verbose: bool = True) -> None:
+    closed: str | None = None  # the "tick N closed" line, once the world closed the tick
+    due: set[str] = field(default_factory=set)  # robots whose result of this tick has not printed yet
+    messages: list[str] = field(default_factory=list)
+    senders: set[str] = field(default_factory=set)  # robots whose message of this tick has come
+    unheard: set[str] = field(default_factory=set)  # robots whose message was sent (their result says so) but has not come
+
+
+class ProgressPrinter:
+    """Subscribes to one run's results, messages and world events and prints them in tick order.
+
+    `verbose` False prints only attaches, detaches and the start (`mhrc world`). With `summary`
+    the metrics table is printed once the episode ended and the final results it names have
+    printed (or at `close()`), after everything held back, and nothing after it; without, the
+    caller calls `close()` when the run has returned and prints the table itself (`mhrc up`: no
+    table for a run that failed)."""
+
+    def __init__(self, console: Console | None = None, *, verbose: bool = True, summary: bool = True) -> None:
         self.console = console or Console(highlight=False, soft_wrap=True)
         self.verbose = verbose
+        self.summary = summary
+        self._ticks: dict[int, _Tick] = {}  # ticks with something held back
+        self._printed: dict[int, set[str]] = {}  # tick -> robots whose result of it has printed
+        self._thoughts: dict[tuple[int, str], list[str]] = {}  # (tick, robot) -> lines, printed before that result
+        self._stepped: bool | None = None  # whether ticks close (lockstep, sequential); None: not known yet
+        self._last_closed = -1  # the latest tick whose closed line has printed
+        self._goals: set[str] = set()  # goal ids of the results printed
+        self._done: EpisodeDone | None = None  # with `summary`: the end, its table held until its final results printed
+        self._closed = False
 
     def attach(self, bus: Bus, run: str) -> None:
         k = Keys(run)
@@ -41,40 +75,116 @@ class ProgressPrinter:
         bus.subscribe(f"{k.base}/robot/*/inbox/*", self._on_message)
         bus.subscribe(f"{k.base}/agent/*/thought", self._on_thought)
 
+    def close(self) -> None:
+        """Print everything still held back, in tick order (and with `summary` the table, if the
+        episode ended); the printer prints nothing after."""
+        if self._closed:
+            return
+        self._force()
+        for lines in self._thoughts.values():
+            for line in lines:
+                self._print(line)
+        self._thoughts.clear()
+        self._closed = True
+        if self._done is not None:
+            self.console.print(summary_table(self._done))
+
+    def _end_when_complete(self) -> None:
+        """With `summary`: the table once the episode ended and its final results printed (they
+        travel on other keys than `episode_done`, and may come after it)."""
+        if self._done is not None and (not self.verbose or set(self._done.final_results.values()) <= self._goals):
+            self.close()
+
+    def _print(self, line: object) -> None:
+        if not self._closed:
+            self.console.print(line)
+
     def _robot(self, name: str) -> str:
         return f"[{COLORS.get(name, 'white')}]{name:>5}[/]"
+
+    def _tick(self, tick: int) -> _Tick:
+        return self._ticks.setdefault(tick, _Tick())
+
+    def _release(self) -> None:
+        """Print the held ticks in order, each once it closed and its due results have printed."""
+        for tick in sorted(self._ticks):
+            held = self._ticks[tick]
+            if held.closed is None or held.due or held.unheard:
+                return
+            self._print_tick(tick)
+
+    def _force(self, upto: int | None = None) -> None:
+        """Print every held tick up to `upto` (all with None) now, whatever is still due, then the rest in order."""
+        for tick in sorted(t for t in self._ticks if upto is None or t <= upto):
+            self._print_tick(tick)
+        self._release()
+
+    def _print_tick(self, tick: int) -> None:
+        held = self._ticks.pop(tick)
+        for robot in sorted(held.due):  # a result that never came: say at least why the robot waited
+            for line in self._thoughts.pop((tick, robot), []):
+                self._print(line)
+        for line in held.messages:
+            self._print(line)
+        if held.closed is not None:
+            self._print(held.closed)
+            self._last_closed = max(self._last_closed, tick)
 
     def _on_event(self, sample: Sample) -> None:
         try:
             ev = decode_event(sample.payload)
         except ProtocolError:
             return
-        c = self.console
         if isinstance(ev, EpisodeStarted):
-            c.print(
+            self._stepped = ev.scheduler != "async"
+            self._print(
                 f"[bold]episode {ev.run}[/]: task {ev.task}, scene {ev.scene}, seed {ev.seed}, "
                 f"{ev.n_objects} objects, robots {', '.join(ev.robots)}, horizon {ev.horizon}, fidelity {ev.fidelity}"
                 + (f", {ev.scheduler} schedule" if ev.scheduler != "lockstep" else "")
             )
         elif isinstance(ev, TickClosed):
-            if self.verbose:
-                c.print(f"[dim]tick {ev.tick:>2} closed: {ev.placed}/{ev.total} placed[/]")
+            self._stepped = True
+            if not self.verbose:
+                return
+            held = self._tick(ev.tick)
+            held.closed = f"[dim]tick {ev.tick:>2} closed: {ev.placed}/{ev.total} placed[/]"
+            held.due = set(ev.actions) - self._printed.get(ev.tick, set())
+            self._release()
         elif isinstance(ev, RobotAttached):
-            c.print(f"{self._robot(ev.robot)} attached (agent {ev.agent_id}) at tick {ev.tick}")
+            self._print(f"{self._robot(ev.robot)} attached (agent {ev.agent_id}) at tick {ev.tick}")
         elif isinstance(ev, RobotDetached):
-            c.print(f"{self._robot(ev.robot)} [red]detached[/] at tick {ev.tick}: {ev.reason}")
-        elif isinstance(ev, EpisodeDone):
-            c.print(summary_table(ev))
+            for held in self._ticks.values():  # its results that were due will not come
+                held.due.discard(ev.robot)
+            self._release()
+            self._print(f"{self._robot(ev.robot)} [red]detached[/] at tick {ev.tick}: {ev.reason}")
+        elif isinstance(ev, EpisodeDone) and self.summary and self._done is None:
+            self._done = ev
+            self._end_when_complete()
 
     def _on_result(self, sample: Sample) -> None:
-        if not self.verbose:
+        if not self.verbose or self._closed:
             return
         try:
             r = decode(sample.payload, ActionResult)
         except ProtocolError:
             return
+        if any(t < r.tick and held.closed is not None for t, held in self._ticks.items()):
+            self._force(r.tick - 1)  # a later tick's result: what an earlier tick still misses is not coming first
+        for line in self._thoughts.pop((r.tick, r.robot), []):
+            self._print(line)
         mark = "[green]ok[/]" if r.outcome.succeeded else "[red]failed[/]"
-        self.console.print(f"tick {r.tick:>2} {self._robot(r.robot)} {r.action.call():<34} {mark}  [dim]{r.outcome.feedback}[/]")
+        self._print(f"tick {r.tick:>2} {self._robot(r.robot)} {r.action.call():<34} {mark}  [dim]{r.outcome.feedback}[/]")
+        self._printed.setdefault(r.tick, set()).add(r.robot)
+        self._goals.add(r.goal_id)
+        held = self._ticks.get(r.tick)
+        if self._stepped and isinstance(r.action, Communicate) and r.outcome.succeeded and r.tick > self._last_closed:
+            held = self._tick(r.tick)
+            if r.robot not in held.senders:  # its message goes before the tick's closed line
+                held.unheard.add(r.robot)
+        if held is not None:
+            held.due.discard(r.robot)
+            self._release()
+        self._end_when_complete()
 
     def _on_thought(self, sample: Sample) -> None:
         """A reply that gave no action is said so, before the wait it turned into."""
@@ -90,7 +200,11 @@ class ProgressPrinter:
         else:
             cut = " (cut at --max-tokens)" if t.finish_reason == "length" else ""
             what = f"[red]reply did not parse{cut}[/]: {error}"
-        self.console.print(f"tick {t.tick:>2} {self._robot(t.robot)} {what}; it waits")
+        line = f"tick {t.tick:>2} {self._robot(t.robot)} {what}; it waits"
+        if t.robot in self._printed.get(t.tick, set()):  # its result came first
+            self._print(line)
+        else:
+            self._thoughts.setdefault((t.tick, t.robot), []).append(line)
 
     def _on_message(self, sample: Sample) -> None:
         if not self.verbose:
@@ -99,10 +213,19 @@ class ProgressPrinter:
             m = decode(sample.payload, RobotMessage)
         except ProtocolError:
             return
-        self.console.print(f"        {self._robot(m.sender)} -> {m.to}: [italic]{m.content}[/]")
+        line = f"        {self._robot(m.sender)} -> {m.to}: [italic]{m.content}[/]"
+        if self._stepped and m.tick > self._last_closed:  # with the tick it was sent in, after its results
+            held = self._tick(m.tick)
+            held.messages.append(line)
+            held.senders.add(m.sender)
+            held.unheard.discard(m.sender)
+            self._release()
+        else:  # async: a message arrives when sent
+            self._print(line)
 
 
 def summary_table(done: EpisodeDone) -> Table:
+    """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics")."""
     m = done.metrics
     t = Table(title=f"episode {done.run}: {done.reason}", show_header=False)
     t.add_row("success", "yes" if m.success else "no")
@@ -112,6 +235,6 @@ def summary_table(done: EpisodeDone) -> Table:
     t.add_row("action steps", f"{m.action_steps} (" + ", ".join(f"{r} {n}" for r, n in m.action_steps_per_robot.items()) + ")")
     t.add_row("failed actions", ", ".join(f"{k} {v}" for k, v in sorted(m.failed_actions.items())) or "none")
     t.add_row("messages", str(m.messages))
+    t.add_row("makespan", f"{m.makespan:.1f} s simulated")
     t.add_row("wall time", f"{m.wall_time:.1f} s")
-    t.add_row("simulated time", f"{m.sim_time:.1f} s")
     return t

@@ -377,6 +377,11 @@ class EpisodeDone(Message):
         description="robot -> goal id of the last result the world published to it: "
         "results travel on other keys, so an agent that sees this event first still waits for that result",
     )
+    targets: list[str] = Field(
+        default_factory=list, description="the task's target objects, in task order: said only once the episode is over (for reports)"
+    )
+    goals: dict[str, str] = Field(default_factory=dict, description="target -> the fixture it had to end on (for reports)")
+    ordered: bool = Field(False, description="whether the targets had to reach their goals in order (a sandwich)")
 
 
 class RobotPose(_Model):

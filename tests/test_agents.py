@@ -28,7 +28,7 @@ from mhrc.trace import read_trace
 
 
 async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(world_factory) -> None:  # type: ignore[no-untyped-def]
-    async with world_factory(seed=0, horizon=3, start_timeout=0.5) as world:
+    async with world_factory(seed=0, horizon=3, start_timeout=3.0) as world:
         bus = await world.client()
         try:
             policy = ScriptedPolicy("bob", ["I am not sure what to do.", "**Command:** pick(ghost).", "Command: wait()"])

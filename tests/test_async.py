@@ -180,7 +180,7 @@ def _unfinished(lines: list[dict[str, Any]]) -> set[str]:
 async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_is_lost(tmp_path: Path) -> None:
     """On a clock at real time, Alice's navigation takes seconds: a second request meanwhile is
     rejected with the reason, and the first one's result still comes."""
-    async with world_on_loopback(seed=0, horizon=5, schedule="async", time_scale=1.0, start_timeout=1.0, trace=tmp_path / "t.jsonl") as world:
+    async with world_on_loopback(seed=0, horizon=5, schedule="async", time_scale=1.0, start_timeout=3.0, trace=tmp_path / "t.jsonl") as world:
         cfg = world.config
         bus = await world.client()
         keys = Keys(cfg.run)

@@ -461,3 +461,26 @@ def test_a_hand_started_secured_world_says_how_to_attach_and_why_not(tmp_path: P
     everything = err.read_text(errors="replace") + out.read_text(errors="replace")
     for raw in ("Hint: increase", "zenoh_link_tls", "tls handshake eof", "zenoh_transport", "\x1b["):
         assert raw not in everything, (raw, everything[-2000:])
+
+
+@pytest.mark.slow
+async def test_a_certificate_that_expires_mid_run_is_named(tmp_path: Path) -> None:
+    """The run's CA and the world's certificate expire 20 s into an episode (the world closes its
+    links then): the agents say the certificate expired, not that the world disappeared."""
+    from mhrc.agents.agent import WorldGone
+    from mhrc.episode import run_agent, serve_world
+
+    cfg = EpisodeConfig.build(seed=0, n_objects=6, tick_delay=1.0, trace=tmp_path / "t.jsonl").resolved()
+    files = security.make_run_credentials(cfg.run, ROBOTS, tmp_path / "cred", days=20 / 86400)
+    cfg = cfg.model_copy(update={"credentials": tmp_path / "cred"})
+    world = asyncio.create_task(serve_world(cfg))
+    agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint, security=security.load(files[r]), attach_timeout=30)) for r in ROBOTS]
+    try:
+        outcomes = await asyncio.wait_for(asyncio.gather(*agents, return_exceptions=True), 120)
+    finally:
+        world.cancel()
+        await asyncio.gather(world, return_exceptions=True)
+    gone = [o for o in outcomes if isinstance(o, WorldGone)]
+    assert gone, outcomes
+    for exc in gone:
+        assert "expired" in str(exc) and "disappeared" not in str(exc), str(exc)

@@ -388,6 +388,8 @@ def test_targets_come_from_the_task_when_the_trace_does_not_name_them(traces: di
             msg = row["msg"]
             if isinstance(msg, dict) and isinstance(msg.get("observation"), dict):
                 msg["observation"]["targets"] = []
+            if isinstance(msg, dict) and msg.get("kind") == "episode_done":  # as a world before the answer key was sent
+                msg.pop("targets", None), msg.pop("goals", None)
             f.write(json.dumps(row) + "\n")
     targets, _, _ = _truth(traces["failed"])
     section = _targets_section(_report(bare, tmp_path))
@@ -397,21 +399,24 @@ def test_targets_come_from_the_task_when_the_trace_does_not_name_them(traces: di
     assert "task&#x27;s generator" in section or "task's generator" in section
 
 
-def test_targets_and_goals_in_the_started_event_come_first(traces: dict[str, Path], tmp_path: Path) -> None:
-    """A world that sends the task's targets and goals in episode_started: the report takes them from there."""
+def test_the_worlds_answer_key_comes_first(traces: dict[str, Path], tmp_path: Path) -> None:
+    """The world names the task's targets, goals and order in episode_done (once nobody can use
+    them): the report takes them from there, before Bob's observations."""
     targets, last, _ = _truth(traces["failed"])
+    done = next(r["msg"] for r in read_trace(traces["failed"]) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_done")
+    assert done["targets"] == targets and done["goals"] == {t: "tray" for t in targets} and done["ordered"] is False
     named = tmp_path / "named.jsonl"
     with named.open("w", encoding="utf-8") as f:
         for row in read_trace(traces["failed"]):
             msg = row["msg"]
-            if isinstance(msg, dict) and msg.get("kind") == "episode_started":
-                msg["targets"], msg["goals"] = targets[::-1], {t: "tray" for t in targets}
+            if isinstance(msg, dict) and msg.get("kind") == "episode_done":
+                msg["targets"] = targets[::-1]
             f.write(json.dumps(row) + "\n")
     section = _targets_section(_report(named, tmp_path))
     parser = Rows()
     parser.feed(section)
     assert [r["name"] for r in parser.rows if r["role"] == "target"] == targets[::-1]
-    assert "targets from the episode_started event; goals from the episode_started event" in section
+    assert "targets from the world (its episode_done event); goals from the world (its episode_done event)" in section
 
 
 def test_partial_success_reads_the_same_everywhere(traces: dict[str, Path], tmp_path: Path) -> None:

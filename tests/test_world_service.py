@@ -79,7 +79,7 @@ class ManualAgent:
 
 async def test_request_ack_result_and_bad_input(world_factory) -> None:  # type: ignore[no-untyped-def]
     # one robot attached, so every tick closes on its action alone
-    async with world_factory(seed=1, start_timeout=0.5) as world:
+    async with world_factory(seed=1, start_timeout=3.0) as world:
         bus = await world.client()
         try:
             alice = ManualAgent(bus, world.cfg.run, "alice")
@@ -127,7 +127,7 @@ async def test_request_ack_result_and_bad_input(world_factory) -> None:  # type:
 
 
 async def test_capabilities_duplicates_and_messages(world_factory) -> None:  # type: ignore[no-untyped-def]
-    async with world_factory(seed=2, start_timeout=1.0) as world:
+    async with world_factory(seed=2, start_timeout=3.0) as world:
         bus = await world.client()
         try:
             david = ManualAgent(bus, world.cfg.run, "david")
@@ -150,7 +150,7 @@ async def test_capabilities_duplicates_and_messages(world_factory) -> None:  # t
 
 
 async def test_message_reaches_receiver_next_tick(world_factory) -> None:  # type: ignore[no-untyped-def]
-    async with world_factory(seed=3, start_timeout=1.0) as world:
+    async with world_factory(seed=3, start_timeout=3.0) as world:
         bus = await world.client()
         try:
             alice = ManualAgent(bus, world.cfg.run, "alice")

@@ -78,15 +78,29 @@ class SimLike(Protocol):
     def views(self) -> tuple[list[FurnitureView], list[ObjectView]]: ...
     def poses(self) -> tuple[dict[str, RobotPose], dict[str, ObjectPose], dict[str, bool]]: ...
     def lower_bound(self) -> int: ...
+    def answer_key(self) -> tuple[list[str], dict[str, str], bool]: ...
     @property
     def aids(self) -> frozenset[str]: ...
+
+
+class NobodyAttached(RuntimeError):
+    """No robot attached within the start timeout: the episode cannot start, and waiting longer
+    was not asked for."""
+
+    def __init__(self, missing: Sequence[str], timeout: float) -> None:
+        self.missing = tuple(missing)
+        self.timeout = timeout
+        super().__init__(
+            f"no robot attached within --start-timeout {timeout:g} s ({', '.join(self.missing)} never attached): "
+            "start their agents (mhrc agent --robot ROBOT ...), or give them longer with --start-timeout"
+        )
 
 
 @dataclass
 class WorldConfig:
     run: str
     horizon: int = 50
-    start_timeout: float | None = None  # start with the robots attached by then; None: wait for all
+    start_timeout: float | None = None  # start with the robots attached by then (NobodyAttached if none is); None: wait for all
     tick_delay: float = 0.0  # pause between scheduler steps, for watching with --gui
     schedule: str = "lockstep"  # the time policy, a name in world.schedulers.SCHEDULERS
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
@@ -166,6 +180,8 @@ class WorldService:
         return self.done
 
     async def _wait_for_start(self) -> None:
+        """Until every robot attached, or the start timeout passed with at least one attached;
+        NobodyAttached when it passed with none (a world nobody joins would wait forever)."""
         loop = asyncio.get_running_loop()
         deadline = None if self.cfg.start_timeout is None else loop.time() + self.cfg.start_timeout
         while len(self.attached) < len(self.sim.robots):
@@ -174,8 +190,9 @@ class WorldService:
             if timeout is not None and timeout <= 0:
                 if self.attached:
                     break
-                deadline = None  # nobody yet: keep waiting for the first agent
-                continue
+                assert self.cfg.start_timeout is not None
+                self._log.info("no robot attached within the start timeout", timeout=self.cfg.start_timeout)  # the error says it
+                raise NobodyAttached(self.sim.robots, self.cfg.start_timeout)
             try:
                 await asyncio.wait_for(self._wake.wait(), timeout)
             except TimeoutError:
@@ -262,7 +279,11 @@ class WorldService:
             lower_bound=self._bound,
             makespan=round(self.scheduler.makespan, 6),
         )
-        self.done = EpisodeDone(run=self.cfg.run, reason=reason, metrics=metrics, final_results=dict(self._last_results))  # type: ignore[arg-type]
+        targets, goals, ordered = self.sim.answer_key()  # the answer key, now that no agent can use it: for reports
+        self.done = EpisodeDone(
+            run=self.cfg.run, reason=reason, metrics=metrics, final_results=dict(self._last_results),  # type: ignore[arg-type]
+            targets=targets, goals=goals, ordered=ordered,
+        )
         self.bus.put(self.keys.world_event, self.done)
         self._log.info("episode done", reason=reason, **metrics.model_dump(exclude={"action_steps_per_robot", "failed_actions"}))
         self._wake.set()
@@ -363,6 +384,12 @@ class WorldService:
             )  # fmt: skip
         self.attached[robot] = req.agent_id
         self._sessions[robot] = session
+        if holder is None:  # said now, before the await below, during which the episode may start
+            self.bus.put(self.keys.world_event, RobotAttached(robot=robot, agent_id=req.agent_id, tick=self.tick))
+            self._log.info("robot attached", robot=robot, agent=req.agent_id, tick=self.tick)
+            check = asyncio.create_task(self._expect_token(robot, req.agent_id), name=f"token-{robot}")
+            self._token_checks.add(check)
+            check.add_done_callback(self._token_checks.discard)
         obs = None
         wait_turn = self.scheduler.on_attach(robot)
         tick = self.scheduler.tick_of(robot)
@@ -370,12 +397,6 @@ class WorldService:
             obs = await self.observe(robot, tick)
             obs = obs.model_copy(update={"new_messages": self._inbox[robot]})
             self._inbox[robot] = []
-        if holder is None:
-            self.bus.put(self.keys.world_event, RobotAttached(robot=robot, agent_id=req.agent_id, tick=self.tick))
-            self._log.info("robot attached", robot=robot, agent=req.agent_id, tick=self.tick)
-            check = asyncio.create_task(self._expect_token(robot, req.agent_id), name=f"token-{robot}")
-            self._token_checks.add(check)
-            check.add_done_callback(self._token_checks.discard)
         self._wake.set()
         return AttachReply(robot=robot, accepted=True, tick=tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn)
 

@@ -2,11 +2,12 @@
 
 Read from the trace, in this order of preference:
 
-- the targets: an `episode_started` field `targets` (worlds that send it), else Bob's
+- the targets: the world's answer key in `episode_done` (`targets`, `goals`, `ordered`: said
+  once the episode is over, so no agent learns from it), else Bob's
   observations (`targets`, the task's list as Bob is told it), else the task's own generator
   re-run on the episode's task, scene, seed and object count (said so on the page: a trace
   from another version of the generator may differ);
-- each target's goal (the fixture it must end on): `episode_started.goals`, else Bob's
+- each target's goal (the fixture it must end on): `episode_done.goals`, else Bob's
   observations' `goals` (sent only with the goal_map aid), else the task's `goal()` of the
   generated object of that name, used only when the generator's targets are the trace's;
 - where every object ended: the last `snapshot` (ground truth); a trace without snapshots
@@ -102,11 +103,15 @@ def task_view(trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str
     """The task's objects, their roles, goals and ends, from the trace (see the module docstring)."""
     observations = _observations(trace)
     notes: list[str] = []
+    done = next(iter(trace.messages("episode_done")[-1:]), {})
+    if done.get("targets"):  # the world's answer key, sent once the episode is over
+        started = {**started, "targets": done["targets"], "goals": done.get("goals") or started.get("goals"),
+                   "ordered": done.get("ordered", False)}  # fmt: skip
 
     targets: list[str] | None = None
     targets_from = ""
     if isinstance(started.get("targets"), list) and started["targets"]:
-        targets, targets_from = [str(t) for t in started["targets"]], "the episode_started event"
+        targets, targets_from = [str(t) for t in started["targets"]], "the world (its episode_done event)"
     else:
         for obs in observations:
             if obs.get("targets"):
@@ -117,7 +122,7 @@ def task_view(trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str
     goals: dict[str, str] = {}
     goals_from = ""
     if isinstance(started.get("goals"), dict) and started["goals"]:
-        goals, goals_from = {str(k): str(v) for k, v in started["goals"].items()}, "the episode_started event"
+        goals, goals_from = {str(k): str(v) for k, v in started["goals"].items()}, "the world (its episode_done event)"
     else:
         for obs in observations:
             if obs.get("goals"):
