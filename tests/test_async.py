@@ -136,13 +136,13 @@ async def test_two_robots_go_for_the_same_object(tmp_path: Path) -> None:
     request the world executes first gets it, the other fails with the feedback any robot would
     get; each request has exactly one result, and the soap is held by one robot."""
     trace = tmp_path / "t.jsonl"
-    alice = ScriptedPolicy(["navigate(dishwasher, 0)", "open(dishwasher)", "pick(soap)", "navigate(table_0, 0)", "place(soap, table_0)", "pick(soap)"])  # fmt: skip
+    alice = ScriptedPolicy(["navigate(cabinet_1, 0)", "open(cabinet_1)", "pick(soap)", "navigate(table_0, 0)", "place(soap, table_0)", "pick(soap)"])  # fmt: skip
     bob = ScriptedPolicy(["pick(soap)"], until=lambda obs: any(o.name == "soap" and o.on == "table_0" for o in obs.objects))
     episode = {"seed": 0, "horizon": 12, "schedule": "async", "start_timeout": 5.0, "trace": trace}
     done = (await run_episode({"alice": alice, "bob": bob, "david": None}, timeout=WAIT, **episode)).done  # no David
     assert done.reason == "horizon"
     picks = [r for r in _results(trace) if r["action"] == {"skill": "pick", "obj": "soap"}]
-    assert [r["robot"] for r in picks[:1]] == ["alice"]  # her first pick, at the dishwasher
+    assert [r["robot"] for r in picks[:1]] == ["alice"]  # her first pick, in cabinet_1
     contest = picks[1:]
     assert sorted(r["robot"] for r in contest) == ["alice", "bob"], contest
     winners = [r for r in contest if r["outcome"]["succeeded"]]
@@ -157,7 +157,7 @@ async def test_two_robots_go_for_the_same_object(tmp_path: Path) -> None:
     released = [r["goal_id"] for r in _results(trace)]
     assert len(released) == len(set(released)) and set(released) <= set(accepted)
     assert set(accepted) - set(released) <= set(done.final_results.values()) | _unfinished(lines), "an accepted request got no result"
-    script = ["navigate(dishwasher, 0)", "open(dishwasher)", "pick(soap)", "navigate(table_0, 0)", "place(soap, table_0)", "pick(soap)"]
+    script = ["navigate(cabinet_1, 0)", "open(cabinet_1)", "pick(soap)", "navigate(table_0, 0)", "place(soap, table_0)", "pick(soap)"]
     assert [r.action.call() for r in alice.results[:6]] == script and all(r.outcome.succeeded for r in alice.results[:5])
 
 

@@ -231,3 +231,61 @@ async def test_sequential_gives_turns_to_a_replacement_agent(tmp_path: Path) -> 
     # after Bob's tick K+2 action executed
     turns = [(line["msg"]["robot"], line["msg"]["tick"]) for line in read_trace(trace) if line["key"].endswith("/turn")]
     assert turns == [("bob", 0), ("david", 0), ("david", back)]
+
+
+# --------------------------------------------------------------------------- messages change scene graphs on delivery
+
+
+class _Teller:
+    """Bob's policy: at his first turn he tells David about the first object he sees."""
+
+    name = "teller"
+
+    def __init__(self) -> None:
+        self.named: str | None = None
+
+    async def decide(self, obs: Observation) -> Decision:
+        from mhrc.protocol import Communicate, Wait
+
+        if self.named is None and obs.objects:
+            self.named = obs.objects[0].name
+            return Decision(action=Communicate(content=f"The {self.named} is on my table.", to="david"))
+        return Decision(action=Wait())
+
+    def record(self, result: ActionResult) -> None:
+        pass
+
+
+class _Listener:
+    """David's policy: waits, keeping every observation it planned on."""
+
+    name = "listener"
+
+    def __init__(self) -> None:
+        self.observations: list[Observation] = []
+
+    async def decide(self, obs: Observation) -> Decision:
+        from mhrc.protocol import Wait
+
+        self.observations.append(obs)
+        return Decision(action=Wait())
+
+    def record(self, result: ActionResult) -> None:
+        pass
+
+
+@pytest.mark.parametrize("schedule", ["sequential", "lockstep"])
+async def test_a_message_reaches_the_scene_graph_with_its_delivery(schedule: str, tmp_path: Path) -> None:
+    """Sequential: Bob tells David of an object in tick 0; David acts after Bob in that tick and
+    must not know it yet; he learns it in tick 1, when the message arrives with it. Lockstep:
+    message and scene graph arrive together with the results of tick 0."""
+    from mhrc.testing import ScriptedPolicy, run_episode
+
+    teller, listener = _Teller(), _Listener()
+    result = await run_episode({"alice": ScriptedPolicy([]), "bob": teller, "david": listener}, seed=0, horizon=3,
+                               schedule=schedule, trace=tmp_path / "t.jsonl")  # fmt: skip
+    assert teller.named is not None
+    seen = [(o.tick, [m.sender for m in o.new_messages], any(x.name == teller.named for x in o.objects)) for o in listener.observations]
+    assert seen[0] == (0, [], False), seen  # tick 0: Bob's message is on its way, David knows nothing of it
+    assert seen[1] == (1, ["bob"], True), seen  # tick 1: the message and what it tells arrive together
+    assert result.done.metrics.messages == 1

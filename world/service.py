@@ -12,7 +12,7 @@ import contextlib
 import json
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -74,6 +74,7 @@ class SimLike(Protocol):
     def execute(self, robot: str, action: Action) -> SkillOutcome: ...
     def observe(self, robot: str, tick: int) -> Observation: ...
     def tell(self, receiver: str, sender: str, text: str) -> None: ...
+    def message(self, receiver: str, sender: str, text: str) -> Callable[[], None]: ...
     def evaluate(self) -> TaskResultLike: ...
     def views(self) -> tuple[list[FurnitureView], list[ObjectView]]: ...
     def poses(self) -> tuple[dict[str, RobotPose], dict[str, ObjectPose], dict[str, bool]]: ...
@@ -127,6 +128,10 @@ class WorldService:
         self.attached: dict[str, str] = {}  # robot -> agent id
         self._sessions: dict[str, str] = {}  # robot -> the attaching session's secret (its attach query's `session` parameter)
         self._inbox: dict[str, list[RobotMessage]] = {r: [] for r in sim.robots}
+        # what messages tell their receivers' scene graphs: fixed when sent (sim.message), learned
+        # only once delivered (a robot acting later in the same sequential tick must not know it yet)
+        self._sent: dict[str, list[Callable[[], None]]] = {r: [] for r in sim.robots}
+        self._due: list[Callable[[], None]] = []  # delivered, applied at the simulator's next use (its thread, its lock)
         self._tally = _Tally()
         self._bound = sim.lower_bound()
         self._sim_lock = asyncio.Lock()
@@ -226,10 +231,16 @@ class WorldService:
         self._log.info("episode started", attached=sorted(self.attached))
         self._wake.set()
 
-    def _execute_batch(self, batch: Sequence[ActionRequest], tick: int) -> tuple[Executed, Snapshot]:
+    def _execute_batch(self, batch: Sequence[ActionRequest], tick: int, deliver: bool) -> tuple[Executed, Snapshot]:
         """Runs in a worker thread, holding the sim lock: the actions in order, then the
-        evaluation and every acting robot's observation of tick + 1."""
+        evaluation and every acting robot's observation of tick + 1 (with `deliver`, after the
+        messages sent in the batch reached their receivers' scene graphs: lockstep delivers them
+        with these observations)."""
+        self._learn()
         outcomes = [self._execute(req, tick) for req in batch]
+        if deliver:
+            self._deliver_told(self.sim.robots)
+            self._learn()
         evaluation = self.sim.evaluate()
         observations = {req.robot: self._present(self.sim.observe(req.robot, tick + 1)) for req in batch}
         return Executed(outcomes, evaluation, observations), self._snapshot(tick, [req.goal_id for req in batch])
@@ -255,7 +266,7 @@ class WorldService:
                 OutcomeCode.RECIPIENT_UNKNOWN, f"There is no teammate called {action.to!r}; you can message {others}."
             )
         self._inbox[action.to].append(RobotMessage(sender=req.robot, to=action.to, content=action.content, tick=tick))
-        self.sim.tell(action.to, req.robot, action.content)
+        self._sent[action.to].append(self.sim.message(action.to, req.robot, action.content))
         self._tally.messages += 1
         return SkillOutcome.ok(f"Your message to {action.to} was sent.")
 
@@ -305,10 +316,11 @@ class WorldService:
     def horizon(self) -> int:
         return self.cfg.horizon
 
-    async def execute(self, batch: Sequence[ActionRequest], tick: int) -> Executed:
-        """Run `batch` in order at `tick` in a worker thread, holding the sim lock; count it."""
+    async def execute(self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False) -> Executed:
+        """Run `batch` in order at `tick` in a worker thread, holding the sim lock; count it.
+        `deliver`: the observations returned carry the batch's messages (lockstep)."""
         async with self._sim_lock:
-            done, snapshot = await asyncio.to_thread(self._execute_batch, batch, tick)
+            done, snapshot = await asyncio.to_thread(self._execute_batch, batch, tick, deliver)
         self.bus.put(self.keys.world_event, snapshot)
         self._evaluation = done.evaluation
         for req, outcome in zip(batch, done.outcomes):
@@ -322,7 +334,23 @@ class WorldService:
     async def observe(self, robot: str, tick: int) -> Observation:
         """`robot`'s observation now, from a worker thread holding the sim lock."""
         async with self._sim_lock:
-            return self._present(await asyncio.to_thread(self.sim.observe, robot, tick))
+            return self._present(await asyncio.to_thread(self._observe, robot, tick))
+
+    def _observe(self, robot: str, tick: int) -> Observation:
+        self._learn()
+        return self.sim.observe(robot, tick)
+
+    def _deliver_told(self, robots: Iterable[str]) -> None:
+        """The messages to `robots` are delivered: what they tell becomes due."""
+        for r in robots:
+            self._due += self._sent[r]
+            self._sent[r] = []
+
+    def _learn(self) -> None:
+        """Apply what delivered messages tell (in the simulator's thread, holding its lock)."""
+        due, self._due = self._due, []
+        for learn in due:
+            learn()
 
     def _present(self, obs: Observation) -> Observation:
         """The observation with the teammates attached now: a teammate whose agent left is not
@@ -335,6 +363,7 @@ class WorldService:
         return obs if len(present) == len(obs.teammates) else obs.model_copy(update={"teammates": present})
 
     def deliver_messages(self) -> dict[str, list[RobotMessage]]:
+        self._deliver_told(self.sim.robots)
         delivered = {r: self._inbox[r] for r in self.sim.robots}
         self._inbox = {r: [] for r in self.sim.robots}
         for msgs in delivered.values():
@@ -394,6 +423,7 @@ class WorldService:
         wait_turn = self.scheduler.on_attach(robot)
         tick = self.scheduler.tick_of(robot)
         if not wait_turn:
+            self._deliver_told([robot])  # its waiting messages come with this observation
             obs = await self.observe(robot, tick)
             obs = obs.model_copy(update={"new_messages": self._inbox[robot]})
             self._inbox[robot] = []

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import re
 import zlib
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -395,12 +395,23 @@ class Sim:
     def tell(self, receiver: str, sender: str, text: str) -> None:
         """A message was delivered: objects it names that the sender knows become known to the
         receiver as the sender believes them (unless the receiver knows something newer)."""
+        self.message(receiver, sender, text)()
+
+    def message(self, receiver: str, sender: str, text: str) -> Callable[[], None]:
+        """A message was sent: what it will tell its receiver, fixed now (the objects it names
+        that the sender knows, as the sender believes them now). The receiver learns it when the
+        returned call runs: when the message is delivered, not before (`tell` does both at once)."""
         if receiver not in self.beliefs or sender not in self.beliefs:
-            return
+            return lambda: None
         words = " ".join(re.findall(r"[a-z0-9]+", text.lower().replace("_", " ")))
         named = [n for n in sorted(self.known_objects(sender)) if re.search(rf"\b{re.escape(n.replace('_', ' '))}\b", words)]
-        self.known[receiver].update(named)
-        self.beliefs[receiver].told(sender, self.beliefs[sender], named)
+        then = Beliefs(objects={n: b for n, b in self.beliefs[sender].objects.items() if n in named})  # beliefs are frozen values
+
+        def deliver() -> None:
+            self.known[receiver].update(named)
+            self.beliefs[receiver].told(sender, then, named)
+
+        return deliver
 
     # ------------------------------------------------------------------ public API
     def capabilities(self, robot: str) -> frozenset[str]:

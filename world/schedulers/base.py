@@ -66,8 +66,10 @@ class World(Protocol):
     @property
     def horizon(self) -> int: ...
 
-    async def execute(self, batch: Sequence[ActionRequest], tick: int) -> Executed:
-        """Run the actions in order in the simulator, at `tick`, and count them for the metrics."""
+    async def execute(self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False) -> Executed:
+        """Run the actions in order in the simulator, at `tick`, and count them for the metrics;
+        with `deliver`, the observations returned already know what the batch's messages tell
+        (a schedule that hands the messages over with them)."""
     async def observe(self, robot: str, tick: int) -> Observation:
         """`robot`'s observation of the world as it is now, labelled `tick` (no messages attached)."""
     def deliver_messages(self) -> dict[str, list[RobotMessage]]:

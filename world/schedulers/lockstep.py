@@ -47,7 +47,7 @@ class LockstepScheduler(Scheduler):
         world, tick = self.world, self.tick
         batch = [self.pending.pop(r) for r in world.robots if r in self.pending and r in world.attached]
         self.pending.clear()
-        done = await world.execute(batch, tick)
+        done = await world.execute(batch, tick, deliver=True)
         began = self.makespan
         took = [duration(req, outcome) for req, outcome in zip(batch, done.outcomes)]
         self.makespan = began + max(took, default=0.0)
