@@ -321,7 +321,7 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
     if not valid:
         return "\n".join(lines + ["No valid episodes to summarize.", ""])
     lines += [
-        "Each cell: Succ / PS / TS (TS*) / AS (AS/robot); paper cells: Succ / PS / TS / AS. "
+        "Each cell: Succ / PS / TS (TS*) / AS (AS sum, AS per robot); paper cells: Succ / PS / TS / AS. "
         "Settings are method · ablation · fidelity (and history cap or horizon when not the paper's).",
         "",
         AS_NOTE,
