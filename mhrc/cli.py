@@ -21,6 +21,7 @@ import click
 from . import logs
 from .episode import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig
 from .fidelity import describe as describe_aids
+from .lifeline import PARENT_ENV
 
 ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
 AIDS_HELP = (
@@ -192,7 +193,8 @@ def _credentials(path: Path | None, insecure: bool, connect: str | None = None) 
     from .security import SecurityError, load
 
     if insecure:
-        click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
+        if not os.environ.get(PARENT_ENV):  # a child of mhrc up --processes or eval: its parent said it once
+            click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
         return None
     if path is None:
         if connect is not None and connect.startswith("tls/"):

@@ -288,3 +288,12 @@ def test_a_model_that_refuses_every_request_is_one_error_no_table_no_vanished_ro
     assert "vanished" not in run.stdout + run.stderr and "detached" not in run.stdout, run.stdout + run.stderr
     errors = [line for line in run.stderr.splitlines() if not line.startswith("insecure:")]
     assert len(errors) == 1 and errors[0].startswith("mhrc up: ") and "HTTP 404: no model 'llama3.1:8b'" in errors[0], run.stderr
+
+
+def test_the_open_bus_is_said_once_under_processes(tmp_path: Path) -> None:
+    """`mhrc up --processes --insecure`: the warning about the open bus comes once, from the
+    command the user typed, not again from each of its world and agent processes."""
+    done = subprocess.run([sys.executable, "-m", "mhrc", "up", "--processes", "--insecure", "--objects", "3", "--quiet"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stderr.count("insecure: the open tcp bus") == 1, done.stderr
