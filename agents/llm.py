@@ -7,6 +7,13 @@ key comes from the provider's variable (OPENAI_API_KEY for openai), from `api_ke
 given, else from MHRC_API_KEY.
 
 Every call is bounded: `max_tokens` (default 1024) and, where given, `seed` go in every request.
+Replies are streamed (`"stream": true`, usage asked for in the stream) unless `stream=False`, and
+timed by what matters: `timeout` is the time to the first token (prompt processing included:
+the first `data:` event of the stream, or for a reply that comes whole, a server that does not
+stream or `stream=False`, the whole reply), then `idle_timeout` between chunks; a reply that keeps
+producing tokens is never cut by a total timeout, only by `max_tokens` (and a caller's deadline).
+A call abandoned for any reason (a timeout, the caller's cancellation) closes its connection, so
+that the server stops decoding it (llama.cpp frees the slot) and a retry never queues behind it.
 Transient failures (429, 5xx, refused connections, unreadable bodies) are retried with
 exponential backoff, honouring Retry-After, a bounded number of times; a timeout is retried at
 most once (a server that did not answer in time will rarely answer the same request faster);
@@ -24,11 +31,12 @@ from __future__ import annotations
 import asyncio
 import email.utils
 import functools
+import json
 import os
 import ssl
 import re
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, Self
 
@@ -51,7 +59,9 @@ PROVIDERS: dict[str, tuple[str, str | None]] = {
 GENERIC_KEY_ENV = "MHRC_API_KEY"
 DEFAULT_TEMPERATURE = 0.5  # the paper's
 DEFAULT_MAX_TOKENS = 1024  # the paper's reply format (analysis, reasoning, one command) with room to think
+DEFAULT_IDLE_TIMEOUT = 30.0  # s between two chunks of a streamed reply: a decoding server sends one every few tokens
 MAX_REPLY_CHARS = 16_000  # what a reply may feed into the trace and the parser (about 4x DEFAULT_MAX_TOKENS tokens)
+MAX_STREAM_CHARS = 1_000_000  # a streamed reply is read no further (a server that never stops): far beyond any max_tokens
 
 
 class LLMError(RuntimeError):
@@ -65,6 +75,14 @@ class LLMFatalError(LLMError):
 
 class LLMTimeout(LLMError):
     """The model did not answer in time (slow or endless generation), as opposed to a server that is down."""
+
+
+class LLMSilent(LLMTimeout):
+    """The server accepted the connection but sent nothing, not even a status line, on every
+    attempt, and never answered this process before: from a robot's first step, as good as down."""
+
+
+_ANSWERED: set[str] = set()  # base URLs that sent this process a status line: slow from then on, never down
 
 
 class LLMSpecError(ValueError):
@@ -132,7 +150,7 @@ def prompt_text(messages: Messages) -> str:
 
 
 class OpenAIChatClient:
-    """POST {base_url}/chat/completions, with retries, a per-request timeout and a concurrency limit."""
+    """POST {base_url}/chat/completions, streamed, with retries, first-token and idle timeouts and a concurrency limit."""
 
     RETRY_STATUS = frozenset({408, 409, 425, 429, 500, 502, 503, 504})
 
@@ -143,6 +161,8 @@ class OpenAIChatClient:
         *,
         api_key: str | None = None,
         timeout: float = 60.0,
+        idle_timeout: float = DEFAULT_IDLE_TIMEOUT,
+        stream: bool = True,
         retries: int = 4,
         backoff: float = 0.5,
         max_backoff: float = 30.0,
@@ -154,14 +174,16 @@ class OpenAIChatClient:
         extra_body: dict[str, Any] | None = None,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
-        if retries < 0 or timeout <= 0 or max_concurrency < 1 or timeout_retries < 0:
-            raise ValueError("need retries >= 0, timeout_retries >= 0, timeout > 0 and max_concurrency >= 1")
+        if retries < 0 or timeout <= 0 or idle_timeout <= 0 or max_concurrency < 1 or timeout_retries < 0:
+            raise ValueError("need retries >= 0, timeout_retries >= 0, timeout > 0, idle_timeout > 0 and max_concurrency >= 1")
         if max_tokens is not None and max_tokens < 1:
             raise ValueError(f"max_tokens must be at least 1 (got {max_tokens})")
         self.model = model
         self.base_url = base_url.rstrip("/")
         self.provider = provider
-        self.timeout = timeout
+        self.timeout = timeout  # s to the first token (or to a whole reply that is not streamed)
+        self.idle_timeout = idle_timeout  # s between chunks of a streamed reply
+        self.stream = stream
         self.retries = retries
         self.timeout_retries = timeout_retries
         self.backoff = backoff
@@ -170,11 +192,19 @@ class OpenAIChatClient:
         self.seed = seed
         self.extra_body = dict(extra_body or {})
         headers = {"Authorization": f"Bearer {api_key}"} if api_key else {}
-        self._http = httpx.AsyncClient(timeout=timeout, headers=headers, transport=transport, verify=_tls())
+        # the deadlines of a call are this client's own (asyncio), not httpx's per-read timeout
+        self._http = httpx.AsyncClient(timeout=httpx.Timeout(None, connect=timeout), headers=headers, transport=transport, verify=_tls())
         self._limit = asyncio.Semaphore(max_concurrency)
         self.requests = 0  # HTTP attempts, retries included
+        self.responses = 0  # status lines received: 0 means the server never answered at all
         self.prompt_tokens = 0  # totals over successful calls
         self.completion_tokens = 0
+
+    @property
+    def answered(self) -> bool:
+        """Whether the server ever sent a status line to this process (to any client, e.g. in an
+        evaluation's earlier episode): a server that answered before and stalls now is slow, not down."""
+        return self.responses > 0 or self.base_url in _ANSWERED
 
     async def aclose(self) -> None:
         await self._http.aclose()
@@ -191,6 +221,8 @@ class OpenAIChatClient:
             body["max_tokens"] = self.max_tokens
         if self.seed is not None:
             body["seed"] = self.seed
+        if self.stream:
+            body |= {"stream": True, "stream_options": {"include_usage": True}}
         if schema is not None:
             from .structured import response_format
 
@@ -204,39 +236,76 @@ class OpenAIChatClient:
         body = self.body(messages, temperature, schema)
         last = ""
         timeouts = 0
+        silent = True  # no attempt of this call got a status line
         for attempt in range(self.retries + 1):
             delay = min(self.max_backoff, self.backoff * 2**attempt)
+            answered = self.responses
             try:
-                async with self._limit:  # the timeout starts once a slot is free
+                async with self._limit:  # the timeouts start once a slot is free
                     self.requests += 1
-                    t0 = time.perf_counter()
-                    async with asyncio.timeout(self.timeout):  # whole request, however the bytes trickle
-                        resp = await self._http.post(url, json=body)
-                    latency = time.perf_counter() - t0
-                if resp.status_code in self.RETRY_STATUS:
-                    last = f"HTTP {resp.status_code}: {resp.text[:200]}"
-                    delay = retry_after(resp, delay, self.max_backoff)
-                elif resp.status_code >= 400:
-                    raise self._refusal(resp, url, schema is not None)
-                else:
-                    c = _completion(resp, messages, latency)
-                    self.prompt_tokens += c.prompt_tokens
-                    self.completion_tokens += c.completion_tokens
-                    return c
+                    c = await self._attempt(url, body, messages, schema is not None, delay)
+                self.prompt_tokens += c.prompt_tokens
+                self.completion_tokens += c.completion_tokens
+                return c
+            except _Retry as exc:
+                last = str(exc)
+                delay = exc.delay
             except (TimeoutError, httpx.TimeoutException) as exc:
-                last = f"no answer within {self.timeout:g} s" + (f" ({type(exc).__name__})" if isinstance(exc, httpx.TimeoutException) else "")
+                silent = silent and self.responses == answered
+                last = str(exc) if isinstance(exc, _Stalled) else f"no answer within {self.timeout:g} s" + (
+                    f" ({type(exc).__name__})" if isinstance(exc, httpx.TimeoutException) else "")  # fmt: skip
                 timeouts += 1
                 if timeouts > self.timeout_retries or attempt == self.retries:
-                    raise LLMTimeout(f"{self.model} at {self.base_url}: {last}, {timeouts} time(s); a timeout is retried at most {self.timeout_retries} time(s)") from None
+                    error = LLMSilent if silent and not self.answered else LLMTimeout
+                    what = "no status line (the server accepted the connection and said nothing)" if error is LLMSilent else last
+                    raise error(f"{self.model} at {self.base_url}: {what}, {timeouts} time(s); a timeout is retried at most {self.timeout_retries} time(s)") from None
             except httpx.TransportError as exc:
                 last = f"{type(exc).__name__}: {exc}"
             except _Unreadable as exc:
                 last = str(exc)
+            if self.responses != answered:
+                silent = False
             if attempt < self.retries:
                 log.warning("llm call failed, retrying", model=self.model, attempt=attempt + 1, error=last, delay=delay)
                 await asyncio.sleep(delay)
         raise LLMError(f"{self.model} at {self.base_url} failed after {self.retries + 1} attempts: {last}")
 
+    async def _attempt(self, url: str, body: dict[str, Any], messages: Messages, structured: bool, delay: float) -> Completion:
+        """One HTTP attempt. Leaving this (a result, an error, a timeout or a cancellation)
+        closes the response, and with a body not read to its end, the connection: the server
+        sees its client go and stops decoding."""
+        loop = asyncio.get_running_loop()
+        t0 = time.perf_counter()
+        reply = _StreamedReply()
+        try:
+            async with asyncio.timeout(self.timeout) as deadline:  # to the first token; then rescheduled chunk by chunk
+                async with self._http.stream("POST", url, json=body) as resp:
+                    self.responses += 1
+                    _ANSWERED.add(self.base_url)
+                    if resp.status_code in self.RETRY_STATUS:
+                        await resp.aread()
+                        raise _Retry(f"HTTP {resp.status_code}: {resp.text[:200]}", retry_after(resp, delay, self.max_backoff))
+                    if resp.status_code >= 400:
+                        await resp.aread()
+                        raise self._refusal(resp, url, structured)
+                    if "text/event-stream" not in resp.headers.get("content-type", ""):
+                        raw = await resp.aread()  # a whole reply (not streamed): within the first-token timeout
+                        if not raw.lstrip().startswith(b"data:"):
+                            return _completion(resp, messages, time.perf_counter() - t0)
+                        lines: AsyncIterator[str] = _lines(resp.text)  # a stream mislabelled as something else
+                    else:
+                        lines = resp.aiter_lines()
+                    async for line in lines:
+                        if reply.add(line):
+                            deadline.reschedule(loop.time() + self.idle_timeout)
+                        if reply.done or reply.size > MAX_STREAM_CHARS:
+                            break
+                    return reply.completion(messages, time.perf_counter() - t0)
+        except TimeoutError:
+            if reply.chunks:
+                raise _Stalled(f"the stream stalled: no chunk for {self.idle_timeout:g} s after {reply.chunks} chunk(s)") from None
+            raise
+        raise AssertionError("unreachable")  # pragma: no cover  (for mypy: the context managers could swallow)
 
     def _refusal(self, resp: httpx.Response, url: str, structured: bool) -> LLMError:
         """The error for a 4xx no retry will fix; fatal where the run cannot succeed at all."""
@@ -264,6 +333,77 @@ def _tls() -> ssl.SSLContext:
 
 class _Unreadable(ValueError):
     """A 200 answer without a usable completion in it."""
+
+
+class _Retry(Exception):
+    """An answer worth another attempt (429, 5xx) after `delay` seconds."""
+
+    def __init__(self, message: str, delay: float) -> None:
+        super().__init__(message)
+        self.delay = delay
+
+
+class _Stalled(TimeoutError):
+    """A streamed reply that began and then sent nothing for the idle timeout."""
+
+
+async def _lines(text: str) -> AsyncIterator[str]:
+    for line in text.splitlines():
+        yield line
+
+
+class _StreamedReply:
+    """The chunks of a streamed completion (server-sent events), put together: content and
+    reasoning deltas, the last finish_reason, and usage where the server sends it (the last chunk,
+    with choices empty, when asked with stream_options.include_usage)."""
+
+    def __init__(self) -> None:
+        self.content: list[str] = []
+        self.reasoning: list[str] = []
+        self.finish_reason: str | None = None
+        self.usage: dict[str, Any] = {}
+        self.chunks = 0
+        self.size = 0  # characters of content and reasoning so far
+        self.done = False
+
+    def add(self, line: str) -> bool:
+        """Take one line of the stream; True when it was a chunk (the server is producing)."""
+        if not line.startswith("data:"):
+            return False  # blank separators, `event:` and `:` keep-alive comments
+        data = line[5:].strip()
+        if data == "[DONE]":
+            self.done = True
+            return True
+        try:
+            chunk = json.loads(data)
+            if not isinstance(chunk, dict):
+                raise TypeError("a chunk is not an object")
+            if chunk.get("error"):
+                raise _Unreadable(f"the server sent an error in the stream: {str(chunk['error'])[:200]}")
+            for choice in chunk.get("choices") or []:
+                delta = choice.get("delta") or choice.get("message") or {}
+                text = delta.get("content")
+                thought = delta.get("reasoning_content") or delta.get("reasoning")
+                if not isinstance(text, str | None) or not isinstance(thought, str | None):
+                    raise TypeError("a delta's content is not text")
+                self.content.append(text or "")
+                self.reasoning.append(thought or "")
+                self.size += len(text or "") + len(thought or "")
+                self.finish_reason = choice.get("finish_reason") or self.finish_reason
+            if isinstance(chunk.get("usage"), dict):
+                self.usage = chunk["usage"]
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            if isinstance(exc, _Unreadable):
+                raise
+            raise _Unreadable(f"unreadable stream chunk ({type(exc).__name__}: {exc}): {data[:200]}") from None
+        self.chunks += 1
+        return True
+
+    def completion(self, messages: Messages, latency: float) -> Completion:
+        if not self.chunks:
+            raise _Unreadable("the stream ended without a single chunk")
+        text, reasoning = "".join(self.content), "".join(self.reasoning) or None
+        return _make_completion(text, reasoning, self.usage, self.finish_reason, messages, latency)
 
 
 def retry_after(resp: httpx.Response, default: float, cap: float) -> float:
@@ -295,7 +435,13 @@ def _completion(resp: httpx.Response, messages: Messages, latency: float) -> Com
             raise TypeError("message content is not text")
     except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
         raise _Unreadable(f"unreadable completion body ({type(exc).__name__}: {exc}): {resp.text[:200]}") from None
-    usage = data.get("usage") or {}
+    return _make_completion(text, reasoning, data.get("usage") or {}, choice.get("finish_reason"), messages, latency)
+
+
+def _make_completion(
+    text: str, reasoning: str | None, usage: dict[str, Any], finish_reason: str | None, messages: Messages, latency: float
+) -> Completion:
+    """A Completion from a reply's text and reasoning field, whether it came whole or in chunks."""
     answer, thoughts = split_reasoning(text, reasoning)
     answer, cut = bounded(answer)
     if thoughts is not None:
@@ -307,7 +453,7 @@ def _completion(resp: httpx.Response, messages: Messages, latency: float) -> Com
         prompt_tokens=int(usage.get("prompt_tokens") or estimate_tokens(prompt_text(messages))),
         completion_tokens=int(usage.get("completion_tokens") or estimate_tokens(text)),
         latency=latency,
-        finish_reason=choice.get("finish_reason"),
+        finish_reason=finish_reason,
         reasoning=thoughts,
         reasoning_tokens=reasoning_tokens,
         truncated=cut,
@@ -438,7 +584,8 @@ def check_spec(spec: str, base_url: str | None = None, api_key_env: str | None =
 def make_client(spec: str, base_url: str | None = None, *, api_key_env: str | None = None, **options: Any) -> OpenAIChatClient:
     """An OpenAI-compatible client for a model spec; raises LLMSpecError before any request if unusable.
 
-    `options` go to OpenAIChatClient: timeout, retries, backoff, max_concurrency, max_tokens, extra_body.
+    `options` go to OpenAIChatClient: timeout (to the first token), idle_timeout, stream, retries,
+    backoff, max_concurrency, max_tokens, extra_body.
     """
     model, url, api_key = check_spec(spec, base_url, api_key_env)
     if spec.startswith("replay:"):

@@ -6,7 +6,7 @@ after its retries or misses the step deadline never crashes the agent: the robot
 step and the reason (bounded to FEEDBACK_CHARS) becomes feedback in its next prompt. What no
 later step can change stops the agent with LLMFatalError instead: bad credentials, no such
 model, a server that refuses --structured's response format, or a server that was down for
-the robot's whole first step.
+the robot's whole first step (refusing connections, or accepting them and never answering).
 
 With `structured=True` each request carries a JSON Schema built from the robot's own skills
 and scene graph (mhrc.agents.structured), the prompt ends with the JSON instructions instead of
@@ -50,7 +50,7 @@ from mhrc.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
 
 from . import observation as describe
 from . import structured as json_mode
-from .llm import DEFAULT_TEMPERATURE, LLMClient, LLMError, LLMFatalError, LLMTimeout, Messages, prompt_text
+from .llm import DEFAULT_TEMPERATURE, LLMClient, LLMError, LLMFatalError, LLMSilent, LLMTimeout, Messages, prompt_text
 from .memory import HISTORIES, TITLES, Memory
 from .parse import SIGNATURES, ReplyFormatError, parse_command
 from .policy import Decision
@@ -278,9 +278,10 @@ class LLMPolicy:
         except LLMFatalError:
             raise
         except (LLMError, TimeoutError) as exc:
+            silent = isinstance(exc, LLMSilent) or getattr(self.client, "answered", True) is False  # not even a status line, ever
             if isinstance(exc, TimeoutError):
                 exc = LLMTimeout(f"no answer within the step deadline of {self.step_deadline:g} s")
-            if not self._answered and not isinstance(exc, LLMTimeout):
+            if not self._answered and (silent or not isinstance(exc, LLMTimeout)):
                 raise LLMUnreachable(f"{self.robot}'s model never answered during its first step: {exc}") from None
             self._log.warning("model unavailable, waiting", tick=obs.tick, error=str(exc))
             self._pending = (obs.tick, MODEL_DOWN.format(reason=_short(str(exc))))

@@ -19,8 +19,9 @@ What xllamacpp (2026.10) does that this module works around, all measured:
   before returning; (2) a request is still in flight (the loop is gone, so its HTTP handler
   waits for a result that never comes, or for its client to hang up, which an in-process client
   cannot do without the GIL), so `stop()` first waits for every slot to be idle. llama.cpp does
-  not cancel a non-streaming request whose client hung up (it decodes on to max_tokens; a
-  streaming one ends about 3 s after), so stop() may wait out the longest reply in flight.
+  not cancel a non-streaming request whose client hung up (it decodes on to max_tokens), so
+  stop() may wait out the longest reply in flight; a streamed one (mhrc's default) ends as soon
+  as its client closes the stream.
 * llama.cpp logs every request to stderr by default (verbosity 3 = info): `verbosity=1` keeps
   errors only (0 drops them too); the threshold is process-wide.
 * A GGUF without an embedded chat template (the packaged Gemma 3 270M has none) is silently
@@ -359,6 +360,7 @@ class LocalModelServer:
         p.offline = True  # never download anything
         p.ui = False
         p.endpoint_slots = True  # stop() and start() read /slots
+        p.endpoint_metrics = True  # /metrics: tokens decoded in all, for tests and benchmarks (loopback only)
         p.api_keys = [self.api_key] if self.api_key else []
         p.verbosity = self.verbosity
         p.fit_params = False  # a second, trial load to fit GPU memory: doubles the load time on a CPU

@@ -50,13 +50,20 @@ def _llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
     opts = [
         click.option("--llm", default=None, metavar="SPEC", help=LLM_HELP),
         click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm specs without their own, e.g. http://127.0.0.1:8000/v1."),
-        click.option("--llm-timeout", default=None, type=float, help="Seconds per LLM request; a timeout is retried once. Default: 60, and 600 for gguf: models (a CPU takes minutes for a long reply; --max-tokens bounds it)."),
+        click.option("--llm-timeout", default=None, type=float,
+                     help="Seconds to the first token of an LLM reply (the server's prompt processing included; with --no-stream, to the whole reply); "
+                          "a timeout is retried once. A reply that keeps producing tokens is not cut by it: --max-tokens and --step-deadline bound that. "
+                          "Default: 60, and 600 for gguf: models."),
+        click.option("--llm-idle-timeout", default=None, type=float, metavar="SECONDS",
+                     help="Seconds a streamed LLM reply may go without a token before the call is abandoned (and retried once). Default: 30."),
+        click.option("--stream/--no-stream", default=True, show_default=True,
+                     help="Stream LLM replies; --no-stream for servers that cannot (then --llm-timeout bounds the whole reply)."),
         click.option("--max-tokens", default=1024, show_default=True, type=int, help="Completion tokens per LLM call, sent on every request."),
         click.option("--llm-seed", default=None, type=int, help="Sampling seed sent on every LLM request (honoured by llama.cpp, vLLM, Ollama, OpenAI)."),
         click.option("--structured", is_flag=True,
                      help="Ask for JSON decisions that follow a schema of each step's valid actions (response_format json_schema; Ollama's format). Not the paper's: its free text is the default."),
         click.option("--step-deadline", default=None, type=float, metavar="SECONDS",
-                     help="Bound one robot's whole LLM step, retries included; past it the robot waits that step. Default: 2 x the request timeout + 10."),
+                     help="Bound one robot's whole LLM step, retries included; past it the robot waits that step (and its call is abandoned). Default: 2 x --llm-timeout + 10."),
         click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
                      help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm."),
         click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP),

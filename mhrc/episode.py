@@ -60,9 +60,10 @@ class ProcessFailed(RuntimeError):
 
 OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}
 DEFAULT_MAX_TOKENS = 1024  # mirrors mhrc.agents.llm.DEFAULT_MAX_TOKENS (not imported: the world needs no agent code)
-SERVER_TIMEOUT = 60.0  # s per request to a model server
-LOCAL_TIMEOUT = 600.0  # s per request to an in-process gguf: model: on a CPU a 1024-token reply from 3 slots took 97-138 s
-# here, and a local server has no network to fail; max_tokens bounds it (a timed-out request keeps its slot decoding)
+SERVER_TIMEOUT = 60.0  # s to the first token of a reply from a model server
+IDLE_TIMEOUT = 30.0  # s between chunks of a streamed reply; mirrors mhrc.agents.llm.DEFAULT_IDLE_TIMEOUT
+LOCAL_TIMEOUT = 600.0  # s to the first token from an in-process gguf: model (with --no-stream, to the whole reply: on a CPU
+# a 1024-token reply from 3 slots took 97-138 s here); a local server has no network to fail; max_tokens bounds a reply
 
 
 def option_name(field: str) -> str:
@@ -93,7 +94,10 @@ class EpisodeConfig(BaseModel):
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
-    llm_timeout: float | None = Field(None, gt=0, description="seconds per LLM request (a timeout is retried once); None: 60, 600 for gguf: models")
+    llm_timeout: float | None = Field(None, gt=0, description="seconds to an LLM reply's first token, prompt processing included (the whole reply "
+                                      "when it is not streamed); a timeout is retried once; None: 60, 600 for gguf: models")
+    llm_idle_timeout: float | None = Field(None, gt=0, description="seconds a streamed LLM reply may go without a chunk; None: 30")
+    stream: bool = Field(True, description="stream LLM replies (False: --no-stream, for servers that cannot)")
     max_tokens: int = Field(DEFAULT_MAX_TOKENS, ge=1, description="completion tokens per LLM call, sent on every request")
     llm_seed: int | None = Field(None, ge=0, description="sampling seed sent on every LLM request (servers that honour one)")
     structured: bool = Field(False, description="LLM replies follow a JSON Schema of the step's valid actions (not the paper's)")
@@ -228,7 +232,10 @@ class EpisodeConfig(BaseModel):
 
     def client_options(self, spec: str | None = None) -> dict[str, Any]:
         """OpenAIChatClient settings of a robot driven by `spec`."""
-        return {"timeout": self.timeout_for(spec), "max_tokens": self.max_tokens, "seed": self.llm_seed}
+        return {
+            "timeout": self.timeout_for(spec), "idle_timeout": self.llm_idle_timeout or IDLE_TIMEOUT, "stream": self.stream,
+            "max_tokens": self.max_tokens, "seed": self.llm_seed,
+        }  # fmt: skip
 
     @property
     def fidelity(self) -> str:
@@ -627,6 +634,8 @@ def agent_command(robot: str, cfg: EpisodeConfig, spec: str | None = None) -> li
         cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
         cmd += ["--llm-timeout", str(cfg.timeout_for(cfg.robot_specs()[robot])), "--max-tokens", str(cfg.max_tokens)]
         cmd += ["--llm-seed", str(cfg.llm_seed)] if cfg.llm_seed is not None else []
+        cmd += ["--llm-idle-timeout", str(cfg.llm_idle_timeout)] if cfg.llm_idle_timeout else []
+        cmd += [] if cfg.stream else ["--no-stream"]
         cmd += ["--structured"] if cfg.structured else []
         cmd += ["--step-deadline", str(cfg.step_deadline)] if cfg.step_deadline else []
         cmd += ["--history-cap", str(cfg.history_cap)] if cfg.history_cap else []

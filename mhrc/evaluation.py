@@ -141,6 +141,8 @@ class EvalSpec:
     horizon: int = 50
     base_url: str | None = None
     llm_timeout: float | None = None  # None: per spec (mhrc.episode.EpisodeConfig.timeout_for)
+    llm_idle_timeout: float | None = None  # None: mhrc.episode.IDLE_TIMEOUT
+    stream: bool = True  # False: --no-stream
     prompts: str | None = None
     repeats: int = 1  # the grid, run this many times with other seeds
     aids: tuple[str, ...] = ()  # mhrc.fidelity names; () is the paper's fidelity
@@ -192,6 +194,7 @@ class EvalSpec:
                                 "task": task, "scene": scene, "seed": seed, "n_objects": n, "horizon": self.horizon,
                                 "llm": self.llm, "ablation": self.ablation, "base_url": self.base_url,
                                 "llm_timeout": self.llm_timeout, "prompts": self.prompts,
+                                "llm_idle_timeout": self.llm_idle_timeout, "stream": None if self.stream else False,
                                 "aids": list(self.aids) or None, "history_cap": self.history_cap,
                                 "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
                                 "step_deadline": self.step_deadline, "schedule": self.schedule,

@@ -72,7 +72,8 @@ async def test_transient_failures_are_retried_then_usage_recorded(mhrc_model_ser
     assert c.text == "Command: wait()" and (c.prompt_tokens, c.completion_tokens) == (11, 7)
     assert len(server.requests) == 5 and server.remaining() == 0
     body, headers = server.requests[-1], server.headers[-1]
-    assert body == {"model": "m1", "messages": [{"role": "user", "content": "hi"}], "temperature": 0.5, "max_tokens": 1024}
+    streamed = {"stream": True, "stream_options": {"include_usage": True}}  # the default: replies are streamed
+    assert body == {"model": "m1", "messages": [{"role": "user", "content": "hi"}], "temperature": 0.5, "max_tokens": 1024} | streamed
     assert headers["Authorization"] == "Bearer sekret"
 
 

@@ -280,7 +280,8 @@ def test_a_process_agent_gets_every_model_option_of_the_episode() -> None:
     from mhrc.episode import agent_command
 
     cfg = EpisodeConfig.build(
-        llm="openai:m", base_url="http://127.0.0.1:9/v1", max_tokens=99, llm_seed=4, structured=True, step_deadline=7.5, llm_timeout=3.0
+        llm="openai:m", base_url="http://127.0.0.1:9/v1", max_tokens=99, llm_seed=4, structured=True, step_deadline=7.5, llm_timeout=3.0,
+        llm_idle_timeout=4.0, stream=False,
     ).resolved()
     cmd = agent_command("bob", cfg, "openai:m")
     ctx = main.make_context("mhrc", cmd[3:])  # after `python -m mhrc`
@@ -289,6 +290,7 @@ def test_a_process_agent_gets_every_model_option_of_the_episode() -> None:
     params = sub.make_context("agent", cmd[4:]).params
     agent_cfg = EpisodeConfig.build(**{k: v for k, v in params.items() if k in EpisodeConfig.model_fields and v is not None})
     assert agent_cfg.client_options() == cfg.client_options()
+    assert (cfg.client_options()["stream"], cfg.client_options()["idle_timeout"]) == (False, 4.0)
     assert agent_cfg.policy_options() == cfg.policy_options()
 
 

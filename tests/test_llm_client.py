@@ -83,7 +83,8 @@ async def test_every_transient_failure_is_retried_and_then_the_reply_comes_throu
         assert reason in errors
     path, body, headers = server.paths[-1], server.requests[-1], server.headers[-1]
     assert path == "/v1/chat/completions"
-    assert body == {"model": "test-model", "messages": HI, "temperature": 0.5, "max_tokens": 1024}
+    streamed = {"stream": True, "stream_options": {"include_usage": True}}  # the default: replies are streamed
+    assert body == {"model": "test-model", "messages": HI, "temperature": 0.5, "max_tokens": 1024} | streamed
     assert headers["Authorization"] == "Bearer k-123"
 
 
