@@ -26,6 +26,7 @@ from mhrc.protocol import (
     AttachReply,
     AttachRequest,
     EpisodeDone,
+    Generating,
     Observation,
     ProtocolError,
     RobotDetached,
@@ -37,6 +38,7 @@ from mhrc.protocol import (
 )
 
 from .policy import Decision, Policy
+from .progress import PROGRESS, Progress
 
 if TYPE_CHECKING:
     from mhrc.security import Credentials
@@ -45,6 +47,7 @@ log = structlog.get_logger("mhrc.agent")
 
 RESYNC_BACKOFF = 0.5  # s: the first wait before attaching again for a tick whose action is already taken; doubles each time
 RESYNC_BACKOFF_MAX = 8.0  # s
+GENERATING_EVERY = 5.0  # s: a model call longer than this says how far it got (agent/<robot>/generating), then again every as long
 
 
 class AgentError(RuntimeError):
@@ -182,7 +185,7 @@ class RobotAgent:
         attached = await self._attach()
         while attached is not None and not self._done.is_set():
             obs = attached
-            decision = await self.policy.decide(obs)
+            decision = await self._decide(obs)
             self._publish_thought(obs, decision)
             if self._done.is_set():  # the episode ended while this robot planned
                 break
@@ -365,6 +368,28 @@ class RobotAgent:
             self._log.warning("the world reported a final result that never arrived", goal=goal_id, what=what)
             return None
 
+    async def _decide(self, obs: Observation) -> Decision:
+        """The policy's decision; while a model call in it takes long, its progress goes out
+        every GENERATING_EVERY seconds, so that a console shows a slow model as generating."""
+        progress = Progress()
+        token = PROGRESS.set(progress)  # the policy's model client, awaited in this task, fills it in
+        ticker = asyncio.create_task(self._tell_progress(obs.tick, progress))
+        try:
+            return await self.policy.decide(obs)
+        finally:
+            PROGRESS.reset(token)
+            ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await ticker
+
+    async def _tell_progress(self, tick: int, progress: Progress) -> None:
+        while True:
+            await asyncio.sleep(GENERATING_EVERY)
+            if progress.attempt == 0:
+                continue  # no model call (a heuristic or scripted policy), or none under way yet
+            msg = Generating(robot=self.robot, tick=tick, elapsed=round(progress.elapsed(), 1), tokens=progress.tokens, attempt=progress.attempt)
+            self.bus.put(self.keys.generating(self.robot), msg)
+
     def _publish_thought(self, obs: Observation, d: Decision) -> None:
         self.bus.put(
             self.keys.thought(self.robot),
@@ -383,5 +408,6 @@ class RobotAgent:
                 reasoning_tokens=d.reasoning_tokens,
                 finish_reason=d.finish_reason,
                 schema_hash=d.schema_hash,
+                ttft=d.ttft,
             ),
         )

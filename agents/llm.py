@@ -43,6 +43,8 @@ from typing import Any, Protocol, Self
 import httpx
 import structlog
 
+from .progress import PROGRESS, Progress
+
 log = structlog.get_logger("mhrc.llm")
 
 Messages = list[dict[str, str]]
@@ -59,9 +61,11 @@ PROVIDERS: dict[str, tuple[str, str | None]] = {
 GENERIC_KEY_ENV = "MHRC_API_KEY"
 DEFAULT_TEMPERATURE = 0.5  # the paper's
 DEFAULT_MAX_TOKENS = 1024  # the paper's reply format (analysis, reasoning, one command) with room to think
+DEFAULT_TIMEOUT = 120.0  # s to the first token (mhrc.episode.SERVER_TIMEOUT says why)
 DEFAULT_IDLE_TIMEOUT = 30.0  # s between two chunks of a streamed reply: a decoding server sends one every few tokens
 MAX_REPLY_CHARS = 16_000  # what a reply may feed into the trace and the parser (about 4x DEFAULT_MAX_TOKENS tokens)
 MAX_STREAM_CHARS = 1_000_000  # a streamed reply is read no further (a server that never stops): far beyond any max_tokens
+MAX_STREAM_CHUNKS = 200_000  # nor past this many chunks (a server that streams empty deltas forever)
 
 
 class LLMError(RuntimeError):
@@ -99,6 +103,7 @@ class Completion:
     reasoning: str | None = None  # a reasoning model's thoughts, apart from the answer
     reasoning_tokens: int = 0
     truncated: bool = False  # the text was longer than MAX_REPLY_CHARS and was cut
+    ttft: float | None = None  # seconds to the first chunk of a streamed reply (prompt processing, mostly); None: not streamed
 
 
 class LLMClient(Protocol):
@@ -160,7 +165,7 @@ class OpenAIChatClient:
         base_url: str,
         *,
         api_key: str | None = None,
-        timeout: float = 60.0,
+        timeout: float = DEFAULT_TIMEOUT,
         idle_timeout: float = DEFAULT_IDLE_TIMEOUT,
         stream: bool = True,
         retries: int = 4,
@@ -276,7 +281,7 @@ class OpenAIChatClient:
         sees its client go and stops decoding."""
         loop = asyncio.get_running_loop()
         t0 = time.perf_counter()
-        reply = _StreamedReply()
+        reply = _StreamedReply(t0, PROGRESS.get())
         try:
             async with asyncio.timeout(self.timeout) as deadline:  # to the first token; then rescheduled chunk by chunk
                 async with self._http.stream("POST", url, json=body) as resp:
@@ -295,13 +300,15 @@ class OpenAIChatClient:
                         lines: AsyncIterator[str] = _lines(resp.text)  # a stream mislabelled as something else
                     else:
                         lines = resp.aiter_lines()
-                    async for line in lines:
+                    async for line in lines:  # after [DONE] too, to the body's end: the connection then serves the next call
                         if reply.add(line):
                             deadline.reschedule(loop.time() + self.idle_timeout)
-                        if reply.done or reply.size > MAX_STREAM_CHARS:
+                        if reply.size > MAX_STREAM_CHARS or reply.chunks > MAX_STREAM_CHUNKS:
                             break
                     return reply.completion(messages, time.perf_counter() - t0)
         except TimeoutError:
+            if reply.done:  # a server that keeps the body open after [DONE]: the reply is whole
+                return reply.completion(messages, time.perf_counter() - t0)
             if reply.chunks:
                 raise _Stalled(f"the stream stalled: no chunk for {self.idle_timeout:g} s after {reply.chunks} chunk(s)") from None
             raise
@@ -357,7 +364,13 @@ class _StreamedReply:
     reasoning deltas, the last finish_reason, and usage where the server sends it (the last chunk,
     with choices empty, when asked with stream_options.include_usage)."""
 
-    def __init__(self) -> None:
+    def __init__(self, started: float, progress: Progress | None = None) -> None:
+        self.started = started  # time.perf_counter() when the request went out
+        self.ttft: float | None = None
+        self.progress = progress
+        if progress is not None:
+            progress.attempt += 1
+            progress.first_token, progress.tokens = None, 0
         self.content: list[str] = []
         self.reasoning: list[str] = []
         self.finish_reason: str | None = None
@@ -368,8 +381,8 @@ class _StreamedReply:
 
     def add(self, line: str) -> bool:
         """Take one line of the stream; True when it was a chunk (the server is producing)."""
-        if not line.startswith("data:"):
-            return False  # blank separators, `event:` and `:` keep-alive comments
+        if not line.startswith("data:") or self.done:
+            return False  # blank separators, `event:` and `:` keep-alive comments; whatever follows [DONE]
         data = line[5:].strip()
         if data == "[DONE]":
             self.done = True
@@ -389,6 +402,8 @@ class _StreamedReply:
                 self.content.append(text or "")
                 self.reasoning.append(thought or "")
                 self.size += len(text or "") + len(thought or "")
+                if text or thought:
+                    self._token()
                 self.finish_reason = choice.get("finish_reason") or self.finish_reason
             if isinstance(chunk.get("usage"), dict):
                 self.usage = chunk["usage"]
@@ -399,11 +414,19 @@ class _StreamedReply:
         self.chunks += 1
         return True
 
+    def _token(self) -> None:
+        if self.ttft is None:
+            self.ttft = time.perf_counter() - self.started
+            if self.progress is not None:
+                self.progress.first_token = time.monotonic()
+        if self.progress is not None:
+            self.progress.tokens += 1
+
     def completion(self, messages: Messages, latency: float) -> Completion:
         if not self.chunks:
             raise _Unreadable("the stream ended without a single chunk")
         text, reasoning = "".join(self.content), "".join(self.reasoning) or None
-        return _make_completion(text, reasoning, self.usage, self.finish_reason, messages, latency)
+        return _make_completion(text, reasoning, self.usage, self.finish_reason, messages, latency, self.ttft)
 
 
 def retry_after(resp: httpx.Response, default: float, cap: float) -> float:
@@ -439,7 +462,8 @@ def _completion(resp: httpx.Response, messages: Messages, latency: float) -> Com
 
 
 def _make_completion(
-    text: str, reasoning: str | None, usage: dict[str, Any], finish_reason: str | None, messages: Messages, latency: float
+    text: str, reasoning: str | None, usage: dict[str, Any], finish_reason: str | None, messages: Messages, latency: float,
+    ttft: float | None = None,
 ) -> Completion:
     """A Completion from a reply's text and reasoning field, whether it came whole or in chunks."""
     answer, thoughts = split_reasoning(text, reasoning)
@@ -457,6 +481,7 @@ def _make_completion(
         reasoning=thoughts,
         reasoning_tokens=reasoning_tokens,
         truncated=cut,
+        ttft=ttft,
     )
 
 

@@ -297,7 +297,7 @@ class LLMPolicy:
             self._pending = (obs.tick, (JSON_FORMAT_ERROR if self.structured else FORMAT_ERROR).format(reason=reason))
         return Decision(
             action, prompt, c.text, error, c.prompt_tokens, c.completion_tokens, c.latency,
-            reasoning=c.reasoning, reasoning_tokens=c.reasoning_tokens, finish_reason=c.finish_reason, schema_hash=digest,
+            reasoning=c.reasoning, reasoning_tokens=c.reasoning_tokens, finish_reason=c.finish_reason, schema_hash=digest, ttft=c.ttft,
         )  # fmt: skip
 
     def _flush_pending(self) -> None:

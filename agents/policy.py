@@ -23,6 +23,7 @@ class Decision:
     reasoning_tokens: int = 0
     finish_reason: str | None = None
     schema_hash: str | None = None
+    ttft: float | None = None  # seconds to the reply's first token, where streamed
 
 
 class Policy(Protocol):

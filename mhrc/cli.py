@@ -53,7 +53,7 @@ def _llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--llm-timeout", default=None, type=float,
                      help="Seconds to the first token of an LLM reply (the server's prompt processing included; with --no-stream, to the whole reply); "
                           "a timeout is retried once. A reply that keeps producing tokens is not cut by it: --max-tokens and --step-deadline bound that. "
-                          "Default: 60, and 600 for gguf: models."),
+                          "Default: 120 (3x the slowest first token measured with 3 robots on a 2-core CPU), and 600 for gguf: models."),
         click.option("--llm-idle-timeout", default=None, type=float, metavar="SECONDS",
                      help="Seconds a streamed LLM reply may go without a token before the call is abandoned (and retried once). Default: 30."),
         click.option("--stream/--no-stream", default=True, show_default=True,
@@ -63,7 +63,9 @@ def _llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--structured", is_flag=True,
                      help="Ask for JSON decisions that follow a schema of each step's valid actions (response_format json_schema; Ollama's format). Not the paper's: its free text is the default."),
         click.option("--step-deadline", default=None, type=float, metavar="SECONDS",
-                     help="Bound one robot's whole LLM step, retries included; past it the robot waits that step (and its call is abandoned). Default: 2 x --llm-timeout + 10."),
+                     help="Bound one robot's whole LLM step, retries included; past it the robot waits that step (and its call is abandoned). "
+                          "At least --llm-timeout. Default: none, as slow is not down: a stream that stalls ends after --llm-idle-timeout, "
+                          "one that keeps producing tokens at --max-tokens."),
         click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
                      help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm."),
         click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP),

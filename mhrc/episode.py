@@ -60,10 +60,14 @@ class ProcessFailed(RuntimeError):
 
 OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}
 DEFAULT_MAX_TOKENS = 1024  # mirrors mhrc.agents.llm.DEFAULT_MAX_TOKENS (not imported: the world needs no agent code)
-SERVER_TIMEOUT = 60.0  # s to the first token of a reply from a model server
+# s to the first token of a reply from a model server: about 3x the slowest first token measured on this
+# machine's CPU with 3 slots (42 s: three robots' prompts of ~2,000 tokens read at once by a 270M model;
+# bench/results/local_model.json); hosted APIs answer in seconds, and a server silent that long is down
+SERVER_TIMEOUT = 120.0  # mirrors mhrc.agents.llm.DEFAULT_TIMEOUT
 IDLE_TIMEOUT = 30.0  # s between chunks of a streamed reply; mirrors mhrc.agents.llm.DEFAULT_IDLE_TIMEOUT
-LOCAL_TIMEOUT = 600.0  # s to the first token from an in-process gguf: model (with --no-stream, to the whole reply: on a CPU
-# a 1024-token reply from 3 slots took 97-138 s here); a local server has no network to fail; max_tokens bounds a reply
+# s to the first token from an in-process gguf: model: a local model is the CPU's, often larger than 270M (a 10x
+# larger model reads the prompt about 10x slower); with --no-stream, to the whole reply; max_tokens bounds a reply
+LOCAL_TIMEOUT = 600.0
 
 
 def option_name(field: str) -> str:
@@ -95,13 +99,15 @@ class EpisodeConfig(BaseModel):
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
     llm_timeout: float | None = Field(None, gt=0, description="seconds to an LLM reply's first token, prompt processing included (the whole reply "
-                                      "when it is not streamed); a timeout is retried once; None: 60, 600 for gguf: models")
+                                      "when it is not streamed); a timeout is retried once; None: 120, 600 for gguf: models")
     llm_idle_timeout: float | None = Field(None, gt=0, description="seconds a streamed LLM reply may go without a chunk; None: 30")
     stream: bool = Field(True, description="stream LLM replies (False: --no-stream, for servers that cannot)")
     max_tokens: int = Field(DEFAULT_MAX_TOKENS, ge=1, description="completion tokens per LLM call, sent on every request")
     llm_seed: int | None = Field(None, ge=0, description="sampling seed sent on every LLM request (servers that honour one)")
     structured: bool = Field(False, description="LLM replies follow a JSON Schema of the step's valid actions (not the paper's)")
-    step_deadline: float | None = Field(None, gt=0, description="seconds one robot's LLM step may take, retries included; None: 2 x --llm-timeout + 10")
+    step_deadline: float | None = Field(None, gt=0, description="seconds one robot's LLM step may take, retries included, at least --llm-timeout; "
+                                        "None: no bound but the call's own (a stalled stream ends after --llm-idle-timeout, one that "
+                                        "keeps producing at --max-tokens)")
     aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.fidelity); none: the paper's")
     history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
     credentials: Path | None = Field(
@@ -155,6 +161,12 @@ class EpisodeConfig(BaseModel):
                     if spec is None:
                         continue
                     check_spec(spec, cfg.base_url)
+                    if cfg.step_deadline is not None and cfg.step_deadline < cfg.timeout_for(spec):
+                        raise ConfigError(
+                            f"--step-deadline: {cfg.step_deadline:g} s is shorter than the first-token timeout of {robot}'s model "
+                            f"({cfg.timeout_for(spec):g} s, --llm-timeout): the step would end before a slow server could answer; "
+                            "give a longer --step-deadline or a shorter --llm-timeout"
+                        )
                     for part in ("system", "user"):
                         load_template(robot, part, cfg.prompts)
         except (ValueError, FileNotFoundError) as exc:
@@ -226,7 +238,7 @@ class EpisodeConfig(BaseModel):
             "reach_labels": "reach_labels" in self.aids,
             "prompt_hints": "prompt_hints" in self.aids,
             "structured": self.structured,
-            "step_deadline": self.step_deadline or 2 * self.timeout_for(spec) + 10,
+            "step_deadline": self.step_deadline,
             "max_tokens": self.max_tokens,
         }
 

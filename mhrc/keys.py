@@ -71,6 +71,9 @@ class Keys:
     def thought(self, robot: str) -> str:
         return f"{self.base}/agent/{check_id(robot, 'robot')}/thought"
 
+    def generating(self, robot: str) -> str:
+        return f"{self.base}/agent/{check_id(robot, 'robot')}/generating"
+
     @property
     def alive_world(self) -> str:
         return f"{self.base}/alive/world"

@@ -21,6 +21,7 @@ from .protocol import (
     Communicate,
     EpisodeDone,
     EpisodeStarted,
+    Generating,
     ProtocolError,
     RobotAttached,
     RobotDetached,
@@ -74,6 +75,7 @@ class ProgressPrinter:
         bus.subscribe(f"{k.base}/robot/*/action/result", self._on_result)
         bus.subscribe(f"{k.base}/robot/*/inbox/*", self._on_message)
         bus.subscribe(f"{k.base}/agent/*/thought", self._on_thought)
+        bus.subscribe(f"{k.base}/agent/*/generating", self._on_generating)
 
     def close(self) -> None:
         """Print everything still held back, in tick order (and with `summary` the table, if the
@@ -205,6 +207,20 @@ class ProgressPrinter:
             self._print(line)
         else:
             self._thoughts.setdefault((t.tick, t.robot), []).append(line)
+
+    def _on_generating(self, sample: Sample) -> None:
+        """A long model call, said as it goes (not held back: it is about now, not a tick's record)."""
+        if not self.verbose or self._closed:
+            return
+        try:
+            g = decode(sample.payload, Generating)
+        except ProtocolError:
+            return
+        if g.robot in self._printed.get(g.tick, set()):
+            return  # a late status of a step whose result has printed
+        what = f"generating ({g.tokens} tokens so far)" if g.tokens else "waiting for the model's first token (it reads the prompt)"
+        again = f", attempt {g.attempt}" if g.attempt > 1 else ""
+        self._print(f"[dim]tick {g.tick:>2}[/] {self._robot(g.robot)} [dim]{what}, {g.elapsed:.0f} s{again}[/]")
 
     def _on_message(self, sample: Sample) -> None:
         if not self.verbose:

@@ -466,6 +466,19 @@ class Thought(Message):
     reasoning_tokens: int = 0
     finish_reason: str | None = Field(None, description="the server's: stop, length (cut at max_tokens), ...")
     schema_hash: str | None = Field(None, description="with --structured: hash of the JSON Schema the reply had to follow")
+    ttft: float | None = Field(None, description="seconds to the reply's first token (prompt processing, mostly), where it was streamed")
+
+
+class Generating(Message):
+    """A robot's model call that is taking a while, as the server has answered it so far: live
+    status for the console (`mhrc up`), sent every few seconds of a long call; not recorded."""
+
+    kind: Literal["generating"] = "generating"
+    robot: str
+    tick: int
+    elapsed: float = Field(description="seconds since the call began, retries included")
+    tokens: int = Field(0, description="tokens streamed so far in this attempt (0: the server is still reading the prompt)")
+    attempt: int = Field(1, description="HTTP attempt of this call (retries included)")
 
 
 # --------------------------------------------------------------------------- codec

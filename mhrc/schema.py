@@ -28,6 +28,7 @@ KEYS: dict[str, tuple[str, str]] = {
     "Turn": ("robot/<rid>/turn", "world -> agent (put): sequential schedule, after an attach reply with wait_turn"),
     "RobotMessage": ("robot/<to>/inbox/<from>", "world -> observers (put): a delivered communicate; agents read it in Observation.new_messages"),
     "Thought": ("agent/<rid>/thought", "agent -> observers (put), optional"),
+    "Generating": ("agent/<rid>/generating", "agent -> observers (put), optional: a long model call's progress, every few seconds; not recorded"),
     "WorldState": ("world/state", "world -> anyone: the reply to a zenoh get"),
     "WorldEvent": ("world/event", "world -> all (put): one of the event kinds, discriminated by `kind`"),
 }

@@ -18,7 +18,7 @@ for containers: each mounts only its own). `mhrc up` calls this for every secure
 The world's router (`apply(conf, creds, router=True)`) listens on TLS with its certificate,
 authenticates every client against the dictionary (`transport/auth/usrpwd/dictionary_file`)
 and enforces `access_control` (default deny): a robot's user may publish only its own
-robot's request and thought keys, query its own attach key, declare its own liveliness token
+robot's request, thought and generating keys, query its own attach key, declare its own liveliness token
 and subscribe to what an agent needs. A denied message is dropped by the router.
 """
 
@@ -333,7 +333,7 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
     world: it alone may put world events, acks, results, turns and inbox copies, reply to
     queries and hold `alive/world`. The observer reads the whole run (and may ask `world/state`),
     and every robot reads the world's events and liveliness; a robot sends only its own requests
-    and thoughts, queries only its own attach key and holds only its own liveliness token.
+    and thoughts (and generating status), queries only its own attach key and holds only its own liveliness token.
 
     Zenoh matches a rule by key inclusion: a declaration is allowed when its key expression lies
     inside one of the rule's, a message when its key does. Ingress is what a client sends to the
@@ -410,12 +410,12 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
         k = f"{base}/robot/{r}"
         own_put, own_in, own_out = f"{r}-put", f"{r}-in", f"{r}-out"
         rules += [
-            {  # what robot r may send: its requests and thoughts
+            {  # what robot r may send: its requests, thoughts and generating status
                 "id": own_put,
                 "messages": ["put"],
                 "flows": ["ingress"],
                 "permission": "allow",
-                "key_exprs": [f"{k}/action/request", f"{base}/agent/{r}/thought"],
+                "key_exprs": [f"{k}/action/request", f"{base}/agent/{r}/thought", f"{base}/agent/{r}/generating"],
             },
             {  # its attach query, its liveliness token, its subscriptions to what the world sends it
                 "id": own_in,
@@ -430,7 +430,7 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
                 "messages": ["put", "reply", "declare_subscriber", "declare_queryable", "liveliness_token"],
                 "flows": ["egress"],
                 "permission": "allow",
-                "key_exprs": [f"{k}/**", f"{base}/agent/{r}/thought", f"{base}/alive/robot/{r}"],
+                "key_exprs": [f"{k}/**", f"{base}/agent/{r}/thought", f"{base}/agent/{r}/generating", f"{base}/alive/robot/{r}"],
             },
         ]  # fmt: skip
         subjects.append({"id": f"s-{r}", "usernames": [r]})

@@ -137,7 +137,8 @@ class ModelReply:
     `stream` (an iterable of bytes, which may be endless, e.g. ``itertools.repeat(b"a")``)
     makes the body be written chunk by chunk, flushed each time, `stream_interval` seconds apart,
     after the status and headers (no ``Content-Length`` unless `headers` give one; the end of the
-    body is the end of the connection): a server that trickles or never stops writing. The
+    body is the end of the connection, or with `keep_alive` a chunked body whose end keeps the
+    connection open for the next request): a server that trickles or never stops writing. The
     stream ends when the iterable does, the client hangs up, or the server is closed. A
     generator is consumed by the one call it answers: return a fresh reply from a callable
     script to stream to every call.
@@ -166,6 +167,8 @@ class ModelCall:
     positions in one count of every call's start and end (a call ends when its latency is over
     and its answer is about to be written; `ended` is None until then): two calls overlapped
     in time exactly when each started before the other ended, whatever the machine's speed.
+    `connection` numbers the TCP connection the call came on (1, 2, ... in the order they were
+    opened): calls on one connection reused it.
     """
 
     request: dict[str, Any]
@@ -174,6 +177,7 @@ class ModelCall:
     robot: str | None
     started: int
     ended: int | None = None
+    connection: int = 0
     latency: float = 0.0
     reply: ModelReply | None = None
 
@@ -236,6 +240,7 @@ class ScriptedModelServer:
         self.in_flight = 0
         self.max_in_flight = 0
         self._seq = 0
+        self._connections = 0
         self._lock = threading.Lock()
         self._closing = threading.Event()
         self._queues: dict[str | None, list[Reply]] = {}
@@ -248,6 +253,12 @@ class ScriptedModelServer:
         class Handler(BaseHTTPRequestHandler):
             protocol_version = "HTTP/1.1" if keep_alive else "HTTP/1.0"
 
+            def setup(self) -> None:
+                super().setup()
+                with server._lock:
+                    server._connections += 1
+                    self.connection_no = server._connections
+
             def do_POST(self) -> None:  # noqa: N802
                 raw = self.rfile.read(int(self.headers.get("Content-Length") or 0))
                 try:
@@ -255,7 +266,7 @@ class ScriptedModelServer:
                 except ValueError:
                     self._send(_Answer(400, {}, b'{"error": "the request body is not JSON"}', 0.0))
                     return
-                call = server._begin(body, dict(self.headers), self.path)
+                call = server._begin(body, dict(self.headers), self.path, self.connection_no)
                 answer = server._answer(body)
                 if answer.delay > 0:
                     server._closing.wait(answer.delay)
@@ -273,7 +284,11 @@ class ScriptedModelServer:
                         self.send_header("Content-Type", "application/json")
                     for k, v in answer.headers.items():
                         self.send_header(k, v)
-                    if answer.stream is not None or "content-length" in names:
+                    # a stream on a kept-alive connection is chunked, so that its end leaves the connection open
+                    chunked = answer.stream is not None and "content-length" not in names and self.protocol_version != "HTTP/1.0"
+                    if chunked:
+                        self.send_header("Transfer-Encoding", "chunked")
+                    elif answer.stream is not None or "content-length" in names:
                         self.close_connection = True  # the body may not be what a length says
                         if self.protocol_version != "HTTP/1.0":
                             self.send_header("Connection", "close")
@@ -285,9 +300,14 @@ class ScriptedModelServer:
                         return
                     for i, chunk in enumerate(answer.stream):
                         if server._closing.is_set() or (i and answer.interval > 0 and server._closing.wait(answer.interval)):
+                            self.close_connection = True  # cut short: the body has no proper end
                             break
-                        self.wfile.write(chunk)
+                        self.wfile.write(b"%x\r\n%s\r\n" % (len(chunk), chunk) if chunked and chunk else chunk)
                         self.wfile.flush()
+                    else:
+                        if chunked:
+                            self.wfile.write(b"0\r\n\r\n")
+                            self.wfile.flush()
                 except OSError:  # the client gave up (its timeout): what a timeout should do
                     self.close_connection = True
 
@@ -326,13 +346,14 @@ class ScriptedModelServer:
                 return sum(len(queue) for queue in self._queues.values())
             return len(self._queues.get(robot, []))
 
-    def _begin(self, body: dict[str, Any], headers: dict[str, str], path: str) -> ModelCall:
+    def _begin(self, body: dict[str, Any], headers: dict[str, str], path: str, connection: int = 0) -> ModelCall:
         with self._lock:
             self.requests.append(body)
             self.headers.append(headers)
             self.paths.append(path)
             self._seq += 1
-            call = ModelCall(request=body, headers=headers, path=path, robot=self.robot_of(body) if isinstance(body, Mapping) else None, started=self._seq)
+            robot = self.robot_of(body) if isinstance(body, Mapping) else None
+            call = ModelCall(request=body, headers=headers, path=path, robot=robot, started=self._seq, connection=connection)
             self.calls.append(call)
             self.in_flight += 1
             self.max_in_flight = max(self.max_in_flight, self.in_flight)

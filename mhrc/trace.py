@@ -8,7 +8,8 @@ Malformed action requests and the world's rejections of them are not copied: a `
 key and second holds their count, bytes and first reason. So are well-formed requests the world
 rejects, past the first REJECTIONS_IN_FULL per robot and interval (a robot flooding its own key
 must not fill the disk either): the recorder holds each well-formed request until its ack, then
-writes both (the request with the time it was seen) or counts both.
+writes both (the request with the time it was seen) or counts both. An agent's `generating`
+status (a long model call's progress, for the console) is not recorded: its thought is.
 """
 
 from __future__ import annotations
@@ -66,6 +67,8 @@ class Recorder:
             self.count += 1
 
     def _on_sample(self, sample: Sample) -> None:
+        if sample.key.endswith("/generating"):
+            return  # an agent's live status of a long model call: its thought records the call
         try:
             msg: Any = json.loads(sample.payload)
         except (ValueError, UnicodeDecodeError):

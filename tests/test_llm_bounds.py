@@ -65,7 +65,7 @@ async def test_an_endless_server_costs_each_step_at_most_its_deadline_and_the_ro
 
 
 async def test_the_step_deadline_bounds_all_attempts_of_one_step(tmp_path: Path) -> None:
-    cfg, done, _ = await against_endless(tmp_path, horizon=1, llm_timeout=30.0, step_deadline=0.5)
+    cfg, done, _ = await against_endless(tmp_path, horizon=1, llm_timeout=0.4, step_deadline=0.5)  # the retry would end past it
     assert done.metrics.temporal_steps == 1
     assert all("step deadline of 0.5 s" in t["parse_error"] for t in thoughts(cfg.trace))
 
@@ -298,8 +298,8 @@ def test_a_local_model_gets_a_longer_default_timeout_than_a_server(gemma: Path) 
     """A CPU takes minutes for a long reply (bench/results/local_model.json); a server does not."""
     cfg = EpisodeConfig.build(llm=f"alice=gguf:{gemma},openai:m@http://127.0.0.1:9/v1")
     specs = cfg.robot_specs()
-    assert cfg.client_options(specs["alice"])["timeout"] == 600.0 and cfg.client_options(specs["bob"])["timeout"] == 60.0
-    assert cfg.policy_options(specs["alice"])["step_deadline"] == 1210.0
+    assert cfg.client_options(specs["alice"])["timeout"] == 600.0 and cfg.client_options(specs["bob"])["timeout"] == 120.0
+    assert cfg.policy_options(specs["alice"])["step_deadline"] is None  # slow is not down: the call's own timeouts bound it
     assert EpisodeConfig.build(llm=f"gguf:{gemma}", llm_timeout=5.0).client_options(f"gguf:{gemma}")["timeout"] == 5.0
 
 

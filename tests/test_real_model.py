@@ -32,18 +32,23 @@ def observations(trace: Path) -> dict[tuple[str, int], Observation]:
     return out
 
 
-async def test_a_free_text_episode_against_llama_cpp_is_bounded_by_max_tokens(gemma: Path, tmp_path: Path) -> None:
+async def test_a_free_text_episode_at_the_defaults_gets_every_robot_its_models_own_reply(gemma: Path, tmp_path: Path) -> None:
+    """The paper's free text, every model option at its default (1024 tokens, the first-token and
+    idle timeouts, no step deadline), three robots on three slots of this machine's CPU: each
+    reply takes minutes of decoding, and every robot-step still gets the model's own reply
+    (parsed or not), none "unavailable" (the old total timeout of 60 s cut them all)."""
+    from mhrc.protocol import LLM_ERROR_PREFIX
+
     async with LocalModelServer(gemma, slots=3, n_ctx_per_slot=CTX, seed=7) as srv:
-        cfg = EpisodeConfig.build(
-            seed=0, horizon=2, llm=f"llamacpp:{srv.model}", base_url=srv.base_url, max_tokens=48, llm_seed=7, trace=tmp_path / "t.jsonl"
-        ).resolved()
+        cfg = EpisodeConfig.build(seed=0, horizon=1, llm=f"llamacpp:{srv.model}", base_url=srv.base_url, trace=tmp_path / "t.jsonl").resolved()
         done = await up_in_process(cfg)
-    assert done.reason == "horizon" and done.metrics.temporal_steps == 2
+    assert done.reason == "horizon" and done.metrics.temporal_steps == 1
     ts = thoughts(cfg.trace)
-    assert len(ts) == 6 and all(t["reply"] is not None and t["prompt_tokens"] > 500 for t in ts)
-    # the server counted its tokens: none went past the cap, and the rambling base model hit it
-    assert all(0 < t["completion_tokens"] <= 48 for t in ts)
-    assert all(t["finish_reason"] in ("stop", "length") for t in ts) and any(t["finish_reason"] == "length" for t in ts)
+    assert len(ts) == 3 and not any((t["parse_error"] or "").startswith(LLM_ERROR_PREFIX) for t in ts), [t["parse_error"] for t in ts]
+    assert all(t["reply"] is not None and t["prompt_tokens"] > 500 and t["ttft"] is not None and t["ttft"] < t["latency"] for t in ts)
+    # the server counted its tokens: none went past the default cap (the rambling base model reaches it)
+    assert all(0 < t["completion_tokens"] <= 1024 for t in ts)
+    assert all(t["finish_reason"] in ("stop", "length") for t in ts)
     for t in ts:  # whatever it wrote, the robot either acted or was told why not
         assert t["action"] and (t["parse_error"] is None or len(t["parse_error"]) <= 300)
 
@@ -54,8 +59,7 @@ async def test_a_structured_episode_against_llama_cpp_parses_every_reply_into_a_
     async with LocalModelServer(gemma, slots=3, n_ctx_per_slot=CTX, seed=3) as srv:
         cfg = EpisodeConfig.build(
             seed=0, horizon=2, llm=f"llamacpp:{srv.model}", base_url=srv.base_url, structured=True, max_tokens=400, llm_seed=3,
-            llm_timeout=300,  # up to 400 grammar-constrained tokens on 3 slots of 2 shared cores: under load, over the default 60 s
-            trace=tmp_path / "t.jsonl",
+            trace=tmp_path / "t.jsonl",  # the default timeouts: streamed, a slow grammar-constrained reply is not cut
         ).resolved()  # fmt: skip
         await up_in_process(cfg)
     ts = thoughts(cfg.trace)

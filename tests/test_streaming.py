@@ -137,6 +137,19 @@ async def test_a_reply_that_keeps_producing_tokens_is_not_cut_by_the_first_token
         c = await client.complete(HI)
     assert c.text == "".join(words) + "Command: wait()"
     assert len(server.requests) == 1
+    assert c.ttft is not None and 0 < c.ttft < c.latency  # the first token came well before the reply's end
+
+
+async def test_a_finished_stream_leaves_its_connection_open_for_the_next_call(serve) -> None:  # type: ignore[no-untyped-def]
+    """A stream read to its end (past `[DONE]`) gives its connection back to the pool: the next
+    call goes out on it instead of opening another (a client that stopped reading at `[DONE]`
+    hung up on every call)."""
+    reply = lambda _body: ModelReply(headers=SSE, stream=events(chunk("Command: wait()", finish="stop"), usage(5, 3)))  # noqa: E731
+    server = serve(reply, keep_alive=True)
+    async with OpenAIChatClient("m", server.url) as client:
+        for _ in range(3):
+            assert (await client.complete(HI)).text == "Command: wait()"
+    assert [call.connection for call in server.calls] == [1, 1, 1]
 
 
 async def test_a_whole_json_body_or_a_mislabelled_stream_answers_a_stream_request(serve) -> None:  # type: ignore[no-untyped-def]
@@ -238,10 +251,55 @@ def test_bad_timeouts_are_refused_naming_the_option(tmp_path: Path) -> None:
 
     from mhrc.cli import main
 
-    for option, value in (("--llm-timeout", "0"), ("--llm-timeout", "-1"), ("--llm-idle-timeout", "0")):
-        result = CliRunner().invoke(main, ["up", "--llm", "openai:m", "--base-url", "http://127.0.0.1:9/v1", "--trace", str(tmp_path / "t.jsonl"), option, value])
-        assert result.exit_code == 2 and f"{option}: " in result.output, result.output
+    for args in (["--llm-timeout", "0"], ["--llm-timeout", "-1"], ["--llm-idle-timeout", "0"], ["--step-deadline", "0"],
+                 ["--step-deadline", "30"], ["--step-deadline", "10", "--llm-timeout", "20"]):  # fmt: skip
+        for command in ("up", "agent"):
+            where = ["--trace", str(tmp_path / "t.jsonl")] if command == "up" else ["--robot", "alice", "--connect", "tcp/127.0.0.1:9", "--run", "r1", "--insecure"]
+            result = CliRunner().invoke(main, [command, "--llm", "openai:m", "--base-url", "http://127.0.0.1:9/v1", *where, *args])
+            assert result.exit_code == 2 and f"{args[0]}: " in result.output, (command, args, result.output)
+        if args[0] == "--step-deadline" and args[1] != "0":  # shorter than the first-token timeout (the default 120 s, or the one given)
+            assert "shorter than the first-token timeout" in result.output, result.output
     assert not (tmp_path / "t.jsonl").exists()
+    assert EpisodeConfig.build(llm="openai:m", base_url="http://127.0.0.1:9/v1", step_deadline=120.0).step_deadline == 120.0  # as long is fine
+
+
+async def test_a_long_call_shows_at_the_console_as_reading_then_generating_and_stays_out_of_the_trace(
+    serve, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:  # type: ignore[no-untyped-def]
+    """Alice's model takes a while to its first token (the prompt), then streams slowly: the
+    console says so while it runs (not "unavailable", not silence), before her result; the
+    trace keeps the thought, with its time to the first token, and not the live status."""
+    import io
+    import re
+
+    from rich.console import Console
+
+    from mhrc.agents import agent as agent_module
+    from mhrc.progress import ProgressPrinter
+    from mhrc.trace import read_trace
+
+    monkeypatch.setattr(agent_module, "GENERATING_EVERY", 0.2)
+    words = [f"w{i} " for i in range(14)]
+    stream = events(*(chunk(w) for w in words), chunk("Command: wait()", finish="stop"), usage(900, 15))
+    server = serve({"alice": [ModelReply(headers=SSE, stream=stream, stream_interval=0.1, latency=0.7)]})
+    out = io.StringIO()
+    printer = ProgressPrinter(Console(file=out, width=300, highlight=False, soft_wrap=True))
+    cfg = EpisodeConfig.build(seed=0, horizon=1, llm="alice=openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
+    await up_in_process(cfg, observe=printer.attach)
+    printer.close()
+    lines = out.getvalue().splitlines()
+    reading = [i for i, line in enumerate(lines) if re.search(r"alice waiting for the model's first token", line)]
+    generating = [(i, int(m.group(1))) for i, line in enumerate(lines) if (m := re.search(r"alice generating \((\d+) tokens so far\)", line))]
+    result = next(i for i, line in enumerate(lines) if re.match(r"tick +0 +alice wait\(\)", line))
+    assert reading and generating, lines
+    assert max(reading) < min(i for i, _ in generating) and max(i for i, _ in generating) < result
+    counts = [n for _, n in generating]
+    assert counts == sorted(counts) and 0 < counts[-1] <= len(words) + 1
+    assert not any("unavailable" in line for line in lines)
+    trace = read_trace(cfg.trace)
+    assert not any(line["key"].endswith("/generating") for line in trace)
+    thought = next(line["msg"] for line in trace if line["key"].endswith("/agent/alice/thought"))
+    assert thought["ttft"] is not None and 0.5 < thought["ttft"] < thought["latency"]
 
 
 def _obs(tick: int = 0) -> Any:
@@ -291,6 +349,57 @@ async def test_an_abandoned_call_frees_llama_cpps_slot_at_once_on_a_busy_server(
                 with contextlib.suppress(asyncio.CancelledError):
                     await neighbour
     assert decoded < long, f"the abandoned generation was decoded on ({decoded} tokens finished)"
+
+
+COUNT = [{"role": "user", "content": "Count to ten thousand:"}]
+LONG = 1500  # tokens of a reply nobody waits for: about a minute of decoding on this machine's CPU
+
+
+@pytest.mark.slow
+async def test_a_step_deadline_ends_a_long_generation_and_leaves_llama_cpp_idle(gemma: Path) -> None:
+    """One slot. The robot's step deadline passes while its model decodes a long reply: the
+    robot waits that step, and the server stops decoding at once: a 1-token request answers from
+    the only slot without waiting out the abandoned reply (the server finished only the few
+    tokens decoded before the deadline, plus one)."""
+    import httpx
+
+    from mhrc.agents.local import LocalModelServer
+
+    async with LocalModelServer(gemma, slots=1, n_ctx_per_slot=2048, seed=1) as srv:
+        async with httpx.AsyncClient(base_url=srv.base_url.removesuffix("/v1"), timeout=300) as admin:
+            client = OpenAIChatClient(srv.model, srv.base_url, max_tokens=LONG, timeout=5, extra_body={"ignore_eos": True})
+            policy = LLMPolicy("alice", client, step_deadline=6.0)
+            policy.render = lambda obs: COUNT  # type: ignore[method-assign]  (a short prompt: the deadline falls in the decoding)
+            async with client:
+                decision = await policy.decide(_obs())
+            assert decision.action.skill == "wait" and "step deadline of 6 s" in (decision.parse_error or "")
+            async with OpenAIChatClient(srv.model, srv.base_url, max_tokens=1, timeout=300) as one:
+                await one.complete([{"role": "user", "content": "Hi"}])
+            decoded = await _tokens_decoded(admin)
+            assert await _decoding(admin) == 0
+    assert 0 < decoded < LONG, f"the abandoned generation was decoded on ({decoded} tokens finished)"
+
+
+@pytest.mark.slow
+async def test_a_retry_does_not_wait_behind_its_abandoned_predecessor(gemma: Path) -> None:
+    """One slot, and an idle timeout so short that every attempt stalls a few tokens in: the call
+    is tried twice, and the retry got tokens of its own (it stalled, it did not time out waiting
+    for the slot) while the server decoded neither attempt on (far fewer tokens finished than
+    one whole reply)."""
+    import httpx
+
+    from mhrc.agents.local import LocalModelServer
+
+    async with LocalModelServer(gemma, slots=1, n_ctx_per_slot=2048, seed=1) as srv:
+        async with httpx.AsyncClient(base_url=srv.base_url.removesuffix("/v1"), timeout=300) as admin:
+            async with OpenAIChatClient(
+                srv.model, srv.base_url, max_tokens=LONG, timeout=300, idle_timeout=0.005, backoff=0.01, extra_body={"ignore_eos": True}
+            ) as client:  # fmt: skip
+                with pytest.raises(LLMTimeout, match=r"the stream stalled: .* 2 time\(s\)"):
+                    await client.complete(COUNT)
+                assert client.requests == 2
+            decoded = await _tokens_decoded(admin)
+    assert 0 < decoded < LONG, f"an abandoned attempt was decoded on ({decoded} tokens finished)"
 
 
 async def _stream(http: Any, body: dict[str, Any]) -> None:
