@@ -378,9 +378,7 @@ class RobotAgent:
             return await self.policy.decide(obs)
         finally:
             PROGRESS.reset(token)
-            ticker.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await ticker
+            ticker.cancel()  # not awaited: an await here could swallow a cancellation of this agent meant for it
 
     async def _tell_progress(self, tick: int, progress: Progress) -> None:
         while True:
