@@ -5,9 +5,8 @@ scouting off, that endpoint only) and closes it in `finally`. Before Zenoh is as
 TCP endpoint is probed with a plain connect, so "nothing listens there" and "something listens
 but it is not zenoh" are told apart in one clear line each (`BusToolError`), never a traceback.
 
-- presence comes from liveliness tokens (DESIGN.md, "The bus"): `mhrc/<run>/alive/world`,
-  `mhrc/<run>/alive/robot/<rid>` and an evaluation's `mhrc/eval/<id>/alive/coordinator` and
-  `.../alive/worker/<wid>`;
+- presence comes from liveliness tokens (DESIGN.md, "The bus"): `mhrc/<run>/alive/world` and
+  `mhrc/<run>/alive/robot/<rid>`;
 - every message `echo` shows is decoded with `mhrc.protocol` by its `kind`; a payload that is
   not JSON or not a valid message is shown as such;
 - the protocol version a world speaks is the `v` field of its `world/state` answer (every
@@ -184,49 +183,33 @@ async def connected(ep: str, credentials: Path | None = None) -> AsyncIterator[C
 
 @dataclass
 class Group:
-    """The participants alive under one `mhrc/<id>/`: a run (world, robots) or an evaluation."""
+    """The participants alive under one `mhrc/<run>/`: its world and robots."""
 
     id: str
     world: bool = False
     robots: list[str] = field(default_factory=list)
-    coordinator: bool = False
-    workers: list[str] = field(default_factory=list)
     other: list[str] = field(default_factory=list)
 
-    @property
-    def is_eval(self) -> bool:
-        return self.coordinator or bool(self.workers)
-
     def to_json(self) -> dict[str, Any]:
-        if self.is_eval and not (self.world or self.robots):
-            out: dict[str, Any] = {"eval": self.id, "coordinator": self.coordinator, "workers": self.workers}
-        else:
-            out = {"run": self.id, "world": self.world, "robots": self.robots}
+        out: dict[str, Any] = {"run": self.id, "world": self.world, "robots": self.robots}
         if self.other:
             out["other"] = self.other
         return out
 
     def describe(self) -> str:
-        if self.is_eval and not (self.world or self.robots):
-            text = f"eval {self.id}: coordinator {'alive' if self.coordinator else 'gone'}; "
-            text += f"workers: {', '.join(self.workers)}" if self.workers else "no workers"
-        else:
-            text = f"run {self.id}: {'world alive' if self.world else 'no world'}; "
-            text += f"robots attached: {', '.join(self.robots)}" if self.robots else "no robots attached"
+        text = f"run {self.id}: {'world alive' if self.world else 'no world'}; "
+        text += f"robots attached: {', '.join(self.robots)}" if self.robots else "no robots attached"
         if self.other:
             text += f"; other tokens: {', '.join(self.other)}"
         return text
 
 
 def group_tokens(keys: list[str]) -> list[Group]:
-    """Liveliness keys -> one Group per run or evaluation id, sorted. A run's tokens are
-    `mhrc/<run>/alive/...`, an evaluation's `mhrc/eval/<id>/alive/...` (mhrc.evaluation)."""
+    """Liveliness keys -> one Group per run id, sorted. A run's tokens are `mhrc/<run>/alive/...`."""
     groups: dict[str, Group] = {}
     for key in sorted(set(keys)):
         parts = key.split("/")
-        if len(parts) >= 5 and parts[0] == ROOT and parts[1] == "eval" and parts[3] == "alive":
-            gid, role = parts[2], parts[4:]
-        elif len(parts) >= 4 and parts[0] == ROOT and parts[2] == "alive":
+        if len(parts) >= 4 and parts[0] == ROOT and parts[2] == "alive":
             gid, role = parts[1], parts[3:]
         else:
             groups.setdefault("", Group("")).other.append(key)
@@ -236,10 +219,6 @@ def group_tokens(keys: list[str]) -> list[Group]:
             g.world = True
         elif len(role) == 2 and role[0] == "robot":
             g.robots.append(role[1])
-        elif role == ["coordinator"]:
-            g.coordinator = True
-        elif len(role) == 2 and role[0] == "worker":
-            g.workers.append(role[1])
         else:
             g.other.append("/".join(role))
     return [groups[k] for k in sorted(groups)]
@@ -258,7 +237,7 @@ async def alive_tokens(bus: Bus, patterns: list[str] | None = None, *, settle: f
 
 
 async def bus_list(ep: str, *, as_json: bool = False, credentials: Path | None = None, write: Write = print) -> int:
-    """`mhrc bus list`: the runs and evaluations alive at `ep`, from liveliness. Exit code 0."""
+    """`mhrc bus list`: the runs alive at `ep`, from liveliness. Exit code 0."""
     async with connected(ep, credentials) as conn:
         groups = group_tokens(await alive_tokens(conn.bus, conn.token_patterns))
     if as_json:
@@ -480,9 +459,6 @@ async def doctor(ep: str, *, credentials: Path | None = None, write: Write = pri
                 write(f"{'ok  ' if ok else 'FAIL'} run {g.id}: {text}")
             elif g.robots:
                 write(f"warn run {g.id}: robots {', '.join(g.robots)} alive, but no world")
-            if g.is_eval:
-                workers = f"{len(g.workers)} worker(s)" if g.workers else "no workers"
-                write(f"ok   eval {g.id}: coordinator {'alive' if g.coordinator else 'gone'}, {workers}")
             if g.other:
                 write(f"warn {g.id or 'bus'}: tokens mhrc does not know: {', '.join(g.other)}")
     finally:

@@ -12,7 +12,7 @@ import shutil
 import signal
 import sys
 import time
-from collections.abc import Callable, Coroutine, Iterator
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any, NoReturn, TypeVar
 
@@ -77,25 +77,8 @@ def _llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
 T = TypeVar("T")
 
 
-_AT_QUIT: list[Callable[[], None]] = []  # run by a quit at once, which skips every `finally` (see _at_quit)
-
-
-@contextlib.contextmanager
-def _at_quit(cleanup: Callable[[], None]) -> Iterator[None]:
-    """Run `cleanup` if the process quits at once (a second Ctrl-C) inside this block: what must
-    not outlive the run (an evaluation's worker login) goes even then."""
-    _AT_QUIT.append(cleanup)
-    try:
-        yield
-    finally:
-        _AT_QUIT.remove(cleanup)
-
-
 def _quit(code: int = 130) -> NoReturn:
-    """Quit at once (os._exit: no `finally`, no waiting on threads) after the _at_quit cleanups."""
-    for cleanup in reversed(_AT_QUIT):
-        with contextlib.suppress(Exception):
-            cleanup()
+    """Quit at once (os._exit: no `finally`, no waiting on threads)."""
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
             stream.flush()
@@ -122,8 +105,8 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | Calla
     A child of `mhrc up --processes` or `mhrc eval` gets SIGTERM when its parent dies.
 
     The first Ctrl-C cancels the run (saying `stopping`, what is being done, when given: a
-    callable is asked at that moment); a second one quits at once after the `_at_quit`
-    cleanups: the children go with this process (mhrc.lifeline), never a hang."""
+    callable is asked at that moment); a second one quits at once: the children go with this
+    process (mhrc.lifeline), never a hang."""
     from .lifeline import die_with_parent
 
     die_with_parent()
@@ -522,29 +505,25 @@ def _first_missing(path: Path) -> Path | None:
 @click.option("--schedule", default="sequential", show_default=True, type=click.Choice(SCHEDULES),
               help=SCHEDULE_HELP + " The paper's figures are shown beside sequential runs only.")
 @click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP)
-@click.option("--workers", default=os.cpu_count() or 1, show_default="the number of cores", type=int,
-              help="Local worker processes; 0: only workers that join with `mhrc worker --connect`.")
+@click.option("--workers", default=None, type=int, show_default="the number of cores",
+              help="Local worker processes (not with --ray: the cluster's resources decide).")
 @click.option("--concurrency", default=None, type=int,
-              help="Episodes each local worker runs at once. Default: 1 for the heuristic (CPU-bound), replays and gguf: models; "
-                   "with a model server, enough episodes to fill its slots (llama.cpp's /props), else 12 for openai and vllm, 1 for ollama and lmstudio.")
-@click.option("--listen", default=None,
-              help="Endpoint for the bus, e.g. tls/0.0.0.0:7448 (tcp/ with --insecure) to let other hosts' workers join; default: a free loopback port.")
-@click.option("--secure/--insecure", "secure", default=True, show_default=True,
-              help="--secure (the default): TLS and a login for every worker (the login is written to OUT/credentials/worker/ "
-                   "while the evaluation runs; workers elsewhere need a copy); --insecure: the open tcp bus.")
-@click.option("--host", "hosts", multiple=True, metavar="NAME", callback=_cert_hosts,
-              help="A name workers reach the coordinator by, for its TLS certificate (repeatable), e.g. eval in docker compose.")
-@click.option("--credentials", "eval_credentials", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Use (and keep) an evaluation's credentials issued by `mhrc credentials --eval --out DIR --host NAME`: remote "
-                   "workers keep one login (DIR/worker/) across evaluations. Default: new ones for each evaluation.")
+              help="Episodes each local worker runs at once (with --ray: an LLM episode takes 1/concurrency of a CPU). Default: 1 for the "
+                   "heuristic (CPU-bound), replays and gguf: models; with a model server, enough episodes to fill its slots "
+                   "(llama.cpp's /props), else 12 for openai and vllm, 1 for ollama and lmstudio.")
+@click.option("--ray", "ray_address", default=None, metavar="ADDRESS",
+              help="Run every episode as a task on this Ray cluster: auto (a node of the cluster), HOST:PORT (the head, e.g. "
+                   "10.0.0.5:6379) or ray://HOST:10001. Needs the extra: pip install -e \".[ray]\".")
+@click.option("--shared-out", is_flag=True,
+              help="With --ray: --out is the same path on every node (a shared file system), so tasks write their traces there "
+                   "instead of sending them back through the object store.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory; default runs/eval-<time>.")
 @click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
 @click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
 def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
-          aids: str | None, schedule: str, time_scale: float, workers: int, concurrency: int | None, listen: str | None, secure: bool,
-          hosts: tuple[str, ...], eval_credentials: Path | None, out: Path | None, resume: bool, dry_run: bool, log_level: str,
-          **llm: Any) -> None:  # fmt: skip
+          aids: str | None, schedule: str, time_scale: float, workers: int | None, concurrency: int | None, ray_address: str | None,
+          shared_out: bool, out: Path | None, resume: bool, dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
     summary.md / summary.csv (tables shaped like the paper's Table I and II with 95% bootstrap
@@ -554,28 +533,27 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     The default grid is the paper's: per task, 3 scenes x one episode each with 3, 4, 5 and 6
     objects (12 per task, 36 in all); --repeats N runs it N times with other seeds, --objects and
     --trials build larger grids. Without --llm the heuristic policy plays. Episodes run in
-    --workers processes on one Zenoh bus; workers on other hosts join with
-    `mhrc worker --connect tls/HOST:PORT --credentials OUT/credentials/worker/worker.json`
-    (see --listen, --host). An interrupted run continues with --resume --out DIR."""
+    --workers processes of this machine, or with --ray ADDRESS as tasks on a Ray cluster
+    (`ray start --head` on one host, `ray start --address HEAD:6379` on the others; see
+    docker/README.md). An interrupted run continues with --resume --out DIR."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 
-    from .evaluation import EvalAborted, EvalSpec, Tally, check_out, evaluate, own_credentials
+    from .evaluation import EvalAborted, EvalSpec, Tally, check_out, evaluate
     from .fidelity import AidsError, parse_aids
     from .report import PAPER_OBJECTS, SUMMARY_FILES, summary_markdown
 
     logs.configure(log_level)
-    if workers < 0:
-        raise click.BadParameter("must be 0 or more", param_hint="--workers")
-    if workers == 0 and listen is None:
-        raise click.UsageError("--workers 0 needs --listen, so that workers can join from elsewhere")
-    if eval_credentials is not None and not secure:
-        raise click.UsageError("--credentials and --insecure contradict each other")
-    if eval_credentials is not None and hosts:
-        raise click.UsageError("--host: the certificate in --credentials is already issued; name hosts with mhrc credentials --eval --host")
+    if ray_address is not None and workers is not None:
+        raise click.UsageError("--workers: not with --ray (the Ray cluster's resources say how many episodes run at once)")
+    if shared_out and ray_address is None:
+        raise click.UsageError("--shared-out: only with --ray (a local run writes into --out anyway)")
+    if workers is not None and workers < 1:
+        raise click.BadParameter(f"must be at least 1 (got {workers})", param_hint="--workers")
+    workers = workers or os.cpu_count() or 1
     try:
         aid_names = parse_aids(aids)
     except AidsError as exc:
@@ -618,6 +596,11 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         return
     try:
         check_out(out, spec, resume)  # before the model server is asked or a worker starts
+        if ray_address is not None:  # a missing extra, an old Ray, an address nothing answers at: one line, now
+            from .eval_ray import import_ray, probe
+
+            import_ray()
+            probe(ray_address)
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
     rows_path = out / "episodes.jsonl"
@@ -633,19 +616,17 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
 
         specs = EpisodeConfig.build(**spec.jobs()[0].config).robot_specs().values() if spec.llm else [None]
         concurrency = asyncio.run(episodes_at_once(list(specs), spec.base_url))
+    where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {workers} worker(s)"
     console.print(
         f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}, {spec.mode} replies) on {n_jobs} episodes "
-        f"into {out} with {workers} worker(s), {concurrency} episode(s) at once each"
+        f"into {out} {where}, {concurrency} episode(s) at once each"
     )
     t0 = time.perf_counter()
-    # the worker login written for this evaluation goes when it ends, a second Ctrl-C included (evaluate's
-    # `finally` removes it otherwise); --credentials DIR are the user's and stay
-    forget = (lambda: shutil.rmtree(own_credentials(out), ignore_errors=True)) if secure and eval_credentials is None else (lambda: None)
-    with progress, _at_quit(forget):
+    with progress:
         try:
             rows = _run(
-                lambda: evaluate(spec, out, workers=workers, resume=resume, listen=listen, progress=hook, concurrency=concurrency,
-                                 secure=secure, hosts=hosts, credentials=eval_credentials),
+                lambda: evaluate(spec, out, workers=1 if ray_address else workers, resume=resume, progress=hook, concurrency=concurrency,
+                                 ray=ray_address, shared_out=shared_out),
                 stopping=stopping,
             )
         except ConfigError as exc:
@@ -661,30 +642,6 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     )
     if rows:
         click.echo(summary_markdown(rows))
-
-
-@main.command("worker")
-@click.option("--connect", required=True, help="The coordinator's endpoint, e.g. tls/10.0.0.5:7448 (tcp/ for an --insecure evaluation).")
-@click.option("--eval", "eval_id", default=None, help="Evaluation id; default: the only one on the bus.")
-@click.option("--concurrency", default=1, show_default=True, type=click.IntRange(min=1),
-              help="Episodes this worker runs at once (with an LLM, episodes mostly wait on the model).")
-@click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
-@click.option("--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS",
-              help="The evaluation's worker login (OUT/credentials/worker/worker.json, written by `mhrc eval`); default $MHRC_CREDENTIALS.")
-@click.option("--insecure", is_flag=True, help="Join a coordinator on the open tcp bus (mhrc eval --insecure).")
-def worker(connect: str, eval_id: str | None, concurrency: int, log_level: str, credentials: Path | None, insecure: bool) -> None:
-    """Run episodes for an `mhrc eval` coordinator until its grid is done."""
-    from .evaluation import run_worker
-
-    logs.configure(log_level)
-    login = _credentials(credentials, insecure)
-    if login is not None and login.kind != "eval":
-        raise click.UsageError(f"--credentials: {login.describe()} are a run's, not an evaluation's worker login")
-    try:
-        n = _run(lambda: run_worker(connect, eval_id, concurrency=concurrency, login=login))
-    except ConfigError as exc:
-        raise click.UsageError(str(exc)) from None
-    click.echo(f"worker ran {n} episode(s)", err=True)
 
 
 @main.command("report")
@@ -753,43 +710,32 @@ def schema_(out: Path | None) -> None:
 @click.option("--days", default=7.0, show_default=True, type=float, callback=_days,
               help=f"How long the CA and the world's certificate stay valid from now: more than 0, at most {MAX_DAYS} (fractions allowed: 0.5 is 12 hours).")
 @click.option("--split", is_flag=True, help="One directory per participant (DIR/world/, DIR/alice/, ...), each for that participant's container only.")
-@click.option("--eval", "for_eval", is_flag=True,
-              help="An evaluation's instead: the coordinator's certificate and files in DIR (mhrc eval --credentials DIR), "
-                   "the one worker login in DIR/worker/ (mhrc worker --credentials DIR/worker/worker.json); --host names the coordinator.")
 @click.option("--force", is_flag=True, help="Replace credentials already in DIR (a world running with the old ones refuses the new).")
-def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float, split: bool, for_eval: bool, force: bool) -> None:
+def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float, split: bool, force: bool) -> None:
     """Issue one run's credentials for a world and agents started by hand or in containers
     (`mhrc up` makes its own): a CA, the world's TLS certificate, one login per participant.
-    Start the world with --credentials DIR/world.json and each agent with its own file.
-    With --eval, an evaluation's: the coordinator's and its workers' one login."""
-    import uuid
-
+    Start the world with --credentials DIR/world.json and each agent with its own file."""
     from .keys import check_id, new_run_id
-    from .security import SecurityError, make_eval_credentials, make_run_credentials
+    from .security import SecurityError, make_run_credentials
 
     existing = out.is_dir() and (any(out.glob("*.json")) or any(out.glob("*/*.json")))
     if existing and not force:
         raise click.UsageError(f"--out: {out} already holds credentials; pass --force to replace them")
-    if for_eval and split:
-        raise click.UsageError("--split: an evaluation's workers share one login, already in a directory of its own")
-    run = run or (f"e{uuid.uuid4().hex[:8]}" if for_eval else new_run_id())
+    run = run or new_run_id()
     try:
-        check_id(run, "evaluation id" if for_eval else "run id")
+        check_id(run, "run id")
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--run") from None
     created = _first_missing(out)
     try:
-        if for_eval:
-            files = make_eval_credentials(run, out, days=days, hosts=hosts)
-        else:
-            files = make_run_credentials(run, ROBOTS, out, days=days, hosts=hosts, split=split)
+        files = make_run_credentials(run, ROBOTS, out, days=days, hosts=hosts, split=split)
     except (SecurityError, ValueError, OSError) as exc:
         if created is not None:  # nothing left behind: what this command created goes again
             shutil.rmtree(created, ignore_errors=True)
         if isinstance(exc, OSError):
             raise click.UsageError(f"--out: cannot write the credentials into {out}: {exc.strerror or exc}") from None
         raise click.UsageError(str(exc)) from None
-    click.echo(f"{'evaluation' if for_eval else 'run'} {run}: credentials in {out} (valid {days:g} days; keep them private)", err=True)
+    click.echo(f"run {run}: credentials in {out} (valid {days:g} days; keep them private)", err=True)
     for user, path in files.items():
         click.echo(f"  {user}: {path}", err=True)
 
@@ -823,7 +769,7 @@ CREDENTIALS_OPT = click.option(
 @click.option("--json", "as_json", is_flag=True, help="One JSON object: the endpoint and every run or evaluation alive.")
 @CREDENTIALS_OPT
 def bus_list(connect: str, as_json: bool, credentials: Path | None) -> None:
-    """The runs alive (from liveliness): which have a world, which robots are attached; and evaluations."""
+    """The runs alive (from liveliness): which have a world, which robots are attached."""
     from .bustools import bus_list as run_list
 
     _bus_tool("bus list", lambda: run_list(connect, as_json=as_json, credentials=credentials, write=click.echo))

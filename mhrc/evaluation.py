@@ -1,29 +1,17 @@
-"""`mhrc eval`: the paper's benchmark grid as one command, episodes spread over worker processes
-on one Zenoh bus, results as traces, `episodes.jsonl` and summary tables.
+"""`mhrc eval`: the paper's benchmark grid as one command, episodes spread over processes of this
+machine or over a Ray cluster, results as traces, `episodes.jsonl` and summary tables.
 
-The coordinator opens a Zenoh router and serves the grid; workers (local processes it starts,
-or `mhrc worker --connect tls/HOST:PORT --credentials ...` on other hosts) pull jobs, run each episode in-process
-with its own run id on the same bus, and push back the episode's trace. A worker runs up to
-`--concurrency` episodes at once (LLM episodes mostly wait on the model). Keys, under
-`mhrc/eval/<eval id>/`:
+Where episodes run is an executor's business: by default a pool of worker processes of this
+machine (mhrc.eval_pool: `--workers` processes, each up to `--concurrency` episodes at once);
+with `--ray ADDRESS` each episode is a Ray task on that cluster (mhrc.eval_ray, the `ray`
+extra), with Ray's retries for a worker or node that dies. Either way an episode runs whole in
+one process (its world and its agents, mhrc.eval_episode) and only its trace comes back.
 
-    job                   queryable: a worker asks (JobRequest) and gets a JobReply: a job,
-                          "wait" (everything is handed out, results pending) or "done"
-    result                put: a worker's EvalResult (the job's key and its zlib'd trace)
-    alive/coordinator     liveliness token of the coordinator (workers find the eval by it)
-    alive/worker/<id>     liveliness token of each worker: when one vanishes, its unfinished
-                          jobs go back to the queue
-
-Secured (`secure=True`, the default of `mhrc eval`): the router listens on tls/ with the
-coordinator's certificate and logs in every worker with the evaluation's one worker login
-(`mhrc.security.make_eval_credentials`, in DIR/credentials/ while the evaluation runs); a
-worker's episodes (world and agents) log in with it too.
-
-Each episode's metrics and failure diagnostics (`diag_*` columns) are computed by the coordinator
-from the trace (`mhrc.metrics`, `mhrc.diagnostics`), so a row means the same thing whichever host
-ran it. Rows are appended to DIR/episodes.jsonl as they arrive; `--resume` skips the keys already
-there. Summaries (tables, confidence intervals, the paper's figures; summary.md, .csv and .html)
-are `mhrc.report`'s.
+Each episode's metrics and failure diagnostics (`diag_*` columns) are computed here, by the
+driver, from the trace (`mhrc.metrics`, `mhrc.diagnostics`), so a row means the same thing
+whichever process or host ran it. Rows are appended to DIR/episodes.jsonl as they arrive;
+`--resume` skips the keys already there. Summaries (tables, confidence intervals, the paper's
+figures; summary.md, .csv and .html) are `mhrc.report`'s.
 
 The default grid is the paper's: per task, every scene with one episode per object count 3, 4,
 5 and 6 (3 scenes x 4 = 12 episodes per task). Seeds: an episode's seed is
@@ -35,94 +23,31 @@ job key is `task/scene/objects/seed`.
 from __future__ import annotations
 
 import asyncio
-import base64
-import contextlib
 import json
-import os
-import shutil
-import subprocess
-import sys
-import tempfile
-import time
-import uuid
 import zlib
-from collections import defaultdict, deque
+from collections import defaultdict
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import structlog
-from pydantic import BaseModel, Field
 
-from . import memory
-from .bus import Bus, Sample, endpoint, free_port, split_endpoint
 from .diagnostics import diagnose
-from .episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig, EventHook, open_client, up_in_process
+from .episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig
+from .eval_episode import EpisodeResult, Job
 from .fidelity import label
-from .keys import Keys
-from .lifeline import child_env
 from .metrics import TraceError, from_trace
-from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode, decode_event
 from .report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
 from .trace import read_trace, unwritable
 
-if TYPE_CHECKING:
-    from .security import Credentials
-
-__all__ = ["EvalSpec", "evaluate", "merge_runs", "run_worker", "summary_csv", "summary_markdown", "write_summaries"]
+__all__ = ["EvalAborted", "EvalSpec", "Job", "Tally", "check_out", "evaluate", "merge_runs", "summary_csv", "summary_markdown", "write_summaries"]
 
 log = structlog.get_logger("mhrc.eval")
 
-ROOT = "mhrc/eval"
-# s an issued job may take before it goes back to the queue. Per job, whatever a worker's
-# --concurrency: a worker asks for a job only when it has a free slot, so a job starts running
-# when it is issued (N jobs sharing one CPU-bound worker each take longer; 600 s leaves room).
-JOB_TIMEOUT = 600.0
-THREADS_PER_EPISODE = 6  # to_thread calls one episode may have in flight: its world's sim, its four sessions' opens and gets
-STARTS_AT_ONCE = 4  # episodes of one worker building their scene and attaching their agents at the same time
-
-
-# --------------------------------------------------------------------------- messages
-
-
-class Job(BaseModel):
-    key: str
-    config: dict[str, Any]  # EpisodeConfig fields (no run, port or trace: the worker picks those)
-    repeat: int = 0
-    trial: int = 0
-
-
-class JobRequest(BaseModel):
-    worker: str
-
-
-class JobReply(BaseModel):
-    status: str = Field(description="job | wait | done")
-    job: Job | None = None
-
-
-class EvalResult(BaseModel):
-    key: str
-    worker: str
-    trace_z: str = ""  # base64 of the zlib-compressed JSONL trace
-    error: str | None = None
-    fatal: bool = False  # the error will recur in every episode (bad credentials, no such model): stop the evaluation
-
 
 class EvalAborted(RuntimeError):
-    """The evaluation cannot go on (an error every episode would hit, or no worker left); finished rows are kept."""
-
-
-def _keys(eval_id: str) -> dict[str, str]:
-    base = f"{ROOT}/{eval_id}"
-    return {
-        "job": f"{base}/job",
-        "result": f"{base}/result",
-        "coordinator": f"{base}/alive/coordinator",
-        "worker": f"{base}/alive/worker",
-    }
+    """The evaluation cannot go on (an error every episode would hit); finished rows are kept."""
 
 
 # --------------------------------------------------------------------------- the grid
@@ -221,193 +146,6 @@ class EvalSpec:
                 EpisodeConfig.build(**c)
 
 
-# --------------------------------------------------------------------------- worker
-
-
-async def find_eval(bus: Bus, timeout: float = 10.0) -> str:
-    """The id of the only evaluation whose coordinator is alive on this bus."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while True:
-        ids = sorted({k.split("/")[2] for k in await bus.alive(f"{ROOT}/*/alive/coordinator", timeout=1.0)})
-        if ids or loop.time() >= deadline:
-            break
-        await asyncio.sleep(0.3)
-    if len(ids) != 1:
-        raise ConfigError(f"pass --eval: expected exactly one evaluation on the bus, found {', '.join(ids) or 'none'}")
-    return ids[0]
-
-
-async def run_worker(
-    connect: str,
-    eval_id: str | None = None,
-    worker_id: str | None = None,
-    connect_timeout: float = 30.0,
-    concurrency: int = 1,
-    login: Credentials | None = None,
-) -> int:
-    """Pull jobs from the coordinator at `connect` and run them until it says done; returns
-    how many episodes this worker ran. With `login` (the evaluation's worker credentials, for
-    a secured coordinator) this worker and every participant of its episodes log in with it.
-
-    Up to `concurrency` episodes run at once as tasks of this process, each with its own world
-    (its own PyBullet clients) and run id. With an LLM an episode mostly waits on the model, so
-    N at once keep a model server's batch full; the heuristic is CPU-bound and gains little.
-    A new job is asked for whenever a slot is free and fewer than STARTS_AT_ONCE episodes are
-    still starting (building their scene, attaching their agents): a burst of N scene builds
-    would hold up every world past its agents' attach timeout."""
-    if concurrency < 1:
-        raise ConfigError(f"--concurrency: must be at least 1 (got {concurrency})")
-    if concurrency > 1:
-        # asyncio's default pool (cores + 4 threads) starves with several episodes: their agents'
-        # attach gets hold threads while the worlds they wait on need one to answer
-        asyncio.get_running_loop().set_default_executor(
-            ThreadPoolExecutor(max_workers=THREADS_PER_EPISODE * concurrency + 4, thread_name_prefix="mhrc-worker")
-        )
-    worker_id = worker_id or f"w-{uuid.uuid4().hex[:8]}"
-    if login is not None and eval_id is None:
-        eval_id = login.run  # an evaluation's credentials name it
-    bus = await open_client(connect, connect_timeout, security=login)
-    wake = asyncio.Event()  # an episode started or a job ended
-    slots: list[_Slot] = []
-    ran = 0
-    try:
-        eval_id = eval_id or await find_eval(bus)
-        keys = _keys(eval_id)
-        await _await_coordinator(bus, keys["coordinator"], eval_id, connect_timeout)
-        bus.declare_token(f"{keys['worker']}/{worker_id}")
-        done = False  # the coordinator has nothing more to hand out
-        while True:
-            wake.clear()
-            for slot in [s for s in slots if s.task.done()]:
-                slots.remove(slot)
-                bus.put(keys["result"], slot.task.result())
-                ran += 1
-            waiting = False  # asked and heard "wait": ask again a little later
-            while not done and len(slots) < concurrency and sum(not s.started for s in slots) < STARTS_AT_ONCE:
-                replies = await bus.get(keys["job"], JobRequest(worker=worker_id), timeout=10.0)
-                if not replies:
-                    if not await bus.alive(keys["coordinator"], timeout=1.0):
-                        log.warning("the coordinator is gone; stopping", eval=eval_id, unfinished=len(slots))
-                        return ran  # nobody would take the results: the finally block cancels what runs
-                    continue
-                reply = decode(replies[0], JobReply)
-                if reply.status == "done":
-                    done = True  # the jobs still running finish first
-                elif reply.job is None:
-                    waiting = True
-                    break
-                else:
-                    slots.append(_Slot(reply.job, worker_id, connect, wake, login))
-            if not slots:
-                if done:
-                    return ran
-                await asyncio.sleep(0.3)
-                continue
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(wake.wait(), timeout=0.3 if waiting else None)
-    finally:
-        for slot in slots:
-            slot.task.cancel()
-        await asyncio.gather(*(s.task for s in slots), return_exceptions=True)
-        await bus.close()
-
-
-async def _await_coordinator(bus: Bus, token: str, eval_id: str, timeout: float) -> None:
-    """Wait for the coordinator's token: a worker may connect the moment the router listens,
-    before the coordinator serves jobs (it would take the silence for a coordinator gone)."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while not await bus.alive(token, timeout=1.0):
-        if loop.time() >= deadline:
-            raise ConfigError(f"no evaluation {eval_id!r} on this bus within {timeout:.0f} s (pass --eval, or none for the only one)")
-        await asyncio.sleep(0.2)
-
-
-class _Slot:
-    """One job a worker runs: its episode's task, and whether the episode has started (every
-    robot attached) or ended; either wakes the worker."""
-
-    def __init__(self, job: Job, worker_id: str, connect: str, wake: asyncio.Event, login: Credentials | None = None) -> None:
-        self.started = False
-        self._wake = wake
-        self.task = asyncio.create_task(_run_job(job, worker_id, connect, self._observe, login), name=f"job-{job.key}")
-        self.task.add_done_callback(lambda _t: wake.set())
-
-    def _observe(self, bus: Bus, run: str) -> None:
-        """Hooked onto the episode's world session (`up_in_process(observe=...)`)."""
-
-        def on_event(sample: Sample) -> None:
-            if self.started:
-                return
-            try:
-                event = decode_event(sample.payload)
-            except ProtocolError:
-                return
-            if isinstance(event, (EpisodeStarted, EpisodeDone)):
-                self.started = True
-                self._wake.set()
-
-        bus.subscribe(Keys(run).world_event, on_event)
-
-
-async def _run_job(
-    job: Job, worker_id: str, connect: str, observe: EventHook | None = None, login: Credentials | None = None
-) -> EvalResult:
-    with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
-        trace = Path(tmp) / "trace.jsonl"
-        try:
-            cfg = EpisodeConfig.build(**job.config, trace=trace).resolved()
-            await up_in_process(cfg, connect=connect, observe=observe, login=login)
-            data = await asyncio.to_thread(lambda: zlib.compress(trace.read_bytes(), 6))  # zlib lets go of the GIL
-            return EvalResult(key=job.key, worker=worker_id, trace_z=base64.b64encode(data).decode())
-        except asyncio.CancelledError:
-            raise
-        except Exception as exc:
-            from mhrc.agents.llm import LLMFatalError
-
-            log.warning("episode failed", key=job.key, error=str(exc))
-            return EvalResult(key=job.key, worker=worker_id, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError))
-        finally:
-            memory.release()  # a worker runs hundreds of episodes: give back what this one freed
-
-
-def worker_command(connect: str, eval_id: str, concurrency: int = 1, credentials: Path | None = None) -> list[str]:
-    return [
-        sys.executable, "-m", "mhrc", "worker", "--connect", connect, "--eval", eval_id, "--concurrency", str(concurrency),
-        "--log-level", "error", *(["--credentials", str(credentials)] if credentials else ["--insecure"]),
-    ]  # fmt: skip
-
-
-# --------------------------------------------------------------------------- coordinator
-def own_credentials(out: Path) -> Path:
-    """Where an evaluation without --credentials writes its own (deleted when it ends, however it ends)."""
-    return out / "credentials"
-
-
-def _forget(creds_dir: Path, ephemeral: bool) -> None:
-    """The evaluation's own credentials live as long as it runs: nobody can log in to a later one with them."""
-    if ephemeral:
-        shutil.rmtree(creds_dir, ignore_errors=True)
-
-
-def _given_credentials(directory: Path) -> tuple[Credentials, Path]:
-    """The coordinator's credentials and the workers' login file in a directory issued by
-    `mhrc credentials --eval`."""
-    from .security import COORDINATOR, EVAL, WORKER, SecurityError, load
-
-    try:
-        creds = load(directory / f"{COORDINATOR}.json")
-    except SecurityError as exc:
-        raise ConfigError(f"--credentials: {exc} (issue them with: mhrc credentials --eval --out {directory})") from None
-    login = directory / WORKER / f"{WORKER}.json"
-    if creds.kind != EVAL or not creds.is_server or not login.is_file():
-        raise ConfigError(f"--credentials: {directory} does not hold an evaluation's credentials (mhrc credentials --eval --out DIR)")
-    return creds, login
-
-
-
-
 @dataclass
 class Tally:
     """The progress of one `evaluate` call: `total` episodes to run now, `done` of them ended
@@ -427,26 +165,18 @@ class Tally:
 ProgressHook = Callable[[Tally, dict[str, Any] | None], None]
 
 
-WORKER_GRACE = 10.0  # s a worker that heard "done" has to finish before it is terminated
-STOP_GRACE = 2.0  # s workers told to stop (SIGTERM) have before they are killed: Ctrl-C exits within 3 s
+STOP_GRACE = 2.0  # s episodes told to stop (an interrupt) have before their processes are killed: Ctrl-C exits within 3 s
+RETRIES = 1  # an episode that fails (not fatally) is run this many more times before it is given up
 
 
-async def _reap(procs: list[subprocess.Popen[bytes]], grace: float) -> None:
-    """Wait up to `grace` seconds (without blocking the loop) for `procs` to end; terminate,
-    then kill, the ones still running."""
-    deadline = time.monotonic() + grace
-    while any(p.poll() is None for p in procs) and time.monotonic() < deadline:
-        await asyncio.sleep(0.05)
-    late = [p for p in procs if p.poll() is None]
-    for p in late:
-        p.terminate()
-    deadline = time.monotonic() + min(1.0, grace)
-    while any(p.poll() is None for p in late) and time.monotonic() < deadline:
-        await asyncio.sleep(0.05)
-    for p in late:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
+class Executor(Protocol):
+    """Where episodes run: mhrc.eval_pool.PoolExecutor (this machine) or mhrc.eval_ray.RayExecutor."""
+
+    async def __aenter__(self) -> Executor: ...
+    async def __aexit__(self, *exc: object) -> None: ...
+    def submit(self, job: Job) -> None: ...
+    async def next(self) -> EpisodeResult: ...
+    async def stop(self, grace: float) -> list[EpisodeResult]: ...
 
 
 def _episode_report(trace: Path) -> None:
@@ -501,106 +231,76 @@ async def evaluate(
     *,
     workers: int = 1,
     resume: bool = False,
-    listen: str | None = None,
     progress: ProgressHook | None = None,
-    idle_timeout: float = 120.0,
     concurrency: int = 1,
-    secure: bool = False,
-    hosts: tuple[str, ...] = (),
-    credentials: Path | None = None,
+    ray: str | None = None,
+    shared_out: bool = False,
 ) -> list[dict[str, Any]]:
     """Run the grid; returns every row of DIR/episodes.jsonl (old ones too, with --resume).
 
-    `workers` local worker processes are started, each running up to `concurrency` episodes at
-    once; with `listen`, workers on other hosts may join (with workers=0 only they run
-    episodes). Without any worker alive for `idle_timeout` seconds, the evaluation stops with
-    an error rather than hang.
-
-    `secure` puts the bus on TLS with logins (`mhrc.security.make_eval_credentials`): the
-    coordinator's certificate names 127.0.0.1, localhost, the --listen host and `hosts`; the
-    workers' login is written to DIR/credentials/worker/worker.json for as long as the
-    evaluation runs (workers elsewhere need a copy). With `credentials` (a directory issued by
-    `mhrc credentials --eval`) those are used instead and kept: remote workers keep one login
-    across evaluations; the evaluation id is theirs."""
+    Locally, `workers` processes of this machine each run up to `concurrency` episodes at once
+    (mhrc.eval_pool). With `ray` (an address as ray.init takes it) every episode is a Ray task
+    on that cluster instead (mhrc.eval_ray); `shared_out`: DIR is the same path on every node,
+    so tasks write their traces there rather than send them back. Either way each row is
+    computed here, from the episode's trace, and appended to DIR/episodes.jsonl as it arrives:
+    an interrupt (cancellation) keeps every finished row."""
     if concurrency < 1:
         raise ConfigError(f"--concurrency: must be at least 1 (got {concurrency})")
+    if ray is not None and workers != 1:
+        raise ConfigError("--workers: the Ray cluster's resources say how many episodes run at once; drop --workers with --ray")
+    if shared_out and ray is None:
+        raise ConfigError("--shared-out: only with --ray (a local run writes into --out anyway)")
+    if workers < 1:
+        raise ConfigError(f"--workers: must be at least 1 (got {workers})")
     spec.validate()
-    coordinator: Credentials | None = None
-    worker_login: Path | None = None
-    if credentials is not None:
-        coordinator, worker_login = _given_credentials(credentials)
-        secure = True
-    if listen is not None and secure and not listen.startswith("tls/"):
-        raise ConfigError(f"--listen: a secured evaluation listens on tls/ (e.g. tls/0.0.0.0:7448), not {listen}; or pass --insecure")
-    if listen is not None and not secure and listen.startswith("tls/"):
-        raise ConfigError(f"--listen: {listen} is tls/, which needs the evaluation's credentials: drop --insecure, or listen on tcp/")
+    executor: Executor
+    if ray is not None:
+        from .eval_ray import RayExecutor, import_ray, probe, shared
+
+        import_ray()  # before --out is touched: a missing extra or an address nothing listens at leaves nothing behind
+        await asyncio.to_thread(probe, ray)
+        executor = RayExecutor(ray, concurrency=concurrency, llm=spec.llm is not None, traces=shared(out) if shared_out else None)
+    else:
+        from .eval_pool import PoolExecutor
+
+        executor = PoolExecutor(workers, concurrency)
+    async with executor:  # joins a Ray cluster before --out is touched: a cluster that refuses us leaves nothing behind
+        return await _drive(spec, out, resume, executor, progress)
+
+
+async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, progress: ProgressHook | None) -> list[dict[str, Any]]:
+    """Run the jobs of `spec` not yet in `out` on `executor`, writing each row as it arrives."""
     finished = prepare_out(out, spec, resume)
-    todo = deque(j for j in spec.jobs() if j.key not in finished)
+    todo = [j for j in spec.jobs() if j.key not in finished]
     earlier = [finished[j.key] for j in spec.jobs() if j.key in finished]
     tally = Tally(total=len(todo), before=len(earlier), before_succeeded=sum(bool(r.get("success")) for r in earlier))
-    eval_id = coordinator.run if coordinator is not None else f"e{uuid.uuid4().hex[:8]}"
-    keys = _keys(eval_id)
-    listen = listen or endpoint("127.0.0.1", free_port("127.0.0.1"), tls=secure)
-    creds_dir = own_credentials(out)
-    ephemeral = secure and coordinator is None  # made for this evaluation, deleted at its end
-    if ephemeral:
-        from .security import COORDINATOR, WORKER, load, make_eval_credentials
-
-        _, listen_host, _ = split_endpoint(listen)
-        names = tuple(h for h in (listen_host, *hosts) if h not in ("0.0.0.0", "::", ""))
-        files = make_eval_credentials(eval_id, creds_dir, hosts=names)
-        coordinator, worker_login = load(files[COORDINATOR]), files[WORKER]
-    issued: dict[str, tuple[Job, str, float]] = {}
-    attempts: dict[str, int] = defaultdict(int)
-    alive_workers: set[str] = set()
-    all_done = asyncio.Event()
-    aborted: list[str] = []
-    if not todo:
-        all_done.set()
     rows_path = out / "episodes.jsonl"
+    jobs = {j.key: j for j in todo}
+    attempts: dict[str, int] = defaultdict(int)
+    aborted: list[str] = []
 
-    async def on_job(_key: str, _params: dict[str, str], payload: bytes) -> JobReply:
-        req = decode(payload, JobRequest)
-        now = time.monotonic()
-        for k, (job, _w, t0) in list(issued.items()):  # a job that takes far too long goes back
-            if now - t0 > JOB_TIMEOUT:
-                issued.pop(k)
-                todo.append(job)
-        if todo:
-            job = todo.popleft()
-            issued[job.key] = (job, req.worker, now)
-            attempts[job.key] += 1
-            return JobReply(status="job", job=job)
-        return JobReply(status="wait" if issued else "done")
-
-    def on_result(sample: Sample) -> None:
-        res = decode(sample.payload, EvalResult)
-        entry = issued.pop(res.key, None)
-        if entry is None:
-            return  # a duplicate (the job was re-issued and both ran)
-        job = entry[0]
+    def take(res: EpisodeResult) -> Job | None:
+        """Write the row of a finished episode (or count a given-up one); the job to run again, if any."""
+        job = jobs[res.key]
         row: dict[str, Any] | None = None
         if res.fatal:
             aborted.append(f"{res.key}: {res.error}")
-            todo.clear()
-            issued.clear()  # workers hear "done"; the episodes they still run would fail the same way
-            all_done.set()
-            return
+            return None
+        trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
         if res.error is None:
-            trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
-            trace_path.write_bytes(zlib.decompress(base64.b64decode(res.trace_z)))
+            if res.trace_file is None:
+                trace_path.write_bytes(zlib.decompress(res.trace_z))
             try:
                 trace_rows = read_trace(trace_path)
                 m = from_trace(trace_rows)
                 diag = diagnose(trace_rows)
-            except TraceError as exc:
-                res.error = f"TraceError: {exc}"
+            except (TraceError, OSError) as exc:
+                res.error = f"{type(exc).__name__}: {exc}"
             else:
                 _episode_report(trace_path)
         if res.error is not None:
-            if attempts[res.key] < 2:
-                todo.append(job)
-                return
+            if attempts[res.key] <= RETRIES:
+                return job
             tally.errors += 1
             with (out / "errors.jsonl").open("a", encoding="utf-8") as f:
                 f.write(json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n")
@@ -619,68 +319,40 @@ async def evaluate(
         tally.done += 1
         if progress is not None:
             progress(tally, row)
-        if tally.done >= tally.total:
-            all_done.set()
+        return None
 
-    def on_worker(sample: Sample) -> None:
-        wid = sample.key.rsplit("/", 1)[1]
-        if sample.is_put:
-            alive_workers.add(wid)
-            return
-        alive_workers.discard(wid)
-        for k, (job, w, _t) in list(issued.items()):
-            if w == wid:
-                log.warning("worker gone; its job goes back to the queue", worker=wid, job=k)
-                issued.pop(k)
-                todo.appendleft(job)
-
-    procs: list[subprocess.Popen[bytes]] = []
-    try:
-        bus = await Bus.open(mode="router", listen=[listen], security=coordinator)
-    except BaseException:
-        _forget(creds_dir, ephemeral)
-        raise
-    try:
-        bus.serve(keys["job"], on_job)
-        bus.subscribe(keys["result"], on_result)
-        bus.watch_liveliness(f"{keys['worker']}/*", on_worker)
-        bus.declare_token(keys["coordinator"])
-        if progress is not None:
-            progress(tally, None)
-        env = child_env(dict(os.environ, PYTHONUNBUFFERED="1"))  # workers die with the coordinator, even after a SIGKILL
-        for _ in range(workers if todo else 0):
-            procs.append(subprocess.Popen(worker_command(listen, eval_id, concurrency, worker_login), env=env, stdin=subprocess.DEVNULL))
-        idle_since = time.monotonic()
-        while not all_done.is_set():
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(all_done.wait(), timeout=1.0)
-            if alive_workers or any(p.poll() is None for p in procs):
-                idle_since = time.monotonic()
-            elif time.monotonic() - idle_since > idle_timeout:
-                raise EvalAborted(
-                    f"no worker has been alive for {idle_timeout:.0f} s with {tally.total - tally.done} episodes left; "
-                    f"start workers with: mhrc worker --connect {listen}"
-                    + (f" --credentials {worker_login}" if worker_login else " --insecure")
-                )
-        await asyncio.sleep(0.5)  # let workers ask once more and hear "done"
+    if progress is not None:
+        progress(tally, None)
+    if todo:
+        for job in todo:
+            attempts[job.key] += 1
+            executor.submit(job)
+        outstanding = len(todo)
+        try:
+            while outstanding and not aborted:
+                res = await executor.next()
+                outstanding -= 1
+                again = take(res)
+                if again is not None:
+                    attempts[again.key] += 1
+                    executor.submit(again)
+                    outstanding += 1
+        except BaseException:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the episodes, keep what finished
+            for res in await asyncio.shield(executor.stop(STOP_GRACE)):
+                take(res)
+            raise
         if aborted:
-            kept = read_rows(rows_path)
-            write_summaries(kept, out)
-            raise EvalAborted(
-                f"stopped: {aborted[0]}. Every episode would fail the same way; "
-                + (f"the {len(kept)} finished episode(s) are kept in {rows_path}" if kept else "no episode finished")
-                + f" (fix the cause, then continue with --resume --out {out})"
-            )
-    except BaseException:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the workers now
-        for p in procs:
-            if p.poll() is None:
-                p.terminate()
-        await _reap(procs, STOP_GRACE)
-        raise
-    finally:
-        await _reap(procs, WORKER_GRACE)  # the workers heard "done": they end by themselves
-        await bus.close()
-        _forget(creds_dir, ephemeral)
+            for res in await executor.stop(STOP_GRACE):
+                if not res.fatal and res.error is None:
+                    take(res)
+    if aborted:
+        kept = read_rows(rows_path)
+        write_summaries(kept, out)
+        raise EvalAborted(
+            f"stopped: {aborted[0]}. Every episode would fail the same way; "
+            + (f"the {len(kept)} finished episode(s) are kept in {rows_path}" if kept else "no episode finished")
+            + f" (fix the cause, then continue with --resume --out {out})"
+        )
     rows = read_rows(rows_path)
     write_summaries(rows, out)
     return rows

@@ -44,9 +44,7 @@ from cryptography.x509.oid import NameOID
 ENV = "MHRC_CREDENTIALS"
 WORLD = "world"
 OBSERVER = "observer"  # subscribes to everything of the run, publishes nothing (the recorder of `mhrc up --processes`)
-COORDINATOR = "coordinator"  # an evaluation's router (`mhrc eval`)
-WORKER = "worker"  # the login every worker of an evaluation shares (`mhrc worker`)
-RUN, EVAL = "run", "eval"  # the kinds of credentials: one episode's participants, or one evaluation's
+RUN = "run"  # the only kind of credentials: one run's participants (an evaluation's job queue, kind "eval", is gone: mhrc eval --ray)
 
 
 class SecurityError(RuntimeError):
@@ -149,15 +147,14 @@ def _write(path: Path, data: bytes | str, private: bool = True) -> Path:
 # ---------------------------------------------------------------------------------- credentials
 @dataclass(frozen=True)
 class Credentials:
-    """One participant's credentials for one run (kind "run"), or for one evaluation (kind
-    "eval": `run` is then the evaluation's id, the coordinator serves, the workers log in)."""
+    """One participant's credentials for one run."""
 
     run: str
     user: str
     password: str
     ca: Path  # the run's CA certificate, that the world's certificate must chain to
     robots: tuple[str, ...] = ()
-    cert: Path | None = None  # the server's (world's, coordinator's) certificate, key and user dictionary
+    cert: Path | None = None  # the world's certificate, key and user dictionary
     key: Path | None = None
     users: Path | None = None
     path: Path | None = None  # the file these came from
@@ -170,7 +167,7 @@ class Credentials:
     @property
     def is_server(self) -> bool:
         """The credentials of the participant whose router the others log in to."""
-        return self.user == (COORDINATOR if self.kind == EVAL else WORLD)
+        return self.user == WORLD
 
     def describe(self) -> str:
         return f"user {self.user!r} of run {self.run!r}" + (f" ({self.path})" if self.path else "")
@@ -201,15 +198,6 @@ def make_run_credentials(
     return _issue(run, RUN, users, directory, robots=robots, days=days, hosts=hosts, split=split)
 
 
-def make_eval_credentials(eval_id: str, directory: Path, *, days: float = 7.0, hosts: Sequence[str] = ()) -> dict[str, Path]:
-    """An evaluation's credentials: the coordinator's router (its files in `directory`) and the
-    one login its workers share (in `directory`/worker/, to hand to workers on other hosts or
-    mount into their containers). A worker hosts whole episodes, world and agents alike, so the
-    login proves "a worker of this evaluation"; the per-robot access control of a run does not
-    apply inside it."""
-    return _issue(eval_id, EVAL, [COORDINATOR, WORKER], directory, days=days, hosts=hosts, split_users=(WORKER,))
-
-
 def _issue(
     run: str,
     kind: str,
@@ -220,10 +208,9 @@ def _issue(
     days: float,
     hosts: Sequence[str],
     split: bool = False,
-    split_users: Sequence[str] = (),
 ) -> dict[str, Path]:
     """Write a CA, the server's (users[0]'s) certificate and a login per user; each user's
-    files go to `directory`, or to a directory of its own with `split` (or if in `split_users`)."""
+    files go to `directory`, or to a directory of its own with `split`."""
     directory.mkdir(parents=True, exist_ok=True)
     os.chmod(directory, 0o700)
     ca, ca_key = make_ca(run, days=days)
@@ -232,7 +219,7 @@ def _issue(
     passwords = {u: secrets.token_urlsafe(24) for u in users}
 
     def home(user: str) -> Path:
-        if not split and user not in split_users:
+        if not split:
             return directory
         d = directory / user
         d.mkdir(exist_ok=True)
@@ -287,8 +274,11 @@ def load(path: Path | str) -> Credentials:
     for f in (creds.ca, creds.cert, creds.key, creds.users):
         if f is not None and not f.is_file():
             raise SecurityError(f"credentials file {p} names {f}, which does not exist")
-    if creds.kind not in (RUN, EVAL):
-        raise SecurityError(f"credentials file {p}: unknown kind {creds.kind!r} (run or eval)")
+    if creds.kind != RUN:
+        raise SecurityError(
+            f"credentials file {p}: kind {creds.kind!r} is not a run's (an evaluation needs no credentials any more: "
+            "mhrc eval runs locally, or on Ray with --ray)"
+        )
     if creds.is_server and (creds.cert is None or creds.key is None or creds.users is None):
         raise SecurityError(f"credentials file {p}: the {creds.user} needs cert, key and users")
     for f in (creds.ca, creds.cert):
@@ -450,13 +440,11 @@ def apply(conf: Any, creds: Credentials, *, router: bool) -> None:
     put("transport/link/tls/close_link_on_expiration", True)
     if router:
         if not creds.is_server:
-            whose = "the coordinator's" if creds.kind == EVAL else "the world's"
-            raise SecurityError(f"only {whose} credentials can serve the bus, not {creds.describe()}")
+            raise SecurityError(f"only the world's credentials can serve the bus, not {creds.describe()}")
         put("transport/link/tls/listen_certificate", str(creds.cert))
         put("transport/link/tls/listen_private_key", str(creds.key))
         put("transport/auth/usrpwd/dictionary_file", str(creds.users))
-        if creds.kind == RUN:  # an evaluation's workers host whole episodes: a login, no per-robot rules
-            put("access_control", acl(creds.run, creds.robots))
+        put("access_control", acl(creds.run, creds.robots))
     else:
         put("transport/auth/usrpwd/user", creds.user)
         put("transport/auth/usrpwd/password", creds.password)

@@ -211,10 +211,9 @@ def test_bus_tools_fail_in_one_line_when_nothing_listens() -> None:
 def test_group_tokens() -> None:
     groups = group_tokens([
         "mhrc/r1/alive/world", "mhrc/r1/alive/robot/bob", "mhrc/r1/alive/robot/alice",
-        "mhrc/r2/alive/robot/david", "mhrc/eval/ev/alive/coordinator", "mhrc/eval/ev/alive/worker/w1",
+        "mhrc/r2/alive/robot/david",
     ])  # fmt: skip
     assert [g.describe() for g in groups] == [
-        "eval ev: coordinator alive; workers: w1",
         "run r1: world alive; robots attached: alice, bob",
         "run r2: no world; robots attached: david",
     ]
@@ -286,30 +285,3 @@ async def test_the_observers_login_reads_a_secured_run(tmp_path: Path) -> None:
         await client.close()
         world.cancel()
         await asyncio.gather(world, return_exceptions=True)
-
-
-def test_bus_list_shows_a_running_evaluation(tmp_path: Path) -> None:
-    """A real `mhrc eval` (its coordinator and one local worker): `mhrc bus list` names the
-    evaluation, its coordinator and its worker (their tokens live under mhrc/eval/<id>/)."""
-    port = free_port()
-    ep = f"tcp/127.0.0.1:{port}"
-    cmd = [*MHRC, "eval", "--insecure", "--listen", ep, "--workers", "1", "--tasks", "pack_objects", "--scenes", "kitchen",
-           "--objects", "3", "--repeats", "3", "--out", str(tmp_path / "ev")]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
-    try:
-        groups: list[dict[str, Any]] = []
-        for _ in range(120):  # until the worker has joined, or the evaluation is over
-            if proc.poll() is not None:
-                break
-            out = mhrc("bus", "list", "--json", "--connect", ep)
-            groups = [g for g in json.loads(out.stdout)["groups"] if "eval" in g] if out.returncode == 0 and out.stdout.strip() else []
-            if groups and groups[0]["workers"]:
-                break
-            time.sleep(0.5)
-        assert len(groups) == 1, groups  # (its episodes' runs, on the same bus, are listed beside it)
-        assert groups[0]["coordinator"] is True and len(groups[0]["workers"]) == 1, groups
-        text = mhrc("bus", "list", "--connect", ep).stdout
-        assert f"eval {groups[0]['eval']}: coordinator alive; workers: w-" in text, text
-    finally:
-        proc.terminate()
-        proc.wait(timeout=60)

@@ -1,5 +1,7 @@
-"""docker/: the compose files' commands are real `mhrc` command lines, the Dockerfile is sound,
-and the compose episode's exact commands, run as local processes on loopback, finish an episode.
+"""docker/ and deploy/: the compose files' commands are real `mhrc` (and `ray start`) command
+lines, the Ray cluster of compose.eval.yaml and of the KubeRay manifest is wired as documented
+(token authentication on), the Dockerfile is sound, and the compose episode's exact commands,
+run as local processes on loopback, finish an episode.
 
 No Docker engine is needed: the compose files are read with PyYAML and interpolated here with
 Compose's own rules (`${VAR}`, `${VAR:-default}`, `${VAR-default}`, `${VAR:+alt}`, `${VAR+alt}`,
@@ -31,6 +33,7 @@ ROOT = Path(__file__).resolve().parent.parent
 DOCKER = ROOT / "docker"
 COMPOSE = DOCKER / "compose.yaml"
 COMPOSE_EVAL = DOCKER / "compose.eval.yaml"
+RAYCLUSTER = ROOT / "deploy" / "raycluster.yaml"
 ROBOT_SERVICES = ("alice", "bob", "david")
 
 # every setting the compose files read, set to a non-default value: exercises each ${VAR:+...}
@@ -39,7 +42,7 @@ FULL_ENV = {
     "MHRC_SCHEDULE": "async", "MHRC_ABLATION": "no_history", "MHRC_RUN": "docker-run", "MHRC_AIDS": "goal_map,status_hints",
     "MHRC_LLM": "llamacpp:local", "MHRC_BASE_URL": "http://llm:8080/v1", "MHRC_LOG_LEVEL": "info",
     "MHRC_TASKS": "pack_objects,make_sandwich", "MHRC_SCENES": "kitchen", "MHRC_TRIALS": "2", "MHRC_REPEATS": "3",
-    "MHRC_EVAL_NAME": "gemma", "MHRC_WORKERS": "4", "MHRC_WORKER_CONCURRENCY": "3", "OPENAI_API_KEY": "sk-test",
+    "MHRC_EVAL_NAME": "gemma", "MHRC_WORKERS": "4", "MHRC_WORKER_CPUS": "8", "MHRC_CONCURRENCY": "3", "OPENAI_API_KEY": "sk-test",
 }  # fmt: skip
 
 
@@ -161,7 +164,7 @@ def option(argv: list[str], name: str) -> str:
 
 
 @pytest.mark.parametrize("env", [{}, FULL_ENV], ids=["defaults", "every-variable"])
-@pytest.mark.parametrize("path", [COMPOSE, COMPOSE_EVAL], ids=lambda p: p.name)
+@pytest.mark.parametrize("path", [COMPOSE], ids=lambda p: p.name)
 def test_every_command_is_an_mhrc_command_line(path: Path, env: dict[str, str]) -> None:
     services = mhrc_services(load(path))
     assert services
@@ -224,22 +227,84 @@ def _subpath(service: dict[str, Any]) -> str | None:
     return None
 
 
-def test_eval_compose_wiring() -> None:
-    services = load(COMPOSE_EVAL)["services"]
-    coordinator, worker = argv_of(services["eval"], {}), argv_of(services["worker"], {})
-    cparams, wparams = parse(coordinator).params, parse(worker).params
-    assert cparams["workers"] == 0 and cparams["resume"] is True
-    listen = cparams["listen"]
-    assert listen.startswith("tls/0.0.0.0:") and cparams["secure"] and "eval" in cparams["hosts"]
-    assert wparams["connect"] == "tls/eval:" + listen.rsplit(":", 1)[1]
-    assert wparams["credentials"] == Path("/credentials/worker.json") and not wparams["insecure"]
-    mount = next(v for v in services["worker"]["volumes"] if isinstance(v, dict))  # only the workers' login, read-only
-    assert (mount["source"], mount["target"], mount["read_only"]) == ("results", "/credentials", True)
-    assert interpolate(mount["volume"]["subpath"], FULL_ENV) == "gemma/credentials/worker"
-    assert str(cparams["out"]).startswith("/data/results/")
-    assert any(str(v).endswith(":/data/results") for v in services["eval"]["volumes"])
-    assert interpolate(str(services["worker"]["deploy"]["replicas"]), {}) == "2"
-    assert interpolate(str(services["worker"]["deploy"]["replicas"]), FULL_ENV) == "4"
+def _eval_argv(head: dict[str, Any], env: dict[str, str]) -> tuple[list[str], list[str]]:
+    """The head's shell command split at `&& exec mhrc`: (`ray start ...`, the mhrc arguments)."""
+    (script,) = head["command"]
+    ray_start, sep, rest = interpolate(script, env).partition("&& exec mhrc ")
+    assert sep, script
+    return shlex.split(ray_start), shlex.split(rest)
+
+
+@pytest.mark.parametrize("env", [{}, FULL_ENV], ids=["defaults", "every-variable"])
+def test_eval_compose_is_a_ray_head_running_mhrc_eval_and_ray_workers(env: dict[str, str]) -> None:
+    doc = load(COMPOSE_EVAL)
+    services = doc["services"]
+    assert set(services) == {"ray-token", "head", "worker"}
+    for name, service in services.items():  # one image, built with the ray extra
+        assert interpolate(service["image"], env) == "mhrc:ray" and service["build"]["args"]["EXTRAS"] == "ray", name
+        assert service["build"]["dockerfile"] == "docker/Dockerfile"
+        senv = service_env(service, env)
+        assert senv["RAY_AUTH_MODE"] == "token" and senv["RAY_AUTH_TOKEN_PATH"] == "/credentials/ray_auth_token", name  # Ray's token auth, on
+        token = next(v for v in service["volumes"] if isinstance(v, dict) and v["source"] == "ray-token")
+        assert token["target"] == "/credentials" and token.get("read_only", False) is (name != "ray-token"), name
+        assert ("OPENAI_API_KEY" in senv) is ("OPENAI_API_KEY" in env)
+    # the one-shot token service writes a random token once, private to its owner
+    code = services["ray-token"]["command"][0]
+    assert services["ray-token"]["entrypoint"] == ["python", "-c"] and "secrets.token_hex(32)" in code and "0o600" in code
+    compile(code, "ray-token", "exec")
+    assert services["head"]["depends_on"]["ray-token"]["condition"] == "service_completed_successfully"
+    # the head: `ray start --head`, then the driver, `mhrc eval --ray auto`
+    head = services["head"]
+    assert head["entrypoint"] == ["/bin/sh", "-c"]
+    ray_start, argv = _eval_argv(head, env)
+    assert ray_start[:3] == ["ray", "start", "--head"] and "--port=6379" in ray_start and "--num-cpus=0" in ray_start
+    params = parse(argv).params
+    assert argv[0] == "eval" and params["ray_address"] == "auto" and params["workers"] is None and params["resume"] is True
+    assert str(params["out"]) == "/data/results/" + env.get("MHRC_EVAL_NAME", "eval")
+    assert "results:/data/results" in head["volumes"] and head["ports"] == ["127.0.0.1:8265:8265"]  # the dashboard, on loopback
+    assert "6379" in " ".join(head["healthcheck"]["test"])
+    if env:
+        assert (params["llm"], params["base_url"], params["concurrency"], params["repeats"]) == ("llamacpp:local", "http://llm:8080/v1", 3, 3)
+    else:
+        assert params["llm"] is None and params["concurrency"] is None
+    # the workers: `ray start --address=head:6379 --block`, N replicas, after the head is healthy
+    worker = services["worker"]
+    wargv = shlex.split(interpolate(worker["command"], env))
+    assert worker["entrypoint"] == ["ray"] and wargv[:2] == ["start", "--address=head:6379"] and "--block" in wargv
+    assert f"--num-cpus={env.get('MHRC_WORKER_CPUS', '2')}" in wargv
+    assert interpolate(str(worker["deploy"]["replicas"]), env) == env.get("MHRC_WORKERS", "2")
+    assert worker["depends_on"]["head"]["condition"] == "service_healthy"
+    assert set(doc["volumes"]) == {"results", "ray-token"}
+
+
+def test_kuberay_raycluster_runs_the_mhrc_image_with_token_auth() -> None:
+    docs = [d for d in yaml.safe_load_all(RAYCLUSTER.read_text(encoding="utf-8")) if d]
+    (rc,) = docs
+    assert (rc["apiVersion"], rc["kind"]) == ("ray.io/v1", "RayCluster")
+    import ray
+
+    assert rc["spec"]["rayVersion"].split(".")[:2] == ray.__version__.split(".")[:2]  # the version the image installs
+    head = rc["spec"]["headGroupSpec"]
+    assert head["rayStartParams"]["num-cpus"] == "0"  # the head runs the driver, not episodes
+    groups = rc["spec"]["workerGroupSpecs"]
+    assert groups and all(int(g["rayStartParams"]["num-cpus"]) >= 1 and g["minReplicas"] <= g["replicas"] <= g["maxReplicas"] for g in groups)
+    pods = [head["template"]["spec"], *(g["template"]["spec"] for g in groups)]
+    for pod in pods:
+        (c,) = pod["containers"]
+        assert c["image"].endswith(":ray")  # built with --build-arg EXTRAS=ray
+        env = {e["name"]: e for e in c["env"]}
+        assert env["RAY_AUTH_MODE"]["value"] == "token"
+        assert env["RAY_AUTH_TOKEN"]["valueFrom"]["secretKeyRef"] == {"name": "mhrc-ray-token", "key": "token"}
+        assert pod["securityContext"]["runAsUser"] == 10001  # the image's user
+        assert any(m["mountPath"] == "/dev/shm" for m in c["volumeMounts"])
+    ports = {p["name"]: p["containerPort"] for p in head["template"]["spec"]["containers"][0]["ports"]}
+    assert ports == {"gcs": 6379, "dashboard": 8265, "client": 10001}
+    assert any(m["mountPath"] == "/data/results" for m in head["template"]["spec"]["containers"][0]["volumeMounts"])
+    # the documented driver command is a real mhrc command line
+    line = next(x for x in RAYCLUSTER.read_text(encoding="utf-8").splitlines() if "mhrc eval --ray" in x)
+    params = parse(shlex.split(line.split("mhrc ", 1)[1])).params
+    assert params["ray_address"] == "auto" and params["resume"] is True
+    assert "kubectl create secret generic mhrc-ray-token" in RAYCLUSTER.read_text(encoding="utf-8")
 
 
 # --- The Dockerfile --------------------------------------------------------------------------
@@ -402,28 +467,6 @@ def test_compose_episode_runs_as_local_processes(tmp_path: Path) -> None:
     assert "tls/127.0.0.1" in ps.out("world") and "insecure" not in ps.out("world")  # the secured bus
 
 
-def test_compose_eval_runs_as_local_processes(tmp_path: Path) -> None:
-    """The eval compose file's coordinator and two workers, on a one-episode grid."""
-    services = load(COMPOSE_EVAL)["services"]
-    env = _compose_env(MHRC_TASKS="pack_objects", MHRC_SCENES="kitchen", MHRC_OBJECTS="3")
-    port = free_port("127.0.0.1")
-    results = tmp_path / "results"
-    login = results / "eval" / "credentials" / "worker"  # the workers' subpath mount
-    with Processes(tmp_path) as ps:
-        ps.start("eval", services["eval"], env, port, rewrite={"/data/results": str(results)})
-        deadline = time.monotonic() + 60  # compose waits for the coordinator's healthcheck: it listens after writing the login
-        while not (login / "worker.json").exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        for i in range(2):  # the replicas
-            ps.start(f"worker-{i}", services["worker"], env, port, rewrite={"/credentials": str(login)})
-        assert ps.wait("eval", 240) == 0, ps.out("eval")
-        for i in range(2):
-            assert ps.wait(f"worker-{i}", 60) == 0, ps.out(f"worker-{i}")
-    rows = [json.loads(line) for line in (results / "eval" / "episodes.jsonl").read_text().splitlines() if line.strip()]
-    assert len(rows) == 1 and rows[0]["success"] is True
-    assert (results / "eval" / "summary.md").is_file()
-
-
 def test_documented_up_commands_survive_the_one_shot_services() -> None:
     """`--exit-code-from` implies `--abort-on-container-exit`: the `credentials` service's exit
     (or a worker's, an agent's a moment before the world's) would stop the whole stack. Every
@@ -438,4 +481,4 @@ def test_documented_up_commands_survive_the_one_shot_services() -> None:
     for line in lines:
         if "--exit-code-from" in line:
             assert "--abort-on-container-failure" in line, line
-    assert any("--exit-code-from world" in line for line in lines) and any("--exit-code-from eval" in line for line in lines)
+    assert any("--exit-code-from world" in line for line in lines) and any("--exit-code-from head" in line for line in lines)

@@ -1,6 +1,6 @@
-"""`mhrc eval`, `mhrc worker` and `mhrc report` over real worker processes, a real Zenoh bus on
-loopback and real episodes (heuristic policy, and LLM agents against a scripted OpenAI-compatible
-server on loopback)."""
+"""`mhrc eval` and `mhrc report` over real local worker processes (mhrc.eval_pool), real Zenoh
+buses on loopback and real episodes (heuristic policy, and LLM agents against a scripted
+OpenAI-compatible server on loopback). Ray: tests/test_ray_eval.py."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from mhrc.bus import endpoint, free_port
+from mhrc.bus import free_port
 from mhrc.episode import ConfigError
 from mhrc.evaluation import EvalSpec, evaluate
 from mhrc.report import merge_runs, summary_markdown
@@ -71,74 +71,6 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     assert bad.returncode == 2 and "no episodes.jsonl" in bad.stderr
 
 
-def test_workers_on_other_processes_join_over_the_bus(tmp_path: Path) -> None:
-    """Secured by default: the coordinator listens on TLS and writes the workers' login; a worker
-    with it runs episodes, one without is refused with the cause, and the login is gone at the end."""
-    listen = endpoint("127.0.0.1", free_port("127.0.0.1"), tls=True)
-    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "sort_solids", "--scenes", "bedroom", "--objects", "3", "--trials", "3",
-           "--workers", "0", "--listen", listen, "--out", str(tmp_path / "ev")]  # fmt: skip
-    coordinator = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    login = tmp_path / "ev" / "credentials" / "worker" / "worker.json"
-    deadline = time.monotonic() + 60
-    while not login.exists() and coordinator.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert login.exists(), coordinator.stderr.read() if coordinator.poll() is not None else "no worker login written"
-    stranger = subprocess.run([sys.executable, "-m", "mhrc", "worker", "--connect", listen], capture_output=True, text=True, timeout=60)
-    assert stranger.returncode == 2 and "no credentials" in stranger.stderr and "Traceback" not in stranger.stderr, stranger.stderr
-    workers = [
-        subprocess.Popen([sys.executable, "-m", "mhrc", "worker", "--connect", listen, "--credentials", str(login)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        for _ in range(2)
-    ]  # fmt: skip
-    try:
-        out, err = coordinator.communicate(timeout=240)
-        assert coordinator.returncode == 0, err
-        ran = []
-        for w in workers:
-            _, werr = w.communicate(timeout=60)
-            assert w.returncode == 0, werr
-            ran.append(int(werr.split("worker ran ")[1].split()[0]))
-        assert sum(ran) == 3
-        rows = _rows(tmp_path / "ev")
-        assert len(rows) == 3 and all(r["success"] for r in rows) and len({r["worker"] for r in rows}) == sum(1 for n in ran if n)
-        assert "| sort_solids |" in out
-        assert not (tmp_path / "ev" / "credentials").exists()  # the login lived as long as the evaluation
-    finally:
-        for p in (coordinator, *workers):
-            if p.poll() is None:
-                p.kill()
-
-
-def test_workers_keep_one_login_across_evaluations(tmp_path: Path) -> None:
-    """`mhrc credentials --eval` once; two evaluations use it (`--credentials DIR`) and a worker
-    logs in to each with the same file; the credentials are kept."""
-    creds = tmp_path / "evcreds"
-    issued = subprocess.run([sys.executable, "-m", "mhrc", "credentials", "--eval", "--out", str(creds), "--run", "enightly"],
-                            capture_output=True, text=True, timeout=60)  # fmt: skip
-    assert issued.returncode == 0 and "evaluation enightly" in issued.stderr, issued.stderr
-    login = creds / "worker" / "worker.json"
-    for n in range(2):
-        listen = endpoint("127.0.0.1", free_port("127.0.0.1"), tls=True)
-        coordinator = subprocess.Popen(
-            [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--workers", "0",
-             "--listen", listen, "--credentials", str(creds), "--out", str(tmp_path / f"ev{n}")],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
-        worker = subprocess.Popen([sys.executable, "-m", "mhrc", "worker", "--connect", listen, "--credentials", str(login)],
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
-        try:
-            _, err = coordinator.communicate(timeout=240)
-            assert coordinator.returncode == 0, err
-            _, werr = worker.communicate(timeout=60)
-            assert worker.returncode == 0 and "worker ran 1 episode(s)" in werr, werr
-        finally:
-            for p in (coordinator, worker):
-                if p.poll() is None:
-                    p.kill()
-        assert [r["success"] for r in _rows(tmp_path / f"ev{n}")] == [True]
-        assert login.is_file() and not (tmp_path / f"ev{n}" / "credentials").exists()  # kept where issued, none made
-
-
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -150,11 +82,13 @@ def test_workers_keep_one_login_across_evaluations(tmp_path: Path) -> None:
         (["--repeats", "-2"], "--repeats: must be at least 1 (got -2)"),
         (["--aids", "crystal_ball"], "--aids: unknown aid 'crystal_ball'"),
         (["--history-cap", "0"], "--history-cap"),
-        (["--workers", "0"], "--workers 0 needs --listen"),
-        (["--listen", "tcp/127.0.0.1:7448"], "--listen: a secured evaluation listens on tls/"),
-        (["--listen", "tls/127.0.0.1:7448", "--insecure"], "needs the evaluation's credentials"),
-        (["--credentials", "/nonexistent/creds"], "--credentials: credentials file /nonexistent/creds/coordinator.json does not exist"),
-        (["--credentials", "/nonexistent/creds", "--insecure"], "--credentials and --insecure contradict each other"),
+        (["--workers", "0"], "--workers: must be at least 1 (got 0)"),
+        (["--ray", "auto", "--workers", "2"], "--workers: not with --ray"),
+        (["--shared-out"], "--shared-out: only with --ray"),
+        (["--ray", f"127.0.0.1:{free_port('127.0.0.1')}"], "--ray: nothing answers at 127.0.0.1:"),
+        (["--ray", "nowhere"], "--ray: 'nowhere' is not an address ray.init takes"),
+        (["--listen", "tls/127.0.0.1:7448"], "No such option '--listen'"),  # the job queue is gone
+        (["--credentials", "/tmp/creds"], "No such option '--credentials'"),
     ],
 )
 def test_bad_eval_options_fail_before_anything_starts(tmp_path: Path, args: list[str], message: str) -> None:
@@ -163,51 +97,48 @@ def test_bad_eval_options_fail_before_anything_starts(tmp_path: Path, args: list
     assert not (tmp_path / "x").exists()
 
 
-GRABBER = """
-import asyncio, sys
-from mhrc.episode import open_client
-from mhrc.evaluation import JobRequest, JobReply, find_eval
-from mhrc.protocol import decode
+def _pool_workers(parent: int) -> list[int]:
+    """The pids of `parent`'s children that are local pool workers (python -m mhrc.eval_pool)."""
+    out = []
+    for status in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            ppid = int(status.read_text().rsplit(")", 1)[1].split()[1])
+            cmd = (status.parent / "cmdline").read_bytes()
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == parent and b"mhrc.eval_pool" in cmd:
+            out.append(int(status.parent.name))
+    return out
 
-async def main():
-    bus = await open_client(sys.argv[1], 60.0)  # retries while the coordinator starts
+
+def test_an_episode_whose_worker_process_dies_runs_again_on_a_new_one(tmp_path: Path) -> None:
+    """SIGKILL the only worker mid-episode (its trace has begun): the driver starts another
+    worker, which runs the episode again; its row is there and no error is recorded."""
+    import os
+    import signal
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--workers", "1",
+           "--out", str(tmp_path / "ev")]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ, TMPDIR=str(tmp)))
     try:
-        eid = await find_eval(bus)
-        bus.declare_token(f"mhrc/eval/{eid}/alive/worker/grabber")
-        reply = decode((await bus.get(f"mhrc/eval/{eid}/job", JobRequest(worker="grabber")))[0], JobReply)
-        print(reply.job.key if reply.job else "none", flush=True)
-        await asyncio.sleep(3600)  # takes the job and never finishes it
-    finally:
-        await bus.close()
-
-asyncio.run(main())
-"""
-
-
-def test_a_job_whose_worker_dies_goes_to_another_worker(tmp_path: Path) -> None:
-    listen = endpoint("127.0.0.1", free_port("127.0.0.1"))
-    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--trials", "1",
-           "--workers", "0", "--listen", listen, "--out", str(tmp_path / "ev"), "--insecure"]  # fmt: skip  (the open bus: the grabber logs in nowhere)
-    coordinator = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    grabber = subprocess.Popen([sys.executable, "-c", GRABBER, listen], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    worker = None
-    try:
-        assert grabber.stdout is not None
-        assert grabber.stdout.readline().strip() == "pack_objects/kitchen/3/0"  # the only job is taken
-        grabber.kill()  # ... and its worker dies with it
-        grabber.wait(timeout=10)
-        worker = subprocess.Popen([sys.executable, "-m", "mhrc", "worker", "--connect", listen, "--insecure"],
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
-        _, err = coordinator.communicate(timeout=120)
-        assert coordinator.returncode == 0, err
+        deadline = time.monotonic() + 120
+        while not any(p.stat().st_size for p in tmp.glob("mhrc-eval-*/trace.jsonl")):  # an episode is under way
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-2000:]
+            time.sleep(0.05)
+        (victim,) = _pool_workers(proc.pid)
+        os.kill(victim, signal.SIGKILL)
+        _, err = proc.communicate(timeout=240)
+        assert proc.returncode == 0, err[-2000:]
         rows = _rows(tmp_path / "ev")
-        assert [r["key"] for r in rows] == ["pack_objects/kitchen/3/0"] and rows[0]["worker"] != "grabber" and rows[0]["success"]
-        _, werr = worker.communicate(timeout=60)
-        assert "worker ran 1 episode(s)" in werr
+        assert [r["key"] for r in rows] == ["pack_objects/kitchen/3/0"] and rows[0]["success"]
+        assert rows[0]["worker"] != f"{os.uname().nodename}:{victim}"  # run again, by another process
+        assert not (tmp_path / "ev" / "errors.jsonl").exists()
     finally:
-        for p in (coordinator, grabber, worker):
-            if p is not None and p.poll() is None:
-                p.kill()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
 
 
 # --------------------------------------------------------------------------- the paper's grid
@@ -386,14 +317,14 @@ def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 
 
 def test_eval_names_every_file_it_wrote_and_a_resume_counts_the_earlier_episodes(tmp_path: Path) -> None:
-    first = _mhrc(*SMALL_ARGS, "--insecure", "--out", "ev", cwd=tmp_path)
+    first = _mhrc(*SMALL_ARGS, "--out", "ev", cwd=tmp_path)
     assert first.returncode == 0, first.stderr[-2000:]
     last = first.stderr.strip().splitlines()[-1]
     written = ["episodes.jsonl", "summary.md", "summary.csv", "summary.html"]
     assert last.startswith("done in") and all(str(Path("ev") / name) in last for name in written), last
     assert all((tmp_path / "ev" / name).exists() for name in written)
     # a resume of the finished grid: the totals are the grid's, not "0/0"
-    again = _mhrc(*SMALL_ARGS, "--insecure", "--out", "ev", "--resume", cwd=tmp_path)
+    again = _mhrc(*SMALL_ARGS, "--out", "ev", "--resume", cwd=tmp_path)
     assert again.returncode == 0, again.stderr[-2000:]
     assert "[1/1 solved (all from before)]" in again.stderr and "0/0" not in again.stderr, again.stderr[-2000:]
     # mhrc report --out: the markdown goes to the file, the files written are named on stderr
@@ -414,12 +345,11 @@ def test_a_model_server_that_is_down_stops_the_evaluation_without_claiming_finis
     assert out.returncode == 1, out.stderr[-2000:]
     assert "no episode finished" in out.stderr and "kept in" not in out.stderr, out.stderr[-2000:]
     assert "--resume --out ev" in out.stderr and not (tmp_path / "ev" / "episodes.jsonl").exists()
-    assert not (tmp_path / "ev" / "credentials").exists()
 
 
-def test_a_second_ctrl_c_on_eval_still_removes_the_worker_login(tmp_path: Path) -> None:
+def test_a_second_ctrl_c_on_eval_quits_at_once_and_loses_no_row(tmp_path: Path) -> None:
     """The first Ctrl-C stops the workers; the second, while they stop, quits at once, skipping
-    every `finally`: the evaluation's worker login must go all the same (issue 20)."""
+    every `finally`: the rows written stay whole, and no worker process outlives the driver."""
     import os
     import signal
 
@@ -441,10 +371,11 @@ def test_a_second_ctrl_c_on_eval_still_removes_the_worker_login(tmp_path: Path) 
                 pytest.fail(f"no {what}")
             time.sleep(0.02)
 
-    login = tmp_path / "ev" / "credentials" / "worker" / "worker.json"
     rows = tmp_path / "ev" / "episodes.jsonl"
     try:
-        until("worker login and first episode", lambda: login.exists() and rows.exists() and rows.read_text().endswith("\n"))
+        until("first episode", lambda: rows.exists() and rows.read_text().endswith("\n"))
+        workers = _pool_workers(proc.pid)
+        before = rows.read_text()
         os.killpg(proc.pid, signal.SIGINT)
         until("'interrupted' line", lambda: "interrupted: stopping the workers" in err.read_text())
         os.killpg(proc.pid, signal.SIGINT)  # while the workers stop
@@ -455,4 +386,16 @@ def test_a_second_ctrl_c_on_eval_still_removes_the_worker_login(tmp_path: Path) 
             proc.wait()
     text = err.read_text()
     assert "quitting at once" in text and proc.returncode == 130, (proc.returncode, text[-2000:])
-    assert not (tmp_path / "ev" / "credentials").exists(), "the worker login outlived the evaluation"
+    after = rows.read_text()
+    assert after.startswith(before) and after.endswith("\n"), "a finished row was lost or cut"
+    deadline = time.monotonic() + 60
+    while alive := [pid for pid in workers if _running(pid)]:  # the workers die with the driver (mhrc.lifeline)
+        assert time.monotonic() < deadline, f"worker processes {alive} outlived the evaluation"
+        time.sleep(0.05)
+
+
+def _running(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False

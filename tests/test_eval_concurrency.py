@@ -1,5 +1,5 @@
 """`mhrc eval` with a worker that runs several episodes at once (`--concurrency`): real worker
-processes, a real Zenoh bus on loopback, real worlds, and LLM agents against a scripted
+processes (mhrc.eval_pool), real Zenoh buses on loopback, real worlds, and LLM agents against a scripted
 OpenAI-compatible server on loopback (test_llm's FakeServer)."""
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 
 from mhrc.episode import ConfigError
-from mhrc.evaluation import EvalSpec, evaluate, run_worker
+from mhrc.evaluation import EvalSpec, evaluate
 
 LATENCY = 0.3  # s the scripted model takes per reply: long enough for episodes to overlap at the server
 
@@ -106,8 +106,7 @@ def test_concurrency_below_one_fails_before_anything_starts(tmp_path: Path) -> N
     with pytest.raises(ConfigError, match=re.escape("--concurrency: must be at least 1 (got 0)")):
         asyncio.run(evaluate(spec, tmp_path / "x", concurrency=0))
     assert not (tmp_path / "x").exists()
-    with pytest.raises(ConfigError, match=re.escape("--concurrency: must be at least 1 (got -1)")):
-        asyncio.run(run_worker("tcp/127.0.0.1:9", concurrency=-1))  # before any connection is tried
-    out = subprocess.run([sys.executable, "-m", "mhrc", "worker", "--connect", "tcp/127.0.0.1:9", "--concurrency", "0"],
+    out = subprocess.run([sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--concurrency", "0", "--out", str(tmp_path / "x")],
                          capture_output=True, text=True, timeout=60)  # fmt: skip
     assert out.returncode == 2 and "--concurrency" in out.stderr, out.stderr
+    assert not (tmp_path / "x").exists()

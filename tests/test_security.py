@@ -306,13 +306,15 @@ def test_mhrc_credentials_issues_a_run_for_containers(tmp_path: Path) -> None:
     assert bad.returncode == 2 and "run id" in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
 
 
-def test_an_evaluation_login_serves_without_per_robot_rules(tmp_path: Path) -> None:
-    files = security.make_eval_credentials("e1234", tmp_path / "ev", hosts=("eval",))
-    coord, worker = security.load(files["coordinator"]), security.load(files["worker"])
-    assert coord.is_server and not worker.is_server and worker.kind == "eval" and worker.run == "e1234"
-    assert files["worker"].parent.name == "worker" and sorted(p.name for p in files["worker"].parent.iterdir()) == ["ca.pem", "worker.json"]
-    with pytest.raises(security.SecurityError, match="coordinator's credentials can serve"):
-        security.apply(__import__("zenoh").Config(), worker, router=True)
+def test_an_old_evaluation_login_is_refused_with_what_to_do_instead(tmp_path: Path) -> None:
+    """Evaluations no longer have credentials (mhrc eval runs locally or on Ray): a file of the
+    old "eval" kind is refused with a line saying so, not taken for a run's."""
+    files = _creds(tmp_path)
+    old = json.loads(files["alice"].read_text()) | {"kind": "eval", "user": "worker"}
+    (files["alice"].parent / "worker.json").write_text(json.dumps(old))
+    with pytest.raises(security.SecurityError, match="kind 'eval' is not a run's .*--ray"):
+        security.load(files["alice"].parent / "worker.json")
+    assert not hasattr(security, "make_eval_credentials")
 
 
 # ---------------------------------------------------------------------------------- only the world speaks for the world

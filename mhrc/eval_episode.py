@@ -1,0 +1,110 @@
+"""One episode of an evaluation, run where an executor puts it (a local pool worker, a Ray
+worker): the job it gets, the result it sends back, and the run itself.
+
+An episode runs whole in the process that takes it: its world (a router on a free loopback
+port) and its agents as asyncio tasks, with a trace in a temporary directory. Only the
+trace goes back (zlib-compressed); the driver computes the row from it (`mhrc.metrics`,
+`mhrc.diagnostics`), so a row means the same thing whichever process or host ran it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import socket
+import tempfile
+import zlib
+from pathlib import Path
+from typing import Any
+
+import structlog
+from pydantic import BaseModel, ConfigDict
+
+from . import memory
+from .bus import Bus, Sample
+from .episode import EpisodeConfig, EventHook, up_in_process
+from .keys import Keys
+from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
+
+log = structlog.get_logger("mhrc.eval")
+
+
+class Job(BaseModel):
+    """One episode of the grid: its key (`task/scene/objects/seed`) and its EpisodeConfig fields
+    (no run, port or trace: the process that runs it picks those)."""
+
+    key: str
+    config: dict[str, Any]
+    repeat: int = 0
+    trial: int = 0
+
+
+class EpisodeResult(BaseModel):
+    """What comes back of a job: the trace (zlib of the JSONL), or where it was written
+    (a shared --out), or the error that ended the episode. Its JSON carries the trace in base64
+    (a pool worker's pipe)."""
+
+    model_config = ConfigDict(ser_json_bytes="base64", val_json_bytes="base64")
+
+    key: str
+    worker: str
+    trace_z: bytes = b""
+    trace_file: str | None = None  # written there by the worker (--shared-out): nothing to carry back
+    error: str | None = None
+    fatal: bool = False  # the error will recur in every episode (bad credentials, no such model): stop the evaluation
+
+
+def worker_name() -> str:
+    """How a row names the process that ran it: host and pid."""
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def watch_start(on_start: Any) -> EventHook:
+    """An `up_in_process(observe=...)` hook calling `on_start()` once, when the episode has
+    started (every robot attached) or ended: a pool worker starts the next episode's scene
+    build only then."""
+    fired = False
+
+    def observe(bus: Bus, run: str) -> None:
+        def on_event(sample: Sample) -> None:
+            nonlocal fired
+            if fired:
+                return
+            try:
+                event = decode_event(sample.payload)
+            except ProtocolError:
+                return
+            if isinstance(event, (EpisodeStarted, EpisodeDone)):
+                fired = True
+                on_start()
+
+        bus.subscribe(Keys(run).world_event, on_event)
+
+    return observe
+
+
+async def run_job(job: Job, worker: str, *, observe: EventHook | None = None, trace_dest: Path | None = None) -> EpisodeResult:
+    """Run one episode in this process; never raises but for cancellation. With `trace_dest`
+    (a shared --out) the trace is written there and only its path goes back."""
+    with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
+        trace = Path(tmp) / "trace.jsonl"
+        try:
+            cfg = EpisodeConfig.build(**job.config, trace=trace).resolved()
+            await up_in_process(cfg, observe=observe)
+            if trace_dest is not None:
+                trace_dest.parent.mkdir(parents=True, exist_ok=True)
+                part = trace_dest.with_name(f".{trace_dest.name}.{os.getpid()}")
+                await asyncio.to_thread(lambda: part.write_bytes(trace.read_bytes()))
+                os.replace(part, trace_dest)  # a retried attempt on another host never leaves half a file
+                return EpisodeResult(key=job.key, worker=worker, trace_file=str(trace_dest))
+            data = await asyncio.to_thread(lambda: zlib.compress(trace.read_bytes(), 6))  # zlib lets go of the GIL
+            return EpisodeResult(key=job.key, worker=worker, trace_z=data)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            from mhrc.agents.llm import LLMFatalError
+
+            log.warning("episode failed", key=job.key, error=str(exc))
+            return EpisodeResult(key=job.key, worker=worker, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError))
+        finally:
+            memory.release()  # a worker runs hundreds of episodes: give back what this one freed
