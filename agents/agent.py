@@ -19,7 +19,7 @@ import structlog
 from mhrc.bus import Bus, Sample
 from mhrc.keys import Keys
 from mhrc.protocol import (
-    EPISODE_OVER,
+    OUT_OF_STEP,
     ActionAck,
     ActionRequest,
     ActionResult,
@@ -29,6 +29,7 @@ from mhrc.protocol import (
     Generating,
     Observation,
     ProtocolError,
+    RejectCode,
     RobotDetached,
     Thought,
     TickClosed,
@@ -318,13 +319,13 @@ class RobotAgent:
             if ack is None:
                 return None
             if not ack.accepted:
-                if ack.reason == EPISODE_OVER:  # the world ended as this robot planned; its event is on the way
+                if ack.code is RejectCode.EPISODE_OVER:  # the world ended as this robot planned; its event is on the way
                     self._over = True
                     with contextlib.suppress(TimeoutError):
                         await asyncio.wait_for(self._done.wait(), self.final_result_grace)
                     return None
-                if "tick" in ack.reason and not self._done.is_set():
-                    self._log.info("request out of step, resynchronizing", reason=ack.reason)
+                if ack.code in OUT_OF_STEP and not self._done.is_set():  # planned on a tick that is not (or no longer) its own
+                    self._log.info("request out of step, resynchronizing", reason=ack.reason, code=getattr(ack.code, "value", None))
                     return None
                 raise AgentError(f"the world rejected {decision.action.call()}: {ack.reason}")
             return await self._await(req.goal_id, res_fut, self.result_timeout, "result")

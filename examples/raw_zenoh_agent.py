@@ -34,7 +34,8 @@ from typing import Any
 import zenoh
 
 PROTOCOL_VERSION = 2
-EPISODE_OVER = "the episode is over"  # an ActionAck's reason after the episode's end
+EPISODE_OVER = "the episode is over"  # an AttachReply's reason after the episode's end
+OUT_OF_STEP = ("stale_tick", "tick_taken", "not_your_turn")  # ActionAck codes: the request was for a tick not (or no longer) ours
 EXPLORE_RE = re.compile(r"explore these surfaces and tell me what lies on them:\s*([A-Za-z0-9_]+(?:\s*,\s*[A-Za-z0-9_]+)*)")
 
 Json = dict[str, Any]
@@ -205,11 +206,11 @@ class Agent:
         if ack is None:
             raise Stop("the world left")
         if not ack.get("accepted"):
-            reason = str(ack.get("reason", ""))
-            if reason == EPISODE_OVER:
+            reason, code = str(ack.get("reason", "")), ack.get("code")
+            if code == "episode_over":
                 box.wait(lambda: box.done is not None, 10.0)
                 raise Stop(reason)
-            if "tick" in reason or "turn" in reason:  # planned on a stale tick: attach again for the current one
+            if code in OUT_OF_STEP:  # planned on a stale tick: attach again for the current one
                 print(f"rejected ({reason}): resynchronizing", flush=True)
                 return None
             raise Failure(f"the world rejected {action}: {reason}")

@@ -130,8 +130,18 @@ def label(key: str) -> str:
     return LABELS.get(key, key.replace("_", " "))
 
 
-def reject_kind(reason: str) -> str:
-    """The kind of an `action_ack`'s reason (world/service.py and world/schedulers)."""
+KIND_OF_CODE = {  # RejectCode -> the kind diagnostics count it under
+    "stale_tick": "stale_tick", "tick_taken": "busy", "busy": "busy", "not_your_turn": "out_of_turn", "episode_over": "episode_over",
+    "malformed": "malformed", "not_attached": "not_attached", "other_agent": "not_attached", "wrong_key": "not_attached",
+    "no_such_robot": "not_attached",
+}  # fmt: skip
+
+
+def reject_kind(reason: str, code: object = None) -> str:
+    """The kind of a rejection: from the `action_ack`'s `code` (mhrc.protocol.RejectCode); a
+    trace recorded before acks had one is read from the reason's text."""
+    if isinstance(code, str) and code in KIND_OF_CODE:
+        return KIND_OF_CODE[code]
     r = reason.lower()
     if reason == EPISODE_OVER:
         return "episode_over"
@@ -195,10 +205,11 @@ def diagnose(rows: list[dict[str, Any]]) -> Diagnostics:
     reasons: Counter[str] = Counter()
     for m in msgs:
         if m.get("kind") == "action_ack" and m.get("accepted") is False:
-            reasons[reject_kind(str(m.get("reason", "")))] += 1
+            reasons[reject_kind(str(m.get("reason", "")), m.get("code"))] += 1
     for row in rows:  # a flood of junk or of rejections, counted by the recorder (mhrc.trace)
         if row.get("kind") == "junk" and str(row.get("key", "")).endswith("/action/ack") and isinstance(row.get("msg"), dict):
-            reasons[reject_kind(str(row["msg"].get("reason", "")).removeprefix("rejected: "))] += int(row["msg"].get("count", 0))
+            junk = row["msg"]
+            reasons[reject_kind(str(junk.get("reason", "")).removeprefix("rejected: "), junk.get("code"))] += int(junk.get("count", 0))
     d.rejected, d.rejected_by_reason = sum(reasons.values()), dict(sorted(reasons.items()))
 
     names: Counter[str] = Counter()

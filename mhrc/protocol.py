@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import uuid
 from enum import Enum
-from typing import Annotated, Any, Literal, TypeVar, Union
+from typing import Annotated, Any, Literal, NamedTuple, TypeVar, Union
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
@@ -248,12 +248,38 @@ class ActionRequest(Message):
 EPISODE_OVER = "the episode is over"  # an ActionAck's reason for a request that came after the episode's end
 
 
+class RejectCode(str, Enum):
+    """Why the world rejected an action request, for programs (`ActionAck.reason` says it for people)."""
+
+    MALFORMED = "malformed"  # the payload is not an ActionRequest
+    WRONG_KEY = "wrong_key"  # a request for one robot sent on another robot's key
+    NO_SUCH_ROBOT = "no_such_robot"  # the robot is not in this episode
+    EPISODE_OVER = "episode_over"  # the episode has ended
+    NOT_ATTACHED = "not_attached"  # nobody is attached to the robot: attach first
+    OTHER_AGENT = "other_agent"  # the robot is attached to another agent
+    STALE_TICK = "stale_tick"  # planned on another tick than the world's (or, async, the robot's)
+    TICK_TAKEN = "tick_taken"  # the robot already submitted an action for this tick
+    NOT_YOUR_TURN = "not_your_turn"  # sequential: another robot's turn
+    BUSY = "busy"  # async: the robot's previous action has not finished
+
+
+OUT_OF_STEP = frozenset({RejectCode.STALE_TICK, RejectCode.TICK_TAKEN, RejectCode.NOT_YOUR_TURN})  # attach again for the current tick
+
+
+class Rejection(NamedTuple):
+    """A rejection as the world builds its ack: the code and the sentence."""
+
+    code: RejectCode
+    reason: str
+
+
 class ActionAck(Message):
     kind: Literal["action_ack"] = "action_ack"
     goal_id: str
     robot: str
     accepted: bool
     reason: str = ""
+    code: RejectCode | None = Field(None, description="why the request was rejected, for programs (None when accepted); `reason` says it for people")
 
 
 class ActionResult(Message):

@@ -90,13 +90,13 @@ class Recorder:
             except ProtocolError as exc:
                 reason = str(exc)
         elif sample.key.endswith("/action/ack") and isinstance(msg, dict) and msg.get("accepted") is False:
-            if str(msg.get("reason", "")).startswith("malformed"):
-                reason = str(msg["reason"])
+            if msg.get("code") == "malformed":
+                reason = str(msg.get("reason", ""))
         if reason is None:
             return False
         now = time.perf_counter()
         with self._lock:
-            self._count_junk(sample.key, reason, len(sample.payload), now)
+            self._count_junk(sample.key, reason, len(sample.payload), now, "malformed")
         return True
 
     def _held_or_counted(self, sample: Sample, msg: Any) -> bool:
@@ -122,18 +122,19 @@ class Recorder:
                 if now - start >= JUNK_INTERVAL:
                     start, copied = now, 0
                 if copied >= REJECTIONS_IN_FULL:
-                    reason = "rejected: " + str(msg.get("reason", ""))
+                    reason, code = "rejected: " + str(msg.get("reason", "")), msg.get("code")
                     if held is not None:
-                        self._count_junk(held[1], reason, len(json.dumps(held[2])), now)
-                    self._count_junk(sample.key, reason, len(sample.payload), now)
+                        self._count_junk(held[1], reason, len(json.dumps(held[2])), now, code)
+                    self._count_junk(sample.key, reason, len(sample.payload), now, code)
                     return True
                 self._rejected[sample.key] = (start, copied + 1)
             if held is not None:
                 self._write(held[1], "put", held[2], held[0])
             return False
 
-    def _count_junk(self, key: str, reason: str, size: int, now: float) -> None:
-        junk = self._junk.setdefault(key, {"count": 0, "bytes": 0, "reason": reason[:300], "since": now})
+    def _count_junk(self, key: str, reason: str, size: int, now: float, code: Any = None) -> None:
+        first = {"count": 0, "bytes": 0, "reason": reason[:300], "since": now} | ({"code": str(code)} if isinstance(code, str) else {})
+        junk = self._junk.setdefault(key, first)
         junk["count"] += 1
         junk["bytes"] += size
         if now - junk["since"] >= JUNK_INTERVAL:
@@ -142,7 +143,8 @@ class Recorder:
     def _flush_junk(self, key: str) -> None:
         junk = self._junk.pop(key, None)
         if junk is not None and junk["count"]:
-            self._write(key, "junk", {"count": junk["count"], "bytes": junk["bytes"], "reason": junk["reason"]})
+            line = {"count": junk["count"], "bytes": junk["bytes"], "reason": junk["reason"]}
+            self._write(key, "junk", line | ({"code": junk["code"]} if "code" in junk else {}))
 
     def _on_liveliness(self, sample: Sample) -> None:
         self._write(sample.key, "alive" if sample.is_put else "gone", None)

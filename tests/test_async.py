@@ -199,7 +199,7 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
         bus.put(keys.action_request("alice"), second)
         ack = await asyncio.wait_for(acks.get(), 30)
         assert ack.goal_id == second.goal_id and not ack.accepted
-        assert "alice is still busy with navigate(table_0, 0)" in ack.reason, ack.reason
+        assert "alice is still busy with navigate(table_0, 0)" in ack.reason and ack.code == "busy", ack
         result = await asyncio.wait_for(results.get(), 60)
         waited = asyncio.get_running_loop().time() - sent
         assert result.goal_id == first.goal_id and result.tick == 0 and result.observation.tick == 1 and result.outcome.succeeded
@@ -209,7 +209,7 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
         stale = ActionRequest(robot="alice", agent_id=agent.agent_id, tick=0, action=Wait())
         bus.put(keys.action_request("alice"), stale)
         ack = await asyncio.wait_for(acks.get(), 30)
-        assert not ack.accepted and "is for tick 0 but alice is at tick 1" in ack.reason
+        assert not ack.accepted and "is for tick 0 but alice is at tick 1" in ack.reason and ack.code == "stale_tick"
     started = [line["msg"] for line in read_trace(tmp_path / "t.jsonl") if line["msg"] and line["msg"].get("kind") == "episode_started"]
     assert started and started[0]["scheduler"] == "async" and started[0]["time_scale"] == 1.0 and started[0]["step_seconds"] == STEP_SECONDS
 

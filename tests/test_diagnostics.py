@@ -138,8 +138,22 @@ def test_without_the_planning_observation_the_worlds_verdict_decides() -> None:
         ("something new", "other"),
     ],
 )
-def test_rejections_are_grouped_by_kind(reason: str, kind: str) -> None:
+def test_rejections_recorded_without_a_code_are_grouped_by_their_text(reason: str, kind: str) -> None:
     assert reject_kind(reason) == kind
+
+
+@pytest.mark.parametrize(("code", "kind"), [
+    ("stale_tick", "stale_tick"), ("tick_taken", "busy"), ("busy", "busy"), ("not_your_turn", "out_of_turn"),
+    ("episode_over", "episode_over"), ("malformed", "malformed"), ("not_attached", "not_attached"), ("other_agent", "not_attached"),
+    ("wrong_key", "not_attached"), ("no_such_robot", "not_attached"),
+])  # fmt: skip
+def test_a_rejections_code_decides_its_kind_whatever_its_text(code: str, kind: str) -> None:
+    from mhrc.protocol import RejectCode
+
+    from mhrc.diagnostics import KIND_OF_CODE
+
+    assert set(KIND_OF_CODE) == {c.value for c in RejectCode}  # every code the world sends has its kind
+    assert reject_kind("a sentence a later world may word differently", code) == kind
 
 
 # --------------------------------------------------------------------------- real recorded episodes

@@ -41,6 +41,8 @@ from mhrc.protocol import (
     ObjectPose,
     OutcomeCode,
     ProtocolError,
+    Rejection,
+    RejectCode,
     RobotAttached,
     RobotDetached,
     RobotMessage,
@@ -438,33 +440,34 @@ class WorldService:
             log_now, held = self._throttle.due(f"malformed/{robot}")
             if log_now:  # a flood costs one line per interval, with the count held back
                 self._log.warning("malformed action request rejected", robot=robot, reason=str(exc), **({"and_before": held} if held else {}))
-            self._reject(robot, _goal_id_of(sample.payload), f"malformed action request: {exc}")
+            self._reject(robot, _goal_id_of(sample.payload), Rejection(RejectCode.MALFORMED, f"malformed action request: {exc}"))
             return
-        reason = self._check_request(robot, req) or self.scheduler.admit(req)  # admit only what passed the checks
-        if reason:
-            self._log.info("action rejected", robot=robot, goal=req.goal_id, reason=reason)
-            self._reject(robot, req.goal_id, reason)
+        rejection = self._check_request(robot, req) or self.scheduler.admit(req)  # admit only what passed the checks
+        if rejection is not None:
+            self._log.info("action rejected", robot=robot, goal=req.goal_id, reason=rejection.reason, code=rejection.code.value)
+            self._reject(robot, req.goal_id, rejection)
             return
         self.bus.put(self.keys.action_ack(robot), ActionAck(goal_id=req.goal_id, robot=robot, accepted=True))
         self._wake.set()
 
-    def _check_request(self, robot: str, req: ActionRequest) -> str:
+    def _check_request(self, robot: str, req: ActionRequest) -> Rejection | None:
         if req.robot != robot:
-            return f"request for {req.robot!r} sent on the key of {robot!r}"
+            return Rejection(RejectCode.WRONG_KEY, f"request for {req.robot!r} sent on the key of {robot!r}")
         if robot not in self.sim.robots:
-            return f"there is no robot {robot!r} in this episode ({', '.join(self.sim.robots)})"
+            return Rejection(RejectCode.NO_SUCH_ROBOT, f"there is no robot {robot!r} in this episode ({', '.join(self.sim.robots)})")
         if self.done is not None:
-            return EPISODE_OVER
+            return Rejection(RejectCode.EPISODE_OVER, EPISODE_OVER)
         holder = self.attached.get(robot)
         if holder is None:
-            return f"robot {robot} is not attached: attach first"
+            return Rejection(RejectCode.NOT_ATTACHED, f"robot {robot} is not attached: attach first")
         if holder != req.agent_id:
-            return f"robot {robot} is attached to another agent"
-        return ""
+            return Rejection(RejectCode.OTHER_AGENT, f"robot {robot} is attached to another agent")
+        return None
 
-    def _reject(self, robot: str, goal_id: str, reason: str) -> None:
+    def _reject(self, robot: str, goal_id: str, rejection: Rejection) -> None:
         if robot in self.sim.robots:
-            self.bus.put(self.keys.action_ack(robot), ActionAck(goal_id=goal_id, robot=robot, accepted=False, reason=reason))
+            ack = ActionAck(goal_id=goal_id, robot=robot, accepted=False, reason=rejection.reason, code=rejection.code)
+            self.bus.put(self.keys.action_ack(robot), ack)
 
     def _on_liveliness(self, sample: Sample) -> None:
         robot = self.keys.robot_of(sample.key)

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import structlog
 
-from mhrc.protocol import ActionRequest, ActionResult, Observation, RobotMessage, SkillOutcome
+from mhrc.protocol import ActionRequest, ActionResult, Observation, Rejection, RejectCode, RobotMessage, SkillOutcome
 
 from .base import Scheduler, SchedulerOptionError, World, duration
 
@@ -109,15 +109,15 @@ class AsyncScheduler(Scheduler):
     def tick_of(self, robot: str) -> int:
         return self.steps.get(robot, 0)
 
-    def admit(self, req: ActionRequest) -> str:
+    def admit(self, req: ActionRequest) -> Rejection | None:
         robot = req.robot
         busy = self.running[robot].req if robot in self.running else next((q for q in self.queue if q.robot == robot), None)
         if busy is not None:
-            return f"{robot} is still busy with {busy.action.call()}: send the next action after its result"
+            return Rejection(RejectCode.BUSY, f"{robot} is still busy with {busy.action.call()}: send the next action after its result")
         if req.tick != self.steps[robot]:
-            return f"the request is for tick {req.tick} but {robot} is at tick {self.steps[robot]}"
+            return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but {robot} is at tick {self.steps[robot]}")
         self.queue.append(req)
-        return ""
+        return None
 
     def on_attach(self, robot: str) -> bool:
         self.world.hold_messages(robot, self.mail.pop(robot, []))  # into the attach reply's observation

@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
-from mhrc.protocol import ActionRequest, ActionResult, Message, Observation, RobotMessage, SkillOutcome, Turn, Wait
+from mhrc.protocol import ActionRequest, ActionResult, Message, Observation, Rejection, RobotMessage, SkillOutcome, Turn, Wait
 
 # How long an action takes on the world's clock (simulated seconds). Skills measure their own
 # time (navigation by path length and base speed, arm motions by trajectory and joint speeds);
@@ -110,8 +110,8 @@ class Scheduler(ABC):
         self.makespan = 0.0
 
     @abstractmethod
-    def admit(self, req: ActionRequest) -> str:
-        """Accept `req` (return "") or say why not. The service has already checked that it
+    def admit(self, req: ActionRequest) -> Rejection | None:
+        """Accept `req` (return None) or say why not. The service has already checked that it
         comes from the agent attached to its robot while the episode runs."""
 
     @abstractmethod

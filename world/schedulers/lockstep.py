@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import structlog
 
-from mhrc.protocol import ActionRequest, ActionResult, TickClosed
+from mhrc.protocol import ActionRequest, ActionResult, Rejection, RejectCode, TickClosed
 
 from .base import Scheduler, World, duration
 
@@ -27,13 +27,13 @@ class LockstepScheduler(Scheduler):
         self.pending: dict[str, ActionRequest] = {}
         self._log = log.bind(run=world.run_id)
 
-    def admit(self, req: ActionRequest) -> str:
+    def admit(self, req: ActionRequest) -> Rejection | None:
         if req.tick != self.tick:
-            return f"the request is for tick {req.tick} but the world is at tick {self.tick}"
+            return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but the world is at tick {self.tick}")
         if req.robot in self.pending:
-            return f"{req.robot} already submitted an action for tick {self.tick}"
+            return Rejection(RejectCode.TICK_TAKEN, f"{req.robot} already submitted an action for tick {self.tick}")
         self.pending[req.robot] = req
-        return ""
+        return None
 
     def ready(self) -> bool:
         attached = self.world.attached

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import structlog
 
-from mhrc.protocol import ActionRequest, ActionResult, Observation, RobotMessage, SkillOutcome, TickClosed, Turn
+from mhrc.protocol import ActionRequest, ActionResult, Observation, Rejection, RejectCode, RobotMessage, SkillOutcome, TickClosed, Turn
 
 from .base import Scheduler, TaskResultLike, World, duration
 
@@ -69,15 +69,15 @@ class SequentialScheduler(Scheduler):
         self.world.hold_messages(robot, self.mail.pop(robot, []))  # into that observation
         return False
 
-    def admit(self, req: ActionRequest) -> str:
+    def admit(self, req: ActionRequest) -> Rejection | None:
         if req.tick != self.tick:
-            return f"the request is for tick {req.tick} but the world is at tick {self.tick}"
+            return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but the world is at tick {self.tick}")
         if req.robot != self.turn or not self.given:
-            return f"it is {self.turn}'s turn in tick {self.tick}: {req.robot} waits for its own"
+            return Rejection(RejectCode.NOT_YOUR_TURN, f"it is {self.turn}'s turn in tick {self.tick}: {req.robot} waits for its own")
         if self.pending is not None:
-            return f"{req.robot} already submitted an action for tick {self.tick}"
+            return Rejection(RejectCode.TICK_TAKEN, f"{req.robot} already submitted an action for tick {self.tick}")
         self.pending = req
-        return ""
+        return None
 
     def ready(self) -> bool:
         attached = self.world.attached
