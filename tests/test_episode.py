@@ -85,7 +85,8 @@ def test_cli_names_the_bad_field() -> None:
 async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """The world starts with Alice and Bob; David attaches once ticks are running and is
     scheduled from then on."""
-    cfg = EpisodeConfig.build(seed=6, n_objects=6, start_timeout=3.0, tick_delay=0.3, trace=tmp_path / "t.jsonl").resolved()
+    # horizon 8: David joins in the first ticks and acts; the rest of the episode would prove nothing more
+    cfg = EpisodeConfig.build(seed=6, n_objects=6, horizon=8, start_timeout=3.0, tick_delay=0.3, trace=tmp_path / "t.jsonl").resolved()
     world = asyncio.create_task(serve_world(cfg))
     agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint)) for r in ("alice", "bob")]
     observer = await open_client(cfg.endpoint, 30.0)
