@@ -219,18 +219,24 @@ class RobotAgent:
         network blinked) and the world detached it: attach again and go on."""
         if _listening(self.endpoint) is False:
             raise WorldGone(f"the world disappeared while {self.robot} awaited {what}: nothing listens at {self.endpoint} any more")
-        if self.security is not None and self.endpoint is not None:  # a secured link also closes when a certificate expires
-            from mhrc.security import diagnose
-
-            why = await asyncio.to_thread(diagnose, self.endpoint, self.security)
-            if why.final:
-                raise WorldGone(f"the link to the world closed while {self.robot} awaited {what}: {why}")
+        await self._closed_for_good(what)
         self._log.warning("lost the world's token, but the world may be there: attaching again", awaited=what)
         self._world_gone.clear()
         try:
             return await self._attach()
         except WorldGone:
+            await self._closed_for_good(what)  # a certificate that expired in the meantime (the link may close a moment before)
             raise WorldGone(f"the world disappeared while {self.robot} awaited {what} and did not answer an attach since") from None
+
+    async def _closed_for_good(self, what: str) -> None:
+        """WorldGone naming the cause when a secured link closed for a reason no new attach
+        fixes (an expired certificate, a foreign one)."""
+        if self.security is not None and self.endpoint is not None:
+            from mhrc.security import diagnose
+
+            why = await asyncio.to_thread(diagnose, self.endpoint, self.security)
+            if why.final:
+                raise WorldGone(f"the link to the world closed while {self.robot} awaited {what}: {why}")
 
     async def _resync(self, tick: int) -> Observation | None:
         """The world rejected this robot's request for `tick` as out of step: attach again to
