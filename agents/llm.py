@@ -370,7 +370,7 @@ class _StreamedReply:
         self.progress = progress
         if progress is not None:
             progress.attempt += 1
-            progress.first_token, progress.tokens = None, 0
+            progress.tokens = 0
         self.content: list[str] = []
         self.reasoning: list[str] = []
         self.finish_reason: str | None = None
@@ -417,8 +417,6 @@ class _StreamedReply:
     def _token(self) -> None:
         if self.ttft is None:
             self.ttft = time.perf_counter() - self.started
-            if self.progress is not None:
-                self.progress.first_token = time.monotonic()
         if self.progress is not None:
             self.progress.tokens += 1
 

@@ -12,11 +12,11 @@ from dataclasses import dataclass, field
 
 @dataclass
 class Progress:
-    """One call: when it began, which HTTP attempt is under way, and that attempt's tokens so far."""
+    """One call: when it began, which HTTP attempt is under way, and that attempt's tokens so far
+    (0: the server is still reading the prompt)."""
 
     started: float = field(default_factory=time.monotonic)  # when the call began (time.monotonic)
     attempt: int = 0  # HTTP attempts so far, retries included
-    first_token: float | None = None  # when this attempt's first token came (time.monotonic); None: still reading the prompt
     tokens: int = 0  # chunks of text or reasoning this attempt (llama.cpp, vLLM and OpenAI send about a token a chunk)
 
     def elapsed(self) -> float:

@@ -355,7 +355,7 @@ async def run_agent(
     from mhrc.agents.agent import RobotAgent
     from mhrc.agents.heuristic import heuristic_policy
 
-    if security is not None and security.kind == "run":  # (an evaluation worker's login hosts every robot)
+    if security is not None:
         from .security import check_for
 
         check_for(security, run=run, user=robot)

@@ -162,10 +162,6 @@ class Credentials:
 
     @property
     def is_world(self) -> bool:
-        return self.user == WORLD
-
-    @property
-    def is_server(self) -> bool:
         """The credentials of the participant whose router the others log in to."""
         return self.user == WORLD
 
@@ -195,12 +191,11 @@ def make_run_credentials(
     for r in robots:
         check_id(r, "robot")
     users = [WORLD, *robots] + ([OBSERVER] if observer else [])
-    return _issue(run, RUN, users, directory, robots=robots, days=days, hosts=hosts, split=split)
+    return _issue(run, users, directory, robots=robots, days=days, hosts=hosts, split=split)
 
 
 def _issue(
     run: str,
-    kind: str,
     users: Sequence[str],
     directory: Path,
     *,
@@ -234,8 +229,6 @@ def _issue(
             _write(d / "ca.pem", _pem_cert(ca), private=False)
             with_ca.add(d)
         entry: dict[str, Any] = {"run": run, "user": u, "password": passwords[u], "ca": "ca.pem", "robots": list(robots)}
-        if kind != RUN:
-            entry["kind"] = kind
         if u == server:
             _write(d / f"{u}.pem", _pem_cert(cert))
             _write(d / f"{u}.key", _pem_key(key))
@@ -279,7 +272,7 @@ def load(path: Path | str) -> Credentials:
             f"credentials file {p}: kind {creds.kind!r} is not a run's (an evaluation needs no credentials any more: "
             "mhrc eval runs locally, or on Ray with --ray)"
         )
-    if creds.is_server and (creds.cert is None or creds.key is None or creds.users is None):
+    if creds.is_world and (creds.cert is None or creds.key is None or creds.users is None):
         raise SecurityError(f"credentials file {p}: the {creds.user} needs cert, key and users")
     for f in (creds.ca, creds.cert):
         if f is not None:
@@ -439,7 +432,7 @@ def apply(conf: Any, creds: Credentials, *, router: bool) -> None:
     put("transport/link/tls/verify_name_on_connect", True)
     put("transport/link/tls/close_link_on_expiration", True)
     if router:
-        if not creds.is_server:
+        if not creds.is_world:
             raise SecurityError(f"only the world's credentials can serve the bus, not {creds.describe()}")
         put("transport/link/tls/listen_certificate", str(creds.cert))
         put("transport/link/tls/listen_private_key", str(creds.key))

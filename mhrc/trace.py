@@ -133,8 +133,9 @@ class Recorder:
             return False
 
     def _count_junk(self, key: str, reason: str, size: int, now: float, code: Any = None) -> None:
-        first = {"count": 0, "bytes": 0, "reason": reason[:300], "since": now} | ({"code": str(code)} if isinstance(code, str) else {})
-        junk = self._junk.setdefault(key, first)
+        """Count one junk sample of `key`; `code` is the rejection's (mhrc.protocol.RejectCode), if it has one."""
+        code = code if isinstance(code, str) else None
+        junk = self._junk.setdefault(key, {"count": 0, "bytes": 0, "reason": reason[:300], "code": code, "since": now})
         junk["count"] += 1
         junk["bytes"] += size
         if now - junk["since"] >= JUNK_INTERVAL:
@@ -143,8 +144,7 @@ class Recorder:
     def _flush_junk(self, key: str) -> None:
         junk = self._junk.pop(key, None)
         if junk is not None and junk["count"]:
-            line = {"count": junk["count"], "bytes": junk["bytes"], "reason": junk["reason"]}
-            self._write(key, "junk", line | ({"code": junk["code"]} if "code" in junk else {}))
+            self._write(key, "junk", {k: junk[k] for k in ("count", "bytes", "reason", "code")})
 
     def _on_liveliness(self, sample: Sample) -> None:
         self._write(sample.key, "alive" if sample.is_put else "gone", None)
