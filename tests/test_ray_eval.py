@@ -72,23 +72,12 @@ def _scores(rows: list[dict[str, Any]]) -> dict[str, tuple[Any, ...]]:
 
 @pytest.mark.slow
 def test_the_default_grid_on_ray_gives_the_rows_of_a_local_run(ray_cluster: Cluster, tmp_path: Path) -> None:
-    # both at once: an episode waits on its bus as much as it computes, so the two share the cores well
-    runs = {
-        "ray": subprocess.Popen([*MHRC, "eval", "--ray", ray_cluster.address, "--out", "ray"], cwd=tmp_path, env=ray_cluster.env,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True),
-        "local": subprocess.Popen([*MHRC, "eval", "--workers", "2", "--out", "local"], cwd=tmp_path, stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.PIPE, text=True),
-    }  # fmt: skip
-    try:
-        errors = {name: proc.communicate(timeout=900)[1] for name, proc in runs.items()}
-    finally:
-        for proc in runs.values():
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-    assert runs["ray"].returncode == 0, errors["ray"][-3000:]
-    assert f"on the Ray cluster at {ray_cluster.address}" in errors["ray"]
-    assert runs["local"].returncode == 0, errors["local"][-3000:]
+    on_ray = subprocess.run([*MHRC, "eval", "--ray", ray_cluster.address, "--out", "ray"], cwd=tmp_path, env=ray_cluster.env,
+                            capture_output=True, text=True, timeout=900)  # fmt: skip
+    assert on_ray.returncode == 0, on_ray.stderr[-3000:]
+    assert f"on the Ray cluster at {ray_cluster.address}" in on_ray.stderr
+    local = subprocess.run([*MHRC, "eval", "--workers", "2", "--out", "local"], cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    assert local.returncode == 0, local.stderr[-3000:]
     ray_rows, local_rows = _rows(tmp_path / "ray"), _rows(tmp_path / "local")
     assert len(ray_rows) == 36 and len({r["key"] for r in ray_rows}) == 36
     assert _scores(ray_rows) == _scores(local_rows)
