@@ -48,6 +48,7 @@ log = structlog.get_logger("mhrc.agent")
 
 RESYNC_BACKOFF = 0.5  # s: the first wait before attaching again for a tick whose action is already taken; doubles each time
 RESYNC_BACKOFF_MAX = 8.0  # s
+EXPIRY_SLACK = 10.0  # s: a secured link that closes this close to the run's certificates' end closed because of it
 GENERATING_EVERY = 5.0  # s: a model call longer than this says how far it got (agent/<robot>/generating), then again every as long
 
 
@@ -232,11 +233,19 @@ class RobotAgent:
         """WorldGone naming the cause when a secured link closed for a reason no new attach
         fixes (an expired certificate, a foreign one)."""
         if self.security is not None and self.endpoint is not None:
-            from mhrc.security import diagnose
+            import datetime
+
+            from mhrc.security import diagnose, expiry
 
             why = await asyncio.to_thread(diagnose, self.endpoint, self.security)
             if why.final:
                 raise WorldGone(f"the link to the world closed while {self.robot} awaited {what}: {why}")
+            ends = expiry(self.security)  # the router may close links a moment before a handshake sees the certificate expired
+            if ends is not None and (ends - datetime.datetime.now(datetime.timezone.utc)).total_seconds() < EXPIRY_SLACK:
+                raise WorldGone(
+                    f"the link to the world closed while {self.robot} awaited {what}: the run's certificate expired "
+                    f"({ends:%Y-%m-%d %H:%M:%S} UTC): issue new credentials (mhrc credentials, or a new mhrc up)"
+                )
 
     async def _resync(self, tick: int) -> Observation | None:
         """The world rejected this robot's request for `tick` as out of step: attach again to

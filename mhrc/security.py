@@ -296,6 +296,19 @@ def _check_current(pem: Path, source: Path) -> None:
         raise SecurityError(f"the certificate {pem} (of {source}) is not valid before {cert.not_valid_before_utc:%Y-%m-%d %H:%M} UTC")
 
 
+def expiry(creds: Credentials) -> datetime.datetime | None:
+    """When the first of the run's certificates this participant holds (the CA's, and the world's
+    own) stops being valid; None if none can be read."""
+    ends = []
+    for pem in (creds.ca, creds.cert):
+        if pem is not None:
+            try:
+                ends.append(x509.load_pem_x509_certificate(pem.read_bytes()).not_valid_after_utc)
+            except (OSError, ValueError):
+                continue
+    return min(ends, default=None)
+
+
 def from_env_or(path: Path | str | None) -> Credentials | None:
     """Credentials from `path`, else from the file named by $MHRC_CREDENTIALS, else None."""
     chosen = path or os.environ.get(ENV) or None
