@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING
 
 import structlog
 
-from mhrc.bus import Bus, Sample
-from mhrc.keys import Keys
-from mhrc.protocol import (
+from mhrc.core.bus import Bus, Sample
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import (
     OUT_OF_STEP,
     ActionAck,
     ActionRequest,
@@ -42,7 +42,7 @@ from .policy import Decision, Policy
 from .progress import PROGRESS, Progress
 
 if TYPE_CHECKING:
-    from mhrc.security import Credentials
+    from mhrc.core.security import Credentials
 
 log = structlog.get_logger("mhrc.agent")
 
@@ -235,7 +235,7 @@ class RobotAgent:
         if self.security is not None and self.endpoint is not None:
             import datetime
 
-            from mhrc.security import diagnose, expiry
+            from mhrc.core.security import diagnose, expiry
 
             why = await asyncio.to_thread(diagnose, self.endpoint, self.security)
             if why.final:

@@ -23,7 +23,7 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from mhrc.protocol import (
+from mhrc.core.protocol import (
     Action,
     ActionResult,
     Communicate,

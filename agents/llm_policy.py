@@ -46,7 +46,7 @@ from string import Template
 
 import structlog
 
-from mhrc.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
+from mhrc.core.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
 
 from . import observation as describe
 from . import structured as json_mode

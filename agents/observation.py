@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 
-from mhrc.protocol import FurnitureView, ObjectView, Observation
+from mhrc.core.protocol import FurnitureView, ObjectView, Observation
 
 from .parse import SIGNATURES
 

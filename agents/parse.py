@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import re
 
-from mhrc.protocol import Action, Communicate, Move, Navigate, Open, Pick, Place, Wait
+from mhrc.core.protocol import Action, Communicate, Move, Navigate, Open, Pick, Place, Wait
 
 SKILL_CALL = re.compile(r"\b(navigate|move|open|pick|place|communicate|wait)\s*\(", re.IGNORECASE)
 LABEL = re.compile(r"\bcommand\s*\**\s*:\s*\**\s*", re.IGNORECASE)  # "Command:", "**Command:**"

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-from mhrc.protocol import Action, ActionResult, Observation
+from mhrc.core.protocol import Action, ActionResult, Observation
 
 
 @dataclass(frozen=True)

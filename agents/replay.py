@@ -21,8 +21,8 @@ from pathlib import Path
 from string import Template
 from typing import Any
 
-from mhrc.protocol import LLM_ERROR_PREFIX
-from mhrc.trace import read_trace
+from mhrc.core.protocol import LLM_ERROR_PREFIX
+from mhrc.core.trace import read_trace
 
 from .llm import DEFAULT_TEMPERATURE, Completion, LLMError, Messages, prompt_text
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from pathlib import Path
 
-from mhrc.protocol import ActionResult
+from mhrc.core.protocol import ActionResult
 
 from .llm import DEFAULT_TEMPERATURE, ScriptedClient
 from .llm_policy import LLMPolicy

@@ -17,7 +17,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from mhrc.protocol import ACTION_ADAPTER, SKILLS, Action, Observation
+from mhrc.core.protocol import ACTION_ADAPTER, SKILLS, Action, Observation
 
 from .parse import ReplyFormatError
 

@@ -21,10 +21,10 @@ from pathlib import Path
 
 from report import emit, percentile
 
-from mhrc.episode import EpisodeConfig, open_client, serve_world, wait_for_port, world_command
-from mhrc.keys import Keys
-from mhrc.protocol import ActionAck, ActionRequest, ActionResult, AttachReply, AttachRequest, Wait, decode
-from mhrc.security import Credentials
+from mhrc.run.episode import EpisodeConfig, open_client, serve_world, wait_for_port, world_command
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import ActionAck, ActionRequest, ActionResult, AttachReply, AttachRequest, Wait, decode
+from mhrc.core.security import Credentials
 
 
 async def _round_trips(endpoint: str, run: str, n: int, security: Credentials | None = None) -> dict[str, float]:
@@ -108,4 +108,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -19,8 +19,8 @@ from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
-from mhrc.episode import EpisodeConfig, up_in_process, up_processes
-from mhrc.protocol import EpisodeDone, Metrics
+from mhrc.run.episode import EpisodeConfig, up_in_process, up_processes
+from mhrc.core.protocol import EpisodeDone, Metrics
 
 RUNNERS: dict[str, Callable[[EpisodeConfig], Coroutine[Any, Any, EpisodeDone]]] = {
     "in_process": lambda cfg: up_in_process(cfg),
@@ -94,4 +94,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

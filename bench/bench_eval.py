@@ -27,7 +27,7 @@ from typing import Any
 from bench_llm_concurrency import CountingServer, serve
 from report import emit
 
-from mhrc.evaluation import EvalSpec, evaluate
+from mhrc.eval.engine import EvalSpec, evaluate
 
 SCHEDULES = ("lockstep", "sequential")  # in the order they run
 
@@ -85,4 +85,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

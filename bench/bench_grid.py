@@ -18,10 +18,10 @@ from typing import Any
 
 from report import emit
 
-from mhrc.evaluation import EvalSpec, evaluate
-from mhrc.fidelity import parse_aids
-from mhrc.metrics import summarize
-from mhrc.trace import read_trace
+from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.core.fidelity import parse_aids
+from mhrc.core.metrics import summarize
+from mhrc.core.trace import read_trace
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.tasks import TASKS
 
@@ -92,4 +92,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -28,9 +28,9 @@ from typing import Any
 
 from report import emit
 
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.metrics import from_trace
-from mhrc.trace import read_trace
+from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.core.metrics import from_trace
+from mhrc.core.trace import read_trace
 
 SEED = 0
 SCHEDULES = ("lockstep", "sequential")  # in the order they run
@@ -120,4 +120,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -28,7 +28,7 @@ from typing import Any
 
 from report import emit
 
-from mhrc.evaluation import EvalSpec, evaluate
+from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.tasks import TASKS
 
@@ -156,4 +156,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -34,9 +34,9 @@ from typing import Any
 from report import emit, percentile
 
 from mhrc.agents.local import LocalModelServer
-from mhrc.episode import IDLE_TIMEOUT, SERVER_TIMEOUT, EpisodeConfig, up_in_process
-from mhrc.protocol import LLM_ERROR_PREFIX
-from mhrc.trace import read_trace
+from mhrc.run.episode import IDLE_TIMEOUT, SERVER_TIMEOUT, EpisodeConfig, up_in_process
+from mhrc.core.protocol import LLM_ERROR_PREFIX
+from mhrc.core.trace import read_trace
 
 SLOTS = 3  # one per robot
 CTX = 6144  # tokens per slot: prompts of 2,000-3,500 tokens and a 1,024-token reply
@@ -162,4 +162,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -5,8 +5,8 @@ Three configurations, each in a fresh process, measured in the same run:
 - `before`: zenoh's shared-memory transport on (zenoh's default, which mhrc used until this
   benchmark found it: each session maps a 16 MB pool for messages over 3 KB and never unmaps
   it), no trim between episodes;
-- `shm_off`: shared memory off (mhrc.bus's configuration now), no trim;
-- `now`: shared memory off and `mhrc.memory.release()` after every episode (what a worker does).
+- `shm_off`: shared memory off (mhrc.core.bus's configuration now), no trim;
+- `now`: shared memory off and `mhrc.run.malloc.release()` after every episode (what a worker does).
 
 Reports the resident size (MB) after each episode and the growth per episode over the second
 half. Prints JSON (or writes it with --out).
@@ -29,20 +29,20 @@ CHILD = r"""
 import asyncio, itertools, json, os, sys, tempfile
 from pathlib import Path
 
-import mhrc.bus
-from mhrc import memory
-from mhrc.episode import EpisodeConfig, up_in_process
+import mhrc.core.bus
+from mhrc.run import malloc as memory
+from mhrc.run.episode import EpisodeConfig, up_in_process
 
 episodes, shm, trim = int(sys.argv[1]), sys.argv[2] == "1", sys.argv[3] == "1"
 if shm:  # the configuration before: zenoh's default shared-memory transport
-    plain = mhrc.bus.make_config
+    plain = mhrc.core.bus.make_config
 
     def with_shm(**kw):
         conf = plain(**kw)
         conf.insert_json5("transport/shared_memory/enabled", "true")
         return conf
 
-    mhrc.bus.make_config = with_shm
+    mhrc.core.bus.make_config = with_shm
 
 
 def rss_mb() -> int:
@@ -95,4 +95,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -25,7 +25,7 @@ from mhrc.agents.llm import ScriptedClient, estimate_tokens
 from mhrc.agents.llm_policy import SMALL_CONTEXT_CAP, LLMPolicy
 from report import emit
 
-from mhrc.protocol import (
+from mhrc.core.protocol import (
     ActionResult,
     FurnitureView,
     ObjectView,
@@ -166,7 +166,7 @@ async def heuristic_sizes() -> dict[str, Any]:
     from mhrc.agents.heuristic import heuristic_policy
     from mhrc.world.sim import Sim
 
-    from mhrc.protocol import Communicate
+    from mhrc.core.protocol import Communicate
 
     variants = {"paper": {}, "prompt_hints": {"prompt_hints": True}}
     out: dict[str, Any] = {"episode": HEURISTIC_EPISODE, "steps": list(HEURISTIC_STEPS), "roles": {}}
@@ -229,4 +229,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -33,8 +33,8 @@ from typing import Any
 from bench_llm_concurrency import serve
 from report import emit
 
-from mhrc.bus import free_port
-from mhrc.evaluation import EvalSpec, evaluate
+from mhrc.core.bus import free_port
+from mhrc.eval.engine import EvalSpec, evaluate
 
 TASKS = ("pack_objects", "sort_solids", "make_sandwich")
 SCENES = ("kitchen", "bathroom", "bedroom")
@@ -122,4 +122,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

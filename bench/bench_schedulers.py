@@ -38,11 +38,11 @@ from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm import OpenAIChatClient
 from mhrc.agents.llm_policy import LLMPolicy
 from mhrc.agents.policy import Decision
-from mhrc.bus import Bus
-from mhrc.episode import EpisodeConfig, open_client, serve_world
-from mhrc.metrics import from_trace
-from mhrc.protocol import ActionResult, EpisodeDone, Observation
-from mhrc.trace import read_trace
+from mhrc.core.bus import Bus
+from mhrc.run.episode import EpisodeConfig, open_client, serve_world
+from mhrc.core.metrics import from_trace
+from mhrc.core.protocol import ActionResult, EpisodeDone, Observation
+from mhrc.core.trace import read_trace
 
 LATENCY = {"bob": 0.5, "alice": 1.5, "david": 1.0}  # s per call, before jitter
 JITTER = 0.5  # each call's latency is drawn uniformly in [1 - JITTER, 1 + JITTER] x the robot's
@@ -198,4 +198,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

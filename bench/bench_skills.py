@@ -18,7 +18,7 @@ from pathlib import Path
 
 from report import emit, percentile
 
-from mhrc.protocol import Action, SkillOutcome
+from mhrc.core.protocol import Action, SkillOutcome
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.sim import Sim
 from mhrc.world.tasks import TASKS
@@ -90,4 +90,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -20,7 +20,7 @@ from pathlib import Path
 import imageio.v3 as iio
 from report import emit
 
-from mhrc.episode import EpisodeConfig, up_in_process
+from mhrc.run.episode import EpisodeConfig, up_in_process
 from mhrc.viewer.video import FPS, render_video
 
 
@@ -71,4 +71,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from mhrc.core import logs
+
+    logs.configure()
     main()

@@ -1,11 +1,6 @@
 """mhrc: multi-heterogeneous robot collaboration with LLM agents over Zenoh.
 
-Importing mhrc routes its structlog output to stderr at the level in MHRC_LOG_LEVEL
-(default: warning); the CLI's --log-level and `mhrc.logs.configure` change it.
+Importing mhrc configures nothing: the `mhrc` command (and each process it starts) routes
+structlog to stderr at MHRC_LOG_LEVEL or --log-level; a library user calls
+`mhrc.core.logs.configure` to do the same.
 """
-
-import os as _os
-
-from . import logs as _logs
-
-_logs.configure(_os.environ.get("MHRC_LOG_LEVEL", "warning"))

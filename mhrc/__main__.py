@@ -1,3 +1,3 @@
-from .cli import main
+from mhrc.cli import main
 
 main()

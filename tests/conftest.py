@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from mhrc.bus import Bus
-from mhrc.episode import EpisodeConfig, open_client, serve_world
-from mhrc.protocol import EpisodeDone
+from mhrc.core.bus import Bus
+from mhrc.run.episode import EpisodeConfig, open_client, serve_world
+from mhrc.core.protocol import EpisodeDone
 
 
 class RunningWorld:
@@ -44,7 +44,7 @@ def world_factory(tmp_path: Path):  # type: ignore[no-untyped-def]
 
 @pytest.fixture(autouse=True, scope="session")
 def _quiet_logs() -> None:
-    from mhrc import logs
+    from mhrc.core import logs
 
     logs.configure("info")
 

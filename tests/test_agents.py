@@ -9,9 +9,9 @@ import pytest
 
 from mhrc.agents.agent import AttachRejected, RobotAgent
 from mhrc.agents.scripted import ScriptedPolicy
-from mhrc.bus import Bus, Sample, endpoint, free_port
-from mhrc.keys import Keys
-from mhrc.protocol import (
+from mhrc.core.bus import Bus, Sample, endpoint, free_port
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import (
     ActionAck,
     ActionRequest,
     ActionResult,
@@ -24,7 +24,7 @@ from mhrc.protocol import (
     SkillOutcome,
     decode,
 )
-from mhrc.trace import read_trace
+from mhrc.core.trace import read_trace
 
 
 async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(world_factory) -> None:  # type: ignore[no-untyped-def]

@@ -12,7 +12,7 @@ from mhrc.agents.observation import furniture_line, object_line
 from mhrc.world.beliefs import Beliefs
 from mhrc.world.sim import Sim
 
-from mhrc.protocol import Move, Navigate, ObjectView, Observation, Open, OutcomeCode, Pick, Place, SkillOutcome
+from mhrc.core.protocol import Move, Navigate, ObjectView, Observation, Open, OutcomeCode, Pick, Place, SkillOutcome
 
 
 EXACT = ("exact_motion",)  # bases stop on their poses, placed objects stay put: the story stays the story

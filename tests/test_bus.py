@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import asyncio
 
-from mhrc.bus import Bus, Sample, endpoint, free_port
-from mhrc.protocol import ActionAck, decode
+from mhrc.core.bus import Bus, Sample, endpoint, free_port
+from mhrc.core.protocol import ActionAck, decode
 
 
 async def test_pub_sub_query_and_liveliness_across_sessions() -> None:

@@ -18,9 +18,9 @@ from rich.console import Console
 
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision, Policy
-from mhrc.bus import Bus, Sample, free_port
-from mhrc.keys import Keys
-from mhrc.protocol import (
+from mhrc.core.bus import Bus, Sample, free_port
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import (
     ActionAck,
     ActionRequest,
     ActionResult,
@@ -149,8 +149,8 @@ def _table_rows(text: str) -> dict[str, str]:
 
 @pytest.mark.parametrize("processes", [False, True], ids=["in-process", "processes"])
 def test_quiet_prints_only_the_summary_table_with_the_reports_makespan(processes: bool, tmp_path: Path) -> None:
-    from mhrc.metrics import from_trace
-    from mhrc.trace import read_trace
+    from mhrc.core.metrics import from_trace
+    from mhrc.core.trace import read_trace
 
     trace = tmp_path / "t.jsonl"
     run = mhrc("up", "--quiet", "--trace", str(trace), *(["--processes"] if processes else []), cwd=tmp_path)
@@ -166,8 +166,8 @@ def test_quiet_prints_only_the_summary_table_with_the_reports_makespan(processes
 
 
 def test_the_summary_table_shows_the_makespan_not_the_sum_of_skill_times() -> None:
-    from mhrc.progress import summary_table
-    from mhrc.protocol import EpisodeDone, Metrics
+    from mhrc.run.console import summary_table
+    from mhrc.core.protocol import EpisodeDone, Metrics
 
     metrics = Metrics(
         success=True, partial_success=1.0, placed=4, total=4, temporal_steps=17, action_steps=42,
@@ -193,9 +193,9 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     """Results, messages and the tick events travel on different keys; the console must still
     read in tick order: a tick's results, then its messages, then "tick N closed"; the table
     last, after every result (`mhrc world`'s printer prints it; `mhrc up` after the run)."""
-    from mhrc.episode import EpisodeConfig, up_in_process
-    from mhrc.progress import ProgressPrinter, summary_table
-    from mhrc.trace import read_trace
+    from mhrc.run.episode import EpisodeConfig, up_in_process
+    from mhrc.run.console import ProgressPrinter, summary_table
+    from mhrc.core.trace import read_trace
 
     out = io.StringIO()
     console = Console(file=out, width=400, highlight=False, soft_wrap=True)

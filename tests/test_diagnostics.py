@@ -1,4 +1,4 @@
-"""Failure diagnostics (mhrc.diagnostics) over a hand-built trace and over real recorded episodes
+"""Failure diagnostics (mhrc.core.diagnostics) over a hand-built trace and over real recorded episodes
 (the heuristic team, and LLM agents against a scripted OpenAI-compatible server on loopback),
 and the evaluation summaries that carry them: summary.md's table and summary.html."""
 
@@ -15,13 +15,13 @@ from typing import Any
 
 import pytest
 
-from mhrc.diagnostics import diagnose, reject_kind, row_diagnostics, summarize_diagnostics
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.evaluation import EvalSpec, evaluate
-from mhrc.metrics import from_trace
-from mhrc.protocol import EPISODE_OVER, LLM_ERROR_PREFIX
-from mhrc.report import read_rows, write_summaries
-from mhrc.trace import read_trace
+from mhrc.core.diagnostics import diagnose, reject_kind, row_diagnostics, summarize_diagnostics
+from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.core.metrics import from_trace
+from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX
+from mhrc.eval.report import read_rows, write_summaries
+from mhrc.core.trace import read_trace
 
 # --------------------------------------------------------------------------- a hand-built trace
 
@@ -148,9 +148,9 @@ def test_rejections_recorded_without_a_code_are_grouped_by_their_text(reason: st
     ("wrong_key", "not_attached"), ("no_such_robot", "not_attached"),
 ])  # fmt: skip
 def test_a_rejections_code_decides_its_kind_whatever_its_text(code: str, kind: str) -> None:
-    from mhrc.protocol import RejectCode
+    from mhrc.core.protocol import RejectCode
 
-    from mhrc.diagnostics import KIND_OF_CODE
+    from mhrc.core.diagnostics import KIND_OF_CODE
 
     assert set(KIND_OF_CODE) == {c.value for c in RejectCode}  # every code the world sends has its kind
     assert reject_kind("a sentence a later world may word differently", code) == kind

@@ -9,10 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.protocol import Navigate, Open, Pick
-from mhrc.quiet import pybullet as p
-from mhrc.trace import read_trace
+from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.core.protocol import Navigate, Open, Pick
+from mhrc.world.quiet import pybullet as p
+from mhrc.core.trace import read_trace
 import pybullet_data
 
 from mhrc.world.arm import HOME

@@ -8,10 +8,10 @@ import sys
 
 import pytest
 
-from mhrc.episode import ConfigError, EpisodeConfig, open_client, run_agent, serve_world, up_in_process, up_processes
-from mhrc.keys import Keys
-from mhrc.protocol import decode_event
-from mhrc.trace import read_trace
+from mhrc.run.episode import ConfigError, EpisodeConfig, open_client, run_agent, serve_world, up_in_process, up_processes
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import decode_event
+from mhrc.core.trace import read_trace
 
 
 async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None:  # type: ignore[no-untyped-def]

@@ -1,4 +1,4 @@
-"""`mhrc eval` and `mhrc report` over real local worker processes (mhrc.eval_pool), real Zenoh
+"""`mhrc eval` and `mhrc report` over real local worker processes (mhrc.eval.pool), real Zenoh
 buses on loopback and real episodes (heuristic policy, and LLM agents against a scripted
 OpenAI-compatible server on loopback). Ray: tests/test_ray_eval.py."""
 
@@ -15,10 +15,10 @@ from typing import Any
 
 import pytest
 
-from mhrc.bus import free_port
-from mhrc.episode import ConfigError
-from mhrc.evaluation import EvalSpec, evaluate
-from mhrc.report import merge_runs, summary_markdown
+from mhrc.core.bus import free_port
+from mhrc.run.episode import ConfigError
+from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.eval.report import merge_runs, summary_markdown
 
 SMALL = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2)
 VOLATILE = {"wall_time", "worker"}
@@ -98,7 +98,7 @@ def test_bad_eval_options_fail_before_anything_starts(tmp_path: Path, args: list
 
 
 def _pool_workers(parent: int) -> list[int]:
-    """The pids of `parent`'s children that are local pool workers (python -m mhrc.eval_pool)."""
+    """The pids of `parent`'s children that are local pool workers (python -m mhrc.eval.pool)."""
     out = []
     for status in Path("/proc").glob("[0-9]*/stat"):
         try:
@@ -106,7 +106,7 @@ def _pool_workers(parent: int) -> list[int]:
             cmd = (status.parent / "cmdline").read_bytes()
         except (OSError, IndexError, ValueError):
             continue
-        if ppid == parent and b"mhrc.eval_pool" in cmd:
+        if ppid == parent and b"mhrc.eval.pool" in cmd:
             out.append(int(status.parent.name))
     return out
 
@@ -190,7 +190,7 @@ def _put(kind: str, **msg: Any) -> dict[str, Any]:
 
 def test_llm_failures_and_validity_are_counted_from_the_trace() -> None:
     from mhrc.agents.replay import LLM_ERROR_PREFIX
-    from mhrc.metrics import from_trace
+    from mhrc.core.metrics import from_trace
 
     def trace(*thoughts: str | None, fidelity: str | None = "aids:goal_map") -> list[dict[str, Any]]:
         started: dict[str, Any] = {"run": "r", "task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3, "robots": ["bob"], "horizon": 4}
@@ -389,7 +389,7 @@ def test_a_second_ctrl_c_on_eval_quits_at_once_and_loses_no_row(tmp_path: Path) 
     after = rows.read_text()
     assert after.startswith(before) and after.endswith("\n"), "a finished row was lost or cut"
     deadline = time.monotonic() + 60
-    while alive := [pid for pid in workers if _running(pid)]:  # the workers die with the driver (mhrc.lifeline)
+    while alive := [pid for pid in workers if _running(pid)]:  # the workers die with the driver (mhrc.run.lifeline)
         assert time.monotonic() < deadline, f"worker processes {alive} outlived the evaluation"
         time.sleep(0.05)
 

@@ -1,5 +1,5 @@
 """`mhrc eval` with a worker that runs several episodes at once (`--concurrency`): real worker
-processes (mhrc.eval_pool), real Zenoh buses on loopback, real worlds, and LLM agents against a scripted
+processes (mhrc.eval.pool), real Zenoh buses on loopback, real worlds, and LLM agents against a scripted
 OpenAI-compatible server on loopback (test_llm's FakeServer)."""
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from typing import Any
 
 import pytest
 
-from mhrc.episode import ConfigError
-from mhrc.evaluation import EvalSpec, evaluate
+from mhrc.run.episode import ConfigError
+from mhrc.eval.engine import EvalSpec, evaluate
 
 LATENCY = 0.3  # s the scripted model takes per reply: long enough for episodes to overlap at the server
 

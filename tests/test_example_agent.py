@@ -13,9 +13,9 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from mhrc import protocol
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.trace import read_trace
+from mhrc.core import protocol
+from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.core.trace import read_trace
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "raw_zenoh_agent.py"
 

@@ -183,12 +183,12 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
 
     import structlog
 
-    from mhrc import logs
-    from mhrc.bus import Bus
-    from mhrc.episode import EpisodeConfig, up_in_process
-    from mhrc.keys import Keys
-    from mhrc.metrics import from_trace
-    from mhrc.trace import read_trace
+    from mhrc.core import logs
+    from mhrc.core.bus import Bus
+    from mhrc.run.episode import EpisodeConfig, up_in_process
+    from mhrc.core.keys import Keys
+    from mhrc.core.metrics import from_trace
+    from mhrc.core.trace import read_trace
 
     flood = 2000
     junk = b'{"v": 2, "robot": "alice", "agent_id": "x", "tick": 0, "action": {"skill": "teleport"}, "pad": "' + b"x" * 900 + b'"}'
@@ -229,13 +229,13 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
     """2,000 well-formed requests on Alice's key from an agent the world does not know: each is
     rejected; the trace copies the first few (request and ack) and counts the rest as `junk`,
     and the metrics and diagnostics still count every rejection, by reason."""
-    from mhrc.bus import Bus
-    from mhrc.diagnostics import diagnose
-    from mhrc.episode import EpisodeConfig, up_in_process
-    from mhrc.keys import Keys
-    from mhrc.metrics import from_trace
-    from mhrc.protocol import ActionRequest, Wait
-    from mhrc.trace import REJECTIONS_IN_FULL, read_trace
+    from mhrc.core.bus import Bus
+    from mhrc.core.diagnostics import diagnose
+    from mhrc.run.episode import EpisodeConfig, up_in_process
+    from mhrc.core.keys import Keys
+    from mhrc.core.metrics import from_trace
+    from mhrc.core.protocol import ActionRequest, Wait
+    from mhrc.core.trace import REJECTIONS_IN_FULL, read_trace
 
     flood = 2000
     forged = [ActionRequest(robot="alice", agent_id="not-attached", tick=0, action=Wait()) for _ in range(flood)]
@@ -269,7 +269,7 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
 def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> None:
     import socket
 
-    from mhrc.bus import free_port
+    from mhrc.core.bus import free_port
 
     port = free_port()
     sock = None
@@ -282,7 +282,7 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
         else:
             (tmp_path / "first").mkdir()
             world = _start(["world", "--port", str(port), "--run", "first", "--insecure", "--quiet"], tmp_path / "first")
-            from mhrc.bus import ListenError, check_listen
+            from mhrc.core.bus import ListenError, check_listen
 
             deadline = time.monotonic() + 60
             while True:  # until the first world listens
@@ -315,7 +315,7 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
 def test_a_world_killed_under_its_agent_is_one_line_and_exit_2(tmp_path: Path) -> None:
     """`mhrc agent` whose world is killed (SIGKILL) mid-episode, and one with no world at all:
     one line naming the cause, exit 2, no traceback."""
-    from mhrc.bus import free_port
+    from mhrc.core.bus import free_port
 
     port = free_port()
     (tmp_path / "w").mkdir()
@@ -378,7 +378,7 @@ async def test_an_agent_frozen_and_resumed_attaches_again(schedule: str, tmp_pat
     (his lease expired), then resumed: he attaches again and plays on, instead of exiting with
     "the world disappeared" while the world was fine; under the sequential schedule he is
     mostly frozen while awaiting his turn, which probes and attaches again the same way."""
-    from mhrc.protocol import RobotAttached, RobotDetached
+    from mhrc.core.protocol import RobotAttached, RobotDetached
     from mhrc.testing import world_on_loopback
 
     async with world_on_loopback(seed=0, n_objects=4, tick_delay=0.4, schedule=schedule, trace=tmp_path / "t.jsonl") as world:
@@ -387,12 +387,12 @@ async def test_an_agent_frozen_and_resumed_attaches_again(schedule: str, tmp_pat
         client = await world.client()
 
         def on_event(sample: Any) -> None:
-            from mhrc.protocol import decode_event
+            from mhrc.core.protocol import decode_event
 
             events.append(decode_event(sample.payload))
             news.set()
 
-        from mhrc.keys import Keys
+        from mhrc.core.keys import Keys
 
         client.subscribe(Keys(world.run).world_event, on_event)
         log = (tmp_path / "david.txt").open("w")
@@ -435,8 +435,8 @@ async def test_an_agent_that_attaches_without_a_token_is_detached_not_waited_for
     """A client that attaches and never declares its liveliness token (killed or frozen right
     after the attach reply, or a hand-written agent that skips it) is detached within the token
     grace, with the reason and its agent id, so the sequential schedule does not wait for it forever."""
-    from mhrc.keys import Keys
-    from mhrc.protocol import AttachReply, AttachRequest, RobotDetached, decode, decode_event
+    from mhrc.core.keys import Keys
+    from mhrc.core.protocol import AttachReply, AttachRequest, RobotDetached, decode, decode_event
     from mhrc.testing import world_on_loopback
     from mhrc.world.service import TOKEN_GRACE
 

@@ -10,10 +10,10 @@ import pytest
 
 from mhrc.agents.llm import ScriptedClient
 from mhrc.agents.llm_policy import LLMPolicy
-from mhrc.episode import ConfigError, EpisodeConfig, up_in_process
-from mhrc.fidelity import AIDS, label, parse_aids
-from mhrc.protocol import ActionResult, SkillOutcome, Wait
-from mhrc.trace import read_trace
+from mhrc.run.episode import ConfigError, EpisodeConfig, up_in_process
+from mhrc.core.fidelity import AIDS, label, parse_aids
+from mhrc.core.protocol import ActionResult, SkillOutcome, Wait
+from mhrc.core.trace import read_trace
 from mhrc.world import skills
 from mhrc.world.robots import ARM_FORWARD
 from mhrc.world.sim import Sim
@@ -49,7 +49,7 @@ def test_bob_is_told_the_goal_of_each_solid_only_with_the_goal_map_aid() -> None
 
 
 def test_reach_labels_are_an_aid_of_the_prompt() -> None:
-    from mhrc.protocol import ObjectView
+    from mhrc.core.protocol import ObjectView
 
     apple = ObjectView(name="apple", position=(-3.3, -0.1, 0.74), on="table_0")
     plain = LLMPolicy("bob", ScriptedClient([])).render(obs(robot="bob", objects=[apple]))[1]["content"]

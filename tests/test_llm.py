@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 
 from mhrc.agents.llm import LLMError, OpenAIChatClient, check_spec
-from mhrc.episode import EpisodeConfig, up_in_process
+from mhrc.run.episode import EpisodeConfig, up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer
-from mhrc.trace import read_trace
+from mhrc.core.trace import read_trace
 
 Reply = tuple[int, dict[str, str], bytes, float]  # status, headers, body, delay
 

@@ -14,7 +14,7 @@ from mhrc.agents.memory import Memory
 from mhrc.agents.policy import Decision
 from mhrc.agents.replay import ReplayClient, ReplayMismatch, replay_clients
 
-from mhrc.protocol import (
+from mhrc.core.protocol import (
     Action,
     ActionResult,
     Communicate,

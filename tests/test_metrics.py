@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 from mhrc.world.bound import SymbolicEpisode, SymbolicObject, lower_bound
 
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.metrics import TraceError, from_trace, summarize
-from mhrc.trace import read_trace
+from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.core.metrics import TraceError, from_trace, summarize
+from mhrc.core.trace import read_trace
 
 
 def _put(kind: str, **msg: Any) -> dict[str, Any]:

@@ -3,7 +3,7 @@ from __future__ import annotations
 import pytest
 
 from mhrc.agents.parse import ReplyFormatError, parse_command
-from mhrc.protocol import Communicate, Move, Navigate, Open, Pick, Place, Wait
+from mhrc.core.protocol import Communicate, Move, Navigate, Open, Pick, Place, Wait
 
 
 @pytest.mark.parametrize(

@@ -27,7 +27,7 @@ from mhrc.agents.llm import ScriptedClient
 from mhrc.agents.llm_policy import LLMPolicy, TemplateError, load_hints, load_template
 from mhrc.agents.replay import ReplayClient, ReplayMismatch
 
-from mhrc.protocol import (
+from mhrc.core.protocol import (
     ActionResult,
     FurnitureView,
     ObjectView,

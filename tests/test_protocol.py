@@ -2,8 +2,8 @@ from __future__ import annotations
 
 import pytest
 
-from mhrc.keys import InvalidId, Keys
-from mhrc.protocol import (
+from mhrc.core.keys import InvalidId, Keys
+from mhrc.core.protocol import (
     PROTOCOL_VERSION,
     ActionRequest,
     Navigate,

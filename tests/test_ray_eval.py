@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from mhrc.bus import free_port
+from mhrc.core.bus import free_port
 
 MHRC = [sys.executable, "-m", "mhrc"]
 SMALL = ["--tasks", "pack_objects", "--scenes", "kitchen"]
@@ -190,7 +190,7 @@ def test_a_driver_without_the_clusters_token_is_refused_before_any_episode(ray_c
 
 
 def test_llm_episodes_take_a_fraction_of_a_cpu_and_heuristic_ones_a_whole_cpu() -> None:
-    from mhrc.eval_ray import RayExecutor
+    from mhrc.eval.cluster import RayExecutor
 
     assert RayExecutor("auto", concurrency=4, llm=True).num_cpus == 0.25
     assert RayExecutor("auto", concurrency=4, llm=False).num_cpus == 1.0

@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 
 from mhrc.agents.local import LocalModelServer
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.protocol import Observation
-from mhrc.trace import read_trace
+from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.core.protocol import Observation
+from mhrc.core.trace import read_trace
 
 pytestmark = pytest.mark.slow
 CTX = 6144  # tokens per slot: the paper's prompts are about 2,000-3,500 tokens at the start
@@ -37,7 +37,7 @@ async def test_a_free_text_episode_at_the_defaults_gets_every_robot_its_models_o
     idle timeouts, no step deadline), three robots on three slots of this machine's CPU: each
     reply takes minutes of decoding, and every robot-step still gets the model's own reply
     (parsed or not), none "unavailable" (the old total timeout of 60 s cut them all)."""
-    from mhrc.protocol import LLM_ERROR_PREFIX
+    from mhrc.core.protocol import LLM_ERROR_PREFIX
 
     async with LocalModelServer(gemma, slots=3, n_ctx_per_slot=CTX, seed=7) as srv:
         cfg = EpisodeConfig.build(seed=0, horizon=1, llm=f"llamacpp:{srv.model}", base_url=srv.base_url, trace=tmp_path / "t.jsonl").resolved()

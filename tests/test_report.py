@@ -1,4 +1,4 @@
-"""`mhrc.report` on hand-built rows: bootstrap intervals, the paper's figures beside the
+"""`mhrc.eval.report` on hand-built rows: bootstrap intervals, the paper's figures beside the
 settings that match its configuration (and only those), invalid episodes left out."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from mhrc.report import PAPER_FIGURES, bootstrap_ci, paper_model, summary_csv, summary_markdown
+from mhrc.eval.report import PAPER_FIGURES, bootstrap_ci, paper_model, summary_csv, summary_markdown
 
 SCENES = ("bathroom", "bedroom", "kitchen")
 GPT4O_PACK = "0.92 / 0.96 / 32.67 / 25.00"  # Table I, GPT-4o, Pack Objects

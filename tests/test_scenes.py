@@ -20,7 +20,7 @@ from mhrc.world.scene import LAYOUTS, occupancy
 from mhrc.world.sim import Sim
 from mhrc.world.tasks import TASKS
 
-from mhrc.protocol import Navigate, Open, OutcomeCode, Pick
+from mhrc.core.protocol import Navigate, Open, OutcomeCode, Pick
 
 # the example house of the paper's appendix
 APPENDIX = {

@@ -22,11 +22,11 @@ import pytest
 
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
-from mhrc.episode import ROBOTS, EpisodeConfig, up_in_process, up_processes
-from mhrc.keys import Keys
-from mhrc.protocol import ActionResult, EpisodeDone, Message, Observation, RobotAttached, RobotDetached, decode_event, parse_action
+from mhrc.run.episode import ROBOTS, EpisodeConfig, up_in_process, up_processes
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import ActionResult, EpisodeDone, Message, Observation, RobotAttached, RobotDetached, decode_event, parse_action
 from mhrc.testing import LoopbackWorld, world_on_loopback
-from mhrc.trace import read_trace
+from mhrc.core.trace import read_trace
 
 WAIT = 120.0  # s: generous bound on every wait, so a regression fails instead of hanging
 
@@ -245,7 +245,7 @@ class _Teller:
         self.named: str | None = None
 
     async def decide(self, obs: Observation) -> Decision:
-        from mhrc.protocol import Communicate, Wait
+        from mhrc.core.protocol import Communicate, Wait
 
         if self.named is None and obs.objects:
             self.named = obs.objects[0].name
@@ -265,7 +265,7 @@ class _Listener:
         self.observations: list[Observation] = []
 
     async def decide(self, obs: Observation) -> Decision:
-        from mhrc.protocol import Wait
+        from mhrc.core.protocol import Wait
 
         self.observations.append(obs)
         return Decision(action=Wait())

@@ -11,10 +11,10 @@ import pytest
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
-from mhrc.bus import Bus
-from mhrc.episode import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig, up_in_process, up_processes
-from mhrc.protocol import ActionRequest, ActionResult, Observation, SkillOutcome, parse_action
-from mhrc.trace import read_trace
+from mhrc.core.bus import Bus
+from mhrc.run.episode import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig, up_in_process, up_processes
+from mhrc.core.protocol import ActionRequest, ActionResult, Observation, SkillOutcome, parse_action
+from mhrc.core.trace import read_trace
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.schedulers import SCHEDULERS, LockstepScheduler, Scheduler, SequentialScheduler, UnknownScheduler
 from mhrc.world.service import WorldConfig, WorldService

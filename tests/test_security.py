@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from mhrc import security
-from mhrc.bus import Bus, BusRefused, endpoint, free_port
-from mhrc.episode import EpisodeConfig, open_client, up_in_process, up_processes
-from mhrc.keys import Keys
-from mhrc.protocol import ActionRequest, AttachReply, AttachRequest, RobotAttached, Wait, decode, decode_event
+from mhrc.core import security
+from mhrc.core.bus import Bus, BusRefused, endpoint, free_port
+from mhrc.run.episode import EpisodeConfig, open_client, up_in_process, up_processes
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import ActionRequest, AttachReply, AttachRequest, RobotAttached, Wait, decode, decode_event
 
 ROBOTS = ("alice", "bob", "david")
 
@@ -224,7 +224,7 @@ def _wait_for(path: Path, text: str, timeout: float = 60.0) -> str:
 
 def _open_without_login(port: int, ca: Path) -> None:
     """A raw zenoh client that trusts the run's CA but sends no user and password (our own
-    clients refuse to try: mhrc.bus says "no credentials" before connecting)."""
+    clients refuse to try: mhrc.core.bus says "no credentials" before connecting)."""
     import zenoh
 
     conf = zenoh.Config()
@@ -387,7 +387,7 @@ async def test_a_forged_episode_done_cannot_end_a_secured_run(tmp_path: Path) ->
     """`mhrc up --processes`, secured: the observer's and bob's logins put a forged `episode_done`
     ("success 99/99") on world/event as soon as the episode starts; the run ends on its own
     terms, and neither the runner nor the trace ever sees the forgery."""
-    from mhrc.protocol import EpisodeDone, EpisodeStarted, Metrics
+    from mhrc.core.protocol import EpisodeDone, EpisodeStarted, Metrics
 
     cfg = EpisodeConfig.build(seed=1, n_objects=3, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
     k = Keys(cfg.run)
@@ -470,7 +470,7 @@ async def test_a_certificate_that_expires_mid_run_is_named(tmp_path: Path) -> No
     """The run's CA and the world's certificate expire 20 s into an episode (the world closes its
     links then): the agents say the certificate expired, not that the world disappeared."""
     from mhrc.agents.agent import WorldGone
-    from mhrc.episode import run_agent, serve_world
+    from mhrc.run.episode import run_agent, serve_world
 
     cfg = EpisodeConfig.build(seed=0, n_objects=6, tick_delay=1.0, trace=tmp_path / "t.jsonl").resolved()
     files = security.make_run_credentials(cfg.run, ROBOTS, tmp_path / "cred", days=20 / 86400)

@@ -15,7 +15,7 @@ from mhrc.world.scene import LAYOUTS
 from mhrc.world.sim import Sim, check_episode
 from mhrc.world.tasks import TASKS
 
-from mhrc.protocol import (
+from mhrc.core.protocol import (
     Communicate,
     Move,
     Navigate,

@@ -29,7 +29,7 @@ import pytest
 
 from mhrc.agents.llm import LLMSilent, LLMTimeout, OpenAIChatClient, make_client
 from mhrc.agents.llm_policy import LLMPolicy, LLMUnreachable
-from mhrc.episode import EpisodeConfig, up_in_process
+from mhrc.run.episode import EpisodeConfig, up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer
 
 HI = [{"role": "system", "content": "You are a test."}, {"role": "user", "content": "Say something."}]
@@ -275,8 +275,8 @@ async def test_a_long_call_shows_at_the_console_as_reading_then_generating_and_s
     from rich.console import Console
 
     from mhrc.agents import agent as agent_module
-    from mhrc.progress import ProgressPrinter
-    from mhrc.trace import read_trace
+    from mhrc.run.console import ProgressPrinter
+    from mhrc.core.trace import read_trace
 
     monkeypatch.setattr(agent_module, "GENERATING_EVERY", 0.2)
     words = [f"w{i} " for i in range(14)]

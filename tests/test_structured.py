@@ -23,7 +23,7 @@ from mhrc.agents.structured import (
     response_format,
     schema_hash,
 )
-from mhrc.protocol import Communicate, Navigate, Observation, Pick, Wait
+from mhrc.core.protocol import Communicate, Navigate, Observation, Pick, Wait
 from mhrc.world.sim import Sim
 
 FORBIDDEN = {"$ref", "$defs", "definitions", "oneOf", "allOf", "not", "format", "pattern", "patternProperties"}

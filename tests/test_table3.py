@@ -26,7 +26,7 @@ from mhrc.world import skills
 from mhrc.world.robots import KINDS
 from mhrc.world.sim import Sim
 
-from mhrc.protocol import (
+from mhrc.core.protocol import (
     Action,
     ActionResult,
     Communicate,

@@ -17,10 +17,10 @@ from typing import Any
 
 import pytest
 
-from mhrc.keys import Keys
-from mhrc.protocol import EpisodeDone, RobotDetached, TickClosed, decode_event
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import EpisodeDone, RobotDetached, TickClosed, decode_event
 from mhrc.testing import world_on_loopback
-from mhrc.trace import read_trace
+from mhrc.core.trace import read_trace
 
 WAIT = 180.0
 

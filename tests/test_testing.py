@@ -15,8 +15,8 @@ from typing import Any
 import httpx
 import pytest
 
-from mhrc.keys import Keys
-from mhrc.protocol import EpisodeDone, decode_event
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import EpisodeDone, decode_event
 from mhrc.testing import ModelCall, ModelReply, ScriptedModelServer, ScriptedPolicy
 
 

@@ -10,8 +10,8 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.protocol import Snapshot
+from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.core.protocol import Snapshot
 from mhrc.viewer.video import TraceWithoutSnapshots, UnsupportedVideoFormat, read_episode, render_video
 from mhrc.world.sim import Sim
 

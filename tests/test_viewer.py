@@ -15,8 +15,8 @@ import pytest
 from click.testing import CliRunner
 
 from mhrc.cli import main
-from mhrc.episode import EpisodeConfig, up_in_process
-from mhrc.trace import read_trace
+from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.core.trace import read_trace
 from test_llm import FakeServer, Reply, ok
 
 
@@ -275,7 +275,7 @@ def test_the_failure_panel_renders_the_diagnosis_or_a_note(traces: dict[str, Pat
     html = out.read_text(encoding="utf-8")
     section = html[html.index('<section id="failures">'):]
     section = section[: section.index("</section>")]
-    from mhrc.diagnostics import LABELS
+    from mhrc.core.diagnostics import LABELS
 
     diag, note = diagnostics_for(read_trace(traces["llm"]))
     assert diag is not None, note
@@ -420,7 +420,7 @@ def test_the_worlds_answer_key_comes_first(traces: dict[str, Path], tmp_path: Pa
 
 
 def test_partial_success_reads_the_same_everywhere(traces: dict[str, Path], tmp_path: Path) -> None:
-    from mhrc.viewer.eval_report import html_summary
+    from mhrc.eval.html import html_summary
 
     for kind in ("failed", "heuristic"):
         _, _, m = _truth(traces[kind])
@@ -482,7 +482,7 @@ def test_paths_follow_the_planned_routes_around_walls(traces: dict[str, Path], t
 
 
 def test_an_older_trace_without_routes_still_loads_and_draws_straight_lines(traces: dict[str, Path], tmp_path: Path) -> None:
-    from mhrc.protocol import ActionResult
+    from mhrc.core.protocol import ActionResult
 
     old = tmp_path / "noroutes.jsonl"
     with old.open("w", encoding="utf-8") as f:

@@ -17,10 +17,10 @@ import pytest
 
 from mhrc.agents.agent import RobotAgent, WorldGone
 from mhrc.agents.heuristic import heuristic_policy
-from mhrc.bus import Bus
-from mhrc.episode import EpisodeConfig, agent_command, world_command, wait_for_port
-from mhrc.keys import Keys
-from mhrc.protocol import (
+from mhrc.core.bus import Bus
+from mhrc.run.episode import EpisodeConfig, agent_command, world_command, wait_for_port
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import (
     Action,
     ActionAck,
     ActionRequest,

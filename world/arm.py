@@ -13,7 +13,7 @@ import threading
 from dataclasses import dataclass
 
 import numpy as np
-from mhrc.quiet import pybullet as p  # no C banner on stdout
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import pybullet_data
 from ompl import base as ob
 from ompl import geometric as og

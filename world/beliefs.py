@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
 
-from mhrc.protocol import ObjectView
+from mhrc.core.protocol import ObjectView
 
 
 @dataclass(frozen=True)

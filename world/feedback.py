@@ -5,7 +5,7 @@ failed, why, and the measured quantities (distances, Alice's x/y offsets, valid 
 indices). Like the paper's, the sentences give causes and numbers, never advice. What would tell
 a robot what to do next (navigate somewhere instead, open or place something first, try again)
 and the lists of names it could have used instead are the `feedback_advice` aid
-(mhrc.fidelity.AIDS): the functions that have such help take `advice=True` to append it, and
+(mhrc.core.fidelity.AIDS): the functions that have such help take `advice=True` to append it, and
 without it they say the same sentence without the help.
 """
 

@@ -7,7 +7,7 @@ import zlib
 from pathlib import Path
 
 import numpy as np
-from mhrc.quiet import pybullet as p  # no C banner on stdout
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from .sim import Sim
 

@@ -13,7 +13,7 @@ from itertools import pairwise
 from dataclasses import dataclass, field
 
 import numpy as np
-from mhrc.quiet import pybullet as p  # no C banner on stdout
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import pybullet_data
 
 from . import assets

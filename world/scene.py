@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mhrc.quiet import pybullet as p  # no C banner on stdout
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import pybullet_data
 
 from . import assets

@@ -18,11 +18,11 @@ from typing import Protocol
 
 import structlog
 
-from mhrc.bus import Bus, Sample
-from mhrc.fidelity import label as fidelity_label
-from mhrc.keys import Keys
-from mhrc.logs import Throttle
-from mhrc.protocol import (
+from mhrc.core.bus import Bus, Sample
+from mhrc.core.fidelity import label as fidelity_label
+from mhrc.core.keys import Keys
+from mhrc.core.logs import Throttle
+from mhrc.core.protocol import (
     Action,
     ActionAck,
     ActionRequest,

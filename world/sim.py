@@ -19,12 +19,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from mhrc.quiet import pybullet as p  # no C banner on stdout
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import structlog
 
-from mhrc.fidelity import parse_aids
+from mhrc.core.fidelity import parse_aids
 
-from mhrc.protocol import (
+from mhrc.core.protocol import (
     Action,
     Communicate,
     FurnitureView,

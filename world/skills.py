@@ -19,9 +19,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from mhrc.quiet import pybullet as p  # no C banner on stdout
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
-from mhrc.protocol import Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
+from mhrc.core.protocol import Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
 
 from . import feedback as fb
 from .arm import HOME, LOWER, UPPER, ArmPlanner, IKResult, straight

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from mhrc.protocol import Action, Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
+from mhrc.core.protocol import Action, Move, Navigate, Open, OutcomeCode, Pick, Place, SkillOutcome
 
 from .sim import Sim
 

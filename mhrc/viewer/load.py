@@ -1,6 +1,6 @@
 """Reading a trace for the viewer, robustly: what could be read, and what was wrong.
 
-A trace is JSONL, one bus message a line (mhrc.trace). The viewer must render what it can of a
+A trace is JSONL, one bus message a line (mhrc.core.trace). The viewer must render what it can of a
 trace cut off mid-line (a run killed while recording), of one from an older protocol version
 (version 1: no `snapshot` events) or with a few damaged lines, and refuse, with one sentence,
 a file that is no trace at all.
@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..protocol import PROTOCOL_VERSION
+from mhrc.core.protocol import PROTOCOL_VERSION
 
 
 class NotATrace(ValueError):

@@ -12,10 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..world.layouts import Layout, get_layout
+from mhrc.world.layouts import Layout, get_layout
 
-from .load import LoadedTrace
-from .targets import TaskView, task_view
+from mhrc.viewer.load import LoadedTrace
+from mhrc.viewer.targets import TaskView, task_view
 
 
 @dataclass

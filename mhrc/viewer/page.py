@@ -19,10 +19,10 @@ from html import escape
 from collections.abc import Callable
 from typing import Any
 
-from .model import EpisodeView, Step
-from .placement import Box, Request, place
-from .targets import ObjectFate, TaskView
-from .wording import diagnostic_label, partial_success
+from mhrc.viewer.model import EpisodeView, Step
+from mhrc.viewer.placement import Box, Request, place
+from mhrc.viewer.targets import ObjectFate, TaskView
+from mhrc.viewer.wording import diagnostic_label, partial_success
 
 SCALE = 80.0  # SVG pixels per metre
 ROBOT_COLORS = {"alice": "#d62728", "bob": "#1f77b4", "david": "#2ca02c"}
@@ -379,7 +379,7 @@ def _diagnostic_value(key: str, value: Any) -> str:
 
 
 def _failures(diagnostics: dict[str, Any] | None, note: str | None) -> str:
-    """mhrc.diagnostics' findings with the labels people read (mhrc.diagnostics.LABELS); the key in each row's title."""
+    """mhrc.core.diagnostics' findings with the labels people read (mhrc.core.diagnostics.LABELS); the key in each row's title."""
     if diagnostics is None:
         return f'<section id="failures"><h2>Failures</h2><p class="note">{_e(note)}</p></section>'
     rows = "".join(

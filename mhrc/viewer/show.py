@@ -5,14 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from .load import load_trace, resolve
-from .model import build_view
-from .page import render_page
+from mhrc.viewer.load import load_trace, resolve
+from mhrc.viewer.model import build_view
+from mhrc.viewer.page import render_page
 
 
 def diagnostics_for(rows: list[dict[str, Any]]) -> tuple[dict[str, Any] | None, str | None]:
-    """mhrc.diagnostics' findings for the failure panel, or why there are none."""
-    from ..diagnostics import diagnose
+    """mhrc.core.diagnostics' findings for the failure panel, or why there are none."""
+    from mhrc.core.diagnostics import diagnose
 
     try:
         result = diagnose(rows).as_dict()

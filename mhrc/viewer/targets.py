@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from .load import LoadedTrace
+from mhrc.viewer.load import LoadedTrace
 
 
 @dataclass
@@ -80,8 +80,8 @@ def _observations(trace: LoadedTrace) -> list[dict[str, Any]]:
 def _generated(started: dict[str, Any]) -> tuple[dict[str, tuple[bool, str | None]], str | None]:
     """name -> (target, goal) from the task's generator, or why not."""
     try:
-        from ..world.layouts import get_layout
-        from ..world.tasks import get_task
+        from mhrc.world.layouts import get_layout
+        from mhrc.world.tasks import get_task
 
         task = get_task(str(started["task"]))
         placements = task.generate(get_layout(str(started["scene"])), int(started["seed"]), int(started["n_objects"]))

@@ -27,13 +27,13 @@ from typing import Any
 import imageio.v2 as iio2
 import imageio.v3 as iio3
 import numpy as np
-from mhrc.quiet import pybullet as p  # no C banner on stdout
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import structlog
 from PIL import Image, ImageDraw, ImageFont
 from pydantic import ValidationError
 
-from mhrc.protocol import ACTION_ADAPTER, EpisodeStarted, ObjectPose, RobotPose, Snapshot
-from mhrc.trace import read_trace
+from mhrc.core.protocol import ACTION_ADAPTER, EpisodeStarted, ObjectPose, RobotPose, Snapshot
+from mhrc.core.trace import read_trace
 from mhrc.world.render import VIEWS, render
 from mhrc.world.sim import Sim
 

@@ -1,17 +1,17 @@
 """How the reports word a figure, the same on every page: partial success with its count,
-diagnostics keys as people read them (the labels live beside the keys, in mhrc.diagnostics)."""
+diagnostics keys as people read them (the labels live beside the keys, in mhrc.core.diagnostics)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from ..diagnostics import label as diagnostic_label
+from mhrc.core.diagnostics import label as diagnostic_label
 
 __all__ = ["diagnostic_label", "partial_success"]
 
 
 def partial_success(ps: Any, placed: Any = None, total: Any = None) -> str:
-    """`0.33 (1/3 placed)`, as the console prints it (mhrc.progress); `0.33` when the counts are
+    """`0.33 (1/3 placed)`, as the console prints it (mhrc.run.console); `0.33` when the counts are
     unknown, `unknown` when the score is."""
     try:
         value = float(ps)

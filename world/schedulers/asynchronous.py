@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import structlog
 
-from mhrc.protocol import ActionRequest, ActionResult, Observation, Rejection, RejectCode, RobotMessage, SkillOutcome
+from mhrc.core.protocol import ActionRequest, ActionResult, Observation, Rejection, RejectCode, RobotMessage, SkillOutcome
 
 from .base import Scheduler, SchedulerOptionError, World, duration
 

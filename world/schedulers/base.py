@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
-from mhrc.protocol import ActionRequest, ActionResult, Message, Observation, Rejection, RobotMessage, SkillOutcome, Turn, Wait
+from mhrc.core.protocol import ActionRequest, ActionResult, Message, Observation, Rejection, RobotMessage, SkillOutcome, Turn, Wait
 
 # How long an action takes on the world's clock (simulated seconds). Skills measure their own
 # time (navigation by path length and base speed, arm motions by trajectory and joint speeds);

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import structlog
 
-from mhrc.protocol import ActionRequest, ActionResult, Rejection, RejectCode, TickClosed
+from mhrc.core.protocol import ActionRequest, ActionResult, Rejection, RejectCode, TickClosed
 
 from .base import Scheduler, World, duration
 

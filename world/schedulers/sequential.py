@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import structlog
 
-from mhrc.protocol import ActionRequest, ActionResult, Observation, Rejection, RejectCode, RobotMessage, SkillOutcome, TickClosed, Turn
+from mhrc.core.protocol import ActionRequest, ActionResult, Observation, Rejection, RejectCode, RobotMessage, SkillOutcome, TickClosed, Turn
 
 from .base import Scheduler, TaskResultLike, World, duration
 

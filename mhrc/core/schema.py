@@ -1,6 +1,6 @@
 """JSON Schemas of every bus payload (`mhrc schema`), for agents written in any language.
 
-One schema per top-level message (every `Message` subclass of `mhrc.protocol`) and one for the
+One schema per top-level message (every `Message` subclass of `mhrc.core.protocol`) and one for the
 world-event union (`WorldEvent`, what `mhrc/<run>/world/event` carries, discriminated by
 `kind`), each with the key it travels on and who sends it.
 """
@@ -13,8 +13,8 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from . import protocol
-from .protocol import PROTOCOL_VERSION, WORLD_EVENT_ADAPTER, Message
+from mhrc.core import protocol
+from mhrc.core.protocol import PROTOCOL_VERSION, WORLD_EVENT_ADAPTER, Message
 
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
@@ -36,7 +36,7 @@ WORLD_EVENT_KINDS = ("EpisodeStarted", "TickClosed", "RobotAttached", "RobotDeta
 
 
 def message_models() -> list[type[Message]]:
-    """Every top-level payload model of mhrc.protocol, in definition order."""
+    """Every top-level payload model of mhrc.core.protocol, in definition order."""
     found: list[type[Message]] = []
     for value in vars(protocol).values():
         if isinstance(value, type) and issubclass(value, Message) and value is not Message and value.__module__ == protocol.__name__:

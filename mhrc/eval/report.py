@@ -2,7 +2,7 @@
 intervals, and the paper's own figures beside mhrc's where the configuration matches.
 
 Rows are the `episodes.jsonl` rows of one or several evaluation directories. Only valid rows
-(`mhrc.metrics`: not every LLM step lost to an unreachable model) enter a table; the summary
+(`mhrc.core.metrics`: not every LLM step lost to an unreachable model) enter a table; the summary
 says how many were left out and which. Rows are grouped by their *setting*: method, ablation,
 fidelity, history cap and horizon, so that a paper-fidelity number is never averaged with an
 aided one (nor a capped prompt with a whole one).
@@ -12,9 +12,9 @@ configuration: paper fidelity, no history cap, horizon 50, the paper grid (3 sce
 one episode per object count 3, 4, 5 and 6, or the same number of them per cell with
 `--repeats`), and a method whose model is one the paper ran, with an ablation it reports.
 
-Beside the metrics, a "Failure diagnostics" table per setting (`mhrc.diagnostics`: the rows'
+Beside the metrics, a "Failure diagnostics" table per setting (`mhrc.core.diagnostics`: the rows'
 `diag_*` columns); rows written before those columns existed are unknown there, never zero.
-`write_summaries` writes summary.md, summary.csv and summary.html (`mhrc.viewer.eval_report`).
+`write_summaries` writes summary.md, summary.csv and summary.html (`mhrc.eval.html`).
 """
 
 from __future__ import annotations
@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 import structlog
 
-from .diagnostics import summarize_diagnostics
-from .episode import ConfigError
-from .metrics import UNRECORDED, summarize
+from mhrc.core.diagnostics import summarize_diagnostics
+from mhrc.run.episode import ConfigError
+from mhrc.core.metrics import UNRECORDED, summarize
 
-log = structlog.get_logger("mhrc.report")
+log = structlog.get_logger("mhrc.eval.report")
 
 PAPER_OBJECTS = (3, 4, 5, 6)  # one episode per object count per scene
 PAPER_SCENES = 3
@@ -412,7 +412,7 @@ DIAG_COLUMNS = (
     "waits_with_pending", "messages_sent", "messages_read", "steps_above_bound",
 )  # fmt: skip
 DIAG_NOTE = (
-    "Means per episode (mhrc.diagnostics defines each count). A name is hallucinated when the command names an object "
+    "Means per episode (mhrc.core.diagnostics defines each count). A name is hallucinated when the command names an object "
     "or furniture the robot's own scene graph (or its task list) did not hold; waits w/ pending are waits chosen while "
     "a teammate's message was unanswered; messages read were delivered into the receiver's observation; steps above TS* "
     "is TS minus the lower bound."
@@ -489,11 +489,11 @@ SUMMARY_FILES = ("summary.md", "summary.csv", "summary.html")  # what write_summ
 
 
 def write_summaries(rows: list[dict[str, Any]], out: Path) -> None:
-    """SUMMARY_FILES in `out`: summary.md, summary.csv and summary.html (tables and plots, `mhrc.viewer.eval_report`)."""
+    """SUMMARY_FILES in `out`: summary.md, summary.csv and summary.html (tables and plots, `mhrc.eval.html`)."""
     if not rows:
         return
     # imported here: the HTML page is built on this module's tables (eval_report imports report)
-    from .viewer.eval_report import write_html_summary
+    from mhrc.eval.html import write_html_summary
 
     md, csv, html = (out / name for name in SUMMARY_FILES)
     csv.write_text(summary_csv(rows), encoding="utf-8")

@@ -2,7 +2,7 @@
 runs (`ray start` by hand, KubeRay, Slurm), with Ray's retries, resources and dashboard.
 
 A task runs one episode whole in its Ray worker process (world and agents, as a local pool
-worker does: mhrc.eval_episode) and returns its `EpisodeResult` through the object store, the
+worker does: mhrc.eval.episode) and returns its `EpisodeResult` through the object store, the
 trace zlib-compressed; with a shared --out (`--shared-out`: the same path on every node) it
 writes the trace there and returns only the path. A task whose worker process or node dies is
 run again by Ray (`max_retries=RAY_RETRIES`). Resources: one CPU per heuristic episode (it is
@@ -28,8 +28,8 @@ from typing import Any
 
 import structlog
 
-from .episode import ConfigError
-from .eval_episode import EpisodeResult, Job
+from mhrc.run.episode import ConfigError
+from mhrc.eval.episode import EpisodeResult, Job
 
 log = structlog.get_logger("mhrc.eval")
 
@@ -80,9 +80,9 @@ def has_token() -> bool:
 
 
 def _episode(job_json: str, trace_dest: str | None) -> dict[str, Any]:
-    """The Ray task: one episode in this worker process (see mhrc.eval_episode.run_job)."""
-    from . import logs
-    from .eval_episode import run_job, worker_name
+    """The Ray task: one episode in this worker process (see mhrc.eval.episode.run_job)."""
+    from mhrc.core import logs
+    from mhrc.eval.episode import run_job, worker_name
 
     logs.configure("error")
     job = Job.model_validate_json(job_json)
@@ -92,7 +92,7 @@ def _episode(job_json: str, trace_dest: str | None) -> dict[str, Any]:
 
 class RayExecutor:
     """Episodes as Ray tasks on the cluster at `address`; the same interface as the local pool
-    (mhrc.eval_pool.PoolExecutor): `submit`, `next`, `stop`."""
+    (mhrc.eval.pool.PoolExecutor): `submit`, `next`, `stop`."""
 
     def __init__(self, address: str, *, concurrency: int = 1, llm: bool = False, traces: Path | None = None) -> None:
         self.address = address

@@ -185,7 +185,7 @@ def make_run_credentials(
     With `split`, each participant's files go to a directory of its own (DIR/alice/alice.json
     beside its own copy of ca.pem; DIR/world/ also holds the certificate, key and user
     dictionary), to be mounted into that participant's container and no other."""
-    from .keys import check_id
+    from mhrc.core.keys import check_id
 
     check_id(run, "run id")
     for r in robots:
@@ -490,7 +490,7 @@ def diagnose(endpoint: str, creds: Credentials | None, timeout: float = 3.0) -> 
     the run's CA can tell: nothing listening, a secured world reached on plain tcp (or the
     reverse), an expired or foreign certificate, or (the handshake succeeding) credentials the
     world refused."""
-    from .bus import split_endpoint
+    from mhrc.core.bus import split_endpoint
 
     proto, host, port = split_endpoint(endpoint)
     if port is None:

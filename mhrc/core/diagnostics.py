@@ -1,8 +1,8 @@
 """Failure diagnostics: why an episode went the way it did, counted from its trace alone.
 
-`mhrc.metrics` says how well an episode went; this module says what went wrong, per episode
+`mhrc.core.metrics` says how well an episode went; this module says what went wrong, per episode
 (`diagnose`) and over episodes (`summarize_diagnostics`). Every count comes from the bus
-messages of one trace (`mhrc.trace.read_trace`); nothing is re-simulated. Definitions:
+messages of one trace (`mhrc.core.trace.read_trace`); nothing is re-simulated. Definitions:
 
 - parse_failures: replies that did not parse into one command (a `thought` whose parse_error
   is set and does not start with LLM_ERROR_PREFIX); llm_unreachable: steps lost to a model
@@ -31,10 +31,10 @@ messages of one trace (`mhrc.trace.read_trace`); nothing is re-simulated. Defini
   the observation that delivered it (new_messages of an observation the robot planned on)
   until the robot does anything but wait (acting on it or replying). The trace cannot tell a
   request from a report, so every teammate message counts.
-- messages_sent: communicate actions that succeeded (as `mhrc.metrics`'s messages);
+- messages_sent: communicate actions that succeeded (as `mhrc.core.metrics`'s messages);
   messages_read: distinct messages delivered into their receiver's observation new_messages
   (a message sent in the last tick may never be).
-- steps_above_bound: TS (`mhrc.metrics.from_trace`'s temporal_steps, as the row's TS) minus the
+- steps_above_bound: TS (`mhrc.core.metrics.from_trace`'s temporal_steps, as the row's TS) minus the
   episode's lower bound (`episode_started`); None when either is unknown. Negative only when the
   horizon is below the bound (the episode was cut off before it could finish).
 
@@ -50,8 +50,8 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from .metrics import TraceError, from_trace
-from .protocol import EPISODE_OVER, LLM_ERROR_PREFIX, OutcomeCode
+from mhrc.core.metrics import TraceError, from_trace
+from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX, OutcomeCode
 
 PREFIX = "diag_"
 REJECT_KINDS = ("stale_tick", "busy", "out_of_turn", "episode_over", "malformed", "not_attached", "other")
@@ -138,7 +138,7 @@ KIND_OF_CODE = {  # RejectCode -> the kind diagnostics count it under
 
 
 def reject_kind(reason: str, code: object = None) -> str:
-    """The kind of a rejection: from the `action_ack`'s `code` (mhrc.protocol.RejectCode); a
+    """The kind of a rejection: from the `action_ack`'s `code` (mhrc.core.protocol.RejectCode); a
     trace recorded before acks had one is read from the reason's text."""
     if isinstance(code, str) and code in KIND_OF_CODE:
         return KIND_OF_CODE[code]
@@ -174,7 +174,7 @@ def _world_says_unknown(outcome: dict[str, Any]) -> bool:
 
 
 def diagnose(rows: list[dict[str, Any]]) -> Diagnostics:
-    """The failure diagnostics of one episode from its trace rows (`mhrc.trace.read_trace`)."""
+    """The failure diagnostics of one episode from its trace rows (`mhrc.core.trace.read_trace`)."""
     msgs = _msgs(rows)
     d = Diagnostics()
     # what each robot planned on: (robot, tick) -> the last observation of that tick, and every message it delivered
@@ -206,7 +206,7 @@ def diagnose(rows: list[dict[str, Any]]) -> Diagnostics:
     for m in msgs:
         if m.get("kind") == "action_ack" and m.get("accepted") is False:
             reasons[reject_kind(str(m.get("reason", "")), m.get("code"))] += 1
-    for row in rows:  # a flood of junk or of rejections, counted by the recorder (mhrc.trace)
+    for row in rows:  # a flood of junk or of rejections, counted by the recorder (mhrc.core.trace)
         if row.get("kind") == "junk" and str(row.get("key", "")).endswith("/action/ack") and isinstance(row.get("msg"), dict):
             junk = row["msg"]
             reasons[reject_kind(str(junk.get("reason", "")).removeprefix("rejected: "), junk.get("code"))] += int(junk.get("count", 0))

@@ -1,11 +1,11 @@
 """The local executor of `mhrc eval`: a pool of worker processes of this machine, no Ray, no bus
 between them.
 
-Each worker is `python -m mhrc.eval_pool --concurrency N`, a child that dies with the driver
-(mhrc.lifeline). The driver writes jobs (`Job`, one JSON line each) to its stdin and reads
+Each worker is `python -m mhrc.eval.pool --concurrency N`, a child that dies with the driver
+(mhrc.run.lifeline). The driver writes jobs (`Job`, one JSON line each) to its stdin and reads
 results (`EpisodeResult`, one JSON line each, the trace in base64) from its stdout; a worker
 holds at most N jobs, so a free slot is the only thing that brings it another. Inside the
-worker an episode runs whole (mhrc.eval_episode); up to N at once (LLM episodes mostly wait
+worker an episode runs whole (mhrc.eval.episode); up to N at once (LLM episodes mostly wait
 on the model), at most STARTS_AT_ONCE of them building their scene and attaching their agents
 at the same moment (a burst of N scene builds would hold up every world past its agents'
 attach timeout).
@@ -31,8 +31,8 @@ from typing import IO
 import structlog
 from pydantic import ValidationError
 
-from .eval_episode import EpisodeResult, Job, run_job, watch_start, worker_name
-from .lifeline import child_env
+from mhrc.eval.episode import EpisodeResult, Job, run_job, watch_start, worker_name
+from mhrc.run.lifeline import child_env
 
 log = structlog.get_logger("mhrc.eval")
 
@@ -93,11 +93,11 @@ async def _serve(concurrency: int, results: IO[bytes]) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """`python -m mhrc.eval_pool`: one worker of the local pool (started by `mhrc eval`)."""
-    from . import logs
-    from .lifeline import die_with_parent
+    """`python -m mhrc.eval.pool`: one worker of the local pool (started by `mhrc eval`)."""
+    from mhrc.core import logs
+    from mhrc.run.lifeline import die_with_parent
 
-    parser = argparse.ArgumentParser(prog="python -m mhrc.eval_pool")
+    parser = argparse.ArgumentParser(prog="python -m mhrc.eval.pool")
     parser.add_argument("--concurrency", type=int, default=1)
     parser.add_argument("--log-level", default="error")
     args = parser.parse_args(argv)
@@ -155,7 +155,7 @@ class PoolExecutor:
         return await self._results.get()
 
     async def _spawn(self) -> _Worker:
-        cmd = [sys.executable, "-m", "mhrc.eval_pool", "--concurrency", str(self.concurrency), "--log-level", self.log_level]
+        cmd = [sys.executable, "-m", "mhrc.eval.pool", "--concurrency", str(self.concurrency), "--log-level", self.log_level]
         proc = await asyncio.create_subprocess_exec(
             *cmd, stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, limit=LINE_LIMIT,
             env=child_env(dict(os.environ, PYTHONUNBUFFERED="1")),

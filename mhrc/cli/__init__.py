@@ -18,10 +18,10 @@ from typing import Any, NoReturn, TypeVar
 
 import click
 
-from . import logs
-from .episode import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig
-from .fidelity import describe as describe_aids
-from .lifeline import PARENT_ENV
+from mhrc.core import logs
+from mhrc.run.episode import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig
+from mhrc.core.fidelity import describe as describe_aids
+from mhrc.run.lifeline import PARENT_ENV
 
 ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
 AIDS_HELP = (
@@ -106,8 +106,8 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | Calla
 
     The first Ctrl-C cancels the run (saying `stopping`, what is being done, when given: a
     callable is asked at that moment); a second one quits at once: the children go with this
-    process (mhrc.lifeline), never a hang."""
-    from .lifeline import die_with_parent
+    process (mhrc.run.lifeline), never a hang."""
+    from mhrc.run.lifeline import die_with_parent
 
     die_with_parent()
 
@@ -137,7 +137,7 @@ def _run(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | Calla
             if task is not None:
                 _plain_signals(loop)
 
-    from .bus import BusError
+    from mhrc.core.bus import BusError
 
     before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -179,10 +179,10 @@ def _episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _credentials(path: Path | None, insecure: bool, connect: str | None = None) -> Any:
-    """The participant's credentials (mhrc.security.Credentials) from --credentials or
+    """The participant's credentials (mhrc.core.security.Credentials) from --credentials or
     $MHRC_CREDENTIALS; None (and a warning on stderr) on the open bus. A tls/ `connect`
     without credentials is a usage error: it cannot work."""
-    from .security import SecurityError, load
+    from mhrc.core.security import SecurityError, load
 
     if insecure:
         if not os.environ.get(PARENT_ENV):  # a child of mhrc up --processes or eval: its parent said it once
@@ -221,6 +221,7 @@ def main() -> None:
     Start with `mhrc up`: one Pack Objects episode with Alice (mobile manipulator), Bob (arm on
     table_0) and David (mobile robot) driven by the built-in heuristic policy.
     """
+    logs.configure(os.environ.get("MHRC_LOG_LEVEL", "warning"))  # a command's --log-level overrides it
 
 
 @main.command()
@@ -249,8 +250,8 @@ def up(
 
     from mhrc.world.service import NobodyAttached
 
-    from .episode import ModelServerDown, ProcessFailed, check_model_servers, up_in_process, up_processes
-    from .progress import ProgressPrinter, summary_table
+    from mhrc.run.episode import ModelServerDown, ProcessFailed, check_model_servers, up_in_process, up_processes
+    from mhrc.run.console import ProgressPrinter, summary_table
 
     logs.configure(log_level)
     cfg = _config(**values)
@@ -308,7 +309,7 @@ def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None 
     """`mhrc world`'s run: one line and exit 1 when no robot attached within --start-timeout."""
     from mhrc.world.service import NobodyAttached
 
-    from .episode import serve_world
+    from mhrc.run.episode import serve_world
 
     try:
         _run(lambda: serve_world(cfg, observe=observe))
@@ -329,12 +330,12 @@ def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None 
 @click.option("--insecure", is_flag=True, help="The open tcp bus: no TLS, no login, no access control (anyone can act as any robot).")
 def world(log_level: str, start_timeout: float | None, quiet: bool, credentials: Path | None, insecure: bool, **values: Any) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
-    from .progress import ProgressPrinter
+    from mhrc.run.console import ProgressPrinter
 
     logs.configure(log_level)
     creds = _credentials(credentials, insecure)
     if creds is not None:
-        from .zenoh_log import watch_refusals
+        from mhrc.core.zenoh_log import watch_refusals
 
         watch_refusals()  # a refused login is said here too, not only on the refused agent's side
         if values.get("run") is None:
@@ -383,7 +384,7 @@ def agent(
     robot: str, connect: str, run: str | None, attach_timeout: float, log_level: str, credentials: Path | None, insecure: bool, **values: Any
 ) -> None:
     """Attach one robot's agent (heuristic or LLM policy) to a running world."""
-    from .episode import attach_agent
+    from mhrc.run.episode import attach_agent
 
     logs.configure(log_level)
     creds = _credentials(credentials, insecure, connect)
@@ -393,7 +394,7 @@ def agent(
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError
 
-    from .security import SecurityError
+    from mhrc.core.security import SecurityError
 
     try:
         done = _run(lambda: attach_agent(
@@ -542,9 +543,9 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 
-    from .evaluation import EvalAborted, EvalSpec, Tally, check_out, evaluate
-    from .fidelity import AidsError, parse_aids
-    from .report import PAPER_OBJECTS, SUMMARY_FILES, summary_markdown
+    from mhrc.eval.engine import EvalAborted, EvalSpec, Tally, check_out, evaluate
+    from mhrc.core.fidelity import AidsError, parse_aids
+    from mhrc.eval.report import PAPER_OBJECTS, SUMMARY_FILES, summary_markdown
 
     logs.configure(log_level)
     if ray_address is not None and workers is not None:
@@ -597,7 +598,7 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     try:
         check_out(out, spec, resume)  # before the model server is asked or a worker starts
         if ray_address is not None:  # a missing extra, an old Ray, an address nothing answers at: one line, now
-            from .eval_ray import import_ray, probe
+            from mhrc.eval.cluster import import_ray, probe
 
             import_ray()
             probe(ray_address)
@@ -657,8 +658,8 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     configuration. Invalid episodes (model unreachable throughout) are left out and listed.
     With --out FILE.md, the markdown goes there instead, with FILE.csv and FILE.html (tables,
     plots, a link to each episode's report) beside it."""
-    from .report import merge_runs, summary_csv, summary_markdown
-    from .trace import unwritable
+    from mhrc.eval.report import merge_runs, summary_csv, summary_markdown
+    from mhrc.core.trace import unwritable
 
     if out is not None:
         files = [out, out.with_suffix(".csv"), out.with_suffix(".html")]
@@ -677,7 +678,7 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     if out is None:
         click.echo(text)
         return
-    from .viewer.eval_report import write_report_html
+    from mhrc.eval.html import write_report_html
 
     md, csv, html = files
     md.write_text(text, encoding="utf-8")
@@ -691,7 +692,7 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
               help="Write one <Payload>.json per bus payload and index.json into this directory; default: print one JSON document.")
 def schema_(out: Path | None) -> None:
     """The JSON Schema of every bus payload, for agents in any language (README, "Attaching your own agent")."""
-    from . import schema as schema_mod
+    from mhrc.core import schema as schema_mod
 
     if out is None:
         click.echo(json.dumps(schema_mod.document(), indent=2))
@@ -715,8 +716,8 @@ def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float
     """Issue one run's credentials for a world and agents started by hand or in containers
     (`mhrc up` makes its own): a CA, the world's TLS certificate, one login per participant.
     Start the world with --credentials DIR/world.json and each agent with its own file."""
-    from .keys import check_id, new_run_id
-    from .security import SecurityError, make_run_credentials
+    from mhrc.core.keys import check_id, new_run_id
+    from mhrc.core.security import SecurityError, make_run_credentials
 
     existing = out.is_dir() and (any(out.glob("*.json")) or any(out.glob("*/*.json")))
     if existing and not force:
@@ -746,8 +747,8 @@ def bus_group() -> None:
 
 
 def _bus_tool(name: str, coro_fn: Callable[[], Coroutine[Any, Any, int]]) -> None:
-    """Run a bus tool: its exit code, or one clear line on stderr and exit 1 (mhrc.bustools)."""
-    from .bustools import BusToolError
+    """Run a bus tool: its exit code, or one clear line on stderr and exit 1 (mhrc.core.bustools)."""
+    from mhrc.core.bustools import BusToolError
 
     try:
         code = _run(coro_fn)
@@ -770,7 +771,7 @@ CREDENTIALS_OPT = click.option(
 @CREDENTIALS_OPT
 def bus_list(connect: str, as_json: bool, credentials: Path | None) -> None:
     """The runs alive (from liveliness): which have a world, which robots are attached."""
-    from .bustools import bus_list as run_list
+    from mhrc.core.bustools import bus_list as run_list
 
     _bus_tool("bus list", lambda: run_list(connect, as_json=as_json, credentials=credentials, write=click.echo))
 
@@ -785,7 +786,7 @@ def bus_list(connect: str, as_json: bool, credentials: Path | None) -> None:
 def bus_echo(keyexpr: str, connect: str, as_json: bool, count: int | None, timeout: float | None, credentials: Path | None) -> None:
     """Print every message on KEYEXPR (e.g. 'mhrc/**' or 'mhrc/RUN/robot/*/action/result'),
     decoded with the protocol, one line each: time, key, kind, summary."""
-    from .bustools import bus_echo as run_echo
+    from mhrc.core.bustools import bus_echo as run_echo
 
     _bus_tool("bus echo", lambda: run_echo(connect, keyexpr, as_json=as_json, count=count, timeout=timeout, credentials=credentials, write=click.echo))
 
@@ -796,7 +797,7 @@ def bus_echo(keyexpr: str, connect: str, as_json: bool, count: int | None, timeo
 def doctor(connect: str, credentials: Path | None) -> None:
     """Check a bus endpoint: is a zenoh router or world there, which runs are alive, which
     protocol version each world speaks. Exit code 0 healthy, 1 not."""
-    from .bustools import doctor as run_doctor
+    from mhrc.core.bustools import doctor as run_doctor
 
     _bus_tool("doctor", lambda: run_doctor(connect, credentials=credentials, write=click.echo))
 
@@ -810,8 +811,8 @@ def show(run_or_trace: Path, out: Path | None, video: Path | None) -> None:
     """Write one self-contained HTML report of an episode (map, robot lanes, messages, failures)
     from RUN_OR_TRACE: a trace file, or a run directory holding trace.jsonl. Prints its path.
     With --video, render the episode's video instead (or as well, with --out)."""
-    from .viewer.load import NotATrace
-    from .viewer.show import write_report
+    from mhrc.viewer.load import NotATrace
+    from mhrc.viewer.show import write_report
 
     if video is None or out is not None:
         try:
@@ -835,7 +836,7 @@ def _render_video(trace: Path, video: Path) -> Path:
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from .viewer.video import render_video
+    from mhrc.viewer.video import render_video
 
     with Progress(TextColumn("video"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True)) as bar:
         task = bar.add_task("frames", total=None)
@@ -854,7 +855,7 @@ def _render_video(trace: Path, video: Path) -> Path:
 @click.option("--port", default=7447, show_default=True, type=int)
 def router(host: str, port: int) -> None:
     """Run a Zenoh router that worlds and agents on several hosts can all connect to."""
-    from .bus import Bus, endpoint
+    from mhrc.core.bus import Bus, endpoint
 
     async def serve() -> None:
         bus = await Bus.open(mode="router", listen=[endpoint(host, port)])

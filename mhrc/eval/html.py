@@ -1,9 +1,9 @@
 """The evaluation's HTML summary (summary.html): one self-contained page with the tables of
 summary.md, plots of them, and a link per episode to its report.
 
-The tables are `mhrc.report.summary_markdown`'s own, rendered as HTML (the same rows, the same
-statistics, nothing recomputed here); the plots draw `mhrc.metrics.summarize` over
-`mhrc.report.group`'s buckets and `mhrc.diagnostics.summarize_diagnostics`. Plots are inline
+The tables are `mhrc.eval.report.summary_markdown`'s own, rendered as HTML (the same rows, the same
+statistics, nothing recomputed here); the plots draw `mhrc.core.metrics.summarize` over
+`mhrc.eval.report.group`'s buckets and `mhrc.core.diagnostics.summarize_diagnostics`. Plots are inline
 SVG drawn with matplotlib's object API (no pyplot state, no display), so the page needs no
 network and no other file. Each episode links to `traces/<trace file stem>.html` next to the
 evaluation's episodes.jsonl, the page `mhrc show` writes; the link is there whether or not that
@@ -20,15 +20,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..diagnostics import summarize_diagnostics
-from ..metrics import summarize
-from ..report import CI_SEED, RESAMPLES, SETTING, _setting, _valid, group, read_rows, setting_label, summary_markdown
-from .wording import diagnostic_label, partial_success
+from mhrc.core.diagnostics import summarize_diagnostics
+from mhrc.core.metrics import summarize
+from mhrc.eval.report import CI_SEED, RESAMPLES, SETTING, _setting, _valid, group, read_rows, setting_label, summary_markdown
+from mhrc.viewer.wording import diagnostic_label, partial_success
 
 PLOTTED_DIAGNOSTICS = tuple(
     (name, diagnostic_label(name))
     for name in ("parse_failures", "hallucinations", "not_capable", "rejected", "failed", "repeated_failures", "waits_with_pending")
-)  # labelled as in every report (mhrc.diagnostics.LABELS)
+)  # labelled as in every report (mhrc.core.diagnostics.LABELS)
 STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 80em; padding: 0 1em; color: #222; }
 table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.9em; }
@@ -52,7 +52,7 @@ def _cells(line: str) -> list[str]:
 
 
 def markdown_to_html(md: str) -> str:
-    """The markdown `mhrc.report` writes (headings, paragraphs, lists, pipe tables) as HTML."""
+    """The markdown `mhrc.eval.report` writes (headings, paragraphs, lists, pipe tables) as HTML."""
     out: list[str] = []
     lines = md.splitlines()
     i = 0
@@ -166,7 +166,7 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
     ax.set_xticks([i + 0.4 - width / 2 for i in range(len(PLOTTED_DIAGNOSTICS))], [label for _, label in PLOTTED_DIAGNOSTICS], rotation=25, ha="right")
     ax.set(ylabel="mean per episode")
     ax.legend(fontsize=7, loc="best")
-    return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.diagnostics)")]
+    return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.core.diagnostics)")]
 
 
 # --------------------------------------------------------------------------- the page
@@ -244,7 +244,7 @@ def write_report_html(
     dirs: Sequence[Path], out_path: Path, *, title: str = "Evaluation summary", resamples: int = RESAMPLES, seed: int = CI_SEED
 ) -> Path:
     """`mhrc report DIR...`'s page: the rows of several evaluation directories (as
-    `mhrc.report.merge_runs` reads them), each episode linked into its own directory."""
+    `mhrc.eval.report.merge_runs` reads them), each episode linked into its own directory."""
     rows: list[dict[str, Any]] = []
     links: list[str | None] = []
     for d in dirs:

@@ -14,9 +14,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from .bus import Bus, Sample
-from .keys import Keys
-from .protocol import (
+from mhrc.core.bus import Bus, Sample
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import (
     ActionResult,
     Communicate,
     EpisodeDone,

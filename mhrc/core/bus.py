@@ -20,12 +20,12 @@ import structlog
 import zenoh
 from pydantic import BaseModel
 
-from .protocol import encode
+from mhrc.core.protocol import encode
 
 if TYPE_CHECKING:
-    from .security import Credentials
+    from mhrc.core.security import Credentials
 
-log = structlog.get_logger("mhrc.bus")
+log = structlog.get_logger("mhrc.core.bus")
 
 DEFAULT_LEASE_MS = 2000
 
@@ -132,7 +132,7 @@ def make_config(
     # never unmaps it when the session closes: an eval worker grew ~16 MB an episode (bench/bench_memory.py)
     conf.insert_json5("transport/shared_memory/enabled", "false")
     if security is not None:
-        from .security import apply
+        from mhrc.core.security import apply
 
         apply(conf, security, router=mode == "router")
     return conf
@@ -160,7 +160,7 @@ class Bus:
         lease_ms: int = DEFAULT_LEASE_MS,
         security: Credentials | None = None,
     ) -> Bus:
-        """Open a session. With `security` (mhrc.security.Credentials) the links are TLS and
+        """Open a session. With `security` (mhrc.core.security.Credentials) the links are TLS and
         the session logs in as the credentials' user; a client that the world refuses gets a
         BusRefused naming the cause (expired or foreign certificate, refused login)."""
         conf = make_config(mode=mode, listen=listen, connect=connect, lease_ms=lease_ms, security=security)
@@ -169,7 +169,7 @@ class Bus:
         except zenoh.ZError as exc:
             where = ", ".join([*listen, *connect]) or "no endpoints"
             if mode == "client" and len(connect) == 1:
-                from .security import diagnose
+                from mhrc.core.security import diagnose
 
                 why = await asyncio.to_thread(diagnose, connect[0], security)
                 if why.final:  # retrying cannot help: a certificate, a missing login, the wrong transport

@@ -333,7 +333,7 @@ class Turn(Message):
 
 
 class Metrics(_Model):
-    """Per-episode metrics, as the paper defines them (see mhrc.metrics)."""
+    """Per-episode metrics, as the paper defines them (see mhrc.core.metrics)."""
 
     success: bool
     partial_success: float = Field(ge=0.0, le=1.0)
@@ -365,7 +365,7 @@ class EpisodeStarted(Message):
         None, gt=0.0, description="async: the simulated seconds one step stands for: the horizon is horizon x step_seconds, TS is makespan / step_seconds rounded up"
     )
     lower_bound: int | None = None
-    fidelity: str = Field("paper", description="`paper`, or `aids:` and the aids this episode ran with (mhrc.fidelity)")
+    fidelity: str = Field("paper", description="`paper`, or `aids:` and the aids this episode ran with (mhrc.core.fidelity)")
     aids: list[str] = Field(default_factory=list)
 
 

@@ -2,16 +2,16 @@
 machine or over a Ray cluster, results as traces, `episodes.jsonl` and summary tables.
 
 Where episodes run is an executor's business: by default a pool of worker processes of this
-machine (mhrc.eval_pool: `--workers` processes, each up to `--concurrency` episodes at once);
-with `--ray ADDRESS` each episode is a Ray task on that cluster (mhrc.eval_ray, the `ray`
+machine (mhrc.eval.pool: `--workers` processes, each up to `--concurrency` episodes at once);
+with `--ray ADDRESS` each episode is a Ray task on that cluster (mhrc.eval.cluster, the `ray`
 extra), with Ray's retries for a worker or node that dies. Either way an episode runs whole in
-one process (its world and its agents, mhrc.eval_episode) and only its trace comes back.
+one process (its world and its agents, mhrc.eval.episode) and only its trace comes back.
 
 Each episode's metrics and failure diagnostics (`diag_*` columns) are computed here, by the
-driver, from the trace (`mhrc.metrics`, `mhrc.diagnostics`), so a row means the same thing
+driver, from the trace (`mhrc.core.metrics`, `mhrc.core.diagnostics`), so a row means the same thing
 whichever process or host ran it. Rows are appended to DIR/episodes.jsonl as they arrive;
 `--resume` skips the keys already there. Summaries (tables, confidence intervals, the paper's
-figures; summary.md, .csv and .html) are `mhrc.report`'s.
+figures; summary.md, .csv and .html) are `mhrc.eval.report`'s.
 
 The default grid is the paper's: per task, every scene with one episode per object count 3, 4,
 5 and 6 (3 scenes x 4 = 12 episodes per task). Seeds: an episode's seed is
@@ -33,13 +33,13 @@ from typing import Any, Protocol
 
 import structlog
 
-from .diagnostics import diagnose
-from .episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig
-from .eval_episode import EpisodeResult, Job
-from .fidelity import label
-from .metrics import TraceError, from_trace
-from .report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
-from .trace import read_trace, unwritable
+from mhrc.core.diagnostics import diagnose
+from mhrc.run.episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig
+from mhrc.eval.episode import EpisodeResult, Job
+from mhrc.core.fidelity import label
+from mhrc.core.metrics import TraceError, from_trace
+from mhrc.eval.report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
+from mhrc.core.trace import read_trace, unwritable
 
 __all__ = ["EvalAborted", "EvalSpec", "Job", "Tally", "check_out", "evaluate", "merge_runs", "summary_csv", "summary_markdown", "write_summaries"]
 
@@ -65,18 +65,18 @@ class EvalSpec:
     ablation: str = "none"
     horizon: int = 50
     base_url: str | None = None
-    llm_timeout: float | None = None  # None: per spec (mhrc.episode.EpisodeConfig.timeout_for)
-    llm_idle_timeout: float | None = None  # None: mhrc.episode.IDLE_TIMEOUT
+    llm_timeout: float | None = None  # None: per spec (mhrc.run.episode.EpisodeConfig.timeout_for)
+    llm_idle_timeout: float | None = None  # None: mhrc.run.episode.IDLE_TIMEOUT
     stream: bool = True  # False: --no-stream
     prompts: str | None = None
     repeats: int = 1  # the grid, run this many times with other seeds
-    aids: tuple[str, ...] = ()  # mhrc.fidelity names; () is the paper's fidelity
+    aids: tuple[str, ...] = ()  # mhrc.core.fidelity names; () is the paper's fidelity
     history_cap: int | None = None
     max_tokens: int = DEFAULT_MAX_TOKENS
     llm_seed: int | None = None
     structured: bool = False  # JSON decisions (not the paper's free text)
     step_deadline: float | None = None
-    schedule: str = "sequential"  # the world's time policy (mhrc.episode.SCHEDULES); the paper's loop by default
+    schedule: str = "sequential"  # the world's time policy (mhrc.run.episode.SCHEDULES); the paper's loop by default
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
 
     @property
@@ -170,7 +170,7 @@ RETRIES = 1  # an episode that fails (not fatally) is run this many more times b
 
 
 class Executor(Protocol):
-    """Where episodes run: mhrc.eval_pool.PoolExecutor (this machine) or mhrc.eval_ray.RayExecutor."""
+    """Where episodes run: mhrc.eval.pool.PoolExecutor (this machine) or mhrc.eval.cluster.RayExecutor."""
 
     async def __aenter__(self) -> Executor: ...
     async def __aexit__(self, *exc: object) -> None: ...
@@ -182,7 +182,7 @@ class Executor(Protocol):
 def _episode_report(trace: Path) -> None:
     """The episode's HTML report beside its trace (summary.html links it); a report that cannot
     be drawn costs a warning, never the episode's row."""
-    from .viewer.show import write_report
+    from mhrc.viewer.show import write_report
 
     try:
         write_report(trace)
@@ -239,8 +239,8 @@ async def evaluate(
     """Run the grid; returns every row of DIR/episodes.jsonl (old ones too, with --resume).
 
     Locally, `workers` processes of this machine each run up to `concurrency` episodes at once
-    (mhrc.eval_pool). With `ray` (an address as ray.init takes it) every episode is a Ray task
-    on that cluster instead (mhrc.eval_ray); `shared_out`: DIR is the same path on every node,
+    (mhrc.eval.pool). With `ray` (an address as ray.init takes it) every episode is a Ray task
+    on that cluster instead (mhrc.eval.cluster); `shared_out`: DIR is the same path on every node,
     so tasks write their traces there rather than send them back. Either way each row is
     computed here, from the episode's trace, and appended to DIR/episodes.jsonl as it arrives:
     an interrupt (cancellation) keeps every finished row."""
@@ -255,13 +255,13 @@ async def evaluate(
     spec.validate()
     executor: Executor
     if ray is not None:
-        from .eval_ray import RayExecutor, import_ray, probe, shared
+        from mhrc.eval.cluster import RayExecutor, import_ray, probe, shared
 
         import_ray()  # before --out is touched: a missing extra or an address nothing listens at leaves nothing behind
         await asyncio.to_thread(probe, ray)
         executor = RayExecutor(ray, concurrency=concurrency, llm=spec.llm is not None, traces=shared(out) if shared_out else None)
     else:
-        from .eval_pool import PoolExecutor
+        from mhrc.eval.pool import PoolExecutor
 
         executor = PoolExecutor(workers, concurrency)
     async with executor:  # joins a Ray cluster before --out is touched: a cluster that refuses us leaves nothing behind

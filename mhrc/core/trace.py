@@ -21,9 +21,9 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-from .bus import Bus, Sample
-from .keys import Keys
-from .protocol import ActionRequest, ProtocolError, decode
+from mhrc.core.bus import Bus, Sample
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import ActionRequest, ProtocolError, decode
 
 JUNK_INTERVAL = 1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
 REJECTIONS_IN_FULL = 5  # well-formed requests rejected per robot and interval that are copied in full; the rest are counted
@@ -133,7 +133,7 @@ class Recorder:
             return False
 
     def _count_junk(self, key: str, reason: str, size: int, now: float, code: Any = None) -> None:
-        """Count one junk sample of `key`; `code` is the rejection's (mhrc.protocol.RejectCode), if it has one."""
+        """Count one junk sample of `key`; `code` is the rejection's (mhrc.core.protocol.RejectCode), if it has one."""
         code = code if isinstance(code, str) else None
         junk = self._junk.setdefault(key, {"count": 0, "bytes": 0, "reason": reason[:300], "code": code, "since": now})
         junk["count"] += 1

@@ -22,15 +22,15 @@ from pathlib import Path
 import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from .bus import Bus, BusError, BusRefused, check_listen, endpoint, free_port
-from .fidelity import AidsError, label, parse_aids
-from .keys import Keys, check_id, new_run_id
-from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
+from mhrc.core.bus import Bus, BusError, BusRefused, check_listen, endpoint, free_port
+from mhrc.core.fidelity import AidsError, label, parse_aids
+from mhrc.core.keys import Keys, check_id, new_run_id
+from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 
 if TYPE_CHECKING:
-    from .security import Credentials
+    from mhrc.core.security import Credentials
 
-log = structlog.get_logger("mhrc.episode")
+log = structlog.get_logger("mhrc.run.episode")
 
 ROBOTS = ("alice", "bob", "david")
 SCHEDULES = ("sequential", "lockstep", "async")  # the names of world.schedulers.SCHEDULERS (not imported: assembling code stays light)
@@ -108,11 +108,11 @@ class EpisodeConfig(BaseModel):
     step_deadline: float | None = Field(None, gt=0, description="seconds one robot's LLM step may take, retries included, at least --llm-timeout; "
                                         "None: no bound but the call's own (a stalled stream ends after --llm-idle-timeout, one that "
                                         "keeps producing at --max-tokens)")
-    aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.fidelity); none: the paper's")
+    aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.core.fidelity); none: the paper's")
     history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
     credentials: Path | None = Field(
         None,
-        description="the run's credentials (mhrc.security): the directory of every participant's files, or one participant's "
+        description="the run's credentials (mhrc.core.security): the directory of every participant's files, or one participant's "
         "file; the bus is then TLS with a login per participant and the world's access control; None: the open tcp bus",
     )
 
@@ -143,7 +143,7 @@ class EpisodeConfig(BaseModel):
                 raise ConfigError(msg) from None
             raise ConfigError(f"{option_name(field)}: {msg} (got {err.get('input')!r})") from None
         if cfg.trace is not None:
-            from .trace import unwritable
+            from mhrc.core.trace import unwritable
 
             if why := unwritable(cfg.trace):  # before anything starts: not a traceback from the recorder
                 raise ConfigError(f"--trace: {why}")
@@ -193,7 +193,7 @@ class EpisodeConfig(BaseModel):
         """`user`'s credentials, checked to be of this run and this user; None on the open bus."""
         if self.credentials is None:
             return None
-        from .security import check_for, load
+        from mhrc.core.security import check_for, load
 
         creds = load(self.credentials_file(user))
         check_for(creds, run=self.run, user=user)
@@ -201,7 +201,7 @@ class EpisodeConfig(BaseModel):
 
     def with_credentials(self, directory: Path | None = None) -> EpisodeConfig:
         """A copy with fresh credentials for this run (default: next to the trace, runs/RUN/credentials)."""
-        from .security import make_run_credentials
+        from mhrc.core.security import make_run_credentials
 
         where = directory or ((self.trace.parent if self.trace else Path("runs") / self.run) / "credentials")
         make_run_credentials(self.run, ROBOTS, where)
@@ -272,7 +272,7 @@ async def serve_world(
     from mhrc.world.service import WorldConfig, WorldService
     from mhrc.world.sim import Sim
 
-    from .trace import Recorder
+    from mhrc.core.trace import Recorder
 
     sim = await asyncio.to_thread(
         Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots, aids=cfg.aids
@@ -356,7 +356,7 @@ async def run_agent(
     from mhrc.agents.heuristic import heuristic_policy
 
     if security is not None:
-        from .security import check_for
+        from mhrc.core.security import check_for
 
         check_for(security, run=run, user=robot)
     async with contextlib.AsyncExitStack() as stack:
@@ -595,7 +595,7 @@ def _is_fatal(exc: BaseException | None) -> bool:
 
 
 def _child_env() -> dict[str, str]:
-    from .lifeline import child_env
+    from mhrc.run.lifeline import child_env
 
     env = child_env()  # the world and agents die with this process, even after a SIGKILL
     env.setdefault("PYTHONUNBUFFERED", "1")
@@ -694,7 +694,7 @@ async def _run_processes(
         bus = await open_client(cfg.endpoint, 10.0, security=cfg.participant("observer"))
         done_fut: asyncio.Future[EpisodeDone] = asyncio.get_running_loop().create_future()
         started = asyncio.Event()
-        from .keys import Keys
+        from mhrc.core.keys import Keys
 
         def on_event(sample: object) -> None:
             try:

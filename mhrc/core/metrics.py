@@ -20,7 +20,7 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
   below its TS in all 21 rows of Tables I-II, often close to it (48.56 of 50 where episodes
   fail), which a sum over three robots cannot be and which the per-robot mean reaches only if
   every robot acts in nearly every step: `active_ticks` is the reading set beside the paper's
-  AS (mhrc.report), the other two are columns beside it.
+  AS (mhrc.eval.report), the other two are columns beside it.
 - failed_actions by skill; messages (communicate actions that were delivered);
 - llm_calls, prompt_tokens, completion_tokens: from the agents' `thought` events (an LLM step
   is a thought with a prompt, whether or not the model answered);
@@ -47,7 +47,7 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from .protocol import LLM_ERROR_PREFIX
+from mhrc.core.protocol import LLM_ERROR_PREFIX
 
 UNRECORDED = "unrecorded"  # the fidelity of a trace written before episodes recorded it
 
@@ -110,7 +110,7 @@ def junk_rejections(rows: Iterable[dict[str, Any]]) -> int:
 
 
 def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
-    """The metrics of one episode from its trace rows (`mhrc.trace.read_trace`)."""
+    """The metrics of one episode from its trace rows (`mhrc.core.trace.read_trace`)."""
     started, done = _msgs(rows, "episode_started"), _msgs(rows, "episode_done")
     if not started or not done:
         raise TraceError("the trace has no episode_started or no episode_done event: the episode did not finish")
@@ -180,7 +180,7 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
 
 def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Means over episode rows (dicts with the EpisodeMetrics fields; rows written before a field
-    existed count it as 0). Leaving invalid episodes out is the caller's choice (mhrc.report)."""
+    existed count it as 0). Leaving invalid episodes out is the caller's choice (mhrc.eval.report)."""
     if not rows:
         raise ValueError("no episodes to summarize")
 

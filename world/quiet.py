@@ -1,4 +1,4 @@
-"""PyBullet without its banner: `from mhrc.quiet import pybullet as p`.
+"""PyBullet without its banner: `from mhrc.world.quiet import pybullet as p`.
 
 pybullet's C extension prints `pybullet build time: ...` with C stdio when it is imported (on
 stderr in the wheels of 2025, on stdout in older builds, where on a pipe it sits in C's buffer

@@ -3,8 +3,8 @@ worker): the job it gets, the result it sends back, and the run itself.
 
 An episode runs whole in the process that takes it: its world (a router on a free loopback
 port) and its agents as asyncio tasks, with a trace in a temporary directory. Only the
-trace goes back (zlib-compressed); the driver computes the row from it (`mhrc.metrics`,
-`mhrc.diagnostics`), so a row means the same thing whichever process or host ran it.
+trace goes back (zlib-compressed); the driver computes the row from it (`mhrc.core.metrics`,
+`mhrc.core.diagnostics`), so a row means the same thing whichever process or host ran it.
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ from typing import Any
 import structlog
 from pydantic import BaseModel, ConfigDict
 
-from . import memory
-from .bus import Bus, Sample
-from .episode import EpisodeConfig, EventHook, up_in_process
-from .keys import Keys
-from .protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
+from mhrc.run import malloc as memory
+from mhrc.core.bus import Bus, Sample
+from mhrc.run.episode import EpisodeConfig, EventHook, up_in_process
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 
 log = structlog.get_logger("mhrc.eval")
 

@@ -7,7 +7,7 @@ but it is not zenoh" are told apart in one clear line each (`BusToolError`), nev
 
 - presence comes from liveliness tokens (DESIGN.md, "The bus"): `mhrc/<run>/alive/world` and
   `mhrc/<run>/alive/robot/<rid>`;
-- every message `echo` shows is decoded with `mhrc.protocol` by its `kind`; a payload that is
+- every message `echo` shows is decoded with `mhrc.core.protocol` by its `kind`; a payload that is
   not JSON or not a valid message is shown as such;
 - the protocol version a world speaks is the `v` field of its `world/state` answer (every
   message carries one).
@@ -28,9 +28,9 @@ from typing import Any
 import zenoh
 from pydantic import BaseModel
 
-from .bus import Bus, Sample, make_config, split_endpoint
-from .keys import ROOT, Keys
-from .protocol import (
+from mhrc.core.bus import Bus, Sample, make_config, split_endpoint
+from mhrc.core.keys import ROOT, Keys
+from mhrc.core.protocol import (
     PROTOCOL_VERSION,
     SUPPORTED_VERSIONS,
     ActionAck,
@@ -52,7 +52,7 @@ from .protocol import (
     WorldState,
     decode,
 )
-from .security import OBSERVER, WORLD, diagnose, speaks_tls
+from mhrc.core.security import OBSERVER, WORLD, diagnose, speaks_tls
 
 OPEN_TIMEOUT_MS = 2000  # a zenoh handshake over loopback takes milliseconds; a silent non-zenoh listener would hold 10 s
 PROBE_TIMEOUT = 2.0  # s for the plain TCP connect
@@ -135,12 +135,12 @@ class Connection:
 
 async def open_connection(ep: str, *, credentials: Path | None = None, open_timeout_ms: int = OPEN_TIMEOUT_MS) -> Connection:
     """A client session to `ep` (with `credentials`, a participant's file of a secured run:
-    TLS and its login; mhrc.security), or BusToolError saying clearly why there is none."""
+    TLS and its login; mhrc.core.security), or BusToolError saying clearly why there is none."""
     ep = normalize_endpoint(ep)
     proto, host, port = split_endpoint(ep)
     security = None
     if credentials is not None:
-        from .security import SecurityError, load
+        from mhrc.core.security import SecurityError, load
 
         try:
             security = load(credentials)
