@@ -19,7 +19,11 @@ from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
-from mhrc.run.episode import EpisodeConfig, up_in_process, up_processes
+from mhrc.run.config import EpisodeConfig
+
+from mhrc.run.inprocess import up_in_process
+
+from mhrc.run.processes import up_processes
 from mhrc.core.protocol import EpisodeDone, Metrics
 
 RUNNERS: dict[str, Callable[[EpisodeConfig], Coroutine[Any, Any, EpisodeDone]]] = {

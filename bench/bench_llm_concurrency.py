@@ -28,7 +28,9 @@ from typing import Any
 
 from report import emit
 
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.metrics import from_trace
 from mhrc.core.trace import read_trace
 

@@ -34,7 +34,8 @@ from typing import Any
 from report import emit, percentile
 
 from mhrc.agents.local import LocalModelServer
-from mhrc.run.episode import IDLE_TIMEOUT, SERVER_TIMEOUT, EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig, IDLE_TIMEOUT, SERVER_TIMEOUT
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import LLM_ERROR_PREFIX
 from mhrc.core.trace import read_trace
 

@@ -31,7 +31,8 @@ from pathlib import Path
 
 import mhrc.core.bus
 from mhrc.run import malloc as memory
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 
 episodes, shm, trim = int(sys.argv[1]), sys.argv[2] == "1", sys.argv[3] == "1"
 if shm:  # the configuration before: zenoh's default shared-memory transport

@@ -33,7 +33,7 @@ from typing import Any
 from bench_llm_concurrency import serve
 from report import emit
 
-from mhrc.core.bus import free_port
+from mhrc.core.endpoints import free_port
 from mhrc.eval.engine import EvalSpec, evaluate
 
 TASKS = ("pack_objects", "sort_solids", "make_sandwich")

@@ -39,7 +39,9 @@ from mhrc.agents.llm import OpenAIChatClient
 from mhrc.agents.llm_policy import LLMPolicy
 from mhrc.agents.policy import Decision
 from mhrc.core.bus import Bus
-from mhrc.run.episode import EpisodeConfig, open_client, serve_world
+from mhrc.core.bus import open_client
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.serve import serve_world
 from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import ActionResult, EpisodeDone, Observation
 from mhrc.core.trace import read_trace

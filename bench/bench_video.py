@@ -20,7 +20,9 @@ from pathlib import Path
 import imageio.v3 as iio
 from report import emit
 
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+
+from mhrc.run.inprocess import up_in_process
 from mhrc.viewer.video import FPS, render_video
 
 

@@ -10,7 +10,9 @@ from pathlib import Path
 import pytest
 
 from mhrc.core.bus import Bus
-from mhrc.run.episode import EpisodeConfig, open_client, serve_world
+from mhrc.core.bus import open_client
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.serve import serve_world
 from mhrc.core.protocol import EpisodeDone
 
 

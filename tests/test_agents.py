@@ -9,7 +9,8 @@ import pytest
 
 from mhrc.agents.agent import AttachRejected, RobotAgent
 from mhrc.agents.scripted import ScriptedPolicy
-from mhrc.core.bus import Bus, Sample, endpoint, free_port
+from mhrc.core.bus import Bus, Sample
+from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import (
     ActionAck,

@@ -18,7 +18,8 @@ from mhrc.agents.agent import RobotAgent
 from mhrc.agents.parse import parse_command
 from mhrc.core.bus import Bus
 from mhrc.cli import main
-from mhrc.run.episode import ConfigError, EpisodeConfig, up_in_process
+from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.keys import Keys
 from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import ActionAck, ActionRequest, ActionResult, Wait, decode
@@ -217,7 +218,7 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
 async def test_async_runs_across_processes_with_its_time_scale(tmp_path: Path) -> None:
     """`--processes` gives the world process the schedule and its time scale (parsed back by the CLI)."""
     from mhrc.cli import world as world_command_cli
-    from mhrc.run.episode import up_processes, world_command
+    from mhrc.run.processes import up_processes, world_command
 
     cfg = EpisodeConfig.build(seed=0, schedule="async", time_scale=40.0, trace=tmp_path / "t.jsonl").resolved()
     argv = world_command(cfg)[3:]  # after `python -m mhrc`

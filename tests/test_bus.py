@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import asyncio
 
-from mhrc.core.bus import Bus, Sample, endpoint, free_port
+from mhrc.core.bus import Bus, Sample
+
+from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.protocol import ActionAck, decode
 
 

@@ -17,9 +17,11 @@ from typing import Any
 
 import pytest
 
-from mhrc.core.bus import Bus, Sample, free_port
+from mhrc.core.bus import Bus, Sample
+
+from mhrc.core.endpoints import free_port
 from mhrc.core.bustools import MODELS, bus_echo, describe_sample, group_tokens, split_endpoint
-from mhrc.run.episode import run_agent
+from mhrc.run.attach import run_agent
 from mhrc.core.protocol import PROTOCOL_VERSION
 
 MHRC = [sys.executable, "-m", "mhrc"]
@@ -255,7 +257,9 @@ async def test_the_observers_login_reads_a_secured_run(tmp_path: Path) -> None:
     """`mhrc doctor` and `mhrc bus echo 'mhrc/**'` with the observer's login: a healthy world is
     called healthy (its state answered), and echo prints the run's messages, as the README says;
     a robot's login is told which login asks the world's state, without calling it unhealthy."""
-    from mhrc.run.episode import EpisodeConfig, open_client, up_in_process
+    from mhrc.core.bus import open_client
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.inprocess import up_in_process
 
     cfg = EpisodeConfig.build(seed=0, n_objects=4, tick_delay=0.2, trace=tmp_path / "t.jsonl").resolved().with_credentials(tmp_path / "cred")
     observer, alice = str(cfg.credentials_file("observer")), str(cfg.credentials_file("alice"))

@@ -18,7 +18,8 @@ from rich.console import Console
 
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision, Policy
-from mhrc.core.bus import Bus, Sample, free_port
+from mhrc.core.bus import Bus, Sample
+from mhrc.core.endpoints import free_port
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import (
     ActionAck,
@@ -193,7 +194,8 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     """Results, messages and the tick events travel on different keys; the console must still
     read in tick order: a tick's results, then its messages, then "tick N closed"; the table
     last, after every result (`mhrc world`'s printer prints it; `mhrc up` after the run)."""
-    from mhrc.run.episode import EpisodeConfig, up_in_process
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.inprocess import up_in_process
     from mhrc.run.console import ProgressPrinter, summary_table
     from mhrc.core.trace import read_trace
 

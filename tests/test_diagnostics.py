@@ -16,11 +16,13 @@ from typing import Any
 import pytest
 
 from mhrc.core.diagnostics import diagnose, reject_kind, row_diagnostics, summarize_diagnostics
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX
-from mhrc.eval.report import read_rows, write_summaries
+from mhrc.eval.rows import read_rows
+from mhrc.eval.summaries import write_summaries
 from mhrc.core.trace import read_trace
 
 # --------------------------------------------------------------------------- a hand-built trace

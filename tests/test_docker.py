@@ -26,7 +26,7 @@ import click
 import pytest
 import yaml
 
-from mhrc.core.bus import free_port
+from mhrc.core.endpoints import free_port
 from mhrc.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent

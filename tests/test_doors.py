@@ -9,7 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import Navigate, Open, Pick
 from mhrc.world.quiet import pybullet as p
 from mhrc.core.trace import read_trace

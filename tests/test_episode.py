@@ -8,7 +8,17 @@ import sys
 
 import pytest
 
-from mhrc.run.episode import ConfigError, EpisodeConfig, open_client, run_agent, serve_world, up_in_process, up_processes
+from mhrc.core.bus import open_client
+
+from mhrc.run.attach import run_agent
+
+from mhrc.run.config import ConfigError, EpisodeConfig
+
+from mhrc.run.inprocess import up_in_process
+
+from mhrc.run.processes import up_processes
+
+from mhrc.run.serve import serve_world
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import decode_event
 from mhrc.core.trace import read_trace

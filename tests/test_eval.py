@@ -15,10 +15,11 @@ from typing import Any
 
 import pytest
 
-from mhrc.core.bus import free_port
-from mhrc.run.episode import ConfigError
+from mhrc.core.endpoints import free_port
+from mhrc.run.config import ConfigError
 from mhrc.eval.engine import EvalSpec, evaluate
-from mhrc.eval.report import merge_runs, summary_markdown
+from mhrc.eval.report import summary_markdown
+from mhrc.eval.rows import merge_runs
 
 SMALL = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2)
 VOLATILE = {"wall_time", "worker"}

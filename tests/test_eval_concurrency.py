@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from mhrc.run.episode import ConfigError
+from mhrc.run.config import ConfigError
 from mhrc.eval.engine import EvalSpec, evaluate
 
 LATENCY = 0.3  # s the scripted model takes per reply: long enough for episodes to overlap at the server

@@ -14,7 +14,8 @@ import jsonschema
 import pytest
 
 from mhrc.core import protocol
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.trace import read_trace
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "raw_zenoh_agent.py"

@@ -185,7 +185,8 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
 
     from mhrc.core import logs
     from mhrc.core.bus import Bus
-    from mhrc.run.episode import EpisodeConfig, up_in_process
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.inprocess import up_in_process
     from mhrc.core.keys import Keys
     from mhrc.core.metrics import from_trace
     from mhrc.core.trace import read_trace
@@ -231,7 +232,8 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
     and the metrics and diagnostics still count every rejection, by reason."""
     from mhrc.core.bus import Bus
     from mhrc.core.diagnostics import diagnose
-    from mhrc.run.episode import EpisodeConfig, up_in_process
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.inprocess import up_in_process
     from mhrc.core.keys import Keys
     from mhrc.core.metrics import from_trace
     from mhrc.core.protocol import ActionRequest, Wait
@@ -269,7 +271,7 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
 def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> None:
     import socket
 
-    from mhrc.core.bus import free_port
+    from mhrc.core.endpoints import free_port
 
     port = free_port()
     sock = None
@@ -282,7 +284,7 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
         else:
             (tmp_path / "first").mkdir()
             world = _start(["world", "--port", str(port), "--run", "first", "--insecure", "--quiet"], tmp_path / "first")
-            from mhrc.core.bus import ListenError, check_listen
+            from mhrc.core.endpoints import ListenError, check_listen
 
             deadline = time.monotonic() + 60
             while True:  # until the first world listens
@@ -315,7 +317,7 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
 def test_a_world_killed_under_its_agent_is_one_line_and_exit_2(tmp_path: Path) -> None:
     """`mhrc agent` whose world is killed (SIGKILL) mid-episode, and one with no world at all:
     one line naming the cause, exit 2, no traceback."""
-    from mhrc.core.bus import free_port
+    from mhrc.core.endpoints import free_port
 
     port = free_port()
     (tmp_path / "w").mkdir()

@@ -10,7 +10,8 @@ import pytest
 
 from mhrc.agents.llm import ScriptedClient
 from mhrc.agents.llm_policy import LLMPolicy
-from mhrc.run.episode import ConfigError, EpisodeConfig, up_in_process
+from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.fidelity import AIDS, label, parse_aids
 from mhrc.core.protocol import ActionResult, SkillOutcome, Wait
 from mhrc.core.trace import read_trace

@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 
 from mhrc.agents.llm import LLMError, OpenAIChatClient, check_spec
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer
 from mhrc.core.trace import read_trace
 

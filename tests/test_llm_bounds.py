@@ -18,7 +18,8 @@ from click.testing import CliRunner
 from mhrc.agents.llm import MAX_REPLY_CHARS, LLMFatalError, OpenAIChatClient, robot_specs, split_reasoning
 from mhrc.agents.llm_policy import LLMUnreachable
 from mhrc.cli import main
-from mhrc.run.episode import ConfigError, EpisodeConfig, up_in_process
+from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import EpisodeDone
 from mhrc.testing import ModelReply, ScriptedModelServer
@@ -277,7 +278,7 @@ async def test_the_console_says_when_a_reply_did_not_parse(mhrc_model_server, tm
 
 def test_a_process_agent_gets_every_model_option_of_the_episode() -> None:
     """`--processes` starts `mhrc agent` command lines: the same options mean the same there."""
-    from mhrc.run.episode import agent_command
+    from mhrc.run.processes import agent_command
 
     cfg = EpisodeConfig.build(
         llm="openai:m", base_url="http://127.0.0.1:9/v1", max_tokens=99, llm_seed=4, structured=True, step_deadline=7.5, llm_timeout=3.0,

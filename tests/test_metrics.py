@@ -10,7 +10,9 @@ from typing import Any
 import pytest
 from mhrc.world.bound import SymbolicEpisode, SymbolicObject, lower_bound
 
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.metrics import TraceError, from_trace, summarize
 from mhrc.core.trace import read_trace
 

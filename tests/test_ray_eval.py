@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from mhrc.core.bus import free_port
+from mhrc.core.endpoints import free_port
 
 MHRC = [sys.executable, "-m", "mhrc"]
 SMALL = ["--tasks", "pack_objects", "--scenes", "kitchen"]

@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 
 from mhrc.agents.local import LocalModelServer
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import Observation
 from mhrc.core.trace import read_trace
 

@@ -10,7 +10,11 @@ from typing import Any
 
 import pytest
 
-from mhrc.eval.report import PAPER_FIGURES, bootstrap_ci, paper_model, summary_csv, summary_markdown
+from mhrc.eval.paper import PAPER_FIGURES, paper_model
+
+from mhrc.eval.report import summary_csv, summary_markdown
+
+from mhrc.eval.rows import bootstrap_ci
 
 SCENES = ("bathroom", "bedroom", "kitchen")
 GPT4O_PACK = "0.92 / 0.96 / 32.67 / 25.00"  # Table I, GPT-4o, Pack Objects

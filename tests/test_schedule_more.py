@@ -22,7 +22,9 @@ import pytest
 
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
-from mhrc.run.episode import ROBOTS, EpisodeConfig, up_in_process, up_processes
+from mhrc.run.config import EpisodeConfig, ROBOTS
+from mhrc.run.inprocess import up_in_process
+from mhrc.run.processes import up_processes
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionResult, EpisodeDone, Message, Observation, RobotAttached, RobotDetached, decode_event, parse_action
 from mhrc.testing import LoopbackWorld, world_on_loopback

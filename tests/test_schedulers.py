@@ -12,7 +12,9 @@ from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
 from mhrc.core.bus import Bus
-from mhrc.run.episode import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig, up_in_process, up_processes
+from mhrc.run.config import ConfigError, EpisodeConfig, ROBOTS, SCHEDULES
+from mhrc.run.inprocess import up_in_process
+from mhrc.run.processes import up_processes
 from mhrc.core.protocol import ActionRequest, ActionResult, Observation, SkillOutcome, parse_action
 from mhrc.core.trace import read_trace
 from mhrc.world.scene import LAYOUTS

@@ -14,9 +14,13 @@ from pathlib import Path
 
 import pytest
 
-from mhrc.core import security
-from mhrc.core.bus import Bus, BusRefused, endpoint, free_port
-from mhrc.run.episode import EpisodeConfig, open_client, up_in_process, up_processes
+from mhrc.core import certs, security
+from mhrc.core.bus import Bus
+from mhrc.core.endpoints import BusRefused, endpoint, free_port
+from mhrc.core.bus import open_client
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
+from mhrc.run.processes import up_processes
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionRequest, AttachReply, AttachRequest, RobotAttached, Wait, decode, decode_event
 
@@ -116,12 +120,12 @@ async def test_expired_certificate_fails_clearly(tmp_path: Path) -> None:
     files = _creds(tmp_path)
     d = tmp_path / "cred"
     world = security.load(files["world"])  # loaded while valid: a certificate that expires under a running world
-    ca, ca_key = security.make_ca("sec")
+    ca, ca_key = certs.make_ca("sec")
     past = datetime.datetime.now(datetime.timezone.utc) - datetime.timedelta(days=10)
-    cert, key = security.make_server_cert(ca, ca_key, not_before=past, days=1)
-    (d / "ca.pem").write_bytes(security._pem_cert(ca))
-    (d / "world.pem").write_bytes(security._pem_cert(cert))
-    (d / "world.key").write_bytes(security._pem_key(key))
+    cert, key = certs.make_server_cert(ca, ca_key, not_before=past, days=1)
+    (d / "ca.pem").write_bytes(certs.pem_cert(ca))
+    (d / "world.pem").write_bytes(certs.pem_cert(cert))
+    (d / "world.key").write_bytes(certs.pem_key(key))
     async with _router(files, world) as (_world, ep):
         with pytest.raises(BusRefused, match="expired"):
             await open_client(ep, 10, security=security.load(files["alice"]))
@@ -470,7 +474,8 @@ async def test_a_certificate_that_expires_mid_run_is_named(tmp_path: Path) -> No
     """The run's CA and the world's certificate expire 20 s into an episode (the world closes its
     links then): the agents say the certificate expired, not that the world disappeared."""
     from mhrc.agents.agent import WorldGone
-    from mhrc.run.episode import run_agent, serve_world
+    from mhrc.run.attach import run_agent
+    from mhrc.run.serve import serve_world
 
     cfg = EpisodeConfig.build(seed=0, n_objects=6, tick_delay=1.0, trace=tmp_path / "t.jsonl").resolved()
     files = security.make_run_credentials(cfg.run, ROBOTS, tmp_path / "cred", days=20 / 86400)

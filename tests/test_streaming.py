@@ -29,7 +29,8 @@ import pytest
 
 from mhrc.agents.llm import LLMSilent, LLMTimeout, OpenAIChatClient, make_client
 from mhrc.agents.llm_policy import LLMPolicy, LLMUnreachable
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer
 
 HI = [{"role": "system", "content": "You are a test."}, {"role": "user", "content": "Say something."}]

@@ -15,7 +15,7 @@ from mhrc.world.layouts import SCENES_DIR, LayoutError, get_layout, load_layout,
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.tasks import COLORS, MENUS, TASKS, ObjectKind, Placement, Seen, get_task
 
-from mhrc.run.episode import ConfigError, EpisodeConfig
+from mhrc.run.config import ConfigError, EpisodeConfig
 
 GRID = [(n, seed) for n in (3, 4, 5, 6) for seed in range(10)]
 

@@ -10,7 +10,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import Snapshot
 from mhrc.viewer.video import TraceWithoutSnapshots, UnsupportedVideoFormat, read_episode, render_video
 from mhrc.world.sim import Sim

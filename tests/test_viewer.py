@@ -15,7 +15,8 @@ import pytest
 from click.testing import CliRunner
 
 from mhrc.cli import main
-from mhrc.run.episode import EpisodeConfig, up_in_process
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.core.trace import read_trace
 from test_llm import FakeServer, Reply, ok
 

@@ -18,7 +18,8 @@ import pytest
 from mhrc.agents.agent import RobotAgent, WorldGone
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.core.bus import Bus
-from mhrc.run.episode import EpisodeConfig, agent_command, world_command, wait_for_port
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.processes import agent_command, wait_for_port, world_command
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import (
     Action,

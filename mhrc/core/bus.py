@@ -4,73 +4,29 @@ zenoh-python has no asyncio API: its callbacks run on zenoh threads. Every callb
 copies the sample and hands it to the event loop with `call_soon_threadsafe`, then returns;
 all user handlers run on the loop. Blocking zenoh calls (`open`, `close`, reading `get`
 replies) run in `asyncio.to_thread`. A `Bus` owns its session and every entity it declared,
-and closes them all in `close()` (use `async with`).
-"""
+and closes them all in `close()` (use `async with`)."""
 
 from __future__ import annotations
 
 import asyncio
 import json
-import socket
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import structlog
 import zenoh
 from pydantic import BaseModel
 
 from mhrc.core.protocol import encode
+from mhrc.core.security import Credentials, apply, diagnose
+from mhrc.core.endpoints import BusError, BusRefused, listen_error
 
-if TYPE_CHECKING:
-    from mhrc.core.security import Credentials
 
 log = structlog.get_logger("mhrc.core.bus")
 
+
 DEFAULT_LEASE_MS = 2000
-
-
-class BusError(RuntimeError):
-    """The bus could not be opened or used."""
-
-
-class BusRefused(BusError):
-    """The world is there but refused this session (certificate, credentials); `final`: retrying cannot help."""
-
-    def __init__(self, message: str, final: bool = True) -> None:
-        super().__init__(message)
-        self.final = final
-
-
-class ListenError(BusError):
-    """This process cannot listen where it was told to (port taken, no permission)."""
-
-
-def _listen_error(listen: Sequence[str], detail: str) -> BusError:
-    """Zenoh's error for a listener that could not be created, said in one sentence with what to do."""
-    where = ", ".join(listen)
-    port = where.rsplit(":", 1)[-1]
-    if "Address already in use" in detail:
-        return ListenError(f"cannot listen on {where}: port {port} is already in use (another mhrc world, or another program): "
-                           "choose another --port, or leave --port out for a free one")  # fmt: skip
-    if "Permission denied" in detail:
-        return ListenError(f"cannot listen on {where}: port {port} needs privileges this process lacks: choose a port above 1023")
-    if "Cannot assign requested address" in detail or "Can not assign" in detail:
-        return ListenError(f"cannot listen on {where}: no network interface of this host has that address: check --host")
-    return ListenError(f"cannot listen on {where}: {detail.split(' at /')[0]}")
-
-
-def check_listen(host: str, port: int, proto: str = "tcp") -> None:
-    """Raise ListenError if this process could not listen on host:port now (taken, no permission);
-    `proto` (tcp, tls) only names the endpoint in the message."""
-    import errno
-
-    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
-        try:
-            s.bind((host, port))
-        except OSError as exc:
-            detail = "Address already in use" if exc.errno == errno.EADDRINUSE else "Permission denied" if exc.errno == errno.EACCES else str(exc)
-            raise _listen_error([f"{proto}/{host}:{port}"], detail) from None
 
 
 @dataclass(frozen=True)
@@ -81,31 +37,9 @@ class Sample:
 
 
 Handler = Callable[[Sample], Any]
+
+
 QueryHandler = Callable[[str, dict[str, str], bytes], Awaitable[BaseModel | None]]
-
-
-def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port that is free on `host` right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
-
-
-def split_endpoint(ep: str) -> tuple[str, str, int | None]:
-    """(protocol, host, port) of a Zenoh endpoint such as `tcp/127.0.0.1:7447`; a bare
-    `HOST:PORT` means tcp. Port None where the endpoint has none we can read."""
-    proto, sep, rest = ep.partition("/")
-    if not sep:
-        proto, rest = "tcp", ep
-    rest = rest.split("#", 1)[0].split("?", 1)[0]
-    host, colon, port = rest.rpartition(":")
-    if not colon or not port.isdigit():
-        return proto, rest, None
-    return proto, host.strip("[]"), int(port)
-
-
-def endpoint(host: str, port: int, tls: bool = False) -> str:
-    return f"{'tls' if tls else 'tcp'}/{host}:{port}"
 
 
 def make_config(
@@ -132,8 +66,6 @@ def make_config(
     # never unmaps it when the session closes: an eval worker grew ~16 MB an episode (bench/bench_memory.py)
     conf.insert_json5("transport/shared_memory/enabled", "false")
     if security is not None:
-        from mhrc.core.security import apply
-
         apply(conf, security, router=mode == "router")
     return conf
 
@@ -169,8 +101,6 @@ class Bus:
         except zenoh.ZError as exc:
             where = ", ".join([*listen, *connect]) or "no endpoints"
             if mode == "client" and len(connect) == 1:
-                from mhrc.core.security import diagnose
-
                 why = await asyncio.to_thread(diagnose, connect[0], security)
                 if why.final:  # retrying cannot help: a certificate, a missing login, the wrong transport
                     raise BusRefused(f"could not open a zenoh session ({where}): {why}") from None
@@ -178,7 +108,7 @@ class Bus:
                     raise BusRefused(f"could not open a zenoh session ({where}): {why}", final=False) from None
                 raise BusError(f"could not open a zenoh session ({where}): {why}") from None
             if listen:
-                raise _listen_error(listen, str(exc)) from None
+                raise listen_error(listen, str(exc)) from None
             raise BusError(f"could not open a zenoh session ({where}): {exc}") from None
         bus = cls(session, asyncio.get_running_loop())
         bus.connected_to = tuple(connect)
@@ -317,3 +247,23 @@ def _run_handler(handler: Handler, sample: Sample) -> None:
             asyncio.ensure_future(result)
     except Exception as exc:
         log.exception("bus handler failed", key=sample.key, error=str(exc))
+
+
+async def open_client(connect: str, timeout: float, *, security: Credentials | None = None) -> Bus:
+    """A client session to `connect` (logged in with `security`), retrying while the world is
+    still starting up; a world that refuses the session (BusRefused) is not retried."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    refused_at = None
+    while True:
+        try:
+            return await Bus.open(mode="client", connect=[connect], security=security)
+        except BusRefused as exc:
+            refused_at = loop.time() if refused_at is None else refused_at
+            if exc.final or loop.time() - refused_at > 3.0 or loop.time() >= deadline:
+                raise
+            await asyncio.sleep(0.2)
+        except BusError:
+            if loop.time() >= deadline:
+                raise
+            await asyncio.sleep(0.2)

@@ -28,7 +28,9 @@ from typing import Any
 import zenoh
 from pydantic import BaseModel
 
-from mhrc.core.bus import Bus, Sample, make_config, split_endpoint
+from mhrc.core.bus import Bus, Sample, make_config
+
+from mhrc.core.endpoints import split_endpoint
 from mhrc.core.keys import ROOT, Keys
 from mhrc.core.protocol import (
     PROTOCOL_VERSION,

@@ -39,7 +39,7 @@ def message_models() -> list[type[Message]]:
     """Every top-level payload model of mhrc.core.protocol, in definition order."""
     found: list[type[Message]] = []
     for value in vars(protocol).values():
-        if isinstance(value, type) and issubclass(value, Message) and value is not Message and value.__module__ == protocol.__name__:
+        if isinstance(value, type) and issubclass(value, Message) and value is not Message and value.__module__.startswith(protocol.__name__ + "."):
             found.append(value)
     return found
 

@@ -1,4 +1,4 @@
-"""Zenoh's own security for one run (DESIGN.md, "Security"): TLS links, user/password
+"""Zenoh's own security for one run (docs/architecture.md, "Security"): TLS links, user/password
 authentication and access-control rules on the world's router.
 
 `make_run_credentials` writes, into one directory (files 0600):
@@ -25,7 +25,6 @@ and subscribe to what an agent needs. A denied message is dropped by the router.
 from __future__ import annotations
 
 import datetime
-import ipaddress
 import json
 import os
 import secrets
@@ -37,9 +36,9 @@ from pathlib import Path
 from typing import Any
 
 from cryptography import x509
-from cryptography.hazmat.primitives import hashes, serialization
-from cryptography.hazmat.primitives.asymmetric import ec
-from cryptography.x509.oid import NameOID
+
+from mhrc.core.endpoints import split_endpoint
+from mhrc.core.certs import make_ca, make_server_cert, pem_cert, pem_key, write_private
 
 ENV = "MHRC_CREDENTIALS"
 WORLD = "world"
@@ -49,99 +48,6 @@ RUN = "run"  # the only kind of credentials: one run's participants (an evaluati
 
 class SecurityError(RuntimeError):
     """Credentials that are missing, unreadable or refused; the message names the cause."""
-
-
-# ---------------------------------------------------------------------------------- certificates
-def _key() -> ec.EllipticCurvePrivateKey:
-    return ec.generate_private_key(ec.SECP256R1())
-
-
-def _pem_key(key: ec.EllipticCurvePrivateKey) -> bytes:
-    return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
-
-
-def _pem_cert(cert: x509.Certificate) -> bytes:
-    return cert.public_bytes(serialization.Encoding.PEM)
-
-
-def make_ca(name: str, *, days: float = 7.0) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
-    """A self-signed certificate authority `mhrc <name> CA`, valid from 5 minutes ago (clock
-    skew) until `days` from now."""
-    key = _key()
-    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"mhrc {name} CA")])
-    now = datetime.datetime.now(datetime.timezone.utc)
-    cert = (
-        x509.CertificateBuilder()
-        .subject_name(subject)
-        .issuer_name(subject)
-        .public_key(key.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(now - datetime.timedelta(minutes=5))
-        .not_valid_after(now + datetime.timedelta(days=days))
-        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-        .add_extension(
-            x509.KeyUsage(False, False, False, False, False, True, True, False, False), critical=True
-        )  # key_cert_sign, crl_sign
-        .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
-        .sign(key, hashes.SHA256())
-    )
-    return cert, key
-
-
-def make_server_cert(
-    ca: x509.Certificate,
-    ca_key: ec.EllipticCurvePrivateKey,
-    *,
-    name: str = "localhost",
-    days: float = 7.0,
-    not_before: datetime.datetime | None = None,
-    hosts: Sequence[str] = (),
-) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
-    """A server certificate signed by `ca` for 127.0.0.1, localhost and `hosts` (names or IP
-    addresses the agents connect to, e.g. a compose service name), valid from 5 minutes ago
-    (clock skew) until `days` from now; a `not_before` in the past and a short `days` (valid
-    `days` from `not_before`) make an expired one, for tests."""
-    key = _key()
-    names: list[x509.GeneralName] = []
-    for h in dict.fromkeys(("localhost", "127.0.0.1", *hosts)):
-        try:
-            names.append(x509.IPAddress(ipaddress.ip_address(h)))
-        except ValueError:
-            names.append(x509.DNSName(h))
-    now = datetime.datetime.now(datetime.timezone.utc)
-    start = not_before or now - datetime.timedelta(minutes=5)  # backdated: a peer whose clock is a little behind accepts it
-    end = (not_before or now) + datetime.timedelta(days=days)  # what `days` says, not 5 minutes short of it
-    cert = (
-        x509.CertificateBuilder()
-        .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)]))
-        .issuer_name(ca.subject)
-        .public_key(key.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(start)
-        .not_valid_after(end)
-        .add_extension(
-            x509.SubjectAlternativeName(names),
-            critical=False,
-        )
-        .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-        .add_extension(x509.ExtendedKeyUsage([x509.oid.ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
-        .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
-        .sign(ca_key, hashes.SHA256())
-    )
-    return cert, key
-
-
-def _write(path: Path, data: bytes | str, private: bool = True) -> Path:
-    """Write `data`, created 0600 (never readable by others, even for a moment) when private."""
-    raw = data.encode() if isinstance(data, str) else data
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
-    try:
-        os.write(fd, raw)
-    finally:
-        os.close(fd)
-    if private:
-        os.chmod(path, 0o600)
-    return path
 
 
 # ---------------------------------------------------------------------------------- credentials
@@ -226,15 +132,15 @@ def _issue(
     for u in users:
         d = home(u)
         if d not in with_ca:  # once per directory: all of them share it flat, each has its own split
-            _write(d / "ca.pem", _pem_cert(ca), private=False)
+            write_private(d / "ca.pem", pem_cert(ca), private=False)
             with_ca.add(d)
         entry: dict[str, Any] = {"run": run, "user": u, "password": passwords[u], "ca": "ca.pem", "robots": list(robots)}
         if u == server:
-            _write(d / f"{u}.pem", _pem_cert(cert))
-            _write(d / f"{u}.key", _pem_key(key))
-            _write(d / "users.txt", "".join(f"{name}:{pw}\n" for name, pw in passwords.items()))
+            write_private(d / f"{u}.pem", pem_cert(cert))
+            write_private(d / f"{u}.key", pem_key(key))
+            write_private(d / "users.txt", "".join(f"{name}:{pw}\n" for name, pw in passwords.items()))
             entry.update(cert=f"{u}.pem", key=f"{u}.key", users="users.txt")
-        out[u] = _write(d / f"{u}.json", json.dumps(entry, indent=2) + "\n")
+        out[u] = write_private(d / f"{u}.json", json.dumps(entry, indent=2) + "\n")
     return out
 
 
@@ -490,8 +396,6 @@ def diagnose(endpoint: str, creds: Credentials | None, timeout: float = 3.0) -> 
     the run's CA can tell: nothing listening, a secured world reached on plain tcp (or the
     reverse), an expired or foreign certificate, or (the handshake succeeding) credentials the
     world refused."""
-    from mhrc.core.bus import split_endpoint
-
     proto, host, port = split_endpoint(endpoint)
     if port is None:
         return Diagnosis(f"bad endpoint {endpoint!r}", final=True)

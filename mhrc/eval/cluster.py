@@ -28,7 +28,7 @@ from typing import Any
 
 import structlog
 
-from mhrc.run.episode import ConfigError
+from mhrc.run.config import ConfigError
 from mhrc.eval.episode import EpisodeResult, Job
 
 log = structlog.get_logger("mhrc.eval")

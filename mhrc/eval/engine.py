@@ -34,11 +34,15 @@ from typing import Any, Protocol
 import structlog
 
 from mhrc.core.diagnostics import diagnose
-from mhrc.run.episode import DEFAULT_MAX_TOKENS, ConfigError, EpisodeConfig
+from mhrc.agents.llm import DEFAULT_MAX_TOKENS
+from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.eval.episode import EpisodeResult, Job
 from mhrc.core.fidelity import label
 from mhrc.core.metrics import TraceError, from_trace
-from mhrc.eval.report import PAPER_OBJECTS, merge_runs, read_rows, summary_csv, summary_markdown, write_summaries
+from mhrc.eval.paper import PAPER_OBJECTS
+from mhrc.eval.report import summary_csv, summary_markdown
+from mhrc.eval.rows import merge_runs, read_rows
+from mhrc.eval.summaries import write_summaries
 from mhrc.core.trace import read_trace, unwritable
 
 __all__ = ["EvalAborted", "EvalSpec", "Job", "Tally", "check_out", "evaluate", "merge_runs", "summary_csv", "summary_markdown", "write_summaries"]
@@ -65,8 +69,8 @@ class EvalSpec:
     ablation: str = "none"
     horizon: int = 50
     base_url: str | None = None
-    llm_timeout: float | None = None  # None: per spec (mhrc.run.episode.EpisodeConfig.timeout_for)
-    llm_idle_timeout: float | None = None  # None: mhrc.run.episode.IDLE_TIMEOUT
+    llm_timeout: float | None = None  # None: per spec (mhrc.run.config.EpisodeConfig.timeout_for)
+    llm_idle_timeout: float | None = None  # None: mhrc.run.config.IDLE_TIMEOUT
     stream: bool = True  # False: --no-stream
     prompts: str | None = None
     repeats: int = 1  # the grid, run this many times with other seeds
@@ -76,7 +80,7 @@ class EvalSpec:
     llm_seed: int | None = None
     structured: bool = False  # JSON decisions (not the paper's free text)
     step_deadline: float | None = None
-    schedule: str = "sequential"  # the world's time policy (mhrc.run.episode.SCHEDULES); the paper's loop by default
+    schedule: str = "sequential"  # the world's time policy (mhrc.run.config.SCHEDULES); the paper's loop by default
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
 
     @property

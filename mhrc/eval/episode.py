@@ -22,7 +22,9 @@ from pydantic import BaseModel, ConfigDict
 
 from mhrc.run import malloc as memory
 from mhrc.core.bus import Bus, Sample
-from mhrc.run.episode import EpisodeConfig, EventHook, up_in_process
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
+from mhrc.run.serve import EventHook
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 

@@ -22,7 +22,8 @@ from typing import Any
 
 from mhrc.core.diagnostics import summarize_diagnostics
 from mhrc.core.metrics import summarize
-from mhrc.eval.report import CI_SEED, RESAMPLES, SETTING, _setting, _valid, group, read_rows, setting_label, summary_markdown
+from mhrc.eval.report import summary_markdown
+from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, group, is_valid, read_rows, setting_label, setting_of
 from mhrc.viewer.wording import diagnostic_label, partial_success
 
 PLOTTED_DIAGNOSTICS = tuple(
@@ -175,11 +176,11 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
 def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> str:
     head = ["episode", "setting", "valid", "Succ", "PS", "TS", "TS*", "report"]
     out = ["<table><thead><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr></thead><tbody>"]
-    order = sorted(range(len(rows)), key=lambda i: (setting_label(_setting(rows[i])), str(rows[i].get("key"))))
+    order = sorted(range(len(rows)), key=lambda i: (setting_label(setting_of(rows[i])), str(rows[i].get("key"))))
     for i in order:
         r, link = rows[i], links[i]
         cells = [
-            html.escape(str(r.get("key", ""))), html.escape(setting_label(_setting(r))), "yes" if _valid(r) else "no",
+            html.escape(str(r.get("key", ""))), html.escape(setting_label(setting_of(r))), "yes" if is_valid(r) else "no",
             "1" if r.get("success") else "0", html.escape(partial_success(r.get("partial_success", 0.0), r.get("placed"), r.get("total"))),
             str(r.get("temporal_steps", "")),
             "" if r.get("lower_bound") is None else str(r["lower_bound"]),
@@ -207,7 +208,7 @@ def html_summary(
     seed: int = CI_SEED,
 ) -> str:
     """The page: summary.md's tables as HTML, the plots, and the episodes with their links (`links[i]` is rows[i]'s)."""
-    valid = [r for r in rows if _valid(r)]
+    valid = [r for r in rows if is_valid(r)]
     plots = success_by_objects(valid) + ts_against_bound(valid) + diagnostics_by_setting(valid) if valid else []
     figures = "\n".join(f"<figure>{svg}<figcaption>{html.escape(caption)}</figcaption></figure>" for svg, caption in plots)
     body = markdown_to_html(summary_markdown(rows, resamples=resamples, seed=seed))

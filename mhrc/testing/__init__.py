@@ -48,7 +48,10 @@ from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.parse import parse_command
 from mhrc.agents.policy import Decision, Policy
 from mhrc.core.bus import Bus
-from mhrc.run.episode import EpisodeConfig, open_client, run_agent, serve_world
+from mhrc.core.bus import open_client
+from mhrc.run.attach import run_agent
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.serve import serve_world
 from mhrc.core.metrics import EpisodeMetrics, from_trace
 from mhrc.core.protocol import Action, ActionResult, EpisodeDone, Observation, Wait
 from mhrc.core.trace import read_trace
@@ -529,7 +532,7 @@ async def world_on_loopback(**options: Any) -> AsyncIterator[LoopbackWorld]:
 
     `options` are `EpisodeConfig`'s fields (``task``, ``scene``, ``seed``, ``n_objects``,
     ``horizon``, ``schedule``, ``start_timeout``, ``trace``, ``llm``, ``base_url``, ...),
-    checked as ``mhrc up`` checks them (`mhrc.run.episode.ConfigError` names the bad one); the host
+    checked as ``mhrc up`` checks them (`mhrc.run.config.ConfigError` names the bad one); the host
     is always 127.0.0.1, and without ``trace`` the trace goes to a fresh temporary directory.
     The world waits for every robot of the episode to attach (``start_timeout`` starts it with
     whoever came). On exit the agents and the world are cancelled if still running and every

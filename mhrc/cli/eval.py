@@ -1,0 +1,223 @@
+"""`mhrc eval` (the paper's benchmark on this machine or a Ray cluster) and `mhrc report`."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+
+from mhrc.cli.options import ABLATIONS, AIDS_HELP, LOG_LEVEL, SCHEDULE_HELP, TIME_SCALE_HELP, llm_options
+from mhrc.cli.running import run_command
+from mhrc.core import logs
+from mhrc.core.trace import unwritable
+from mhrc.run.config import ConfigError, EpisodeConfig, SCHEDULES
+
+def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
+    if text is None:
+        return None
+    try:
+        return tuple(kind(x.strip()) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected a comma-separated list, got {text!r}") from None
+
+
+@click.command("eval")
+@llm_options
+@click.option("--tasks", default=None, help="Comma-separated task ids; default: every registered task.")
+@click.option("--scenes", default=None, help="Comma-separated layouts; default: every built-in layout.")
+@click.option("--objects", default=None, show_default="3,4,5,6", help="Comma-separated object counts (each scene runs every count).")
+@click.option("--trials", default=1, show_default=True, type=int,
+              help="Episodes per task, scene and object count in each repeat (the paper: 1).")
+@click.option("--repeats", default=1, show_default=True, type=int,
+              help="Run the grid this many times; an episode's seed is repeat x trials + trial, so repeat r of the paper grid uses seed r.")
+@click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
+@click.option("--horizon", default=50, show_default=True, type=int)
+@click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP)
+@click.option("--schedule", default="sequential", show_default=True, type=click.Choice(SCHEDULES),
+              help=SCHEDULE_HELP + " The paper's figures are shown beside sequential runs only.")
+@click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP)
+@click.option("--workers", default=None, type=int, show_default="the number of cores",
+              help="Local worker processes (not with --ray: the cluster's resources decide).")
+@click.option("--concurrency", default=None, type=int,
+              help="Episodes each local worker runs at once (with --ray: an LLM episode takes 1/concurrency of a CPU). Default: 1 for the "
+                   "heuristic (CPU-bound), replays and gguf: models; with a model server, enough episodes to fill its slots "
+                   "(llama.cpp's /props), else 12 for openai and vllm, 1 for ollama and lmstudio.")
+@click.option("--ray", "ray_address", default=None, metavar="ADDRESS",
+              help="Run every episode as a task on this Ray cluster: auto (a node of the cluster), HOST:PORT (the head, e.g. "
+                   "10.0.0.5:6379) or ray://HOST:10001. Needs the extra: pip install -e \".[ray]\".")
+@click.option("--shared-out", is_flag=True,
+              help="With --ray: --out is the same path on every node (a shared file system), so tasks write their traces there "
+                   "instead of sending them back through the object store.")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory; default runs/eval-<time>.")
+@click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
+@click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
+@LOG_LEVEL
+def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
+          aids: str | None, schedule: str, time_scale: float, workers: int | None, concurrency: int | None, ray_address: str | None,
+          shared_out: bool, out: Path | None, resume: bool, dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
+    """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
+    (every metric of every episode, its fidelity and the LLM failures that shaped it) and
+    summary.md / summary.csv (tables shaped like the paper's Table I and II with 95% bootstrap
+    intervals, the paper's figures beside a matching configuration, TS next to its lower bound)
+    and summary.html (the tables, plots, a link to each episode's report).
+
+    The default grid is the paper's: per task, 3 scenes x one episode each with 3, 4, 5 and 6
+    objects (12 per task, 36 in all); --repeats N runs it N times with other seeds, --objects and
+    --trials build larger grids. Without --llm the heuristic policy plays. Episodes run in
+    --workers processes of this machine, or with --ray ADDRESS as tasks on a Ray cluster
+    (`ray start --head` on one host, `ray start --address HEAD:6379` on the others; see
+    docker/README.md). An interrupted run continues with --resume --out DIR."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from mhrc.world.scene import LAYOUTS
+    from mhrc.world.tasks import TASKS
+
+    from mhrc.eval.engine import EvalAborted, EvalSpec, Tally, check_out, evaluate
+    from mhrc.core.fidelity import AidsError, parse_aids
+    from mhrc.eval.paper import PAPER_OBJECTS
+    from mhrc.eval.report import summary_markdown
+    from mhrc.eval.summaries import SUMMARY_FILES
+
+    logs.configure(log_level)
+    if ray_address is not None and workers is not None:
+        raise click.UsageError("--workers: not with --ray (the Ray cluster's resources say how many episodes run at once)")
+    if shared_out and ray_address is None:
+        raise click.UsageError("--shared-out: only with --ray (a local run writes into --out anyway)")
+    if workers is not None and workers < 1:
+        raise click.BadParameter(f"must be at least 1 (got {workers})", param_hint="--workers")
+    workers = workers or os.cpu_count() or 1
+    try:
+        aid_names = parse_aids(aids)
+    except AidsError as exc:
+        raise click.UsageError(str(exc)) from None
+    prompts = llm.pop("prompts")
+    spec = EvalSpec(
+        tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS),
+        objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()), trials=trials, repeats=repeats,
+        ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, schedule=schedule,
+        time_scale=time_scale, **llm,
+    )  # fmt: skip
+    if concurrency is not None and concurrency < 1:
+        raise click.BadParameter(f"must be at least 1 (got {concurrency})", param_hint="--concurrency")
+    out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
+    console = Console(stderr=True)
+    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console)
+    bar = progress.add_task("episodes", total=None)
+
+    def hook(t: Tally, row: dict[str, Any] | None) -> None:
+        # the whole grid: with --resume, the episodes an earlier run finished count too
+        rate = f"{t.before_succeeded + t.succeeded}/{t.before + t.done} solved" + (f", {t.errors} errors" if t.errors else "")
+        rate += f", {t.invalid} invalid" if t.invalid else ""
+        if t.before:
+            rate += " (all from before)" if t.total == 0 else f" ({t.before} from before)"
+        progress.update(bar, total=t.before + t.total, completed=t.before + t.done, description=f"{spec.method} [{rate}]")
+        if row is not None and not row.get("valid", True):
+            progress.console.print(f"[red]invalid[/]: {row['key']} ({row.get('invalid_reason')}); left out of the summary")
+        elif row is not None and not row["success"]:
+            progress.console.print(f"[yellow]not solved[/]: {row['key']} (PS {row['partial_success']:.2f}, TS {row['temporal_steps']})")
+
+    try:
+        spec.validate()
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    n_jobs = len(spec.jobs())
+    if dry_run:
+        for job in spec.jobs():
+            click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config['seed']}")
+        click.echo(f"{n_jobs} episodes ({spec.fidelity} fidelity)")
+        return
+    try:
+        check_out(out, spec, resume)  # before the model server is asked or a worker starts
+        if ray_address is not None:  # a missing extra, an old Ray, an address nothing answers at: one line, now
+            from mhrc.eval.cluster import import_ray, probe
+
+            import_ray()
+            probe(ray_address)
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    rows_path = out / "episodes.jsonl"
+
+    def stopping() -> str:
+        """What the first Ctrl-C says: where the finished episodes are, only if one has finished."""
+        kept = rows_path.exists() and rows_path.stat().st_size > 0
+        where = f"every finished episode is kept in {rows_path}" if kept else "no episode has finished yet"
+        return f"stopping the workers; {where} (continue with --resume --out {out})"
+
+    if concurrency is None:
+        from mhrc.agents.llm import episodes_at_once
+
+        specs = EpisodeConfig.build(**spec.jobs()[0].config).robot_specs().values() if spec.llm else [None]
+        concurrency = asyncio.run(episodes_at_once(list(specs), spec.base_url))
+    where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {workers} worker(s)"
+    console.print(
+        f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}, {spec.mode} replies) on {n_jobs} episodes "
+        f"into {out} {where}, {concurrency} episode(s) at once each"
+    )
+    t0 = time.perf_counter()
+    with progress:
+        try:
+            rows = run_command(
+                lambda: evaluate(spec, out, workers=1 if ray_address else workers, resume=resume, progress=hook, concurrency=concurrency,
+                                 ray=ray_address, shared_out=shared_out),
+                stopping=stopping,
+            )
+        except ConfigError as exc:
+            raise click.UsageError(str(exc)) from None
+        except EvalAborted as exc:
+            raise click.ClickException(str(exc)) from None
+    written = [p for p in (rows_path, *(out / name for name in SUMMARY_FILES)) if p.exists()]
+    errors = out / "errors.jsonl"
+    console.print(
+        f"done in {time.perf_counter() - t0:.1f} s: "
+        + (", ".join(map(str, written)) if rows else "no episode finished")
+        + (f" (episodes given up: {errors})" if errors.exists() else "")
+    )
+    if rows:
+        click.echo(summary_markdown(rows))
+
+
+@click.command("report")
+@click.argument("dirs", nargs=-1, required=True, type=click.Path(file_okay=False, exists=True, path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.md",
+              help="Write the markdown to FILE.md instead of stdout, FILE.csv and FILE.html beside it; the files written are named on stderr.")
+@click.option("--resamples", default=2000, show_default=True, type=click.IntRange(min=1), help="Bootstrap resamples per 95% confidence interval.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the bootstrap (the same rows and seed give the same intervals).")
+def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) -> None:
+    """Merge `mhrc eval` directories into one comparison (markdown on stdout): Succ, PS, TS
+    and AS per task with 95% bootstrap confidence intervals, grouped by method, ablation and
+    fidelity, and the paper's Table I / II figures beside the settings that match its
+    configuration. Invalid episodes (model unreachable throughout) are left out and listed.
+    With --out FILE.md, the markdown goes there instead, with FILE.csv and FILE.html (tables,
+    plots, a link to each episode's report) beside it."""
+    from mhrc.eval.report import summary_csv, summary_markdown
+    from mhrc.eval.rows import merge_runs
+
+    if out is not None:
+        files = [out, out.with_suffix(".csv"), out.with_suffix(".html")]
+        if len(set(files)) < len(files):
+            raise click.BadParameter(f"{out} would be overwritten by the CSV or HTML beside it; name a .md file", param_hint="--out")
+        for f in files:
+            if why := unwritable(f):
+                raise click.BadParameter(why, param_hint="--out")
+    try:
+        rows = merge_runs(list(dirs))
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    if not rows:
+        raise click.UsageError("no finished episodes in " + ", ".join(map(str, dirs)))
+    text = summary_markdown(rows, resamples=resamples, seed=seed)
+    if out is None:
+        click.echo(text)
+        return
+    from mhrc.eval.html import write_report_html
+
+    md, csv, html = files
+    md.write_text(text, encoding="utf-8")
+    csv.write_text(summary_csv(rows, resamples=resamples, seed=seed), encoding="utf-8")
+    write_report_html(list(dirs), html, resamples=resamples, seed=seed)
+    click.echo(f"wrote {md}, {csv}, {html}", err=True)

@@ -1,0 +1,215 @@
+"""`mhrc up` (a whole episode), `mhrc world` (the world alone) and `mhrc agent` (one robot).
+
+The world, the agents and the console are imported inside the commands: `mhrc --help` and the
+bus tools stay light.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import shlex
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+
+from mhrc.cli.options import (
+    ABLATIONS, AIDS_HELP, INSECURE_HELP, LOG_LEVEL, VIDEO_HELP, credentials_option, episode_config, episode_options, llm_options,
+    load_credentials,
+)  # fmt: skip
+from mhrc.cli.running import run_command
+from mhrc.cli.viewer import render_video_to
+from mhrc.core import logs
+from mhrc.core.security import SecurityError
+from mhrc.run.config import ConfigError, EpisodeConfig, ROBOTS
+
+
+@click.command()
+@episode_options
+@click.option("--processes", is_flag=True, help="Run the world and each agent as separate OS processes.")
+@click.option("--external", multiple=True, type=click.Choice(ROBOTS),
+              help="Do not start an agent for this robot: attach your own with `mhrc agent` (repeatable).")
+@click.option("--quiet", "-q", is_flag=True, help="Print only the final summary table (errors still go to stderr).")
+@click.option("--start-timeout", type=float, default=None,
+              help="Start with the robots attached after this many seconds (fail if none is); default: wait for all of them.")
+@click.option("--secure/--insecure", "secure", default=True, show_default=True,
+              help="--secure (the default): fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, "
+                   "access control: an agent can act only as its own robot); --insecure: the open tcp bus, for loopback experiments.")
+@click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
+@click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
+@click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.")
+@llm_options
+def up(
+    processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, video: Path | None, secure: bool, **values: Any
+) -> None:
+    """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
+    from rich.console import Console
+
+    from mhrc.world.service import NobodyAttached
+
+    from mhrc.run.config import ModelServerDown, check_model_servers
+
+    from mhrc.run.inprocess import up_in_process
+
+    from mhrc.run.processes import ProcessFailed, up_processes
+    from mhrc.run.console import ProgressPrinter, summary_table
+
+    logs.configure(log_level)
+    cfg = episode_config(**values)
+    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
+        raise click.BadParameter(f"{video.name}: the video must be a .mp4 or .gif file", param_hint="--video")
+    robots = tuple(r for r in cfg.robots if r not in external)
+    try:
+        check_model_servers(cfg, robots)  # before anything is written or started
+    except ModelServerDown as exc:
+        click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(2)
+    if not secure:
+        click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
+    else:
+        cfg = cfg.with_credentials()
+        if not quiet:
+            click.echo(f"credentials in {cfg.credentials} (TLS, one login per participant, access control)", err=True)
+    console = Console(highlight=False, stderr=as_json, soft_wrap=True)
+    printer = None if quiet else ProgressPrinter(console, summary=False)  # the table is printed below, once the run returned
+    if not quiet:
+        console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
+    if external:  # needed to go on at all: said with --quiet too, on stderr
+        click.echo("attach the external robots with: " + "; ".join(
+            f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}"
+            + (f" --credentials {cfg.credentials_file(r)}" if cfg.credentials else "") for r in external), err=quiet or as_json)
+    runner = functools.partial(up_processes, quiet=quiet) if processes else up_in_process
+    from mhrc.agents.agent import AgentError
+    from mhrc.agents.llm import LLMError
+    from mhrc.agents.replay import ReplayMismatch
+
+    try:
+        done = run_command(lambda: runner(cfg, observe=None if printer is None else printer.attach, robots=robots))
+    except (AgentError, LLMError, ReplayMismatch) as exc:  # an agent could not play (its model, its replay, the world): one line
+        click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(2)
+    except NobodyAttached as exc:
+        click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(1)
+    except ProcessFailed as exc:
+        if exc.returncode <= 0:  # killed, or gone without a word (a positive code: the process said why on stderr)
+            click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(exc.returncode if exc.returncode > 0 else 1)
+    if printer is not None:
+        printer.close()  # what arrived late for its tick, then nothing more: the table is the last line
+    console.print(summary_table(done))
+    if video is not None and cfg.trace is not None:
+        path = render_video_to(cfg.trace, video)
+        if not quiet:
+            console.print(f"video {path}")
+    if as_json:
+        click.echo(json.dumps(done.metrics.model_dump()))
+
+
+def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None = None) -> None:
+    """`mhrc world`'s run: one line and exit 1 when no robot attached within --start-timeout."""
+    from mhrc.world.service import NobodyAttached
+
+    from mhrc.run.serve import serve_world
+
+    try:
+        run_command(lambda: serve_world(cfg, observe=observe))
+    except NobodyAttached as exc:
+        click.echo(f"mhrc world: {exc}", err=True)
+        sys.exit(1)
+
+
+@click.command()
+@episode_options
+@click.option("--start-timeout", type=float, default=None,
+              help="Start with the robots attached after this many seconds (fail if none is); default: wait for all three.")
+@click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
+@click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
+@credentials_option(
+    "This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "
+    "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control."
+)
+@click.option("--insecure", is_flag=True, help=INSECURE_HELP)
+def world(log_level: str, start_timeout: float | None, quiet: bool, credentials: Path | None, insecure: bool, **values: Any) -> None:
+    """Run the world alone and wait for agents to attach (`mhrc agent`)."""
+    from mhrc.run.console import ProgressPrinter
+
+    logs.configure(log_level)
+    creds = load_credentials(credentials, insecure)
+    if creds is not None:
+        from mhrc.core.zenoh_log import watch_refusals
+
+        watch_refusals()  # a refused login is said here too, not only on the refused agent's side
+        if values.get("run") is None:
+            values["run"] = creds.run
+    cfg = episode_config(start_timeout=start_timeout, credentials=credentials if creds is not None else None, **values)
+    if quiet:
+        _serve_world(cfg)
+        return
+    printer = ProgressPrinter(verbose=False)
+
+    def listening(bus: Any, run: str) -> None:  # said once the world listens, not before
+        click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
+        for r in ROBOTS:
+            login = "" if creds is None else f" --credentials {_login_of(creds, r)}"
+            click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}{login}", err=True)
+        printer.attach(bus, run)
+
+    _serve_world(cfg, listening)
+
+
+def _login_of(world: Any, user: str) -> str:
+    """Where `user`'s credentials file lies beside the world's (`mhrc credentials` flat or
+    --split, `mhrc up`'s runs/RUN/credentials/), or a placeholder naming it."""
+    if world.path is not None:
+        here = world.path.parent
+        for candidate in (here / f"{user}.json", here.parent / user / f"{user}.json"):
+            if candidate.is_file():
+                return shlex.quote(str(candidate))
+    return f"<{user}'s credentials file>"
+
+
+@click.command()
+@click.option("--robot", required=True, type=click.Choice(ROBOTS), help="The robot this agent drives.")
+@click.option("--connect", required=True, help="The world's endpoint, e.g. tcp/127.0.0.1:7447.")
+@click.option("--run", default=None, help="Run id of the world; default: the only world alive at --connect.")
+@click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
+@llm_options
+@click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
+@click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels, prompt_hints); the world's aids are set on the world. " + AIDS_HELP)
+@LOG_LEVEL
+@credentials_option(
+    "This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "
+    "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control."
+)
+@click.option("--insecure", is_flag=True, help=INSECURE_HELP)
+def agent(
+    robot: str, connect: str, run: str | None, attach_timeout: float, log_level: str, credentials: Path | None, insecure: bool, **values: Any
+) -> None:
+    """Attach one robot's agent (heuristic or LLM policy) to a running world."""
+    from mhrc.run.attach import attach_agent
+
+    logs.configure(log_level)
+    creds = load_credentials(credentials, insecure, connect)
+    cfg = episode_config(**values)
+    spec = cfg.robot_specs().get(robot) if cfg.llm else None
+    options = cfg.policy_options(spec)
+    from mhrc.agents.agent import AgentError
+    from mhrc.agents.llm import LLMFatalError
+
+
+    try:
+        done = run_command(lambda: attach_agent(
+            robot, connect, run, attach_timeout, spec, cfg.base_url, cfg.client_options(spec), security=creds, **options))  # fmt: skip
+    except (AgentError, LLMFatalError, SecurityError, ConfigError) as exc:  # the world, the model or the setup: one line, exit 2
+        click.echo(f"mhrc agent {robot}: {exc}", err=True)
+        sys.exit(2)
+    except Exception as exc:  # anything else: say what happened, exit 1
+        raise click.ClickException(f"{type(exc).__name__}: {exc}") from None
+    if done is not None:
+        m = done.metrics
+        click.echo(f"{robot}: episode {done.run} ended ({done.reason}): success={m.success} placed={m.placed}/{m.total} TS={m.temporal_steps}")

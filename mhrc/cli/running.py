@@ -1,0 +1,91 @@
+"""Running a command's coroutine: SIGTERM and Ctrl-C cancel it so every session closes in a
+`finally`; a second Ctrl-C quits at once; a bus that cannot start is one line, exit 2."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+import sys
+from collections.abc import Callable, Coroutine
+from typing import Any, NoReturn, TypeVar
+
+import click
+
+from mhrc.core.endpoints import BusError
+from mhrc.run.lifeline import die_with_parent
+
+T = TypeVar("T")
+
+
+def quit_now(code: int = 130) -> NoReturn:
+    """Quit at once (os._exit: no `finally`, no waiting on threads)."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(code)
+
+
+def _quit_on_signal(signum: int, frame: Any) -> None:
+    """A signal while the run winds down: it is over anyway, so quit at once (130, as Ctrl-C)."""
+    quit_now(130)
+
+
+def _plain_signals(loop: asyncio.AbstractEventLoop) -> None:
+    """Take SIGINT and SIGTERM back from the event loop before it closes. asyncio closes its
+    self-pipe before it removes its signal handlers; a signal landing in between (a parent's
+    SIGTERM right after the group's Ctrl-C) printed "Exception ignored when trying to write to
+    the signal wakeup fd" and a traceback."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.remove_signal_handler(sig)  # also clears the wakeup fd once none is left
+        signal.signal(sig, _quit_on_signal)
+
+
+def run_command(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | Callable[[], str] | None = None) -> T:
+    """Run a coroutine; SIGTERM cancels it like Ctrl-C, so every session closes in `finally`.
+    A child of `mhrc up --processes` or `mhrc eval` gets SIGTERM when its parent dies.
+
+    The first Ctrl-C cancels the run (saying `stopping`, what is being done, when given: a
+    callable is asked at that moment); a second one quits at once: the children go with this
+    process (mhrc.run.lifeline), never a hang."""
+    die_with_parent()
+
+    async def main() -> T:
+        task = asyncio.current_task()
+        loop = asyncio.get_running_loop()
+        if task is not None:
+            loop.add_signal_handler(signal.SIGTERM, task.cancel)
+            interrupts = 0
+
+            def on_interrupt() -> None:
+                nonlocal interrupts
+                interrupts += 1
+                if interrupts > 1:
+                    sys.stderr.write("interrupted again: quitting at once\n")
+                    quit_now(130)
+                said = stopping() if callable(stopping) else stopping
+                if said:
+                    sys.stderr.write(f"\ninterrupted: {said} (Ctrl-C again to quit at once)\n")
+                    sys.stderr.flush()
+                task.cancel()
+
+            loop.add_signal_handler(signal.SIGINT, on_interrupt)
+        try:
+            return await coro_fn()
+        finally:
+            if task is not None:
+                _plain_signals(loop)
+
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return asyncio.run(main())
+    except (KeyboardInterrupt, asyncio.CancelledError):
+        click.echo("interrupted", err=True)
+        sys.exit(130)
+    except BusError as exc:  # the bus cannot start (port taken, refused): one line that says what to do
+        click.echo(f"mhrc: {exc}", err=True)
+        sys.exit(2)
+    finally:
+        for sig, handler in before.items():  # what the caller had (a test's CliRunner, a later _run)
+            signal.signal(sig, handler)

@@ -1,0 +1,128 @@
+"""The rows of `mhrc eval` (`episodes.jsonl`): reading and merging them, their setting (what may
+be averaged together), validity, grouping, and 95% bootstrap intervals over a cell of them."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import structlog
+
+from mhrc.run.config import ConfigError
+from mhrc.core.metrics import UNRECORDED, summarize
+from mhrc.eval.paper import PAPER_HORIZON, PAPER_SCHEDULE
+
+log = structlog.get_logger("mhrc.eval.rows")
+
+RESAMPLES = 2000  # bootstrap resamples per confidence interval
+
+
+CI_SEED = 0  # every interval is drawn with this seed: the same rows give the same intervals
+
+
+CI_LEVEL = 0.95
+
+
+CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as_ticks": "active_ticks", "as": "action_steps"}
+
+
+# mode: free (the paper's) or structured replies; schedule: the world's time policy (world/schedulers)
+SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule")
+
+
+def read_rows(path: Path) -> list[dict[str, Any]]:
+    """The rows of an episodes.jsonl (a torn last line, from an interrupted write, is skipped)."""
+    if not path.exists():
+        return []
+    rows = []
+    for i, line in enumerate(path.read_text(encoding="utf-8").splitlines()):
+        if not line.strip():
+            continue
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            log.warning("skipping a torn line of episodes.jsonl (an interrupted write)", line=i + 1)
+    return rows
+
+
+def merge_runs(dirs: list[Path]) -> list[dict[str, Any]]:
+    """Every episode row of several evaluation directories (for `mhrc report`)."""
+    rows = []
+    for d in dirs:
+        path = d / "episodes.jsonl"
+        if not path.exists():
+            raise ConfigError(f"{d}: no episodes.jsonl here; is it an `mhrc eval --out` directory?")
+        rows += read_rows(path)
+    return rows
+
+
+def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
+    """What a row's numbers depend on besides the episode; rows written before a field existed get its old meaning."""
+    defaults = {"fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free", "schedule": "lockstep"}
+    return tuple(row.get(k, defaults.get(k)) for k in SETTING)
+
+
+def is_valid(row: dict[str, Any]) -> bool:
+    return row.get("valid", True) is not False
+
+
+def order_key(key: Iterable[Any]) -> tuple[str, ...]:
+    return tuple("" if x is None else str(x) for x in key)
+
+
+def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
+    method, abl, fidelity, cap, horizon, mode, schedule = setting
+    parts = [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["structured decisions"] if mode == "structured" else [])
+    if schedule != PAPER_SCHEDULE:
+        parts.append(f"{schedule} schedule")
+    if cap is not None:
+        parts.append(f"history cap {cap}")
+    if horizon is not None and horizon != PAPER_HORIZON:
+        parts.append(f"horizon {horizon}")
+    return " · ".join(parts)
+
+
+def bootstrap_ci(
+    values: Sequence[float], *, resamples: int = RESAMPLES, seed: int = CI_SEED, level: float = CI_LEVEL
+) -> tuple[float, float]:
+    """Percentile bootstrap confidence interval of the mean: `resamples` resamples with
+    replacement, drawn with `seed` (the same values always give the same interval)."""
+    x = np.asarray([float(v) for v in values], dtype=float)
+    if x.size == 0:
+        raise ValueError("no values to bootstrap")
+    if resamples < 1 or not 0 < level < 1:
+        raise ValueError("need resamples >= 1 and 0 < level < 1")
+    rng = np.random.default_rng(seed)
+    means = x[rng.integers(0, x.size, size=(resamples, x.size))].mean(axis=1)
+    alpha = (1 - level) / 2
+    lo, hi = np.percentile(means, [100 * alpha, 100 * (1 - alpha)])
+    return float(lo), float(hi)
+
+
+def cell_stats(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> dict[str, Any]:
+    """`summarize` plus a bootstrap interval (`<metric>_ci`) for Succ, PS, TS and AS."""
+    s = summarize(rows)
+    for name, field in CI_METRICS.items():
+        if s.get(name) is None:  # a reading older rows do not have
+            s[f"{name}_ci"] = None
+            continue
+        s[f"{name}_ci"] = bootstrap_ci([float(r[field]) for r in rows], resamples=resamples, seed=seed)
+    return s
+
+
+def group(rows: list[dict[str, Any]], *keys: str) -> dict[tuple[Any, ...], list[dict[str, Any]]]:
+    buckets: dict[tuple[Any, ...], list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        buckets[tuple(setting_of(r)[SETTING.index(k)] if k in SETTING else r[k] for k in keys)].append(r)
+    return dict(sorted(buckets.items(), key=lambda kv: order_key(kv[0])))
+
+
+def by_setting_task(rows: list[dict[str, Any]]) -> dict[tuple[tuple[Any, ...], str], list[dict[str, Any]]]:
+    out: dict[tuple[tuple[Any, ...], str], list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        out[(setting_of(r), r["task"])].append(r)
+    return dict(sorted(out.items(), key=lambda kv: (order_key(kv[0][0]), kv[0][1])))

@@ -1,0 +1,141 @@
+"""An agent's side of an episode: attach one robot's policy (heuristic, an LLM, a replay) to a
+world, and serve the in-process gguf: models its robots need."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator, Callable
+from typing import TYPE_CHECKING, Any
+
+import structlog
+
+from mhrc.core.bus import Bus
+from mhrc.core.protocol import EpisodeDone
+
+if TYPE_CHECKING:
+    from mhrc.core.security import Credentials
+
+from mhrc.agents.agent import RobotAgent
+from mhrc.agents.heuristic import heuristic_policy
+from mhrc.agents.llm import make_client
+from mhrc.agents.llm_policy import LLMPolicy
+from mhrc.agents.local import LocalModelServer
+from mhrc.agents.replay import ReplayClient
+from mhrc.core.bus import open_client
+from mhrc.core.security import check_for
+from mhrc.run.config import ConfigError
+
+log = structlog.get_logger("mhrc.run.attach")
+
+
+async def run_agent(
+    robot: str,
+    run: str,
+    connect: str,
+    *,
+    llm: str | None = None,
+    base_url: str | None = None,
+    client_options: dict[str, Any] | None = None,
+    attach_timeout: float = 30.0,
+    security: Credentials | None = None,
+    on_error: Callable[[BaseException], None] | None = None,
+    **policy_options: Any,
+) -> EpisodeDone | None:
+    """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
+    the heuristic policy, or with `llm` (one robot's spec) an LLMPolicy on that model. A
+    `gguf:PATH` spec gets a one-slot local server of its own for as long as the agent runs.
+    `on_error` hears an error that ends the agent while its session is still open: before the
+    world sees the robot vanish."""
+
+    if security is not None:
+
+        check_for(security, run=run, user=robot)
+    async with contextlib.AsyncExitStack() as stack:
+        if llm is None:
+            policy = heuristic_policy(robot)
+        else:
+
+            if llm.startswith("replay:"):
+                policy = LLMPolicy(robot, ReplayClient(llm.removeprefix("replay:"), robot), **policy_options)  # type: ignore[assignment]
+            else:
+                if llm.startswith("gguf:"):
+                    llm = (await stack.enter_async_context(local_models({robot: llm}, (client_options or {}).get("seed"))))[robot]
+                client = make_client(llm, base_url=base_url, **(client_options or {}))
+                stack.push_async_callback(client.aclose)
+                policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
+        bus = await open_client(connect, attach_timeout, security=security)
+        try:
+            agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout, endpoint=connect,  # type: ignore[arg-type]
+                               security=security)
+            return await agent.run()
+        except Exception as exc:
+            if on_error is not None:
+                on_error(exc)
+            raise
+        finally:
+            await bus.close()
+
+
+@contextlib.asynccontextmanager
+async def local_models(specs: dict[str, str | None], seed: int | None = None) -> AsyncIterator[dict[str, str | None]]:
+    """Serve every `gguf:PATH` spec in-process (mhrc.agents.local): one llama.cpp server per
+    model file with one slot per robot on it, so the robots decode in parallel; yields the specs
+    with each gguf one replaced by `llamacpp:MODEL@URL` of its server. The servers stop on exit."""
+    paths = sorted({s.removeprefix("gguf:") for s in specs.values() if s and s.startswith("gguf:")})
+    if not paths:
+        yield specs
+        return
+
+    async with contextlib.AsyncExitStack() as stack:
+        served: dict[str, str] = {}
+        for path in paths:
+            slots = sum(1 for s in specs.values() if s == f"gguf:{path}")
+            server = await stack.enter_async_context(LocalModelServer(path, slots=slots, seed=seed))
+            served[path] = f"llamacpp:{server.model}@{server.base_url}"
+            log.info("local model serving", path=path, slots=slots, url=server.base_url)
+        yield {r: served[s.removeprefix("gguf:")] if s and s.startswith("gguf:") else s for r, s in specs.items()}
+
+
+async def find_run(bus: Bus, timeout: float = 5.0) -> str:
+    """The run id of the only world alive on this bus (raises if there is none or several).
+
+    Asks again for a while: a freshly connected session may not see the tokens at once."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        runs = sorted({key.split("/")[1] for key in await bus.alive("mhrc/*/alive/world", timeout=1.0)})
+        if runs or loop.time() >= deadline:
+            break
+        await asyncio.sleep(0.3)
+    if len(runs) != 1:
+        found = ", ".join(runs) if runs else "none"
+        raise ConfigError(f"pass --run: expected exactly one world on the bus, found {found}")
+    return runs[0]
+
+
+async def attach_agent(
+    robot: str,
+    connect: str,
+    run: str | None,
+    attach_timeout: float = 30.0,
+    llm: str | None = None,
+    base_url: str | None = None,
+    client_options: dict[str, Any] | None = None,
+    security: Credentials | None = None,
+    **policy_options: Any,
+) -> EpisodeDone | None:
+    """`mhrc agent`: find the run if not given (the credentials' run, or the only world alive),
+    then play `robot` (heuristic policy, or `llm`)."""
+    if run is None and security is not None:
+        run = security.run
+    if run is None:
+        bus = await open_client(connect, attach_timeout)
+        try:
+            run = await find_run(bus)
+        finally:
+            await bus.close()
+    return await run_agent(
+        robot, run, connect, llm=llm, base_url=base_url, client_options=client_options, attach_timeout=attach_timeout, security=security,
+        **policy_options,
+    )  # fmt: skip

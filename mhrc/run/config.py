@@ -1,0 +1,261 @@
+"""One episode's configuration (`EpisodeConfig`), checked before anything starts: a bad
+value raises `ConfigError` naming its option."""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Sequence
+from typing import Any, Literal
+from pathlib import Path
+
+import structlog
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from mhrc.core.endpoints import endpoint, free_port
+from mhrc.core.fidelity import AidsError, label, parse_aids
+from mhrc.core.keys import check_id, new_run_id
+
+from mhrc.agents.llm import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_TOKENS, DEFAULT_TIMEOUT, check_spec, robot_specs, split_url
+from mhrc.core.security import Credentials, check_for, load, make_run_credentials
+from mhrc.core.trace import unwritable
+
+log = structlog.get_logger("mhrc.run.config")
+
+
+ROBOTS = ("alice", "bob", "david")
+SCHEDULES = ("sequential", "lockstep", "async")
+
+
+class ConfigError(ValueError):
+    """A configuration value that cannot work; the message names the field."""
+
+
+class ModelServerDown(ConfigError):
+    """Nothing listens where a robot's model server should be (connection refused): no step could
+    ever be planned, so the run does not start."""
+
+
+OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}
+# s to the first token of a reply from a model server: about 3x the slowest first token measured on this
+# machine's CPU with 3 slots (42 s: three robots' prompts of ~2,000 tokens read at once by a 270M model;
+# bench/results/local_model.json); hosted APIs answer in seconds, and a server silent that long is down
+SERVER_TIMEOUT = DEFAULT_TIMEOUT
+IDLE_TIMEOUT = DEFAULT_IDLE_TIMEOUT  # s between chunks of a streamed reply
+# s to the first token from an in-process gguf: model: a local model is the CPU's, often larger than 270M (a 10x
+# larger model reads the prompt about 10x slower); with --no-stream, to the whole reply; max_tokens bounds a reply
+LOCAL_TIMEOUT = 600.0
+
+
+def option_name(field: str) -> str:
+    """The command-line option a config field comes from (n_objects -> --objects)."""
+    return OPTIONS.get(field, "--" + field.replace("_", "-"))
+
+
+class EpisodeConfig(BaseModel):
+    """What one episode runs: validated before anything starts."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    task: str = "pack_objects"
+    scene: str = "kitchen"
+    seed: int = Field(0, ge=0)
+    n_objects: int = Field(4, ge=3, le=6)
+    horizon: int = Field(50, ge=1, le=1000)
+    run: str = Field(default_factory=new_run_id)
+    host: str = "127.0.0.1"
+    port: int = Field(0, ge=0, le=65535, description="0: pick a free port")
+    trace: Path | None = None
+    gui: bool = False
+    start_timeout: float | None = Field(None, gt=0)
+    tick_delay: float = Field(0.0, ge=0)
+    schedule: Literal["sequential", "lockstep", "async"] = Field("lockstep", description="the world's time policy (DESIGN.md, \"Time\")")
+    time_scale: float = Field(0.0, ge=0, allow_inf_nan=False, description="async: simulated seconds per wall second; 0: as fast as possible")
+    llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
+    ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
+    prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
+    base_url: str | None = None
+    llm_timeout: float | None = Field(None, gt=0, description="seconds to an LLM reply's first token, prompt processing included (the whole reply "
+                                      "when it is not streamed); a timeout is retried once; None: 120, 600 for gguf: models")
+    llm_idle_timeout: float | None = Field(None, gt=0, description="seconds a streamed LLM reply may go without a chunk; None: 30")
+    stream: bool = Field(True, description="stream LLM replies (False: --no-stream, for servers that cannot)")
+    max_tokens: int = Field(DEFAULT_MAX_TOKENS, ge=1, description="completion tokens per LLM call, sent on every request")
+    llm_seed: int | None = Field(None, ge=0, description="sampling seed sent on every LLM request (servers that honour one)")
+    structured: bool = Field(False, description="LLM replies follow a JSON Schema of the step's valid actions (not the paper's)")
+    step_deadline: float | None = Field(None, gt=0, description="seconds one robot's LLM step may take, retries included, at least --llm-timeout; "
+                                        "None: no bound but the call's own (a stalled stream ends after --llm-idle-timeout, one that "
+                                        "keeps producing at --max-tokens)")
+    aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.core.fidelity); none: the paper's")
+    history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
+    credentials: Path | None = Field(
+        None,
+        description="the run's credentials (mhrc.core.security): the directory of every participant's files, or one participant's "
+        "file; the bus is then TLS with a login per participant and the world's access control; None: the open tcp bus",
+    )
+
+    @field_validator("aids", mode="before")
+    @classmethod
+    def _aids(cls, v: object) -> tuple[str, ...]:
+        try:
+            return parse_aids(v)  # type: ignore[arg-type]
+        except AidsError as exc:
+            raise ValueError(str(exc)) from None
+
+    @field_validator("run")
+    @classmethod
+    def _run_id(cls, v: str) -> str:
+        check_id(v, "run id")
+        return v
+
+    @classmethod
+    def build(cls, **values: object) -> EpisodeConfig:
+        """Validate, raising ConfigError that names the offending field."""
+        try:
+            cfg = cls(**values)
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            field = ".".join(str(p) for p in err["loc"]) or "config"
+            msg = err["msg"].removeprefix("Value error, ")
+            if msg.startswith("--"):  # the validator already names the option
+                raise ConfigError(msg) from None
+            raise ConfigError(f"{option_name(field)}: {msg} (got {err.get('input')!r})") from None
+        if cfg.trace is not None:
+            if why := unwritable(cfg.trace):  # before anything starts: not a traceback from the recorder
+                raise ConfigError(f"--trace: {why}")
+        if cfg.time_scale and cfg.schedule != "async":
+            raise ConfigError(f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})")
+        from mhrc.world.sim import check_episode  # validates task and scene names without building
+
+        try:
+            check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
+            if cfg.llm is not None:
+                from mhrc.agents.llm import check_spec
+                from mhrc.agents.llm_policy import load_template
+
+                for robot, spec in cfg.robot_specs().items():
+                    if spec is None:
+                        continue
+                    check_spec(spec, cfg.base_url)
+                    if cfg.step_deadline is not None and cfg.step_deadline < cfg.timeout_for(spec):
+                        raise ConfigError(
+                            f"--step-deadline: {cfg.step_deadline:g} s is shorter than the first-token timeout of {robot}'s model "
+                            f"({cfg.timeout_for(spec):g} s, --llm-timeout): the step would end before a slow server could answer; "
+                            "give a longer --step-deadline or a shorter --llm-timeout"
+                        )
+                    for part in ("system", "user"):
+                        load_template(robot, part, cfg.prompts)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ConfigError(str(exc)) from None
+        return cfg
+
+    def resolved(self) -> EpisodeConfig:
+        """A copy with a concrete port and trace path."""
+        port = self.port or free_port(self.host)
+        trace = self.trace or Path("runs") / self.run / "trace.jsonl"
+        return self.model_copy(update={"port": port, "trace": trace})
+
+    @property
+    def endpoint(self) -> str:
+        return endpoint(self.host, self.port, tls=self.credentials is not None)
+
+    def credentials_file(self, user: str) -> Path:
+        """The credentials file of `user` (the world, a robot, the observer)."""
+        if self.credentials is None:
+            raise ConfigError("this episode has no credentials (the open bus)")
+        return self.credentials / f"{user}.json" if self.credentials.is_dir() else self.credentials
+
+    def participant(self, user: str) -> Credentials | None:
+        """`user`'s credentials, checked to be of this run and this user; None on the open bus."""
+        if self.credentials is None:
+            return None
+        creds = load(self.credentials_file(user))
+        check_for(creds, run=self.run, user=user)
+        return creds
+
+    def with_credentials(self, directory: Path | None = None) -> EpisodeConfig:
+        """A copy with fresh credentials for this run (default: next to the trace, runs/RUN/credentials)."""
+        where = directory or ((self.trace.parent if self.trace else Path("runs") / self.run) / "credentials")
+        make_run_credentials(self.run, ROBOTS, where)
+        return self.model_copy(update={"credentials": where})
+
+    @property
+    def robots(self) -> tuple[str, ...]:
+        """The robots in this episode (no_mobile leaves David out)."""
+        return tuple(r for r in ROBOTS if not (r == "david" and self.ablation == "no_mobile"))
+
+    def robot_specs(self) -> dict[str, str | None]:
+        """Each robot's model spec (None: the heuristic policy); see mhrc.agents.llm.robot_specs."""
+        if self.llm is None:
+            return dict.fromkeys(self.robots)
+        return robot_specs(self.llm, self.robots)
+
+    def timeout_for(self, spec: str | None) -> float:
+        """Seconds per LLM request for a robot driven by `spec` (its own spec, before gguf: is served)."""
+        if self.llm_timeout is not None:
+            return self.llm_timeout
+        return LOCAL_TIMEOUT if spec is not None and spec.startswith("gguf:") else SERVER_TIMEOUT
+
+    def policy_options(self, spec: str | None = None) -> dict[str, Any]:
+        """LLMPolicy switches for the ablation (the heuristic policy ignores them), for a robot
+        driven by `spec`."""
+        return {
+            "feedback": self.ablation != "no_feedback",
+            "history": self.ablation != "no_history",
+            "teammates_absent": tuple(r for r in ROBOTS if r not in self.robots),
+            "prompts_dir": self.prompts,
+            "prompt_cap_chars": self.history_cap,
+            "reach_labels": "reach_labels" in self.aids,
+            "prompt_hints": "prompt_hints" in self.aids,
+            "structured": self.structured,
+            "step_deadline": self.step_deadline,
+            "max_tokens": self.max_tokens,
+        }
+
+    def client_options(self, spec: str | None = None) -> dict[str, Any]:
+        """OpenAIChatClient settings of a robot driven by `spec`."""
+        return {
+            "timeout": self.timeout_for(spec), "idle_timeout": self.llm_idle_timeout or IDLE_TIMEOUT, "stream": self.stream,
+            "max_tokens": self.max_tokens, "seed": self.llm_seed,
+        }  # fmt: skip
+
+    @property
+    def fidelity(self) -> str:
+        return label(self.aids)
+
+
+def check_model_servers(cfg: EpisodeConfig, robots: Sequence[str]) -> None:
+    """ModelServerDown when nothing listens (connection refused) at the server a robot's model
+    spec names: said at once, in one line, instead of every robot retrying into the void. A
+    server that does not answer the connection (a slow network, a name that does not resolve)
+    is left to the agents' own retries."""
+    from urllib.parse import urlsplit
+
+
+    servers: dict[str, tuple[str, list[str]]] = {}  # url -> (where it came from, its robots)
+    specs = cfg.robot_specs()
+    for robot in robots:
+        spec = specs.get(robot)
+        if spec is None or spec.startswith(("gguf:", "replay:")):
+            continue
+        bare, own = split_url(spec)
+        url = check_spec(spec, cfg.base_url)[1]
+        if own:
+            advice = f"start the server there, or fix the @URL in --llm {spec!r}"
+        elif cfg.base_url:
+            advice = "start the server there, or point --base-url at one"
+        else:
+            advice = f"start {bare.partition(':')[0]} there, or pass --base-url for a server elsewhere"
+        servers.setdefault(url, (advice, []))[1].append(robot)
+    for url, (advice, users) in servers.items():
+        parts = urlsplit(url)
+        try:
+            port = parts.port or (443 if parts.scheme == "https" else 80)
+            with socket.create_connection((parts.hostname or "", port), timeout=2.0):
+                pass
+        except ConnectionRefusedError:
+            raise ModelServerDown(
+                f"nothing listens at {url}, the model server of {', '.join(users)} (connection refused): {advice}"
+            ) from None
+        except (OSError, ValueError):
+            continue
+
+

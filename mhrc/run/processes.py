@@ -1,0 +1,195 @@
+"""`mhrc up --processes`: the world and each agent as separate OS processes (`mhrc world`,
+`mhrc agent`) that die with this one."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+import socket
+import subprocess
+import sys
+import time
+from typing import Any
+
+import structlog
+
+from mhrc.core.endpoints import check_listen
+from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
+
+from mhrc.run.config import EpisodeConfig
+from mhrc.core.bus import open_client
+from mhrc.core.keys import Keys
+from mhrc.run.attach import local_models
+from mhrc.run.lifeline import child_env
+from mhrc.run.serve import EventHook
+
+log = structlog.get_logger("mhrc.run.processes")
+
+
+class ProcessFailed(RuntimeError):
+    """A process of `mhrc up --processes` failed the run: the world's ended before the episode
+    did, or an agent's before the episode started (the world would wait for its robot forever).
+    With a positive exit code the process has said why on stderr itself; a negative one is the
+    signal that killed it."""
+
+    def __init__(self, who: str, returncode: int, before: str) -> None:
+        self.who = who
+        self.returncode = returncode
+        how = f"was killed by signal {-returncode}" if returncode < 0 else f"exited with code {returncode}"
+        super().__init__(f"{who} {how} before the episode {before}")
+
+
+def _child_env() -> dict[str, str]:
+    env = child_env()  # the world and agents die with this process, even after a SIGKILL
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    return env
+
+
+def _child_stdout() -> int | None:
+    """Children print to this process's stderr: stdout is for `--json` output alone."""
+    try:
+        return sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def world_command(cfg: EpisodeConfig) -> list[str]:
+    cmd = [
+        sys.executable, "-m", "mhrc", "world",
+        "--task", cfg.task, "--scene", cfg.scene, "--seed", str(cfg.seed), "--objects", str(cfg.n_objects),
+        "--horizon", str(cfg.horizon), "--run", cfg.run, "--host", cfg.host, "--port", str(cfg.port), "--quiet",
+        "--ablation", cfg.ablation, "--schedule", cfg.schedule,
+    ]  # fmt: skip
+    if cfg.trace is not None:
+        cmd += ["--trace", str(cfg.trace)]
+    if cfg.aids:
+        cmd += ["--aids", ",".join(cfg.aids)]
+    if cfg.tick_delay:
+        cmd += ["--tick-delay", str(cfg.tick_delay)]
+    if cfg.start_timeout is not None:
+        cmd += ["--start-timeout", str(cfg.start_timeout)]
+    if cfg.time_scale:
+        cmd += ["--time-scale", str(cfg.time_scale)]
+    if cfg.credentials is not None:
+        cmd += ["--credentials", str(cfg.credentials_file("world"))]
+    else:  # said, so that a $MHRC_CREDENTIALS of another run is not picked up
+        cmd += ["--insecure"]
+    return cmd
+
+
+def agent_command(robot: str, cfg: EpisodeConfig, spec: str | None = None) -> list[str]:
+    """`mhrc agent` for `robot`, driven by `spec` (its model, already resolved: no gguf) or the heuristic policy."""
+    cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
+    if cfg.credentials is not None:
+        cmd += ["--credentials", str(cfg.credentials_file(robot))]
+    else:  # said, so that a $MHRC_CREDENTIALS of another run is not picked up
+        cmd += ["--insecure"]
+    if spec is not None:
+        cmd += ["--llm", spec, "--ablation", cfg.ablation] + (["--base-url", cfg.base_url] if cfg.base_url else [])
+        cmd += ["--prompts", str(cfg.prompts)] if cfg.prompts else []
+        cmd += ["--llm-timeout", str(cfg.timeout_for(cfg.robot_specs()[robot])), "--max-tokens", str(cfg.max_tokens)]
+        cmd += ["--llm-seed", str(cfg.llm_seed)] if cfg.llm_seed is not None else []
+        cmd += ["--llm-idle-timeout", str(cfg.llm_idle_timeout)] if cfg.llm_idle_timeout else []
+        cmd += [] if cfg.stream else ["--no-stream"]
+        cmd += ["--structured"] if cfg.structured else []
+        cmd += ["--step-deadline", str(cfg.step_deadline)] if cfg.step_deadline else []
+        cmd += ["--history-cap", str(cfg.history_cap)] if cfg.history_cap else []
+        cmd += ["--aids", ",".join(cfg.aids)] if cfg.aids else []
+    return cmd
+
+
+def wait_for_port(host: str, port: int, timeout: float, proc: subprocess.Popen[bytes] | None = None) -> None:
+    """Block until something accepts TCP connections on host:port."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc is not None and proc.poll() is not None:
+            raise RuntimeError(f"the world process exited early with code {proc.returncode}")
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.settimeout(0.2)
+            if s.connect_ex((host, port)) == 0:
+                return
+        time.sleep(0.1)
+    raise TimeoutError(f"nothing listened on {host}:{port} within {timeout:.0f} s")
+
+
+async def up_processes(
+    cfg: EpisodeConfig, *, observe: EventHook | None = None, robots: tuple[str, ...] | None = None, quiet: bool = False
+) -> EpisodeDone:
+    """The world and each agent as separate OS processes; this process only observes (and
+    serves the local models that gguf specs name, for the agents to share). With `quiet` the
+    children's own output (an agent's closing line) is dropped; their errors still show."""
+    robots = cfg.robots if robots is None else robots
+    async with local_models({r: cfg.robot_specs()[r] for r in robots}, cfg.llm_seed) as specs:
+        return await _run_processes(cfg, specs, observe=observe, robots=robots, quiet=quiet)
+
+
+async def _run_processes(
+    cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...], quiet: bool = False
+) -> EpisodeDone:
+    stdout = subprocess.DEVNULL if quiet else _child_stdout()
+    procs: list[subprocess.Popen[bytes]] = []
+    bus = None
+    try:
+        check_listen(cfg.host, cfg.port, cfg.endpoint.split("/", 1)[0])  # a port taken is one line now, not a world process failing behind a client that waits
+        world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=stdout)
+        procs.append(world)
+        await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)
+        bus = await open_client(cfg.endpoint, 10.0, security=cfg.participant("observer"))
+        done_fut: asyncio.Future[EpisodeDone] = asyncio.get_running_loop().create_future()
+        started = asyncio.Event()
+        def on_event(sample: object) -> None:
+            try:
+                ev = decode_event(sample.payload)  # type: ignore[attr-defined]
+            except ProtocolError:
+                return
+            if isinstance(ev, EpisodeStarted):
+                started.set()
+            elif isinstance(ev, EpisodeDone) and not done_fut.done():
+                done_fut.set_result(ev)
+
+        bus.subscribe(Keys(cfg.run).world_event, on_event)
+        if observe is not None:
+            observe(bus, cfg.run)
+        exits: dict[asyncio.Future[Any], str] = {asyncio.ensure_future(asyncio.to_thread(world.wait)): "the world process"}
+        for r in robots:
+            agent = subprocess.Popen(agent_command(r, cfg, specs[r]), env=_child_env(), stdout=stdout)
+            procs.append(agent)
+            exits[asyncio.ensure_future(asyncio.to_thread(agent.wait))] = f"{r}'s agent process"
+        watched: set[asyncio.Future[Any]] = {done_fut, *exits}
+        while not done_fut.done():
+            finished, watched = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
+            for fut in finished - {done_fut}:
+                code, who = fut.result(), exits[fut]
+                if fut is next(iter(exits)) and not done_fut.done():
+                    if code == 0:  # it ended the episode: its last event may still be on the way
+                        with contextlib.suppress(TimeoutError):
+                            await asyncio.wait_for(asyncio.shield(done_fut), 5.0)
+                    if not done_fut.done():
+                        raise ProcessFailed(who, code, "ended")
+                if code != 0 and not started.is_set() and not done_fut.done():  # as up_in_process: its robot would be waited for forever
+                    raise ProcessFailed(who, code, "started")
+        done = done_fut.result()
+        for p in procs:
+            await asyncio.to_thread(_wait_or_kill, p, 20.0)
+        if done.reason == "no_agents":  # as up_in_process: every agent gone, with an error, is the run's failure
+            failed = [(r, p.returncode) for r, p in zip(robots, procs[1:]) if p.returncode != 0]
+            if failed:
+                raise ProcessFailed(f"{failed[0][0]}'s agent process", failed[0][1], "ended")
+        return done
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p in procs:
+            await asyncio.to_thread(_wait_or_kill, p, 10.0)
+        if bus is not None:
+            await bus.close()
+
+
+def _wait_or_kill(proc: subprocess.Popen[bytes], timeout: float) -> None:
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()

@@ -1,0 +1,78 @@
+"""The world's side of an episode: build the scene, open the world's bus (a router, or a
+client of one), record, and run the world's service."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import structlog
+
+from mhrc.core.bus import Bus
+from mhrc.core.protocol import EpisodeDone
+
+if TYPE_CHECKING:
+    from mhrc.core.security import Credentials
+
+from mhrc.core.bus import open_client
+from mhrc.core.trace import Recorder
+from mhrc.run.config import EpisodeConfig
+from mhrc.world.service import WorldConfig, WorldService
+from mhrc.world.sim import Sim
+
+log = structlog.get_logger("mhrc.run.serve")
+
+EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
+
+
+async def serve_world(
+    cfg: EpisodeConfig,
+    *,
+    observe: EventHook | None = None,
+    connect: str | None = None,
+    login: Credentials | None = None,
+    on_service: Callable[[Any], None] | None = None,
+) -> EpisodeDone:
+    """Build the scene, open the world's bus (a router on cfg.endpoint, or with `connect` a
+    client of a router that already exists, logged in with `login` if given: an evaluation
+    worker's), record, and run the episode. `on_service` gets the WorldService once it exists
+    (the in-process runner stops it when an agent fails for good)."""
+    sim = await asyncio.to_thread(
+        Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots, aids=cfg.aids
+    )
+    bus = None
+    recorder = None
+    world: WorldService | None = None
+    try:
+        security = login if connect and login is not None else cfg.participant("world")
+        bus = await (
+            open_client(connect, 30.0, security=security) if connect else Bus.open(mode="router", listen=[cfg.endpoint], security=security)
+        )
+        if cfg.trace is not None:
+            recorder = Recorder(bus, cfg.run, cfg.trace).start()
+        if observe is not None:
+            observe(bus, cfg.run)
+        world = WorldService(
+            bus,
+            sim,
+            WorldConfig(
+                run=cfg.run, horizon=cfg.horizon, start_timeout=cfg.start_timeout, tick_delay=cfg.tick_delay, schedule=cfg.schedule,
+                time_scale=cfg.time_scale,
+            ),  # fmt: skip
+        )
+        if on_service is not None:
+            on_service(world)
+        try:
+            return await world.run()
+        except asyncio.CancelledError:
+            world.stop()
+            raise
+        finally:
+            await asyncio.sleep(0.2)  # let the last results and the done event leave
+    finally:
+        if recorder is not None:
+            recorder.close(until_done=2.0 if world is not None and world.done is not None else 0.0)
+        if bus is not None:
+            await bus.close()
+        await asyncio.to_thread(sim.close)
