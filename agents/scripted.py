@@ -1,7 +1,9 @@
-"""A scripted stand-in for an LLM: an LLMPolicy whose model answers from a list.
+"""`ScriptedLLMPolicy`: an LLMPolicy whose model answers from a list, for tests of the LLM plumbing.
 
-For tests and demos of the plumbing: the replies are the model's "judgement"; prompt
-rendering, parsing, format feedback and the agent loop are the real ones.
+The replies are the model's "judgement", in a model's own words (``"I am not sure."``,
+``"Command: pick(apple)"``); prompt rendering, parsing, format feedback and the agent loop are
+the real ones. Not `mhrc.testing.ScriptedPolicy`, which plays commands already parsed and
+never renders a prompt: use that one to script a robot's actions, this one to script a model.
 """
 
 from __future__ import annotations
@@ -11,11 +13,12 @@ from pathlib import Path
 
 from mhrc.core.protocol import ActionResult
 
-from .llm import DEFAULT_TEMPERATURE, ScriptedClient
+from .completion import DEFAULT_TEMPERATURE
 from .llm_policy import LLMPolicy
+from .scripted_client import ScriptedClient
 
 
-class ScriptedPolicy(LLMPolicy):
+class ScriptedLLMPolicy(LLMPolicy):
     """An LLMPolicy whose model answers each step with the next scripted reply (then `wait()`)."""
 
     def __init__(

@@ -8,7 +8,7 @@ import contextlib
 import pytest
 
 from mhrc.agents.agent import AttachRejected, RobotAgent
-from mhrc.agents.scripted import ScriptedPolicy
+from mhrc.agents.scripted import ScriptedLLMPolicy
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.keys import Keys
@@ -32,7 +32,7 @@ async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(wo
     async with world_factory(seed=0, horizon=3, start_timeout=3.0) as world:
         bus = await world.client()
         try:
-            policy = ScriptedPolicy("bob", ["I am not sure what to do.", "**Command:** pick(ghost).", "Command: wait()"])
+            policy = ScriptedLLMPolicy("bob", ["I am not sure what to do.", "**Command:** pick(ghost).", "Command: wait()"])
             agent = RobotAgent(bus, policy, run=world.cfg.run, robot="bob")
             done = await asyncio.wait_for(agent.run(), 60)
         finally:
@@ -51,10 +51,10 @@ async def test_a_second_agent_for_an_attached_robot_is_refused(world_factory) ->
     async with world_factory(seed=0) as world:
         first, second = await world.client(), await world.client()
         try:
-            a = asyncio.create_task(RobotAgent(first, ScriptedPolicy("bob", []), run=world.cfg.run, robot="bob").run())
+            a = asyncio.create_task(RobotAgent(first, ScriptedLLMPolicy("bob", []), run=world.cfg.run, robot="bob").run())
             await asyncio.sleep(1.5)
             with pytest.raises(AttachRejected, match="already attached"):
-                await RobotAgent(second, ScriptedPolicy("bob", []), run=world.cfg.run, robot="bob").run()
+                await RobotAgent(second, ScriptedLLMPolicy("bob", []), run=world.cfg.run, robot="bob").run()
             a.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await a
@@ -107,7 +107,7 @@ async def test_a_result_overtaken_by_episode_done_is_still_recorded_when_the_wor
         world = _OvertakingWorld(world_bus, "overtake", name_final_result=named)
         world.start()
         await asyncio.sleep(0.3)  # declarations reach the agent's session
-        policy = ScriptedPolicy("bob", ["Command: wait()"])
+        policy = ScriptedLLMPolicy("bob", ["Command: wait()"])
         done = await asyncio.wait_for(RobotAgent(agent_bus, policy, run="overtake", robot="bob").run(), 30)
         assert done is not None and done.reason == "horizon"
         if named:  # the world said it executed the request: the agent waits for its result

@@ -9,14 +9,16 @@ range slider or the arrow keys (Home and End jump). The page opens on the last f
 the episode was judged on. A robot's path follows each navigate's planned route where its result
 carries one (older traces: straight lines between stops). Labels never cover one another: the
 fixed ones are placed here (mhrc.viewer.placement), the moving ones by the script, which
-measures them.
+measures them. The script and the style are `page.js` and `page.css` beside this module
+(package data), inlined into every page.
 """
 
 from __future__ import annotations
 
 import json
-from html import escape
 from collections.abc import Callable
+from html import escape
+from importlib.resources import files
 from typing import Any
 
 from mhrc.viewer.model import EpisodeView, Step
@@ -27,6 +29,9 @@ from mhrc.viewer.wording import diagnostic_label, partial_success
 SCALE = 80.0  # SVG pixels per metre
 ROBOT_COLORS = {"alice": "#d62728", "bob": "#1f77b4", "david": "#2ca02c"}
 PALETTE = ["#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"]
+# the page's style and script, inlined into every report: package data beside this module
+CSS = files("mhrc.viewer").joinpath("page.css").read_text(encoding="utf-8")
+JS = files("mhrc.viewer").joinpath("page.js").read_text(encoding="utf-8")
 
 
 def _e(value: Any) -> str:
@@ -426,241 +431,4 @@ def render_page(view: EpisodeView, diagnostics: dict[str, Any] | None = None, di
 <script type="application/json" id="mhrc-data">{_data(view, colors)}</script>
 <script>{JS}</script>
 </body></html>
-"""
-
-
-CSS = """
-body{font:14px/1.4 system-ui,sans-serif;margin:0 1.2em 2em;color:#222;background:#fafafa}
-h1{font-size:1.4em;margin:.6em 0}h2{font-size:1.15em;margin:1.2em 0 .4em;border-bottom:1px solid #ccc}
-.warning{background:#fff3cd;border:1px solid #e0b400;padding:.35em .6em;margin:.3em 0;border-radius:4px}
-.note{background:#eef;border:1px solid #99c;padding:.35em .6em;border-radius:4px}
-.dim{color:#777;font-size:.9em}
-.cols{display:flex;gap:2em;flex-wrap:wrap;align-items:flex-start}
-table.kv,table.grid{border-collapse:collapse}table.kv th,table.kv td,table.grid th,table.grid td{border:1px solid #ddd;padding:2px 6px;text-align:left;vertical-align:top}
-table.kv th{background:#f0f0f0;font-weight:600}table.grid th{background:#f0f0f0}
-.metrics{display:flex;gap:.8em;flex-wrap:wrap;margin-bottom:.5em}
-.metric{background:#fff;border:1px solid #ccc;border-radius:6px;padding:.4em .8em;text-align:center;min-width:4.5em}
-.mv{font-size:1.4em;font-weight:600}.mvs{font-size:.6em;font-weight:400;color:#555}.mk{color:#666;font-size:.85em}
-.controls{display:flex;gap:.6em;align-items:center;margin:.4em 0}
-#tick-slider{width:min(60vw,700px)}#tick-label{font-weight:600;min-width:8em}
-.map-wrap{display:flex;gap:1em;flex-wrap:wrap;align-items:flex-start}
-#map{width:min(100%,900px);background:#fff;border:1px solid #ccc}
-#frame-info{flex:1;min-width:16em;font-size:.9em}
-.floor{fill:#f4f1ea}.wall{fill:#444}.furniture{stroke:#333;stroke-width:1;opacity:.75}
-.container{stroke-dasharray:4 2;stroke-width:1.5}.container.is-open{stroke:#e07000;stroke-width:3;stroke-dasharray:none}
-.open-footprint{fill:none;stroke:none}.open-footprint.is-open{fill:#ffd9a8;stroke:#e07000;stroke-dasharray:3 2}
-.goal-area{fill:#ffe680;fill-opacity:.55;stroke:#c9a000;stroke-width:2;stroke-dasharray:6 3}
-.fixture{fill:#b0905a;stroke:#6b5020}
-.fname{text-anchor:middle;fill:#111;paint-order:stroke;stroke:#fff;stroke-width:3px}
-.gname{text-anchor:middle;fill:#806000;paint-order:stroke;stroke:#fff;stroke-width:3px}
-.leader{stroke:#555;stroke-width:.8;stroke-dasharray:2 1.5}
-.path{fill:none;stroke-width:2.5;stroke-opacity:.6;stroke-linejoin:round}
-.obj{fill:#fff;stroke:#333;stroke-width:1.2}.obj.target{fill:#ff8c00}.obj.target.placed{fill:#137a13}.obj.distractor{fill:#d0d0d0;stroke:#777}
-.obj.inside{stroke-dasharray:2 1;fill-opacity:.6}.obj.held{stroke:#000;stroke-width:2.5}
-.ring{fill:none;stroke:#d00000;stroke-width:2;stroke-dasharray:3 2}
-.oname{font-size:9px;fill:#333;paint-order:stroke;stroke:#fff;stroke-width:2.5px}.oname.target.unplaced{font-weight:700;fill:#a04800}.oname.distractor{fill:#777}
-.rname{font-size:11px;font-weight:700;paint-order:stroke;stroke:#fff;stroke-width:3px}
-.msgline{stroke-width:2;stroke-dasharray:6 4;fill:none}
-.legend{margin-bottom:.5em;line-height:1.8}.legend .li{white-space:nowrap}.chip,.odot{display:inline-block;width:.9em;height:.9em;border-radius:50%;margin:0 .25em 0 .6em;vertical-align:middle;box-sizing:border-box}
-.odot{border:1px solid #333;background:#fff}.odot.target{background:#ff8c00}.odot.target.placed{background:#137a13}.odot.distractor{background:#d0d0d0;border-color:#777}
-.odot.ring{border:2px dashed #d00000;background:none}
-#targets .tsum{font-size:1.05em}.unplaced-count{color:#b00000;font-weight:700}.placed-count{color:#1a7a1a;font-weight:700}
-table.objs tr.unplaced td{background:#fdeaea}table.objs tr.placed td.state{color:#1a7a1a}table.objs tr.unplaced td.state{color:#b00000;font-weight:600}
-table.objs tr.distractor td{color:#555}
-#frame-objects li.target.unplaced{color:#a04800}
-table.diag th{font-weight:600;white-space:nowrap}
-#lanes{display:flex;gap:.8em;align-items:flex-start;overflow-x:auto}
-.lane{flex:1;min-width:20em;max-height:80vh;overflow-y:auto;background:#fff;border:1px solid #ccc;border-radius:6px}
-.lane h3{margin:0;padding:.4em .6em;border-bottom:4px solid;position:sticky;top:0;background:#fff;z-index:1}
-.lane ol{list-style:none;margin:0;padding:.3em}
-.step{border:1px solid #ddd;border-left:5px solid #999;border-radius:4px;margin:.3em 0;padding:.3em .5em;cursor:pointer}
-.step.ok{border-left-color:#2a2}.step.failed{border-left-color:#d22}.step.rejected{border-left-color:#a0a;background:#fbeefb}.step.pending{border-left-color:#aaa}
-.step.current{outline:3px solid #1f77b4;background:#eef6ff}.step.future{opacity:.45}
-.badge{font-size:.8em;padding:0 .4em;border-radius:3px;background:#eee}.badge.ok{background:#d4f4d4}.badge.failed{background:#fbd4d4}.badge.rejected{background:#f0c8f0}
-.tick{color:#666;font-size:.85em}.feedback{margin:.2em 0}.analysis{white-space:pre-wrap;color:#333;font-style:italic;margin:.2em 0}
-.perr{color:#b00}pre{white-space:pre-wrap;word-break:break-word;max-height:30em;overflow:auto;background:#f6f6f6;padding:.4em;font-size:.85em}
-tr.msg.current{background:#eef6ff}
-"""
-
-JS = r"""
-(function(){
-  const data = JSON.parse(document.getElementById('mhrc-data').textContent);
-  const svg = document.getElementById('map');
-  const NS = svg.namespaceURI;
-  const dyn = document.getElementById('dyn');
-  const slider = document.getElementById('tick-slider');
-  const label = document.getElementById('tick-label');
-  const frames = data.frames;
-  const xmin = parseFloat(svg.dataset.xmin), ymax = parseFloat(svg.dataset.ymax), S = parseFloat(svg.dataset.scale);
-  const vb = svg.viewBox.baseVal, W = vb.width, H = vb.height;
-  const px = x => ((x - xmin) * S).toFixed(1), py = y => ((ymax - y) * S).toFixed(1);
-  const esc = s => String(s).replace(/[&<>"']/g, c => ({'&':'&amp;','<':'&lt;','>':'&gt;','"':'&quot;',"'":'&#39;'}[c]));
-  const last = frames.length - 1;
-  let current = -1;
-
-  // ---- label layout: every label of a frame takes the first spot around its dot that covers no
-  // other label (the fixed ones included) and no robot or object, else the least covering one
-  const overlap = (a, b) => { const w = Math.min(a.x1, b.x1) - Math.max(a.x0, b.x0), h = Math.min(a.y1, b.y1) - Math.max(a.y0, b.y0); return w > 0 && h > 0 ? w * h : 0; };
-  const grow = (b, d) => ({x0: b.x0 - d, y0: b.y0 - d, x1: b.x1 + d, y1: b.y1 + d});
-  let fixedBoxes = null;
-  function fixed(){
-    if (fixedBoxes === null) fixedBoxes = Array.from(document.querySelectorAll('#static text')).map(t => { const b = t.getBBox(); return grow({x0: b.x, y0: b.y, x1: b.x + b.width, y1: b.y + b.height}, 1); });
-    return fixedBoxes;
-  }
-  function spots(it, w, h){
-    const g = it.r + 3, out = [[it.x + g + w / 2, it.y], [it.x - g - w / 2, it.y], [it.x, it.y - g - h / 2], [it.x, it.y + g + h / 2],
-      [it.x + g + w / 2, it.y - g - h / 2 + 4], [it.x - g - w / 2, it.y - g - h / 2 + 4], [it.x + g + w / 2, it.y + g + h / 2 - 4], [it.x - g - w / 2, it.y + g + h / 2 - 4]];
-    for (const d of [10, 20, 32, 46, 62, 80, 100]) for (let k = 0; k < 16; k++){
-      const t = Math.PI * 2 * k / 16;
-      out.push([it.x + Math.cos(t) * (g + d + w / 2), it.y + Math.sin(t) * (g + d + h / 2)]);
-    }
-    return out;
-  }
-  function layoutLabels(items, layer){
-    const taken = fixed().slice();
-    const dots = items.map(it => ({x0: it.x - it.r, y0: it.y - it.r, x1: it.x + it.r, y1: it.y + it.r}));
-    items.forEach((it, idx) => {
-      const t = document.createElementNS(NS, 'text');
-      t.setAttribute('class', it.cls); if (it.fill) t.setAttribute('fill', it.fill);
-      t.setAttribute('x', '0'); t.setAttribute('y', '0'); t.textContent = it.text;
-      if (it.name) t.dataset.for = it.name;
-      layer.appendChild(t);
-      const bb = t.getBBox();
-      let best = null;
-      spots(it, bb.width, bb.height).forEach((c, k) => {
-        if (best && best.clean) return;
-        const b = {x0: c[0] - bb.width / 2, y0: c[1] - bb.height / 2, x1: c[0] + bb.width / 2, y1: c[1] + bb.height / 2};
-        if (b.x0 < 0 || b.y0 < 0 || b.x1 > W || b.y1 > H) return;
-        const hard = taken.reduce((s, o) => s + overlap(b, o), 0);
-        const soft = dots.reduce((s, o, j) => s + (j === idx ? 0 : overlap(b, o)), 0);
-        const cost = hard * 1000 + soft * 10 + k * 4;
-        if (!best || cost < best.cost) best = {cost: cost, b: b, clean: hard === 0 && soft === 0};
-      });
-      if (!best) best = {b: {x0: it.x + it.r, y0: it.y - bb.height / 2, x1: it.x + it.r + bb.width, y1: it.y + bb.height / 2}};
-      const b = best.b;
-      t.setAttribute('x', (b.x0 - bb.x).toFixed(1)); t.setAttribute('y', (b.y0 - bb.y).toFixed(1));
-      taken.push(grow(b, 1));
-      if (!overlap(b, grow(dots[idx], 5))){  // away from its dot: a leader line to it
-        const cx = Math.min(Math.max(it.x, b.x0), b.x1), cy = Math.min(Math.max(it.y, b.y0), b.y1);
-        const d = Math.hypot(cx - it.x, cy - it.y) || 1;
-        const l = document.createElementNS(NS, 'line');
-        l.setAttribute('class', 'leader'); l.setAttribute('x1', (it.x + (cx - it.x) * it.r / d).toFixed(1)); l.setAttribute('y1', (it.y + (cy - it.y) * it.r / d).toFixed(1));
-        l.setAttribute('x2', cx.toFixed(1)); l.setAttribute('y2', cy.toFixed(1));
-        layer.insertBefore(l, layer.firstChild);
-      }
-    });
-  }
-
-  function state(name, o){
-    const role = data.roles[name] || 'unknown';
-    if (role !== 'target') return role;
-    const goal = data.goals[name];
-    if (goal === undefined) return 'target';
-    return (o.on === goal && !o.held_by) ? 'target placed' : 'target unplaced';
-  }
-
-  function draw(i){
-    if (!frames.length) return;
-    i = Math.max(0, Math.min(last, i));
-    current = i;
-    slider.value = i;
-    const f = frames[i];
-    label.textContent = (i === 0 ? 'start, ' : '') + 'tick ' + f.tick + ' (frame ' + (i + 1) + '/' + frames.length + (i === last ? ', the end' : '') + ')';
-    label.dataset.tick = f.tick; label.dataset.frame = i;
-    let out = '';
-    // open containers
-    document.querySelectorAll('#static .container, #static .open-footprint').forEach(el => {
-      const name = el.dataset.name || el.dataset.for;
-      el.classList.toggle('is-open', !!f.open[name]);
-    });
-    // paths up to this frame: a navigate's planned route where its result carries one, else straight
-    for (const r of data.robots){
-      const pts = [];
-      let routed = 0;
-      const add = (x, y) => { const s = px(x) + ',' + py(y); if (pts[pts.length - 1] !== s) pts.push(s); };
-      for (let k = 0; k <= i; k++){
-        const p = frames[k].robots[r];
-        if (!p) continue;
-        if (k > 0) for (const g of frames[k].goals){
-          const c = data.calls[g], route = data.routes[g];
-          if (c && c.robot === r && route){ route.forEach(q => add(q[0], q[1])); routed++; }
-        }
-        add(p.x, p.y);
-      }
-      if (pts.length > 1) out += '<polyline class="path" data-robot="' + esc(r) + '" data-routes="' + routed + '" stroke="' + data.colors[r] + '" points="' + pts.join(' ') + '"/>';
-    }
-    // messages sent in this frame's tick: sender -> receiver
-    for (const m of data.messages){
-      if (m.frame !== i) continue;
-      const a = f.robots[m.sender], b = f.robots[m.to];
-      if (!a || !b) continue;
-      out += '<line class="msgline" stroke="' + (data.colors[m.sender] || '#555') + '" x1="' + px(a.x) + '" y1="' + py(a.y) + '" x2="' + px(b.x) + '" y2="' + py(b.y) + '"><title>' + esc(m.sender + ' -> ' + m.to + ': ' + m.content) + '</title></line>';
-      out += '<circle r="5" fill="' + (data.colors[m.sender] || '#555') + '" cx="' + px(b.x) + '" cy="' + py(b.y) + '"/>';
-    }
-    // objects, styled by role: a target on its goal, a target elsewhere, a distractor
-    const objs = [], labels = [];
-    for (const [name, o] of Object.entries(f.objects)){
-      const st = state(name, o);
-      let cls = 'obj ' + st;
-      if (o.held_by && f.robots[o.held_by]) cls += ' held';
-      if (o.inside) cls += ' inside';
-      const x = px(o.x), y = py(o.y), rad = st.startsWith('target') ? 6 : 4.5;
-      const where = o.held_by ? 'held by ' + o.held_by : (o.on ? (o.inside ? 'in ' : 'on ') + o.on : 'on the floor');
-      const role = st === 'target placed' ? 'target, placed' : st === 'target unplaced' ? 'target, not placed' : st;
-      out += '<g class="object" data-name="' + esc(name) + '" data-role="' + esc(st) + '">'
-        + (i === last && st === 'target unplaced' ? '<circle class="ring" r="11" cx="' + x + '" cy="' + y + '"/>' : '')
-        + '<circle class="' + cls + '" r="' + rad + '" cx="' + x + '" cy="' + y + '"><title>' + esc(name + ' (' + role + '): ' + where) + '</title></circle></g>';
-      labels.push({text: name, cls: 'oname ' + st, x: parseFloat(x), y: parseFloat(y), r: i === last && st === 'target unplaced' ? 11 : rad, name: name, order: st === 'target unplaced' ? 1 : st.startsWith('target') ? 2 : 3});
-      objs.push('<li class="' + esc(st) + '"><b>' + esc(name) + '</b> <span class="dim">' + esc(role) + '</span>: ' + esc(where) + '</li>');
-    }
-    // robots
-    for (const r of data.robots){
-      const p = f.robots[r];
-      if (!p) continue;
-      const c = data.colors[r], x = px(p.x), y = py(p.y), yaw = p.yaw || 0;
-      const hx = (parseFloat(x) + Math.cos(yaw) * 16).toFixed(1), hy = (parseFloat(y) - Math.sin(yaw) * 16).toFixed(1);
-      out += '<g class="robot" data-robot="' + esc(r) + '" data-x="' + p.x + '" data-y="' + p.y + '">'
-        + '<circle r="10" cx="' + x + '" cy="' + y + '" fill="' + c + '" fill-opacity=".85" stroke="#000"/>'
-        + '<line x1="' + x + '" y1="' + y + '" x2="' + hx + '" y2="' + hy + '" stroke="#000" stroke-width="2.5"/></g>';
-      labels.push({text: r + (p.holding ? ' [' + p.holding + ']' : ''), cls: 'rname', fill: c, x: parseFloat(x), y: parseFloat(y), r: 11, name: r, order: 0});
-    }
-    dyn.innerHTML = out + '<g id="labels"></g>';
-    labels.sort((a, b) => a.order - b.order);
-    layoutLabels(labels, document.getElementById('labels'));
-    // what just happened
-    const steps = f.goals.map(g => data.calls[g]).filter(Boolean)
-      .map(c => '<li><b style="color:' + data.colors[c.robot] + '">' + esc(c.robot) + '</b> ' + esc(c.call) + (c.ok ? ' &#10003;' : ' &#10007;') + '</li>');
-    document.getElementById('frame-steps').innerHTML = steps.length ? '<b>executed:</b><ul>' + steps.join('') + '</ul>' : '<b>executed:</b> nothing (start)';
-    document.getElementById('frame-objects').innerHTML = objs.length ? '<b>objects:</b><ul>' + objs.join('') + '</ul>' : '';
-    // lanes and messages follow the slider: the step of this frame is current, later ones are future
-    document.querySelectorAll('.step').forEach(el => {
-      const fr = el.dataset.frame === undefined ? null : parseInt(el.dataset.frame, 10);
-      el.classList.toggle('current', fr === i);
-      el.classList.toggle('future', fr !== null && fr > i);
-    });
-    document.querySelectorAll('.lane').forEach(lane => {
-      const cur = lane.querySelector('.step.current');
-      if (cur) lane.scrollTop = cur.offsetTop - lane.offsetTop - 40;
-    });
-    document.querySelectorAll('tr.msg').forEach(el => el.classList.toggle('current', el.dataset.frame !== undefined && parseInt(el.dataset.frame, 10) === i));
-  }
-
-  slider.addEventListener('input', () => draw(parseInt(slider.value, 10)));
-  document.getElementById('prev').addEventListener('click', () => draw(current - 1));
-  document.getElementById('next').addEventListener('click', () => draw(current + 1));
-  document.addEventListener('keydown', e => {
-    if (e.target === slider) return;  // the slider moves itself and fires input
-    const t = e.target.tagName;
-    if (t === 'INPUT' || t === 'TEXTAREA') return;
-    if (e.key === 'ArrowRight') { draw(current + 1); e.preventDefault(); }
-    if (e.key === 'ArrowLeft') { draw(current - 1); e.preventDefault(); }
-    if (e.key === 'Home') { draw(0); e.preventDefault(); }
-    if (e.key === 'End') { draw(last); e.preventDefault(); }
-  });
-  document.querySelectorAll('.step[data-frame]').forEach(el => el.addEventListener('click', ev => {
-    if (ev.target.closest('details')) return;
-    draw(parseInt(el.dataset.frame, 10));
-  }));
-  draw(last);  // the page opens on the end: the state the episode was judged on
-})();
 """

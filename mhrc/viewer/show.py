@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from mhrc.core.diagnostics import diagnose
 from mhrc.viewer.load import load_trace, resolve
 from mhrc.viewer.model import build_view
 from mhrc.viewer.page import render_page
@@ -12,8 +13,6 @@ from mhrc.viewer.page import render_page
 
 def diagnostics_for(rows: list[dict[str, Any]]) -> tuple[dict[str, Any] | None, str | None]:
     """mhrc.core.diagnostics' findings for the failure panel, or why there are none."""
-    from mhrc.core.diagnostics import diagnose
-
     try:
         result = diagnose(rows).as_dict()
     except Exception as exc:  # a diagnosis that fails must not cost the user the report

@@ -23,6 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from mhrc.world.layouts import get_layout
+from mhrc.world.tasks import get_task
+
 from mhrc.viewer.load import LoadedTrace
 
 
@@ -80,9 +83,6 @@ def _observations(trace: LoadedTrace) -> list[dict[str, Any]]:
 def _generated(started: dict[str, Any]) -> tuple[dict[str, tuple[bool, str | None]], str | None]:
     """name -> (target, goal) from the task's generator, or why not."""
     try:
-        from mhrc.world.layouts import get_layout
-        from mhrc.world.tasks import get_task
-
         task = get_task(str(started["task"]))
         placements = task.generate(get_layout(str(started["scene"])), int(started["seed"]), int(started["n_objects"]))
     except Exception as exc:  # an unknown task or scene, an older trace: the page says the goals are unknown
