@@ -1,0 +1,123 @@
+"""A MkDocs hook: benchmark figures come from `bench/results/*.json` when the site is built.
+
+A page writes a placeholder where a figure or a table belongs, never the number itself, so
+the site always shows what the last benchmark run wrote:
+
+    <!-- bench: bus:in_process.result_ms_p50 -->           one value, inline
+    <!-- bench: bus -->                                      a table of the file's dict rows
+    <!-- bench: eval_grid:runs | fidelity | Succ=all.succ | TS=all.ts -->   chosen columns
+
+`NAME` is a file of `bench/results/` without `.json`; the optional `:PATH` is a dotted path into
+it (list items by index: `models.0.runs`). A value renders inline. A dict or list renders as
+a table, one row per member that is a dict; without columns, every scalar field of the rows
+is a column; with columns (`| FIELD` or `| HEADER=FIELD`, dotted paths inside a row), those.
+A dict with no dict member is one record: one row of the columns, or without them a table of
+field and value.
+Each table says which file it came from. A placeholder that names a missing file, path or
+field is a warning, which fails `mkdocs build --strict`. (`bench/report.py` only writes the
+JSON; the tables are made here.)
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from pathlib import Path
+from typing import Any
+
+RESULTS = Path(__file__).resolve().parents[2] / "bench" / "results"
+PLACEHOLDER = re.compile(r"<!--\s*bench:\s*(?P<spec>.*?)\s*-->")
+log = logging.getLogger("mkdocs.hooks.bench")
+
+
+class BenchError(ValueError):
+    """A placeholder that does not name a figure of the results."""
+
+
+def fmt(value: Any) -> str:
+    """One cell: floats rounded for reading (the JSON keeps every digit), lists joined."""
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        if abs(value) >= 100:
+            return f"{value:.1f}"
+        if abs(value) >= 1:
+            return f"{value:.2f}".rstrip("0").rstrip(".")
+        return f"{value:.3g}"
+    if isinstance(value, list):
+        return ", ".join(fmt(v) for v in value) if value else "-"
+    return str(value).replace("|", "\\|").replace("\n", " ")
+
+
+def lookup(data: Any, path: str, where: str) -> Any:
+    """The member at a dotted path (list items by index); None where the path passes a null."""
+    node = data
+    for part in [p for p in path.split(".") if p]:
+        if node is None:  # a record without this measure (e.g. no first token when not streamed)
+            return None
+        if isinstance(node, dict) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        else:
+            raise BenchError(f"{where}: no {part!r} in {path!r}")
+    return node
+
+
+def table(node: Any, columns: list[tuple[str, str]], label: str, where: str) -> str:
+    """A markdown table of the dict members of `node`, one row each."""
+    items = list(node.items()) if isinstance(node, dict) else [(None, v) for v in node]
+    rows = [(key, row) for key, row in items if isinstance(row, dict)]
+    if not rows and isinstance(node, dict):  # one record: a row of the chosen fields, or field | value
+        if columns:
+            return table([node], columns, label, where)
+        return "\n".join(["| field | value |", "| --- | --- |", *(f"| {k} | {fmt(v)} |" for k, v in items)])
+    if not rows:
+        raise BenchError(f"{where}: nothing to tabulate (no member is an object)")
+    if not columns:
+        names: dict[str, None] = {}
+        for _, row in rows:
+            names.update({k: None for k, v in row.items() if not isinstance(v, dict)})
+        columns = [(name, name) for name in names]
+    keyed = isinstance(node, dict)
+    header = ([label] if keyed else []) + [h for h, _ in columns]
+    lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    for key, row in rows:
+        cells = [fmt(lookup(row, field, f"{where} row {key!r}")) for _, field in columns]
+        lines.append("| " + " | ".join(([str(key)] if keyed else []) + cells) + " |")
+    return "\n".join(lines)
+
+
+def render(spec: str, results: Path = RESULTS) -> str:
+    """The markdown for one placeholder's `spec` (what follows `bench:`)."""
+    head, *cols = [part.strip() for part in spec.split("|")]
+    name, _, path = head.partition(":")
+    name = name.strip()
+    source = results / f"{name}.json"
+    where = f"bench/results/{name}.json"
+    if not name or not source.is_file():
+        raise BenchError(f"no benchmark results {where} (placeholder {spec!r})")
+    node = lookup(json.loads(source.read_text()), path.strip(), where)
+    if not isinstance(node, (dict, list)) or (isinstance(node, list) and not any(isinstance(v, dict) for v in node)):
+        if cols:
+            raise BenchError(f"{where}: {path!r} is a value, not a table; drop the columns")
+        return fmt(node)
+    columns = [(h.strip(), f.strip()) if sep else (c, c) for c in cols for h, sep, f in [c.partition("=")]]
+    label = path.strip().split(".")[-1] if path.strip() else ""
+    return f"{table(node, columns, label, where)}\n\n*From `{where}`{f' (`{path.strip()}`)' if path.strip() else ''}.*"
+
+
+def on_page_markdown(markdown: str, page: Any, **kwargs: Any) -> str:
+    """MkDocs' hook: replace every placeholder of the page; a bad one is a warning (strict fails)."""
+
+    def replace(match: re.Match[str]) -> str:
+        try:
+            return render(match.group("spec"))
+        except (BenchError, ValueError) as exc:
+            log.warning("%s: %s", page.file.src_path, exc)
+            return f"**(benchmark figure missing: {exc})**"
+
+    return PLACEHOLDER.sub(replace, markdown)
