@@ -15,7 +15,7 @@ from mhrc.run.inprocess import up_in_process
 from mhrc.core.fidelity import AIDS, label, parse_aids
 from mhrc.core.protocol import ActionResult, SkillOutcome, Wait
 from mhrc.core.trace import read_trace
-from mhrc.world import skills
+from mhrc.world.skills import reaching
 from mhrc.world.robots import ARM_FORWARD
 from mhrc.world.sim import Sim
 
@@ -67,7 +67,7 @@ def test_alices_prompt_gives_the_simulators_real_picking_distances() -> None:
     good = re.search(r"object ([0-9.]+) to ([0-9.]+) m \(horizontally\) from your arm base", text)
     assert ahead and good, "the prompt must say where the arm base is and the good picking range"
     assert float(ahead.group(1)) == pytest.approx(ARM_FORWARD)
-    assert (float(good.group(1)), float(good.group(2))) == pytest.approx(skills.IDEAL_PICK)
+    assert (float(good.group(1)), float(good.group(2))) == pytest.approx(reaching.IDEAL_PICK)
 
 
 def test_histories_are_whole_by_default_and_capped_only_on_request() -> None:

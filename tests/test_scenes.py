@@ -242,7 +242,7 @@ def test_alice_opens_every_container_and_empties_every_slot(scene: str) -> None:
             placed = short[-len(spec.slots) :]  # the tallest that fit
             for obj, slot in zip(placed, spec.slots):
                 obj.on, obj.inside, obj.local, obj.held_by = f.name, True, slot, None
-                sim._follow_container(obj)
+                sim.world.follow_container(obj)
                 sim.known["alice"].add(obj.name)
             assert sim.execute("alice", Navigate(target=f.name, stand_pose=0)).succeeded, f.name
             out = sim.execute("alice", Open(target=f.name))
@@ -253,7 +253,7 @@ def test_alice_opens_every_container_and_empties_every_slot(scene: str) -> None:
                 assert out.succeeded, (f.name, obj.local, out.feedback)
                 alice.release()  # drop it out of the way
                 obj.held_by, obj.on = None, "nowhere"
-                sim._rest(obj, 50.0, 50.0, 0.0)
+                sim.world.rest(obj, 50.0, 50.0, 0.0)
                 alice.set_arm(HOME)
 
 
@@ -269,9 +269,9 @@ def test_bob_picks_from_his_near_slots_and_not_from_his_far_ones(scene: str) -> 
                 for other in sim.objects.values():  # nothing else in the way
                     if other is not obj and other.on == lay.bob_table:
                         other.on = "nowhere"
-                        sim._rest(other, 50.0, 50.0, 0.0)
+                        sim.world.rest(other, 50.0, 50.0, 0.0)
                 obj.on, obj.inside = lay.bob_table, False
-                sim._rest(obj, x, y, table.top)
+                sim.world.rest(obj, x, y, table.top)
                 out = sim.execute("bob", Pick(obj=obj.name))
                 assert out.succeeded == can, ((x, y), out.feedback)
                 if can:

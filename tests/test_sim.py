@@ -231,7 +231,7 @@ def test_drawer_opens_for_real_and_contents_wait_for_it(sim: Sim) -> None:
         unit = next(g for g in sim.layout.furniture if g.drawer is not None and g.drawer.max_object_height >= inside.kind.height)
         assert unit.drawer is not None
         inside.on, inside.local = unit.name, unit.drawer.slots[0]
-        sim._follow_container(inside)
+        sim.world.follow_container(inside)
     drawer = inside.on or ""
     spec = sim.layout.get(drawer)
     assert spec is not None and spec.drawer is not None, f"{inside.name} is in {drawer}, not in a drawer"
@@ -266,7 +266,7 @@ def test_a_chest_lid_swings_up_on_its_hinge_and_shows_what_is_inside(scene: str,
     with Sim(task="pack_objects", scene=scene, seed=0, n_objects=6, aids=("exact_motion",)) as sim:
         obj = next(o for o in sim.objects.values() if not o.inside)  # put one object in the chest
         obj.on, obj.inside, obj.local = chest, True, (0.0, -0.05)
-        sim._follow_container(obj)
+        sim.world.follow_container(obj)
         sim.known["alice"].add(obj.name)
         assert sim.position(obj)[2] < sim.layout.get(chest).top  # type: ignore[union-attr]
         body, joint = sim.scene.bodies[chest], sim.scene.joints[chest]

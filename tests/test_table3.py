@@ -22,7 +22,7 @@ import pybullet as p
 import pytest
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.world import feedback as fb
-from mhrc.world import skills
+from mhrc.world.skills import navigation
 from mhrc.world.robots import KINDS
 from mhrc.world.sim import Sim
 
@@ -480,7 +480,7 @@ def table3_cases(aids: tuple[str, ...]) -> tuple[list[Case], set[str], set[str]]
             assert spec is not None and spec.drawer is not None
             obj = next(o for o in sim.objects.values() if not o.inside and o.name not in (near, far))
             obj.on, obj.inside, obj.local = container, True, spec.drawer.slots[0]
-            sim._follow_container(obj)
+            sim.world.follow_container(obj)
             inside = [obj]
         hidden = inside[0].name
         # any skill
@@ -535,7 +535,7 @@ def table3_cases(aids: tuple[str, ...]) -> tuple[list[Case], set[str], set[str]]
         case("place: out of a fixed arm's reach", "bob", Place(obj=near, location="table_1"), OutcomeCode.TOO_FAR)
     # navigation off target: the first noise draw a slip (the seeded noise of a real episode, chosen)
     with Sim(seed=1, n_objects=4, aids=aids) as sim:
-        slips = [k for k in range(2000) if (d := np.random.default_rng(k).random(3))[0] < skills.NAV_SLIP_P and d[1] > 0.5]
+        slips = [k for k in range(2000) if (d := np.random.default_rng(k).random(3))[0] < navigation.NAV_SLIP_P and d[1] > 0.5]
         for k in slips:
             sim.rng = np.random.default_rng(k)
             out = sim.execute("david", Navigate(target="sofa"))
@@ -600,7 +600,7 @@ def test_bob_is_never_too_far_from_what_lies_within_his_reach(scene: str) -> Non
                 x, y = ab[0] + d * math.cos(ang), ab[1] + d * math.sin(ang)
                 if not table.contains_xy(x, y) or sim.fixture_at(x, y) is not None or not sim.within_handover((x, y)):
                     continue
-                sim._rest(obj, x, y, top)
+                sim.world.rest(obj, x, y, top)
                 obj.on, obj.held_by = "table_0", None
                 sim.learn("bob", [obj.name])
                 out = sim.execute("bob", Pick(obj=obj.name))

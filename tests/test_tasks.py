@@ -13,7 +13,8 @@ from typing import Any
 import pytest
 from mhrc.world.layouts import SCENES_DIR, LayoutError, get_layout, load_layout, parse_layout
 from mhrc.world.scene import LAYOUTS
-from mhrc.world.tasks import COLORS, MENUS, TASKS, ObjectKind, Placement, Seen, get_task
+from mhrc.world.colors import PANEL_COLORS as COLORS
+from mhrc.world.tasks import MENUS, TASKS, ObjectKind, Placement, Seen, get_task
 
 from mhrc.run.config import ConfigError, EpisodeConfig
 
@@ -113,10 +114,10 @@ def test_sort_task_text_lists_solids_and_panels_but_not_which_goes_where() -> No
     solids, _ = _kinds("sort_solids", n=5)
     names = [k.name for k in solids]
     goals = {k.name: sort.goal(k) for k in solids}
-    text = sort.detail("bob", names, goals)
+    text = sort.detail(True, names, goals)  # as the robot that finishes the task (Bob) is told it
     assert all(n in text for n in names) and all(f"{c}_panel" in text for c in COLORS)
     assert " onto " not in text and not any(f"{n} onto" in text or f"{n} on {goals[n]}" in text for n in names)
-    assert f"{names[0]} onto {goals[names[0]]}" in sort.detail("bob", names, goals, frozenset({"goal_map"}))
+    assert f"{names[0]} onto {goals[names[0]]}" in sort.detail(True, names, goals, frozenset({"goal_map"}))
 
 
 def test_pack_evaluate() -> None:

@@ -3,8 +3,8 @@
 "Scene graphs are updated from the robot's own observations and the messages it receives":
 a robot's belief of an object (where it lies, what it is on or in, who holds it) and of a
 container (open or closed) is what it last saw or was last told, never the live truth. The
-store reads nothing of the simulator: `Sim` hands it what a robot sees (`see`, `note`) and
-what a message carries (`told`), and `Sim.observe` reads it back.
+store reads nothing of the simulator: observe.Knowledge hands it what a robot sees (`see`,
+`note`) and what a message carries (`told`), and observe.observation reads it back.
 
 Every belief carries a stamp, the moment (an episode-wide counter) its content was seen, so
 a message only replaces what the receiver knows with something newer.

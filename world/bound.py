@@ -23,12 +23,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
+from .physics import PhysicalWorld
 from .robots import MAX_ARM_RANGE
-
-if TYPE_CHECKING:
-    from .sim import Sim
 
 
 @dataclass(frozen=True)
@@ -56,15 +53,15 @@ def lower_bound(ep: SymbolicEpisode) -> int:
     return max(alice, math.ceil(arms / 2))
 
 
-def symbolic_episode(sim: Sim) -> SymbolicEpisode:
-    """The relaxation of a freshly built episode, read from the simulator's ground truth."""
-    bob = sim.bots.get("bob")
-    base = bob.arm_base() if bob is not None else None
+def symbolic_episode(world: PhysicalWorld, targets: list[str]) -> SymbolicEpisode:
+    """The relaxation of a freshly built episode, read from its ground truth."""
+    fin = world.finisher()  # the arm on Bob's table
+    base = fin.arm_base() if fin is not None else None
     objs = []
-    for name in sim.targets:
-        o = sim.objects[name]
-        x, y, _ = sim.position(o)
-        on_table = sim.on_bob_table(o.on)
+    for name in targets:
+        o = world.objects[name]
+        x, y, _ = world.position(o)
+        on_table = world.on_bob_table(o.on)
         reach = base is not None and on_table and math.hypot(x - base[0], y - base[1]) <= MAX_ARM_RANGE
         objs.append(SymbolicObject(name, o.on or "", o.inside, on_table, reach))
     return SymbolicEpisode(tuple(objs))

@@ -15,7 +15,8 @@ import pybullet_data
 from . import assets
 from .assets import AssetDir, Color
 from .astar import Grid
-from .layouts import LAYOUTS, DrawerSpec, FurnitureSpec, Layout, LayoutError, door_sweep, get_layout, load_layout
+from .furniture import DrawerSpec, FurnitureSpec, Layout, door_sweep
+from .layouts import LAYOUTS, LayoutError, get_layout, load_layout
 
 __all__ = ["LAYOUTS", "DrawerSpec", "FurnitureSpec", "Layout", "LayoutError", "get_layout", "load_layout"]
 

@@ -2,7 +2,9 @@
 runs the actions in the simulator and publishes results, messages and events.
 
 When actions run and results go out is the time policy's (`WorldConfig.schedule`, one of
-world.schedulers.SCHEDULERS; DESIGN.md, "Time"); this module keeps the bus plumbing.
+world.schedulers.SCHEDULERS; DESIGN.md, "Time"); this module keeps the episode's lifecycle and
+the bus plumbing. Who may drive which robot is the roster's (roster.py); the robots' messages
+wait in the mailroom until delivered (mail.py).
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import contextlib
 import json
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -30,7 +32,6 @@ from mhrc.core.protocol import (
     AttachReply,
     AttachRequest,
     Communicate,
-    EPISODE_OVER,
     EpisodeDone,
     EpisodeStarted,
     FurnitureView,
@@ -55,6 +56,8 @@ from mhrc.core.protocol import (
     decode,
 )
 
+from .mail import Mailroom
+from .roster import Roster
 from .schedulers import Executed, Scheduler, TaskResultLike, make_scheduler
 
 log = structlog.get_logger("mhrc.world")
@@ -127,13 +130,9 @@ class WorldService:
         self.keys = Keys(config.run)
         self.started = False
         self.done: EpisodeDone | None = None
-        self.attached: dict[str, str] = {}  # robot -> agent id
-        self._sessions: dict[str, str] = {}  # robot -> the attaching session's secret (its attach query's `session` parameter)
-        self._inbox: dict[str, list[RobotMessage]] = {r: [] for r in sim.robots}
-        # what messages tell their receivers' scene graphs: fixed when sent (sim.message), learned
-        # only once delivered (a robot acting later in the same sequential tick must not know it yet)
-        self._sent: dict[str, list[Callable[[], None]]] = {r: [] for r in sim.robots}
-        self._due: list[Callable[[], None]] = []  # delivered, applied at the simulator's next use (its thread, its lock)
+        self._log = log.bind(run=config.run)
+        self.roster = Roster(sim.robots, self._log)  # which agent drives which robot
+        self.mail = Mailroom(sim.robots, sim.message)  # the robots' messages, held until delivered
         self._tally = _Tally()
         self._bound = sim.lower_bound()
         self._sim_lock = asyncio.Lock()
@@ -141,16 +140,19 @@ class WorldService:
         self._t0 = 0.0
         self._evaluation: TaskResultLike = sim.evaluate()
         self._last_results: dict[str, str] = {}  # robot -> goal id of the last result released to it
-        self._log = log.bind(run=config.run)
         self._throttle = Throttle(interval=5.0)  # warnings about junk from the bus
         self._token_checks: set[asyncio.Task[None]] = set()
-        self._tokens: set[str] = set()  # robots whose liveliness token is declared now
         self.scheduler: Scheduler = make_scheduler(config.schedule, self, time_scale=config.time_scale)
 
     @property
     def tick(self) -> int:
         """The scheduler's clock."""
         return self.scheduler.tick
+
+    @property
+    def attached(self) -> dict[str, str]:
+        """Robot -> agent id, for the robots attached now."""
+        return self.roster.attached
 
     # ------------------------------------------------------------------ running
     async def run(self) -> EpisodeDone:
@@ -238,11 +240,11 @@ class WorldService:
         evaluation and every acting robot's observation of tick + 1 (with `deliver`, after the
         messages sent in the batch reached their receivers' scene graphs: lockstep delivers them
         with these observations)."""
-        self._learn()
+        self.mail.learn()
         outcomes = [self._execute(req, tick) for req in batch]
         if deliver:
-            self._deliver_told(self.sim.robots)
-            self._learn()
+            self.mail.delivered(self.sim.robots)
+            self.mail.learn()
         evaluation = self.sim.evaluate()
         observations = {req.robot: self._present(self.sim.observe(req.robot, tick + 1)) for req in batch}
         return Executed(outcomes, evaluation, observations), self._snapshot(tick, [req.goal_id for req in batch])
@@ -267,8 +269,7 @@ class WorldService:
             return SkillOutcome.fail(
                 OutcomeCode.RECIPIENT_UNKNOWN, f"There is no teammate called {action.to!r}; you can message {others}."
             )
-        self._inbox[action.to].append(RobotMessage(sender=req.robot, to=action.to, content=action.content, tick=tick))
-        self._sent[action.to].append(self.sim.message(action.to, req.robot, action.content))
+        self.mail.send(req.robot, action.to, action.content, tick)
         self._tally.messages += 1
         return SkillOutcome.ok(f"Your message to {action.to} was sent.")
 
@@ -339,20 +340,8 @@ class WorldService:
             return self._present(await asyncio.to_thread(self._observe, robot, tick))
 
     def _observe(self, robot: str, tick: int) -> Observation:
-        self._learn()
+        self.mail.learn()
         return self.sim.observe(robot, tick)
-
-    def _deliver_told(self, robots: Iterable[str]) -> None:
-        """The messages to `robots` are delivered: what they tell becomes due."""
-        for r in robots:
-            self._due += self._sent[r]
-            self._sent[r] = []
-
-    def _learn(self) -> None:
-        """Apply what delivered messages tell (in the simulator's thread, holding its lock)."""
-        due, self._due = self._due, []
-        for learn in due:
-            learn()
 
     def _present(self, obs: Observation) -> Observation:
         """The observation with the teammates attached now: a teammate whose agent left is not
@@ -365,16 +354,14 @@ class WorldService:
         return obs if len(present) == len(obs.teammates) else obs.model_copy(update={"teammates": present})
 
     def deliver_messages(self) -> dict[str, list[RobotMessage]]:
-        self._deliver_told(self.sim.robots)
-        delivered = {r: self._inbox[r] for r in self.sim.robots}
-        self._inbox = {r: [] for r in self.sim.robots}
+        delivered = self.mail.take_all()
         for msgs in delivered.values():
             for m in msgs:
                 self.bus.put(self.keys.inbox(m.to, m.sender), m)
         return delivered
 
     def hold_messages(self, robot: str, messages: Sequence[RobotMessage]) -> None:
-        self._inbox[robot] = list(messages) + self._inbox[robot]
+        self.mail.hold(robot, messages)
 
     def release(self, results: Sequence[ActionResult]) -> None:
         self._last_results.update((r.robot, r.goal_id) for r in results)
@@ -395,27 +382,11 @@ class WorldService:
         except ProtocolError as exc:
             self._log.warning("malformed attach request rejected", robot=robot, reason=str(exc))
             return AttachReply(robot=robot, accepted=False, reason=f"malformed attach request: {exc}")
-        if req.robot != robot:
-            return AttachReply(robot=robot, accepted=False, reason=f"attach for {req.robot!r} sent on the key of {robot!r}")
-        if robot not in self.sim.robots:
-            return AttachReply(robot=robot, accepted=False, reason=f"there is no robot {robot!r} in this episode ({', '.join(self.sim.robots)})")
-        if self.done is not None:
-            return AttachReply(robot=robot, accepted=False, reason=EPISODE_OVER)
-        holder = self.attached.get(robot)
         session = params.get("session", "")
-        if holder is not None and holder != req.agent_id:
-            self._log.warning("duplicate attach rejected", robot=robot, agent=req.agent_id)
-            return AttachReply(robot=robot, accepted=False, reason=f"robot {robot} is already attached to another agent ({holder})")
-        if holder is not None and self._sessions.get(robot, "") != session:
-            # the live agent's id, from another session: a copy, never a second driver of one robot
-            self._log.warning("duplicate attach with a live agent's id rejected", robot=robot, agent=req.agent_id)
-            return AttachReply(
-                robot=robot, accepted=False,
-                reason=f"robot {robot} is already attached to a live agent with id {holder} in another session",
-            )  # fmt: skip
-        self.attached[robot] = req.agent_id
-        self._sessions[robot] = session
-        if holder is None:  # said now, before the await below, during which the episode may start
+        refused = self.roster.refuse_attach(robot, req, session, over=self.done is not None)
+        if refused is not None:
+            return AttachReply(robot=robot, accepted=False, reason=refused)
+        if self.roster.attach(robot, req.agent_id, session):  # said now, before the await below, during which the episode may start
             self.bus.put(self.keys.world_event, RobotAttached(robot=robot, agent_id=req.agent_id, tick=self.tick))
             self._log.info("robot attached", robot=robot, agent=req.agent_id, tick=self.tick)
             check = asyncio.create_task(self._expect_token(robot, req.agent_id), name=f"token-{robot}")
@@ -425,10 +396,9 @@ class WorldService:
         wait_turn = self.scheduler.on_attach(robot)
         tick = self.scheduler.tick_of(robot)
         if not wait_turn:
-            self._deliver_told([robot])  # its waiting messages come with this observation
+            self.mail.delivered([robot])  # its waiting messages come with this observation
             obs = await self.observe(robot, tick)
-            obs = obs.model_copy(update={"new_messages": self._inbox[robot]})
-            self._inbox[robot] = []
+            obs = obs.model_copy(update={"new_messages": self.mail.take(robot)})
         self._wake.set()
         return AttachReply(robot=robot, accepted=True, tick=tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn)
 
@@ -442,27 +412,13 @@ class WorldService:
                 self._log.warning("malformed action request rejected", robot=robot, reason=str(exc), **({"and_before": held} if held else {}))
             self._reject(robot, _goal_id_of(sample.payload), Rejection(RejectCode.MALFORMED, f"malformed action request: {exc}"))
             return
-        rejection = self._check_request(robot, req) or self.scheduler.admit(req)  # admit only what passed the checks
+        rejection = self.roster.check_request(robot, req, over=self.done is not None) or self.scheduler.admit(req)  # admit only what passed the checks
         if rejection is not None:
             self._log.info("action rejected", robot=robot, goal=req.goal_id, reason=rejection.reason, code=rejection.code.value)
             self._reject(robot, req.goal_id, rejection)
             return
         self.bus.put(self.keys.action_ack(robot), ActionAck(goal_id=req.goal_id, robot=robot, accepted=True))
         self._wake.set()
-
-    def _check_request(self, robot: str, req: ActionRequest) -> Rejection | None:
-        if req.robot != robot:
-            return Rejection(RejectCode.WRONG_KEY, f"request for {req.robot!r} sent on the key of {robot!r}")
-        if robot not in self.sim.robots:
-            return Rejection(RejectCode.NO_SUCH_ROBOT, f"there is no robot {robot!r} in this episode ({', '.join(self.sim.robots)})")
-        if self.done is not None:
-            return Rejection(RejectCode.EPISODE_OVER, EPISODE_OVER)
-        holder = self.attached.get(robot)
-        if holder is None:
-            return Rejection(RejectCode.NOT_ATTACHED, f"robot {robot} is not attached: attach first")
-        if holder != req.agent_id:
-            return Rejection(RejectCode.OTHER_AGENT, f"robot {robot} is attached to another agent")
-        return None
 
     def _reject(self, robot: str, goal_id: str, rejection: Rejection) -> None:
         if robot in self.sim.robots:
@@ -472,9 +428,9 @@ class WorldService:
     def _on_liveliness(self, sample: Sample) -> None:
         robot = self.keys.robot_of(sample.key)
         if sample.is_put:
-            self._tokens.add(robot)
+            self.roster.tokens.add(robot)
             return
-        self._tokens.discard(robot)
+        self.roster.tokens.discard(robot)
         if robot not in self.attached:
             return
         self._detach(robot, "agent vanished (liveliness lost)")
@@ -485,7 +441,7 @@ class WorldService:
         that skips it) would never be seen to leave: the sequential schedule would wait for its
         turn forever. Detach it; it may attach again."""
         await asyncio.sleep(TOKEN_GRACE)
-        if self.done is not None or self.attached.get(robot) != agent_id or robot in self._tokens:
+        if self.done is not None or self.attached.get(robot) != agent_id or robot in self.roster.tokens:
             return
         if await self.bus.alive(self.keys.alive_robot(robot), timeout=2.0):  # its put may have gone unseen: ask
             return
@@ -493,26 +449,15 @@ class WorldService:
             self._detach(robot, f"its agent declared no liveliness token ({self.keys.alive_robot(robot)}) within {TOKEN_GRACE:.0f} s of attaching")
 
     def _detach(self, robot: str, why: str) -> None:
-        agent_id = self.attached.pop(robot)
+        agent_id = self.roster.detach(robot)
         self.scheduler.forget(robot)
         if self.done is not None:
             return  # agents leaving after the episode: nothing to report
-        stranded = self._stranded()
+        stranded = self.roster.stranded(self.sim.finishers(), self.sim.capabilities)
         self._log.warning("robot detached", robot=robot, tick=self.tick, why=why, **({"stranded": stranded} if stranded else {}))
         reason = why + (f"; {stranded} unless an agent attaches again" if stranded else "")
         self.bus.put(self.keys.world_event, RobotDetached(robot=robot, tick=self.tick, reason=reason, agent_id=agent_id))
         self._wake.set()
-
-    def _stranded(self) -> str:
-        """Why the robots attached now cannot finish the task on their own, or ""."""
-        left = set(self.attached)
-        finishers = self.sim.finishers()
-        if finishers and not left & finishers:
-            return f"nobody attached can finish the task (only {', '.join(sorted(finishers))} places on the goal fixtures)"
-        fetchers = [r for r in self.sim.robots if {"navigate", "pick"} <= self.sim.capabilities(r)]
-        if fetchers and not left & set(fetchers):
-            return f"nobody attached can fetch objects from the rooms (only {', '.join(fetchers)} navigates and picks)"
-        return ""
 
     async def _on_state_query(self, key: str, params: dict[str, str], payload: bytes) -> WorldState:
         async with self._sim_lock:

@@ -17,6 +17,7 @@ from typing import Protocol, TypeVar
 import numpy as np
 
 from .assets import Color, Shape
+from .colors import NO_PANEL_COLORS, PANEL_COLORS
 from .scene import Fixture, Layout
 
 
@@ -83,7 +84,10 @@ class Task(Protocol):
         """Bob's task status as the paper gives it; with the `status_hints` aid, also what is
         missing, next or wrong."""
         ...
-    def detail(self, robot: str, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str: ...
+    def detail(self, finisher: bool, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        """The task as one robot is told it: a robot that finishes the task (`finisher`: its kind's
+        `finishes_task`, the paper's Bob) gets the list, a helper what it is there for."""
+        ...
 
 
 TASKS: dict[str, Task] = {}
@@ -214,24 +218,15 @@ class PackObjects:
             parts.append(f"In the tray but not on the list (take it out): {', '.join(wrong)}.")
         return " ".join(parts)
 
-    def detail(self, robot: str, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
-        if robot == "bob":
+    def detail(self, finisher: bool, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        if finisher:
             return f"Objects to pack: {', '.join(targets)}."
         return "Help Bob pack the listed objects into the tray on table_0: find them, fetch them and hand them over."
 
 
 # --------------------------------------------------------------------------- Sort Solids
 
-COLORS: dict[str, Color] = {
-    "red": (0.85, 0.1, 0.1, 1),
-    "blue": (0.1, 0.25, 0.85, 1),
-    "pink": (0.95, 0.5, 0.7, 1),
-    "green": (0.1, 0.65, 0.2, 1),
-    "yellow": (0.95, 0.85, 0.1, 1),
-    "purple": (0.5, 0.15, 0.65, 1),
-}
 PANEL_SIZE, PANEL_PITCH = 0.1, 0.12
-NO_PANEL: dict[str, Color] = {"orange": (0.95, 0.5, 0.05, 1), "white": (0.95, 0.95, 0.95, 1)}
 SOLIDS: dict[str, tuple[str, tuple[float, float, float]]] = {
     "cube": ("box", (0.05, 0.05, 0.05)),
     "cylinder": ("cylinder", (0.025, 0.025, 0.06)),
@@ -263,17 +258,17 @@ class SortSolids:
     def generate(self, layout: Layout, seed: int, n_objects: int) -> list[Placement]:
         rng = np.random.default_rng(seed)
         shapes = list(SOLIDS)
-        colors = [list(COLORS)[i] for i in rng.permutation(len(COLORS))[:n_objects]]
-        targets = [_solid(c, shapes[int(rng.integers(0, len(shapes)))], COLORS) for c in colors]
+        colors = [list(PANEL_COLORS)[i] for i in rng.permutation(len(PANEL_COLORS))[:n_objects]]
+        targets = [_solid(c, shapes[int(rng.integers(0, len(shapes)))], PANEL_COLORS) for c in colors]
         n_distractors = 1 + int(rng.integers(0, 2))
-        distractors = [_solid(c, shapes[int(rng.integers(0, len(shapes)))], NO_PANEL) for c in list(NO_PANEL)[:n_distractors]]
+        distractors = [_solid(c, shapes[int(rng.integers(0, len(shapes)))], NO_PANEL_COLORS) for c in list(NO_PANEL_COLORS)[:n_distractors]]
         return scatter(layout, rng, targets, distractors)
 
     def fixtures(self, layout: Layout) -> list[Fixture]:
         """Six 10 cm panels, 3 x 2 at a 12 cm pitch, centred in the goal area."""
         cx, cy, _, _ = _goal_area(layout)
         out = []
-        for i, (name, color) in enumerate(COLORS.items()):
+        for i, (name, color) in enumerate(PANEL_COLORS.items()):
             c, r = i % 3, i // 3
             center = (round(cx + (c - 1) * PANEL_PITCH, 4), round(cy + (0.5 - r) * PANEL_PITCH, 4))
             out.append(Fixture(f"{name}_panel", f"{name} panel", center, (PANEL_SIZE, PANEL_SIZE), color, thickness=0.008))
@@ -302,11 +297,11 @@ class SortSolids:
             parts.append(f"On a wrong panel (move it): {', '.join(wrong)}.")
         return " ".join(parts)
 
-    def detail(self, robot: str, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
-        if robot == "bob" and "goal_map" in aids:
+    def detail(self, finisher: bool, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        if finisher and "goal_map" in aids:
             return "Solids to sort: " + ", ".join(f"{t} onto {goals[t]}" for t in targets) + "."
-        if robot == "bob":  # the paper's: the solids and the panels; matching the colours is Bob's job
-            panels = ", ".join(f"{c}_panel" for c in COLORS)
+        if finisher:  # the paper's: the solids and the panels; matching the colours is Bob's job
+            panels = ", ".join(f"{c}_panel" for c in PANEL_COLORS)
             return f"Solids to sort: {', '.join(targets)}. Colour panels on table_0: {panels}."
         return "Help Bob sort the listed solids onto the coloured panels on table_0: find them, fetch them and hand them over."
 
@@ -412,7 +407,7 @@ class MakeSandwich:
             parts.append("The sandwich is complete.")
         return " ".join(parts)
 
-    def detail(self, robot: str, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
-        if robot == "bob":
+    def detail(self, finisher: bool, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        if finisher:
             return f"Menu, bottom to top, on the cutting board: {', '.join(targets)}."
         return "Help Bob make a sandwich on the cutting board on table_0: find the ingredients he asks for, fetch them and hand them over."
