@@ -168,7 +168,7 @@ async def heuristic_sizes() -> dict[str, Any]:
 
     from mhrc.core.protocol import Communicate
 
-    variants = {"paper": {}, "prompt_hints": {"prompt_hints": True}}
+    variants: dict[str, dict[str, Any]] = {"paper": {}, "prompt_hints": {"prompt_hints": True}}
     out: dict[str, Any] = {"episode": HEURISTIC_EPISODE, "steps": list(HEURISTIC_STEPS), "roles": {}}
     with Sim(**HEURISTIC_EPISODE) as sim:  # type: ignore[arg-type]
         robots = sim.robots

@@ -1,4 +1,4 @@
-"""The three schedules side by side (DESIGN.md, "Time"): the same episodes, the same robots' minds,
+"""The three schedules side by side (docs/architecture.md, "Time"): the same episodes, the same robots' minds,
 the same loopback OpenAI-compatible server, measured in one run.
 
 The server's latency differs per robot and per call: Bob 0.5 s, Alice 1.5 s, David 1.0 s, each

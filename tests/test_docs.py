@@ -28,7 +28,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 RUNNABLE = {"bash", "sh", "console", "python"}
-LINKED = ("world", "prompts", "examples", "bench", "docker", "deploy")  # what an example may read from the checkout
+LINKED = ("mhrc", "examples", "bench", "docker", "deploy")  # what an example may read from the checkout
 EXAMPLE_TIMEOUT = 240.0  # s: a bound so that a hung example fails instead of hanging the suite
 FENCE = re.compile(r"^(?P<indent> *)(?P<fence>`{3,}|~{3,})(?P<info>[^`]*)$")
 NOTE = re.compile(r"^<!--\s*(?P<note>.*?)\s*-->$")

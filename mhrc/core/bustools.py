@@ -5,7 +5,7 @@ scouting off, that endpoint only) and closes it in `finally`. Before Zenoh is as
 TCP endpoint is probed with a plain connect, so "nothing listens there" and "something listens
 but it is not zenoh" are told apart in one clear line each (`BusToolError`), never a traceback.
 
-- presence comes from liveliness tokens (DESIGN.md, "The bus"): `mhrc/<run>/alive/world` and
+- presence comes from liveliness tokens (docs/architecture.md, "The bus"): `mhrc/<run>/alive/world` and
   `mhrc/<run>/alive/robot/<rid>`;
 - every message `echo` shows is decoded with `mhrc.core.protocol` by its `kind`; a payload that is
   not JSON or not a valid message is shown as such;

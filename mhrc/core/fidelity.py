@@ -1,6 +1,6 @@
 """Fidelity: an episode is the paper's unless aids are asked for.
 
-By default every robot sees and hears what the paper's robots do (DESIGN.md, "Fidelity"). The
+By default every robot sees and hears what the paper's robots do (docs/architecture.md, "Fidelity"). The
 aids below make the benchmark easier; they are useful for debugging and teaching, so they
 stay, each opt-in by name (`--aids solved_move,goal_map` or `--aids all`), and every trace
 (`episode_started`) and every `episodes.jsonl` row records which ones an episode ran with.

@@ -1,4 +1,4 @@
-"""Zenoh key expressions of the mhrc bus (see DESIGN.md, "The bus").
+"""Zenoh key expressions of the mhrc bus (see docs/architecture.md, "The bus").
 
 Every id is one key chunk of `[a-z0-9_-]+`, so a run id scopes everything below it and many
 runs can share one bus.

@@ -33,7 +33,7 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
   unreachable measured the network, not the method: it is invalid and left out of summaries;
 - fidelity (`paper` or `aids:...`, from `episode_started`; `unrecorded` for traces older than
   the field) and horizon;
-- wall_time (world's measure), lower_bound (world/bound.py, from `episode_started`).
+- wall_time (world's measure), lower_bound (mhrc/world/bound.py, from `episode_started`).
 
 Over episodes, `summarize` takes means (Succ is then the success rate).
 """

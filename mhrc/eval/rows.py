@@ -30,7 +30,7 @@ CI_LEVEL = 0.95
 CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as_ticks": "active_ticks", "as": "action_steps"}
 
 
-# mode: free (the paper's) or structured replies; schedule: the world's time policy (world/schedulers)
+# mode: free (the paper's) or structured replies; schedule: the world's time policy (mhrc/world/schedulers)
 SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule")
 
 

@@ -60,7 +60,8 @@ async def run_agent(
                 policy = LLMPolicy(robot, ReplayClient(llm.removeprefix("replay:"), robot), **policy_options)  # type: ignore[assignment]
             else:
                 if llm.startswith("gguf:"):
-                    llm = (await stack.enter_async_context(local_models({robot: llm}, (client_options or {}).get("seed"))))[robot]
+                    served = await stack.enter_async_context(local_models({robot: llm}, (client_options or {}).get("seed")))
+                    llm = served[robot] or llm  # the spec of the server now serving the file
                 client = make_client(llm, base_url=base_url, **(client_options or {}))
                 stack.push_async_callback(client.aclose)
                 policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]

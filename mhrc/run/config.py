@@ -68,7 +68,7 @@ class EpisodeConfig(BaseModel):
     gui: bool = False
     start_timeout: float | None = Field(None, gt=0)
     tick_delay: float = Field(0.0, ge=0)
-    schedule: Literal["sequential", "lockstep", "async"] = Field("lockstep", description="the world's time policy (DESIGN.md, \"Time\")")
+    schedule: Literal["sequential", "lockstep", "async"] = Field("lockstep", description="the world's time policy (docs/architecture.md, \"Time\")")
     time_scale: float = Field(0.0, ge=0, allow_inf_nan=False, description="async: simulated seconds per wall second; 0: as fast as possible")
     llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"

@@ -26,7 +26,7 @@ class Metrics(_Model):
     messages: int = 0
     wall_time: float = 0.0
     sim_time: float = 0.0
-    lower_bound: int | None = Field(None, description="a lower bound on TS for this episode (world/bound.py)")
+    lower_bound: int | None = Field(None, description="a lower bound on TS for this episode (mhrc/world/bound.py)")
     makespan: float = Field(0.0, ge=0.0, description="simulated seconds from the start to the end of the episode on the world's clock")
 
 

@@ -74,7 +74,7 @@ class ActionResult(Message):
     outcome: SkillOutcome
     observation: Observation
     done: bool = False
-    started: float | None = Field(None, ge=0.0, description="simulated seconds on the world's clock when the action began (DESIGN.md, \"Time\")")
+    started: float | None = Field(None, ge=0.0, description="simulated seconds on the world's clock when the action began (docs/architecture.md, \"Time\")")
     ended: float | None = Field(None, ge=0.0, description="simulated seconds on the world's clock when it ended: `started` plus its duration")
 
 

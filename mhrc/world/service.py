@@ -2,7 +2,7 @@
 runs the actions in the simulator and publishes results, messages and events.
 
 When actions run and results go out is the time policy's (`WorldConfig.schedule`, one of
-world.schedulers.SCHEDULERS; DESIGN.md, "Time"); this module keeps the episode's lifecycle and
+world.schedulers.SCHEDULERS; docs/architecture.md, "Time"); this module keeps the episode's lifecycle and
 the bus plumbing. Who may drive which robot is the roster's (roster.py); the robots' messages
 wait in the mailroom until delivered (mail.py).
 """
@@ -436,7 +436,7 @@ class WorldService:
         self._detach(robot, "agent vanished (liveliness lost)")
 
     async def _expect_token(self, robot: str, agent_id: str) -> None:
-        """An attached agent declares its liveliness token at once (DESIGN.md, attach); one that
+        """An attached agent declares its liveliness token at once (docs/architecture.md, "Attach"); one that
         has none TOKEN_GRACE seconds later (frozen or killed right after attaching, or a client
         that skips it) would never be seen to leave: the sequential schedule would wait for its
         turn forever. Detach it; it may attach again."""

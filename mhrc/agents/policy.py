@@ -7,6 +7,8 @@ from typing import Protocol
 
 from mhrc.core.protocol import Action, ActionResult, Observation
 
+__all__ = ["Decision", "Policy"]
+
 
 @dataclass(frozen=True)
 class Decision:

@@ -1,4 +1,4 @@
-"""The world's time policies (DESIGN.md, "Time"), one module each behind `Scheduler`,
+"""The world's time policies (docs/architecture.md, "Time"), one module each behind `Scheduler`,
 registered by name for `WorldConfig.schedule`."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Lockstep (DESIGN.md, "Time"): tick t closes when every attached robot has submitted one
+"""Lockstep (docs/architecture.md, "Time"): tick t closes when every attached robot has submitted one
 action for t; the world executes them in the fixed robot order and releases all results
 together. A message sent in tick t reaches its receiver with the observation of tick t+1.
 On the world's clock the robots of a tick act at the same time: a tick lasts as long as its

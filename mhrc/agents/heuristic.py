@@ -126,6 +126,9 @@ class _RoleBase:
     name: str = "heuristic"
     last: ActionResult | None = None
 
+    async def decide(self, obs: Observation) -> Decision:
+        raise NotImplementedError  # each role decides its own way
+
     def record(self, result: ActionResult) -> None:
         self.last = result
 

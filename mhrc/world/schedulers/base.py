@@ -1,4 +1,4 @@
-"""The interface between the world service and its time policy (DESIGN.md, "Time").
+"""The interface between the world service and its time policy (docs/architecture.md, "Time").
 
 The service keeps the bus: it attaches robots, checks each request's robot, agent and payload,
 acks it with the scheduler's verdict, answers state queries, starts and finishes the episode.
@@ -36,10 +36,16 @@ class SchedulerOptionError(ValueError):
 
 
 class TaskResultLike(Protocol):
-    success: bool
-    placed: int
-    total: int
-    partial_success: float
+    """A task's evaluation as the schedulers read it (read-only: world.tasks.TaskResult is frozen)."""
+
+    @property
+    def success(self) -> bool: ...
+    @property
+    def placed(self) -> int: ...
+    @property
+    def total(self) -> int: ...
+    @property
+    def partial_success(self) -> float: ...
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Async (DESIGN.md, "Time"): no step barrier. Each robot acts at its own pace and waits only
+"""Async (docs/architecture.md, "Time"): no step barrier. Each robot acts at its own pace and waits only
 for the world's answer to its own action.
 
 - A request is executed as soon as the world gets to it (one action at a time on the one

@@ -1,4 +1,4 @@
-"""Sequential (DESIGN.md, "Time"; the paper's Algorithm 1): within tick t the world asks the
+"""Sequential (docs/architecture.md, "Time"; the paper's Algorithm 1): within tick t the world asks the
 attached robots one at a time, in the fixed robot order, and executes each one's action before
 the next robot observes: robot k plans on the world that robots 0..k-1 left in this tick.
 
