@@ -9,11 +9,10 @@ never renders a prompt: use that one to script a robot's actions, this one to sc
 from __future__ import annotations
 
 from collections.abc import Iterable
-from pathlib import Path
+from typing import Any
 
 from mhrc.core.protocol import ActionResult
 
-from .completion import DEFAULT_TEMPERATURE
 from .llm_policy import LLMPolicy
 from .scripted_client import ScriptedClient
 
@@ -21,30 +20,9 @@ from .scripted_client import ScriptedClient
 class ScriptedLLMPolicy(LLMPolicy):
     """An LLMPolicy whose model answers each step with the next scripted reply (then `wait()`)."""
 
-    def __init__(
-        self,
-        robot: str,
-        replies: Iterable[str],
-        *,
-        prompts_dir: str | Path | None = None,
-        temperature: float = DEFAULT_TEMPERATURE,
-        feedback: bool = True,
-        history: bool = True,
-        prompt_cap_chars: int | None = None,
-        teammates_absent: tuple[str, ...] = (),
-        reach_labels: bool = False,
-    ) -> None:
-        super().__init__(
-            robot,
-            ScriptedClient(list(replies)),
-            prompts_dir=prompts_dir,
-            temperature=temperature,
-            feedback=feedback,
-            history=history,
-            prompt_cap_chars=prompt_cap_chars,
-            teammates_absent=teammates_absent,
-            reach_labels=reach_labels,
-        )
+    def __init__(self, robot: str, replies: Iterable[str], **options: Any) -> None:
+        """`options`: LLMPolicy's keyword options (prompts_dir, feedback, history, ...)."""
+        super().__init__(robot, ScriptedClient(list(replies)), **options)
         self.results: list[ActionResult] = []
 
     @property
