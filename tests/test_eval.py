@@ -43,7 +43,7 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
         assert (a / r["trace"]).exists()
     summary = (a / "summary.md").read_text()
     assert "Table I" in summary and "| pack_objects | 1.00 / 1.00 /" in summary and "set beside the paper's AS" in summary
-    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,history_cap,horizon,mode,schedule,task,episodes,succ,ps,ts,ts_bound,as_ticks,as,as_per_robot")
+    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,history_cap,horizon,mode,schedule,scenario,task,episodes,succ,ps,ts,ts_bound,as_ticks,as,as_per_robot")
     for r in rows_a:  # fidelity and the LLM failures are on every row (the heuristic has none)
         assert (r["fidelity"], r["aids"], r["history_cap"], r["horizon"], r["repeat"], r["trial"]) == ("paper", [], None, 50, 0, r["seed"])
         assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"], r["invalid_reason"]) == (0, 0, 0, True, None)

@@ -27,6 +27,10 @@ SCHEDULE_HELP = (
 )
 VIDEO_HELP = "Render the episode's video to FILE (.mp4 or .gif) with PyBullet's CPU renderer: a few frames per step, each captioned with every robot's action."
 TIME_SCALE_HELP = "With --schedule async: simulated seconds per wall second (1: real time); 0: as fast as possible."
+EVENTS_HELP = (
+    "A scenario: a JSON list of events the world applies during the episode, each with the tick it fires at and a kind "
+    "(relocate, breakdown, new_target, close); checked before anything starts."
+)
 HISTORY_CAP_HELP = "Bound each LLM prompt to CHARS characters, shortening older history (for small-context models); default: whole histories, as the paper."
 LLM_HELP = (
     "Drive the robots with a model: provider:model (openai:gpt-4o, ollama:llama3.1:8b, vllm:M, lmstudio:M, llamacpp:M), "
@@ -94,6 +98,7 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP),
         click.option("--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP),
         click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP),
+        click.option("--events", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE", help=EVENTS_HELP),
         LOG_LEVEL,
     ]  # fmt: skip
     for opt in reversed(opts):

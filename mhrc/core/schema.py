@@ -32,7 +32,7 @@ KEYS: dict[str, tuple[str, str]] = {
     "WorldState": ("world/state", "world -> anyone: the reply to a zenoh get"),
     "WorldEvent": ("world/event", "world -> all (put): one of the event kinds, discriminated by `kind`"),
 }
-WORLD_EVENT_KINDS = ("EpisodeStarted", "TickClosed", "RobotAttached", "RobotDetached", "EpisodeDone", "Snapshot")
+WORLD_EVENT_KINDS = ("EpisodeStarted", "TickClosed", "RobotAttached", "RobotDetached", "EpisodeDone", "Snapshot", "ScenarioEvent")
 
 
 def message_models() -> list[type[Message]]:

@@ -44,6 +44,7 @@ from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import merge_runs, read_rows
 from mhrc.eval.summaries import write_summaries
 from mhrc.core.trace import read_trace, unwritable
+from mhrc.world.scenario import load_scenario
 
 __all__ = ["EvalAborted", "EvalSpec", "Job", "Tally", "check_out", "evaluate", "merge_runs", "summary_csv", "summary_markdown", "write_summaries"]
 
@@ -82,6 +83,14 @@ class EvalSpec:
     step_deadline: float | None = None
     schedule: str = "sequential"  # the world's time policy (mhrc.run.config.SCHEDULES); the paper's loop by default
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
+    events: str | None = None  # a scenario file (mhrc/world/scenario.py), applied to every episode
+
+    def scenario(self) -> tuple[str, str] | tuple[None, None]:
+        """The scenario's short name and sha256 (None, None without one): what rows record of it."""
+        if self.events is None:
+            return None, None
+        sc = load_scenario(self.events)
+        return sc.name, sc.sha256
 
     @property
     def mode(self) -> str:
@@ -103,7 +112,7 @@ class EvalSpec:
             "method": self.method, "ablation": self.ablation, "horizon": self.horizon, "fidelity": self.fidelity,
             "history_cap": self.history_cap, "prompts": self.prompts, "mode": self.mode,
             "max_tokens": self.max_tokens if self.llm else None, "llm_seed": self.llm_seed, "schedule": self.schedule,
-            "time_scale": self.time_scale,
+            "time_scale": self.time_scale, "scenario": self.scenario()[1],
         }  # fmt: skip
 
     def seed(self, repeat: int, trial: int) -> int:
@@ -127,7 +136,7 @@ class EvalSpec:
                                 "aids": list(self.aids) or None, "history_cap": self.history_cap,
                                 "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
                                 "step_deadline": self.step_deadline, "schedule": self.schedule,
-                                "time_scale": self.time_scale or None,
+                                "time_scale": self.time_scale or None, "events": self.events,
                             }  # fmt: skip
                             config = {k: v for k, v in cfg.items() if v is not None}
                             out.append(Job(key=f"{task}/{scene}/{n}/{seed}", config=config, repeat=repeat, trial=trial))
@@ -147,7 +156,10 @@ class EvalSpec:
             cell = (c["task"], c["scene"], c["n_objects"])
             if cell not in seen:
                 seen.add(cell)
-                EpisodeConfig.build(**c)
+                try:
+                    EpisodeConfig.build(**c)
+                except ConfigError as exc:  # a scenario is checked against every task and scene of the grid: say which
+                    raise ConfigError(f"{exc} (in {c['task']}/{c['scene']})" if self.events else str(exc)) from None
 
 
 @dataclass
@@ -207,7 +219,7 @@ def check_out(out: Path, spec: EvalSpec, resume: bool) -> None:
             old = json.loads(manifest.read_text())
             # a manifest written before a field was part of the identity ran with its default
             before = {"fidelity": "paper", "history_cap": None, "prompts": None, "mode": "free", "max_tokens": None, "llm_seed": None,
-                      "schedule": "lockstep", "time_scale": 0.0}
+                      "schedule": "lockstep", "time_scale": 0.0, "scenario": None}
             before |= old.get("identity") or {}
             if before != spec.identity():
                 raise ConfigError(
@@ -279,6 +291,7 @@ async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, pr
     earlier = [finished[j.key] for j in spec.jobs() if j.key in finished]
     tally = Tally(total=len(todo), before=len(earlier), before_succeeded=sum(bool(r.get("success")) for r in earlier))
     rows_path = out / "episodes.jsonl"
+    scenario, scenario_sha256 = spec.scenario()  # every row says which scenario it ran (rows of different ones are never averaged)
     jobs = {j.key: j for j in todo}
     attempts: dict[str, int] = defaultdict(int)
     aborted: list[str] = []
@@ -313,7 +326,8 @@ async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, pr
                 "key": res.key, "method": spec.method, "ablation": spec.ablation, "repeat": job.repeat, "trial": job.trial,
                 **m.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap, "mode": spec.mode,
                 "max_tokens": spec.max_tokens if spec.llm else None, "llm_seed": spec.llm_seed, "schedule": spec.schedule,
-                "time_scale": spec.time_scale, "worker": res.worker, "trace": str(trace_path.relative_to(out)),
+                "time_scale": spec.time_scale, "scenario": scenario, "scenario_sha256": scenario_sha256,
+                "worker": res.worker, "trace": str(trace_path.relative_to(out)),
                 **diag.columns(),
             }  # fmt: skip
             with rows_path.open("a", encoding="utf-8") as f:

@@ -117,7 +117,7 @@ def grid_problem(rows: list[dict[str, Any]]) -> str | None:
 def paper_match(setting: tuple[Any, ...], task: str, rows: list[dict[str, Any]]) -> PaperMatch | None:
     """The paper's figures for this setting and task when the configuration matches; a
     PaperMatch without figures (and the reason) when only the model matches; None otherwise."""
-    method, ablation, fidelity, cap, horizon, mode, schedule = setting
+    method, ablation, fidelity, cap, horizon, mode, schedule, scenario = setting
     model = paper_model(str(method))
     if model is None:
         return None
@@ -133,6 +133,8 @@ def paper_match(setting: tuple[Any, ...], task: str, rows: list[dict[str, Any]])
         why = f"history cap {cap} (the paper keeps whole histories)"
     elif horizon != PAPER_HORIZON:
         why = f"horizon {horizon}, the paper's is {PAPER_HORIZON}"
+    elif scenario is not None:
+        why = f"scenario {scenario} (the paper's episodes are static)"
     elif schedule != PAPER_SCHEDULE:
         why = f"the {schedule} schedule (the paper's robots act one after another: --schedule {PAPER_SCHEDULE})"
     else:

@@ -162,9 +162,9 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
     for key, title in (("scene", "scene"), ("n_objects", "object count")):
         lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS sum, AS/robot) | episodes |",
                   "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
-        for (m, a, fid, cap, hor, mode, sched, v), bucket in group(valid, *SETTING, key).items():
+        for (m, a, fid, cap, hor, mode, sched, scen, v), bucket in group(valid, *SETTING, key).items():
             s = summarize(bucket)
-            extra = "".join(f" · {x}" for x in setting_label((m, a, fid, cap, hor, mode, sched)).split(" · ")[3:])  # mode, schedule, cap, horizon
+            extra = "".join(f" · {x}" for x in setting_label((m, a, fid, cap, hor, mode, sched, scen)).split(" · ")[3:])  # mode, schedule, cap, horizon, scenario
             lines.append(f"| {m}{extra} | {a} | {fid} | {v} | {_cell(s)} | {s['episodes']} |")
         lines.append("")
     return "\n".join(lines)

@@ -30,8 +30,9 @@ CI_LEVEL = 0.95
 CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as_ticks": "active_ticks", "as": "action_steps"}
 
 
-# mode: free (the paper's) or structured replies; schedule: the world's time policy (mhrc/world/schedulers)
-SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule")
+# mode: free (the paper's) or structured replies; schedule: the world's time policy (mhrc/world/schedulers);
+# scenario: the --events file's short name (mhrc/world/scenario.py), None for a static episode
+SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule", "scenario")
 
 
 def read_rows(path: Path) -> list[dict[str, Any]]:
@@ -62,7 +63,7 @@ def merge_runs(dirs: list[Path]) -> list[dict[str, Any]]:
 
 def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
     """What a row's numbers depend on besides the episode; rows written before a field existed get its old meaning."""
-    defaults = {"fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free", "schedule": "lockstep"}
+    defaults = {"fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free", "schedule": "lockstep", "scenario": None}
     return tuple(row.get(k, defaults.get(k)) for k in SETTING)
 
 
@@ -75,7 +76,7 @@ def order_key(key: Iterable[Any]) -> tuple[str, ...]:
 
 
 def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
-    method, abl, fidelity, cap, horizon, mode, schedule = setting
+    method, abl, fidelity, cap, horizon, mode, schedule, scenario = setting
     parts = [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["structured decisions"] if mode == "structured" else [])
     if schedule != PAPER_SCHEDULE:
         parts.append(f"{schedule} schedule")
@@ -83,6 +84,8 @@ def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
         parts.append(f"history cap {cap}")
     if horizon is not None and horizon != PAPER_HORIZON:
         parts.append(f"horizon {horizon}")
+    if scenario is not None:
+        parts.append(f"scenario {scenario}")
     return " · ".join(parts)
 
 

@@ -18,6 +18,7 @@ from mhrc.core.keys import check_id, new_run_id
 from mhrc.agents.llm import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_TOKENS, DEFAULT_TIMEOUT, check_spec, robot_specs, split_url
 from mhrc.core.security import Credentials, check_for, load, make_run_credentials
 from mhrc.core.trace import unwritable
+from mhrc.world.scenario import Scenario, check_scenario, load_scenario
 
 log = structlog.get_logger("mhrc.run.config")
 
@@ -86,6 +87,7 @@ class EpisodeConfig(BaseModel):
                                         "keeps producing at --max-tokens)")
     aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.core.fidelity); none: the paper's")
     history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
+    events: Path | None = Field(None, description="a scenario file: events the world applies during the episode (mhrc/world/scenario.py)")
     credentials: Path | None = Field(
         None,
         description="the run's credentials (mhrc.core.security): the directory of every participant's files, or one participant's "
@@ -127,6 +129,7 @@ class EpisodeConfig(BaseModel):
 
         try:
             check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
+            cfg.scenario()
             if cfg.llm is not None:
                 from mhrc.agents.llm import check_spec
                 from mhrc.agents.llm_policy import load_template
@@ -146,6 +149,17 @@ class EpisodeConfig(BaseModel):
         except (ValueError, FileNotFoundError) as exc:
             raise ConfigError(str(exc)) from None
         return cfg
+
+    def scenario(self) -> Scenario | None:
+        """The --events file, read and checked against this episode (ScenarioError naming the event
+        and field); None without one."""
+        if self.events is None:
+            return None
+        from mhrc.world.dynamics import episode_facts  # reads the task and layout, builds nothing
+
+        scenario = load_scenario(self.events)
+        check_scenario(scenario, episode_facts(task=self.task, scene=self.scene, horizon=self.horizon, robots=self.robots))
+        return scenario
 
     def resolved(self) -> EpisodeConfig:
         """A copy with a concrete port and trace path."""

@@ -71,6 +71,8 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         cmd += ["--start-timeout", str(cfg.start_timeout)]
     if cfg.time_scale:
         cmd += ["--time-scale", str(cfg.time_scale)]
+    if cfg.events is not None:
+        cmd += ["--events", str(cfg.events)]
     if cfg.credentials is not None:
         cmd += ["--credentials", str(cfg.credentials_file("world"))]
     else:  # said, so that a $MHRC_CREDENTIALS of another run is not picked up

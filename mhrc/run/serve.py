@@ -39,8 +39,9 @@ async def serve_world(
     worker's), record, and run the episode. `on_service` gets the WorldService once it exists
     (the in-process runner stops it when an agent fails for good)."""
     sim = await asyncio.to_thread(
-        Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots, aids=cfg.aids
-    )
+        Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots, aids=cfg.aids,
+        scenario=cfg.scenario(),
+    )  # fmt: skip
     bus = None
     recorder = None
     world: WorldService | None = None

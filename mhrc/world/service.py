@@ -73,6 +73,7 @@ class SimLike(Protocol):
     scene_id: str
     seed: int
     n_objects: int
+    aids: frozenset[str]
 
     def capabilities(self, robot: str) -> frozenset[str]: ...
     def finishers(self) -> frozenset[str]: ...
@@ -85,8 +86,7 @@ class SimLike(Protocol):
     def poses(self) -> tuple[dict[str, RobotPose], dict[str, ObjectPose], dict[str, bool]]: ...
     def lower_bound(self) -> int: ...
     def answer_key(self) -> tuple[list[str], dict[str, str], bool]: ...
-    @property
-    def aids(self) -> frozenset[str]: ...
+    def fire_events(self, tick: int) -> Sequence[Message]: ...
 
 
 class NobodyAttached(RuntimeError):
@@ -235,19 +235,19 @@ class WorldService:
         self._log.info("episode started", attached=sorted(self.attached))
         self._wake.set()
 
-    def _execute_batch(self, batch: Sequence[ActionRequest], tick: int, deliver: bool) -> tuple[Executed, Snapshot]:
-        """Runs in a worker thread, holding the sim lock: the actions in order, then the
-        evaluation and every acting robot's observation of tick + 1 (with `deliver`, after the
-        messages sent in the batch reached their receivers' scene graphs: lockstep delivers them
-        with these observations)."""
+    def _execute_batch(self, batch: Sequence[ActionRequest], tick: int, deliver: bool, opens: int | None) -> tuple[Executed, Snapshot, Sequence[Message]]:
+        """Runs in a worker thread, holding the sim lock: the actions in order, then the evaluation and every acting
+        robot's observation of tick + 1 (with `deliver`, after the batch's messages reached their receivers' scene
+        graphs: lockstep delivers them with these observations; with `opens`, after that tick's scenario events)."""
         self.mail.learn()
         outcomes = [self._execute(req, tick) for req in batch]
         if deliver:
             self.mail.delivered(self.sim.robots)
             self.mail.learn()
+        fired = self.sim.fire_events(opens) if opens is not None and not self.sim.evaluate().success else []
         evaluation = self.sim.evaluate()
         observations = {req.robot: self._present(self.sim.observe(req.robot, tick + 1)) for req in batch}
-        return Executed(outcomes, evaluation, observations), self._snapshot(tick, [req.goal_id for req in batch])
+        return Executed(outcomes, evaluation, observations), self._snapshot(tick, [req.goal_id for req in batch]), fired
 
     def _snapshot(self, tick: int, goals: list[str]) -> Snapshot:
         """The ground truth for viewers, taken where the simulator is idle (its thread, or the start)."""
@@ -319,12 +319,13 @@ class WorldService:
     def horizon(self) -> int:
         return self.cfg.horizon
 
-    async def execute(self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False) -> Executed:
-        """Run `batch` in order at `tick` in a worker thread, holding the sim lock; count it.
-        `deliver`: the observations returned carry the batch's messages (lockstep)."""
+    async def execute(self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False, opens: int | None = None) -> Executed:
+        """Run `batch` in order at `tick` in a worker thread, holding the sim lock; count it. `deliver`: the
+        observations returned carry the batch's messages (lockstep); `opens`: and that tick's scenario events."""
         async with self._sim_lock:
-            done, snapshot = await asyncio.to_thread(self._execute_batch, batch, tick, deliver)
-        self.bus.put(self.keys.world_event, snapshot)
+            done, snapshot, fired = await asyncio.to_thread(self._execute_batch, batch, tick, deliver, opens)
+        for event in [*fired, snapshot]:
+            self.bus.put(self.keys.world_event, event)
         self._evaluation = done.evaluation
         for req, outcome in zip(batch, done.outcomes):
             self._tally.sim_time += outcome.sim_time
@@ -333,6 +334,13 @@ class WorldService:
             if not outcome.succeeded:
                 self._tally.failed[req.action.skill] += 1
         return done
+
+    async def open_tick(self, tick: int) -> None:
+        """Tick `tick` opens: the scenario's events due by then fire, each published on world/event."""
+        async with self._sim_lock:
+            fired, self._evaluation = await asyncio.to_thread(lambda: (self.sim.fire_events(tick), self.sim.evaluate()))
+        for event in fired:
+            self.bus.put(self.keys.world_event, event)
 
     async def observe(self, robot: str, tick: int) -> Observation:
         """`robot`'s observation now, from a worker thread holding the sim lock."""

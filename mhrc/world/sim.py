@@ -30,7 +30,9 @@ from mhrc.core.protocol import (
     Observation,
     OutcomeCode,
     RobotPose,
+    ScenarioEvent,
     SkillOutcome,
+    Wait,
 )
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
@@ -40,9 +42,11 @@ from .arm import ArmPlanner
 from .assets import AssetDir
 from .astar import Grid
 from .bound import lower_bound, symbolic_episode
+from .dynamics import Dynamics
 from .observe import Knowledge
 from .physics import ObjectState, PhysicalWorld
 from .robots import KINDS, ROBOTS, TEAM, RobotBody, RobotKind, spawn
+from .scenario import Scenario
 from .scene import BuiltScene, Fixture, Layout, build_scene, get_layout
 from .skills import SKILLS, SkillContext
 from .tasks import Seen, TaskResult, get_task
@@ -91,7 +95,9 @@ class Sim:
         gui: bool = False,
         robots: tuple[str, ...] = ROBOTS,
         aids: tuple[str, ...] | frozenset[str] = (),
+        scenario: Scenario | None = None,
     ) -> None:
+        """`scenario`: the events fired during the episode (`fire_events`; dynamics.py)."""
         check_episode(task=task, scene=scene, n_objects=n_objects)
         self.aids: frozenset[str] = frozenset(parse_aids(aids))
         # motion noise: its own stream, apart from the generator's, and different for every episode of a seed
@@ -101,6 +107,7 @@ class Sim:
         self.task_id, self.scene_id, self.seed, self.n_objects = task, scene, seed, n_objects
         self.task = get_task(task)
         self.layout: Layout = get_layout(scene)
+        self._scenario = scenario
         self.cid = p.connect(p.GUI if gui else p.DIRECT)
         self.assets = AssetDir()
         try:
@@ -145,6 +152,7 @@ class Sim:
                 assert f is not None
                 w.rest(obj, pl.xy[0], pl.xy[1], f.top)
         self.skill_context = SkillContext(w, self.knowledge, rng)  # what the skills act through
+        self.dynamics = Dynamics(w, self.task, self.targets, self.goals, self.assets, self.seed, self._scenario)
         log.debug("episode built", task=self.task_id, scene=self.scene_id, seed=self.seed, objects=list(w.objects))
 
     def close(self) -> None:
@@ -191,13 +199,20 @@ class Sim:
         r = self.bots[robot]
         if action.skill not in r.kind.skills:
             return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, fb.not_capable(robot, action.skill, r.kind.skills))
+        if (broken := self.dynamics.broken_for(robot)) and not isinstance(action, Wait):
+            return SkillOutcome.fail(OutcomeCode.BROKEN_DOWN, fb.broken_down(action.skill, broken))
         run = SKILLS.get(type(action))
         if run is None:  # pragma: no cover - every action but communicate has a skill
             out = SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, f"Unknown skill {action.skill}.")
         else:
             out = run(self.skill_context, r, action)
+            self.dynamics.note_containers()
         log.debug("skill", robot=robot, action=action.call(), code=out.code.value, sim_time=round(out.sim_time, 3))
         return out
+
+    def fire_events(self, tick: int) -> list[ScenarioEvent]:
+        """Tick `tick` opens: apply the scenario's events due by then (dynamics.py); what each did."""
+        return self.dynamics.fire_due(tick)
 
     # ------------------------------------------------------------------ the physical state (physics.PhysicalWorld)
     @property

@@ -235,7 +235,7 @@ SOLIDS: dict[str, tuple[str, tuple[float, float, float]]] = {
 }
 
 
-def _solid(color: str, shape: str, palette: dict[str, Color]) -> ObjectKind:
+def solid_kind(color: str, shape: str, palette: dict[str, Color]) -> ObjectKind:
     prim, size = SOLIDS[shape]
     return _kind(f"{color}_{shape}", prim, size, palette[color], group=color)
 
@@ -259,9 +259,9 @@ class SortSolids:
         rng = np.random.default_rng(seed)
         shapes = list(SOLIDS)
         colors = [list(PANEL_COLORS)[i] for i in rng.permutation(len(PANEL_COLORS))[:n_objects]]
-        targets = [_solid(c, shapes[int(rng.integers(0, len(shapes)))], PANEL_COLORS) for c in colors]
+        targets = [solid_kind(c, shapes[int(rng.integers(0, len(shapes)))], PANEL_COLORS) for c in colors]
         n_distractors = 1 + int(rng.integers(0, 2))
-        distractors = [_solid(c, shapes[int(rng.integers(0, len(shapes)))], NO_PANEL_COLORS) for c in list(NO_PANEL_COLORS)[:n_distractors]]
+        distractors = [solid_kind(c, shapes[int(rng.integers(0, len(shapes)))], NO_PANEL_COLORS) for c in list(NO_PANEL_COLORS)[:n_distractors]]
         return scatter(layout, rng, targets, distractors)
 
     def fixtures(self, layout: Layout) -> list[Fixture]:
@@ -329,7 +329,7 @@ MENUS: dict[str, tuple[str, ...]] = {  # bottom to top
 }
 
 
-def _ingredient(kind: str, name: str) -> ObjectKind:
+def ingredient_kind(kind: str, name: str) -> ObjectKind:
     shape, size, color = INGREDIENTS[kind]
     return _kind(name, shape, size, color, group=kind)
 
@@ -361,10 +361,10 @@ class MakeSandwich:
         for kind in items:
             seen[kind] = seen.get(kind, 0) + 1
             name = f"{kind}_{seen[kind]}" if items.count(kind) > 1 else kind
-            targets.append(_ingredient(kind, name))
+            targets.append(ingredient_kind(kind, name))
         unused = [k for k in INGREDIENTS if k not in items]
         n_distractors = min(len(unused), 1 + int(rng.integers(0, 2)))
-        distractors = [_ingredient(unused[i], unused[i]) for i in sorted(rng.permutation(len(unused))[:n_distractors])]
+        distractors = [ingredient_kind(unused[i], unused[i]) for i in sorted(rng.permutation(len(unused))[:n_distractors])]
         return scatter(layout, rng, targets, distractors)
 
     def fixtures(self, layout: Layout) -> list[Fixture]:

@@ -52,6 +52,7 @@ from mhrc.core.protocol.events import EpisodeDone
 from mhrc.core.protocol.events import RobotPose
 from mhrc.core.protocol.events import ObjectPose
 from mhrc.core.protocol.events import Snapshot
+from mhrc.core.protocol.events import ScenarioEvent
 from mhrc.core.protocol.events import WorldEvent
 from mhrc.core.protocol.events import WORLD_EVENT_ADAPTER
 from mhrc.core.protocol.events import WorldState
@@ -106,6 +107,7 @@ __all__ = [
     "RobotPose",
     "ObjectPose",
     "Snapshot",
+    "ScenarioEvent",
     "WorldEvent",
     "WORLD_EVENT_ADAPTER",
     "WorldState",

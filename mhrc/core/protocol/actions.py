@@ -109,6 +109,7 @@ class OutcomeCode(str, Enum):
     NOT_REACHABLE_CONTAINER = "closed_container"  # object inside a closed container
     RECIPIENT_UNKNOWN = "recipient_unknown"
     FORMAT_ERROR = "format_error"  # the policy's reply could not be parsed into an action
+    BROKEN_DOWN = "broken_down"  # a scenario's breakdown: only communicate and wait work for now
 
 
 class SkillOutcome(_Model):

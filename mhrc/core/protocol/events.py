@@ -121,8 +121,27 @@ class Snapshot(Message):
     open: dict[str, bool] = Field(default_factory=dict, description="openable furniture -> open")
 
 
+class ScenarioEvent(Message):
+    """A scenario event fired (`--events`, mhrc/world/scenario.py): what it changed, or why it was
+    skipped (its object already in place, nothing open to close). Robots are not told: they
+    learn it by looking, or from their teammates."""
+
+    kind: Literal["scenario_event"] = "scenario_event"
+    scenario: str = Field(description="the scenario's short name (its file's stem)")
+    sha256: str = Field(description="the sha256 of the scenario file's bytes")
+    index: int = Field(ge=0, description="the event's index in the scenario file")
+    event: Literal["relocate", "breakdown", "new_target", "close"]
+    tick: int = Field(description="the tick it fired at (the file's tick)")
+    applied: bool
+    skipped: str | None = Field(None, description="why it could not apply (None when applied)")
+    changed: dict[str, str] = Field(
+        default_factory=dict, description="what exactly changed, e.g. object, from, to (relocate); robot, until (breakdown); object, on, total (new_target); container (close)"
+    )
+    text: str = Field("", description="the same in one sentence, for people")
+
+
 WorldEvent = Annotated[
-    Union[EpisodeStarted, TickClosed, RobotAttached, RobotDetached, EpisodeDone, Snapshot],
+    Union[EpisodeStarted, TickClosed, RobotAttached, RobotDetached, EpisodeDone, Snapshot, ScenarioEvent],
     Field(discriminator="kind"),
 ]
 WORLD_EVENT_ADAPTER: TypeAdapter[WorldEvent] = TypeAdapter(WorldEvent)

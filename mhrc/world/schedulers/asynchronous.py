@@ -167,6 +167,7 @@ class AsyncScheduler(Scheduler):
     async def _execute(self, req: ActionRequest, start: float) -> None:
         world, robot = self.world, req.robot
         tick = self.steps[robot]
+        await world.open_tick(math.floor(start / self.step_seconds))  # the scenario's events due by the action's start
         done = await world.execute([req], tick)
         outcome = done.outcomes[0]
         end = start + duration(req, outcome)
@@ -192,7 +193,8 @@ class AsyncScheduler(Scheduler):
         del self.running[robot]
         if self.time_scale == 0:
             obs = run.observation
-        else:  # the world as it is at the action's end
+        else:  # the world as it is at the action's end (with the scenario's events due by then)
+            await self.world.open_tick(math.floor(run.ended / self.step_seconds))
             obs = await self.world.observe(robot, run.tick + 1)
         obs = obs.model_copy(update={"new_messages": self.mail.pop(robot, [])})
         self.world.release(

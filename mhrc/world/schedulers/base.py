@@ -72,10 +72,14 @@ class World(Protocol):
     @property
     def horizon(self) -> int: ...
 
-    async def execute(self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False) -> Executed:
+    async def execute(self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False, opens: int | None = None) -> Executed:
         """Run the actions in order in the simulator, at `tick`, and count them for the metrics;
         with `deliver`, the observations returned already know what the batch's messages tell
-        (a schedule that hands the messages over with them)."""
+        (a schedule that hands the messages over with them); with `opens`, tick `opens` opens
+        after the actions: the evaluation and observations come after its scenario events."""
+    async def open_tick(self, tick: int) -> None:
+        """Tick `tick` opens: the scenario's events due by then fire (--events; world/dynamics.py),
+        before any observation of it goes out."""
     async def observe(self, robot: str, tick: int) -> Observation:
         """`robot`'s observation of the world as it is now, labelled `tick` (no messages attached)."""
     def deliver_messages(self) -> dict[str, list[RobotMessage]]:

@@ -47,7 +47,7 @@ class LockstepScheduler(Scheduler):
         world, tick = self.world, self.tick
         batch = [self.pending.pop(r) for r in world.robots if r in self.pending and r in world.attached]
         self.pending.clear()
-        done = await world.execute(batch, tick, deliver=True)
+        done = await world.execute(batch, tick, deliver=True, opens=tick + 1)  # tick + 1's scenario events before its observations
         began = self.makespan
         took = [duration(req, outcome) for req, outcome in zip(batch, done.outcomes)]
         self.makespan = began + max(took, default=0.0)

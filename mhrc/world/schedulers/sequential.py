@@ -110,6 +110,7 @@ class SequentialScheduler(Scheduler):
         if self.turn is None:
             if await self._close_tick():
                 return
+            await world.open_tick(self.tick)  # the scenario's events of the new tick, before anyone observes it
             self.turn, self.given = self._next(None), False
             if self.turn is None:
                 return  # nobody attached: the service ends the episode
