@@ -1,47 +1,12 @@
-"""Shared fixtures: real Zenoh sessions on loopback, real worlds."""
+"""Project-only fixtures. The harness (worlds on loopback, scripted model servers) is the public
+one, `mhrc.testing`, whose pytest plugin provides ``mhrc_world``, ``mhrc_model_server`` and
+``mhrc_run_episode``."""
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
-
-from mhrc.core.bus import Bus
-from mhrc.core.bus import open_client
-from mhrc.run.config import EpisodeConfig
-from mhrc.run.serve import serve_world
-from mhrc.core.protocol import EpisodeDone
-
-
-class RunningWorld:
-    def __init__(self, cfg: EpisodeConfig, task: asyncio.Task[EpisodeDone]) -> None:
-        self.cfg = cfg
-        self.task = task
-
-    async def client(self) -> Bus:
-        return await open_client(self.cfg.endpoint, 30.0)
-
-
-@contextlib.asynccontextmanager
-async def running_world(tmp_path: Path, **values: object) -> AsyncIterator[RunningWorld]:
-    """A world serving one episode on a free loopback port; cancelled and closed on exit."""
-    cfg = EpisodeConfig.build(trace=tmp_path / "trace.jsonl", **values).resolved()
-    task = asyncio.create_task(serve_world(cfg))
-    try:
-        yield RunningWorld(cfg, task)
-    finally:
-        if not task.done():
-            task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
-
-
-@pytest.fixture
-def world_factory(tmp_path: Path):  # type: ignore[no-untyped-def]
-    return lambda **values: running_world(tmp_path, **values)
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -26,35 +26,36 @@ from mhrc.core.protocol import (
     decode,
 )
 from mhrc.core.trace import read_trace
+from waits import served, subscribed
 
 
-async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(world_factory) -> None:  # type: ignore[no-untyped-def]
-    async with world_factory(seed=0, horizon=3, start_timeout=3.0) as world:
+async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(mhrc_world) -> None:  # type: ignore[no-untyped-def]
+    async with mhrc_world(seed=0, horizon=3, start_timeout=3.0) as world:
         bus = await world.client()
         try:
             policy = ScriptedLLMPolicy("bob", ["I am not sure what to do.", "**Command:** pick(ghost).", "Command: wait()"])
-            agent = RobotAgent(bus, policy, run=world.cfg.run, robot="bob")
+            agent = RobotAgent(bus, policy, run=world.config.run, robot="bob")
             done = await asyncio.wait_for(agent.run(), 60)
         finally:
             await bus.close()
-        await world.task
+        await world.done()
     assert done is not None and done.reason == "horizon" and done.metrics.temporal_steps == 3
     assert [r.action.call() for r in policy.results] == ["wait()", "pick(ghost)", "wait()"]
     assert policy.results[1].outcome.code == OutcomeCode.OBJECT_UNKNOWN
     assert policy.format_feedback and "no command found" in policy.format_feedback[0]
-    thoughts = [line["msg"] for line in read_trace(world.cfg.trace) if line["key"].endswith("/agent/bob/thought")]
+    thoughts = [line["msg"] for line in read_trace(world.config.trace) if line["key"].endswith("/agent/bob/thought")]
     assert [t["parse_error"] is not None for t in thoughts] == [True, False, False]
     assert thoughts[0]["reply"] == "I am not sure what to do."
 
 
-async def test_a_second_agent_for_an_attached_robot_is_refused(world_factory) -> None:  # type: ignore[no-untyped-def]
-    async with world_factory(seed=0) as world:
+async def test_a_second_agent_for_an_attached_robot_is_refused(mhrc_world) -> None:  # type: ignore[no-untyped-def]
+    async with mhrc_world(seed=0) as world:
         first, second = await world.client(), await world.client()
         try:
-            a = asyncio.create_task(RobotAgent(first, ScriptedLLMPolicy("bob", []), run=world.cfg.run, robot="bob").run())
-            await asyncio.sleep(1.5)
+            a = asyncio.create_task(RobotAgent(first, ScriptedLLMPolicy("bob", []), run=world.config.run, robot="bob").run())
+            await world.attached("bob")
             with pytest.raises(AttachRejected, match="already attached"):
-                await RobotAgent(second, ScriptedLLMPolicy("bob", []), run=world.cfg.run, robot="bob").run()
+                await RobotAgent(second, ScriptedLLMPolicy("bob", []), run=world.config.run, robot="bob").run()
             a.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await a
@@ -106,7 +107,8 @@ async def test_a_result_overtaken_by_episode_done_is_still_recorded_when_the_wor
     try:
         world = _OvertakingWorld(world_bus, "overtake", name_final_result=named)
         world.start()
-        await asyncio.sleep(0.3)  # declarations reach the agent's session
+        await served(agent_bus, world.keys.attach("bob"))  # the world's declarations reached the agent's session
+        await subscribed(agent_bus, world.keys.action_request("bob"))
         policy = ScriptedLLMPolicy("bob", ["Command: wait()"])
         done = await asyncio.wait_for(RobotAgent(agent_bus, policy, run="overtake", robot="bob").run(), 30)
         assert done is not None and done.reason == "horizon"

@@ -12,7 +12,6 @@ from typing import Any
 
 import pytest
 from click.testing import CliRunner
-from test_llm import FakeServer, ok
 
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.parse import parse_command
@@ -23,12 +22,13 @@ from mhrc.run.inprocess import up_in_process
 from mhrc.core.keys import Keys
 from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import ActionAck, ActionRequest, ActionResult, Wait, decode
-from mhrc.testing import ScriptedPolicy, run_episode, world_on_loopback
+from mhrc.testing import ModelReply, ScriptedModelServer, ScriptedPolicy, run_episode, world_on_loopback
 from mhrc.core.trace import read_trace
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.schedulers import SCHEDULERS, STEP_SECONDS, AsyncScheduler, SchedulerOptionError
 from mhrc.world.service import WorldConfig, WorldService
 from mhrc.world.sim import Sim
+from sweep import sweep
 
 WAIT = 180.0  # s: a bound on every wait, so that a regression fails instead of hanging
 
@@ -68,8 +68,7 @@ async def test_the_scheduler_refuses_a_negative_time_scale() -> None:
 # --------------------------------------------------------------------------- the heuristic team
 
 
-@pytest.mark.parametrize("task", ["pack_objects", "sort_solids", "make_sandwich"])
-@pytest.mark.parametrize("scene", sorted(LAYOUTS))
+@pytest.mark.parametrize(("task", "scene"), sweep([(t, s) for s in sorted(LAYOUTS) for t in ("pack_objects", "sort_solids", "make_sandwich")]))
 async def test_heuristic_team_solves_every_task_async(task: str, scene: str, tmp_path: Path) -> None:
     trace = tmp_path / "t.jsonl"
     cfg = EpisodeConfig.build(task=task, scene=scene, seed=0, n_objects=4, schedule="async", trace=trace)
@@ -100,6 +99,7 @@ def _robot_of(body: dict[str, Any]) -> str:
     return body["messages"][0]["content"].split(",")[0].removeprefix("You are ").lower()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("schedule", ["async", "lockstep"])
 async def test_a_slow_robot_does_not_hold_back_the_fast_ones(schedule: str, tmp_path: Path) -> None:
     """Scripted replies (every robot waits), David's model answers in 2 s, the others' in 0.05 s:
@@ -108,10 +108,7 @@ async def test_a_slow_robot_does_not_hold_back_the_fast_ones(schedule: str, tmp_
     fast robots at least 80 x 0.05 s of model latency, so David has time for at least one.)"""
     latency = {"alice": 0.05, "bob": 0.05, "david": 2.0}
 
-    def respond(body: dict[str, Any]) -> tuple[int, dict[str, str], bytes, float]:
-        return ok("Command: wait()")[:3] + (latency[_robot_of(body)],)
-
-    server = FakeServer(respond)
+    server = ScriptedModelServer(lambda body: ModelReply("Command: wait()", latency=latency[_robot_of(body)]), when_done=None)
     try:
         trace = tmp_path / "t.jsonl"
         cfg = EpisodeConfig.build(seed=0, horizon=10 if schedule == "async" else 3, schedule=schedule, llm="openai:scripted", base_url=server.url, trace=trace)
@@ -120,7 +117,7 @@ async def test_a_slow_robot_does_not_hold_back_the_fast_ones(schedule: str, tmp_
         server.close()
     assert done.reason == "horizon"
     counts = Counter(r["robot"] for r in _results(trace))
-    calls = Counter(_robot_of(body) for body, _ in server.requests)
+    calls = Counter(_robot_of(body) for body in server.requests)
     if schedule == "lockstep":
         assert counts == {"alice": 3, "bob": 3, "david": 3}
     else:
@@ -132,6 +129,7 @@ async def test_a_slow_robot_does_not_hold_back_the_fast_ones(schedule: str, tmp_
 # --------------------------------------------------------------------------- two robots, one object
 
 
+@pytest.mark.slow
 async def test_two_robots_go_for_the_same_object(tmp_path: Path) -> None:
     """Alice brings the soap to Bob's table and reaches for it again as Bob does: whichever
     request the world executes first gets it, the other fails with the feedback any robot would
@@ -178,6 +176,7 @@ def _unfinished(lines: list[dict[str, Any]]) -> set[str]:
 # --------------------------------------------------------------------------- a request while the previous one runs
 
 
+@pytest.mark.slow
 async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_is_lost(tmp_path: Path) -> None:
     """On a clock at real time, Alice's navigation takes seconds: a second request meanwhile is
     rejected with the reason, and the first one's result still comes."""
@@ -215,6 +214,7 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
     assert started and started[0]["scheduler"] == "async" and started[0]["time_scale"] == 1.0 and started[0]["step_seconds"] == STEP_SECONDS
 
 
+@pytest.mark.slow
 async def test_async_runs_across_processes_with_its_time_scale(tmp_path: Path) -> None:
     """`--processes` gives the world process the schedule and its time scale (parsed back by the CLI)."""
     from mhrc.cli import world as world_command_cli

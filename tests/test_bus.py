@@ -8,6 +8,7 @@ from mhrc.core.bus import Bus, Sample
 
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.protocol import ActionAck, decode
+from waits import served, subscribed
 
 
 async def test_pub_sub_query_and_liveliness_across_sessions() -> None:
@@ -25,7 +26,8 @@ async def test_pub_sub_query_and_liveliness_across_sessions() -> None:
             return ActionAck(goal_id=payload.decode(), robot=params["robot"], accepted=True)
 
         router.serve("t/q", answer)
-        await asyncio.sleep(0.3)  # declarations reach the other sessions
+        await subscribed(client, "t/x")  # the declarations reached the client's session
+        await served(client, "t/q")
 
         client.put("t/x", b"hello")
         sample = await asyncio.wait_for(got.get(), 5)
@@ -51,20 +53,20 @@ async def test_a_failing_handler_does_not_stop_delivery() -> None:
     b = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
     try:
         seen: list[bytes] = []
+        last = asyncio.Event()
 
         def flaky(s: Sample) -> None:
             seen.append(s.payload)
+            if s.payload == b"2":
+                last.set()
             if s.payload == b"boom":
                 raise RuntimeError("handler bug")
 
         a.subscribe("t/y", flaky)
-        await asyncio.sleep(0.3)
+        await subscribed(b, "t/y")
         for p in (b"1", b"boom", b"2"):
             b.put("t/y", p)
-        for _ in range(50):
-            if len(seen) == 3:
-                break
-            await asyncio.sleep(0.05)
+        await asyncio.wait_for(last.wait(), 30)
         assert seen == [b"1", b"boom", b"2"]
     finally:
         await b.close()

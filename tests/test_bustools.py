@@ -10,7 +10,6 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
@@ -23,6 +22,7 @@ from mhrc.core.endpoints import free_port
 from mhrc.core.bustools import MODELS, bus_echo, describe_sample, group_tokens, split_endpoint
 from mhrc.run.attach import run_agent
 from mhrc.core.protocol import PROTOCOL_VERSION
+from waits import robots_alive, subscribed
 
 MHRC = [sys.executable, "-m", "mhrc"]
 BANNER = "pybullet build time"
@@ -78,27 +78,17 @@ def silent_tcp_listener() -> Iterator[int]:
         srv.close()
 
 
-async def wait_attached(bus: Bus, run: str, robots: set[str], timeout: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        keys = await bus.alive(f"mhrc/{run}/alive/robot/*", timeout=1.0)
-        if {k.rsplit("/", 1)[1] for k in keys} >= robots:
-            return
-        await asyncio.sleep(0.2)
-    raise AssertionError(f"robots {robots} did not attach")
-
-
 # --------------------------------------------------------------------------- live world
 
 
-async def test_list_and_doctor_show_the_run_and_its_robots(world_factory) -> None:  # type: ignore[no-untyped-def]
+async def test_list_and_doctor_show_the_run_and_its_robots(mhrc_world) -> None:  # type: ignore[no-untyped-def]
     # the world waits for all three robots: with two attached it stays alive and unstarted
-    async with world_factory(run="bt-list", n_objects=3) as world:
-        ep = world.cfg.endpoint
+    async with mhrc_world(run="bt-list", n_objects=3) as world:
+        ep = world.config.endpoint
         client = await world.client()
         try:
             async with agents("bt-list", ep, ("alice", "bob")):
-                await wait_attached(client, "bt-list", {"alice", "bob"})
+                await world.attached("alice", "bob")
                 listed, listed_json, doc = await asyncio.gather(
                     amhrc("bus", "list", "--connect", ep), amhrc("bus", "list", "--json", "--connect", ep), amhrc("doctor", "--connect", ep)
                 )
@@ -116,14 +106,17 @@ async def test_list_and_doctor_show_the_run_and_its_robots(world_factory) -> Non
         assert BANNER not in out.stdout + out.stderr and "Traceback" not in out.stderr
 
 
-async def test_echo_prints_an_episodes_action_results(world_factory) -> None:  # type: ignore[no-untyped-def]
-    async with world_factory(run="bt-echo", n_objects=3, tick_delay=0.2) as world:
-        ep = world.cfg.endpoint
-        await (await world.client()).close()  # the world listens (open_client waits for it) before the echoes connect
-        key = "mhrc/bt-echo/robot/*/action/result"
-        text = asyncio.create_task(amhrc("bus", "echo", key, "--connect", ep, "--count", "4", "--timeout", "60", timeout=90))
-        as_json = asyncio.create_task(amhrc("bus", "echo", key, "--json", "--connect", ep, "--count", "4", "--timeout", "60", timeout=90))
-        await asyncio.sleep(1.5)  # the echoes subscribe; results come from tick 0 on, every 0.2 s, and there are plenty
+async def test_echo_prints_an_episodes_action_results(mhrc_world) -> None:  # type: ignore[no-untyped-def]
+    async with mhrc_world(run="bt-echo", n_objects=3, tick_delay=0.2) as world:
+        ep = world.config.endpoint
+        client = await world.client()  # the world listens (open_client waits for it) before the echoes connect
+        # Each echo's key also matches a probe key of no run (the world records only its own run's
+        # keys): a subscriber of the probe is the echo, subscribed. The second echo's key is wider
+        # than the first's, with a probe of its own.
+        text = asyncio.create_task(amhrc("bus", "echo", "mhrc/*/robot/*/action/result", "--connect", ep, "--count", "4", "--timeout", "60", timeout=90))
+        await subscribed(client, "mhrc/probe/robot/x/action/result")
+        as_json = asyncio.create_task(amhrc("bus", "echo", "mhrc/**/action/result", "--json", "--connect", ep, "--count", "4", "--timeout", "60", timeout=90))
+        await subscribed(client, "mhrc/probe/action/result")
         async with agents("bt-echo", ep, ("alice", "bob", "david")):
             out_text, out_json = await asyncio.gather(text, as_json)
     assert out_text.returncode == 0, out_text.stderr
@@ -176,20 +169,17 @@ async def test_echo_shows_undecodable_payloads_without_crashing() -> None:
 
 def test_doctor_nothing_listens() -> None:
     port = free_port()
-    t0 = time.monotonic()
     out = mhrc("doctor", "--connect", f"tcp/127.0.0.1:{port}")
-    assert time.monotonic() - t0 < 10  # python start included; the check itself is immediate
     assert out.returncode == 1
     assert out.stdout.splitlines() == [f"FAIL tcp/127.0.0.1:{port}: nothing listens there (connection refused)"]
     assert out.stderr == ""
 
 
+@pytest.mark.slow
 def test_doctor_non_zenoh_listener() -> None:
     with silent_tcp_listener() as port:
-        t0 = time.monotonic()
         out = mhrc("doctor", "--connect", f"tcp/127.0.0.1:{port}")
-        elapsed = time.monotonic() - t0
-    assert out.returncode == 1 and elapsed < 12
+    assert out.returncode == 1
     assert out.stdout.splitlines() == [
         f"FAIL tcp/127.0.0.1:{port}: something accepts TCP connections there, but no zenoh handshake within 2 s: "
         f"it is not zenoh (or a secured world: connect to tls/127.0.0.1:{port} with --credentials)"
@@ -232,6 +222,7 @@ def test_split_endpoint_and_known_kinds() -> None:
 # --------------------------------------------------------------------------- no pybullet banner
 
 
+@pytest.mark.slow
 def test_commands_print_no_pybullet_banner(tmp_path: Path) -> None:
     cmds = [["--help"], ["scenes"], ["up", "--quiet", "--json", "--objects", "3"]]
     if "schema" in mhrc("--help").stdout:
@@ -253,6 +244,7 @@ def test_importing_pybullet_modules_is_silent(module: str) -> None:
 # --------------------------------------------------------------------------- a secured run, read with the observer's login
 
 
+@pytest.mark.slow
 async def test_the_observers_login_reads_a_secured_run(tmp_path: Path) -> None:
     """`mhrc doctor` and `mhrc bus echo 'mhrc/**'` with the observer's login: a healthy world is
     called healthy (its state answered), and echo prints the run's messages, as the README says;
@@ -266,7 +258,7 @@ async def test_the_observers_login_reads_a_secured_run(tmp_path: Path) -> None:
     world = asyncio.create_task(up_in_process(cfg, robots=("alice", "bob")))  # waits for david: alive, not started
     client = await open_client(cfg.endpoint, 60, security=cfg.participant("observer"))
     try:
-        await wait_attached(client, cfg.run, {"alice", "bob"})
+        await robots_alive(client, cfg.run, {"alice", "bob"})
         doc, as_alice = await asyncio.gather(
             amhrc("doctor", "--connect", cfg.endpoint, "--credentials", observer),
             amhrc("doctor", "--connect", cfg.endpoint, "--credentials", alice),

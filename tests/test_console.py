@@ -35,6 +35,8 @@ from mhrc.core.protocol import (
     decode_event,
 )
 from mhrc.testing import world_on_loopback
+from sweep import sweep
+from waits import served
 
 
 def mhrc(*args: str, cwd: Path, timeout: float = 240) -> subprocess.CompletedProcess[str]:
@@ -62,16 +64,14 @@ class GatedPolicy:
 
 async def _attach_by_hand(bus: Bus, keys: Keys, robot: str) -> None:
     """Attach `robot` with a live token and never act: the lockstep tick stays open."""
-    for _ in range(100):
-        replies = await bus.get(keys.attach(robot), AttachRequest(robot=robot, agent_id=f"hand-{robot}"), timeout=2.0)
-        if replies:
-            assert decode(replies[0], AttachReply).accepted
-            bus.declare_token(keys.alive_robot(robot))
-            return
-        await asyncio.sleep(0.1)
-    raise AssertionError(f"the world never answered {robot}'s attach")
+    await served(bus, keys.attach(robot))  # the world's attach queryable reached this session
+    replies = await bus.get(keys.attach(robot), AttachRequest(robot=robot, agent_id=f"hand-{robot}"), timeout=2.0)
+    assert replies, f"the world never answered {robot}'s attach"
+    assert decode(replies[0], AttachReply).accepted
+    bus.declare_token(keys.alive_robot(robot))
 
 
+@pytest.mark.slow
 async def test_an_agent_whose_tick_was_taken_backs_off_instead_of_resubmitting_in_a_loop(tmp_path: Path) -> None:
     """On the open bus another process can act for alice with her (public) agent id. Her own
     request for that tick is then rejected; re-attaching gives her the same tick, so before
@@ -148,7 +148,7 @@ def _table_rows(text: str) -> dict[str, str]:
     return rows
 
 
-@pytest.mark.parametrize("processes", [False, True], ids=["in-process", "processes"])
+@pytest.mark.parametrize("processes", sweep([False, True], ids=["in-process", "processes"]))
 def test_quiet_prints_only_the_summary_table_with_the_reports_makespan(processes: bool, tmp_path: Path) -> None:
     from mhrc.core.metrics import from_trace
     from mhrc.core.trace import read_trace
@@ -188,8 +188,11 @@ CLOSED_LINE = re.compile(r"^tick +(\d+) closed: ")
 MESSAGE_LINE = re.compile(r"^ +(alice|bob|david) -> (alice|bob|david): ")
 
 
-@pytest.mark.parametrize("schedule", ["lockstep", "sequential"])
-@pytest.mark.parametrize("summary", [True, False], ids=["table-at-the-end", "table-by-mhrc-up"])
+@pytest.mark.parametrize(
+    ("summary", "schedule"),
+    sweep([(True, "lockstep"), (False, "lockstep"), (True, "sequential"), (False, "sequential")], fast=2,
+          ids=["table-at-the-end-lockstep", "table-by-mhrc-up-lockstep", "table-at-the-end-sequential", "table-by-mhrc-up-sequential"]),
+)  # fmt: skip
 async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table(schedule: str, summary: bool, tmp_path: Path) -> None:
     """Results, messages and the tick events travel on different keys; the console must still
     read in tick order: a tick's results, then its messages, then "tick N closed"; the table
@@ -243,9 +246,9 @@ async def test_a_world_nobody_attaches_to_ends_at_the_start_timeout(tmp_path: Pa
 
 @pytest.mark.parametrize(
     "args",
-    [["world", "--insecure"], ["up", "--insecure", "--external", "alice", "--external", "bob", "--external", "david"]],
-    ids=["world", "up-all-external"],
-)
+    sweep([["world", "--insecure"], ["up", "--insecure", "--external", "alice", "--external", "bob", "--external", "david"]],
+          ids=["world", "up-all-external"]),
+)  # fmt: skip
 def test_start_timeout_with_nobody_attached_is_one_line_and_a_failure(args: list[str], tmp_path: Path) -> None:
     run = mhrc(*args, "--start-timeout", "1", cwd=tmp_path, timeout=120)  # before: waited forever (up had no such option)
     assert run.returncode == 1, (run.returncode, run.stderr[-2000:])
@@ -271,7 +274,7 @@ def test_no_model_server_is_one_line_exit_2_and_nothing_left_behind(processes: b
     assert not (tmp_path / "runs").exists()  # no credentials, no trace
 
 
-@pytest.mark.parametrize("processes", [False, True], ids=["in-process", "processes"])
+@pytest.mark.parametrize("processes", sweep([False, True], ids=["in-process", "processes"]))
 def test_a_model_that_refuses_every_request_is_one_error_no_table_no_vanished_robots(processes: bool, tmp_path: Path) -> None:
     """A server that is there but has no such model (HTTP 404, as Ollama answers for a model not
     pulled): the run stops with the model's error, not with robots 'vanished' and a table of
@@ -292,6 +295,7 @@ def test_a_model_that_refuses_every_request_is_one_error_no_table_no_vanished_ro
     assert len(errors) == 1 and errors[0].startswith("mhrc up: ") and "HTTP 404: no model 'llama3.1:8b'" in errors[0], run.stderr
 
 
+@pytest.mark.slow
 def test_the_open_bus_is_said_once_under_processes(tmp_path: Path) -> None:
     """`mhrc up --processes --insecure`: the warning about the open bus comes once, from the
     command the user typed, not again from each of its world and agent processes."""

@@ -7,7 +7,6 @@ from __future__ import annotations
 import asyncio
 import csv
 import io
-import json
 import re
 from html.parser import HTMLParser
 from pathlib import Path
@@ -24,6 +23,7 @@ from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX
 from mhrc.eval.rows import read_rows
 from mhrc.eval.summaries import write_summaries
 from mhrc.core.trace import read_trace
+from mhrc.testing import ModelReply, ScriptedModelServer
 
 # --------------------------------------------------------------------------- a hand-built trace
 
@@ -161,7 +161,7 @@ def test_a_rejections_code_decides_its_kind_whatever_its_text(code: str, kind: s
 # --------------------------------------------------------------------------- real recorded episodes
 
 
-def _scripted(body: dict[str, Any]) -> tuple[int, dict[str, str], bytes, float]:
+def _scripted(body: dict[str, Any]) -> ModelReply:
     """Bob's first reply has no command; David tries to pick (he has no arm); Alice navigates
     twice to furniture that does not exist, then messages Bob; everything else waits."""
     system, user = body["messages"][0]["content"], body["messages"][-1]["content"]
@@ -175,18 +175,15 @@ def _scripted(body: dict[str, Any]) -> tuple[int, dict[str, str], bytes, float]:
         ("alice", 2): 'Command: communicate("Bob, where is the tray?", bob)',
     }
     text = script.get((robot, step), "Analysis: nothing to do.\nCommand: wait()")
-    reply = {"choices": [{"message": {"role": "assistant", "content": text}}], "usage": {"prompt_tokens": 50, "completion_tokens": 9}}
-    return 200, {"Content-Type": "application/json"}, json.dumps(reply).encode(), 0.0
+    return ModelReply(text, usage={"prompt_tokens": 50, "completion_tokens": 9})
 
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from test_llm import FakeServer
-
     out = tmp_path_factory.mktemp("recorded")
     heuristic, llm = out / "heuristic.jsonl", out / "llm.jsonl"
     asyncio.run(up_in_process(EpisodeConfig.build(seed=0, horizon=50, trace=heuristic).resolved()))
-    server = FakeServer(_scripted)
+    server = ScriptedModelServer(_scripted, when_done=None)
     try:
         cfg = EpisodeConfig.build(seed=0, horizon=5, trace=llm, llm="openai:test-model", base_url=server.url, llm_timeout=5.0, schedule="sequential")
         asyncio.run(up_in_process(cfg.resolved()))

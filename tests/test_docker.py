@@ -442,6 +442,7 @@ def _compose_env(**settings: str) -> dict[str, str]:
     return {**{k: v for k, v in os.environ.items() if not k.startswith("MHRC_")}, **settings}
 
 
+@pytest.mark.slow
 def test_compose_episode_runs_as_local_processes(tmp_path: Path) -> None:
     services = load(COMPOSE)["services"]
     env = _compose_env()

@@ -144,8 +144,17 @@ def check_block(block: Block, where: Path) -> None:
     assert result.returncode == 0, f"{block.id} ({block.lang}) exited with {result.returncode}:\n{result.stdout[-4000:]}"
 
 
+# An example that runs an episode, a world, a benchmark or Python is in the slow tier (it takes
+# seconds to minutes); the fast tier keeps those that only ask the CLI (--help, --dry-run, schema).
+RUNS_SOMETHING = re.compile(r"\bmhrc (up|world|agent|render|show|report|router|bus|doctor)\b|\bmhrc eval\b(?!.*--dry-run)|bench/|pytest|python")
+
+
+def in_slow_tier(block: Block) -> bool:
+    return bool(block.slow) or block.lang == "python" or RUNS_SOMETHING.search(block.text) is not None
+
+
 @pytest.mark.parametrize(
-    "block", [pytest.param(b, id=b.id, marks=[pytest.mark.slow] if b.slow else []) for b in UNIQUE]
+    "block", [pytest.param(b, id=b.id, marks=[pytest.mark.slow] if in_slow_tier(b) else []) for b in UNIQUE]
 )
 def test_example_runs(block: Block, tmp_path: Path) -> None:
     assert block.bad_note is None, f"{block.id}: `<!-- {block.bad_note} -->` must read `<!-- not run: REASON -->`"

@@ -40,6 +40,7 @@ async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None: 
     assert sum(1 for r in results if r["action"]["skill"] != "wait") == m.action_steps
 
 
+@pytest.mark.slow
 async def test_same_metrics_in_process_and_in_processes(tmp_path) -> None:  # type: ignore[no-untyped-def]
     a = await up_in_process(EpisodeConfig.build(seed=3, n_objects=3, trace=tmp_path / "a.jsonl").resolved())
     b = await up_processes(EpisodeConfig.build(seed=3, n_objects=3, trace=tmp_path / "b.jsonl").resolved())
@@ -92,6 +93,7 @@ def test_cli_names_the_bad_field() -> None:
     assert out.returncode == 2 and "--aids: unknown aid 'cheat'" in out.stderr and "Value error" not in out.stderr
 
 
+@pytest.mark.slow
 async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """The world starts with Alice and Bob; David attaches once ticks are running and is
     scheduled from then on."""

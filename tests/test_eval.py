@@ -20,6 +20,7 @@ from mhrc.run.config import ConfigError
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.report import summary_markdown
 from mhrc.eval.rows import merge_runs
+from mhrc.testing import ModelReply, ScriptedModelServer
 
 SMALL = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2)
 VOLATILE = {"wall_time", "worker"}
@@ -33,6 +34,7 @@ def _stable(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return {r["key"]: {k: v for k, v in r.items() if k not in VOLATILE} for r in rows}
 
 
+@pytest.mark.slow
 def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_work(tmp_path: Path) -> None:
     a, b = tmp_path / "a", tmp_path / "b"
     rows_a = asyncio.run(evaluate(SMALL, a, workers=2))
@@ -112,6 +114,7 @@ def _pool_workers(parent: int) -> list[int]:
     return out
 
 
+@pytest.mark.slow
 def test_an_episode_whose_worker_process_dies_runs_again_on_a_new_one(tmp_path: Path) -> None:
     """SIGKILL the only worker mid-episode (its trace has begun): the driver starts another
     worker, which runs the episode again; its row is there and no error is recorded."""
@@ -217,7 +220,7 @@ def test_llm_failures_and_validity_are_counted_from_the_trace() -> None:
 
 
 class ScriptedModel:
-    """The model behind an OpenAI-compatible endpoint on loopback (test_llm's FakeServer).
+    """The model behind an OpenAI-compatible endpoint on loopback (a `ScriptedModelServer`).
 
     Episodes run one after the other (one worker), so a step number lower than the last one seen
     starts the next episode. In episode `down` the model never answers in time: every call
@@ -228,16 +231,14 @@ class ScriptedModel:
     def __init__(self, down: int) -> None:
         import threading
 
-        from test_llm import FakeServer
-
         self.down = down
         self.episode = 0
         self.last_step = -1
         self.lock = threading.Lock()
-        self.server = FakeServer(self.answer)
+        self.server = ScriptedModelServer(self.answer, when_done=None)
         self.url = self.server.url
 
-    def answer(self, body: dict[str, Any]) -> tuple[int, dict[str, str], bytes, float]:
+    def answer(self, body: dict[str, Any]) -> ModelReply:
         import re
 
         system, user = body["messages"][0]["content"], body["messages"][-1]["content"]
@@ -248,21 +249,21 @@ class ScriptedModel:
             self.last_step = step
             episode = self.episode
         if episode == self.down:
-            return 503, {}, b'{"error": {"message": "too late"}}', 2.5  # beyond the 1 s timeout
+            return ModelReply(status=503, body={"error": {"message": "too late"}}, latency=3600.0)  # never, in the test's time
         robot = system.split()[2].rstrip(",").lower()  # "You are Bob, ..."
         text = "Let me think about the tray first." if robot == "bob" and step == 0 else "Analysis: nothing to do yet.\nCommand: wait()"
-        reply = {"choices": [{"message": {"role": "assistant", "content": text}}], "usage": {"prompt_tokens": 50, "completion_tokens": 9}}
-        return 200, {"Content-Type": "application/json"}, json.dumps(reply).encode(), 0.0
+        return ModelReply(text, usage={"prompt_tokens": 50, "completion_tokens": 9})
 
     def close(self) -> None:
         self.server.close()
 
 
+@pytest.mark.slow
 def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_model_never_answered(tmp_path: Path) -> None:
     model = ScriptedModel(down=1)  # the second episode (4 objects) never reaches the model
     spec = EvalSpec(
-        tasks=("pack_objects",), scenes=("kitchen",), objects=(3, 4, 5), horizon=3, llm="openai:test-model",
-        base_url=model.url, llm_timeout=1.0, aids=("goal_map",), history_cap=50_000,
+        tasks=("pack_objects",), scenes=("kitchen",), objects=(3, 4, 5), horizon=2, llm="openai:test-model",
+        base_url=model.url, llm_timeout=0.5, aids=("goal_map",), history_cap=50_000,
     )  # fmt: skip
     try:
         rows = asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))
@@ -271,32 +272,31 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
     by_key = {r["key"]: r for r in rows}
     assert sorted(by_key) == ["pack_objects/kitchen/3/0", "pack_objects/kitchen/4/0", "pack_objects/kitchen/5/0"]
     for r in rows:  # the configuration the episode ran with is on its row
-        assert (r["method"], r["fidelity"], r["aids"], r["history_cap"], r["horizon"]) == ("openai:test-model", "aids:goal_map", ["goal_map"], 50_000, 3)
-        assert r["temporal_steps"] == 3 and r["llm_calls"] == 9  # three robots, three steps
+        assert (r["method"], r["fidelity"], r["aids"], r["history_cap"], r["horizon"]) == ("openai:test-model", "aids:goal_map", ["goal_map"], 50_000, 2)
+        assert r["temporal_steps"] == 2 and r["llm_calls"] == 6  # three robots, two steps
     down = by_key["pack_objects/kitchen/4/0"]
-    assert (down["llm_unreachable"], down["parse_failures"], down["prompt_tokens"], down["valid"]) == (9, 0, 0, False)
-    assert "unreachable for all 9 LLM steps" in down["invalid_reason"]
+    assert (down["llm_unreachable"], down["parse_failures"], down["prompt_tokens"], down["valid"]) == (6, 0, 0, False)
+    assert "unreachable for all 6 LLM steps" in down["invalid_reason"]
     for key in ("pack_objects/kitchen/3/0", "pack_objects/kitchen/5/0"):
         r = by_key[key]
         assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"]) == (1, 0, 0, True)
-        assert (r["prompt_tokens"], r["completion_tokens"]) == (9 * 50, 9 * 9)
+        assert (r["prompt_tokens"], r["completion_tokens"]) == (6 * 50, 6 * 9)
     summary = (tmp_path / "ev" / "summary.md").read_text()
     assert "3 episodes, 2 valid, 1 invalid" in summary and "1 invalid episode(s) left out" in summary
-    assert "- pack_objects/kitchen/4/0 (openai:test-model · ablation none · aids:goal_map · history cap 50000 · horizon 3): the model was unreachable" in summary
+    assert "- pack_objects/kitchen/4/0 (openai:test-model · ablation none · aids:goal_map · history cap 50000 · horizon 2): the model was unreachable" in summary
     assert "| pack_objects | 2 | 0.00 [0.00, 0.00] |" in summary  # only the two valid episodes are averaged
     assert "paper GPT" not in summary  # no model of the paper's
     csv_line = (tmp_path / "ev" / "summary.csv").read_text().splitlines()[1]
-    assert csv_line.startswith("openai:test-model,none,aids:goal_map,50000,3,free,sequential,pack_objects,2,")  # eval runs the paper's loop by default
+    assert csv_line.startswith("openai:test-model,none,aids:goal_map,50000,2,free,sequential,,pack_objects,2,")  # eval runs the paper's loop by default (no scenario)
 
 
 def test_a_wrong_api_key_stops_the_evaluation_with_one_error_and_a_failing_exit(tmp_path: Path) -> None:
     """Not a grid of PS 0.00 rows and exit 0: the first episode's 401 stops the run."""
     from click.testing import CliRunner
-    from test_llm import FakeServer
 
     from mhrc.cli import main
 
-    server = FakeServer(lambda body: (401, {}, b'{"error": {"message": "Incorrect API key provided"}}', 0.0))
+    server = ScriptedModelServer(lambda body: ModelReply(status=401, body={"error": {"message": "Incorrect API key provided"}}), when_done=None)
     try:
         result = CliRunner().invoke(main, [
             "eval", "--llm", "openai:gpt-4o", "--base-url", server.url, "--tasks", "pack_objects", "--scenes", "kitchen",
@@ -317,6 +317,7 @@ def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_eval_names_every_file_it_wrote_and_a_resume_counts_the_earlier_episodes(tmp_path: Path) -> None:
     first = _mhrc(*SMALL_ARGS, "--out", "ev", cwd=tmp_path)
     assert first.returncode == 0, first.stderr[-2000:]
@@ -340,6 +341,7 @@ def test_eval_names_every_file_it_wrote_and_a_resume_counts_the_earlier_episodes
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "r.csv", "r.html", "r.md"]
 
 
+@pytest.mark.slow
 def test_a_model_server_that_is_down_stops_the_evaluation_without_claiming_finished_rows(tmp_path: Path) -> None:
     down = f"http://127.0.0.1:{free_port('127.0.0.1')}/v1"  # nothing listens there
     out = _mhrc(*SMALL_ARGS, "--llm", "openai:x", "--base-url", down, "--concurrency", "1", "--out", "ev", cwd=tmp_path)
@@ -348,6 +350,7 @@ def test_a_model_server_that_is_down_stops_the_evaluation_without_claiming_finis
     assert "--resume --out ev" in out.stderr and not (tmp_path / "ev" / "episodes.jsonl").exists()
 
 
+@pytest.mark.slow
 def test_a_second_ctrl_c_on_eval_quits_at_once_and_loses_no_row(tmp_path: Path) -> None:
     """The first Ctrl-C stops the workers; the second, while they stop, quits at once, skipping
     every `finally`: the rows written stay whole, and no worker process outlives the driver."""

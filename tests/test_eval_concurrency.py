@@ -1,6 +1,6 @@
 """`mhrc eval` with a worker that runs several episodes at once (`--concurrency`): real worker
 processes (mhrc.eval.pool), real Zenoh buses on loopback, real worlds, and LLM agents against a scripted
-OpenAI-compatible server on loopback (test_llm's FakeServer)."""
+OpenAI-compatible server on loopback (`mhrc.testing.ScriptedModelServer`)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,6 @@ import json
 import re
 import subprocess
 import sys
-import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +16,7 @@ import pytest
 
 from mhrc.run.config import ConfigError
 from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.testing import ScriptedModelServer
 
 LATENCY = 0.3  # s the scripted model takes per reply: long enough for episodes to overlap at the server
 
@@ -27,47 +26,33 @@ def _rows(path: Path) -> list[dict[str, Any]]:
 
 
 class SlowModel:
-    """A model that always waits, answering after LATENCY seconds, and records the order in which
-    its requests start and end, each tagged with the episode it came from: Bob's prompt lists
-    the episode's objects, and every episode of the grid has another number of them."""
+    """A model that always waits, answering after LATENCY seconds; the server records the order in
+    which its requests start and end (`ModelCall.started`, `ended`), and each request tells the
+    episode it came from: Bob's prompt lists the episode's objects, and every episode of the grid
+    has another number of them."""
 
     def __init__(self) -> None:
-        from test_llm import FakeServer, ok
-
-        self.ok = ok
-        self.events: list[tuple[str, int]] = []  # ("start" | "end", objects in Bob's list), in order
-        self.lock = threading.Lock()
-        self.server = FakeServer(self.answer)
+        self.server = ScriptedModelServer(lambda body: "Analysis: nothing to do yet.\nCommand: wait()", latency=LATENCY)
         self.url = self.server.url
 
-    def answer(self, body: dict[str, Any]) -> tuple[int, dict[str, str], bytes, float]:
+    @staticmethod
+    def episode_of(body: dict[str, Any]) -> int:
+        """The number of objects in Bob's list; 0 for Alice's and David's prompts."""
         listed = re.search(r"^Object list: (.*)\.$", body["messages"][-1]["content"], re.M)
-        tag = len(listed.group(1).split(", ")) if listed else 0  # 0: Alice or David
-        with self.lock:
-            self.events.append(("start", tag))
-        time.sleep(LATENCY)
-        with self.lock:
-            self.events.append(("end", tag))
-        return self.ok("Analysis: nothing to do yet.\nCommand: wait()")
+        return len(listed.group(1).split(", ")) if listed else 0
 
     def overlapping(self) -> set[frozenset[int]]:
         """Pairs of episodes one of whose requests started before a request of the other ended
         and ended after it started (from the recorded order alone, no clock)."""
-        spans: list[tuple[int, int, int]] = []  # (episode, start index, end index), one per request
-        open_: dict[int, list[int]] = {}
-        for i, (what, tag) in enumerate(self.events):
-            if tag == 0:
-                continue
-            if what == "start":
-                open_.setdefault(tag, []).append(i)
-            else:  # Bob asks once at a time, so an end closes that episode's only open request
-                spans.append((tag, open_[tag].pop(), i))
+        spans = [(self.episode_of(c.request), c.started, c.ended) for c in self.server.calls if c.ended is not None]
+        spans = [span for span in spans if span[0]]
         return {frozenset((a, b)) for a, s1, e1 in spans for b, s2, e2 in spans if a != b and s1 < e2 and s2 < e1}
 
     def close(self) -> None:
         self.server.close()
 
 
+@pytest.mark.slow
 def test_one_worker_runs_llm_episodes_at_once_and_writes_each_row_once(tmp_path: Path) -> None:
     model = SlowModel()
     spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3, 4, 5, 6), horizon=3, llm="m", base_url=model.url, llm_timeout=20.0)
@@ -83,10 +68,11 @@ def test_one_worker_runs_llm_episodes_at_once_and_writes_each_row_once(tmp_path:
     assert not (tmp_path / "ev" / "errors.jsonl").exists()
     assert len(model.server.requests) == 4 * 9  # no request was retried or sent twice
     # the episodes' model calls overlapped: a call of one episode was in flight while another's was
-    assert model.overlapping(), model.events
+    assert model.overlapping(), [(c.started, c.ended, model.episode_of(c.request)) for c in model.server.calls]
     assert model.server.max_in_flight > 3  # one episode alone never has more than its three robots' calls in flight
 
 
+@pytest.mark.slow
 def test_heuristic_episodes_run_at_once_give_the_same_metrics_as_one_at_a_time(tmp_path: Path) -> None:
     """Each episode has its own PyBullet client and arm planner; the process-wide OMPL generator
     is re-seeded under a lock before every plan (world/arm.py), so sharing a process changes nothing."""

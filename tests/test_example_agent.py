@@ -17,6 +17,7 @@ from mhrc.core import protocol
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.core.trace import read_trace
+from sweep import sweep
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "raw_zenoh_agent.py"
 
@@ -43,7 +44,7 @@ def test_example_imports_nothing_of_mhrc() -> None:
     assert not {m for m in imported if m.startswith("mhrc")}
 
 
-@pytest.mark.parametrize("schedule", ["lockstep", "sequential"])
+@pytest.mark.parametrize("schedule", sweep(["lockstep", "sequential"]))
 async def test_raw_zenoh_agent_plays_david(tmp_path: Path, schedule: str) -> None:
     trace_path = tmp_path / "t.jsonl"
     cfg = EpisodeConfig.build(seed=0, n_objects=3, horizon=30, schedule=schedule, trace=trace_path).resolved()

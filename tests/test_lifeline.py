@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads children from /proc (Linux)")
+pytestmark = [pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads children from /proc (Linux)"), pytest.mark.slow]
 
 
 def children(pid: int) -> set[int]:

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import json
-from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -12,44 +10,8 @@ import pytest
 from mhrc.agents.llm import LLMError, OpenAIChatClient, check_spec
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
-from mhrc.testing import ModelReply, ScriptedModelServer
+from mhrc.testing import ModelReply
 from mhrc.core.trace import read_trace
-
-Reply = tuple[int, dict[str, str], bytes, float]  # status, headers, body, delay
-
-
-def ok(text: str, usage: bool = True) -> Reply:
-    body: dict[str, Any] = {"choices": [{"message": {"role": "assistant", "content": text}}]}
-    if usage:
-        body["usage"] = {"prompt_tokens": 11, "completion_tokens": 7}
-    return 200, {}, json.dumps(body).encode(), 0.0
-
-
-class FakeServer:
-    """`mhrc.testing.ScriptedModelServer` scripted with `Reply` tuples: `respond(request_json)`
-    returns (status, headers, body bytes, delay). Kept for the test modules that import it
-    (test_async, test_eval, test_eval_concurrency, test_viewer, test_diagnostics); new tests
-    use ScriptedModelServer and ModelReply directly. `requests` pairs each body with its headers."""
-
-    def __init__(self, respond: Callable[[dict[str, Any]], Reply]) -> None:
-        def reply(body: dict[str, Any]) -> ModelReply:
-            status, headers, payload, delay = respond(body)
-            return ModelReply(status=status, headers=headers, body=payload, latency=delay)
-
-        self.server = ScriptedModelServer(reply, when_done=None)
-        self.url = self.server.url
-
-    @property
-    def requests(self) -> list[tuple[dict[str, Any], dict[str, str]]]:
-        return [(call.request, call.headers) for call in self.server.calls]
-
-    @property
-    def max_in_flight(self) -> int:
-        return self.server.max_in_flight
-
-    def close(self) -> None:
-        self.server.close()
-
 
 USAGE = {"prompt_tokens": 11, "completion_tokens": 7}
 

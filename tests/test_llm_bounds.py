@@ -54,6 +54,7 @@ async def against_endless(tmp_path: Path, **values: Any) -> tuple[EpisodeConfig,
         return cfg, await up_in_process(cfg), len(server.requests)
 
 
+@pytest.mark.slow
 async def test_an_endless_server_costs_each_step_at_most_its_deadline_and_the_row_counts_the_lost_steps(tmp_path: Path) -> None:
     """Every call hits the timeout, is retried once, then the robot waits: the episode reaches
     its horizon (it never stalls), and every lost step is counted as unreachable."""
@@ -151,6 +152,7 @@ async def test_a_server_that_refuses_the_response_format_stops_a_structured_run_
     assert len(server.requests) <= 3
 
 
+@pytest.mark.slow
 async def test_a_server_down_for_the_whole_first_step_stops_the_run(tmp_path: Path) -> None:
     with socket.socket() as s:  # a port nobody listens on
         s.bind(("127.0.0.1", 0))

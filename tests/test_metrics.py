@@ -15,6 +15,7 @@ from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.core.metrics import TraceError, from_trace, summarize
 from mhrc.core.trace import read_trace
+from sweep import sweep
 
 
 def _put(kind: str, **msg: Any) -> dict[str, Any]:
@@ -108,7 +109,7 @@ def test_lower_bound_of_hand_built_episodes(objects: list[SymbolicObject], bound
     assert lower_bound(SymbolicEpisode(tuple(objects))) == bound
 
 
-@pytest.mark.parametrize(("task", "scene", "seed", "n"), [("pack_objects", "kitchen", 4, 5), ("make_sandwich", "bathroom", 1, 4), ("sort_solids", "bedroom", 2, 6)])
+@pytest.mark.parametrize(("task", "scene", "seed", "n"), sweep([("pack_objects", "kitchen", 4, 5), ("make_sandwich", "bathroom", 1, 4), ("sort_solids", "bedroom", 2, 6)]))
 def test_real_episodes_agree_with_the_world_and_respect_the_bound(tmp_path: Path, task: str, scene: str, seed: int, n: int) -> None:
     cfg = EpisodeConfig.build(task=task, scene=scene, seed=seed, n_objects=n, trace=tmp_path / "t.jsonl").resolved()
     done = asyncio.run(up_in_process(cfg))

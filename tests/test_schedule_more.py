@@ -50,6 +50,7 @@ def _events(trace: Path, kind: str) -> list[dict[str, Any]]:
 # --------------------------------------------------------------------------- lockstep
 
 
+@pytest.mark.slow
 async def test_lockstep_same_trace_in_one_process_or_many(tmp_path: Path) -> None:
     a = await up_in_process(EpisodeConfig.build(seed=0, horizon=8, schedule="lockstep", trace=tmp_path / "a.jsonl").resolved())
     b = await up_processes(EpisodeConfig.build(seed=0, horizon=8, schedule="lockstep", trace=tmp_path / "b.jsonl").resolved())

@@ -21,6 +21,7 @@ from mhrc.world.scene import LAYOUTS
 from mhrc.world.schedulers import SCHEDULERS, LockstepScheduler, Scheduler, SequentialScheduler, UnknownScheduler
 from mhrc.world.service import WorldConfig, WorldService
 from mhrc.world.sim import Sim
+from sweep import sweep
 
 
 def test_registry_has_lockstep() -> None:
@@ -84,6 +85,7 @@ def test_unknown_schedule_option_is_a_usage_error() -> None:
         assert result.exit_code == 2 and "'warp' is not one of 'sequential', 'lockstep'" in result.output, result.output
 
 
+@pytest.mark.slow
 async def test_sequential_same_trace_in_one_process_or_many(tmp_path: Path) -> None:
     a = await up_in_process(EpisodeConfig.build(seed=0, horizon=8, schedule="sequential", trace=tmp_path / "a.jsonl").resolved())
     b = await up_processes(EpisodeConfig.build(seed=0, horizon=8, schedule="sequential", trace=tmp_path / "b.jsonl").resolved())
@@ -122,7 +124,7 @@ class _Recording:
         self.inner.record(result)
 
 
-async def test_sequential_is_algorithm_1(world_factory, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+async def test_sequential_is_algorithm_1(mhrc_world, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
     """Within a tick the robots plan and act one at a time, in order, each on the world the earlier
     ones left: robot k decides only after robot k-1's action of the same tick executed, and the
     observation it decides on already shows that action's effect."""
@@ -137,12 +139,12 @@ async def test_sequential_is_algorithm_1(world_factory, monkeypatch: pytest.Monk
 
     monkeypatch.setattr(WorldService, "_execute", logged)
     horizon = 12
-    async with world_factory(seed=0, horizon=horizon, schedule="sequential") as world:
+    async with mhrc_world(seed=0, horizon=horizon, schedule="sequential") as world:
         buses = [await world.client() for _ in ROBOTS]
         try:
-            agents = [RobotAgent(bus, _Recording(r, events, seen), run=world.cfg.run, robot=r) for bus, r in zip(buses, ROBOTS)]  # type: ignore[arg-type]
+            agents = [RobotAgent(bus, _Recording(r, events, seen), run=world.config.run, robot=r) for bus, r in zip(buses, ROBOTS)]  # type: ignore[arg-type]
             dones = await asyncio.wait_for(asyncio.gather(*(a.run() for a in agents)), 120)
-            done = await world.task
+            done = await world.done()
         finally:
             for bus in buses:
                 await bus.close()
@@ -160,8 +162,7 @@ async def test_sequential_is_algorithm_1(world_factory, monkeypatch: pytest.Monk
         assert any(o.name == obj and o.on == "table_0" for o in seen[("bob", tick)].objects), (tick, call)
 
 
-@pytest.mark.parametrize("task", ["pack_objects", "sort_solids", "make_sandwich"])
-@pytest.mark.parametrize("scene", sorted(LAYOUTS))
+@pytest.mark.parametrize(("task", "scene"), sweep([(t, s) for s in sorted(LAYOUTS) for t in ("pack_objects", "sort_solids", "make_sandwich")]))
 async def test_heuristic_team_solves_every_task_in_sequence(task: str, scene: str, tmp_path: Path) -> None:
     cfg = EpisodeConfig.build(task=task, scene=scene, seed=0, n_objects=4, schedule="sequential", trace=tmp_path / "t.jsonl")
     done = await up_in_process(cfg.resolved())

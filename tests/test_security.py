@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from mhrc.core import certs, security
-from mhrc.core.bus import Bus
+from mhrc.core.bus import Bus, Sample
 from mhrc.core.endpoints import BusRefused, endpoint, free_port
 from mhrc.core.bus import open_client
 from mhrc.run.config import EpisodeConfig
@@ -23,6 +23,8 @@ from mhrc.run.inprocess import up_in_process
 from mhrc.run.processes import up_processes
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionRequest, AttachReply, AttachRequest, RobotAttached, Wait, decode, decode_event
+from sweep import sweep
+from waits import served, subscribed
 
 ROBOTS = ("alice", "bob", "david")
 
@@ -64,7 +66,14 @@ async def test_acl_only_own_robot(tmp_path: Path) -> None:
     k = Keys("sec")
     async with _router(files) as (world, ep):
         got: list[bytes] = []
-        world.subscribe(k.any_action_request, lambda s: got.append(s.payload))
+        arrived = asyncio.Event()  # both robots' own requests
+
+        def on_request(sample: Sample) -> None:
+            got.append(sample.payload)
+            if {b"alice", b"bob"} <= set(got):
+                arrived.set()
+
+        world.subscribe(k.any_action_request, on_request)
 
         async def attach(key: str, payload: bytes, timeout: float) -> AttachReply | None:
             return AttachReply(robot=k.robot_of(key), accepted=True)
@@ -75,15 +84,24 @@ async def test_acl_only_own_robot(tmp_path: Path) -> None:
         david = await open_client(ep, 5, security=security.load(files["david"]))
         try:
             seen: list[str] = []
+            own = asyncio.Event()
             david.subscribe(f"{k.base}/robot/alice/**", lambda s: seen.append(s.key))  # denied: david may not read alice's keys
-            await asyncio.sleep(0.5)
+            david.subscribe(k.action_ack("david"), lambda s: own.set())  # allowed, declared after the denied one
+            await subscribed(alice, k.action_request("alice"))  # the world's declarations reached the robots' sessions
+            await subscribed(bob, k.action_request("bob"))
+            await served(alice, k.attach("alice"))
+            await subscribed(world, k.action_ack("david"))  # and david's reached the world
             alice.put(k.action_request("alice"), b"alice")
             bob.put(k.action_request("alice"), b"bob-as-alice")  # denied: dropped by the router
             bob.put(k.action_request("bob"), b"bob")
             world.put(k.action_ack("alice"), b"ack")  # david may not read it
+            world.put(k.action_ack("david"), b"ack")  # he may read his own, which comes after it on the same link
             assert await alice.get(k.attach("alice"), AttachRequest(robot="alice", agent_id="a"), timeout=2)
             assert await bob.get(k.attach("alice"), AttachRequest(robot="alice", agent_id="a"), timeout=1) == []
-            await asyncio.sleep(0.5)
+            # Each session delivers in order: once bob's own request and david's own ack arrived,
+            # whatever was sent before them on the same link would have too.
+            await asyncio.wait_for(arrived.wait(), 30)
+            await asyncio.wait_for(own.wait(), 30)
             assert sorted(got) == [b"alice", b"bob"]
             assert seen == []
         finally:
@@ -95,10 +113,8 @@ async def test_acl_only_own_robot(tmp_path: Path) -> None:
 async def test_no_credentials_refused_with_a_clear_error(tmp_path: Path) -> None:
     files = _creds(tmp_path)
     async with _router(files) as (_world, ep):
-        t0 = time.monotonic()
         with pytest.raises(BusRefused, match="no credentials"):
-            await open_client(ep, 10)
-        assert time.monotonic() - t0 < 5  # refused at once, not retried until the timeout
+            await open_client(ep, 3600)  # refused at once: retried until this timeout, pytest-timeout would fail it
         with pytest.raises(BusRefused, match="is secured"):  # a plain tcp client is told at once to use tls/
             await open_client(ep.replace("tls/", "tcp/"), 60)
         wrong = json.loads(files["alice"].read_text())
@@ -145,17 +161,18 @@ async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> Non
     mallory = await open_client(cfg.endpoint, 30, security=cfg.participant("bob"))
     try:
         alice_id: list[str] = []
+        alice_seen = asyncio.Event()
 
         def on_event(sample) -> None:  # type: ignore[no-untyped-def]
             ev = decode_event(sample.payload)
             if isinstance(ev, RobotAttached) and ev.robot == "alice":
                 alice_id.append(ev.agent_id)
+                alice_seen.set()
 
         mallory.subscribe(k.world_event, on_event)
-        for _ in range(300):
-            if alice_id or episode.done():
-                break
-            await asyncio.sleep(0.05)
+        attached = asyncio.create_task(alice_seen.wait())
+        await asyncio.wait({attached, episode}, timeout=60, return_when=asyncio.FIRST_COMPLETED)
+        attached.cancel()
         assert alice_id, "alice never attached"
         replies = await mallory.get(k.attach("alice"), AttachRequest(robot="alice", agent_id=alice_id[0]), timeout=1)
         assert replies == []  # the router drops the attach query of another robot's user
@@ -183,18 +200,16 @@ async def test_duplicate_attach_with_a_live_agents_id_is_refused(tmp_path: Path)
     copycat = await open_client(cfg.endpoint, 30, security=cfg.participant("alice"))  # even alice's own credentials
     try:
         ids: list[str] = []
+        seen = asyncio.Event()
 
         def on_event(sample) -> None:  # type: ignore[no-untyped-def]
             ev = decode_event(sample.payload)
             if isinstance(ev, RobotAttached):
                 ids.append(ev.agent_id)
+                seen.set()
 
         copycat.subscribe(k.world_event, on_event)
-        for _ in range(300):
-            if ids:
-                break
-            await asyncio.sleep(0.05)
-        assert ids
+        await asyncio.wait_for(seen.wait(), 60)
         replies = await copycat.get(k.attach("alice"), AttachRequest(robot="alice", agent_id=ids[0]), timeout=3)
         reply = decode(replies[0], AttachReply)
         assert not reply.accepted
@@ -206,7 +221,7 @@ async def test_duplicate_attach_with_a_live_agents_id_is_refused(tmp_path: Path)
             await episode
 
 
-@pytest.mark.parametrize("task", ["pack_objects", "sort_solids", "make_sandwich"])
+@pytest.mark.parametrize("task", sweep(["pack_objects", "sort_solids", "make_sandwich"]))
 async def test_up_processes_with_credentials(task: str, tmp_path: Path) -> None:
     """`mhrc up --processes`' way (the world and every agent a process of its own), secured as by default, finishes every task."""
     cfg = EpisodeConfig.build(task=task, seed=0, n_objects=4, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
@@ -241,6 +256,7 @@ def _open_without_login(port: int, ca: Path) -> None:
         zenoh.open(conf).close()
 
 
+@pytest.mark.slow
 async def test_the_world_says_which_logins_it_refused(tmp_path: Path) -> None:
     """Bad input on the world's side: `mhrc world` names the cause of every refused login (a wrong
     password, no login at all, another run's credentials), and keeps serving."""
@@ -387,6 +403,7 @@ async def test_only_the_world_speaks_for_the_world(attacker: str, tmp_path: Path
             await alice.close()
 
 
+@pytest.mark.slow
 async def test_a_forged_episode_done_cannot_end_a_secured_run(tmp_path: Path) -> None:
     """`mhrc up --processes`, secured: the observer's and bob's logins put a forged `episode_done`
     ("success 99/99") on world/event as soon as the episode starts; the run ends on its own
@@ -419,6 +436,7 @@ async def test_a_forged_episode_done_cannot_end_a_secured_run(tmp_path: Path) ->
     assert trace.count('"episode_done"') == 1 and '"placed":99' not in trace.replace(" ", "")
 
 
+@pytest.mark.slow
 def test_a_hand_started_secured_world_says_how_to_attach_and_why_not(tmp_path: Path) -> None:
     """`mhrc world --credentials`: the attach commands it prints carry each robot's login and
     work as printed; a plain-tcp agent and one without credentials each fail at once with one

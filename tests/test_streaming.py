@@ -16,10 +16,8 @@ import contextlib
 import itertools
 import json
 import os
-import socket
 import subprocess
 import sys
-import threading
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -111,19 +109,11 @@ async def test_a_stream_without_usage_or_done_is_estimated_and_keeps_its_finish_
 async def test_a_stream_that_stalls_mid_reply_is_abandoned_after_the_idle_timeout_and_retried(serve) -> None:  # type: ignore[no-untyped-def]
     """The first token came, then nothing: the idle timeout (not the first-token timeout, which
     is far longer here) ends the call; it is retried once, then reported as a stall."""
-    release = threading.Event()
-
-    def stalled() -> Iterator[bytes]:
-        yield from events(chunk("Analysis: I am "), chunk("thinking"), done=False)
-        release.wait(60)  # the server says no more until the test is over
-
-    server = serve(lambda body: ModelReply(headers=SSE, stream=stalled()))
-    try:
-        async with OpenAIChatClient("m", server.url, timeout=60, idle_timeout=0.3, backoff=0.01) as client:
-            with pytest.raises(LLMTimeout, match=r"the stream stalled: no chunk for 0\.3 s after 2 chunk\(s\), 2 time\(s\)") as err:
-                await client.complete(HI)
-    finally:
-        release.set()
+    stalled = events(chunk("Analysis: I am "), chunk("thinking"), done=False)
+    server = serve(lambda body: ModelReply(headers=SSE, stream=stalled, stall=True))  # then no more until the test is over
+    async with OpenAIChatClient("m", server.url, timeout=60, idle_timeout=0.3, backoff=0.01) as client:
+        with pytest.raises(LLMTimeout, match=r"the stream stalled: no chunk for 0\.3 s after 2 chunk\(s\), 2 time\(s\)") as err:
+            await client.complete(HI)
     assert not isinstance(err.value, LLMSilent)  # it answered: slow, not down
     assert len(server.requests) == 2
 
@@ -189,14 +179,13 @@ async def test_no_stream_sends_plain_requests_and_every_option_reaches_the_clien
 
 
 @pytest.fixture
-def mute() -> Iterator[str]:
-    """The base URL of a socket that takes connections (the kernel completes them: it listens)
-    and never reads or writes a byte. Its path is its own: a client remembers, process-wide,
-    the base URLs that ever answered (a port reused from an earlier test's server must not count)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        s.listen(64)
-        yield f"http://127.0.0.1:{s.getsockname()[1]}/mute-{uuid.uuid4().hex[:8]}/v1"
+def mute(serve) -> str:  # type: ignore[no-untyped-def]
+    """The base URL of a server that reads each request and never sends a status line (its
+    latency outlasts the test; closing the server at teardown ends it). Its path is its own: a
+    client remembers, process-wide, the base URLs that ever answered (a port reused from an
+    earlier test's server must not count); the scripted server answers on any path."""
+    server = serve(lambda body: "Command: wait()", latency=3600.0)
+    return f"http://127.0.0.1:{server.port}/mute-{uuid.uuid4().hex[:8]}/v1"
 
 
 async def test_a_server_that_never_sends_a_status_line_is_silent_and_stops_a_first_step(mute: str) -> None:
@@ -212,25 +201,18 @@ async def test_a_server_that_never_sends_a_status_line_is_silent_and_stops_a_fir
 
 
 async def test_a_server_that_answered_before_and_then_goes_mute_only_costs_steps(serve) -> None:  # type: ignore[no-untyped-def]
-    release = threading.Event()
-
-    def respond(body: dict[str, Any]) -> ModelReply:
-        if len(server.requests) == 1:
-            return ModelReply("Command: wait()")
-        release.wait(60)  # from now on: no status line
-        return ModelReply("too late")
+    def respond(body: dict[str, Any]) -> ModelReply:  # one answer, then no status line, ever
+        return ModelReply("Command: wait()") if len(server.requests) == 1 else ModelReply("too late", latency=3600.0)
 
     server = serve(respond)
-    try:
-        async with OpenAIChatClient("m", server.url, timeout=0.3, backoff=0.01) as client:
-            policy = LLMPolicy("alice", client)
-            await policy.decide(_obs(0))
-            d = await policy.decide(_obs(1))
-    finally:
-        release.set()
+    async with OpenAIChatClient("m", server.url, timeout=0.3, backoff=0.01) as client:
+        policy = LLMPolicy("alice", client)
+        await policy.decide(_obs(0))
+        d = await policy.decide(_obs(1))
     assert d.action.skill == "wait" and d.parse_error is not None and "no answer within 0.3 s" in d.parse_error
 
 
+@pytest.mark.slow
 async def test_up_against_a_server_that_never_answers_is_one_line_exit_2(mute: str, tmp_path: Path) -> None:
     """Before: the run went on to its horizon, "it waits" every tick, exit 0."""
     cfg = EpisodeConfig.build(seed=0, horizon=50, llm="openai:m", base_url=mute, llm_timeout=0.5, trace=tmp_path / "t.jsonl").resolved()
@@ -439,20 +421,12 @@ async def test_a_stream_that_never_ends_is_read_no_further_than_its_bound(serve)
 async def test_a_server_that_answered_an_earlier_client_is_slow_not_down(serve) -> None:  # type: ignore[no-untyped-def]
     """An evaluation's next episode has new clients: a server that answered this process before
     and is silent now costs that episode its steps, it does not stop the evaluation."""
-    release = threading.Event()
-
-    def respond(body: dict[str, Any]) -> ModelReply:
-        if len(server.requests) == 1:
-            return ModelReply("Command: wait()")
-        release.wait(60)
-        return ModelReply("too late")
+    def respond(body: dict[str, Any]) -> ModelReply:  # one answer, then no status line, ever
+        return ModelReply("Command: wait()") if len(server.requests) == 1 else ModelReply("too late", latency=3600.0)
 
     server = serve(respond)
-    try:
-        async with OpenAIChatClient("m", server.url) as earlier:
-            await earlier.complete(HI)
-        async with OpenAIChatClient("m", server.url, timeout=0.3, backoff=0.01) as client:
-            d = await LLMPolicy("alice", client).decide(_obs(0))
-    finally:
-        release.set()
+    async with OpenAIChatClient("m", server.url) as earlier:
+        await earlier.complete(HI)
+    async with OpenAIChatClient("m", server.url, timeout=0.3, backoff=0.01) as client:
+        d = await LLMPolicy("alice", client).decide(_obs(0))
     assert d.action.skill == "wait" and d.parse_error is not None and "no answer within 0.3 s" in d.parse_error

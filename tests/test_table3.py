@@ -43,9 +43,11 @@ from mhrc.core.protocol import (
 
 NAVIGATE_TO = re.compile(r"\b[Nn]avigate to (?:a stand pose of |stand pose \d+ of )?([A-Za-z0-9_]+)")
 # episodes (task, scene, n_objects, seed) tried in order until both real failures have been seen:
-# the first two show both today; the rest keep the test meaningful if scenes or policies change
+# the first two show both today (bathroom/5/1 moved up: it was the 14th tried, the first with a failed
+# placement); the rest keep the test meaningful if scenes or policies change
 EPISODES = [
     ("make_sandwich", "kitchen", 4, 5),
+    ("make_sandwich", "bathroom", 5, 1),
     ("make_sandwich", "kitchen", 6, 7),
     *[("make_sandwich", scene, n, seed) for seed in range(10) for n in (6, 5) for scene in ("kitchen", "bedroom", "bathroom")],
 ]
@@ -385,6 +387,7 @@ SAMPLES: dict[str, tuple[tuple[Any, ...], dict[str, Any], str | None]] = {
     "not_capable": (("bob", "navigate", ("pick", "place", "wait")), {}, None),
     "no_such_robot": (("carol", ("alice", "bob", "david")), {}, None),
     "waited": ((), {}, None),
+    "broken_down": (("navigate", 2), {}, None),
     "unknown_furniture": (("garage", ["sofa", "table_0"]), {}, "; furniture: sofa, table_0."),
     "not_navigable": (("tray", "table_0"), {}, " Navigate to table_0 instead."),
     "stand_pose_invalid": (("table_0", 3, 7), {}, None),

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import json
 import re
-import threading
 from html import escape
 from html.parser import HTMLParser
 from pathlib import Path
@@ -18,7 +17,7 @@ from mhrc.cli import main
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.core.trace import read_trace
-from test_llm import FakeServer, Reply, ok
+from mhrc.testing import ModelReply, ScriptedModelServer
 
 
 def record_heuristic(path: Path, horizon: int = 30) -> Path:
@@ -46,15 +45,9 @@ def record_llm(path: Path) -> Path:
         "bob": ["Analysis: the ghost is near.\nCommand: pick(ghost)"],
         "david": ["Command: navigate(table_2, 0)"],
     }
-    lock = threading.Lock()
-
-    def respond(body: dict[str, Any]) -> Reply:
-        robot = body["messages"][0]["content"].split()[2].rstrip(",").lower()  # "You are Alice, ..."
-        with lock:
-            text = replies[robot].pop(0) if replies[robot] else "Analysis: nothing to do.\nCommand: wait()"
-        return ok(text)
-
-    server = FakeServer(respond)
+    usage = {"prompt_tokens": 11, "completion_tokens": 7}
+    script = {robot: [ModelReply(text, usage=usage) for text in texts] for robot, texts in replies.items()}
+    server = ScriptedModelServer(script, when_done=ModelReply("Analysis: nothing to do.\nCommand: wait()", usage=usage))
     try:
         cfg = EpisodeConfig.build(seed=0, horizon=4, llm="openai:test-model", base_url=server.url, trace=path).resolved()
         asyncio.run(up_in_process(cfg))

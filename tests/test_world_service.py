@@ -17,7 +17,7 @@ import pytest
 
 from mhrc.agents.agent import RobotAgent, WorldGone
 from mhrc.agents.heuristic import heuristic_policy
-from mhrc.core.bus import Bus
+from mhrc.core.bus import Bus, Sample
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.processes import agent_command, wait_for_port, world_command
 from mhrc.core.keys import Keys
@@ -30,6 +30,7 @@ from mhrc.core.protocol import (
     AttachRequest,
     Communicate,
     EpisodeDone,
+    EpisodeStarted,
     Navigate,
     OutcomeCode,
     Pick,
@@ -39,6 +40,7 @@ from mhrc.core.protocol import (
     decode,
     decode_event,
 )
+from waits import robots_alive, served
 
 
 class ManualAgent:
@@ -48,22 +50,27 @@ class ManualAgent:
         self.acks: asyncio.Queue[ActionAck] = asyncio.Queue()
         self.results: asyncio.Queue[ActionResult] = asyncio.Queue()
         self.events: list[object] = []
+        self.started = asyncio.Event()
         bus.subscribe(self.keys.action_ack(robot), lambda s: self.acks.put_nowait(decode(s.payload, ActionAck)))
         bus.subscribe(self.keys.action_result(robot), lambda s: self.results.put_nowait(decode(s.payload, ActionResult)))
-        bus.subscribe(self.keys.world_event, lambda s: self.events.append(decode_event(s.payload)))
+        bus.subscribe(self.keys.world_event, self._on_event)
         self.tick = 0
 
+    def _on_event(self, sample: Sample) -> None:
+        event = decode_event(sample.payload)
+        self.events.append(event)
+        if isinstance(event, EpisodeStarted):
+            self.started.set()
+
     async def attach(self) -> AttachReply:
-        for _ in range(100):
-            replies = await self.bus.get(self.keys.attach(self.robot), AttachRequest(robot=self.robot, agent_id=self.agent_id))
-            if replies:
-                reply = decode(replies[0], AttachReply)
-                if reply.accepted:
-                    self.bus.declare_token(self.keys.alive_robot(self.robot))
-                    self.tick = reply.tick
-                return reply
-            await asyncio.sleep(0.1)
-        raise AssertionError("the world never answered the attach query")
+        await served(self.bus, self.keys.attach(self.robot))  # the world's attach queryable reached this session
+        replies = await self.bus.get(self.keys.attach(self.robot), AttachRequest(robot=self.robot, agent_id=self.agent_id))
+        assert replies, "the world did not answer the attach query"
+        reply = decode(replies[0], AttachReply)
+        if reply.accepted:
+            self.bus.declare_token(self.keys.alive_robot(self.robot))
+            self.tick = reply.tick
+        return reply
 
     async def act(self, action: Action) -> tuple[ActionAck, ActionResult | None]:
         req = ActionRequest(robot=self.robot, agent_id=self.agent_id, tick=self.tick, action=action)
@@ -78,16 +85,16 @@ class ManualAgent:
         return ack, result
 
 
-async def test_request_ack_result_and_bad_input(world_factory) -> None:  # type: ignore[no-untyped-def]
+async def test_request_ack_result_and_bad_input(mhrc_world) -> None:  # type: ignore[no-untyped-def]
     # one robot attached, so every tick closes on its action alone
-    async with world_factory(seed=1, start_timeout=3.0) as world:
+    async with mhrc_world(seed=1, start_timeout=3.0) as world:
         bus = await world.client()
         try:
-            alice = ManualAgent(bus, world.cfg.run, "alice")
+            alice = ManualAgent(bus, world.config.run, "alice")
             reply = await alice.attach()
             assert reply.accepted and reply.observation is not None
             assert reply.observation.robot == "alice" and reply.horizon == 50
-            await asyncio.sleep(0.7)  # the world starts with alice alone
+            await asyncio.wait_for(alice.started.wait(), 30)  # the world starts with alice alone, after start_timeout
 
             ack, res = await alice.act(Navigate(target="table_0", stand_pose=0))
             assert ack.accepted and res is not None
@@ -108,7 +115,7 @@ async def test_request_ack_result_and_bad_input(world_factory) -> None:  # type:
             assert res is not None and res.outcome.code == OutcomeCode.RECIPIENT_UNKNOWN
 
             # a malformed payload is rejected with a reason; the world goes on
-            request_key = Keys(world.cfg.run).action_request("alice")
+            request_key = Keys(world.config.run).action_request("alice")
             bus.put(request_key, b'{"v": 1, "goal_id": "bad1", "robot": "alice", "tick": 0, "action": {"skill": "teleport"}}')
             bad = await asyncio.wait_for(alice.acks.get(), 10)
             assert bad.goal_id == "bad1" and not bad.accepted and "malformed" in bad.reason
@@ -127,15 +134,15 @@ async def test_request_ack_result_and_bad_input(world_factory) -> None:  # type:
             await bus.close()
 
 
-async def test_capabilities_duplicates_and_messages(world_factory) -> None:  # type: ignore[no-untyped-def]
-    async with world_factory(seed=2, start_timeout=3.0) as world:
+async def test_capabilities_duplicates_and_messages(mhrc_world) -> None:  # type: ignore[no-untyped-def]
+    async with mhrc_world(seed=2, start_timeout=3.0) as world:
         bus = await world.client()
         try:
-            david = ManualAgent(bus, world.cfg.run, "david")
-            bob = ManualAgent(bus, world.cfg.run, "bob")
+            david = ManualAgent(bus, world.config.run, "david")
+            bob = ManualAgent(bus, world.config.run, "bob")
             assert (await david.attach()).accepted
             assert (await bob.attach()).accepted
-            impostor = ManualAgent(bus, world.cfg.run, "david", agent_id="impostor")
+            impostor = ManualAgent(bus, world.config.run, "david", agent_id="impostor")
             reply = await impostor.attach()
             assert not reply.accepted and "already attached" in reply.reason
 
@@ -150,12 +157,12 @@ async def test_capabilities_duplicates_and_messages(world_factory) -> None:  # t
             await bus.close()
 
 
-async def test_message_reaches_receiver_next_tick(world_factory) -> None:  # type: ignore[no-untyped-def]
-    async with world_factory(seed=3, start_timeout=3.0) as world:
+async def test_message_reaches_receiver_next_tick(mhrc_world) -> None:  # type: ignore[no-untyped-def]
+    async with mhrc_world(seed=3, start_timeout=3.0) as world:
         bus = await world.client()
         try:
-            alice = ManualAgent(bus, world.cfg.run, "alice")
-            bob = ManualAgent(bus, world.cfg.run, "bob")
+            alice = ManualAgent(bus, world.config.run, "alice")
+            bob = ManualAgent(bus, world.config.run, "bob")
             await alice.attach()
             await bob.attach()
             (_, ra), (_, rb) = await asyncio.gather(alice.act(Wait()), bob.act(Communicate(content="Alice, go.", to="alice")))
@@ -167,6 +174,7 @@ async def test_message_reaches_receiver_next_tick(world_factory) -> None:  # typ
             await bus.close()
 
 
+@pytest.mark.slow
 async def test_world_notices_a_dead_agent_and_goes_on(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """An agent process killed mid-episode: liveliness tells the world, which does not hang."""
     cfg = EpisodeConfig.build(seed=0, horizon=12, trace=tmp_path / "t.jsonl").resolved()
@@ -215,7 +223,7 @@ async def test_agent_fails_fast_when_the_world_vanishes(tmp_path) -> None:  # ty
         # alone, alice's first action never completes: the world waits for bob and david
         agent = RobotAgent(bus, heuristic_policy("alice"), run=cfg.run, robot="alice")
         task = asyncio.create_task(agent.run())
-        await asyncio.sleep(3.0)
+        await robots_alive(bus, cfg.run, {"alice"})  # attached, and waiting for her teammates
         assert not task.done()
         world_proc.send_signal(signal.SIGKILL)
         with pytest.raises(WorldGone):
@@ -243,6 +251,7 @@ def _stray(run: str) -> list[str]:
     return found
 
 
+@pytest.mark.slow
 def test_processes_mode_exits_cleanly(tmp_path) -> None:  # type: ignore[no-untyped-def]
     run = "clean-exit-test"
     out = subprocess.run(

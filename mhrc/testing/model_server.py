@@ -1,0 +1,344 @@
+"""`ScriptedModelServer`: an OpenAI-compatible chat-completions server on loopback answering
+from a script, a real threaded HTTP server standing in for a model's judgement."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any, TypeAlias
+
+__all__ = ["ModelCall", "ModelReply", "Reply", "Script", "ScriptedModelServer", "WHEN_DONE"]
+
+
+@dataclass(frozen=True)
+class ModelReply:
+    """One scripted answer of `ScriptedModelServer`; a plain `str` in a script is ``ModelReply(text)``.
+
+    `text` becomes the assistant message (with `reasoning` under `reasoning_field`:
+    ``"reasoning_content"`` as vLLM and llama.cpp send it, or ``"reasoning"`` as Ollama does)
+    and `finish_reason`; `usage` is the completion's ``usage`` object: True (the default)
+    estimates it from the lengths of the prompt and the text, a mapping is sent as it is (e.g.
+    with ``completion_tokens_details``), False leaves it out, as some servers do. `body`
+    (JSON-able or bytes) replaces the whole response body, e.g. to send malformed JSON; `status`
+    and `headers` for errors (``ModelReply(status=429, headers={"Retry-After": "0"})``);
+    `headers` also override the server's own ``Content-Type`` and ``Content-Length`` (a
+    ``Content-Length`` of your own may lie: the connection is closed after such a reply).
+    `latency` (seconds) overrides the server's for this call.
+
+    `stream` (an iterable of bytes, which may be endless, e.g. ``itertools.repeat(b"a")``)
+    makes the body be written chunk by chunk, flushed each time, `stream_interval` seconds apart,
+    after the status and headers (no ``Content-Length`` unless `headers` give one; the end of the
+    body is the end of the connection, or with `keep_alive` a chunked body whose end keeps the
+    connection open for the next request): a server that trickles or never stops writing. The
+    stream ends when the iterable does, the client hangs up, or the server is closed. A
+    generator is consumed by the one call it answers: return a fresh reply from a callable
+    script to stream to every call.
+
+    Two faults of a server gone bad: `stall` writes the status, the headers and the `stream`'s
+    chunks (or no body at all, without a `stream`), then nothing more, the connection held open
+    until the server is closed (a stream stalled mid-reply); `drop`
+    closes the connection after the latency without a byte of answer (a server that crashed
+    while the request was being answered).
+    """
+
+    text: str | None = None
+    status: int = 200
+    headers: Mapping[str, str] = field(default_factory=dict)
+    body: Any = None
+    latency: float | None = None
+    finish_reason: str = "stop"
+    reasoning: str | None = None
+    reasoning_field: str = "reasoning_content"
+    usage: Mapping[str, Any] | bool = True
+    stream: Iterable[bytes] | None = None
+    stream_interval: float = 0.0
+    stall: bool = False
+    drop: bool = False
+
+
+@dataclass
+class ModelCall:
+    """One request `ScriptedModelServer` received, as kept in its `calls`.
+
+    `request` (the JSON body), `headers`, `path` and `robot` (`ScriptedModelServer.robot_of`)
+    are what came in; `reply` is the `ModelReply` the script gave (None when it raised or was
+    exhausted) and `latency` the delay applied before answering. `started` and `ended` are
+    positions in one count of every call's start and end (a call ends when its latency is over
+    and its answer is about to be written; `ended` is None until then): two calls overlapped
+    in time exactly when each started before the other ended, whatever the machine's speed.
+    `connection` numbers the TCP connection the call came on (1, 2, ... in the order they were
+    opened): calls on one connection reused it.
+    """
+
+    request: dict[str, Any]
+    headers: dict[str, str]
+    path: str
+    robot: str | None
+    started: int
+    ended: int | None = None
+    connection: int = 0
+    latency: float = 0.0
+    reply: ModelReply | None = None
+
+
+Reply: TypeAlias = "str | ModelReply"
+Script: TypeAlias = "Sequence[Reply] | Mapping[str, Sequence[Reply]] | Callable[[dict[str, Any]], Reply]"
+
+WHEN_DONE = "Analysis: the script is over.\nCommand: wait()"
+
+
+@dataclass
+class _Answer:
+    status: int
+    headers: Mapping[str, str]
+    payload: bytes
+    delay: float
+    reply: ModelReply | None = None
+    stream: Iterable[bytes] | None = None
+    interval: float = 0.0
+
+
+class ScriptedModelServer:
+    """An OpenAI-compatible chat-completions server on 127.0.0.1 answering from a script.
+
+    `script` is a list of replies, answered in the order the requests arrive; or a mapping from
+    robot name to its own list (the robot read from the request's system prompt, "You are
+    Alice, ..."), so concurrent robots do not race for one list; or a callable on the request's
+    JSON returning the reply (called from the server's threads, one per request: guard any
+    state it shares). A reply is a `str` (the assistant's text) or a `ModelReply`. After a list
+    runs out the server answers `when_done` (a wait command), or with `when_done=None` HTTP 500.
+    `latency` (seconds, or a callable on the request JSON) delays each answer; the server is
+    threaded, so concurrent requests are answered concurrently. `close()` cuts short the
+    latencies and streams still running. With `keep_alive` the server speaks HTTP/1.1 and keeps
+    connections open between requests, as production servers do, so that a client's
+    connection pool is exercised (the default is HTTP/1.0: one connection a request).
+
+    Every request is recorded: `requests` (the JSON bodies, in arrival order), `headers` (the
+    matching request headers) and `paths`, and `calls` (a `ModelCall` each: the request, the
+    reply, its latency and the order of its start and end); `in_flight` counts the requests
+    being answered and `max_in_flight` the most at once, e.g. to check a client's concurrency
+    limit; `remaining()` counts the scripted replies not given yet. Use as a context manager,
+    or call `close()`; the endpoint to give a client is `url` (``http://127.0.0.1:PORT/v1``).
+    """
+
+    def __init__(
+        self,
+        script: Script,
+        *,
+        latency: float | Callable[[dict[str, Any]], float] = 0.0,
+        when_done: Reply | None = WHEN_DONE,
+        keep_alive: bool = False,
+    ) -> None:
+        self.script = script
+        self.latency = latency
+        self.when_done = when_done
+        self.requests: list[dict[str, Any]] = []
+        self.headers: list[dict[str, str]] = []
+        self.paths: list[str] = []
+        self.calls: list[ModelCall] = []
+        self.in_flight = 0
+        self.max_in_flight = 0
+        self._seq = 0
+        self._connections = 0
+        self._lock = threading.Lock()
+        self._closing = threading.Event()
+        self._queues: dict[str | None, list[Reply]] = {}
+        if isinstance(script, Mapping):
+            self._queues = {robot: list(replies) for robot, replies in script.items()}
+        elif not callable(script):
+            self._queues = {None: list(script)}
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1" if keep_alive else "HTTP/1.0"
+
+            def setup(self) -> None:
+                super().setup()
+                with server._lock:
+                    server._connections += 1
+                    self.connection_no = server._connections
+
+            def do_POST(self) -> None:  # noqa: N802
+                raw = self.rfile.read(int(self.headers.get("Content-Length") or 0))
+                try:
+                    body = json.loads(raw or b"{}")
+                except ValueError:
+                    self._send(_Answer(400, {}, b'{"error": "the request body is not JSON"}', 0.0))
+                    return
+                call = server._begin(body, dict(self.headers), self.path, self.connection_no)
+                answer = server._answer(body)
+                if answer.delay > 0:
+                    server._closing.wait(answer.delay)
+                server._end(call, answer)
+                if answer.reply is not None and answer.reply.drop:
+                    self.close_connection = True  # not a byte: the client sees the connection close
+                    return
+                self._send(answer)
+
+            def do_GET(self) -> None:  # noqa: N802
+                self._send(_Answer(404, {}, b'{"error": "only POST /v1/chat/completions is served"}', 0.0))
+
+            def _send(self, answer: _Answer) -> None:
+                names = {k.lower() for k in answer.headers}
+                try:
+                    self.send_response(answer.status)
+                    if "content-type" not in names:
+                        self.send_header("Content-Type", "application/json")
+                    for k, v in answer.headers.items():
+                        self.send_header(k, v)
+                    # a stream on a kept-alive connection is chunked, so that its end leaves the connection open
+                    chunked = answer.stream is not None and "content-length" not in names and self.protocol_version != "HTTP/1.0"
+                    if chunked:
+                        self.send_header("Transfer-Encoding", "chunked")
+                    elif answer.stream is not None or "content-length" in names:
+                        self.close_connection = True  # the body may not be what a length says
+                        if self.protocol_version != "HTTP/1.0":
+                            self.send_header("Connection", "close")
+                    if answer.stream is None and "content-length" not in names:
+                        self.send_header("Content-Length", str(len(answer.payload)))
+                    self.end_headers()
+                    if answer.stream is None:
+                        self.wfile.write(answer.payload)
+                        return
+                    for i, chunk in enumerate(answer.stream):
+                        if server._closing.is_set() or (i and answer.interval > 0 and server._closing.wait(answer.interval)):
+                            self.close_connection = True  # cut short: the body has no proper end
+                            break
+                        self.wfile.write(b"%x\r\n%s\r\n" % (len(chunk), chunk) if chunked and chunk else chunk)
+                        self.wfile.flush()
+                    else:
+                        if answer.reply is not None and answer.reply.stall:
+                            server._closing.wait()  # not another byte until the server is closed
+                            self.close_connection = True
+                        elif chunked:
+                            self.wfile.write(b"0\r\n\r\n")
+                            self.wfile.flush()
+                except OSError:  # the client gave up (its timeout): what a timeout should do
+                    self.close_connection = True
+
+            def log_message(self, *args: object) -> None:
+                pass
+
+        self._httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self._httpd.daemon_threads = True
+        self.port = int(self._httpd.server_address[1])
+        self.url = f"http://127.0.0.1:{self.port}/v1"
+        self._thread = threading.Thread(
+            target=self._httpd.serve_forever, kwargs={"poll_interval": 0.05}, name="mhrc-scripted-model", daemon=True
+        )
+        self._thread.start()
+        self._closed = False
+
+    @staticmethod
+    def robot_of(request: Mapping[str, Any]) -> str | None:
+        """The robot a request comes from, read from its system prompt ("You are Alice, ...")."""
+        messages = request.get("messages") or []
+        text = str(messages[0].get("content") or "") if messages else ""
+        if not text.startswith("You are "):
+            return None
+        return text.removeprefix("You are ").split(",")[0].split()[0].strip(".").lower() or None
+
+    def requests_of(self, robot: str) -> list[dict[str, Any]]:
+        """The recorded requests of one robot, in arrival order."""
+        with self._lock:
+            return [r for r in self.requests if self.robot_of(r) == robot]
+
+    def remaining(self, robot: str | None = None) -> int:
+        """The scripted replies not given yet: of the list, of one robot's list, or (with a
+        mapping and no `robot`) of all robots' lists; 0 for a callable script."""
+        with self._lock:
+            if robot is None:
+                return sum(len(queue) for queue in self._queues.values())
+            return len(self._queues.get(robot, []))
+
+    def _begin(self, body: dict[str, Any], headers: dict[str, str], path: str, connection: int = 0) -> ModelCall:
+        with self._lock:
+            self.requests.append(body)
+            self.headers.append(headers)
+            self.paths.append(path)
+            self._seq += 1
+            robot = self.robot_of(body) if isinstance(body, Mapping) else None
+            call = ModelCall(request=body, headers=headers, path=path, robot=robot, started=self._seq, connection=connection)
+            self.calls.append(call)
+            self.in_flight += 1
+            self.max_in_flight = max(self.max_in_flight, self.in_flight)
+            return call
+
+    def _end(self, call: ModelCall, answer: _Answer) -> None:
+        with self._lock:
+            self.in_flight -= 1
+            self._seq += 1
+            call.ended, call.latency, call.reply = self._seq, answer.delay, answer.reply
+
+    def _next(self, body: dict[str, Any]) -> Reply | None:
+        if isinstance(self.script, Mapping):
+            key = self.robot_of(body)
+        elif callable(self.script):
+            return self.script(body)
+        else:
+            key = None
+        with self._lock:
+            queue = self._queues.get(key)
+            if queue:
+                return queue.pop(0)
+        return self.when_done
+
+    def _answer(self, body: dict[str, Any]) -> _Answer:
+        try:
+            reply = self._next(body)
+        except Exception as exc:  # a bug in the test's script: answer it, visibly
+            return _Answer(500, {}, json.dumps({"error": f"the script raised {exc!r}"}).encode(), 0.0)
+        if reply is None:
+            return _Answer(500, {}, b'{"error": "the script is exhausted"}', 0.0)
+        if isinstance(reply, str):
+            reply = ModelReply(text=reply)
+        delay = reply.latency if reply.latency is not None else (self.latency(body) if callable(self.latency) else self.latency)
+        answer = _Answer(reply.status, reply.headers, b"", delay, reply, reply.stream, reply.stream_interval)
+        if reply.stall and reply.stream is None:
+            answer.stream = ()  # the headers, then silence
+        if answer.stream is not None:
+            return answer
+        if reply.body is not None:
+            answer.payload = reply.body if isinstance(reply.body, bytes) else json.dumps(reply.body).encode()
+            return answer
+        if reply.text is None:  # an error status with no content
+            answer.payload = json.dumps({"error": f"scripted HTTP {reply.status}"}).encode()
+            return answer
+        message: dict[str, Any] = {"role": "assistant", "content": reply.text}
+        if reply.reasoning is not None:
+            message[reply.reasoning_field] = reply.reasoning
+        completion: dict[str, Any] = {
+            "id": f"chatcmpl-{uuid.uuid4().hex[:12]}",
+            "object": "chat.completion",
+            "created": int(time.time()),
+            "model": body.get("model", "scripted"),
+            "choices": [{"index": 0, "message": message, "finish_reason": reply.finish_reason}],
+        }
+        if reply.usage is True:
+            prompt = sum(len(str(m.get("content") or "")) for m in body.get("messages") or [])
+            completion["usage"] = {"prompt_tokens": max(1, prompt // 4), "completion_tokens": max(1, len(reply.text) // 4)}
+        elif reply.usage is not False:
+            completion["usage"] = dict(reply.usage)
+        answer.payload = json.dumps(completion).encode()
+        return answer
+
+    def close(self) -> None:
+        """Stop serving and free the port (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._closing.set()  # ends the latencies and streams still running
+        self._httpd.shutdown()
+        self._httpd.server_close()
+        self._thread.join(timeout=5.0)
+
+    def __enter__(self) -> ScriptedModelServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
