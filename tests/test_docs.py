@@ -25,6 +25,8 @@ from types import ModuleType, SimpleNamespace
 
 import pytest
 
+from mhrc.core.endpoints import free_port
+
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 RUNNABLE = {"bash", "sh", "console", "python"}
@@ -116,13 +118,16 @@ def run_block(block: Block, where: Path) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("MHRC_", "PYTEST_"))}
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
     env["NO_MKDOCS_2_WARNING"] = "1"
+    # the docs name Zenoh's usual port; here each example gets a free one, so a world left by
+    # anything else on 7447 can never answer in its place
+    text = (block.text if block.lang == "python" else script_of(block)).replace("7447", str(free_port()))
     if block.lang == "python":
         is_test = re.search(r"^(async )?def test_", block.text, re.M) is not None
         source = where / ("test_example.py" if is_test else "example.py")
-        source.write_text(block.text)
+        source.write_text(text)
         cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-o", "asyncio_mode=auto", source.name] if is_test else [sys.executable, source.name]
     else:
-        (where / "example.sh").write_text(script_of(block))
+        (where / "example.sh").write_text(text)
         cmd = ["bash", "-e", "-o", "pipefail", "example.sh"]
     proc = subprocess.Popen(cmd, cwd=where, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
