@@ -24,27 +24,15 @@ from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from . import assets
 from .assets import AssetDir
-from .colors import PANEL_COLORS
 from .furniture import Layout
 from .layouts import get_layout
 from .physics import ObjectState, PhysicalWorld
 from .scenario import Breakdown, Close, EpisodeFacts, NewTarget, Relocate, Scenario, ScenarioEventSpec
-from .tasks import INGREDIENTS, PACK_POOL, SOLIDS, ObjectKind, Task, get_task, ingredient_kind, solid_kind
+from .tasks import Task, get_task
 
 log = structlog.get_logger("mhrc.world.dynamics")
 
 SPOT_CLEARANCE = 0.12  # m: a slot counts as free when no object's centre lies closer than this
-
-
-def task_kinds(task_id: str) -> list[ObjectKind]:
-    """Every object a task can have as a target (what new_target may add, what an event may name)."""
-    if task_id == "pack_objects":
-        return list(PACK_POOL)
-    if task_id == "sort_solids":
-        return [solid_kind(c, s, PANEL_COLORS) for c in PANEL_COLORS for s in SOLIDS]
-    if task_id == "make_sandwich":
-        return [ingredient_kind(k, k) for k in INGREDIENTS]
-    raise ValueError(f"no objects known for task {task_id!r}")
 
 
 def surfaces(layout: Layout) -> list[str]:
@@ -56,15 +44,8 @@ def episode_facts(*, task: str, scene: str, horizon: int, robots: Iterable[str])
     """What scenario.check_scenario needs of an episode, read from the task and layout alone
     (nothing built). Object names: every name the task can generate (a sandwich's repeated
     ingredients are numbered: bread_slice_1, bread_slice_2)."""
-    get_task(task)
+    names = get_task(task).object_names()
     layout = get_layout(scene)
-    names = {k.name for k in task_kinds(task)}
-    if task == "make_sandwich":
-        names |= {f"{k}_{i}" for k in INGREDIENTS for i in (1, 2)}
-    if task == "sort_solids":
-        from .colors import NO_PANEL_COLORS
-
-        names |= {solid_kind(c, s, NO_PANEL_COLORS).name for c in NO_PANEL_COLORS for s in SOLIDS}
     return EpisodeFacts(
         horizon=horizon,
         robots=tuple(robots),
@@ -166,7 +147,7 @@ class Dynamics:
 
     def _new_target(self, ev: NewTarget, rng: np.random.Generator) -> dict[str, str]:
         w = self.world
-        kinds = {k.name: k for k in task_kinds(self.task.id)}
+        kinds = {k.name: k for k in self.task.target_kinds()}
         if ev.object is not None:
             if ev.object in w.objects:
                 raise Skip(f"{ev.object} is already in the scene")

@@ -79,6 +79,12 @@ class Task(Protocol):
     def generate(self, layout: Layout, seed: int, n_objects: int) -> list[Placement]: ...
     def fixtures(self, layout: Layout) -> list[Fixture]: ...
     def goal(self, kind: ObjectKind) -> str: ...
+    def target_kinds(self) -> list[ObjectKind]:
+        """Every object an episode of this task can have as a target (what a new target may be)."""
+        ...
+    def object_names(self) -> set[str]:
+        """Every object name an episode of this task can hold: targets (repeats numbered) and distractors."""
+        ...
     def evaluate(self, targets: list[str], objects: list[Seen]) -> TaskResult: ...
     def status(self, targets: list[str], objects: list[Seen], aids: frozenset[str] = frozenset()) -> str:
         """Bob's task status as the paper gives it; with the `status_hints` aid, also what is
@@ -194,6 +200,12 @@ class PackObjects:
         kinds = [PACK_POOL[i] for i in rng.permutation(len(PACK_POOL))[: n_objects + n_distractors]]
         return scatter(layout, rng, kinds[:n_objects], kinds[n_objects:])
 
+    def target_kinds(self) -> list[ObjectKind]:
+        return list(PACK_POOL)
+
+    def object_names(self) -> set[str]:
+        return {k.name for k in PACK_POOL}  # distractors come from the same pool
+
     def fixtures(self, layout: Layout) -> list[Fixture]:
         cx, cy, sx, sy = _goal_area(layout)
         return [Fixture("tray", "tray", (cx, cy), (sx, sy), (0.2, 0.3, 0.6, 1.0), thickness=0.01, rim=True)]
@@ -263,6 +275,12 @@ class SortSolids:
         n_distractors = 1 + int(rng.integers(0, 2))
         distractors = [solid_kind(c, shapes[int(rng.integers(0, len(shapes)))], NO_PANEL_COLORS) for c in list(NO_PANEL_COLORS)[:n_distractors]]
         return scatter(layout, rng, targets, distractors)
+
+    def target_kinds(self) -> list[ObjectKind]:
+        return [solid_kind(c, s, PANEL_COLORS) for c in PANEL_COLORS for s in SOLIDS]
+
+    def object_names(self) -> set[str]:
+        return {k.name for k in self.target_kinds()} | {f"{c}_{s}" for c in NO_PANEL_COLORS for s in SOLIDS}
 
     def fixtures(self, layout: Layout) -> list[Fixture]:
         """Six 10 cm panels, 3 x 2 at a 12 cm pitch, centred in the goal area."""
@@ -366,6 +384,12 @@ class MakeSandwich:
         n_distractors = min(len(unused), 1 + int(rng.integers(0, 2)))
         distractors = [ingredient_kind(unused[i], unused[i]) for i in sorted(rng.permutation(len(unused))[:n_distractors])]
         return scatter(layout, rng, targets, distractors)
+
+    def target_kinds(self) -> list[ObjectKind]:
+        return [ingredient_kind(k, k) for k in INGREDIENTS]
+
+    def object_names(self) -> set[str]:  # a menu's repeated ingredient is numbered: bread_slice_1, bread_slice_2
+        return set(INGREDIENTS) | {f"{k}_{i}" for k in INGREDIENTS for i in (1, 2)}
 
     def fixtures(self, layout: Layout) -> list[Fixture]:
         cx, cy, _, _ = _goal_area(layout)
