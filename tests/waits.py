@@ -10,8 +10,8 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from mhrc.core.bus import Bus, Sample
-from mhrc.core.keys import Keys
+from mhrc.core.bus import Bus
+from mhrc.testing.world import robots_attached
 
 TIMEOUT = 30.0  # s: generous; a declaration that never arrives fails the test instead of hanging it
 
@@ -47,22 +47,9 @@ async def served(bus: Bus, key: str, timeout: float = TIMEOUT) -> None:
 
 
 async def robots_alive(bus: Bus, run: str, robots: set[str], timeout: float = TIMEOUT) -> None:
-    """Return once `bus` sees the liveliness token of every robot named (each agent declares its
-    token when the world accepted its attach)."""
-    keys = Keys(run)
-    seen: set[str] = set()
-    ready = asyncio.Event()
-
-    def on_token(sample: Sample) -> None:
-        if sample.is_put:
-            seen.add(keys.robot_of(sample.key))
-        else:
-            seen.discard(keys.robot_of(sample.key))
-        if robots <= seen:
-            ready.set()
-
-    bus.watch_liveliness(keys.alive_any_robot, on_token)
+    """Return once `bus` sees the liveliness token of every robot named (mhrc.testing's wait, as a
+    test failure rather than a timeout)."""
     try:
-        await asyncio.wait_for(ready.wait(), timeout)
-    except TimeoutError:
-        raise AssertionError(f"robots {sorted(robots - seen)} did not attach within {timeout:.0f} s") from None
+        await robots_attached(bus, run, robots, timeout)
+    except TimeoutError as exc:
+        raise AssertionError(str(exc)) from None

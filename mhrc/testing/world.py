@@ -38,6 +38,29 @@ def _default_trace() -> Path:
     return Path(tempfile.mkdtemp(prefix="mhrc-episode-")) / "trace.jsonl"
 
 
+async def robots_attached(bus: Bus, run: str, robots: set[str], timeout: float) -> None:
+    """Return once `bus` sees the liveliness token of every robot named (each agent declares its
+    token when the world accepted its attach); TimeoutError naming the missing ones after `timeout`."""
+    keys = Keys(run)
+    seen: set[str] = set()
+    ready = asyncio.Event()
+
+    def on_token(sample: Sample) -> None:
+        robot = keys.robot_of(sample.key)
+        if sample.is_put:
+            seen.add(robot)
+        else:
+            seen.discard(robot)
+        if robots <= seen:
+            ready.set()
+
+    bus.watch_liveliness(keys.alive_any_robot, on_token)
+    try:
+        await asyncio.wait_for(ready.wait(), timeout)
+    except TimeoutError:
+        raise TimeoutError(f"robots {sorted(robots - seen)} did not attach within {timeout:.0f} s") from None
+
+
 class LoopbackWorld:
     """The handle `world_on_loopback` yields: one episode's world, serving on 127.0.0.1."""
 
@@ -76,22 +99,7 @@ class LoopbackWorld:
         unknown = sorted(set(robots) - set(self.config.robots))
         if unknown:  # fails here, not as a timeout
             raise ValueError(f"no such robot in this episode: {', '.join(unknown)} (robots: {', '.join(self.config.robots)})")
-        keys = Keys(self.run)
-        wanted, seen = set(robots), set[str]()
-        ready = asyncio.Event()
-
-        def on_token(sample: Sample) -> None:
-            robot = keys.robot_of(sample.key)
-            if sample.is_put:
-                seen.add(robot)
-            else:
-                seen.discard(robot)
-            if wanted <= seen:
-                ready.set()
-
-        bus = await self.client(timeout)
-        bus.watch_liveliness(keys.alive_any_robot, on_token)
-        await asyncio.wait_for(ready.wait(), timeout)
+        await robots_attached(await self.client(timeout), self.run, set(robots), timeout)
 
     async def agent(self, robot: str, policy: AgentSpec = None, *, attach_timeout: float = ATTACH_TIMEOUT) -> asyncio.Task[EpisodeDone | None]:
         """Start an agent for `robot` on its own session, driven by `policy` (a `Policy`,
