@@ -124,8 +124,8 @@ def test_ctrl_c_on_eval_exits_soon_and_keeps_every_finished_row(times: int, tmp_
     assert len({r["key"] for r in after}) == len(after), "a row was written twice"
     if times == 1:
         assert "interrupted: stopping the workers; every finished episode is kept in" in err and "--resume --out" in err, err[-2000:]
-    else:
-        assert "quitting at once" in err, err[-2000:]
+    else:  # the second quit at once, unless the first had already finished stopping when it came
+        assert "quitting at once" in err or "\ninterrupted\n" in err, err[-2000:]
     assert "Traceback" not in err, err[-3000:]
     _no_strays(proc.pid)
     print(f"{times} Ctrl-C: exited with {len(after)} rows kept")
