@@ -3,6 +3,7 @@
 - `participants`: `up`, `world`, `agent`
 - `eval`: `eval`, `report`
 - `viewer`: `scenes`, `render`, `show`
+- `scenarios`: `scenarios` (the shipped scenarios of `--events`)
 - `bus`: `credentials`, `bus list|echo`, `doctor`, `router`, `schema`
 - `options` (shared options, declared once), `running` (signals and Ctrl-C)
 """
@@ -13,7 +14,7 @@ import os
 
 import click
 
-from mhrc.cli import bus, participants, viewer
+from mhrc.cli import bus, participants, scenarios, viewer
 from mhrc.cli import eval as eval_cmd
 from mhrc.core import logs
 
@@ -34,7 +35,7 @@ def main() -> None:
 
 for command in (
     participants.up, participants.world, participants.agent, viewer.scenes, viewer.render, eval_cmd.eval_, eval_cmd.report,
-    bus.schema_, bus.credentials_, bus.bus_group, bus.doctor, viewer.show, bus.router,
+    bus.schema_, bus.credentials_, bus.bus_group, bus.doctor, viewer.show, bus.router, scenarios.scenarios,
 ):  # fmt: skip
     main.add_command(command)
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from mhrc.cli.options import ABLATIONS, AIDS_HELP, LOG_LEVEL, EVENTS_HELP, SCHEDULE_HELP, TIME_SCALE_HELP, llm_options
+from mhrc.cli.options import ABLATIONS, AIDS_HELP, LOG_LEVEL, EVENTS_HELP, SCHEDULE_HELP, TIME_SCALE_HELP, events_option, llm_options
 from mhrc.cli.running import run_command
 from mhrc.core import logs
 from mhrc.core.trace import unwritable
@@ -40,8 +40,7 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--schedule", default="sequential", show_default=True, type=click.Choice(SCHEDULES),
               help=SCHEDULE_HELP + " The paper's figures are shown beside sequential runs only.")
 @click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP)
-@click.option("--events", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE",
-              help=EVENTS_HELP + " Applied to every episode of the grid; rows record the scenario, and summaries never average different ones.")
+@events_option(EVENTS_HELP + " Applied to every episode of the grid; rows record the scenario, and summaries never average different ones.")
 @click.option("--workers", default=None, type=int, show_default="the number of cores",
               help="Local worker processes (not with --ray: the cluster's resources decide).")
 @click.option("--concurrency", default=None, type=int,
@@ -59,7 +58,7 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
 @LOG_LEVEL
 def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
-          aids: str | None, schedule: str, time_scale: float, events: Path | None, workers: int | None, concurrency: int | None, ray_address: str | None,
+          aids: str | None, schedule: str, time_scale: float, events: str | None, workers: int | None, concurrency: int | None, ray_address: str | None,
           shared_out: bool, out: Path | None, resume: bool, dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
@@ -102,7 +101,7 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS),
         objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()), trials=trials, repeats=repeats,
         ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, schedule=schedule,
-        time_scale=time_scale, events=str(events) if events else None, **llm,
+        time_scale=time_scale, events=events, **llm,
     )  # fmt: skip
     if concurrency is not None and concurrency < 1:
         raise click.BadParameter(f"must be at least 1 (got {concurrency})", param_hint="--concurrency")

@@ -13,6 +13,7 @@ from mhrc.core.fidelity import describe as describe_aids
 from mhrc.core.security import Credentials, SecurityError, load
 from mhrc.run.config import ConfigError, EpisodeConfig, SCHEDULES
 from mhrc.run.lifeline import PARENT_ENV
+from mhrc.world.scenario import ScenarioError, resolve_scenario
 
 ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
 AIDS_HELP = (
@@ -29,7 +30,8 @@ VIDEO_HELP = "Render the episode's video to FILE (.mp4 or .gif) with PyBullet's 
 TIME_SCALE_HELP = "With --schedule async: simulated seconds per wall second (1: real time); 0: as fast as possible."
 EVENTS_HELP = (
     "A scenario: a JSON list of events the world applies during the episode, each with the tick it fires at and a kind "
-    "(relocate, breakdown, new_target, close); checked before anything starts."
+    "(relocate, breakdown, new_target, close): a file's path, or the name of a shipped one (mhrc scenarios lists them; "
+    "an existing file wins); checked before anything starts."
 )
 HISTORY_CAP_HELP = "Bound each LLM prompt to CHARS characters, shortening older history (for small-context models); default: whole histories, as the paper."
 LLM_HELP = (
@@ -38,6 +40,21 @@ LLM_HELP = (
     "alice=SPEC,bob=SPEC,david=SPEC (a bare SPEC among them drives the rest; without one the rest play the heuristic "
     "policy); SPEC@URL names a spec's own server. Default: the heuristic policy."
 )
+
+
+def _check_events(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """--events as given (a shipped name travels as a name), once it is known to name a scenario."""
+    if value is not None:
+        try:
+            resolve_scenario(value)
+        except ScenarioError as exc:
+            raise click.UsageError(str(exc), ctx=ctx) from None
+    return value
+
+
+def events_option(help: str = EVENTS_HELP) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """--events FILE|NAME: a scenario file or a shipped scenario's name (mhrc.world.scenario.resolve_scenario)."""
+    return click.option("--events", default=None, metavar="FILE|NAME", callback=_check_events, help=help)
 
 
 def llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
@@ -81,7 +98,7 @@ def credentials_option(help: str) -> Callable[[Callable[..., Any]], Callable[...
 
 def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """The episode options `up` and `world` share (task, scene, seed, horizon, schedule, ...)."""
-    opts = [
+    opts: list[Callable[[Callable[..., Any]], Callable[..., Any]]] = [
         click.option("--task", default="pack_objects", show_default=True, help="Task id."),
         click.option("--scene", default="kitchen", show_default=True, help="Scene layout."),
         click.option("--seed", default=0, show_default=True, type=int, help="Episode generator seed."),
@@ -98,7 +115,7 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP),
         click.option("--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP),
         click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP),
-        click.option("--events", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE", help=EVENTS_HELP),
+        events_option(),
         LOG_LEVEL,
     ]  # fmt: skip
     for opt in reversed(opts):

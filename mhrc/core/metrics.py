@@ -34,8 +34,29 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
 - fidelity (`paper` or `aids:...`, from `episode_started`; `unrecorded` for traces older than
   the field) and horizon;
 - wall_time (world's measure), lower_bound (mhrc/world/bound.py, from `episode_started`).
+- recovery (a scenario's events, `--events`; mhrc/world/scenario.py): per `scenario_event` in the
+  trace, in firing order, {index, kind, tick, applied, ticks_to_recover}. ticks_to_recover is the
+  number of steps from the event to the first moment the team has one more target in place than
+  it had when the event fired, i.e. until its progress resumes:
+    - lockstep and sequential: an event of tick T fires when tick T opens, so the team had then
+      the `placed` of tick T-1's `tick` event (0 before any); if tick t (t >= T) is the first
+      whose `tick` event has more, ticks_to_recover = t + 1 - T (the ticks executed from the
+      event through the one that placed it: 1 when the first tick after the event places one).
+    - async: the event fires at T x step_seconds of simulated time; the targets in place are
+      counted on the world's `snapshot` events (a target on its goal and not held, as `mhrc
+      show` counts them; the targets and goals are `episode_done`'s, new ones included, so a
+      target counts from the moment it joined). At the event the count is the last snapshot's
+      before it; the first later snapshot with more gives the end of its action (`ended` of
+      the action_result), and ticks_to_recover = ceil((ended - T x step_seconds) / step_seconds),
+      steps as TS counts them. In an ordered task (make_sandwich) this counts every layer on
+      the board, where the world counts only the correct prefix.
+  None when progress never resumes before the episode ends, and for a skipped event (`applied`
+  false: it changed nothing to recover from). recovery_ticks: the mean ticks_to_recover over
+  the applied events that have one (None when none has); unrecovered: the applied events after
+  which progress never resumed (both None in an episode without scenario events).
 
-Over episodes, `summarize` takes means (Succ is then the success rate).
+Over episodes, `summarize` takes means (Succ is then the success rate); recovery_ticks and
+unrecovered over the episodes that have a value (a static episode adds nothing to them).
 """
 
 from __future__ import annotations
@@ -91,6 +112,9 @@ class EpisodeMetrics:
     idle: dict[str, float] = field(default_factory=dict)
     actions_per_robot: dict[str, int] = field(default_factory=dict)
     active_ticks: int | None = None  # steps with a non-wait action of any robot (None: rows written before the field)
+    recovery: list[dict[str, Any]] = field(default_factory=list)  # per scenario event (module docstring)
+    recovery_ticks: float | None = None  # mean ticks_to_recover of the applied events that recovered
+    unrecovered: int | None = None  # applied events after which progress never resumed (None: no scenario events)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -141,6 +165,8 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         active = {math.floor(round(float(r.get("started") or 0.0) / step, 9)) for r in acting}
     else:
         active = {int(r["tick"]) for r in acting}
+    recovery = recovery_of(rows, scheduler, float(s.get("step_seconds") or 0.0), d)
+    recovered = [int(e["ticks_to_recover"]) for e in recovery if e["applied"] and e["ticks_to_recover"] is not None]
     return EpisodeMetrics(
         task=s["task"],
         scene=s["scene"],
@@ -175,7 +201,63 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         idle={r: round(max(0.0, makespan - busy.get(r, 0.0)), 3) for r in s["robots"]},
         actions_per_robot={r: everything.get(r, 0) for r in s["robots"]},
         active_ticks=len(active),
+        recovery=recovery,
+        recovery_ticks=round(statistics.fmean(recovered), 3) if recovered else None,
+        unrecovered=sum(1 for e in recovery if e["applied"] and e["ticks_to_recover"] is None) if recovery else None,
     )
+
+
+def recovery_of(rows: list[dict[str, Any]], scheduler: str, step_seconds: float, done: dict[str, Any]) -> list[dict[str, Any]]:
+    """Per scenario event of the trace, the steps until the team's progress resumes (module docstring)."""
+    events = _msgs(rows, "scenario_event")
+    if not events:
+        return []
+    if scheduler == "async":
+        since = _async_progress(rows, step_seconds, done)
+    else:
+        placed = {int(t["tick"]): int(t["placed"]) for t in _msgs(rows, "tick")}
+        since = {}
+        for ev in events:
+            tick = int(ev["tick"])
+            before = max((t for t in placed if t < tick), default=None)
+            at_event = placed[before] if before is not None else 0
+            later = [t for t in sorted(placed) if t >= tick and placed[t] > at_event]
+            since[int(ev["index"])] = later[0] + 1 - tick if later else None
+    return [
+        {
+            "index": int(ev["index"]), "kind": str(ev["event"]), "tick": int(ev["tick"]), "applied": bool(ev["applied"]),
+            "ticks_to_recover": since.get(int(ev["index"])) if ev["applied"] else None,
+        }  # fmt: skip
+        for ev in events
+    ]
+
+
+def _async_progress(rows: list[dict[str, Any]], step_seconds: float, done: dict[str, Any]) -> dict[int, int | None]:
+    """Async: scenario event index -> ceil((end of the first action after it that put one more target
+    in place - its firing time) / step_seconds), None if none did; counted on the snapshots."""
+    goals = {str(k): str(v) for k, v in (done.get("goals") or {}).items()}
+    targets = [str(t) for t in done.get("targets") or goals]
+    ended = {str(r["goal_id"]): float(r["ended"]) for r in _msgs(rows, "action_result") if r.get("ended") is not None}
+    end_of_episode = float((done.get("metrics") or {}).get("makespan", 0.0))
+    count = 0
+    waiting: dict[int, tuple[float, int]] = {}  # event index -> (its firing time, the count then)
+    out: dict[int, int | None] = {}
+    for r in rows:
+        msg = r.get("msg") if r.get("kind") == "put" else None
+        if not isinstance(msg, dict):
+            continue
+        if msg.get("kind") == "scenario_event":
+            waiting[int(msg["index"])] = (int(msg["tick"]) * step_seconds, count)
+            out[int(msg["index"])] = None
+        elif msg.get("kind") == "snapshot":
+            objects = msg.get("objects") or {}
+            count = sum(1 for t in targets if t in objects and objects[t].get("on") == goals.get(t) and not objects[t].get("held_by"))
+            at = max((ended.get(str(g), end_of_episode) for g in msg.get("goals") or []), default=end_of_episode)
+            for index, (fired, then) in list(waiting.items()):
+                if count > then:
+                    out[index] = max(0, math.ceil(round((at - fired) / step_seconds, 9)))
+                    del waiting[index]
+    return out
 
 
 def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -208,4 +290,12 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "failed_actions": round(statistics.fmean(sum(r["failed_actions"].values()) for r in rows), 3),
         "wall_time": round(mean("wall_time"), 3),
         "makespan": round(statistics.fmean(float(r.get("makespan", 0.0)) for r in rows), 3),
+        # scenario episodes only (a static episode, or a row written before the fields, adds nothing)
+        "recovery_ticks": _mean_of_known(rows, "recovery_ticks"),
+        "unrecovered": _mean_of_known(rows, "unrecovered"),
     }
+
+
+def _mean_of_known(rows: list[dict[str, Any]], key: str) -> float | None:
+    known = [float(r[key]) for r in rows if r.get(key) is not None]
+    return round(statistics.fmean(known), 3) if known else None

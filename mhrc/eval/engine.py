@@ -83,7 +83,9 @@ class EvalSpec:
     step_deadline: float | None = None
     schedule: str = "sequential"  # the world's time policy (mhrc.run.config.SCHEDULES); the paper's loop by default
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
-    events: str | None = None  # a scenario file (mhrc/world/scenario.py), applied to every episode
+    # a scenario (mhrc/world/scenario.py), applied to every episode: a file's path, or a shipped scenario's name, which
+    # travels to the workers as the name so that each (a Ray node too) reads the copy installed with its own package
+    events: str | None = None
 
     def scenario(self) -> tuple[str, str] | tuple[None, None]:
         """The scenario's short name and sha256 (None, None without one): what rows record of it."""
@@ -224,7 +226,7 @@ def check_out(out: Path, spec: EvalSpec, resume: bool) -> None:
             if before != spec.identity():
                 raise ConfigError(
                     f"--out: {out} holds an evaluation of {before}, not {spec.identity()}; --resume needs the same --llm, "
-                    "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens, --llm-seed, --schedule and --time-scale"
+                    "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens, --llm-seed, --schedule, --time-scale and --events"
                 )
 
 

@@ -37,6 +37,7 @@ log = structlog.get_logger("mhrc.eval.report")
 COLUMNS = (
     "episodes", "succ", "ps", "ts", "ts_bound", "as_ticks", "as", "as_per_robot", "messages", "llm_calls", "prompt_tokens",
     "completion_tokens", "parse_failures", "llm_unreachable", "rejected_actions", "failed_actions", "wall_time",
+    "recovery_ticks", "unrecovered",  # a scenario's (mhrc.core.metrics); empty for static episodes
 )  # fmt: skip
 
 
@@ -53,6 +54,18 @@ def _cell(s: dict[str, Any]) -> str:
     bound = f" ({s['ts_bound']:.1f})" if s.get("ts_bound") is not None else ""
     steps = "-" if s.get("as_ticks") is None else f"{s['as_ticks']:.1f}"
     return f"{s['succ']:.2f} / {s['ps']:.2f} / {s['ts']:.1f}{bound} / {steps} (sum {s['as']:.1f}, per robot {s['as_per_robot']:.1f})"
+
+
+RECOVERY_NOTE = (
+    "Recovery: the mean number of steps from a scenario event to the first moment the team has one more target in place "
+    "than it had when the event fired (mhrc.core.metrics), over the episodes where some event was followed by progress; "
+    "beside it, the events per episode after which progress never resumed."
+)
+
+
+def _recovery(s: dict[str, Any]) -> str:
+    ticks = "-" if s.get("recovery_ticks") is None else f"{s['recovery_ticks']:.1f}"
+    return ticks + ("" if s.get("unrecovered") is None else f" ({s['unrecovered']:.2f} unrecovered)")
 
 
 def _ci(s: dict[str, Any], name: str, digits: int) -> str:
@@ -136,13 +149,15 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
         mine_tasks = [t for t in tasks if (setting, t) in cells]
         shown = [matches.get((setting, t)) for t in mine_tasks]
         paper_col = any(m is not None and m.figures is not None for m in shown)
-        head = "| task | episodes | Succ | PS | TS | AS | TS* | AS sum | AS/robot |" + (" paper Succ / PS / TS / AS |" if paper_col else "")
-        lines += [f"### {setting_label(setting)}", "", head, "| --- |" + " --- |" * (head.count("|") - 2)]
+        scenario = setting[SETTING.index("scenario")] is not None  # a recovery column only where a scenario ran
+        head = ("| task | episodes | Succ | PS | TS | AS | TS* | AS sum | AS/robot |" + (" recovery (steps) |" if scenario else "")
+                + (" paper Succ / PS / TS / AS |" if paper_col else ""))
+        lines += [f"### {setting_label(setting)}", "", *([RECOVERY_NOTE, ""] if scenario else []), head, "| --- |" + " --- |" * (head.count("|") - 2)]
         for t, m in zip(mine_tasks, shown):
             s = cells[(setting, t)]
             bound = f"{s['ts_bound']:.1f}" if s.get("ts_bound") is not None else ""
             row = (f"| {t} | {s['episodes']} | {_ci(s, 'succ', 2)} | {_ci(s, 'ps', 2)} | {_ci(s, 'ts', 1)} | {_ci(s, 'as_ticks', 1)} | {bound} | "
-                   f"{_ci(s, 'as', 1)} | {s['as_per_robot']:.1f} |")
+                   f"{_ci(s, 'as', 1)} | {s['as_per_robot']:.1f} |" + (f" {_recovery(s)} |" if scenario else ""))
             if paper_col:
                 row += f" {paper_cell(m.figures)} ({m.title}, {m.table}) |" if m is not None and m.figures is not None else " |"
             lines.append(row)

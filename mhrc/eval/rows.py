@@ -31,7 +31,8 @@ CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps"
 
 
 # mode: free (the paper's) or structured replies; schedule: the world's time policy (mhrc/world/schedulers);
-# scenario: the --events file's short name (mhrc/world/scenario.py), None for a static episode
+# scenario: the --events scenario as NAME@SHA12 (its name and the first 12 hex digits of the file's sha256, as
+# `mhrc scenarios` lists it: two files of one name are two settings), None for a static episode
 SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule", "scenario")
 
 
@@ -64,7 +65,10 @@ def merge_runs(dirs: list[Path]) -> list[dict[str, Any]]:
 def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
     """What a row's numbers depend on besides the episode; rows written before a field existed get its old meaning."""
     defaults = {"fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free", "schedule": "lockstep", "scenario": None}
-    return tuple(row.get(k, defaults.get(k)) for k in SETTING)
+    values = {k: row.get(k, defaults.get(k)) for k in SETTING}
+    if values["scenario"] is not None and row.get("scenario_sha256"):
+        values["scenario"] = f"{values['scenario']}@{str(row['scenario_sha256'])[:12]}"
+    return tuple(values[k] for k in SETTING)
 
 
 def is_valid(row: dict[str, Any]) -> bool:

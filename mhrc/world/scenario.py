@@ -8,6 +8,11 @@ A scenario file is a JSON list of events, each with the `tick` it fires at and a
     new_target   one more object joins the task (optional `object`, `on`)
     close        a container closes (optional `target`; by default the one opened last)
 
+A scenario is given as a file path or as the name of one shipped with the package
+(`mhrc/world/scenarios/*.json`, listed by `mhrc scenarios`): `resolve_scenario` finds it, an
+existing path first. A name travels as a name (to `mhrc eval`'s workers, to a `--processes`
+world), so each process reads the copy installed with its own package.
+
 `load_scenario` checks the file alone (its shape and fields); `check_scenario` checks it against
 one episode (horizon, robots, the scene's surfaces, the task's possible objects). Both raise
 `ScenarioError`, whose message names the event's index and field, e.g.
@@ -18,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Collection
+from importlib import resources
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal, Union
@@ -83,9 +89,34 @@ class Scenario(BaseModel):
     source: str = Field("", description="the file as it was given (for messages)")
 
 
+def shipped_scenarios() -> dict[str, Path]:
+    """The scenarios shipped with the package, by name (the file's stem), in name order."""
+    folder = Path(str(resources.files("mhrc.world").joinpath("scenarios")))
+    return {p.stem: p for p in sorted(folder.glob("*.json"))}
+
+
+def resolve_scenario(arg: Path | str) -> Path:
+    """The file `--events ARG` means: ARG itself when it is a file, else the shipped scenario named
+    ARG; else ScenarioError naming the shipped ones (so a typo is refused before anything starts)."""
+    path = Path(arg)
+    if path.is_file():
+        return path
+    shipped = shipped_scenarios()
+    if str(arg) in shipped:
+        return shipped[str(arg)]
+    if path.exists():
+        raise ScenarioError(f"--events: {arg} is a directory; give a scenario file (a JSON list of events) or a shipped scenario's name")
+    raise ScenarioError(
+        f"--events: {arg} is neither a file nor a shipped scenario; give a scenario file's path or one of "
+        f"{', '.join(shipped) or '(none installed)'} (mhrc scenarios lists them)"
+    )
+
+
 def load_scenario(path: Path | str) -> Scenario:
-    """Read and validate a scenario file (its shape only: `check_scenario` checks it against an episode)."""
-    path = Path(path)
+    """Read and validate a scenario given by path or shipped name (its shape only: `check_scenario`
+    checks it against an episode)."""
+    source = str(path)
+    path = resolve_scenario(path)
     try:
         data = path.read_bytes()
     except OSError as exc:
@@ -93,8 +124,8 @@ def load_scenario(path: Path | str) -> Scenario:
     try:
         events = _EVENTS.validate_json(data)
     except ValidationError as exc:
-        raise ScenarioError(f"--events {path}: {_where(exc)}") from None
-    return Scenario(name=path.stem, sha256=hashlib.sha256(data).hexdigest(), events=events, source=str(path))
+        raise ScenarioError(f"--events {source}: {_where(exc)}") from None
+    return Scenario(name=path.stem, sha256=hashlib.sha256(data).hexdigest(), events=events, source=source)
 
 
 def _where(exc: ValidationError) -> str:
@@ -110,6 +141,23 @@ def _where(exc: ValidationError) -> str:
         msg = f"must be one of {', '.join(KINDS)}" + (f", not {err['input'].get('kind')!r}" if isinstance(err.get("input"), dict) and "kind" in err["input"] else "")
     field = ".".join(rest) or "event"
     return f"events[{index}].{field}: {msg}"
+
+
+def describe(event: ScenarioEventSpec) -> str:
+    """What one event does, in a sentence (for `mhrc scenarios NAME` and the docs)."""
+    if isinstance(event, Relocate):
+        what = event.object or "a target not yet in place (chosen with the episode's seed)"
+        where = event.to or "another surface (chosen with the seed)"
+        return f"someone moves {what} to {where}; robots learn it only by looking"
+    if isinstance(event, Breakdown):
+        return (f"{event.robot} breaks down for {event.ticks} tick(s), until tick {event.tick + event.ticks}: it can only "
+                "communicate and wait; teammates learn it only from its messages")
+    if isinstance(event, NewTarget):
+        what = event.object or "one more object (chosen with the seed among the task's objects not in the scene)"
+        on = event.on or "a surface chosen with the seed"
+        return f"{what} joins the task, on {on}; Bob's task changes, the others learn it from him"
+    target = event.target or "the container opened most recently"
+    return f"{target} closes, hiding what is inside again (skipped when nothing is open)"
 
 
 @dataclass(frozen=True)
