@@ -4,7 +4,8 @@ Steps are keyed by goal id: a request, its ack, its result; each robot's thought
 its requests in order (an agent publishes its thought, then its request). Map frames are the
 world's `snapshot` events; a trace without them (protocol version 1) gets frames from the
 robots' own observations in their results, with no objects. The task's targets and their ends
-come from mhrc.viewer.targets; each navigate's planned route from its outcome's `path`.
+come from mhrc.viewer.targets; each navigate's planned route from its outcome's `path`; a dynamic
+episode's scenario events, with their frame and place, from mhrc.viewer.events.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import Any
 
 from mhrc.world.layouts import Layout, get_layout
 
+from mhrc.viewer.events import ScenarioMark, scenario_marks, scenario_name
 from mhrc.viewer.load import LoadedTrace
 from mhrc.viewer.targets import TaskView, task_view
 
@@ -54,6 +56,7 @@ class EpisodeView:
     scene: dict[str, Any] | None
     task: TaskView | None = None
     routes: dict[str, list[list[float]]] = field(default_factory=dict)  # goal id -> a navigate's planned route
+    events: list[ScenarioMark] = field(default_factory=list)  # a dynamic episode's scenario events (mhrc.viewer.events)
     warnings: list[str] = field(default_factory=list)
 
 
@@ -202,6 +205,7 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
                 scene_names.add(str(f.get("name")))
     scene = scene_map(str(started["scene"]), {k: v for k, v in fixtures.items() if k not in scene_names}, warnings) if started.get("scene") else None
 
+    marks = scenario_marks(trace, frames, frames_from, scene)
     metrics = (done or {}).get("metrics") or {}
     header = {
         "run": started.get("run"),
@@ -219,13 +223,14 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
         "step_seconds": started.get("step_seconds"),
         "lower_bound": started.get("lower_bound", metrics.get("lower_bound")),
         "reason": (done or {}).get("reason"),
+        "scenario": scenario_name(marks, started),  # (name, sha256), or None for a static episode
         "metrics": metrics,
         "versions": sorted(trace.versions),
         "trace": str(trace.path),
     }
     return EpisodeView(header=header, robots=robots, steps=out, frames=frames, frames_from=frames_from,
                        messages=messages, scene=scene, task=task_view(trace, started, frames, frames_from, metrics),
-                       routes=_routes(out), warnings=warnings)
+                       routes=_routes(out), events=marks, warnings=warnings)
 
 
 def _routes(lanes: dict[str, list[Step]]) -> dict[str, list[list[float]]]:

@@ -12,6 +12,8 @@
   const px = x => ((x - xmin) * S).toFixed(1), py = y => ((ymax - y) * S).toFixed(1);
   const esc = s => String(s).replace(/[&<>"']/g, c => ({'&':'&amp;','<':'&lt;','>':'&gt;','"':'&quot;',"'":'&#39;'}[c]));
   const last = frames.length - 1;
+  const events = data.events || [];  // a dynamic episode's scenario events (mhrc/viewer/events.py)
+  const glyphs = {relocate: '\u25c6', new_target: '\u2605', close: '\u25a0', breakdown: '\u25b2'};
   let current = -1;
 
   // ---- label layout: every label of a frame takes the first spot around its dot that covers no
@@ -75,6 +77,40 @@
     return (o.on === goal && !o.held_by) ? 'target placed' : 'target unplaced';
   }
 
+  function shape(kind, x, y){
+    if (kind === 'relocate') return '<polygon class="shape" points="' + [[x, y - 12], [x + 12, y], [x, y + 12], [x - 12, y]].map(p => p.join(',')).join(' ') + '"/>';
+    if (kind === 'close') return '<rect class="shape" x="' + (x - 10) + '" y="' + (y - 10) + '" width="20" height="20"/>';
+    if (kind === 'breakdown') return '<polygon class="shape" points="' + [[x, y - 8], [x + 7.5, y + 5], [x - 7.5, y + 5]].map(p => p.join(',')).join(' ') + '"/>';
+    const pts = [];  // new_target: a five-pointed star
+    for (let k = 0; k < 10; k++){ const a = -Math.PI / 2 + k * Math.PI / 5, rr = k % 2 ? 6 : 14; pts.push((x + Math.cos(a) * rr).toFixed(1) + ',' + (y + Math.sin(a) * rr).toFixed(1)); }
+    return '<polygon class="shape" points="' + pts.join(' ') + '"/>';
+  }
+  function eventMarks(i, f, labels, broken){
+    let out = '';
+    for (const e of events){
+      if (e.frame === null || e.frame > i || !e.applied) continue;
+      const cls = 'ev-mark ev-' + esc(e.event) + (e.frame === i ? ' fresh' : '');
+      const head = '<g class="' + cls + '" data-index="' + e.index + '" data-event="' + esc(e.event) + '"><title>' + esc(e.text) + '</title>';
+      if (e.event === 'breakdown'){
+        const p = f.robots[e.robot];
+        if (!p || (e.until !== null && f.tick >= e.until)) continue;  // it works again
+        const x = parseFloat(px(p.x)) + 11, y = parseFloat(py(p.y)) - 11;
+        broken[e.robot] = head + shape('breakdown', x, y) + '</g>';
+        continue;
+      }
+      if (!e.at) continue;
+      const x = parseFloat(px(e.at[0])), y = parseFloat(py(e.at[1]));
+      if (e.origin){
+        const ox = parseFloat(px(e.origin[0])), oy = parseFloat(py(e.origin[1])), d = Math.hypot(x - ox, y - oy) || 1;
+        out += '<line class="ev-arrow ev-' + esc(e.event) + '" data-index="' + e.index + '" x1="' + ox.toFixed(1) + '" y1="' + oy.toFixed(1) + '" x2="' + (x - (x - ox) * 13 / d).toFixed(1)
+          + '" y2="' + (y - (y - oy) * 13 / d).toFixed(1) + '" marker-end="url(#ev-head)"><title>' + esc(e.text) + '</title></line>';
+      }
+      out += head + shape(e.event, x, y) + '</g>';
+      labels.push({text: e.label, cls: 'evname ev-' + e.event, x: x, y: y, r: 13, name: 'event-' + e.index, order: 1});
+    }
+    return out ? '<defs><marker id="ev-head" viewBox="0 0 10 10" refX="8" refY="5" markerWidth="7" markerHeight="7" orient="auto"><path d="M0,0 L10,5 L0,10 z" fill="#7b3fb5"/></marker></defs>' + out : out;
+  }
+
   function draw(i){
     if (!frames.length) return;
     i = Math.max(0, Math.min(last, i));
@@ -113,8 +149,12 @@
       out += '<line class="msgline" stroke="' + (data.colors[m.sender] || '#555') + '" x1="' + px(a.x) + '" y1="' + py(a.y) + '" x2="' + px(b.x) + '" y2="' + py(b.y) + '"><title>' + esc(m.sender + ' -> ' + m.to + ': ' + m.content) + '</title></line>';
       out += '<circle r="5" fill="' + (data.colors[m.sender] || '#555') + '" cx="' + px(b.x) + '" cy="' + py(b.y) + '"/>';
     }
+    // scenario events from their frame on, where they happened (under the objects they mark);
+    // a breakdown on its robot while it is broken down
+    const labels = [], broken = {};
+    out += eventMarks(i, f, labels, broken);
     // objects, styled by role: a target on its goal, a target elsewhere, a distractor
-    const objs = [], labels = [];
+    const objs = [];
     for (const [name, o] of Object.entries(f.objects)){
       const st = state(name, o);
       let cls = 'obj ' + st;
@@ -138,7 +178,8 @@
       out += '<g class="robot" data-robot="' + esc(r) + '" data-x="' + p.x + '" data-y="' + p.y + '">'
         + '<circle r="10" cx="' + x + '" cy="' + y + '" fill="' + c + '" fill-opacity=".85" stroke="#000"/>'
         + '<line x1="' + x + '" y1="' + y + '" x2="' + hx + '" y2="' + hy + '" stroke="#000" stroke-width="2.5"/></g>';
-      labels.push({text: r + (p.holding ? ' [' + p.holding + ']' : ''), cls: 'rname', fill: c, x: parseFloat(x), y: parseFloat(y), r: 11, name: r, order: 0});
+      if (broken[r]) out += broken[r];
+      labels.push({text: r + (p.holding ? ' [' + p.holding + ']' : '') + (broken[r] ? ' (broken down)' : ''), cls: 'rname', fill: c, x: parseFloat(x), y: parseFloat(y), r: broken[r] ? 20 : 11, name: r, order: 0});
     }
     dyn.innerHTML = out + '<g id="labels"></g>';
     labels.sort((a, b) => a.order - b.order);
@@ -148,8 +189,14 @@
       .map(c => '<li><b style="color:' + data.colors[c.robot] + '">' + esc(c.robot) + '</b> ' + esc(c.call) + (c.ok ? ' &#10003;' : ' &#10007;') + '</li>');
     document.getElementById('frame-steps').innerHTML = steps.length ? '<b>executed:</b><ul>' + steps.join('') + '</ul>' : '<b>executed:</b> nothing (start)';
     document.getElementById('frame-objects').innerHTML = objs.length ? '<b>objects:</b><ul>' + objs.join('') + '</ul>' : '';
+    const fe = document.getElementById('frame-events');
+    if (fe){
+      const now = events.filter(e => e.frame === i).map(e => '<li class="ev-' + esc(e.event) + (e.applied ? '' : ' skipped') + '"><span class="ev-glyph ev-' + esc(e.event) + '">' + (glyphs[e.event] || '?') + '</span> '
+        + esc(e.text) + (e.applied || (e.skipped && e.text.includes(e.skipped)) ? '' : ' <span class="skip-why">(skipped: ' + esc(e.skipped || 'no reason given') + ')</span>') + '</li>');
+      fe.innerHTML = now.length ? '<b>scenario events:</b><ul>' + now.join('') + '</ul>' : '';
+    }
     // lanes and messages follow the slider: the step of this frame is current, later ones are future
-    document.querySelectorAll('.step').forEach(el => {
+    document.querySelectorAll('.step, .lane-event').forEach(el => {
       const fr = el.dataset.frame === undefined ? null : parseInt(el.dataset.frame, 10);
       el.classList.toggle('current', fr === i);
       el.classList.toggle('future', fr !== null && fr > i);
@@ -158,6 +205,7 @@
       const cur = lane.querySelector('.step.current');
       if (cur) lane.scrollTop = cur.offsetTop - lane.offsetTop - 40;
     });
+    document.querySelectorAll('.ev-marker').forEach(el => el.classList.toggle('current', el.dataset.frame !== undefined && parseInt(el.dataset.frame, 10) === i));
     document.querySelectorAll('tr.msg').forEach(el => el.classList.toggle('current', el.dataset.frame !== undefined && parseInt(el.dataset.frame, 10) === i));
   }
 
@@ -173,7 +221,10 @@
     if (e.key === 'Home') { draw(0); e.preventDefault(); }
     if (e.key === 'End') { draw(last); e.preventDefault(); }
   });
-  document.querySelectorAll('.step[data-frame]').forEach(el => el.addEventListener('click', ev => {
+  document.querySelectorAll('.ev-marker[data-frame]').forEach(el => el.addEventListener('keydown', ev => {
+    if (ev.key === 'Enter' || ev.key === ' ') { draw(parseInt(el.dataset.frame, 10)); ev.preventDefault(); }
+  }));
+  document.querySelectorAll('.step[data-frame], .lane-event[data-frame], .ev-marker[data-frame]').forEach(el => el.addEventListener('click', ev => {
     if (ev.target.closest('details')) return;
     draw(parseInt(el.dataset.frame, 10));
   }));

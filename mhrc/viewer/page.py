@@ -9,8 +9,10 @@ range slider or the arrow keys (Home and End jump). The page opens on the last f
 the episode was judged on. A robot's path follows each navigate's planned route where its result
 carries one (older traces: straight lines between stops). Labels never cover one another: the
 fixed ones are placed here (mhrc.viewer.placement), the moving ones by the script, which
-measures them. The script and the style are `page.js` and `page.css` beside this module
-(package data), inlined into every page.
+measures them. A dynamic episode's scenario events (mhrc.viewer.events) get a track of markers
+under the slider, entries in the lanes and marks on the map (mhrc.viewer.page_events); a static
+episode's page has none of them. The script and the style are `page.js` and `page.css` beside
+this module (package data), inlined into every page.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from html import escape
 from importlib.resources import files
 from typing import Any
 
+from mhrc.viewer import page_events
 from mhrc.viewer.model import EpisodeView, Step
 from mhrc.viewer.placement import Box, Request, place
 from mhrc.viewer.targets import ObjectFate, TaskView
@@ -97,6 +100,9 @@ def _header(view: EpisodeView) -> str:
         "aids": ", ".join(h["aids"] or []) or "none", "scheduler": h["scheduler"], "horizon": h["horizon"],
         "TS lower bound": h["lower_bound"], "end": h["reason"] or "not recorded",
     }
+    scenario = page_events.scenario_fact(view)
+    if scenario is not None:  # a dynamic episode: the scenario of events it ran with
+        facts = {**dict(list(facts.items())[:4]), "scenario": scenario, **dict(list(facts.items())[4:])}
     if h["scheduler"] == "async":
         facts["time scale"] = h["time_scale"]
         facts["step seconds"] = h["step_seconds"]
@@ -123,6 +129,8 @@ def _header(view: EpisodeView) -> str:
         metrics = '<p class="dim">no metrics: the trace has no episode_done event</p>'
     warn = "".join(f'<div class="warning">&#9888; {_e(w)}</div>' for w in view.warnings)
     title = f"{h['task'] or 'episode'} in {h['scene'] or 'an unknown scene'}, seed {h['seed'] if h['seed'] is not None else '?'}"
+    if h.get("scenario"):
+        title += f", scenario {h['scenario'][0]}"
     return (
         f'<header id="header"><h1>mhrc: {_e(title)}</h1>{warn}'
         f'<div class="cols"><table class="kv facts">{fact_rows}</table><div>{metrics}</div></div></header>'
@@ -252,6 +260,8 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
     legend += "<br>" + " ".join(f'<span class="li"><span class="odot {cls}"></span>{text}</span>' for cls, text in (
         ("target unplaced", "target, not on its goal"), ("target placed", "target on its goal"), ("distractor", "distractor"),
         ("ring", "target not placed at the end")))
+    if view.events:
+        legend += page_events.legend(view)
     n = len(view.frames)
     if view.frames_from == "snapshots":
         note = ""
@@ -260,11 +270,16 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
     else:
         note = '<div class="warning">&#9888; nothing to animate: the trace has no snapshots and no action results</div>'
     disabled = " disabled" if n == 0 else ""
+    slider = (f'<input type="range" id="tick-slider" min="0" max="{max(n - 1, 0)}" value="{max(n - 1, 0)}" step="1"{disabled} '
+              'aria-label="frame">')
+    if view.events:  # the scenario's events on a track under the slider
+        slider = f'<div class="timeline">{slider}{page_events.timeline(view)}</div>'
+    frame_events = '<div id="frame-events"></div>' if view.events else ""
     return f"""
 <section id="map-section"><h2>House map</h2>{note}
 <div class="controls">
   <button id="prev" type="button"{disabled}>&#9664;</button>
-  <input type="range" id="tick-slider" min="0" max="{max(n - 1, 0)}" value="{max(n - 1, 0)}" step="1"{disabled} aria-label="frame">
+  {slider}
   <button id="next" type="button"{disabled}>&#9654;</button>
   <span id="tick-label">{f'tick {view.frames[-1]["tick"]} (the end)' if n else 'no frames'}</span>
   <span class="dim">(frames: {n}; use the slider, the &#8592; &#8594; keys, Home or End)</span>
@@ -274,7 +289,7 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
 <g id="static">{''.join(parts)}</g>
 <g id="dyn"></g>
 </svg>
-<div id="frame-info"><div class="legend">{legend}</div><div id="frame-steps"></div><div id="frame-objects"></div></div>
+<div id="frame-info"><div class="legend">{legend}</div>{frame_events}<div id="frame-steps"></div><div id="frame-objects"></div></div>
 </div>
 </section>"""
 
@@ -339,11 +354,12 @@ def _lanes(view: EpisodeView, colors: dict[str, str]) -> str:
     lanes = []
     for r in view.robots:
         steps = view.steps.get(r, [])
-        items = "".join(_step_html(s) for s in steps)
+        items = page_events.merge(steps, [m for m in view.events if page_events.robot_of(m) == r], [_step_html(s) for s in steps])
         lanes.append(
             f'<div class="lane" data-robot="{_e(r)}"><h3 style="border-color:{colors[r]}">{_e(r)} '
             f'<span class="dim">{_e(view.header["models"].get(r))} · {len(steps)} steps</span></h3><ol>{items}</ol></div>'
         )
+    lanes.append(page_events.world_lane(view))
     return f'<section id="lanes-section"><h2>Robots</h2><div id="lanes">{"".join(lanes)}</div></section>'
 
 
@@ -410,6 +426,8 @@ def _data(view: EpisodeView, colors: dict[str, str]) -> str:
         "goals": view.task.goals if view.task else {},
         "bobBase": view.scene["bob_base"] if view.scene else None,
     }
+    if view.events:
+        data["events"] = [m.as_data() for m in view.events]
     text = json.dumps(data, separators=(",", ":"), ensure_ascii=False)
     # inside <script>: no "</script>" or "<!--" can end it early
     return text.replace("<", "\\u003c").replace("\u2028", "\\u2028").replace("\u2029", "\\u2029")

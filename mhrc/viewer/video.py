@@ -5,7 +5,9 @@ actions (ground truth: robot bases, objects, containers). The video rebuilds the
 scene (same task, scene, seed, object count and aids), teleports the bodies to each
 snapshot in turn (`Sim.apply_snapshot`; no physics, arms stay in their home pose), renders
 each with PyBullet's CPU renderer and captions it with what every robot did in that batch
-and how it went. Between two snapshots the robots' bases glide in a straight line (not
+and how it went, and, in a dynamic episode, with its scenario's events (mhrc.viewer.events: from
+the first snapshot after an event through the last of its tick, e.g. "tick 6: someone moved mug
+from table_3 to tub"). Between two snapshots the robots' bases glide in a straight line (not
 along their planned paths: a robot may cross a wall between two frames).
 
 Frame count: `frames_per_step` frames per snapshot, the first one held still; so
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from bisect import bisect_right
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,9 +35,12 @@ import structlog
 from PIL import Image, ImageDraw, ImageFont
 from pydantic import ValidationError
 
-from mhrc.core.protocol import ACTION_ADAPTER, EpisodeStarted, ObjectPose, RobotPose, Snapshot
+from mhrc.core.protocol import ACTION_ADAPTER, EpisodeStarted, ObjectPose, RobotPose, ScenarioEvent, Snapshot
 from mhrc.core.trace import read_trace
+from mhrc.viewer.events import caption as event_caption
+from mhrc.viewer.events import captions_by_snapshot
 from mhrc.world.render import VIEWS, render
+from mhrc.world.scenario import NewTarget, Scenario
 from mhrc.world.sim import Sim
 
 log = structlog.get_logger("mhrc.viewer.video")
@@ -49,6 +55,7 @@ TEXT = (235, 235, 235)
 DIM = (140, 140, 150)
 OK = (110, 210, 120)
 FAILED = (240, 110, 100)
+EVENT = (250, 215, 90)  # a scenario event's caption
 BAR = 3  # height of the progress bar under the captions
 ROBOT_COLORS = {"alice": (200, 140, 230), "bob": (240, 190, 90), "david": (120, 170, 250)}
 
@@ -97,6 +104,8 @@ class Step:
     snapshot: Snapshot
     captions: list[Caption]
     sim_time: float | None  # the latest `ended` among the batch's results: the world clock after it
+    events: tuple[str, ...] = ()  # the scenario events this snapshot shows, captioned ("tick 6: someone moved ...")
+    added: tuple[tuple[str, str], ...] = ()  # (object, furniture) of each new target first in this snapshot
 
 
 # --------------------------------------------------------------------------- reading the trace
@@ -107,7 +116,10 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step]]:
     started: EpisodeStarted | None = None
     snapshots: list[Snapshot] = []
     results: dict[str, dict[str, Any]] = {}
-    for line in read_trace(trace):
+    positions: list[tuple[int, int]] = []  # each snapshot's (line, tick)
+    events: list[tuple[int, int, str]] = []  # each scenario event's (line, tick, caption)
+    added: list[tuple[int, str, str]] = []  # each new target's (line, object, furniture)
+    for n, line in enumerate(read_trace(trace)):
         msg = line.get("msg")
         if line.get("kind") != "put" or not isinstance(msg, dict):
             continue
@@ -117,6 +129,13 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step]]:
                 started = EpisodeStarted.model_validate(msg)
             elif kind == "snapshot":
                 snapshots.append(Snapshot.model_validate(msg))
+                positions.append((n, snapshots[-1].tick))
+            elif kind == "scenario_event":
+                ev = ScenarioEvent.model_validate(msg)
+                skipped = f" (skipped: {ev.skipped})" if not ev.applied and ev.skipped and ev.skipped not in ev.text else ""
+                events.append((n, ev.tick, event_caption(ev.tick, ev.text) + skipped))
+                if ev.applied and ev.event == "new_target" and ev.changed.get("object") and ev.changed.get("on"):
+                    added.append((n, ev.changed["object"], ev.changed["on"]))
         except ValidationError as exc:
             raise VideoError(f"{trace}: a {kind} event does not match this version of mhrc ({exc.errors()[0]['msg']})") from None
         if kind == "action_result" and isinstance(msg.get("goal_id"), str):
@@ -129,13 +148,24 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step]]:
         )
     robots = list(started.robots)
     steps = []
-    for snap in snapshots:
+    shown = captions_by_snapshot(events, positions)
+    first = [bisect_right([line for line, _ in positions], line) for line, _, _ in added]
+    for k, (snap, said) in enumerate(zip(snapshots, shown)):
         done = [results[g] for g in snap.goals if g in results]
         by_robot = {r["robot"]: r for r in done}
         captions = [_caption(robot, by_robot.get(robot)) for robot in robots]
         ended = [float(r["ended"]) for r in done if isinstance(r.get("ended"), (int, float))]
-        steps.append(Step(snap, captions, max(ended) if ended else None))
+        new = tuple((obj, on) for (_, obj, on), at in zip(added, first) if at == k)
+        steps.append(Step(snap, captions, max(ended) if ended else None, tuple(said), new))
     return started, steps
+
+
+def _spawns(steps: list[Step]) -> Scenario | None:
+    """The episode's new targets as a scenario for the video's own Sim, which the trace's episode
+    data alone builds without them: each fires (`Sim.fire_events(i)`) at the step index `i` of its
+    first snapshot, so it exists from there on and the snapshots place it."""
+    events = [NewTarget(tick=i, object=obj, on=on) for i, s in enumerate(steps) if i > 0 for obj, on in s.added]
+    return Scenario(name="trace", sha256="", events=list(events)) if events else None
 
 
 def _caption(robot: str, result: dict[str, Any] | None) -> Caption:
@@ -216,13 +246,15 @@ def _camera(sim: Sim, view: str, width: int, height: int) -> np.ndarray:
 
 
 class _Captioner:
-    """Draws the caption band under the picture: a header line, then one line per robot."""
+    """Draws the caption band under the picture: a header line, one line per robot, and for a
+    dynamic episode (`events`) a line for the scenario events the step shows."""
 
-    def __init__(self, width: int, height: int, started: EpisodeStarted, n_steps: int) -> None:
+    def __init__(self, width: int, height: int, started: EpisodeStarted, n_steps: int, *, events: bool = False) -> None:
         self.size = max(9, round(min(width / 48, height / 30)))
         self.font = ImageFont.load_default(size=self.size)
         self.line = self.size + max(2, self.size // 4)
-        self.band = self.line * (1 + len(started.robots)) + self.line // 2 + BAR
+        self.events = events
+        self.band = self.line * (1 + len(started.robots) + int(events)) + self.line // 2 + BAR
         if self.band > height // 2:
             raise VideoError(f"a {width}x{height} frame leaves no room for the picture above the captions; make it larger")
         self.width, self.height = width, height
@@ -247,6 +279,8 @@ class _Captioner:
             draw.text((pad, y), f"{c.robot}:", font=self.font, fill=ROBOT_COLORS.get(c.robot, TEXT))
             colour = DIM if c.succeeded is None else OK if c.succeeded else FAILED
             draw.text((pad + name_w, y), self._fit(c.text, self.width - 2 * pad - name_w), font=self.font, fill=colour)
+        if self.events and step.events:
+            draw.text((pad, y + self.line), self._fit("; ".join(step.events), self.width - 2 * pad), font=self.font, fill=EVENT)
         return np.asarray(img)
 
     def _fit(self, text: str, room: float) -> str:
@@ -311,15 +345,17 @@ def render_video(
     if width < 64 or height < 64 or (out.suffix.lower() == ".mp4" and (width % 2 or height % 2)):
         raise VideoError(f"width and height must be at least 64 (and even, for .mp4); got {width}x{height}")
     started, steps = read_episode(trace)
-    captioner = _Captioner(width, height, started, len(steps))
+    captioner = _Captioner(width, height, started, len(steps), events=any(s.events for s in steps))
     total = len(steps) * frames_per_step
     out.parent.mkdir(parents=True, exist_ok=True)
     rendering = 0.0
-    with Sim(task=started.task, scene=started.scene, seed=started.seed, n_objects=started.n_objects, robots=tuple(started.robots), aids=tuple(started.aids)) as sim:
+    with Sim(task=started.task, scene=started.scene, seed=started.seed, n_objects=started.n_objects, robots=tuple(started.robots),
+             aids=tuple(started.aids), scenario=_spawns(steps)) as sim:
         writer = _Writer(out, fps)
         try:
             for n, (i, (robots, objects, opened)) in enumerate(_poses(steps, frames_per_step), start=1):
                 t = time.perf_counter()
+                sim.fire_events(i)  # a new target joins from its first snapshot on (_spawns)
                 sim.apply_snapshot(robots, objects, opened)
                 frame = captioner.compose(_camera(sim, view, width, height - captioner.band), i, steps[i], n / total)
                 rendering += time.perf_counter() - t
