@@ -231,6 +231,42 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     assert title > closed_at[done.metrics.temporal_steps - 1] and all(TABLE_ROW.match(line) for line in lines[title + 1 :])
 
 
+EVENT_LINE = re.compile(r"^tick +(\d+) event (.*)$")
+
+
+async def test_scenario_events_print_as_their_tick_opens_and_the_table_says_how_the_team_recovered(tmp_path: Path) -> None:
+    """A dynamic episode (issue 25) at the console: each scenario event's line comes right after
+    the closed line of the tick before it (it fires as its tick opens) and before that tick's
+    results; the table ends with each event's recovery as the metrics score it."""
+    from mhrc.core.metrics import from_trace
+    from mhrc.core.trace import read_trace
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.console import ProgressPrinter, summary_table
+    from mhrc.run.inprocess import up_in_process
+
+    out = io.StringIO()
+    console = Console(file=out, width=400, highlight=False, soft_wrap=True)
+    printer = ProgressPrinter(console, summary=False)
+    cfg = EpisodeConfig.build(seed=0, events="busy_house", trace=tmp_path / "t.jsonl").resolved()
+    done = await up_in_process(cfg, observe=printer.attach)
+    printer.close()
+    assert cfg.trace is not None
+    recovery = from_trace(read_trace(cfg.trace)).recovery
+    console.print(summary_table(done, recovery))
+    lines = out.getvalue().splitlines()
+    events = [(i, int(m.group(1)), m.group(2)) for i, line in enumerate(lines) if (m := EVENT_LINE.match(line))]
+    fired = [r["msg"] for r in read_trace(cfg.trace) if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "scenario_event"]
+    assert [(t, text) for _, t, text in events] == [(e["tick"], e["text"]) for e in fired] and len(events) == 4
+    for i, tick, _ in events:
+        assert CLOSED_LINE.match(lines[i - 1]) and int(CLOSED_LINE.match(lines[i - 1]).group(1)) == tick - 1, lines[i - 1 : i + 1]  # type: ignore[union-attr]
+        first_result = next(j for j, line in enumerate(lines) if (m := TICK_LINE.match(line)) and int(m.group(1)) == tick)
+        assert i < first_result
+    said = _table_rows(out.getvalue()).get("scenario events", "")
+    for e in recovery:
+        steps = e["ticks_to_recover"]
+        assert f"{e['kind']}@{e['tick']} " + ("skipped" if not e["applied"] else "unrecovered" if steps is None else f"recovered in {steps} step") in said, said
+
+
 # --------------------------------------------------------------------------- 4. nobody attaches within --start-timeout
 
 

@@ -101,13 +101,26 @@ def up(
         sys.exit(exc.returncode if exc.returncode > 0 else 1)
     if printer is not None:
         printer.close()  # what arrived late for its tick, then nothing more: the table is the last line
-    console.print(summary_table(done))
+    console.print(summary_table(done, _recovery(cfg.trace) if cfg.events is not None else None))
     if video is not None and cfg.trace is not None:
         path = render_video_to(cfg.trace, video)
         if not quiet:
             console.print(f"video {path}")
     if as_json:
         click.echo(json.dumps(done.metrics.model_dump()))
+
+
+def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:
+    """A scenario's events as the metrics score them (mhrc.core.metrics), read back from the trace."""
+    from mhrc.core.metrics import TraceError, from_trace
+    from mhrc.core.trace import read_trace
+
+    if trace is None or not trace.exists():
+        return None
+    try:
+        return from_trace(read_trace(trace)).recovery
+    except (TraceError, ValueError, OSError):  # a trace the metrics cannot read: the table goes without the row
+        return None
 
 
 def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None = None) -> None:

@@ -9,6 +9,7 @@ until every result that tick is known to have (`TickClosed.actions`) has printed
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
@@ -27,6 +28,7 @@ from mhrc.core.protocol import (
     RobotDetached,
     LLM_ERROR_PREFIX,
     RobotMessage,
+    ScenarioEvent,
     Thought,
     TickClosed,
     decode,
@@ -45,6 +47,7 @@ class _Tick:
     messages: list[str] = field(default_factory=list)
     senders: set[str] = field(default_factory=set)  # robots whose message of this tick has come
     unheard: set[str] = field(default_factory=set)  # robots whose message was sent (their result says so) but has not come
+    after: list[str] = field(default_factory=list)  # printed after the closed line: the scenario events of the next tick
 
 
 class ProgressPrinter:
@@ -131,6 +134,8 @@ class ProgressPrinter:
         if held.closed is not None:
             self._print(held.closed)
             self._last_closed = max(self._last_closed, tick)
+        for line in held.after:
+            self._print(line)
 
     def _on_event(self, sample: Sample) -> None:
         try:
@@ -159,6 +164,14 @@ class ProgressPrinter:
                 held.due.discard(ev.robot)
             self._release()
             self._print(f"{self._robot(ev.robot)} [red]detached[/] at tick {ev.tick}: {ev.reason}")
+        elif isinstance(ev, ScenarioEvent):
+            if not self.verbose:
+                return
+            line = f"[bold yellow]tick {ev.tick:>2} event[/] {escape(ev.text)}"
+            if self._stepped and ev.tick - 1 > self._last_closed:  # it fires as its tick opens: after the previous tick's lines
+                self._tick(ev.tick - 1).after.append(line)
+            else:
+                self._print(line)
         elif isinstance(ev, EpisodeDone) and self.summary and self._done is None:
             self._done = ev
             self._end_when_complete()
@@ -240,8 +253,9 @@ class ProgressPrinter:
             self._print(line)
 
 
-def summary_table(done: EpisodeDone) -> Table:
-    """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics")."""
+def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = None) -> Table:
+    """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics").
+    `recovery`: a scenario's events as mhrc.core.metrics scores them (`--events`), one row of them."""
     m = done.metrics
     t = Table(title=f"episode {done.run}: {done.reason}", show_header=False)
     t.add_row("success", "yes" if m.success else "no")
@@ -253,4 +267,14 @@ def summary_table(done: EpisodeDone) -> Table:
     t.add_row("messages", str(m.messages))
     t.add_row("makespan", f"{m.makespan:.1f} s simulated")
     t.add_row("wall time", f"{m.wall_time:.1f} s")
+    if recovery:
+        t.add_row("scenario events", ", ".join(_recovered(e) for e in recovery))
     return t
+
+
+def _recovered(e: dict[str, Any]) -> str:
+    where = f"{e['kind']}@{e['tick']}"
+    if not e["applied"]:
+        return f"{where} skipped"
+    steps = e["ticks_to_recover"]
+    return f"{where} unrecovered" if steps is None else f"{where} recovered in {steps} step{'s' if steps != 1 else ''}"
