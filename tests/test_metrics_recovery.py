@@ -193,3 +193,14 @@ def test_the_report_shows_recovery_only_where_a_scenario_ran_and_never_mixes_two
     assert [(r["scenario"], r["recovery_ticks"], r["unrecovered"]) for r in table] == [
         ("", "", ""), ("relocate@aaaaaaaaaaaa", "3.0", "0.0"), ("relocate@bbbbbbbbbbbb", "3.0", "0.0"),
     ]  # fmt: skip
+
+
+def test_the_html_summary_lists_each_episodes_recovery_only_where_a_scenario_ran() -> None:
+    from mhrc.eval.html import html_summary
+
+    scen = from_trace(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5), _event(1, 5, "close", applied=False)]}))
+    static = from_trace(_ticks([1, 2, 3]))
+    page = html_summary([_row(static, scenario=None), _row(scen, scenario="relocate", sha="a" * 64, key="pack_objects/kitchen/3/1")], [None, None], resamples=50)
+    episodes = page.split("<h2>Episodes</h2>")[1]
+    assert "<th>recovery (steps)</th>" in episodes and "<td>relocate@5: 3, close@5: skipped</td>" in episodes
+    assert "recovery" not in html_summary([_row(static, scenario=None)], [None], resamples=50).split("<h2>Episodes</h2>")[1]

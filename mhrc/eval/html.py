@@ -174,7 +174,8 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
 
 
 def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> str:
-    head = ["episode", "setting", "valid", "Succ", "PS", "TS", "TS*", "report"]
+    dynamic = any(r.get("recovery") for r in rows)  # a scenario ran: each event's recovery (mhrc.core.metrics)
+    head = ["episode", "setting", "valid", "Succ", "PS", "TS", "TS*", *(["recovery (steps)"] if dynamic else []), "report"]
     out = ["<table><thead><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr></thead><tbody>"]
     order = sorted(range(len(rows)), key=lambda i: (setting_label(setting_of(rows[i])), str(rows[i].get("key"))))
     for i in order:
@@ -184,10 +185,20 @@ def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> s
             "1" if r.get("success") else "0", html.escape(partial_success(r.get("partial_success", 0.0), r.get("placed"), r.get("total"))),
             str(r.get("temporal_steps", "")),
             "" if r.get("lower_bound") is None else str(r["lower_bound"]),
+            *([html.escape(_recovery_cell(r.get("recovery") or []))] if dynamic else []),
             f'<a href="{html.escape(link)}">{html.escape(link)}</a>' if link else "",
         ]  # fmt: skip
         out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     return "\n".join(out + ["</tbody></table>"])
+
+
+def _recovery_cell(recovery: list[dict[str, Any]]) -> str:
+    """Each event as kind@tick and its steps to recover (- never, skipped when it did not apply)."""
+    def one(e: dict[str, Any]) -> str:
+        steps = "skipped" if not e.get("applied") else "-" if e.get("ticks_to_recover") is None else str(e["ticks_to_recover"])
+        return f"{e.get('kind')}@{e.get('tick')}: {steps}"
+
+    return ", ".join(one(e) for e in recovery)
 
 
 def _link(row: dict[str, Any], base: Path, page_dir: Path) -> str | None:
