@@ -337,6 +337,12 @@ def test_the_video_captions_each_event_at_the_frames_of_its_tick(busy: Path, sta
     assert lit(moved) > 50 and lit(quiet[-1]) == 0
     _, plain = read_episode(static)
     assert not any(s.events or s.added for s in plain)
+    # the title names the scenario (name and hash), a static episode's none
+    from mhrc.viewer.video import scenario_of
+
+    sha = _events(busy)[0]["sha256"]
+    assert scenario_of(busy) == f"busy_house ({sha[:8]})" and scenario_of(static) is None
+    assert _Captioner(320, 240, started, len(steps), scenario=scenario_of(busy)).title.endswith(f"/ scenario busy_house ({sha[:8]})")
 
 
 def test_the_videos_own_sim_gets_the_new_target_from_its_first_snapshot(busy: Path) -> None:

@@ -111,6 +111,16 @@ class Step:
 # --------------------------------------------------------------------------- reading the trace
 
 
+def scenario_of(trace: Path) -> str | None:
+    """The scenario a dynamic episode ran, as `name (first 8 hex of its sha256)`, from its first
+    scenario_event; None for a static episode."""
+    for line in read_trace(trace):
+        msg = line.get("msg")
+        if isinstance(msg, dict) and msg.get("kind") == "scenario_event":
+            return f"{msg.get('scenario')} ({str(msg.get('sha256', ''))[:8]})"
+    return None
+
+
 def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step]]:
     """The episode's start event and its snapshots, each with its robots' actions and outcomes."""
     started: EpisodeStarted | None = None
@@ -249,7 +259,7 @@ class _Captioner:
     """Draws the caption band under the picture: a header line, one line per robot, and for a
     dynamic episode (`events`) a line for the scenario events the step shows."""
 
-    def __init__(self, width: int, height: int, started: EpisodeStarted, n_steps: int, *, events: bool = False) -> None:
+    def __init__(self, width: int, height: int, started: EpisodeStarted, n_steps: int, *, events: bool = False, scenario: str | None = None) -> None:
         self.size = max(9, round(min(width / 48, height / 30)))
         self.font = ImageFont.load_default(size=self.size)
         self.line = self.size + max(2, self.size // 4)
@@ -259,6 +269,8 @@ class _Captioner:
             raise VideoError(f"a {width}x{height} frame leaves no room for the picture above the captions; make it larger")
         self.width, self.height = width, height
         self.title = f"{started.scene} / {started.task} / seed {started.seed} / {started.n_objects} objects / {started.scheduler}"
+        if scenario:
+            self.title += f" / scenario {scenario}"
         self.n_steps = n_steps
 
     def compose(self, picture: np.ndarray, index: int, step: Step, done: float) -> np.ndarray:
@@ -345,7 +357,7 @@ def render_video(
     if width < 64 or height < 64 or (out.suffix.lower() == ".mp4" and (width % 2 or height % 2)):
         raise VideoError(f"width and height must be at least 64 (and even, for .mp4); got {width}x{height}")
     started, steps = read_episode(trace)
-    captioner = _Captioner(width, height, started, len(steps), events=any(s.events for s in steps))
+    captioner = _Captioner(width, height, started, len(steps), events=any(s.events for s in steps), scenario=scenario_of(trace))
     total = len(steps) * frames_per_step
     out.parent.mkdir(parents=True, exist_ok=True)
     rendering = 0.0
