@@ -200,7 +200,7 @@ class Sim:
         if action.skill not in r.kind.skills:
             return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, fb.not_capable(robot, action.skill, r.kind.skills))
         if (broken := self.dynamics.broken_for(robot)) and not isinstance(action, Wait):
-            return SkillOutcome.fail(OutcomeCode.BROKEN_DOWN, fb.broken_down(action.skill, broken))
+            return SkillOutcome.fail(OutcomeCode.BROKEN_DOWN, fb.broken_down(action.skill, broken), ticks=broken)  # ticks: for machines
         run = SKILLS.get(type(action))
         if run is None:  # pragma: no cover - every action but communicate has a skill
             out = SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, f"Unknown skill {action.skill}.")
