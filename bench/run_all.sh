@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Regenerates every figure in bench/results/ (on this project's 2-core machine: about an hour,
-# most of it bench_grid.py's 720 episodes and bench_llm_grid.py's sequential grid).
+# most of it bench_grid.py's 720 episodes, bench_scenarios.py's 2160 and bench_llm_grid.py's sequential grid).
 # One benchmark:  bench/run_all.sh local_model    (the names of bench/results/*.json)
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -9,9 +9,10 @@ declare -A BENCH=(
   [llm_concurrency]=bench_llm_concurrency.py [prompt_size]=bench_prompt_size.py [eval]=bench_eval.py
   [eval_grid]=bench_grid.py [llm_grid]=bench_llm_grid.py [local_model]=bench_local_model.py [schedulers]=bench_schedulers.py
   [video]=bench_video.py [security]=bench_security.py [memory]=bench_memory.py [ray]=bench_ray.py
+  [scenarios]=bench_scenarios.py
 )
 names=("$@")
-[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model schedulers video security memory ray)
+[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model schedulers video security memory ray scenarios)
 for name in "${names[@]}"; do
   script=${BENCH[$name]:?"unknown benchmark $name; known: ${!BENCH[*]}"}
   echo "== $name ($script)" >&2
