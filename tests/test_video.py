@@ -56,7 +56,7 @@ def test_video_has_a_frame_per_step_and_shows_the_robots_moving(trace: Path, tmp
 
 
 def test_captions_name_each_robots_action_and_outcome(trace: Path) -> None:
-    started, steps = read_episode(trace)
+    started, steps, _ = read_episode(trace)
     assert [c.robot for c in steps[0].captions] == started.robots and all(c.succeeded is None for c in steps[0].captions)
     acted = [c for s in steps[1:] for c in s.captions]
     assert len(acted) == HORIZON * len(started.robots)
@@ -65,7 +65,7 @@ def test_captions_name_each_robots_action_and_outcome(trace: Path) -> None:
 
 
 def test_apply_snapshot_puts_bodies_where_the_trace_says(trace: Path) -> None:
-    started, _ = read_episode(trace)
+    started, _, _ = read_episode(trace)
     last = _snapshots(trace)[-1]
     with Sim(task=started.task, scene=started.scene, seed=started.seed, n_objects=started.n_objects) as sim:
         before = sim.poses()[0]

@@ -311,7 +311,7 @@ def test_scrubbing_to_an_event_shows_its_markers_in_a_browser(driver: Any, busy:
 def test_the_video_captions_each_event_at_the_frames_of_its_tick(busy: Path, static: Path) -> None:
     from mhrc.viewer.video import _Captioner  # the caption band alone: no scene rendered
 
-    started, steps = read_episode(busy)
+    started, steps, named = read_episode(busy)
     shown: dict[str, list[int]] = {}
     for ev in _events(busy):
         text = ev["text"].rstrip(".")
@@ -335,21 +335,19 @@ def test_the_video_captions_each_event_at_the_frames_of_its_tick(busy: Path, sta
         return int(((px[:, :, 0] > 200) & (px[:, :, 1] > 170) & (px[:, :, 2] < 150)).sum())
 
     assert lit(moved) > 50 and lit(quiet[-1]) == 0
-    _, plain = read_episode(static)
+    _, plain, unnamed = read_episode(static)
     assert not any(s.events or s.added for s in plain)
     # the title names the scenario (name and hash), a static episode's none
-    from mhrc.viewer.video import scenario_of
-
     sha = _events(busy)[0]["sha256"]
-    assert scenario_of(busy) == f"busy_house ({sha[:8]})" and scenario_of(static) is None
-    assert _Captioner(320, 240, started, len(steps), scenario=scenario_of(busy)).title.endswith(f"/ scenario busy_house ({sha[:8]})")
+    assert named == f"busy_house ({sha[:8]})" and unnamed is None
+    assert _Captioner(320, 240, started, len(steps), scenario=named).title.endswith(f"/ scenario busy_house ({sha[:8]})")
 
 
 def test_the_videos_own_sim_gets_the_new_target_from_its_first_snapshot(busy: Path) -> None:
     """The video rebuilds the scene from the episode's start: a new target must join it at its frame."""
     from mhrc.viewer.video import _spawns
 
-    started, steps = read_episode(busy)
+    started, steps, _ = read_episode(busy)
     added = next(e for e in _events(busy) if e["event"] == "new_target")["changed"]
     [(first, obj)] = [(i, a) for i, s in enumerate(steps) for a in s.added]
     assert obj == (added["object"], added["on"]) and added["object"] in steps[first].snapshot.objects

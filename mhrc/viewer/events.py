@@ -74,13 +74,16 @@ def caption(tick: int, text: str) -> str:
     return f"tick {tick}: {body}" if body else f"tick {tick}"
 
 
-def scenario_name(marks: list[ScenarioMark], started: dict[str, Any]) -> tuple[str, str] | None:
-    """(name, sha256) of the episode's scenario: from its events (episode_started may not carry it)."""
-    if started.get("scenario"):
-        return str(started["scenario"]), str(started.get("scenario_sha256") or started.get("sha256") or "")
+def scenario_name(marks: list[ScenarioMark]) -> tuple[str, str] | None:
+    """(name, sha256) of the episode's scenario, from its events (episode_started does not carry it)."""
     for m in marks:
         return m.scenario, m.sha256
     return None
+
+
+def scenario_label(name: str, sha256: str) -> str:
+    """`busy_house (d45b5975)`: how the report's header and the video's title name a scenario."""
+    return f"{name} ({sha256[:8]})" if sha256 else name
 
 
 def _xy(pose: Any) -> tuple[float, float] | None:

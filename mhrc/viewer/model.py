@@ -223,7 +223,7 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
         "step_seconds": started.get("step_seconds"),
         "lower_bound": started.get("lower_bound", metrics.get("lower_bound")),
         "reason": (done or {}).get("reason"),
-        "scenario": scenario_name(marks, started),  # (name, sha256), or None for a static episode
+        "scenario": scenario_name(marks),  # (name, sha256), or None for a static episode
         "metrics": metrics,
         "versions": sorted(trace.versions),
         "trace": str(trace.path),

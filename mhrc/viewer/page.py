@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from html import escape
 from importlib.resources import files
 from typing import Any
 
@@ -27,6 +26,7 @@ from mhrc.viewer import page_events
 from mhrc.viewer.model import EpisodeView, Step
 from mhrc.viewer.placement import Box, Request, place
 from mhrc.viewer.targets import ObjectFate, TaskView
+from mhrc.viewer.wording import html_text as _e
 from mhrc.viewer.wording import diagnostic_label, partial_success
 
 SCALE = 80.0  # SVG pixels per metre
@@ -36,9 +36,6 @@ PALETTE = ["#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"]
 CSS = files("mhrc.viewer").joinpath("page.css").read_text(encoding="utf-8")
 JS = files("mhrc.viewer").joinpath("page.js").read_text(encoding="utf-8")
 
-
-def _e(value: Any) -> str:
-    return escape("" if value is None else str(value), quote=True)
 
 
 def robot_colors(robots: list[str]) -> dict[str, str]:

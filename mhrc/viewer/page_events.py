@@ -9,18 +9,12 @@ static episode (no events) gets none of this: its page is the same as before.
 
 from __future__ import annotations
 
-from html import escape
-from typing import Any
-
-from mhrc.viewer.events import GLYPHS, KINDS, ScenarioMark
+from mhrc.viewer.events import GLYPHS, KINDS, ScenarioMark, scenario_label
 from mhrc.viewer.model import EpisodeView, Step
+from mhrc.viewer.wording import html_text as _e
 
 THUMB = 16  # px: the slider's thumb; a frame's place on the track is where the thumb's centre goes
 ROW = 15  # px between stacked markers (events of one frame)
-
-
-def _e(value: Any) -> str:
-    return escape("" if value is None else str(value), quote=True)
 
 
 def scenario_fact(view: EpisodeView) -> str | None:
@@ -29,7 +23,7 @@ def scenario_fact(view: EpisodeView) -> str | None:
     if not named:
         return None
     name, sha = named
-    return f"{name} ({sha[:8]})" if sha else str(name)
+    return scenario_label(str(name), str(sha))
 
 
 def _tooltip(m: ScenarioMark) -> str:

@@ -38,7 +38,7 @@ from pydantic import ValidationError
 from mhrc.core.protocol import ACTION_ADAPTER, EpisodeStarted, ObjectPose, RobotPose, ScenarioEvent, Snapshot
 from mhrc.core.trace import read_trace
 from mhrc.viewer.events import caption as event_caption
-from mhrc.viewer.events import captions_by_snapshot
+from mhrc.viewer.events import captions_by_snapshot, scenario_label
 from mhrc.world.render import VIEWS, render
 from mhrc.world.scenario import NewTarget, Scenario
 from mhrc.world.sim import Sim
@@ -111,19 +111,11 @@ class Step:
 # --------------------------------------------------------------------------- reading the trace
 
 
-def scenario_of(trace: Path) -> str | None:
-    """The scenario a dynamic episode ran, as `name (first 8 hex of its sha256)`, from its first
-    scenario_event; None for a static episode."""
-    for line in read_trace(trace):
-        msg = line.get("msg")
-        if isinstance(msg, dict) and msg.get("kind") == "scenario_event":
-            return f"{msg.get('scenario')} ({str(msg.get('sha256', ''))[:8]})"
-    return None
-
-
-def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step]]:
-    """The episode's start event and its snapshots, each with its robots' actions and outcomes."""
+def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step], str | None]:
+    """The episode's start event, its snapshots (each with its robots' actions and outcomes), and
+    for a dynamic episode its scenario as the title names it (`busy_house (d45b5975)`; None when static)."""
     started: EpisodeStarted | None = None
+    scenario: str | None = None
     snapshots: list[Snapshot] = []
     results: dict[str, dict[str, Any]] = {}
     positions: list[tuple[int, int]] = []  # each snapshot's (line, tick)
@@ -142,6 +134,7 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step]]:
                 positions.append((n, snapshots[-1].tick))
             elif kind == "scenario_event":
                 ev = ScenarioEvent.model_validate(msg)
+                scenario = scenario or scenario_label(ev.scenario, ev.sha256)
                 skipped = f" (skipped: {ev.skipped})" if not ev.applied and ev.skipped and ev.skipped not in ev.text else ""
                 events.append((n, ev.tick, event_caption(ev.tick, ev.text) + skipped))
                 if ev.applied and ev.event == "new_target" and ev.changed.get("object") and ev.changed.get("on"):
@@ -167,7 +160,7 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step]]:
         ended = [float(r["ended"]) for r in done if isinstance(r.get("ended"), (int, float))]
         new = tuple((obj, on) for (_, obj, on), at in zip(added, first) if at == k)
         steps.append(Step(snap, captions, max(ended) if ended else None, tuple(said), new))
-    return started, steps
+    return started, steps, scenario
 
 
 def _spawns(steps: list[Step]) -> Scenario | None:
@@ -356,8 +349,8 @@ def render_video(
         raise VideoError(f"frames_per_step must be at least 1 and fps positive (got {frames_per_step}, {fps})")
     if width < 64 or height < 64 or (out.suffix.lower() == ".mp4" and (width % 2 or height % 2)):
         raise VideoError(f"width and height must be at least 64 (and even, for .mp4); got {width}x{height}")
-    started, steps = read_episode(trace)
-    captioner = _Captioner(width, height, started, len(steps), events=any(s.events for s in steps), scenario=scenario_of(trace))
+    started, steps, scenario = read_episode(trace)
+    captioner = _Captioner(width, height, started, len(steps), events=any(s.events for s in steps), scenario=scenario)
     total = len(steps) * frames_per_step
     out.parent.mkdir(parents=True, exist_ok=True)
     rendering = 0.0

@@ -1,13 +1,15 @@
 """How the reports word a figure, the same on every page: partial success with its count,
-diagnostics keys as people read them (the labels live beside the keys, in mhrc.core.diagnostics)."""
+diagnostics keys as people read them (the labels live beside the keys, in mhrc.core.diagnostics),
+and any value as HTML text."""
 
 from __future__ import annotations
 
+from html import escape
 from typing import Any
 
 from mhrc.core.diagnostics import label as diagnostic_label
 
-__all__ = ["diagnostic_label", "partial_success"]
+__all__ = ["diagnostic_label", "html_text", "partial_success"]
 
 
 def partial_success(ps: Any, placed: Any = None, total: Any = None) -> str:
@@ -20,3 +22,8 @@ def partial_success(ps: Any, placed: Any = None, total: Any = None) -> str:
     if isinstance(placed, int) and isinstance(total, int) and not isinstance(placed, bool):
         return f"{value:.2f} ({placed}/{total} placed)"
     return f"{value:.2f}"
+
+
+def html_text(value: Any) -> str:
+    """`value` as text inside HTML (an element or a quoted attribute); None as nothing."""
+    return escape("" if value is None else str(value), quote=True)
