@@ -112,14 +112,14 @@ def up(
 
 def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:
     """A scenario's events as the metrics score them (mhrc.core.metrics), read back from the trace."""
-    from mhrc.core.metrics import TraceError, from_trace
+    from mhrc.core.metrics import from_trace
     from mhrc.core.trace import read_trace
 
     if trace is None or not trace.exists():
         return None
     try:
         return from_trace(read_trace(trace)).recovery
-    except (TraceError, ValueError, OSError):  # a trace the metrics cannot read: the table goes without the row
+    except (ValueError, OSError):  # a trace the metrics cannot read (TraceError, bad JSON): the table goes without the row
         return None
 
 
