@@ -7,11 +7,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import io
+import json
 import os
 import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from rich.console import Console
@@ -229,6 +231,60 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
         assert sent.get((tick, sender), len(lines)) < i, f"message line {i} ({lines[i]!r}) before its communicate result"
     title = next(i for i, line in enumerate(lines) if line.startswith(f"episode {cfg.run}: success"))
     assert title > closed_at[done.metrics.temporal_steps - 1] and all(TABLE_ROW.match(line) for line in lines[title + 1 :])
+
+
+class _Replay:
+    """Stands where a Bus stands for `ProgressPrinter.attach`: keeps its handlers by key pattern,
+    so a test can hand it a real trace's samples in an order the bus may deliver them in."""
+
+    def __init__(self) -> None:
+        self.handlers: list[tuple[re.Pattern[str], Any]] = []
+
+    def subscribe(self, key_expr: str, handler: Any) -> None:
+        self.handlers.append((re.compile("^" + re.escape(key_expr).replace(r"\*", "[^/]+") + "$"), handler))
+
+    def deliver(self, record: dict[str, Any]) -> None:
+        sample = Sample(record["key"], json.dumps(record["msg"]).encode())
+        for pattern, handler in self.handlers:
+            if pattern.match(sample.key):
+                handler(sample)
+
+
+async def test_messages_that_come_after_the_end_still_print_before_the_table(tmp_path: Path) -> None:
+    """Each key has its own delivery thread, so a tick's messages may come after its results,
+    its closed line and even `episode_done` (CI saw it: seed 0's last tick sends one). The
+    printer holds the table until they came, and prints them with their tick."""
+    from mhrc.core.trace import read_trace
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.console import ProgressPrinter
+    from mhrc.run.inprocess import up_in_process
+
+    cfg = EpisodeConfig.build(seed=0, trace=tmp_path / "t.jsonl").resolved()
+    done = await up_in_process(cfg)
+    assert cfg.trace is not None
+    records = [r for r in read_trace(cfg.trace) if isinstance(r.get("msg"), dict)]
+    last = done.metrics.temporal_steps - 1
+    late = [r for r in records if "/inbox/" in r["key"]]
+    assert any(r["msg"]["tick"] == last for r in late), "the episode no longer sends a message in its last tick: pick another seed"
+
+    out = io.StringIO()
+    printer = ProgressPrinter(Console(file=out, width=400, highlight=False, soft_wrap=True), summary=True)
+    replay = _Replay()
+    printer.attach(replay, cfg.run)  # type: ignore[arg-type]
+    for record in records:
+        if "/inbox/" not in record["key"]:
+            replay.deliver(record)
+    for record in late:  # every message after everything else, the end included
+        replay.deliver(record)
+    printer.close()
+    lines = out.getvalue().splitlines()
+
+    messages = [i for i, line in enumerate(lines) if MESSAGE_LINE.match(line)]
+    assert len(messages) == done.metrics.messages == len(late)
+    title = next(i for i, line in enumerate(lines) if line.startswith(f"episode {cfg.run}: success"))
+    assert max(messages) < title, "a message printed after the table"
+    closed_at = {int(m.group(1)): i for i, line in enumerate(lines) if (m := CLOSED_LINE.match(line))}
+    assert max(messages) < closed_at[last], "the last tick's message is not printed with its tick"
 
 
 EVENT_LINE = re.compile(r"^tick +(\d+) event (.*)$")

@@ -95,9 +95,14 @@ class ProgressPrinter:
             self.console.print(summary_table(self._done))
 
     def _end_when_complete(self) -> None:
-        """With `summary`: the table once the episode ended and its final results printed (they
-        travel on other keys than `episode_done`, and may come after it)."""
-        if self._done is not None and (not self.verbose or set(self._done.final_results.values()) <= self._goals):
+        """With `summary`: the table once the episode ended, its final results printed and the
+        messages they sent came (each key has its own delivery thread: they may all come after
+        `episode_done`)."""
+        if self._done is None:
+            return
+        if not self.verbose or (
+            set(self._done.final_results.values()) <= self._goals and not any(held.unheard for held in self._ticks.values())
+        ):
             self.close()
 
     def _print(self, line: object) -> None:
@@ -249,6 +254,7 @@ class ProgressPrinter:
             held.senders.add(m.sender)
             held.unheard.discard(m.sender)
             self._release()
+            self._end_when_complete()
         else:  # async: a message arrives when sent
             self._print(line)
 
