@@ -145,9 +145,10 @@ def main() -> None:
             wall = round(time.perf_counter() - t0, 1)
             if name == STATIC:
                 static = {_episode(r): r for r in rows}
+                summary = summarize(rows)
                 run = {"scenario": STATIC, "episodes": len(rows), "solved": sum(1 for r in rows if r["success"]),
-                       "unsolved": sorted(r["key"] for r in rows if not r["success"]), "succ": summarize(rows)["succ"],
-                       "ts": summarize(rows)["ts"], "all": summarize(rows)}  # fmt: skip
+                       "unsolved": sorted(r["key"] for r in rows if not r["success"]), "succ": summary["succ"],
+                       "ts": summary["ts"], "all": summary}  # fmt: skip
             else:
                 run = _scenario_run(name, shipped[name], rows, out, static)
         run["wall_s"] = wall

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import Communicate, Navigate, Observation, OutcomeCode, Pick, Place, Wait
+from mhrc.core.protocol import Communicate, Navigate, ObjectView, Observation, OutcomeCode, Pick, Place, Wait
 
 from .heuristic_alice import AliceHeuristic
 from .heuristic_base import (
@@ -46,6 +46,7 @@ from .heuristic_base import (
     UNREACHABLE_RE,
     _dist2,
     _furniture,
+    _gone,
     _names,
     _object,
     _RoleBase,
@@ -94,8 +95,8 @@ class BobHeuristic(_RoleBase):
         todo = [t for t in obs.targets if t not in done]
         self._notice_gone(obs, todo)
         candidates = todo[:1] if obs.ordered else todo
-        reachable = [t for t in candidates if self._in_reach(obs, t) and self.pick_failures.get(t, 0) < 2]
-        reachable = reachable or [t for t in candidates if self._brought_near(obs, t) and self.pick_failures.get(t, 0) < 2]
+        tryable = [t for t in candidates if self.pick_failures.get(t, 0) < 2]
+        reachable = [t for t in tryable if self._in_reach(obs, t)] or [t for t in tryable if self._brought_near(obs, t)]
         if reachable:
             return self._decision(Pick(obj=reachable[0]))
         ask = [t for t in todo if t not in self.requested or (self.pick_failures.get(t, 0) >= 2 and _object(obs, t))]
@@ -111,11 +112,9 @@ class BobHeuristic(_RoleBase):
     def _notice_gone(self, obs: Observation, todo: list[str]) -> None:
         """A target last seen within his reach on his table, gone from it without his picking it
         (someone moved it): it is to be asked for again, once per time it goes."""
-        s = obs.status
         for t in todo:
             o = _object(obs, t)
-            away = o is not None and o.on is None and o.held_by is None and o.last_seen_on == HANDOVER
-            if not away or o is None or s.arm_base is None or s.reach is None or _dist2(o.position, s.arm_base) > s.reach:
+            if o is None or not (_gone(o) and o.last_seen_on == HANDOVER and _within_reach(obs, o)):
                 self.gone.discard(t)
             elif t not in self.gone:
                 self.gone.add(t)
@@ -126,18 +125,18 @@ class BobHeuristic(_RoleBase):
         table leaves it (seen: a seventh target 0.629 m away, reach 0.62): worth a pick rather
         than waiting for ever."""
         o = _object(obs, name)
-        s = obs.status
-        if o is None or o.on != HANDOVER or name in (self.at_start or set()) or s.arm_base is None or s.reach is None:
-            return False
-        return _dist2(o.position, s.arm_base) <= s.reach + STRETCH
+        return o is not None and o.on == HANDOVER and name not in (self.at_start or set()) and _within_reach(obs, o, STRETCH)
 
     @staticmethod
     def _in_reach(obs: Observation, name: str) -> bool:
         o = _object(obs, name)
-        s = obs.status
-        if o is None or o.on != HANDOVER or s.arm_base is None or s.reach is None:
-            return False
-        return _dist2(o.position, s.arm_base) <= s.reach
+        return o is not None and o.on == HANDOVER and _within_reach(obs, o)
+
+
+def _within_reach(obs: Observation, o: ObjectView, margin: float = 0.0) -> bool:
+    """Whether `o` lies within this robot's reach (plus `margin` m) of its arm base."""
+    s = obs.status
+    return s.arm_base is not None and s.reach is not None and _dist2(o.position, s.arm_base) <= s.reach + margin
 
 
 # --------------------------------------------------------------------------- David

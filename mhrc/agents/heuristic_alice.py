@@ -27,6 +27,7 @@ from .heuristic_base import (
     _on_fixture,
     _RoleBase,
     corrective_move,
+    explore_sentence,
     failed,
 )
 from .policy import Decision
@@ -49,7 +50,6 @@ class AliceHeuristic(_RoleBase):
     david_todo: set[str] = field(default_factory=set)  # surfaces handed to David he has not reported on
     david_broken_until: int = 0  # from David's breakdown message
     mine: list[str] = field(default_factory=list)  # surfaces Alice searches herself in the current round
-    rounds: int = 0  # search rounds started (a target nobody knows the place of)
     late: set[str] = field(default_factory=set)  # asked for after Bob's first request
     searched_for: set[str] = field(default_factory=set)  # what earlier search rounds looked for
 
@@ -68,12 +68,7 @@ class AliceHeuristic(_RoleBase):
             self.delegated = True
             if surfaces:
                 self.david_todo = set(surfaces)
-                return self._decision(
-                    Communicate(
-                        to="david",
-                        content=f"David, please explore these surfaces and tell me what lies on them: {', '.join(surfaces)}.",
-                    )
-                )
+                return self._decision(Communicate(to="david", content=explore_sentence(surfaces)))
         target = self._next_target(obs)
         if target is not None:
             return self._fetch(obs, target)
@@ -253,7 +248,6 @@ class AliceHeuristic(_RoleBase):
         surfaces = self._open_surfaces(obs)
         if not surfaces:
             return None
-        self.rounds += 1
         self.explored -= set(surfaces)
         here = obs.status.base
         if here is not None:
@@ -266,9 +260,7 @@ class AliceHeuristic(_RoleBase):
         if not rest:
             return self._next_exploration(obs)
         self.david_todo = set(rest)
-        return self._decision(
-            Communicate(to="david", content=f"David, please explore these surfaces and tell me what lies on them: {', '.join(rest)}.")
-        )
+        return self._decision(Communicate(to="david", content=explore_sentence(rest)))
 
     def _open(self, obs: Observation, f: FurnitureView) -> Decision:
         """Open `f` from a stand pose. After a failed open (the arm could not follow the handle

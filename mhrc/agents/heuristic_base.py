@@ -31,6 +31,11 @@ MAX_MOVE = 1.0
 AT_POSE_TOL = 0.15  # m: counts as standing at a stand pose (navigation may stop a little off)
 
 
+def explore_sentence(surfaces: list[str]) -> str:
+    """What Alice asks David (EXPLORE_RE reads it back)."""
+    return f"David, please explore these surfaces and tell me what lies on them: {', '.join(surfaces)}."
+
+
 def breakdown_sentence(until: int) -> str:
     """What a broken-down robot tells its teammates (BREAKDOWN_RE reads it back)."""
     return f"I broke down: I can only communicate and wait until tick {until}."
