@@ -8,7 +8,10 @@ Malformed action requests and the world's rejections of them are not copied: a `
 key and second holds their count, bytes and first reason. So are well-formed requests the world
 rejects, past the first REJECTIONS_IN_FULL per robot and interval (a robot flooding its own key
 must not fill the disk either): the recorder holds each well-formed request until its ack, then
-writes both (the request with the time it was seen) or counts both. An agent's `generating`
+writes both (the request with the time it was seen) or counts both. The world's answer to a
+request (its ack, its result) may reach the recorder before the request itself (the world's own
+puts and the network's samples come on different threads): it is held until the request comes,
+and the request is written first, with the time of its answer. An agent's `generating`
 status (a long model call's progress, for the console) is not recorded: its thought is.
 """
 
@@ -28,6 +31,7 @@ from mhrc.core.protocol import ActionRequest, ProtocolError, decode
 JUNK_INTERVAL = 1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
 REJECTIONS_IN_FULL = 5  # well-formed requests rejected per robot and interval that are copied in full; the rest are counted
 MAX_HELD = 20_000  # requests awaiting their ack (a flood arrives faster than the world acks); past it the oldest is written at once
+MAX_REQUESTED = 100_000  # goal ids of the requests seen, remembered to tell an early ack or result from one of an old request
 
 
 class Recorder:
@@ -44,6 +48,8 @@ class Recorder:
         self._ended = threading.Event()  # an episode_done event is on disk
         self._junk: dict[str, dict[str, Any]] = {}  # key -> counts not yet written
         self._held: dict[str, tuple[float, str, Any]] = {}  # goal id -> (t, key, msg) of a request awaiting its ack
+        self._requested: dict[str, None] = {}  # goal ids whose request was seen (the newest MAX_REQUESTED, in order)
+        self._early: dict[str, list[tuple[float, Sample, Any]]] = {}  # goal id -> its ack or result, come before its request
         self._rejected: dict[str, tuple[float, int]] = {}  # ack key -> (interval start, rejections copied in it)
         self._lock = threading.RLock()  # samples arrive on zenoh's threads (the data's and the liveliness')
 
@@ -73,11 +79,37 @@ class Recorder:
             msg: Any = json.loads(sample.payload)
         except (ValueError, UnicodeDecodeError):
             msg = {"raw": sample.payload.decode("utf-8", "replace")}
-        if sample.is_put and (self._is_junk(sample, msg) or self._held_or_counted(sample, msg)):
+        goal = msg.get("goal_id") if isinstance(msg, dict) else None
+        with self._lock:
+            if sample.is_put and isinstance(goal, str) and goal in self._early and sample.key.endswith("/action/request"):
+                early = self._early.pop(goal)
+                self._record(sample, msg, early[0][0])  # seen after its answer, written before it, at the answer's time
+                for t, s, m in early:
+                    self._record(s, m, t)
+                return
+            self._record(sample, msg)
+
+    def _record(self, sample: Sample, msg: Any, t: float | None = None) -> None:
+        if sample.is_put and (self._is_junk(sample, msg) or self._too_early(sample, msg, t) or self._held_or_counted(sample, msg, t)):
             return
-        self._write(sample.key, "put" if sample.is_put else "delete", msg)
+        self._write(sample.key, "put" if sample.is_put else "delete", msg, t)
         if isinstance(msg, dict) and msg.get("kind") == "episode_done":
             self._ended.set()
+
+    def _too_early(self, sample: Sample, msg: Any, t: float | None) -> bool:
+        """The world's ack or result of a request not seen yet, held until it comes: the world's
+        own put reaches this recorder on the world's thread, the request on zenoh's network
+        thread, so the answer may be first. True when the sample is held."""
+        if not (sample.key.endswith("/action/ack") or sample.key.endswith("/action/result")) or not isinstance(msg, dict):
+            return False
+        goal = msg.get("goal_id")
+        if not isinstance(goal, str) or goal in self._requested or goal in self._held:
+            return False
+        self._early.setdefault(goal, []).append((time.perf_counter() if t is None else t, sample, msg))
+        if len(self._early) > MAX_HELD:  # answers to requests that never come: do not hold forever
+            for t_old, s, m in self._early.pop(next(iter(self._early))):
+                self._write(s.key, "put", m, t_old)
+        return True
 
     def _is_junk(self, sample: Sample, msg: Any) -> bool:
         """A malformed action request, or the world's rejection of one: counted, not copied
@@ -99,16 +131,19 @@ class Recorder:
             self._count_junk(sample.key, reason, len(sample.payload), now, "malformed")
         return True
 
-    def _held_or_counted(self, sample: Sample, msg: Any) -> bool:
+    def _held_or_counted(self, sample: Sample, msg: Any, t: float | None = None) -> bool:
         """Hold a well-formed request until its ack; at the ack, write the request then let the
         ack be written, or, for a rejection past REJECTIONS_IN_FULL in this interval, count both
         as junk. True when the sample is held or counted (not to be written now)."""
         if not isinstance(msg, dict) or not isinstance(msg.get("goal_id"), str):
             return False
-        now = time.perf_counter()
+        now = time.perf_counter() if t is None else t
         with self._lock:
             if sample.key.endswith("/action/request"):
                 self._held[msg["goal_id"]] = (now, sample.key, msg)
+                self._requested[msg["goal_id"]] = None
+                if len(self._requested) > MAX_REQUESTED:
+                    del self._requested[next(iter(self._requested))]
                 if len(self._held) > MAX_HELD:  # acks that never come (a world gone): do not hold forever
                     oldest = next(iter(self._held))
                     t, key, old = self._held.pop(oldest)
@@ -159,6 +194,9 @@ class Recorder:
             for t, key, msg in self._held.values():  # requests never acked (the episode ended first)
                 self._write(key, "put", msg, t)
             self._held.clear()
+            for t, s, m in sorted((e for early in self._early.values() for e in early), key=lambda e: e[0]):
+                self._write(s.key, "put", m, t)  # answers whose request never came
+            self._early.clear()
             for key in list(self._junk):
                 self._flush_junk(key)
         with self._lock:

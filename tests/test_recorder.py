@@ -1,0 +1,55 @@
+"""The trace recorder on a real bus: what it writes, in which order."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+from mhrc.core.bus import Bus
+from mhrc.core.endpoints import endpoint, free_port
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import ActionAck, ActionRequest, Wait
+from mhrc.core.trace import Recorder, read_trace
+
+
+def _request(goal: str) -> ActionRequest:
+    return ActionRequest(goal_id=goal, robot="alice", agent_id="alice-1", tick=0, action=Wait())
+
+
+async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_path: Path) -> None:
+    """The world's own ack reaches the recorder on the world's thread, the request on zenoh's
+    network thread: under load the ack can come first (a landing run's viewer test counted 27
+    steps in the first half of a trace that held 25 requests: theirs were written at the end).
+    Each request is written before its answers, at the earliest time the recorder saw any of
+    it; an answer whose request never comes is written at the end."""
+    run = "rec-order"
+    k = Keys(run)
+    bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", free_port())])
+    recorder = Recorder(bus, run, tmp_path / "t.jsonl").start()
+    try:
+        ack = k.action_ack("alice")
+        bus.put(ack, ActionAck(goal_id="late", robot="alice", accepted=True))  # the race: answers first
+        bus.put(ack, ActionAck(goal_id="late-rejected", robot="alice", accepted=False, reason="not your turn"))
+        bus.put(k.action_request("alice"), _request("in-order"))
+        bus.put(ack, ActionAck(goal_id="in-order", robot="alice", accepted=True))
+        bus.put(k.action_request("alice"), _request("late"))
+        bus.put(k.action_request("alice"), _request("late-rejected"))
+        bus.put(ack, ActionAck(goal_id="orphan", robot="alice", accepted=True))  # its request never comes
+        for _ in range(300):  # the subscriber's thread takes the samples in the order put; six lines are due before the close
+            if recorder.count >= 6:
+                break
+            await asyncio.sleep(0.05)
+    finally:
+        recorder.close()
+        await bus.close()
+    rows = read_trace(tmp_path / "t.jsonl")
+    order = [(r["msg"]["kind"], r["msg"]["goal_id"]) for r in rows]
+    assert order == [
+        ("action_request", "in-order"), ("action_ack", "in-order"),
+        ("action_request", "late"), ("action_ack", "late"),
+        ("action_request", "late-rejected"), ("action_ack", "late-rejected"),
+        ("action_ack", "orphan"),
+    ], order  # fmt: skip
+    for goal in ("late", "late-rejected"):
+        request, answer = (r["t"] for r in rows if r["msg"]["goal_id"] == goal)
+        assert request == answer, f"the {goal} request takes the time of its answer"
