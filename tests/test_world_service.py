@@ -18,6 +18,7 @@ import pytest
 from mhrc.agents.agent import RobotAgent, WorldGone
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.core.bus import Bus, Sample
+from mhrc.core.endpoints import endpoint
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.processes import agent_command, wait_for_port, world_command
 from mhrc.core.keys import Keys
@@ -229,6 +230,58 @@ async def test_agent_fails_fast_when_the_world_vanishes(tmp_path) -> None:  # ty
         with pytest.raises(WorldGone):
             await asyncio.wait_for(task, 10)  # the lease is 2 s: far sooner than any timeout
     finally:
+        if bus is not None:
+            await bus.close()
+        if world_proc.poll() is None:
+            world_proc.kill()
+        world_proc.wait()
+
+
+async def _forward(world_port: int, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    """One connection to the forwarding port, piped to the world's (closed at once when the world is gone)."""
+    try:
+        up_reader, up_writer = await asyncio.open_connection("127.0.0.1", world_port)
+    except OSError:
+        writer.close()
+        return
+
+    async def pipe(src: asyncio.StreamReader, dst: asyncio.StreamWriter) -> None:
+        try:
+            while data := await src.read(65536):
+                dst.write(data)
+                await dst.drain()
+        except OSError:
+            pass
+        finally:
+            dst.close()
+
+    await asyncio.gather(pipe(reader, up_writer), pipe(up_reader, writer))
+
+
+async def test_an_agent_behind_a_port_that_outlives_the_world_fails_once_it_closes(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A port that still listens after the world died (a forwarder in front of it, as docker's
+    userland proxy is, or a dying world whose port closes a moment after its links): the agent's
+    probe finds it listening and attaches again, and fails as soon as the port closes, not at the
+    end of its 30 s attach timeout."""
+    cfg = EpisodeConfig.build(seed=0, trace=tmp_path / "t.jsonl").resolved()
+    world_proc = subprocess.Popen(world_command(cfg))
+    bus = None
+    forwarder = await asyncio.start_server(lambda r, w: _forward(cfg.port, r, w), "127.0.0.1", 0)
+    try:
+        await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60, world_proc)
+        bus = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", forwarder.sockets[0].getsockname()[1])])
+        agent = RobotAgent(bus, heuristic_policy("alice"), run=cfg.run, robot="alice")
+        task = asyncio.create_task(agent.run())
+        await robots_alive(bus, cfg.run, {"alice"})
+        world_proc.send_signal(signal.SIGKILL)
+        await asyncio.to_thread(world_proc.wait)
+        await asyncio.sleep(3)  # the behaviour under test: the port outlives the world by 3 s
+        assert not task.done()
+        forwarder.close()
+        with pytest.raises(WorldGone, match="did not answer an attach since"):
+            await asyncio.wait_for(task, 10)  # an attach attempt takes 2 s; the attach timeout is 30 s
+    finally:
+        forwarder.close()
         if bus is not None:
             await bus.close()
         if world_proc.poll() is None:

@@ -224,7 +224,7 @@ class RobotAgent:
         self._log.warning("lost the world's token, but the world may be there: attaching again", awaited=what)
         self._world_gone.clear()
         try:
-            return await self._attach()
+            return await self._attach(again=True)
         except WorldGone:
             await self._closed_for_good(what)  # a certificate that expired in the meantime (the link may close a moment before)
             raise WorldGone(f"the world disappeared while {self.robot} awaited {what} and did not answer an attach since") from None
@@ -276,9 +276,11 @@ class RobotAgent:
                 return None
             delay = min(delay * 2, RESYNC_BACKOFF_MAX)
 
-    async def _attach(self) -> Observation | None:
+    async def _attach(self, *, again: bool = False) -> Observation | None:
         """Attach and return the first observation to plan on; None when the episode ended
-        while this robot waited for its turn."""
+        while this robot waited for its turn. `again`: the world was there and its token went
+        away; each unanswered attach probes whether it still listens (WorldGone when not: the
+        probe before the first attempt can still connect to a world that is dying)."""
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.attach_timeout
         request = AttachRequest(robot=self.robot, agent_id=self.agent_id)
@@ -309,6 +311,8 @@ class RobotAgent:
                     return reply.observation
                 if loop.time() >= deadline:
                     raise WorldGone(f"no world answered for run {self.keys.run!r} within {self.attach_timeout:.0f} s")
+                if again and await asyncio.to_thread(_listening, self.endpoint) is False:
+                    raise WorldGone(f"nothing listens at {self.endpoint} any more")
                 await asyncio.sleep(0.2)
         finally:
             self._turn = None
