@@ -17,11 +17,11 @@ def _request(goal: str) -> ActionRequest:
 
 
 async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_path: Path) -> None:
-    """The world's own ack reaches the recorder on the world's thread, the request on zenoh's
-    network thread: under load the ack can come first (a landing run's viewer test counted 27
-    steps in the first half of a trace that held 25 requests: theirs were written at the end).
-    Each request is written before its answers, at the earliest time the recorder saw any of
-    it; an answer whose request never comes is written at the end."""
+    """Each subscriber has its own thread: the world may handle a request and ack it before the
+    recorder's thread is given the request, so under load the ack can come first (a 3-worker
+    run's viewer test counted 27 steps in the first half of a trace that held 25 requests:
+    theirs were written at the end). Each request is written before its answers, at the time of
+    its first answer; an answer whose request never comes is written at the end."""
     run = "rec-order"
     k = Keys(run)
     bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", free_port())])

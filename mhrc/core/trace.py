@@ -9,8 +9,8 @@ key and second holds their count, bytes and first reason. So are well-formed req
 rejects, past the first REJECTIONS_IN_FULL per robot and interval (a robot flooding its own key
 must not fill the disk either): the recorder holds each well-formed request until its ack, then
 writes both (the request with the time it was seen) or counts both. The world's answer to a
-request (its ack, its result) may reach the recorder before the request itself (the world's own
-puts and the network's samples come on different threads): it is held until the request comes,
+request (its ack, its result) may reach the recorder before the request itself (the world may
+handle the request before the recorder's thread is given it): it is held until the request comes,
 and the request is written first, with the time of its answer. An agent's `generating`
 status (a long model call's progress, for the console) is not recorded: its thought is.
 """
@@ -97,9 +97,9 @@ class Recorder:
             self._ended.set()
 
     def _too_early(self, sample: Sample, msg: Any, t: float | None) -> bool:
-        """The world's ack or result of a request not seen yet, held until it comes: the world's
-        own put reaches this recorder on the world's thread, the request on zenoh's network
-        thread, so the answer may be first. True when the sample is held."""
+        """The world's ack or result of a request not seen yet, held until it comes: each
+        subscriber has its own thread, and the world may handle the request and answer before
+        the recorder's thread is given it. True when the sample is held."""
         if not (sample.key.endswith("/action/ack") or sample.key.endswith("/action/result")) or not isinstance(msg, dict):
             return False
         goal = msg.get("goal_id")
