@@ -35,21 +35,22 @@ async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_p
         bus.put(k.action_request("alice"), _request("late"))
         bus.put(k.action_request("alice"), _request("late-rejected"))
         bus.put(ack, ActionAck(goal_id="orphan", robot="alice", accepted=True))  # its request never comes
-        for _ in range(300):  # the subscriber's thread takes the samples in the order put; six lines are due before the close
-            if recorder.count >= 6:
+        bus.put(f"{k.base}/end", b'{"kind": "end"}')  # the subscriber's thread takes the samples in the order put:
+        for _ in range(300):  # once this line is written, every sample before it was handled
+            if recorder.count >= 7:
                 break
             await asyncio.sleep(0.05)
     finally:
         recorder.close()
         await bus.close()
     rows = read_trace(tmp_path / "t.jsonl")
-    order = [(r["msg"]["kind"], r["msg"]["goal_id"]) for r in rows]
+    order = [(r["msg"]["kind"], r["msg"].get("goal_id")) for r in rows]
     assert order == [
         ("action_request", "in-order"), ("action_ack", "in-order"),
         ("action_request", "late"), ("action_ack", "late"),
         ("action_request", "late-rejected"), ("action_ack", "late-rejected"),
-        ("action_ack", "orphan"),
+        ("end", None), ("action_ack", "orphan"),
     ], order  # fmt: skip
     for goal in ("late", "late-rejected"):
-        request, answer = (r["t"] for r in rows if r["msg"]["goal_id"] == goal)
+        request, answer = (r["t"] for r in rows if r["msg"].get("goal_id") == goal)
         assert request == answer, f"the {goal} request takes the time of its answer"
