@@ -10,6 +10,7 @@ import pytest
 
 from mhrc.core.bus import open_client
 
+from mhrc.agents.agent import AttachRejected
 from mhrc.run.attach import run_agent
 
 from mhrc.run.config import ConfigError, EpisodeConfig
@@ -123,13 +124,20 @@ async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ign
 async def test_no_mobile_ablation_runs_without_david(tmp_path) -> None:  # type: ignore[no-untyped-def]
     cfg = EpisodeConfig.build(seed=1, n_objects=4, ablation="no_mobile", trace=tmp_path / "t.jsonl").resolved()
     assert cfg.robots == ("alice", "bob") and cfg.policy_options()["teammates_absent"] == ("david",)
-    world = asyncio.create_task(up_in_process(cfg))
+    # the world waits for bob, so it is there when david asks (a whole episode could end before
+    # a loaded machine's david connects)
+    world = asyncio.create_task(up_in_process(cfg, robots=("alice",)))
+    bob = None
     try:
-        with pytest.raises(Exception, match="no robot 'david'"):
-            await run_agent("david", cfg.run, cfg.endpoint, attach_timeout=20)
+        with pytest.raises(AttachRejected, match="no robot 'david'"):
+            await run_agent("david", cfg.run, cfg.endpoint, attach_timeout=60)
+        bob = asyncio.create_task(run_agent("bob", cfg.run, cfg.endpoint, attach_timeout=60))
         done = await asyncio.wait_for(world, 120)
+        await asyncio.wait_for(bob, 30)
     finally:
-        world.cancel()
+        for task in (world, bob):
+            if task is not None:
+                task.cancel()
     assert done.metrics.success and set(done.metrics.action_steps_per_robot) == {"alice", "bob"}
 
 
