@@ -218,7 +218,7 @@ class RobotAgent:
         """The world's token went away while this robot awaited `what`. A world that no longer
         listens is gone: say so now. Otherwise this agent's own link was cut (it was frozen, the
         network blinked) and the world detached it: attach again and go on."""
-        if _listening(self.endpoint) is False:
+        if await asyncio.to_thread(_listening, self.endpoint) is False:  # a connect of up to 1 s: off the loop
             raise WorldGone(f"the world disappeared while {self.robot} awaited {what}: nothing listens at {self.endpoint} any more")
         await self._closed_for_good(what)
         self._log.warning("lost the world's token, but the world may be there: attaching again", awaited=what)
