@@ -25,6 +25,9 @@ from mhrc.agents.llm import ScriptedClient, estimate_tokens
 from mhrc.agents.llm_policy import SMALL_CONTEXT_CAP, LLMPolicy
 from report import emit
 
+from mhrc.world.briefs import Briefing, Role, brief, detail
+from mhrc.world.tasks import get_task
+
 from mhrc.core.protocol import (
     ActionResult,
     FurnitureView,
@@ -64,6 +67,8 @@ HOUSE = [
     ("washbasin", "washbasin", 8.5, -3.2, False, True),
 ]
 TARGETS = ["apple", "fork", "soap", "toy_duck", "phone", "book"]
+ROLES: dict[str, Role] = {"alice": "fetcher", "bob": "finisher", "david": "scout"}
+PACK, CREW = get_task("pack_objects"), Briefing(finisher="Bob", fetcher="Alice", table="table_0")  # as the world words each role's task
 WHERE = {"apple": "fridge", "fork": "drawer_unit", "soap": "washbasin", "toy_duck": "tub", "phone": "table_0", "book": "table_0"}
 
 # (reply, succeeded, feedback): what each role's model says and the world answers, cycled
@@ -131,8 +136,8 @@ def observe(robot: str, step: int, messages: list[RobotMessage]) -> Observation:
         ),
         furniture=furniture({"fridge", "drawer_unit"} if step > 10 else set()),
         objects=objects,
-        task_brief="Pack the listed objects into the tray on table_0; nothing else goes in the tray.",
-        task_detail=f"Objects to pack: {', '.join(TARGETS)}." if bob else "Help Bob pack the listed objects into the tray on table_0: find them, fetch them and hand them over.",
+        task_brief=brief(PACK, ROLES[robot], CREW),
+        task_detail=detail(PACK, ROLES[robot], CREW, TARGETS, {}),
         targets=TARGETS if bob else [],
         task_status=f"In the tray: phone. Not yet in the tray: {', '.join(TARGETS[:-2])}, book." if bob else None,
         teammates={r: SKILLS[r] for r in SKILLS if r != robot},

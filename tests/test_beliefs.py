@@ -115,12 +115,14 @@ def test_a_robot_does_not_see_what_happens_where_it_is_not() -> None:
         assert gone == seen.model_copy(update={"on": None, "last_seen_on": c.shelf})
         x, y, z = seen.position
         where = f"where it was last seen at ({x:.2f}, {y:.2f}, {z:.2f}); where it is now is unknown"
-        assert object_line(gone, david) == f"- {c.item}: no longer on {c.shelf}, {where}"
+        assert object_line(gone, david) == f"- {c.item}: position unknown"  # the paper's field: where it is he does not know
+        assert object_line(gone, david, hints=True) == f"- {c.item}: no longer on {c.shelf}, {where}"  # the prompt_hints aid says more
         # Alice tells him where it went: her newer belief replaces his
         sim.tell("david", "alice", f"I put the {c.item} on table_0.")
         view = _obj(sim.observe("david", 5), c.item)
         assert view is not None and view.on == "table_0" and view.told_by == "alice" and view.last_seen_on is None
-        assert f"{c.item}: on table_0 (Alice told you), at " in object_line(view, david)
+        assert f"{c.item}: on table_0 (Alice told you), at " in object_line(view, david, hints=True)
+        assert object_line(view, david) == f"- {c.item}: position ({view.position[0]:.2f}, {view.position[1]:.2f}, {view.position[2]:.2f})"
 
 
 def test_the_live_state_aid_shows_the_truth() -> None:
@@ -147,7 +149,8 @@ def test_a_container_is_open_only_for_those_who_saw_it_open() -> None:
         assert _is_open(alice, c.box) is True and (hidden := _obj(alice, c.hidden)) is not None and hidden.inside
         david = sim.observe("david", 1)
         assert _is_open(david, c.box) is False and _obj(david, c.hidden) is None
-        assert "closed (open it to see inside)" in furniture_line(next(f for f in david.furniture if f.name == c.box))
+        box = next(f for f in david.furniture if f.name == c.box)
+        assert "; closed;" in furniture_line(box) and "closed (open it to see inside)" in furniture_line(box, hints=True)
         _ok(sim.execute("david", Navigate(target=c.other, stand_pose=0)))
         assert _is_open(sim.observe("david", 2), c.box) is False  # elsewhere: still as he last knew it
         _ok(sim.execute("david", Navigate(target=c.box, stand_pose=0)))

@@ -38,7 +38,7 @@ class SlowModel:
     @staticmethod
     def episode_of(body: dict[str, Any]) -> int:
         """The number of objects in Bob's list; 0 for Alice's and David's prompts."""
-        listed = re.search(r"^Object list: (.*)\.$", body["messages"][-1]["content"], re.M)
+        listed = re.search(r" The list: (.*?)\. Nothing that is not on the list", body["messages"][-1]["content"])
         return len(listed.group(1).split(", ")) if listed else 0
 
     def overlapping(self) -> set[frozenset[int]]:

@@ -102,7 +102,7 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
     thoughts = [line["msg"] for line in read_trace(cfg.trace) if line["key"].endswith("/thought")]
     bob = [t for t in thoughts if t["robot"] == "bob"]
     assert bob[0]["parse_error"] and "no command" in bob[0]["parse_error"] and bob[0]["action"] == "wait()"
-    assert "could not be executed" in bob[1]["prompt"]  # the format error came back as feedback
+    assert "Your command could not be read, so you waited." in bob[1]["prompt"]  # the format error came back as feedback
     assert all(t["policy"] == "llm:test-model" and t["prompt"] and t["prompt_tokens"] > 0 for t in thoughts)
 
     for robot, extra in (("David", 1), ("Bob", 2), ("Alice", 1)):  # each hiccup cost one retried request

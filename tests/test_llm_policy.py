@@ -90,16 +90,21 @@ async def test_a_parsed_reply_becomes_the_action_and_the_decision_carries_everyt
 
 
 async def test_an_unparseable_reply_makes_the_robot_wait_and_comes_back_as_feedback() -> None:
-    policy = LLMPolicy("alice", ScriptedClient(["I would rather pick(apple) or place(apple, tray)", "Command: wait()"]))
-    d = await policy.decide(obs(0))
-    assert d.action == Wait() and d.parse_error is not None and "several commands" in d.parse_error
-    assert d.reply == "I would rather pick(apple) or place(apple, tray)"
-    policy.record(result(0, Wait(), SkillOutcome.ok("You waited.")))
-    nxt = await policy.decide(obs(1))
-    feedback = user(nxt).split("Feedback on your actions")[1].split("Messages you received")[0]
-    assert "- (latest) step 0: Your reply could not be executed (several commands found (pick, place)" in feedback
-    assert "You waited." not in feedback  # the reason replaces the wait's own feedback
-    assert "(latest) step 0: wait()" in user(nxt).split("Your actions so far")[1]
+    for advice in (False, True):
+        policy = LLMPolicy("alice", ScriptedClient(["I would rather pick(apple) or place(apple, tray)", "Command: wait()"]), feedback_advice=advice)
+        d = await policy.decide(obs(0))
+        assert d.action == Wait() and d.parse_error is not None and "several commands" in d.parse_error  # the trace keeps the reason
+        assert d.reply == "I would rather pick(apple) or place(apple, tray)"
+        policy.record(result(0, Wait(), SkillOutcome.ok("You waited.")))
+        nxt = await policy.decide(obs(1))
+        feedback = user(nxt).split("Feedback on your actions")[1].split("Messages you received")[0]
+        if advice:  # the feedback_advice aid: the reason and how to answer
+            assert "- (latest) step 0: Your reply could not be executed (several commands found (pick, place)" in feedback
+            assert "Give your command on one line: Command: skill(arguments)." in feedback
+        else:  # the paper's: only that the command could not be read (Table III has no format advice)
+            assert feedback == " (oldest first):\n- (latest) step 0: Your command could not be read, so you waited.\n\n"
+        assert "You waited." not in feedback  # the reason replaces the wait's own feedback
+        assert "(latest) step 0: wait()" in user(nxt).split("Your actions so far")[1]
 
 
 async def test_a_model_that_goes_down_later_is_a_wait_with_the_error_as_feedback() -> None:
@@ -143,8 +148,9 @@ async def test_bob_gets_only_the_outcome_feedback_and_sees_progress_in_his_obser
     await policy.decide(obs(0, robot="bob"))
     policy.record(result(0, Pick(obj="apple"), SkillOutcome.ok("You picked up apple."), robot="bob"))
     d = await policy.decide(obs(1, robot="bob"))
-    assert [e.text for e in policy.memory.feedback] == ["pick(apple) succeeded: You picked up apple."]
-    assert "# Latest task progress\nIn the tray: nothing yet." in user(d) and "Object list: apple, soap." in user(d)
+    first_step = "This is the first step of the task: do nothing else now; communicate with Alice and share what you know so far."
+    assert [e.text for e in policy.memory.feedback] == [first_step, "pick(apple) succeeded: You picked up apple."]
+    assert "Latest task progress:\nIn the tray: nothing yet." in user(d) and "Objects to pack: apple, soap." in user(d)
 
 
 FEEDBACK = [
@@ -208,6 +214,11 @@ async def test_ablations_change_the_prompt_as_documented() -> None:
     for section in ("Feedback on your actions", "Messages you received", "Your actions so far", "You reached stand pose 0", "from Bob: Alice, please"):
         assert section in full
 
+    bob = LLMPolicy("bob", ScriptedClient([]), feedback=False)
+    bob_prompt = (await bob.decide(obs(0, robot="bob"))).prompt or ""
+    assert "task progress" not in bob_prompt and "In the tray" not in bob_prompt  # Table III counts the task status as feedback
+    assert "first step of the task" not in bob_prompt
+
     no_feedback = await prompt_after_two_steps(feedback=False)
     assert "Feedback on your actions" not in no_feedback and "FAILED" not in no_feedback and "You reached" not in no_feedback
     assert "from Bob: Alice, please" in no_feedback and "- step 0: navigate(drawer_unit, 0)\n- (latest) step 1: pick(soap)" in no_feedback
@@ -223,9 +234,13 @@ async def test_ablations_change_the_prompt_as_documented() -> None:
     assert "FAILED" not in neither and "Feedback on your actions" not in neither and "On table_1 I found nothing." in neither
 
     solo = await prompt_after_two_steps(teammates_absent=("david",))
-    team = solo.split("## Background: your team")[1].split("About them:")[0]
+    background = solo.split("## Background")[1].split("## Profile")[0]
+    assert background.rstrip().endswith("David is not part of the team in this episode.")  # the fact, no advice the paper lacks
+    assert "take over" not in solo
+    aided = await prompt_after_two_steps(teammates_absent=("david",), prompt_hints=True)
+    assert "take over their part yourself" in aided
+    team = aided.split("## Your teammates in this episode and their skills")[1].split("## Skills")[0]
     assert "- Bob: pick(object)" in team and "David" not in team
-    assert "David is not part of the team in this episode" in solo
 
 
 async def _record_episode(tmp_path: Path, replies: list[str | BaseException]) -> tuple[Path, list[Decision]]:

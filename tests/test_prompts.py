@@ -26,6 +26,8 @@ import pytest
 from mhrc.agents.llm import ScriptedClient
 from mhrc.agents.llm_policy import LLMPolicy, TemplateError, load_hints, load_template
 from mhrc.agents.replay import ReplayClient, ReplayMismatch
+from mhrc.world.briefs import Briefing, Role, brief, detail
+from mhrc.world.tasks import get_task
 
 from mhrc.core.protocol import (
     ActionResult,
@@ -47,9 +49,9 @@ SKILLS = {
     "david": ["navigate", "communicate", "wait"],
 }
 KINDS = {"alice": "mobile manipulator", "bob": "tabletop manipulator", "david": "mobile robot"}
-BRIEF = "Pack the listed objects into the tray on table_0; nothing else goes in the tray."
-HELP = "Help Bob pack the listed objects into the tray on table_0: find them, fetch them and hand them over."
 TARGETS = ["phone", "book", "soap", "mug"]
+ROLES: dict[str, Role] = {"alice": "fetcher", "bob": "finisher", "david": "scout"}
+PACK, CREW = get_task("pack_objects"), Briefing(finisher="Bob", fetcher="Alice", table="table_0")
 
 
 def furniture(drawer_open: bool = False) -> list[FurnitureView]:
@@ -92,8 +94,8 @@ def observe(robot: str, tick: int = 0, *, base: tuple[float, float, float] | Non
         ]
         if bob
         else [],
-        "task_brief": BRIEF,
-        "task_detail": f"Objects to pack: {', '.join(TARGETS)}." if bob else HELP,
+        "task_brief": brief(PACK, ROLES[robot], CREW),  # as the world words each role's task
+        "task_detail": detail(PACK, ROLES[robot], CREW, TARGETS, {}),
         "targets": TARGETS if bob else [],
         "task_status": f"In the tray: nothing yet. Not yet in the tray: {', '.join(TARGETS)}." if bob else None,
         "teammates": {r: SKILLS[r] for r in SKILLS if r != robot},
@@ -178,6 +180,8 @@ ROBOTS = ("alice", "bob", "david")
 DYNAMIC_HINTS = ("m from your arm base", "m from you", "reach about", "Arm base:", "not a navigation target", "(drawer unit)", "(table)", "(tray on table_0)")
 # Sentences of the old prompts that the issue moves into the aid: none may be in the default
 AID_PHRASES = (
+    "Current step", "at stand pose", "not at any stand pose", "open it to see inside", "told you", "at most 1 m", "give your command",
+    "take over their part", "## Your teammates",
     "0.20 m ahead", "0.30 to 0.58", "compare it with your reach", "with your reach", "Do not repeat work",
     "Do not visit a surface twice", "Until Alice asks", "please explore these surfaces", "I placed soap on table_0 for you",
     "On table_1 I found:", "please bring these to table_0 within my reach", "hand the open surfaces",
@@ -193,7 +197,10 @@ async def test_prompts_at_step_1_and_step_5(robot: str) -> None:
     check_golden(f"{robot}_step5.txt", later)
 
     assert first.startswith(f"You are {robot.capitalize()}, a smart robot")  # the role first (mhrc.testing reads the robot from it) and "Think step by step." in first
-    assert first.count("- (none yet)") == 3 and "(latest)" not in first
+    if robot == "bob":  # the appendix's first feedback: before acting, talk to Alice
+        assert first.count("- (none yet)") == 2 and "- (latest) step 0: This is the first step of the task" in first
+    else:
+        assert first.count("- (none yet)") == 3 and "(latest)" not in first
     # the later step: each history's newest entry tagged, the oldest shown before it
     _, rest = later.split("Feedback on your actions")
     feedback, rest = rest.split("Messages you received")
@@ -219,12 +226,15 @@ def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None
     assert f"you are {robot}" in low["role"]
     assert ("navigate" in low["role"]) is (robot != "bob") and ("manipulate" in low["role"]) is (robot != "david")
     assert ("no more than 1 m" in role) is (robot != "david")
-    # background: who the teammates are and what they can do
+    # background: who the teammates are and what they can do, as the appendix tells each robot
+    # (Bob and David know only Alice; no skill table)
     assert "cooperating" in background and "communicating" in background
+    assert "wait()" not in background and "pick(object)" not in background
     if robot == "alice":
         assert "Bob is a robot arm" in background and "manipulate" in background and "David is a mobile base" in background
     else:
-        assert "Alice" in background and "navigate" in background and "manipulate" in background
+        assert "Alice" in background and "navigate" in background and "Bob" not in background and "David" not in background
+        assert ("manipulate" in background) is (robot == "david")
     if robot == "david":
         assert "You do what Alice asks of you" in background
     # profile: an unexplored house whose scene graph shows furniture, not what lies on or in it; the robot's job
@@ -261,26 +271,38 @@ def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_the_user_prompt_carries_the_appendix_in_its_order(robot: str) -> None:
     user = "# Scene graph" + (GOLDEN / f"{robot}_step5.txt").read_text(encoding="utf-8").split("# Scene graph")[1]
-    heads = ["# Scene graph", "# Your status", "# Task"] + (["# Latest task progress"] if robot == "bob" else [])
+    heads = ["# Scene graph", "# Your status", "# Task"] + (["Latest task progress:"] if robot == "bob" else [])
     heads += ["Feedback on your actions", "Messages you received", "Your actions so far"]
     graph, status, task, *rest = _sections(user, heads)
-    # every piece of furniture: position, orientation, state, stand poses (robots that navigate), place pose
-    assert "- drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; " in graph
-    assert ("open;" if robot == "alice" else "closed (open it to see inside)") in graph
-    assert ("stand poses 0 = (-3.30, -0.85, yaw 90 deg)" in graph) is (robot != "bob")
-    assert "place pose (-3.30, -0.22, 0.70)" in graph
-    known = {"alice": "- soap: inside drawer_unit, at (-3.10, 3.30, 0.45)\n", "bob": "- book: on table_0, at (-2.40, 0.05, 0.71)\n",
-             "david": "- mug: on table_1, at (2.60, 2.40, 0.75)\n"}[robot]
+    # the house's furniture (robots that navigate): position, orientation, state, stand poses, place pose;
+    # Bob sees only what is on his table: the tray (with its place pose) and the objects there
+    if robot == "bob":
+        assert "table_0" not in graph and "drawer_unit" not in graph and "stand poses" not in graph
+        assert "- tray: position (-3.40, 0.19, 0.71), yaw 0 deg; place pose (-3.40, 0.19, 0.71)" in graph
+    else:
+        assert "- drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; " + ("open;" if robot == "alice" else "closed;") in graph
+        assert "stand poses 0 = (-3.30, -0.85, yaw 90 deg)" in graph and "place pose (-3.30, -0.22, 0.70)" in graph
+    # known objects in the appendix's fields: position, nothing about where they lie or who told
+    known = {"alice": "- soap: position (-3.10, 3.30, 0.45)\n", "bob": "- book: position (-2.40, 0.05, 0.71)\n",
+             "david": "- mug: position (2.60, 2.40, 0.75)\n"}[robot]
     assert known in graph
-    # status: position, orientation (where the base moves), gripper (where there is one)
+    # status: position, orientation (where the base moves), gripper (where there is one); not the step, not the stand pose
     if robot == "bob":
         assert "Your base is fixed at (-3.75, 0.00, 0.70): you cannot move." in status
     else:
-        assert re.search(r"Position: \(-?[\d.]+, -?[\d.]+\); orientation: yaw -?\d+ deg; at stand pose \d of \w+\.", status)
+        assert re.search(r"^Position: \(-?[\d.]+, -?[\d.]+\); orientation: yaw -?\d+ deg\.$", status, re.M)
     assert ("Gripper: empty." in status) is (robot != "david")
-    assert task.startswith("# Task\nTask: Pack the listed objects") and "Details: " in task
+    assert "step" not in status and "stand pose" not in status
+    # each robot's own brief and detail (the appendix's Task section of its role)
+    assert task.startswith("# Task\nBrief: ") and "\nDetails: " in task
+    first_line = {"alice": "Brief: Explore the whole house and hand Bob the objects the task needs.",
+                  "bob": "Brief: Put the listed objects into the tray.", "david": "Brief: Search the whole house for the objects the task needs."}
+    assert first_line[robot] in task
+    assert "fetch" not in task  # David cannot fetch; nobody is told to
     if robot == "bob":
-        assert rest[0] == "# Latest task progress\nIn the tray: phone. Not yet in the tray: book, soap, mug.\n\n"
+        assert task.count("phone, book, soap, mug") == 1  # the list once
+        assert "ask Alice to move it" in task and "ask Alice to search for them and bring them" in task and "Nothing that is not on the list goes into the tray" in task
+        assert rest[0] == "Latest task progress:\nIn the tray: phone. Not yet in the tray: book, soap, mug.\n\n"
     for section in rest[-3:]:
         assert "(latest) step" in section
 
@@ -301,9 +323,13 @@ def _without_hints(text: str, hints: str) -> str:
     """An aided prompt with exactly the aid's text taken out."""
     assert text.count(hints) == 1
     text = text.replace(hints + "\n\n", "")
+    text = re.sub(r"## Your teammates in this episode and their skills\n(- .*\n)+\n", "", text)
     text = re.sub(r", \d+\.\d\d m from (your arm base|you)", "", text)
     text = re.sub(r"\nArm base: \([^)]*\); reach about \d+\.\d\d m from it\.", "", text)
-    text = text.replace("; no stand pose (not a navigation target)", "")
+    text = re.sub(r"You are \w+, a [\w ]+\. Current step: \d+\.\n", "", text)
+    text = re.sub(r"; (at stand pose \d+ of \w+|not at any stand pose)\.", ".", text)
+    text = text.replace("; no stand pose (not a navigation target)", "").replace("closed (open it to see inside)", "closed")
+    text = re.sub(r"^(- \w+): .*?, at (\([^)]*\))$", r"\1: position \2", text, flags=re.M)  # where it lies, who told
     return re.sub(r"^(- \w+) \([^)]*\):", r"\1:", text, flags=re.M)
 
 
@@ -318,7 +344,7 @@ async def test_prompt_hints_adds_exactly_its_text(robot: str) -> None:
         assert constraints_end < a.index(hints) < skills_at
     # and it does add each kind of text it stands for
     last = aided[-1]
-    assert "(drawer unit)" in last and ("m from your arm base" in last) is (robot != "david") and ("reach about" in last) is (robot != "david")
+    assert ("(tray on table_0)" if robot == "bob" else "(drawer unit)") in last and ("m from your arm base" in last) is (robot != "david") and ("reach about" in last) is (robot != "david")
     assert ("not a navigation target" in last) is (robot != "bob")
     assert ("m from you\n" in last) is (robot == "david")
 
@@ -346,19 +372,20 @@ def test_skill_signatures_in_the_prompts_are_what_the_parser_accepts() -> None:
 
 def test_alice_at_step_5_sees_only_what_she_was_told_or_saw() -> None:
     text = (GOLDEN / "alice_step5.txt").read_text(encoding="utf-8")
-    assert "soap: inside drawer_unit" in text and "phone" not in text.split("# Scene graph")[1].split("# Your status")[0]
-    assert "could not be executed" in text  # the unparseable reply at step 2 came back as feedback
-    assert "at stand pose 0 of drawer_unit" in text and "drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; open" in text
+    assert "soap: position (-3.10, 3.30, 0.45)" in text and "phone" not in text.split("# Scene graph")[1].split("# Your status")[0]
+    # the unparseable reply at step 2 came back as feedback saying only that (Table III has no format advice)
+    assert "- step 2: Your command could not be read, so you waited.\n" in text and "Command: skill(arguments)" not in text
+    assert "drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; open" in text
     assert "(latest) step 3: from David: On table_1 I found: mug." in text
 
 
 def test_bob_sees_progress_and_no_stand_poses() -> None:
     text = (GOLDEN / "bob_step5.txt").read_text(encoding="utf-8")
-    assert "book: on table_0, at (-2.40, 0.05, 0.71)\n" in text
+    assert "book: position (-2.40, 0.05, 0.71)\n" in text
     assert "(within your reach)" not in text and "(out of your reach)" not in text  # reach labels are an aid, not the paper's prompt
-    assert "phone: in the tray" in text and "# Latest task progress\nIn the tray: phone." in text
+    assert "phone: position (-3.40, 0.19, 0.72)" in text and "Latest task progress:\nIn the tray: phone." in text
     assert "stand poses" not in text and "Gripper: empty." in text
-    assert "Object list: phone, book, soap, mug." in text
+    assert "The list: phone, book, soap, mug." in text
 
 
 # --------------------------------------------------------------------------- your own templates
@@ -386,15 +413,17 @@ def test_custom_templates_are_checked_when_loaded(tmp_path: Path) -> None:
     policy = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path)
     system, user = (m["content"] for m in policy.render(observe("bob")))
     assert system.startswith("You are Bob. Skills:\n- pick(object):")
-    assert user.startswith("Furniture:\n- table_0: ") and user.endswith("Your actions so far (oldest first):\n- (none yet)\nCommand?\n")
-    # a template without $hints gets the aid's text at its end; a hints file of your own replaces the built-in one
+    assert user.startswith("Furniture:\n- tray: ") and user.endswith("Your actions so far (oldest first):\n- (none yet)\nCommand?\n")
+    # a template without $hints gets the aid's text at its end, and without $teammates the aid's
+    # table of the teammates' skills after it; a hints file of your own replaces the built-in one
+    team = "\n\n## Your teammates in this episode and their skills\n- Alice: navigate(furniture, stand_pose_id), move(dx, dy), open(furniture)"
     aided = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path, prompt_hints=True).render(observe("bob"))[0]["content"]
-    assert aided.endswith(load_hints("bob") + "\n")
+    assert load_hints("bob") + team in aided and aided.endswith("- David: navigate(furniture, stand_pose_id), communicate(content, robot), wait()\n")
     (tmp_path / "bob_hints.txt").write_text("## Hints\n- Be quick.\n", encoding="utf-8")
     aided = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path, prompt_hints=True).render(observe("bob"))[0]["content"]
-    assert aided.endswith("Skills:\n- pick(object): pick up that object\n- place(object, location): put the object in your gripper at that location\n"
-                          "- communicate(content, robot): send content to that robot; when objects are missing and you need help, sum up how things stand in it\n"
-                          "- wait(): do nothing this step\n\n## Hints\n- Be quick.\n")
+    assert ("Skills:\n- pick(object): pick up that object\n- place(object, location): put the object in your gripper at that location\n"
+            "- communicate(content, robot): send content to that robot; when objects are missing and you need help, sum up how things stand in it\n"
+            "- wait(): do nothing this step\n\n## Hints\n- Be quick." + team) in aided and load_hints("bob") not in aided
 
 
 def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:

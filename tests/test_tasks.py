@@ -4,6 +4,8 @@ needed except where a Sim is built from a user's own layout file."""
 
 from __future__ import annotations
 
+import re
+
 import copy
 import json
 import math
@@ -14,6 +16,7 @@ import pytest
 from mhrc.world.layouts import SCENES_DIR, LayoutError, get_layout, load_layout, parse_layout
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.colors import PANEL_COLORS as COLORS
+from mhrc.world.briefs import Briefing, brief, detail
 from mhrc.world.tasks import MENUS, TASKS, ObjectKind, Placement, Seen, get_task
 
 from mhrc.run.config import ConfigError, EpisodeConfig
@@ -114,10 +117,36 @@ def test_sort_task_text_lists_solids_and_panels_but_not_which_goes_where() -> No
     solids, _ = _kinds("sort_solids", n=5)
     names = [k.name for k in solids]
     goals = {k.name: sort.goal(k) for k in solids}
-    text = sort.detail(True, names, goals)  # as the robot that finishes the task (Bob) is told it
+    text = sort.finisher_detail(CREW, names, goals)  # as the robot that finishes the task (Bob) is told it
     assert all(n in text for n in names) and all(f"{c}_panel" in text for c in COLORS)
-    assert " onto " not in text and not any(f"{n} onto" in text or f"{n} on {goals[n]}" in text for n in names)
-    assert f"{names[0]} onto {goals[names[0]]}" in sort.detail(True, names, goals, frozenset({"goal_map"}))
+    assert not any(f"{n} onto" in text or f"{n} on {goals[n]}" in text for n in names)
+    assert f"{names[0]} onto {goals[names[0]]}" in sort.finisher_detail(CREW, names, goals, frozenset({"goal_map"}))
+
+
+CREW = Briefing(finisher="Bob", fetcher="Alice", table="table_0")
+
+
+@pytest.mark.parametrize("task_id", sorted(TASKS))
+def test_each_role_is_told_its_own_task_as_the_appendix_gives_it(task_id: str) -> None:
+    """Alice's, Bob's and David's brief and detail carry the appendix's content for their role,
+    per task (the appendix: Alice fetches for Bob and moves table objects only when he asks;
+    David explores, follows Alice's arrangements and reports finds; Bob finishes, asks Alice, and
+    keeps everything off the list out of the goal), and nothing a role cannot do."""
+    task = get_task(task_id)
+    targets = ["a_thing", "b_thing", "c_thing"]
+    text = {role: brief(task, role, CREW) + "\n" + detail(task, role, CREW, targets, {t: "red_panel" for t in targets}) for role in ("finisher", "fetcher", "scout")}
+    things = task.things
+    assert f"hand Bob the {things}" in text["fetcher"] and "Explore the whole house" in text["fetcher"]
+    assert f"Ask Bob which {things} are needed" in text["fetcher"] and "put them on table_0 close to Bob" in text["fetcher"]
+    assert "When Bob asks, move" in text["fetcher"] and "do not move anything on the table unless Bob asks" in text["fetcher"]
+    assert "Search the whole house" in text["scout"] and "Do as Alice arranges" in text["scout"] and "tell Alice about each new find" in text["scout"]
+    for word in ("fetch", "pick", "bring", "hand them", "Bob"):  # David cannot fetch and, in the appendix, answers to Alice only
+        assert word not in text["scout"], word
+    assert text["finisher"].count("a_thing, b_thing, c_thing") == 1
+    assert "ask Alice to move it for you" in text["finisher"] and "ask Alice to search for them and bring them" in text["finisher"]
+    assert re.search(r"Nothing that is not on the (list|menu) goes (into the tray|onto a panel|onto the board)\.$", text["finisher"])
+    for role in ("fetcher", "scout"):
+        assert "a_thing" not in text[role]  # the list is Bob's: the others learn it by asking
 
 
 def test_pack_evaluate() -> None:

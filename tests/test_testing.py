@@ -212,7 +212,7 @@ async def test_a_scripted_llm_robot_whose_bad_reply_becomes_feedback(mhrc_model_
     assert result.done.reason == "horizon" and result.metrics.temporal_steps == 3
     bob = result.thoughts("bob")
     assert bob[0]["parse_error"] and "no command" in bob[0]["parse_error"] and bob[0]["action"] == "wait()"
-    assert "could not be executed" in bob[1]["prompt"]  # the format error came back as feedback
+    assert "Your command could not be read, so you waited." in bob[1]["prompt"]  # the format error came back as feedback
     assert bob[1]["action"] == "pick(ghost)" and result.done.metrics.failed_actions.get("pick") == 1
     assert all(t["policy"] == "llm:test" for t in bob) and len(server.requests_of("bob")) == len(bob) == len(server.requests)
     assert {t["policy"] for t in result.thoughts("alice") + result.thoughts("david")} == {"heuristic"}

@@ -3,7 +3,9 @@ ask the model, parse exactly one command.
 
 An unparseable reply, a reply cut at max_tokens before its command, or a model that stays down
 after its retries or misses the step deadline never crashes the agent: the robot waits that
-step and the reason (bounded to FEEDBACK_CHARS) becomes feedback in its next prompt. What no
+step and its next prompt's feedback says so. For an unreadable reply that is all it says (Table
+III has no format advice); with the feedback_advice aid it also gives the reason (bounded to
+FEEDBACK_CHARS) and how to answer. What no
 later step can change stops the agent with LLMFatalError instead: bad credentials, no such
 model, a server that refuses --structured's response format, or a server that was down for
 the robot's whole first step (refusing connections, or accepting them and never answering).
@@ -18,16 +20,20 @@ the paper's appendix (role, background, profile, constraints, skills, response f
 graph, status, task, histories) and nothing more. Placeholders (* required):
 
 system  $robot      the robot's name, capitalized (Alice)
-        $teammates  one line per teammate present: name and skill signatures
+        $teammates  one line per teammate present: name and skill signatures (the default
+                    templates give the appendix's background instead; the prompt_hints aid
+                    adds this table to its advice)
         $absent     a note naming the teammates left out of this episode, or nothing
         $skills*    one line per skill of this robot: signature and what it does
         $hints      the prompt_hints aid's advice (`<robot>_hints.txt`), or nothing; a system
                     template without it gets the advice at its end when the aid is on
-user    $step       the current step (tick)
+user    $step       the current step (tick); the default templates do not show it (the appendix does not)
         $scene_graph*  furniture (position, yaw, open/closed, stand poses, place pose) and known objects
-        $status*    position, orientation and where the robot stands, gripper
-        $task*      brief and detailed task (Bob: the object list)
-        $progress   the latest task progress status (Bob's, required in his; a placeholder for the others)
+        $status*    position, orientation, gripper
+        $task*      brief and detailed task of the robot's role (Bob's holds the object list)
+        $progress   the latest task progress status as a titled section (Bob's, required in
+                    his; empty for the others, and under the no_feedback ablation: Table III
+                    counts it as feedback)
         $feedback*, $messages*, $actions*
                     each history as a titled section, older entries first and the newest tagged
                     "(latest)"; empty where an ablation removes it
@@ -60,7 +66,7 @@ log = structlog.get_logger("mhrc.llm_policy")
 
 MEANINGS = {
     "navigate": "go to the stand pose with that id of that piece of furniture",
-    "move": "move your base dx metres along the x axis and dy metres along the y axis (at most 1 m each)",
+    "move": "move your base dx metres along the x axis and dy metres along the y axis",
     "open": "open that piece of furniture, whose drawer runs on rails or whose door or lid turns on hinges",
     "pick": "pick up that object",
     "place": "put the object in your gripper at that location",
@@ -81,9 +87,13 @@ PLACEHOLDERS = {
 REQUIRED = {"system": frozenset({"skills"}), "user": frozenset({"scene_graph", "status", "task", *HISTORIES})}
 REQUIRED_FOR = {("bob", "user"): frozenset({"progress"})}  # the appendix gives Bob his task progress
 SMALL_CONTEXT_CAP = 12_000  # ~3,000 tokens: a --history-cap that fits a 4k-context local model with room for the reply
+UNREADABLE = "Your command could not be read, so you waited."  # the paper's: that it failed, no format advice
+# with the feedback_advice aid: the reason and how to answer
 FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. Give your command on one line: Command: skill(arguments)."
 JSON_FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. Answer with one JSON object: analysis, then command."
 CUT_REPLY = "your reply was cut at the token limit before it gave a command; think more briefly"
+# The appendix's first feedback of the robot that finishes the task: before any action, talk to Alice.
+FIRST_STEP = {"bob": "This is the first step of the task: do nothing else now; communicate with Alice and share what you know so far."}
 MODEL_DOWN = "Your planner could not reach its model ({reason}), so you waited."
 FEEDBACK_CHARS = 300  # what one error may put into the next prompt
 
@@ -157,8 +167,10 @@ class LLMPolicy:
     prompt_cap_chars bounds the whole prompt (system + user); None (the default, as the paper)
     keeps every history whole. reach_labels (an aid, not the paper's) says for each object
     whether it lies within the robot's arm reach. prompt_hints (an aid, not the paper's) adds the
-    role's advice (`<robot>_hints.txt`) to the system prompt and distances, reach and the arm
-    base to the scene graph and status. structured asks for a JSON decision that
+    role's advice (`<robot>_hints.txt`) and the teammates' skills to the system prompt, and
+    where objects lie, distances, the step, the stand pose, reach and the arm base to the scene
+    graph and status. feedback_advice (an aid, the agent's half of the world's) puts the reason
+    an unreadable reply failed, and how to answer, into its feedback. structured asks for a JSON decision that
     follows a schema of this step's valid actions, its analysis short enough that the command
     fits within the client's max_tokens. step_deadline bounds one step's model call,
     every retry included: past it the robot waits that step.
@@ -177,6 +189,7 @@ class LLMPolicy:
         teammates_absent: tuple[str, ...] = (),
         reach_labels: bool = False,
         prompt_hints: bool = False,
+        feedback_advice: bool = False,
         structured: bool = False,
         step_deadline: float | None = None,
         max_tokens: int | None = None,
@@ -190,6 +203,7 @@ class LLMPolicy:
         self._answered = False  # any reply yet: a server down before the first one is fatal
         self.reach_labels = reach_labels
         self.prompt_hints = prompt_hints
+        self.feedback_advice = feedback_advice
         self.client = client
         self.name = f"llm:{client.model}"
         self.temperature = temperature
@@ -198,6 +212,8 @@ class LLMPolicy:
         self.cap = prompt_cap_chars
         self.absent = tuple(teammates_absent)
         self.memory = Memory()
+        if feedback and robot in FIRST_STEP:  # the appendix's first feedback, before any action
+            self.memory.add("feedback", 0, FIRST_STEP[robot], tag="first step")
         self.system_t = load_template(robot, "system", prompts_dir)
         self.user_t = load_template(robot, "user", prompts_dir)
         self.hints = load_hints(robot, prompts_dir) if prompt_hints else ""
@@ -228,21 +244,25 @@ class LLMPolicy:
     def render(self, obs: Observation) -> Messages:
         """The system and user messages for this observation and the memory so far."""
         meanings = MEANINGS | ROLE_MEANINGS.get(self.robot, {})
+        teammates = describe.teammates(obs, self.absent)
+        hints = self.hints
+        if self.prompt_hints and "teammates" not in self.system_t.get_identifiers():
+            hints = f"{hints}\n\n## Your teammates in this episode and their skills\n{teammates}".strip()
         system = self.system_t.substitute(
             robot=self.robot.capitalize(),
-            teammates=describe.teammates(obs, self.absent),
+            teammates=teammates,
             absent=self._absent_note(),
             skills="\n".join(f"- {SIGNATURES[s]}: {meanings[s]}" for s in obs.status.skills if s in SIGNATURES),
-            hints=self.hints,
+            hints=hints,
         )
-        if self.hints and "hints" not in self.system_t.get_identifiers():
-            system = _tidy(system) + "\n" + self.hints
+        if hints and "hints" not in self.system_t.get_identifiers():
+            system = _tidy(system) + "\n" + hints
         fields = {
             "step": str(obs.tick),
             "scene_graph": describe.scene_graph(obs, reach_labels=self.reach_labels, hints=self.prompt_hints),
             "status": describe.robot_status(obs, hints=self.prompt_hints),
             "task": describe.task_text(obs),
-            "progress": describe.progress_text(obs),
+            "progress": describe.progress_text(obs) if self.feedback else "",  # Table III counts it as feedback
         }
         budget = None
         if self.cap is not None and self.history:
@@ -258,10 +278,10 @@ class LLMPolicy:
             return ""
         names = " and ".join(a.capitalize() for a in self.absent)
         verb = "is" if len(self.absent) == 1 else "are"
-        return (
-            f"{names} {verb} not part of the team in this episode: nobody else will do {names}'s part, "
-            "so ignore what this prompt says about working with them and take over their part yourself where you can."
-        )
+        note = f"{names} {verb} not part of the team in this episode."
+        if self.prompt_hints:  # advice the paper's ablation does not give
+            note += f" Nobody else will do {names}'s part: ignore what this prompt says about working with them and take over their part yourself where you can."
+        return note
 
     # ------------------------------------------------------------------ deciding
     async def decide(self, obs: Observation) -> Decision:
@@ -294,7 +314,8 @@ class LLMPolicy:
             reason = CUT_REPLY if c.finish_reason == "length" else _short(str(exc))
             self._log.info("unparseable reply, waiting", tick=obs.tick, reason=reason)
             action, error = Wait(), reason
-            self._pending = (obs.tick, (JSON_FORMAT_ERROR if self.structured else FORMAT_ERROR).format(reason=reason))
+            advice = JSON_FORMAT_ERROR if self.structured else FORMAT_ERROR
+            self._pending = (obs.tick, advice.format(reason=reason) if self.feedback_advice else UNREADABLE)
         return Decision(
             action, prompt, c.text, error, c.prompt_tokens, c.completion_tokens, c.latency,
             reasoning=c.reasoning, reasoning_tokens=c.reasoning_tokens, finish_reason=c.finish_reason, schema_hash=digest, ttft=c.ttft,

@@ -4,11 +4,14 @@ It reads nothing but that robot's `Observation`, so a prompt never shows what th
 not seen or been told. Every number is rounded to centimetres and whole degrees, so the
 text (and a replayed prompt) is stable across platforms.
 
-By default the text holds what the paper's scene graph and status hold: positions,
-orientations, open or closed, stand poses, place poses, the gripper. With `hints` (the
-prompt_hints aid) it adds what the paper leaves to the model: each furniture's kind, which
-furniture is no navigation target, each object's distance from the robot's arm base, and
-where that arm base is and how far it reaches.
+By default the text holds what the paper's scene graph and status hold (the appendix's
+fields): furniture with position, orientation, open or closed, stand poses and place pose; each
+known object's position; the robot's position, orientation and gripper. A robot that does not
+navigate (the paper's Bob) sees only what lies on its table: the goal fixtures and the objects
+there, no furniture of the house. With `hints` (the prompt_hints aid) it adds what the paper
+leaves to the model: each furniture's kind, which furniture is no navigation target, where
+each object lies and who told the robot of it, its distance from the robot's arm base, the
+step, the stand pose the robot is at, and where its arm base is and how far it reaches.
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ def furniture_line(f: FurnitureView, navigates: bool = True, hints: bool = False
     `hints`, the kind after the name and "no stand pose (not a navigation target)"."""
     parts = [f"position {_xyz(f.position)}, yaw {_deg(f.yaw)}"]
     if f.openable:
-        parts.append("open" if f.is_open else "closed (open it to see inside)")
+        parts.append("open" if f.is_open else "closed (open it to see inside)" if hints else "closed")
     if navigates and f.stand_poses:
         poses = ", ".join(f"{i} = ({s.x:.2f}, {s.y:.2f}, yaw {_deg(s.yaw)})" for i, s in enumerate(f.stand_poses))
         parts.append(f"stand poses {poses}")
@@ -54,12 +57,16 @@ def furniture_line(f: FurnitureView, navigates: bool = True, hints: bool = False
 
 
 def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False, hints: bool = False) -> str:
-    """`- name: where it lies, position`; with `hints`, its distance from the robot's arm base
-    (or base); with the reach_labels aid, whether that is within the arm's reach (the paper's
-    prompts leave both to the model). An object the robot looked for and no longer found where
-    it was gets neither place nor distance; one it knows only from a message says who told it."""
+    """`- name: position (x, y, z)` (the appendix's field); an object the robot looked for and
+    no longer found where it was: `position unknown`. With `hints`, where it lies, who told the
+    robot of it and its distance from the robot's arm base (or base); with the reach_labels
+    aid, whether that is within the arm's reach (the paper's prompts leave all that to the model)."""
+    gone = bool(o.last_seen_on and not (o.on or o.held_by))
+    if not hints:
+        text = f"- {o.name}: position " + ("unknown" if gone else _xyz(o.position))
+        return text + _reach(o, obs) if reach_labels and not gone and not o.held_by else text
     told = f" ({o.told_by.capitalize()} told you)" if o.told_by else ""
-    if o.last_seen_on and not (o.on or o.held_by):
+    if gone:
         return f"- {o.name}: no longer on {o.last_seen_on}, where it was last seen at {_xyz(o.position)}; where it is now is unknown{told}"
     if o.held_by:
         where = "in your gripper" if o.held_by == obs.robot else f"held by {o.held_by}"
@@ -72,20 +79,26 @@ def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False, hin
         return text
     s = obs.status
     if s.arm_base is not None and s.reach is not None:
-        d = _flat(o.position, s.arm_base)
-        if hints:
-            text += f", {d:.2f} m from your arm base"
-        if reach_labels:
-            text += " (within your reach)" if d <= s.reach else " (out of your reach)"
-    elif s.base is not None and hints:
+        text += f", {_flat(o.position, s.arm_base):.2f} m from your arm base"
+    elif s.base is not None:
         text += f", {_flat(o.position, (s.base.x, s.base.y)):.2f} m from you"
-    return text
+    return text + _reach(o, obs) if reach_labels else text
+
+
+def _reach(o: ObjectView, obs: Observation) -> str:
+    """The reach_labels aid: whether `o` lies within the robot's arm reach ("" for a robot without an arm)."""
+    s = obs.status
+    if s.arm_base is None or s.reach is None:
+        return ""
+    return " (within your reach)" if _flat(o.position, s.arm_base) <= s.reach else " (out of your reach)"
 
 
 def scene_graph(obs: Observation, reach_labels: bool = False, hints: bool = False) -> str:
-    """Furniture (always known), then the objects this robot knows of."""
+    """Furniture, then the objects this robot knows of. A robot that does not navigate sees
+    only its table's goal fixtures (furniture without stand poses), as the appendix's Bob."""
     navigates = "navigate" in obs.status.skills
-    lines = ["Furniture:"] + [furniture_line(f, navigates, hints) for f in obs.furniture]
+    furniture = obs.furniture if navigates else [f for f in obs.furniture if not f.stand_poses]
+    lines = ["Furniture:"] + [furniture_line(f, navigates, hints) for f in furniture]
     if obs.objects:
         lines.append("Objects you know of:")
         lines += [object_line(o, obs, reach_labels, hints) for o in obs.objects]
@@ -107,13 +120,16 @@ def standing_at(obs: Observation) -> str | None:
 
 
 def robot_status(obs: Observation, hints: bool = False) -> str:
-    """Position and orientation, where the robot stands, gripper; with `hints`, the arm base and
-    its reach."""
+    """Position and orientation, gripper (the appendix's status); with `hints`, also the
+    robot's kind, the step, the stand pose it is at, and its arm base and reach."""
     s = obs.status
-    lines = [f"You are {s.name.capitalize()}, a {s.kind}. Current step: {obs.tick}."]
+    lines = [f"You are {s.name.capitalize()}, a {s.kind}. Current step: {obs.tick}."] if hints else []
     if s.base is not None:
-        at = standing_at(obs)
-        lines.append(f"Position: ({s.base.x:.2f}, {s.base.y:.2f}); orientation: yaw {_deg(s.base.yaw)}" + (f"; at {at}." if at else "; not at any stand pose."))
+        where = f"Position: ({s.base.x:.2f}, {s.base.y:.2f}); orientation: yaw {_deg(s.base.yaw)}"
+        if hints:
+            at = standing_at(obs)
+            where += f"; at {at}" if at else "; not at any stand pose"
+        lines.append(where + ".")
     else:
         where = f" at {_xyz(s.arm_base)}" if s.arm_base is not None else ""
         lines.append(f"Your base is fixed{where}: you cannot move.")
@@ -125,16 +141,18 @@ def robot_status(obs: Observation, hints: bool = False) -> str:
 
 
 def task_text(obs: Observation) -> str:
-    """Brief and detailed task; Bob's object list."""
-    lines = [f"Task: {obs.task_brief}", f"Details: {obs.task_detail}"]
-    if obs.targets:
-        lines.append(f"Object list: {', '.join(obs.targets)}.")
-    return "\n".join(lines)
+    """Brief and detailed task, as the world words them for this robot's role (the finisher's
+    detail holds its list)."""
+    return f"Brief: {obs.task_brief}\nDetails: {obs.task_detail}"
+
+
+PROGRESS_TITLE = "Latest task progress"
 
 
 def progress_text(obs: Observation) -> str:
-    """The latest task progress status (Bob's), or a placeholder for robots without one."""
-    return obs.task_status or "(no progress report for you)"
+    """The latest task progress status as a titled section (the finisher's; Table III's Target
+    Task Status), or "" for a robot without one."""
+    return f"{PROGRESS_TITLE}:\n{obs.task_status}" if obs.task_status else ""
 
 
 def teammates(obs: Observation, absent: tuple[str, ...] = ()) -> str:

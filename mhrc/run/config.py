@@ -219,6 +219,7 @@ class EpisodeConfig(BaseModel):
             "prompt_cap_chars": self.history_cap,
             "reach_labels": "reach_labels" in self.aids,
             "prompt_hints": "prompt_hints" in self.aids,
+            "feedback_advice": "feedback_advice" in self.aids,
             "structured": self.structured,
             "step_deadline": self.step_deadline,
             "max_tokens": self.max_tokens,

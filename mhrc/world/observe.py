@@ -25,6 +25,7 @@ from mhrc.core.protocol import FurnitureView, ObjectPose, ObjectView, Observatio
 from .beliefs import Beliefs
 from .physics import ObjectState, PhysicalWorld
 from .robots import RobotBody
+from .briefs import Briefing, brief, detail, role_of
 from .tasks import Task
 
 
@@ -175,8 +176,9 @@ def robot_status(r: RobotBody) -> RobotStatus:
 def observation(
     world: PhysicalWorld, knowledge: Knowledge, task: Task, targets: list[str], goals: dict[str, str], robot: str, tick: int
 ) -> Observation:
-    """`robot`'s own partial view; new_messages is left for the world service to fill. The robot
-    that finishes the task is also told the targets, its progress and (goal_map aid) the goals."""
+    """`robot`'s own partial view; new_messages is left for the world service to fill. Each
+    robot gets its role's brief and detail (world/tasks.py); the robot that finishes the task is
+    also told the targets, its progress and (goal_map aid) the goals."""
     if robot not in world.bots:
         raise ValueError(f"there is no robot {robot!r} in this episode ({', '.join(world.bots)})")
     known = knowledge.known_objects(robot)
@@ -185,20 +187,31 @@ def observation(
     aids = knowledge.aids
     live = "live_state" in aids  # the aid: known objects and containers as they are now
     beliefs = knowledge.beliefs[robot].objects
+    role = role_of(finisher, r.kind.mobile, r.kind.has_arm)
+    briefing_ = briefing(world)
     return Observation(
         robot=robot,
         tick=tick,
         status=robot_status(r),
         furniture=furniture_views(world, None if live else knowledge.beliefs[robot]),
         objects=[object_view(world, o) if live else beliefs[o.name].view for o in world.objects.values() if o.name in known],
-        task_brief=task.brief,
-        task_detail=task.detail(finisher, targets, goals, aids),
+        task_brief=brief(task, role, briefing_),
+        task_detail=detail(task, role, briefing_, targets, goals, aids),
         targets=list(targets) if finisher else [],
         goals=dict(goals) if finisher and "goal_map" in aids else {},
         ordered=task.ordered,
         task_status=task.status(targets, world.seen(), aids) if finisher else None,
         teammates={o: list(world.bots[o].kind.skills) for o in world.bots if o != robot},
     )
+
+
+def briefing(world: PhysicalWorld) -> Briefing:
+    """Whom the task texts name: the finisher and the fetcher of this episode's team, by kind
+    (the paper's Bob and Alice; the finisher stands in for a fetcher the team lacks)."""
+    bots = world.bots.values()
+    finisher = next((b.name for b in bots if b.kind.finishes_task), "")
+    fetcher = next((b.name for b in bots if role_of(b.kind.finishes_task, b.kind.mobile, b.kind.has_arm) == "fetcher"), finisher)
+    return Briefing(finisher=finisher.capitalize(), fetcher=fetcher.capitalize(), table=world.layout.bob_table)
 
 
 def views(world: PhysicalWorld) -> tuple[list[FurnitureView], list[ObjectView]]:

@@ -17,6 +17,7 @@ from typing import Protocol, TypeVar
 import numpy as np
 
 from .assets import Color, Shape
+from .briefs import Briefing, ask
 from .colors import NO_PANEL_COLORS, PANEL_COLORS
 from .scene import Fixture, Layout
 
@@ -73,7 +74,7 @@ class Seen:
 
 class Task(Protocol):
     id: str
-    brief: str
+    things: str  # what the task moves, as the helpers' briefs name it: objects, solids, ingredients
     ordered: bool  # whether the targets must reach their goals in the listed order
 
     def generate(self, layout: Layout, seed: int, n_objects: int) -> list[Placement]: ...
@@ -90,9 +91,11 @@ class Task(Protocol):
         """Bob's task status as the paper gives it; with the `status_hints` aid, also what is
         missing, next or wrong."""
         ...
-    def detail(self, finisher: bool, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
-        """The task as one robot is told it: a robot that finishes the task (`finisher`: its kind's
-        `finishes_task`, the paper's Bob) gets the list, a helper what it is there for."""
+    def finisher_brief(self) -> str:
+        """The brief of the robot that finishes the task (the appendix's Bob)."""
+        ...
+    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        """The finisher's detailed task: what goes where, whom to ask, and the list."""
         ...
 
 
@@ -191,7 +194,7 @@ class PackObjects:
     """
 
     id = "pack_objects"
-    brief = "Pack the listed objects into the tray on table_0; nothing else goes in the tray."
+    things = "objects"
     ordered = False
 
     def generate(self, layout: Layout, seed: int, n_objects: int) -> list[Placement]:
@@ -230,10 +233,14 @@ class PackObjects:
             parts.append(f"In the tray but not on the list (take it out): {', '.join(wrong)}.")
         return " ".join(parts)
 
-    def detail(self, finisher: bool, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
-        if finisher:
-            return f"Objects to pack: {', '.join(targets)}."
-        return "Help Bob pack the listed objects into the tray on table_0: find them, fetch them and hand them over."
+    def finisher_brief(self) -> str:
+        return "Put the listed objects into the tray."
+
+    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        return (
+            f"Put every object on the list into the tray on {b.table}. {ask(b, 'objects')} "
+            f"The list: {', '.join(targets)}. Nothing that is not on the list goes into the tray."
+        )
 
 
 # --------------------------------------------------------------------------- Sort Solids
@@ -264,7 +271,7 @@ class SortSolids:
     """
 
     id = "sort_solids"
-    brief = "Sort the listed solids: put each on the panel of its colour on table_0; nothing else goes on a panel."
+    things = "solids"
     ordered = False
 
     def generate(self, layout: Layout, seed: int, n_objects: int) -> list[Placement]:
@@ -315,13 +322,18 @@ class SortSolids:
             parts.append(f"On a wrong panel (move it): {', '.join(wrong)}.")
         return " ".join(parts)
 
-    def detail(self, finisher: bool, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
-        if finisher and "goal_map" in aids:
-            return "Solids to sort: " + ", ".join(f"{t} onto {goals[t]}" for t in targets) + "."
-        if finisher:  # the paper's: the solids and the panels; matching the colours is Bob's job
-            panels = ", ".join(f"{c}_panel" for c in PANEL_COLORS)
-            return f"Solids to sort: {', '.join(targets)}. Colour panels on table_0: {panels}."
-        return "Help Bob sort the listed solids onto the coloured panels on table_0: find them, fetch them and hand them over."
+    def finisher_brief(self) -> str:
+        return "Put each listed solid on the panel of its colour."
+
+    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        if "goal_map" in aids:
+            listed = ", ".join(f"{t} onto {goals[t]}" for t in targets)
+        else:  # the paper's: the solids and the panels; matching the colours is the finisher's job
+            listed = f"{', '.join(targets)}; the colour panels: {', '.join(f'{c}_panel' for c in PANEL_COLORS)}"
+        return (
+            f"Put every solid on the list on the panel of its colour on {b.table}. {ask(b, 'solids')} "
+            f"The list: {listed}. Nothing that is not on the list goes onto a panel."
+        )
 
 
 # --------------------------------------------------------------------------- Make Sandwich
@@ -363,7 +375,7 @@ class MakeSandwich:
     """
 
     id = "make_sandwich"
-    brief = "Make the sandwich on the menu: stack its ingredients on the cutting board on table_0, bottom to top, in order."
+    things = "ingredients"
     ordered = True
 
     def menu(self, n_objects: int, rng: np.random.Generator) -> tuple[str, tuple[str, ...]]:
@@ -431,7 +443,11 @@ class MakeSandwich:
             parts.append("The sandwich is complete.")
         return " ".join(parts)
 
-    def detail(self, finisher: bool, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
-        if finisher:
-            return f"Menu, bottom to top, on the cutting board: {', '.join(targets)}."
-        return "Help Bob make a sandwich on the cutting board on table_0: find the ingredients he asks for, fetch them and hand them over."
+    def finisher_brief(self) -> str:
+        return "Make the sandwich on the menu on the cutting board."
+
+    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+        return (
+            f"Stack the menu's ingredients on the cutting board on {b.table}, bottom to top in the menu's order. {ask(b, 'ingredients')} "
+            f"The menu, bottom to top: {', '.join(targets)}. Nothing that is not on the menu goes onto the board."
+        )
