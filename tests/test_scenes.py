@@ -8,13 +8,15 @@ from __future__ import annotations
 import copy
 import json
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from mhrc.world import assets
 from mhrc.world.arm import HOME
-from mhrc.world.layouts import ARM_REACH, FAR_SLOT, SCENES_DIR, LayoutError, parse_layout
+from mhrc.agents.llm_policy import load_template
+from mhrc.world.layouts import ARM_REACH, FAR_SLOT, SCENES_DIR, LayoutError, load_layout, parse_layout
 from mhrc.world.robots import KINDS, TEAM
 from mhrc.world.scene import LAYOUTS, occupancy
 from mhrc.world.sim import Sim
@@ -79,10 +81,38 @@ def test_bobs_slots_and_goal_fixtures_respect_his_reach(scene: str) -> None:
     for x, y in lay.near_slots:
         assert 0.3 <= math.hypot(x - bx, y - by) <= ARM_REACH
     for x, y in lay.far_slots:
-        assert math.hypot(x - bx, y - by) >= FAR_SLOT
+        assert math.hypot(x - bx, y - by) > FAR_SLOT
     for task in TASKS.values():
         for fx in task.fixtures(lay):
             assert 0.3 <= math.hypot(fx.center[0] - bx, fx.center[1] - by) <= ARM_REACH, (task.id, fx.name)
+
+
+@pytest.mark.parametrize("path", sorted(SCENES_DIR.glob("*.json")), ids=lambda p: p.stem)
+def test_what_lies_out_of_bobs_reach_lies_beyond_the_pick_distance_his_prompt_gives(path: Path) -> None:
+    """Bob's prompt (as the paper's appendix) says he picks best within 1 m of him, and where he
+    is, in his prompt, is his arm base (the layout's bob.base; a physics test below checks that
+    the world tells him so): every far slot of every shipped layout file lies beyond 1 m of it."""
+    assert "no more than 1 m away from you" in load_template("bob", "system").template, "the prompt's figure changed: so must FAR_SLOT"
+    assert FAR_SLOT == 1.0
+    data = json.loads(path.read_text())
+    bx, by, _ = data["bob"]["base"]
+    for i, (x, y) in enumerate(data["bob"]["far_slots"]):
+        assert math.hypot(x - bx, y - by) > FAR_SLOT, f"{path.name}: bob.far_slots.{i}"
+    load_layout(path)  # and the file loads: the schema holds it to the same rule (next test)
+
+
+@pytest.mark.parametrize(
+    ("far", "distance"),
+    [([-2.75, 0.0], "1.000"), ([-2.8, 0.3], "0.996"), ([-3.0, -0.3], "0.808")],
+)
+def test_a_far_slot_within_1_m_of_bob_is_refused_naming_the_file_and_field(tmp_path: Path, far: list[float], distance: str) -> None:
+    data = copy.deepcopy(_kitchen())
+    data["bob"]["far_slots"] = [data["bob"]["far_slots"][0], far]
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(LayoutError) as exc:
+        load_layout(path)
+    assert str(exc.value).startswith(f"{path}: bob.far_slots.1: {far} is {distance} m from Bob's arm base; far slots lie beyond 1.0 m from it"), exc.value
 
 
 @pytest.mark.parametrize("scene", sorted(LAYOUTS))
@@ -166,7 +196,7 @@ def _index(name: str) -> int:
     [
         (lambda d: d["bob"].update(base=[-4.2, 0.0, 0.7]), "bob.base: [-4.2, 0.0, 0.7] is not on table_0"),
         (lambda d: d["bob"].update(near_slots=[[-3.0, 0.4]]), "bob.near_slots.0: [-3.0, 0.4] is 0.85 m from Bob's arm base; near slots lie 0.3 to 0.59 m from it"),
-        (lambda d: d["bob"].update(far_slots=[[-3.0, -0.3]]), "bob.far_slots.0: [-3.0, -0.3] is 0.81 m from Bob's arm base; far slots lie at least 0.9 m from it"),
+        (lambda d: d["bob"].update(far_slots=[[-3.0, -0.3]]), "bob.far_slots.0: [-3.0, -0.3] is 0.808 m from Bob's arm base; far slots lie beyond 1.0 m from it"),
         (lambda d: d["bob"].update(goal_area=[-3.3, 0.0, 0.3, 0.3]), "bob.goal_area: [-3.3, 0.0, 0.3, 0.3] is too small"),
         (lambda d: d["bob"].update(goal_area=[-3.1, 0.0, 0.5, 0.4]), "bob.goal_area: [-3.1, 0.0, 0.5, 0.4]: its corner [-2.85, -0.2] is beyond 0.8 m"),
         (lambda d: _named(d, "microwave").update(stand_poses=[]), f"furniture.{_index('microwave')}.stand_poses: microwave has none"),
@@ -263,6 +293,8 @@ def test_bob_picks_from_his_near_slots_and_not_from_his_far_ones(scene: str) -> 
         bob, lay = sim.bots["bob"], sim.layout
         table = lay.get(lay.bob_table)
         assert table is not None
+        arm_base = sim.observe("bob", 0).status.arm_base  # where Bob's prompt says he is ("your base is fixed at ...")
+        assert arm_base is not None and arm_base[:2] == pytest.approx(lay.bob_base[:2])
         obj = next(o for o in sim.objects.values() if o.on == lay.bob_table)
         for slots, can in ((lay.near_slots, True), (lay.far_slots, False)):
             for x, y in slots:
@@ -280,3 +312,30 @@ def test_bob_picks_from_his_near_slots_and_not_from_his_far_ones(scene: str) -> 
                 else:
                     assert out.code == OutcomeCode.TOO_FAR
                 bob.set_arm(HOME)
+
+
+@pytest.mark.parametrize("scene", sorted(LAYOUTS))
+def test_alice_fetches_from_every_far_slot(scene: str) -> None:
+    """What lies out of Bob's reach is Alice's to fetch: from the stand pose of his table nearest
+    to it (the heuristic's choice), her pick succeeds at every far slot. Bases stop exactly
+    (exact_motion): the test is about reach, not noise."""
+    with Sim(task="pack_objects", scene=scene, seed=0, n_objects=6, aids=("exact_motion",)) as sim:
+        alice, lay = sim.bots["alice"], sim.layout
+        table = lay.get(lay.bob_table)
+        assert table is not None
+        obj = next(o for o in sim.objects.values() if o.on == lay.bob_table)
+        sim.known["alice"].add(obj.name)
+        for x, y in lay.far_slots:
+            for other in sim.objects.values():  # nothing else on the table in the way
+                if other is not obj and other.on == lay.bob_table:
+                    other.on = "nowhere"
+                    sim.world.rest(other, 50.0, 50.0, 0.0)
+            obj.on, obj.inside, obj.held_by = lay.bob_table, False, None
+            sim.world.rest(obj, x, y, table.top)
+            pose = min(range(len(table.stand_poses)), key=lambda i: math.hypot(table.stand_poses[i][0] - x, table.stand_poses[i][1] - y))
+            assert sim.execute("alice", Navigate(target=lay.bob_table, stand_pose=pose)).succeeded
+            out = sim.execute("alice", Pick(obj=obj.name))
+            assert out.succeeded, ((x, y), out.feedback)
+            alice.release()
+            obj.held_by = None
+            alice.set_arm(HOME)

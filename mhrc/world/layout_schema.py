@@ -35,7 +35,8 @@ STAND_OFFSET = 0.45  # base centre to furniture edge at a stand pose
 HALF_PI = math.pi / 2
 ROBOT_CLEARANCE = 0.3  # a stand pose or start must be this far from walls and furniture
 ARM_REACH = 0.62  # Bob's conservative horizontal reach (robots.KINDS["tabletop_arm"].reach; a test keeps them equal)
-FAR_SLOT = 0.9  # far slots lie at least this far from Bob's arm base: no top-down pose reaches them
+FAR_SLOT = 1.0  # far slots lie beyond this from Bob's arm base, his position in his prompt: it tells him he picks best within 1 m
+# (the paper's appendix: ideal pick distance about 1 m), so what the task puts "out of his reach" must lie beyond it
 GOAL_CORNER_REACH = 0.8  # every corner of the goal area lies within this of Bob's arm base
 PANELS = (0.34, 0.22)  # the sort task's six panels, 3 x 2 at a 0.12 m pitch: their extent
 PANEL_CENTRES = (0.12, 0.06)  # the panels' centres lie within +- these of the goal area's centre
@@ -391,8 +392,11 @@ class LayoutFile(_Strict):
             if not 0.3 <= dist(x, y) <= ARM_REACH - 0.03:
                 raise ValueError(f"bob.near_slots.{i}: {[x, y]} is {dist(x, y):.2f} m from Bob's arm base; near slots lie 0.3 to {ARM_REACH - 0.03:.2f} m from it")
         for i, (x, y) in enumerate(self.bob.far_slots):
-            if dist(x, y) < FAR_SLOT:
-                raise ValueError(f"bob.far_slots.{i}: {[x, y]} is {dist(x, y):.2f} m from Bob's arm base; far slots lie at least {FAR_SLOT} m from it")
+            if dist(x, y) <= FAR_SLOT:
+                raise ValueError(
+                    f"bob.far_slots.{i}: {[x, y]} is {dist(x, y):.3f} m from Bob's arm base; far slots lie beyond {FAR_SLOT} m from it "
+                    "(his prompt says he picks best within 1 m, so an object out of his reach must lie farther)"
+                )
         gx, gy, gsx, gsy = self.bob.goal_area
         where = f"bob.goal_area: {list(self.bob.goal_area)}"
         if gsx < PANELS[0] or gsy < PANELS[1] or gsx * gsy < MIN_GOAL_AREA:

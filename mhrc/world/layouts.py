@@ -49,8 +49,10 @@ A stand pose given by side stands STAND_OFFSET from that edge, facing the furnit
 piece of furniture has a stand pose (agents read furniture without one as a task fixture).
 
 Bob's slots and goal area are checked against his reach (ARM_REACH from his arm base): near
-slots 0.3 m to ARM_REACH - 0.03, far slots FAR_SLOT or more (beyond any pose his arm has),
-the goal area at least the sort task's six panels (0.34 x 0.22 m) and the area of a tray that
+slots 0.3 m to ARM_REACH - 0.03; far slots beyond FAR_SLOT (1 m: his prompt, as the paper's
+appendix, says he picks best within 1 m of him, and where he is, there, is his arm base, so
+an object the task puts out of his reach lies farther; beyond any pose his arm has, too); the
+goal area at least the sort task's six panels (0.34 x 0.22 m) and the area of a tray that
 holds six objects, with its centre region (the panels' centres) 0.3 m to ARM_REACH and its
 corners within GOAL_CORNER_REACH (a tray is filled from a corner). Stand poses and starts keep
 clear of where a drawer stands when open and of the floor a door sweeps (the square of its
