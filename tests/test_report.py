@@ -10,7 +10,8 @@ from typing import Any
 
 import pytest
 
-from mhrc.eval.paper import PAPER_FIGURES, paper_model
+from mhrc.eval.html import html_summary
+from mhrc.eval.paper import PAPER_FIGURES, Why, paper_match, paper_model
 
 from mhrc.eval.report import summary_csv, summary_markdown
 
@@ -23,7 +24,7 @@ GPT4O_PACK_NO_MOBILE = "0.92 / 0.94 / 37.00 / 28.33"  # Table II, w/o mobile rob
 
 def _rows(method: str, *, ablation: str = "none", fidelity: str = "paper", task: str = "pack_objects", scenes: tuple[str, ...] = SCENES,
           objects: tuple[int, ...] = (3, 4, 5, 6), repeats: int = 1, horizon: int = 50, history_cap: int | None = None,
-          schedule: str = "sequential") -> list[dict[str, Any]]:  # fmt: skip
+          schedule: str = "sequential", **extra: Any) -> list[dict[str, Any]]:  # fmt: skip
     rows = []
     for repeat in range(repeats):
         for i, (scene, n) in enumerate((s, n) for s in scenes for n in objects):
@@ -36,7 +37,7 @@ def _rows(method: str, *, ablation: str = "none", fidelity: str = "paper", task:
                 "action_steps": 15 + i, "lower_bound": 9, "messages": 2, "llm_calls": 90, "prompt_tokens": 9000,
                 "completion_tokens": 700, "failed_actions": {"pick": i % 2}, "wall_time": 1.0, "parse_failures": i % 2,
                 "llm_unreachable": 0, "rejected_actions": 0, "valid": True, "invalid_reason": None, "schedule": schedule,
-            })  # fmt: skip
+            } | extra)  # fmt: skip
     return rows
 
 
@@ -58,23 +59,36 @@ def test_the_bootstrap_interval_is_deterministic_and_contains_the_mean() -> None
 
 
 @pytest.mark.parametrize(
-    ("method", "model"),
+    ("spec", "base_url", "model"),
     [
-        ("openai:gpt-4o", "GPT-4o"),
-        ("azure:GPT-4o-2024-08-06", "GPT-4o"),
-        ("openai:gpt-4o-mini", None),
-        ("openai:gpt-3.5-turbo", "GPT-3.5-turbo"),
-        ("openai:gpt-3.5-turbo-0125", "GPT-3.5-turbo"),
-        ("ollama:llama3.1:8b", "Llama-3.1-8B"),
-        ("vllm:meta-llama/Llama-3.1-8B-Instruct", "Llama-3.1-8B"),
-        ("ollama:llama3.1:70b", None),
-        ("ollama:qwen2.5:7b", None),
-        ("heuristic", None),
-        ("replay:runs/gpt-4o", None),
+        ("openai:gpt-4o", None, "GPT-4o"),
+        ("openai:gpt-4o-2024-08-06", None, "GPT-4o"),
+        ("openai:gpt-4o@https://api.openai.com/v1/", None, "GPT-4o"),  # OpenAI's own URL, spelled out
+        ("openai:gpt-4o", "https://api.openai.com/v1", "GPT-4o"),
+        ("openai:gpt-4o-mini", None, None),
+        ("openai:gpt-3.5-turbo", None, "GPT-3.5-turbo"),
+        ("openai:gpt-3.5-turbo-0125", None, "GPT-3.5-turbo"),
+        ("vllm:meta-llama/Llama-3.1-8B-Instruct", None, "Llama-3.1-8B"),
+        ("vllm:meta-llama/Meta-Llama-3.1-8B-Instruct@http://gpu:8000/v1", None, "Llama-3.1-8B"),  # open weights: any server
+        ("ollama:llama3.1:8b-instruct-fp16", None, "Llama-3.1-8B"),
+        # a server other than OpenAI's only says its model is called so
+        ("openai:gpt-4o@http://127.0.0.1:8080/v1", None, None),
+        ("openai:gpt-4o", "http://127.0.0.1:8080/v1", None),
+        ("vllm:gpt-4o", None, None),
+        ("azure:GPT-4o-2024-08-06", "https://example.openai.azure.com/v1", None),
+        # quantised Llama builds and local files
+        ("ollama:llama3.1:8b", None, None),  # Ollama's default tag is a 4-bit quantisation
+        ("vllm:hugging-quants/Meta-Llama-3.1-8B-Instruct-AWQ-INT4", None, None),
+        ("lmstudio:meta-llama-3.1-8b-instruct", None, None),
+        ("gguf:models/Llama-3.1-8B-Instruct-Q4_K_M.gguf", None, None),
+        ("ollama:llama3.1:70b", None, None),
+        ("ollama:qwen2.5:7b", None, None),
+        (None, None, None),  # the heuristic
+        ("replay:runs/gpt-4o", None, None),
     ],
 )
-def test_models_are_matched_loosely(method: str, model: str | None) -> None:
-    assert paper_model(method) == model
+def test_which_specs_are_the_papers_models(spec: str | None, base_url: str | None, model: str | None) -> None:
+    assert paper_model(spec, base_url) == model
 
 
 def test_paper_figures_stand_beside_a_matching_setting_and_nowhere_else() -> None:
@@ -102,7 +116,8 @@ def test_paper_figures_stand_beside_a_matching_setting_and_nowhere_else() -> Non
             [{k: v for k, v in r.items() if k != "schedule"} for r in _rows("openai:gpt-4o")], "the lockstep schedule"),
         "two scenes": (_rows("openai:gpt-4o", scenes=SCENES[:2]), "not the paper grid: 2 scene(s)"),
         "other object counts": (_rows("openai:gpt-4o", objects=(3, 4)), "not the paper grid: scene bathroom has object counts 3, 4"),
-        "an ablation Llama was not run with": (_rows("ollama:llama3.1:8b", ablation="no_feedback"), "reports no pack_objects figures for Llama-3.1-8B"),
+        "an ablation Llama was not run with": (
+            _rows("vllm:meta-llama/Llama-3.1-8B-Instruct", ablation="no_feedback"), "reports no pack_objects figures for Llama-3.1-8B"),
     }
     for what, (mine, why) in not_matching.items():
         text = summary_markdown(mine)
@@ -111,14 +126,82 @@ def test_paper_figures_stand_beside_a_matching_setting_and_nowhere_else() -> Non
         assert all(r["paper_model"] == "" for r in csv.DictReader(io.StringIO(summary_csv(mine)))), what
 
     # side by side, each setting gets only its own match
-    both = _rows("openai:gpt-4o") + _rows("openai:gpt-4o", fidelity="aids:all") + _rows("ollama:llama3.1:8b")
+    both = _rows("openai:gpt-4o") + _rows("openai:gpt-4o", fidelity="aids:all") + _rows("ollama:llama3.1:8b-instruct-fp16")
     table_one = summary_markdown(both).split("## Table II")[0]
     header = next(line for line in table_one.splitlines() if line.startswith("| task |"))
     assert header == (
-        "| task | ollama:llama3.1:8b · paper | paper Llama-3.1-8B (Table I) | openai:gpt-4o · aids:all | "
+        "| task | ollama:llama3.1:8b-instruct-fp16 · paper | paper Llama-3.1-8B (Table I) | openai:gpt-4o · aids:all | "
         "openai:gpt-4o · paper | paper GPT-4o (Table I) |"
     )
     assert "0.00 / 0.20 / 50.00 / 40.33" in table_one  # Llama-3.1-8B, Pack Objects
+
+
+NO_PAPER = "No paper figures beside this run: "
+
+
+def _no_paper_cells(rows: list[dict[str, Any]]) -> str:
+    """The summary of rows that must get no paper cells (markdown, CSV and HTML); its markdown."""
+    text = summary_markdown(rows)
+    assert "(Table I)" not in text and "(Table II)" not in text and "paper Succ" not in text and GPT4O_PACK not in text
+    assert all(r["paper_model"] == "" for r in csv.DictReader(io.StringIO(summary_csv(rows))))
+    return text
+
+
+def test_the_papers_figures_stand_only_beside_a_whole_team_of_the_papers_model_with_its_prompts() -> None:
+    """Issue 31: `--llm alice=openai:gpt-4o` (Bob and David the heuristic) was set beside the paper's GPT-4o."""
+    for method in ("openai:gpt-4o", "alice=openai:gpt-4o,bob=openai:gpt-4o,david=openai:gpt-4o", "bob=openai:gpt-4o,openai:gpt-4o"):
+        text = summary_markdown(_rows(method))
+        assert "paper GPT-4o (Table I)" in text and GPT4O_PACK in text and NO_PAPER not in text, method
+    # w/o mobile robot: the team is Alice and Bob
+    no_mobile = _rows("alice=openai:gpt-4o,bob=openai:gpt-4o", ablation="no_mobile", robots=["alice", "bob"])
+    assert GPT4O_PACK_NO_MOBILE in summary_markdown(no_mobile)
+
+    cases = {
+        "alice=openai:gpt-4o": "bob and david run the heuristic, not the paper's model",
+        "alice=openai:gpt-4o,bob=openai:gpt-4o": "david runs the heuristic, not the paper's model",
+        "openai:gpt-4o,david=openai:gpt-3.5-turbo": (
+            "the robots run different models (alice openai:gpt-4o, bob openai:gpt-4o, david openai:gpt-3.5-turbo); "
+            "the paper runs one model for the whole team"),
+        "alice=openai:gpt-4o,bob=ollama:qwen2.5:7b": "bob runs ollama:qwen2.5:7b, not a model the paper reports; david runs the heuristic",
+        "heuristic": "every robot runs the heuristic, not the paper's model",
+    }  # fmt: skip
+    for method, why in cases.items():
+        assert why in _no_paper_cells(_rows(method)), method
+    text = _no_paper_cells(_rows("alice=openai:gpt-4o"))
+    line = next(x for x in text.splitlines() if x.startswith(NO_PAPER))
+    assert line == NO_PAPER + "bob and david run the heuristic, not the paper's model."  # one line, in the setting's section
+    assert text.index("### alice=openai:gpt-4o · ablation none · paper") < text.index(line)
+    assert "<p>" + NO_PAPER + "bob and david run the heuristic, not the paper&#x27;s model.</p>" in html_summary(_rows("alice=openai:gpt-4o"), [None] * 12)
+
+
+@pytest.mark.parametrize(
+    ("rows", "why"),
+    [
+        (_rows("openai:gpt-4o", prompts="my-prompts"), "custom prompt templates (--prompts my-prompts), not the paper's"),
+        (_rows("replay:runs/gpt4o/traces/a.jsonl"), "every robot replays a recorded trace (replay:runs/gpt4o/traces/a.jsonl), not the paper's model"),
+        (_rows("gguf:models/Llama-3.1-8B-Instruct-Q4_K_M.gguf"),
+         "every robot runs a local GGUF file (gguf:models/Llama-3.1-8B-Instruct-Q4_K_M.gguf), not the paper's model"),
+        (_rows("ollama:llama3.1:8b"), "every robot runs ollama:llama3.1:8b, not Meta's unquantised Llama-3.1-8B-Instruct (the paper's model)"),
+        (_rows("openai:gpt-4o@http://127.0.0.1:8080/v1"),
+         "every robot asks openai:gpt-4o@http://127.0.0.1:8080/v1: a server other than OpenAI's API, so not the paper's model"),
+        (_rows("openai:gpt-4o", base_url="http://127.0.0.1:8080/v1"), "every robot asks openai:gpt-4o: a server other than OpenAI's API"),
+        (_rows("alice=openai:gpt-4o", prompts="p", fidelity="aids:all"),  # every reason, in one line
+         "bob and david run the heuristic, not the paper's model; custom prompt templates (--prompts p), not the paper's; fidelity aids:all, not paper."),
+    ],
+    ids=["prompts", "replay", "gguf", "quantised", "own URL", "base URL", "several"],
+)
+def test_a_run_that_is_not_the_papers_model_says_why_it_has_no_paper_cells(rows: list[dict[str, Any]], why: str) -> None:
+    assert NO_PAPER + why in _no_paper_cells(rows)
+
+
+def test_any_other_setting_off_its_default_keeps_the_paper_figures_away() -> None:
+    """A setting field this module does not know (a world setting such as noise) must hold the value a row without it gets."""
+    fields = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule", "scenario", "noise")
+    paper = ("openai:gpt-4o", "none", "paper", None, 50, "free", "sequential", None, None)
+    rows, defaults = _rows("openai:gpt-4o"), dict.fromkeys(fields) | {"noise": None}
+    assert paper_match(dict(zip(fields, paper)), "pack_objects", rows, defaults).figures == PAPER_FIGURES[("GPT-4o", "none")]["pack_objects"]
+    noisy = paper_match(dict(zip(fields, (*paper[:-1], 0.1))), "pack_objects", rows, defaults)
+    assert noisy.figures is None and [m.why for m in noisy.mismatches] == [Why.SETTING] and noisy.why == "noise 0.1, not the default None"
 
 
 def test_every_paper_figure_is_there() -> None:

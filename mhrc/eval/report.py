@@ -8,9 +8,12 @@ fidelity, history cap and horizon, so that a paper-fidelity number is never aver
 aided one (nor a capped prompt with a whole one).
 
 The paper's figures are shown beside a setting's (per task) only when it is the paper's
-configuration: paper fidelity, no history cap, horizon 50, the paper grid (3 scenes, each with
-one episode per object count 3, 4, 5 and 6, or the same number of them per cell with
-`--repeats`), and a method whose model is one the paper ran, with an ablation it reports.
+configuration (`mhrc.eval.paper.paper_match`): every robot runs the same model of the paper's
+(`mhrc.eval.paper.judge_spec` says which specs are) with the default prompts, paper fidelity,
+every other field of the setting at the paper's value, the paper grid (3 scenes, each with one
+episode per object count 3, 4, 5 and 6, or the same number of them per cell with `--repeats`),
+and an ablation the paper reports. Where a setting has no paper cells, its section says why in
+one line.
 
 Beside the metrics, a "Failure diagnostics" table per setting (`mhrc.core.diagnostics`: the rows'
 `diag_*` columns); rows written before those columns existed are unknown there, never zero.
@@ -75,6 +78,21 @@ def _ci(s: dict[str, Any], name: str, digits: int) -> str:
     return f"{s[name]:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
 
 
+def matches_of(cells: dict[tuple[tuple[Any, ...], str], list[dict[str, Any]]]) -> dict[tuple[tuple[Any, ...], str], PaperMatch]:
+    """`paper_match` of every (setting, task) cell, the setting given by its field names."""
+    defaults = dict(zip(SETTING, setting_of({})))  # a row that records no field: every field's default
+    return {k: paper_match(dict(zip(SETTING, k[0])), k[1], v, defaults) for k, v in cells.items()}
+
+
+def why_no_paper(shown: list[PaperMatch]) -> str | None:
+    """The one line a setting without paper cells gets: its team's and setting's reasons (its
+    tasks' own reasons are listed per task); None when a task has paper cells or only tasks' reasons."""
+    if any(m.figures is not None for m in shown):
+        return None
+    texts = list(dict.fromkeys(x.text() for m in shown for x in m.mismatches if not x.per_task))
+    return f"No paper figures beside this run: {'; '.join(texts)}." if texts else None
+
+
 def invalid_note(rows: list[dict[str, Any]]) -> list[str]:
     bad = [r for r in rows if not is_valid(r)]
     if not bad:
@@ -104,7 +122,7 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
         "",
     ]
     cells = {k: cell_stats(v, resamples=resamples, seed=seed) for k, v in by_setting_task(valid).items()}
-    matches = {k: paper_match(k[0], k[1], v) for k, v in by_setting_task(valid).items()}
+    matches = matches_of(by_setting_task(valid))
     tasks = sorted({r["task"] for r in valid})
 
     def paper_of(setting: tuple[Any, ...], task: str) -> PaperMatch | None:
@@ -147,8 +165,8 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
               f"Mean [95% percentile bootstrap interval, {resamples} resamples, seed {seed}] over the valid episodes.", ""]  # fmt: skip
     for setting in settings:
         mine_tasks = [t for t in tasks if (setting, t) in cells]
-        shown = [matches.get((setting, t)) for t in mine_tasks]
-        paper_col = any(m is not None and m.figures is not None for m in shown)
+        shown = [matches[(setting, t)] for t in mine_tasks]
+        paper_col = any(m.figures is not None for m in shown)
         scenario = setting[SETTING.index("scenario")] is not None  # a recovery column only where a scenario ran
         head = ("| task | episodes | Succ | PS | TS | AS | TS* | AS sum | AS/robot |" + (" recovery (steps) |" if scenario else "")
                 + (" paper Succ / PS / TS / AS |" if paper_col else ""))
@@ -159,10 +177,13 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
             row = (f"| {t} | {s['episodes']} | {_ci(s, 'succ', 2)} | {_ci(s, 'ps', 2)} | {_ci(s, 'ts', 1)} | {_ci(s, 'as_ticks', 1)} | {bound} | "
                    f"{_ci(s, 'as', 1)} | {s['as_per_robot']:.1f} |" + (f" {_recovery(s)} |" if scenario else ""))
             if paper_col:
-                row += f" {paper_cell(m.figures)} ({m.title}, {m.table}) |" if m is not None and m.figures is not None else " |"
+                row += f" {paper_cell(m.figures)} ({m.title}, {m.table}) |" if m.figures is not None else " |"
             lines.append(row)
-        notes = [f"- {t}: not set beside the {m.title} figures: {m.why}" for t, m in zip(mine_tasks, shown) if m is not None and m.figures is None]
-        lines += ([""] + notes if notes else []) + [""]
+        team = why_no_paper(shown)
+        notes = [f"- {t}: not set beside the {m.title} figures: {m.why}" for t, m in zip(mine_tasks, shown)
+                 if m.figures is None and (team is None or all(x.per_task for x in m.mismatches))]  # fmt: skip
+        said = ([team] if team else []) + notes
+        lines += ([""] + said if said else []) + [""]
 
     if any(r.get("llm_calls") for r in valid):
         head = "| setting | task | LLM steps | unparsed replies | unreachable steps | rejected actions | prompt tokens | completion tokens |"
@@ -177,9 +198,10 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
     for key, title in (("scene", "scene"), ("n_objects", "object count")):
         lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS sum, AS/robot) | episodes |",
                   "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
-        for (m, a, fid, cap, hor, mode, sched, scen, v), bucket in group(valid, *SETTING, key).items():
+        for (*setting, v), bucket in group(valid, *SETTING, key).items():
             s = summarize(bucket)
-            extra = "".join(f" · {x}" for x in setting_label((m, a, fid, cap, hor, mode, sched, scen)).split(" · ")[3:])  # mode, schedule, cap, horizon, scenario
+            m, a, fid = (setting[SETTING.index(f)] for f in ("method", "ablation", "fidelity"))
+            extra = "".join(f" · {x}" for x in setting_label(tuple(setting)).split(" · ")[3:])  # mode, schedule, cap, horizon, scenario
             lines.append(f"| {m}{extra} | {a} | {fid} | {v} | {_cell(s)} | {s['episodes']} |")
         lines.append("")
     return "\n".join(lines)
@@ -254,10 +276,12 @@ def summary_csv(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed:
     diag_cols = ["diag_episodes", *(f"diag_{c}" for c in DIAG_COLUMNS)]  # means over the rows with diagnostics; empty: unknown
     w.writerow([*SETTING, "task", *COLUMNS, *ci_cols, "invalid_left_out", "paper_model", "paper_succ", "paper_ps", "paper_ts", "paper_as", *diag_cols])
     invalid = Counter((setting_of(r), r["task"]) for r in rows if not is_valid(r))
-    for (setting, task), mine in by_setting_task([r for r in rows if is_valid(r)]).items():
+    cells = by_setting_task([r for r in rows if is_valid(r)])
+    matches = matches_of(cells)
+    for (setting, task), mine in cells.items():
         s = cell_stats(mine, resamples=resamples, seed=seed)
-        m = paper_match(setting, task, mine)
-        paper: list[Any] = [m.model, *m.figures] if m is not None and m.figures is not None else ["", "", "", "", ""]
+        m = matches[(setting, task)]
+        paper: list[Any] = [m.model, *m.figures] if m.figures is not None else ["", "", "", "", ""]
         cis = ["" if s[f"{name}_ci"] is None else round(x, 4) for name in CI_METRICS for x in (s[f"{name}_ci"] or (0.0, 0.0))]
         d = summarize_diagnostics(mine)
         diag = [d["known"], *("" if d["mean"][c] is None else d["mean"][c] for c in DIAG_COLUMNS)]
