@@ -164,8 +164,8 @@ def test_a_rejections_code_decides_its_kind_whatever_its_text(code: str, kind: s
 def _scripted(body: dict[str, Any]) -> ModelReply:
     """Bob's first reply has no command; David tries to pick (he has no arm); Alice navigates
     twice to furniture that does not exist, then messages Bob; everything else waits."""
-    system, user = body["messages"][0]["content"], body["messages"][-1]["content"]
-    step = int(re.findall(r"Step (\d+):", user)[-1])
+    system = body["messages"][0]["content"]
+    step = ScriptedModelServer.step_of(body)
     robot = system.split()[2].rstrip(",").lower()  # "You are Bob, ..."
     script = {
         ("bob", 0): "Let me think about the tray first.",

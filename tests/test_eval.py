@@ -239,10 +239,9 @@ class ScriptedModel:
         self.url = self.server.url
 
     def answer(self, body: dict[str, Any]) -> ModelReply:
-        import re
-
-        system, user = body["messages"][0]["content"], body["messages"][-1]["content"]
-        step = int(re.findall(r"Step (\d+):", user)[-1])
+        system = body["messages"][0]["content"]
+        step = ScriptedModelServer.step_of(body)
+        assert step is not None
         with self.lock:
             if step < self.last_step:
                 self.episode += 1

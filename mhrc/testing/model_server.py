@@ -4,6 +4,7 @@ from a script, a real threaded HTTP server standing in for a model's judgement."
 from __future__ import annotations
 
 import json
+import re
 import threading
 import time
 import uuid
@@ -242,6 +243,19 @@ class ScriptedModelServer:
         if not text.startswith("You are "):
             return None
         return text.removeprefix("You are ").split(",")[0].split()[0].strip(".").lower() or None
+
+    @staticmethod
+    def step_of(request: Mapping[str, Any]) -> int | None:
+        """The step a request's prompt plans, read from its action history (the default prompts
+        show no step number, as the paper's): 0 before the robot's first action, else one after
+        its latest; None for a prompt without an action history (no_history, your own templates)."""
+        messages = request.get("messages") or []
+        text = str(messages[-1].get("content") or "") if messages else ""
+        if "Your actions so far" not in text:
+            return None
+        actions = text.split("Your actions so far", 1)[1]
+        latest = re.findall(r"\(latest\) step (\d+):", actions)
+        return int(latest[-1]) + 1 if latest else 0
 
     def requests_of(self, robot: str) -> list[dict[str, Any]]:
         """The recorded requests of one robot, in arrival order."""
