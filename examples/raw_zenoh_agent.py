@@ -6,8 +6,8 @@ JSON Schemas come from `mhrc schema`):
     python examples/raw_zenoh_agent.py --connect tcp/127.0.0.1:7447 --run demo --robot david
 
 1. open a zenoh session in client mode, connected to the world's endpoint, scouting off;
-2. subscribe to its ack, result and turn keys and to world/event, then `get` the attach key
-   with an AttachRequest and declare the liveliness token alive/robot/<robot>;
+2. subscribe to its ack, result and turn keys and to world/event, declare the liveliness
+   token alive/robot/<robot>, then `get` the attach key with an AttachRequest;
 3. loop: choose an action from the observation, put an ActionRequest for the observation's
    tick, await the ack (same goal_id), then the result, whose observation is the next one;
    until a result says done or episode_done arrives.
@@ -164,6 +164,8 @@ class Agent:
         """Attach (again) and return the observation to plan on; Stop when the episode ended."""
         request = json.dumps({"v": PROTOCOL_VERSION, "kind": "attach_request", "robot": self.robot, "agent_id": self.agent_id})
         self.box.turn = None  # a Turn from before this attach is stale
+        if self.token is None:  # before attaching: the world detaches an attached robot whose token does not come
+            self.token = self.session.liveliness().declare_token(self.alive_key)
         deadline = time.monotonic() + timeout
         while True:
             reply = None
@@ -176,11 +178,11 @@ class Agent:
                 raise Failure(f"no world answered on {self.base}/attach within {timeout:.0f} s")
             time.sleep(0.3)
         if not reply.get("accepted"):
+            self.token.undeclare()  # refused: this token must not stand for a robot another agent drives
+            self.token = None
             if reply.get("reason") == EPISODE_OVER:
                 raise Stop("the episode is over")
             raise Failure(f"attach refused: {reply.get('reason')}")
-        if self.token is None:  # before waiting for a turn: the world counts the robot as attached from now
-            self.token = self.session.liveliness().declare_token(self.alive_key)
         print(f"attached {self.robot} as {self.agent_id} at tick {reply['tick']} (horizon {reply['horizon']})", flush=True)
         if reply.get("wait_turn"):  # sequential schedule: the observation comes with a Turn
             if not self.box.wait(lambda: self.box.turn is not None or self.box.done is not None or self.box.world_gone, self.step_timeout):

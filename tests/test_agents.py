@@ -7,7 +7,7 @@ import contextlib
 
 import pytest
 
-from mhrc.agents.agent import AttachRejected, RobotAgent
+from mhrc.agents.agent import AttachRejected, RobotAgent, WorldGone
 from mhrc.agents.scripted import ScriptedLLMPolicy
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.endpoints import endpoint, free_port
@@ -117,5 +117,72 @@ async def test_a_result_overtaken_by_episode_done_is_still_recorded_when_the_wor
         else:  # the world ended without executing it: the agent does not wait for a result
             assert policy.results == [] and not world.sent_result.is_set()
     finally:
+        await agent_bus.close()
+        await world_bus.close()
+
+
+async def test_an_agent_declares_its_liveliness_token_before_it_attaches() -> None:
+    """Issue 31: the world's deadline for an agent's token starts at its attach, so the token must
+    exist by then, whatever the machine's load: a world asks the router for it inside its attach
+    handler and finds it. A refused agent withdraws its token (it must not stand for a robot
+    another agent drives): the world's liveliness subscriber sees it go."""
+    port = free_port()
+    world_bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    agent_bus = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    try:
+        keys = Keys("tokenfirst")
+        token = keys.alive_robot("bob")
+        at_attach: list[list[str]] = []
+        gone = asyncio.Event()
+
+        async def on_attach(key: str, params: dict[str, str], payload: bytes) -> AttachReply:
+            at_attach.append(await world_bus.alive(token))  # the router's tokens as the attach query arrives
+            return AttachReply(robot="bob", accepted=False, reason="a world that only looks")
+
+        world_bus.serve(keys.attach("bob"), on_attach)
+        world_bus.watch_liveliness(token, lambda s: None if s.is_put else gone.set())
+        await served(agent_bus, keys.attach("bob"))
+        with pytest.raises(AttachRejected, match="only looks"):
+            await asyncio.wait_for(RobotAgent(agent_bus, ScriptedLLMPolicy("bob", []), run="tokenfirst", robot="bob").run(), 30)
+        assert at_attach == [[token]], "the agent's token did not exist when its attach reached the world"
+        await asyncio.wait_for(gone.wait(), 10)  # withdrawn on the refusal, while the agent's session stays open
+    finally:
+        await agent_bus.close()
+        await world_bus.close()
+
+
+async def test_an_agent_whose_world_vanishes_before_answering_its_attach_fails_fast() -> None:
+    """The world's token goes away while the agent's attach is unanswered (a world killed as it
+    attached the robot; a robot's token no longer says its agent holds its reply, since agents
+    declare it before attaching): the agent probes the world's port, finds nothing, and ends with
+    WorldGone, as it does when the world vanishes during any other exchange, instead of asking
+    until its attach timeout."""
+    port = free_port()
+    world_bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    agent_bus = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    keys = Keys("vanishing")
+    asked, release = asyncio.Event(), asyncio.Event()
+
+    async def on_attach(key: str, params: dict[str, str], payload: bytes) -> None:
+        asked.set()
+        await release.wait()  # never answered while the world lives
+
+    agent = None
+    try:
+        world_bus.serve(keys.attach("bob"), on_attach)
+        world_bus.declare_token(keys.alive_world)
+        await served(agent_bus, keys.attach("bob"))
+        robot = RobotAgent(agent_bus, ScriptedLLMPolicy("bob", []), run="vanishing", robot="bob", attach_timeout=120)
+        agent = asyncio.create_task(robot.run())
+        await asyncio.wait_for(asked.wait(), 30)
+        await world_bus.close()  # the world and its port go
+        with pytest.raises(WorldGone, match="awaited its attach reply"):
+            await asyncio.wait_for(agent, 60)  # far sooner than the attach timeout
+    finally:
+        release.set()
+        if agent is not None and not agent.done():
+            agent.cancel()
+            with contextlib.suppress(asyncio.CancelledError, WorldGone):
+                await agent
         await agent_bus.close()
         await world_bus.close()

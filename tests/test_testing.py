@@ -238,7 +238,7 @@ async def test_a_world_with_agents_attached_by_hand(mhrc_world: Any) -> None:
 
 async def test_attached_returns_once_the_robots_named_are_attached(mhrc_world: Any) -> None:
     """The world waits for all three robots: the first two stay attached meanwhile, and
-    `attached` sees their liveliness tokens; the episode starts when the third comes."""
+    `attached` sees the world accept them; the episode starts when the third comes."""
     async with mhrc_world(seed=0, horizon=1) as world:
         with pytest.raises(ValueError, match="no such robot in this episode: zed"):
             await world.attached("zed")

@@ -47,8 +47,8 @@ async def served(bus: Bus, key: str, timeout: float = TIMEOUT) -> None:
 
 
 async def robots_alive(bus: Bus, run: str, robots: set[str], timeout: float = TIMEOUT) -> None:
-    """Return once `bus` sees the liveliness token of every robot named (mhrc.testing's wait, as a
-    test failure rather than a timeout)."""
+    """Return once `bus` sees the world accept the attach of every robot named (mhrc.testing's
+    wait, as a test failure rather than a timeout)."""
     try:
         await robots_attached(bus, run, robots, timeout)
     except TimeoutError as exc:

@@ -126,7 +126,6 @@ class RobotAgent:
         self._done = asyncio.Event()
         self._world_gone = asyncio.Event()
         self._over = False  # the world said the episode is over
-        self._alive = False  # whether this agent's liveliness token is declared
         self._turn: asyncio.Future[Turn] | None = None  # set while attaching, for a world that says wait_turn
         self._clock = asyncio.Event()  # set on every tick the world closes (the stepped schedules)
         self._via_turn = False  # whether the last attach's observation came with a Turn (a fresh turn, not a repeat)
@@ -184,7 +183,13 @@ class RobotAgent:
         self.bus.subscribe(k.world_event, self._on_event)
         self.bus.subscribe(k.turn(self.robot), self._on_turn)  # before attaching: a turn may come before the reply
         self.bus.watch_liveliness(k.alive_world, self._on_world_liveliness)
-        attached = await self._attach()
+        # presence before the attach: the world's deadline for it starts at the attach, and must not race it
+        self.bus.declare_token(k.alive_robot(self.robot))
+        try:
+            attached = await self._attach()
+        except AttachRejected:  # another agent may drive this robot: this token must not stand for it
+            self.bus.undeclare_token(k.alive_robot(self.robot))
+            raise
         while attached is not None and not self._done.is_set():
             obs = attached
             decision = await self._decide(obs)
@@ -280,7 +285,9 @@ class RobotAgent:
         """Attach and return the first observation to plan on; None when the episode ended
         while this robot waited for its turn. `again`: the world was there and its token went
         away; each unanswered attach probes whether it still listens (WorldGone when not: the
-        probe before the first attempt can still connect to a world that is dying)."""
+        probe before the first attempt can still connect to a world that is dying). A world
+        whose token goes away while an attach is unanswered is handled as during any other
+        exchange (_reattach)."""
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.attach_timeout
         request = AttachRequest(robot=self.robot, agent_id=self.agent_id)
@@ -294,9 +301,6 @@ class RobotAgent:
                         reply = decode(replies[0], AttachReply)
                     except ProtocolError as exc:
                         raise AgentError(f"the world sent a malformed attach reply: {exc}") from None
-                    if reply.accepted and not self._alive:
-                        self.bus.declare_token(self.keys.alive_robot(self.robot))  # before any wait for the turn
-                        self._alive = True
                     if reply.accepted and reply.wait_turn:
                         self._log.info("attached, waiting for the turn", tick=reply.tick)
                         try:
@@ -309,6 +313,8 @@ class RobotAgent:
                         raise AttachRejected(f"the world refused {self.robot}: {reply.reason}")
                     self._log.info("attached", tick=reply.tick)
                     return reply.observation
+                if not again and self._world_gone.is_set():  # its token went while this attach went unanswered: probe, attach again
+                    return await self._reattach("its attach reply")
                 if loop.time() >= deadline:
                     raise WorldGone(f"no world answered for run {self.keys.run!r} within {self.attach_timeout:.0f} s")
                 if again and await asyncio.to_thread(_listening, self.endpoint) is False:

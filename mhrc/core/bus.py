@@ -78,6 +78,7 @@ class Bus:
         self._loop = loop
         self._entities: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
+        self._tokens: dict[str, Any] = {}  # key -> this session's liveliness token on it
         self._closed = False
         self.connected_to: tuple[str, ...] = ()  # the endpoints a client session was opened to
 
@@ -130,6 +131,7 @@ class Bus:
                 log.debug("undeclare publisher failed", error=str(exc))
         self._entities.clear()
         self._publishers.clear()
+        self._tokens.clear()
         await asyncio.to_thread(self._session.close)
 
     async def __aenter__(self) -> Bus:
@@ -222,7 +224,16 @@ class Bus:
 
     # ------------------------------------------------------------------ liveliness
     def declare_token(self, key: str) -> None:
-        self._entities.append(self._session.liveliness().declare_token(key))
+        token = self._session.liveliness().declare_token(key)
+        self._entities.append(token)
+        self._tokens[key] = token
+
+    def undeclare_token(self, key: str) -> None:
+        """Withdraw this session's token on `key` (declare_token's), if it holds one."""
+        token = self._tokens.pop(key, None)
+        if token is not None:
+            self._entities.remove(token)
+            token.undeclare()
 
     def watch_liveliness(self, key_expr: str, handler: Handler, *, on_thread: bool = False) -> None:
         """`handler(Sample)` with is_put True when a token appears, False when it vanishes

@@ -17,7 +17,7 @@ from mhrc.agents.policy import Policy
 from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.keys import Keys
 from mhrc.core.metrics import EpisodeMetrics, from_trace
-from mhrc.core.protocol import EpisodeDone
+from mhrc.core.protocol import EpisodeDone, ProtocolError, RobotAttached, RobotDetached, WorldState, decode, decode_event
 from mhrc.core.trace import read_trace
 from mhrc.run.attach import run_agent
 from mhrc.run.config import EpisodeConfig
@@ -39,26 +39,42 @@ def _default_trace() -> Path:
 
 
 async def robots_attached(bus: Bus, run: str, robots: set[str], timeout: float) -> None:
-    """Return once `bus` sees the liveliness token of every robot named (each agent declares its
-    token when the world accepted its attach); TimeoutError naming the missing ones after `timeout`."""
+    """Return once the world of `run` has accepted the attach of every robot named, as `bus` sees it: its
+    `robot_attached` events, and its state (`world/state`) for the attaches before this call. A robot's liveliness
+    token says less: an agent declares it before it attaches. TimeoutError naming the missing ones after `timeout`."""
     keys = Keys(run)
-    seen: set[str] = set()
-    ready = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    attached: set[str] = set()
+    news = asyncio.Event()
 
-    def on_token(sample: Sample) -> None:
-        robot = keys.robot_of(sample.key)
-        if sample.is_put:
-            seen.add(robot)
-        else:
-            seen.discard(robot)
-        if robots <= seen:
-            ready.set()
+    def on_event(sample: Sample) -> None:
+        try:
+            event = decode_event(sample.payload)
+        except ProtocolError:
+            return
+        if isinstance(event, RobotAttached):
+            attached.add(event.robot)
+        elif isinstance(event, RobotDetached):
+            attached.discard(event.robot)
+        news.set()
 
-    bus.watch_liveliness(keys.alive_any_robot, on_token)
-    try:
-        await asyncio.wait_for(ready.wait(), timeout)
-    except TimeoutError:
-        raise TimeoutError(f"robots {sorted(robots - seen)} did not attach within {timeout:.0f} s") from None
+    bus.subscribe(keys.world_event, on_event)
+    deadline = loop.time() + timeout
+    known = False  # the world's state read, after the subscription: no attach falls between the two
+    while not robots <= attached:
+        left = deadline - loop.time()
+        if left <= 0:
+            raise TimeoutError(f"robots {sorted(robots - attached)} did not attach within {timeout:.0f} s")
+        news.clear()
+        if not known:
+            replies = await bus.get(keys.world_state, timeout=min(2.0, left))
+            with contextlib.suppress(ProtocolError):
+                attached |= set(decode(replies[0], WorldState).attached) if replies else set()
+                known = bool(replies)
+            if known:
+                continue
+        with contextlib.suppress(TimeoutError):  # an event, or (no world answering yet) a new look at its state
+            await asyncio.wait_for(news.wait(), max(0.0, min(left, 0.5 if not known else left)))
 
 
 class LoopbackWorld:
@@ -93,9 +109,9 @@ class LoopbackWorld:
         return bus
 
     async def attached(self, *robots: str, timeout: float = ATTACH_TIMEOUT) -> None:
-        """Return once every robot named is attached: its agent's liveliness token (declared when
-        the world accepted its attach) is seen on a session of the handle's. Wait on this, not on
-        a sleep, before acting on an attached robot. Raises TimeoutError after `timeout` seconds."""
+        """Return once the world has accepted the attach of every robot named (its `robot_attached`
+        events and its state, seen on a session of the handle's). Wait on this, not on a sleep,
+        before acting on an attached robot. Raises TimeoutError after `timeout` seconds."""
         unknown = sorted(set(robots) - set(self.config.robots))
         if unknown:  # fails here, not as a timeout
             raise ValueError(f"no such robot in this episode: {', '.join(unknown)} (robots: {', '.join(self.config.robots)})")
