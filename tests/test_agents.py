@@ -8,6 +8,7 @@ import contextlib
 import pytest
 
 from mhrc.agents.agent import AttachRejected, RobotAgent, WorldGone
+from mhrc.agents.llm_policy import UNREADABLE
 from mhrc.agents.scripted import ScriptedLLMPolicy
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.endpoints import endpoint, free_port
@@ -42,9 +43,9 @@ async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(mh
     assert done is not None and done.reason == "horizon" and done.metrics.temporal_steps == 3
     assert [r.action.call() for r in policy.results] == ["wait()", "pick(ghost)", "wait()"]
     assert policy.results[1].outcome.code == OutcomeCode.OBJECT_UNKNOWN
-    assert policy.format_feedback and "no command found" in policy.format_feedback[0]
+    assert policy.format_feedback == [UNREADABLE]  # the paper's feedback: only that the command could not be read
     thoughts = [line["msg"] for line in read_trace(world.config.trace) if line["key"].endswith("/agent/bob/thought")]
-    assert [t["parse_error"] is not None for t in thoughts] == [True, False, False]
+    assert [t["parse_error"] is not None for t in thoughts] == [True, False, False] and "no command found" in thoughts[0]["parse_error"]
     assert thoughts[0]["reply"] == "I am not sure what to do."
 
 

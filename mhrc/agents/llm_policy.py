@@ -95,6 +95,7 @@ CUT_REPLY = "your reply was cut at the token limit before it gave a command; thi
 # The appendix's first feedback of the robot that finishes the task: before any action, talk to Alice.
 FIRST_STEP = {"bob": "This is the first step of the task: do nothing else now; communicate with Alice and share what you know so far."}
 MODEL_DOWN = "Your planner could not reach its model ({reason}), so you waited."
+UNREADABLE_TAG, MODEL_DOWN_TAG = "unreadable", "model down"  # the feedback entries' tags (what a history summary counts)
 FEEDBACK_CHARS = 300  # what one error may put into the next prompt
 
 
@@ -219,7 +220,7 @@ class LLMPolicy:
         self.hints = load_hints(robot, prompts_dir) if prompt_hints else ""
         if isinstance(client, ReplayClient):  # a trace recorded with other prompts is refused now, not at its first step
             client.check_templates({f"{robot}_system.txt": self.system_t, f"{robot}_user.txt": self.user_t})
-        self._pending: tuple[int, str] | None = None  # (tick, why this step's reply gave no action)
+        self._pending: tuple[int, str, str] | None = None  # (tick, why this step's reply gave no action, its tag)
         self._log = log.bind(robot=robot, model=client.model)
 
     # ------------------------------------------------------------------ rendering
@@ -304,7 +305,7 @@ class LLMPolicy:
             if not self._answered and (silent or not isinstance(exc, LLMTimeout)):
                 raise LLMUnreachable(f"{self.robot}'s model never answered during its first step: {exc}") from None
             self._log.warning("model unavailable, waiting", tick=obs.tick, error=str(exc))
-            self._pending = (obs.tick, MODEL_DOWN.format(reason=_short(str(exc))))
+            self._pending = (obs.tick, MODEL_DOWN.format(reason=_short(str(exc))), MODEL_DOWN_TAG)
             return Decision(action=Wait(), prompt=prompt, parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000), schema_hash=digest)
         self._answered = True
         try:
@@ -315,7 +316,7 @@ class LLMPolicy:
             self._log.info("unparseable reply, waiting", tick=obs.tick, reason=reason)
             action, error = Wait(), reason
             advice = JSON_FORMAT_ERROR if self.structured else FORMAT_ERROR
-            self._pending = (obs.tick, advice.format(reason=reason) if self.feedback_advice else UNREADABLE)
+            self._pending = (obs.tick, advice.format(reason=reason) if self.feedback_advice else UNREADABLE, UNREADABLE_TAG)
         return Decision(
             action, prompt, c.text, error, c.prompt_tokens, c.completion_tokens, c.latency,
             reasoning=c.reasoning, reasoning_tokens=c.reasoning_tokens, finish_reason=c.finish_reason, schema_hash=digest, ttft=c.ttft,
@@ -324,8 +325,8 @@ class LLMPolicy:
     def _flush_pending(self) -> None:
         """A format or model error whose result never came back still becomes feedback."""
         if self._pending is not None:
-            tick, text = self._pending
-            self.memory.add("feedback", tick, text, tag="failed")
+            tick, text, tag = self._pending
+            self.memory.add("feedback", tick, text, tag=tag)
             self._pending = None
 
     def record(self, result: ActionResult) -> None:

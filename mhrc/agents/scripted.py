@@ -13,7 +13,7 @@ from typing import Any
 
 from mhrc.core.protocol import ActionResult
 
-from .llm_policy import LLMPolicy
+from .llm_policy import UNREADABLE_TAG, LLMPolicy
 from .scripted_client import ScriptedClient
 
 
@@ -28,7 +28,7 @@ class ScriptedLLMPolicy(LLMPolicy):
     @property
     def format_feedback(self) -> list[str]:
         """The feedback entries that report an unparseable reply."""
-        return [e.text for e in self.memory.feedback if "could not be executed" in e.text]
+        return [e.text for e in self.memory.feedback if e.tag == UNREADABLE_TAG]
 
     def record(self, result: ActionResult) -> None:
         super().record(result)
