@@ -14,8 +14,8 @@ for the world's answer to its own action.
   executed, and thinking costs a robot no simulated time of its own, only the time its
   teammates' actions took meanwhile.
 - A robot's tick is its own step count: the number of its actions executed so far. Its request
-  names the tick of the observation it planned on; a request while its previous action still
-  runs is rejected.
+  names the tick of the observation it planned on; a request while its previous one is queued,
+  executing or running (its result not yet out) is rejected.
 - Messages arrive when sent: a message goes out on its inbox key when its `communicate`
   executes and reaches the receiver with its next observation.
 - The horizon is a budget of `horizon x step_seconds` simulated seconds (STEP_SECONDS: the mean
@@ -73,7 +73,8 @@ class AsyncScheduler(Scheduler):
         self.tick = 0
         self.steps: dict[str, int] = {r: 0 for r in world.robots}  # robot -> actions executed
         self.queue: list[ActionRequest] = []  # admitted, not yet executed, in arrival order
-        self.running: dict[str, _Running] = {}
+        self.executing: ActionRequest | None = None  # off the queue, in the simulator now
+        self.running: dict[str, _Running] = {}  # executed, result not yet released
         self.mail: dict[str, list[RobotMessage]] = {}
         self.free_at: dict[str, float] = {}  # robot -> the end of its last action
         self.watermark = 0.0  # the start of the action executed last
@@ -111,13 +112,18 @@ class AsyncScheduler(Scheduler):
 
     def admit(self, req: ActionRequest) -> Rejection | None:
         robot = req.robot
-        busy = self.running[robot].req if robot in self.running else next((q for q in self.queue if q.robot == robot), None)
+        busy = next((q for q in self._unanswered() if q.robot == robot), None)
         if busy is not None:
             return Rejection(RejectCode.BUSY, f"{robot} is still busy with {busy.action.call()}: send the next action after its result")
         if req.tick != self.steps[robot]:
             return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but {robot} is at tick {self.steps[robot]}")
         self.queue.append(req)
         return None
+
+    def _unanswered(self) -> list[ActionRequest]:
+        """The admitted requests whose result has not gone out: queued, executing, running."""
+        executing = [] if self.executing is None else [self.executing]
+        return [*self.queue, *executing, *(run.req for run in self.running.values())]
 
     def on_attach(self, robot: str) -> bool:
         self.world.hold_messages(robot, self.mail.pop(robot, []))  # into the attach reply's observation
@@ -158,7 +164,11 @@ class AsyncScheduler(Scheduler):
             if start >= self.budget:
                 await self._finish("horizon", self.budget)
                 return
-            await self._execute(req, start)
+            self.executing = req
+            try:
+                await self._execute(req, start)
+            finally:
+                self.executing = None  # now in `running` (or its robot left)
             if self.success_at is None:
                 await self._release_due()
         if self.success_at is not None and self._due(self.success_at):
@@ -189,8 +199,8 @@ class AsyncScheduler(Scheduler):
                 await self._release(run, done=False)
 
     async def _release(self, run: _Running, *, done: bool) -> None:
+        """Publish `run`'s result; the robot counts as busy until it is out (its observation may be awaited)."""
         robot = run.req.robot
-        del self.running[robot]
         if self.time_scale == 0:
             obs = run.observation
         else:  # the world as it is at the action's end (with the scenario's events due by then)
@@ -205,6 +215,8 @@ class AsyncScheduler(Scheduler):
                 )  # fmt: skip
             ]
         )
+        if self.running.get(robot) is run:  # not forgotten meanwhile (nor, after a re-attach, another run)
+            del self.running[robot]
 
     def _advance(self, t: float) -> None:
         self.makespan = max(self.makespan, t)

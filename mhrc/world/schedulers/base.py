@@ -104,6 +104,9 @@ class Scheduler(ABC):
     A scheduler must guarantee that
     - every request it admits gets exactly one result, unless its robot detaches or the
       episode ends first (`EpisodeDone.final_results` then tells the agent whether to wait);
+    - a robot has at most one action per tick: a request that arrives while its previous one is
+      admitted and unanswered (pending, executing in the simulator, or awaiting its release)
+      is rejected, never held over to a later tick;
     - a robot's results go out in the order of its requests;
     - the messages an action sends reach their receivers with a later observation, never lost;
     - the episode finishes on success, and at the latest when `tick` reaches the horizon.
@@ -122,7 +125,8 @@ class Scheduler(ABC):
     @abstractmethod
     def admit(self, req: ActionRequest) -> Rejection | None:
         """Accept `req` (return None) or say why not. The service has already checked that it
-        comes from the agent attached to its robot while the episode runs."""
+        comes from the agent attached to its robot while the episode runs, with a goal id new
+        to the episode (world/admission.py)."""
 
     @abstractmethod
     def ready(self) -> bool:

@@ -25,12 +25,13 @@ class LockstepScheduler(Scheduler):
         super().__init__(world)
         self.tick = 0
         self.pending: dict[str, ActionRequest] = {}
+        self.closing: frozenset[str] = frozenset()  # the robots whose actions of `tick` execute now (off `pending`, no result yet)
         self._log = log.bind(run=world.run_id)
 
     def admit(self, req: ActionRequest) -> Rejection | None:
         if req.tick != self.tick:
             return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but the world is at tick {self.tick}")
-        if req.robot in self.pending:
+        if req.robot in self.pending or req.robot in self.closing:  # one action per robot per tick, executing ones included
             return Rejection(RejectCode.TICK_TAKEN, f"{req.robot} already submitted an action for tick {self.tick}")
         self.pending[req.robot] = req
         return None
@@ -47,7 +48,11 @@ class LockstepScheduler(Scheduler):
         world, tick = self.world, self.tick
         batch = [self.pending.pop(r) for r in world.robots if r in self.pending and r in world.attached]
         self.pending.clear()
-        done = await world.execute(batch, tick, deliver=True, opens=tick + 1)  # tick + 1's scenario events before its observations
+        self.closing = frozenset(req.robot for req in batch)
+        try:
+            done = await world.execute(batch, tick, deliver=True, opens=tick + 1)  # tick + 1's scenario events before its observations
+        finally:
+            self.closing = frozenset()  # from here to the results' release nothing awaits, and the tick moves on
         began = self.makespan
         took = [duration(req, outcome) for req, outcome in zip(batch, done.outcomes)]
         self.makespan = began + max(took, default=0.0)

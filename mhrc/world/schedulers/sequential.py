@@ -56,6 +56,7 @@ class SequentialScheduler(Scheduler):
         self.turn: str | None = world.robots[0] if world.robots else None  # the robot asked now
         self.given = False  # whether the robot on turn has its observation
         self.pending: ActionRequest | None = None  # the admitted request of the robot on turn
+        self.executing: ActionRequest | None = None  # that request while the simulator runs it (off `pending`, turn not yet passed)
         self.held: dict[str, _Held] = {}
         self.mail: dict[str, list[RobotMessage]] = {}  # messages of closed ticks, for the receiver's next turn
         self._executed: list[tuple[ActionRequest, SkillOutcome]] = []  # this tick's, in order
@@ -74,7 +75,7 @@ class SequentialScheduler(Scheduler):
             return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but the world is at tick {self.tick}")
         if req.robot != self.turn or not self.given:
             return Rejection(RejectCode.NOT_YOUR_TURN, f"it is {self.turn}'s turn in tick {self.tick}: {req.robot} waits for its own")
-        if self.pending is not None:
+        if self.pending is not None or self.executing is not None:  # one action per turn, the executing one included
             return Rejection(RejectCode.TICK_TAKEN, f"{req.robot} already submitted an action for tick {self.tick}")
         self.pending = req
         return None
@@ -97,7 +98,11 @@ class SequentialScheduler(Scheduler):
         world = self.world
         if self.pending is not None:
             req, self.pending = self.pending, None
-            done = await world.execute([req], self.tick)
+            self.executing = req
+            try:
+                done = await world.execute([req], self.tick)
+            finally:
+                self.executing = None  # nothing awaits from here until the turn has passed on
             outcome = done.outcomes[0]
             self._evaluation = done.evaluation
             self._executed.append((req, outcome))
