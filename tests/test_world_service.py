@@ -12,8 +12,11 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+from collections.abc import Callable
 
 import pytest
+from structlog.testing import capture_logs
 
 from mhrc.agents.agent import RobotAgent, WorldGone
 from mhrc.agents.heuristic import heuristic_policy
@@ -37,10 +40,14 @@ from mhrc.core.protocol import (
     Pick,
     Place,
     RobotDetached,
+    SkillOutcome,
     Wait,
     decode,
     decode_event,
+    encode,
 )
+from mhrc.core.trace import read_trace
+from mhrc.world.service import WorldService
 from waits import robots_alive, served
 
 
@@ -52,6 +59,7 @@ class ManualAgent:
         self.results: asyncio.Queue[ActionResult] = asyncio.Queue()
         self.events: list[object] = []
         self.started = asyncio.Event()
+        self._news = asyncio.Event()
         bus.subscribe(self.keys.action_ack(robot), lambda s: self.acks.put_nowait(decode(s.payload, ActionAck)))
         bus.subscribe(self.keys.action_result(robot), lambda s: self.results.put_nowait(decode(s.payload, ActionResult)))
         bus.subscribe(self.keys.world_event, self._on_event)
@@ -60,8 +68,22 @@ class ManualAgent:
     def _on_event(self, sample: Sample) -> None:
         event = decode_event(sample.payload)
         self.events.append(event)
+        self._news.set()
         if isinstance(event, EpisodeStarted):
             self.started.set()
+
+    async def seen(self, match: Callable[[object], bool], timeout: float = 30) -> object:
+        """The first world event (seen so far or still to come) for which `match` is true."""
+
+        async def first() -> object:
+            while True:
+                self._news.clear()
+                found = next((event for event in self.events if match(event)), None)
+                if found is not None:
+                    return found
+                await self._news.wait()
+
+        return await asyncio.wait_for(first(), timeout)
 
     async def attach(self) -> AttachReply:
         await served(self.bus, self.keys.attach(self.robot))  # the world's attach queryable reached this session
@@ -173,6 +195,87 @@ async def test_message_reaches_receiver_next_tick(mhrc_world) -> None:  # type: 
             assert ra is not None and ra.observation.new_messages == []
         finally:
             await bus.close()
+
+
+# --------------------------------------------------------------------------- each goal once, one action a tick (issue 31)
+REFUSED_WHILE_EXECUTING = {"sequential": "tick_taken", "lockstep": "tick_taken", "async": "busy"}
+
+
+@pytest.mark.parametrize("schedule", sorted(REFUSED_WHILE_EXECUTING))
+async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(mhrc_world, monkeypatch: pytest.MonkeyPatch, schedule: str) -> None:  # type: ignore[no-untyped-def]
+    """Alice acts alone (Bob and David leave once the episode started). While her first goal
+    executes (the simulator's thread held inside it): the same payload again is refused as a
+    duplicate, however often it comes, and logged once an interval, not once a message; a second
+    goal for the same tick is refused (async: busy). After the first's result the payload is
+    refused again. Nothing refused reaches the simulator: it runs the first goal and the next
+    one, in ticks 0 and 1, and the trace has one result and one snapshot for each."""
+    first = ActionRequest(robot="alice", agent_id="manual-alice", tick=0, action=Navigate(target="table_0", stand_pose=0))
+    payload = encode(first)
+    ran: asyncio.Queue[str] = asyncio.Queue()  # goal ids, as the simulator's thread starts each
+    release = threading.Event()
+    loop = asyncio.get_running_loop()
+    execute = WorldService._execute
+
+    def held(self: WorldService, req: ActionRequest, tick: int) -> SkillOutcome:
+        loop.call_soon_threadsafe(ran.put_nowait, req.goal_id)
+        if req.goal_id == first.goal_id:
+            release.wait(60)  # until the test has sent what comes while it executes (bounded: never a hang)
+        return execute(self, req, tick)
+
+    monkeypatch.setattr(WorldService, "_execute", held)
+    repeats = 10
+    with capture_logs() as logs:
+        async with mhrc_world(seed=0, schedule=schedule) as world:
+            bus, team = await world.client(), await world.client()
+            try:
+                alice = ManualAgent(bus, world.run, "alice")
+                assert (await alice.attach()).accepted
+                for robot in ("bob", "david"):
+                    assert (await ManualAgent(team, world.run, robot).attach()).accepted
+                await asyncio.wait_for(alice.started.wait(), 30)
+                await team.close()  # bob and david leave: alice's action is each tick's only one
+                await alice.seen(lambda event: isinstance(event, RobotDetached) and event.robot == "bob")
+                await alice.seen(lambda event: isinstance(event, RobotDetached) and event.robot == "david")
+                bus.put(alice.keys.action_request("alice"), payload)
+                assert (ack := await asyncio.wait_for(alice.acks.get(), 30)).accepted and ack.goal_id == first.goal_id
+                assert await asyncio.wait_for(ran.get(), 30) == first.goal_id  # executing now, no result yet
+
+                for _ in range(repeats):
+                    bus.put(alice.keys.action_request("alice"), payload)
+                for _ in range(repeats):
+                    ack = await asyncio.wait_for(alice.acks.get(), 30)
+                    assert (ack.goal_id, ack.accepted, ack.code) == (first.goal_id, False, "duplicate_goal"), ack
+                    assert first.goal_id in ack.reason
+                second = ActionRequest(robot="alice", agent_id="manual-alice", tick=0, action=Wait())
+                bus.put(alice.keys.action_request("alice"), second)
+                ack = await asyncio.wait_for(alice.acks.get(), 30)
+                assert (ack.goal_id, ack.accepted, ack.code) == (second.goal_id, False, REFUSED_WHILE_EXECUTING[schedule]), ack
+                assert ack.reason
+
+                release.set()
+                result = await asyncio.wait_for(alice.results.get(), 60)
+                assert (result.goal_id, result.tick, result.observation.tick) == (first.goal_id, 0, 1)
+                bus.put(alice.keys.action_request("alice"), payload)  # finished: still a goal it sent
+                ack = await asyncio.wait_for(alice.acks.get(), 30)
+                assert (ack.goal_id, ack.accepted, ack.code) == (first.goal_id, False, "duplicate_goal"), ack
+
+                third = ActionRequest(robot="alice", agent_id="manual-alice", tick=1, action=Wait())
+                bus.put(alice.keys.action_request("alice"), third)
+                assert (ack := await asyncio.wait_for(alice.acks.get(), 30)).accepted and ack.goal_id == third.goal_id, ack
+                result = await asyncio.wait_for(alice.results.get(), 60)
+                assert (result.goal_id, result.tick) == (third.goal_id, 1)
+            finally:
+                release.set()
+                await bus.close()  # alice's token goes: the episode ends with nobody attached
+            done = await world.done(60)
+    assert done.reason == "no_agents" and done.metrics.action_steps == 1  # the navigation, once (waits are not counted)
+    assert [ran.get_nowait() for _ in range(ran.qsize())] == [third.goal_id], "after the first, only the third reached the simulator"
+    rows = [line["msg"] for line in read_trace(world.trace) if line["kind"] == "put" and isinstance(line["msg"], dict)]
+    assert [m["goal_id"] for m in rows if m["kind"] == "action_result"] == [first.goal_id, third.goal_id]
+    assert [(m["tick"], m["goals"]) for m in rows if m["kind"] == "snapshot" and m["goals"]] == [(0, [first.goal_id]), (1, [third.goal_id])]
+    lines = [entry for entry in logs if entry["event"] == "duplicate goal rejected"]
+    assert 1 <= len(lines) <= 2, lines  # 11 duplicates: a line per 5 s interval, not a line a message
+    assert lines[0]["code"] == "duplicate_goal" and lines[0]["goal"] == first.goal_id
 
 
 @pytest.mark.slow

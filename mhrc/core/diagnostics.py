@@ -21,8 +21,9 @@ messages of one trace (`mhrc.core.trace.read_trace`); nothing is re-simulated. D
 - not_capable: executed commands outside the robot's capabilities (outcome not_capable: a
   skill it lacks, or a non-finisher placing on the task's fixtures).
 - rejected: `action_ack` with accepted false, by kind of reason (REJECT_KINDS): stale_tick
-  (planned on an old tick), busy (an action already submitted or still running), out_of_turn
-  (sequential: another robot's turn), episode_over, malformed, not_attached, other.
+  (planned on an old tick), busy (an action already submitted or still running, or a goal id
+  sent before), out_of_turn (sequential: another robot's turn), episode_over, malformed,
+  not_attached, other.
 - failed: executed actions whose outcome did not succeed, by outcome code and by skill/code.
 - repeated_failures: a failed action whose robot's previous executed action was the same call
   (same skill and arguments) and failed too; a third identical failure in a row counts again.
@@ -131,9 +132,9 @@ def label(key: str) -> str:
 
 
 KIND_OF_CODE = {  # RejectCode -> the kind diagnostics count it under
-    "stale_tick": "stale_tick", "tick_taken": "busy", "busy": "busy", "not_your_turn": "out_of_turn", "episode_over": "episode_over",
-    "malformed": "malformed", "not_attached": "not_attached", "other_agent": "not_attached", "wrong_key": "not_attached",
-    "no_such_robot": "not_attached",
+    "stale_tick": "stale_tick", "tick_taken": "busy", "busy": "busy", "duplicate_goal": "busy", "not_your_turn": "out_of_turn",
+    "episode_over": "episode_over", "malformed": "malformed", "not_attached": "not_attached", "other_agent": "not_attached",
+    "wrong_key": "not_attached", "no_such_robot": "not_attached",
 }  # fmt: skip
 
 

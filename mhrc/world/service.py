@@ -3,15 +3,15 @@ runs the actions in the simulator and publishes results, messages and events.
 
 When actions run and results go out is the time policy's (`WorldConfig.schedule`, one of
 world.schedulers.SCHEDULERS; docs/architecture.md, "Time"); this module keeps the episode's lifecycle and
-the bus plumbing. Who may drive which robot is the roster's (roster.py); the robots' messages
-wait in the mailroom until delivered (mail.py).
+the bus plumbing. Who may drive which robot is the roster's (roster.py); which requests get in,
+admission's (admission.py: each goal at most once); the robots' messages wait in the mailroom
+until delivered (mail.py).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -23,7 +23,6 @@ import structlog
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.fidelity import label as fidelity_label
 from mhrc.core.keys import Keys
-from mhrc.core.logs import Throttle
 from mhrc.core.protocol import (
     Action,
     ActionAck,
@@ -43,7 +42,6 @@ from mhrc.core.protocol import (
     OutcomeCode,
     ProtocolError,
     Rejection,
-    RejectCode,
     RobotAttached,
     RobotDetached,
     RobotMessage,
@@ -56,6 +54,7 @@ from mhrc.core.protocol import (
     decode,
 )
 
+from .admission import Admission
 from .mail import Mailroom
 from .roster import Roster
 from .schedulers import Executed, Scheduler, TaskResultLike, make_scheduler
@@ -140,9 +139,9 @@ class WorldService:
         self._t0 = 0.0
         self._evaluation: TaskResultLike = sim.evaluate()
         self._last_results: dict[str, str] = {}  # robot -> goal id of the last result released to it
-        self._throttle = Throttle(interval=5.0)  # warnings about junk from the bus
         self._token_checks: set[asyncio.Task[None]] = set()
         self.scheduler: Scheduler = make_scheduler(config.schedule, self, time_scale=config.time_scale)
+        self.admission = Admission(self.roster, self.scheduler, self._log)  # what gets to the scheduler
 
     @property
     def tick(self) -> int:
@@ -412,20 +411,11 @@ class WorldService:
 
     def _on_request(self, sample: Sample) -> None:
         robot = self.keys.robot_of(sample.key)
-        try:
-            req = decode(sample.payload, ActionRequest)
-        except ProtocolError as exc:
-            log_now, held = self._throttle.due(f"malformed/{robot}")
-            if log_now:  # a flood costs one line per interval, with the count held back
-                self._log.warning("malformed action request rejected", robot=robot, reason=str(exc), **({"and_before": held} if held else {}))
-            self._reject(robot, _goal_id_of(sample.payload), Rejection(RejectCode.MALFORMED, f"malformed action request: {exc}"))
-            return
-        rejection = self.roster.check_request(robot, req, over=self.done is not None) or self.scheduler.admit(req)  # admit only what passed the checks
+        goal_id, rejection = self.admission.request(robot, sample.payload, over=self.done is not None)
         if rejection is not None:
-            self._log.info("action rejected", robot=robot, goal=req.goal_id, reason=rejection.reason, code=rejection.code.value)
-            self._reject(robot, req.goal_id, rejection)
+            self._reject(robot, goal_id, rejection)
             return
-        self.bus.put(self.keys.action_ack(robot), ActionAck(goal_id=req.goal_id, robot=robot, accepted=True))
+        self.bus.put(self.keys.action_ack(robot), ActionAck(goal_id=goal_id, robot=robot, accepted=True))
         self._wake.set()
 
     def _reject(self, robot: str, goal_id: str, rejection: Rejection) -> None:
@@ -487,14 +477,4 @@ class WorldService:
             placed=evaluation.placed,
             total=evaluation.total,
         )
-
-
-def _goal_id_of(payload: bytes) -> str:
-    """Best-effort goal id of a malformed request, so its sender can match the rejection."""
-    try:
-        data = json.loads(payload)
-        goal = data.get("goal_id") if isinstance(data, dict) else None
-        return goal if isinstance(goal, str) and goal else "unknown"
-    except (ValueError, UnicodeDecodeError):
-        return "unknown"
 

@@ -44,6 +44,7 @@ class RejectCode(str, Enum):
     TICK_TAKEN = "tick_taken"  # the robot already submitted an action for this tick
     NOT_YOUR_TURN = "not_your_turn"  # sequential: another robot's turn
     BUSY = "busy"  # async: the robot's previous action has not finished
+    DUPLICATE_GOAL = "duplicate_goal"  # the robot sent this goal id before in this episode: each goal executes at most once
 
 
 OUT_OF_STEP = frozenset({RejectCode.STALE_TICK, RejectCode.TICK_TAKEN, RejectCode.NOT_YOUR_TURN})  # attach again for the current tick
