@@ -45,7 +45,7 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
         assert (a / r["trace"]).exists()
     summary = (a / "summary.md").read_text()
     assert "Table I" in summary and "| pack_objects | 1.00 / 1.00 /" in summary and "set beside the paper's AS" in summary
-    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,history_cap,horizon,mode,schedule,scenario,task,episodes,succ,ps,ts,ts_bound,as_ticks,as,as_per_robot")
+    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,noise,history_cap,horizon,mode,schedule,scenario,task,episodes,succ,ps,ts,ts_bound,as_ticks,as,as_per_robot")
     for r in rows_a:  # fidelity and the LLM failures are on every row (the heuristic has none)
         assert (r["fidelity"], r["aids"], r["history_cap"], r["horizon"], r["repeat"], r["trial"]) == ("paper", [], None, 50, 0, r["seed"])
         assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"], r["invalid_reason"]) == (0, 0, 0, True, None)
@@ -286,7 +286,7 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
     assert "| pack_objects | 2 | 0.00 [0.00, 0.00] |" in summary  # only the two valid episodes are averaged
     assert "paper GPT" not in summary  # no model of the paper's
     csv_line = (tmp_path / "ev" / "summary.csv").read_text().splitlines()[1]
-    assert csv_line.startswith("openai:test-model,none,aids:goal_map,50000,2,free,sequential,,pack_objects,2,")  # eval runs the paper's loop by default (no scenario)
+    assert csv_line.startswith("openai:test-model,none,aids:goal_map,on,50000,2,free,sequential,,pack_objects,2,")  # eval runs the paper's loop by default (no scenario), with the calibrated noise
 
 
 def test_a_wrong_api_key_stops_the_evaluation_with_one_error_and_a_failing_exit(tmp_path: Path) -> None:

@@ -10,9 +10,10 @@ from typing import Any
 
 import click
 
-from mhrc.cli.options import ABLATIONS, AIDS_HELP, LOG_LEVEL, EVENTS_HELP, SCHEDULE_HELP, TIME_SCALE_HELP, events_option, llm_options
+from mhrc.cli.options import ABLATIONS, AIDS_HELP, LOG_LEVEL, EVENTS_HELP, NOISE_HELP, SCHEDULE_HELP, TIME_SCALE_HELP, events_option, llm_options
 from mhrc.cli.running import run_command
 from mhrc.core import logs
+from mhrc.core.fidelity import NOISE
 from mhrc.core.trace import unwritable
 from mhrc.run.config import ConfigError, EpisodeConfig, SCHEDULES
 
@@ -37,6 +38,8 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
 @click.option("--horizon", default=50, show_default=True, type=int)
 @click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP)
+@click.option("--noise", default="on", show_default=True, type=click.Choice(list(NOISE)),
+              help=NOISE_HELP + " Rows and summaries keep --noise off apart from the default.")
 @click.option("--schedule", default="sequential", show_default=True, type=click.Choice(SCHEDULES),
               help=SCHEDULE_HELP + " The paper's figures are shown beside sequential runs only.")
 @click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP)
@@ -58,7 +61,7 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
 @LOG_LEVEL
 def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
-          aids: str | None, schedule: str, time_scale: float, events: str | None, workers: int | None, concurrency: int | None, ray_address: str | None,
+          aids: str | None, noise: str, schedule: str, time_scale: float, events: str | None, workers: int | None, concurrency: int | None, ray_address: str | None,
           shared_out: bool, out: Path | None, resume: bool, dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
@@ -100,8 +103,8 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     spec = EvalSpec(
         tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS),
         objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()), trials=trials, repeats=repeats,
-        ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, schedule=schedule,
-        time_scale=time_scale, events=events, **llm,
+        ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, noise=noise,
+        schedule=schedule, time_scale=time_scale, events=events, **llm,
     )  # fmt: skip
     if concurrency is not None and concurrency < 1:
         raise click.BadParameter(f"must be at least 1 (got {concurrency})", param_hint="--concurrency")
@@ -130,7 +133,7 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     if dry_run:
         for job in spec.jobs():
             click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config['seed']}")
-        click.echo(f"{n_jobs} episodes ({spec.fidelity} fidelity)")
+        click.echo(f"{n_jobs} episodes ({spec.fidelity} fidelity{', noise off' if spec.noise == 'off' else ''})")
         return
     try:
         check_out(out, spec, resume)  # before the model server is asked or a worker starts
@@ -156,7 +159,7 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         concurrency = asyncio.run(episodes_at_once(list(specs), spec.base_url))
     where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {workers} worker(s)"
     console.print(
-        f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}, {spec.mode} replies) on {n_jobs} episodes "
+        f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}{', noise off' if spec.noise == 'off' else ''}, {spec.mode} replies) on {n_jobs} episodes "
         f"into {out} {where}, {concurrency} episode(s) at once each"
     )
     t0 = time.perf_counter()

@@ -9,6 +9,7 @@ from typing import Any
 
 import click
 
+from mhrc.core.fidelity import NOISE
 from mhrc.core.fidelity import describe as describe_aids
 from mhrc.core.security import Credentials, SecurityError, load
 from mhrc.run.config import ConfigError, EpisodeConfig, SCHEDULES
@@ -19,6 +20,11 @@ ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
 AIDS_HELP = (
     "Make the episode easier than the paper's (off by default; recorded in the trace and every result row): "
     "a comma-separated list of aids, or all. " + describe_aids()
+)
+NOISE_HELP = (
+    "The world's motion noise: mhrc's calibration, not the paper's (recorded in the trace and every result row). "
+    + " ".join(f"{k}: {v}." for k, v in NOISE.items())
+    + " The exact_motion aid has no noise either, and also sets released objects down without physics."
 )
 SCHEDULE_HELP = (
     "The world's time policy: lockstep (every robot plans on the same state, the tick closes when all have acted), "
@@ -113,6 +119,7 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS),
                      help="Paper ablation: no_mobile leaves David out; no_feedback / no_history change LLM prompts."),
         click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP),
+        click.option("--noise", default="on", show_default=True, type=click.Choice(list(NOISE)), help=NOISE_HELP),
         click.option("--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP),
         click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP),
         events_option(),

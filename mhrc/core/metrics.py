@@ -33,6 +33,9 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
   unreachable measured the network, not the method: it is invalid and left out of summaries;
 - fidelity (`paper` or `aids:...`, from `episode_started`; `unrecorded` for traces older than
   the field) and horizon;
+- noise (`on` or `off`) and noise_rates (the motion noise's chances and error scales), from
+  `episode_started` (mhrc.core.fidelity.recorded_noise: a trace older than the field ran with
+  the calibration, or with none under the exact_motion aid);
 - wall_time (world's measure), lower_bound (mhrc/world/bound.py, from `episode_started`).
 - recovery (a scenario's events, `--events`; mhrc/world/scenario.py): per `scenario_event` in the
   trace, in firing order, {index, kind, tick, applied, ticks_to_recover}. ticks_to_recover is the
@@ -68,6 +71,7 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from mhrc.core.fidelity import recorded_noise
 from mhrc.core.protocol import LLM_ERROR_PREFIX
 
 UNRECORDED = "unrecorded"  # the fidelity of a trace written before episodes recorded it
@@ -105,6 +109,8 @@ class EpisodeMetrics:
     valid: bool = True
     invalid_reason: str | None = None
     fidelity: str = UNRECORDED
+    noise: str = "on"  # the motion noise: on (the calibration) or off (--noise off, or the exact_motion aid)
+    noise_rates: dict[str, float] = field(default_factory=dict)  # its chances and error scales (mhrc.core.protocol.MotionNoise)
     horizon: int | None = None
     scheduler: str = "lockstep"
     makespan: float = 0.0
@@ -150,6 +156,7 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
     unreachable = sum(1 for e in errors if e.startswith(LLM_ERROR_PREFIX))
     invalid = bool(thoughts) and unreachable >= len(thoughts)
     scheduler = str(s.get("scheduler") or "lockstep")
+    noise = recorded_noise(s)
     makespan = float(world.get("makespan", 0.0))
     if scheduler == "async":
         temporal_steps = math.ceil(round(makespan / float(s["step_seconds"]), 9))
@@ -194,6 +201,8 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         valid=not invalid,
         invalid_reason=f"the model was unreachable for all {len(thoughts)} LLM steps" if invalid else None,
         fidelity=str(s.get("fidelity") or UNRECORDED),
+        noise=noise.setting,
+        noise_rates=noise.model_dump(exclude={"setting"}),
         horizon=s.get("horizon"),
         scheduler=scheduler,
         makespan=round(makespan, 3),

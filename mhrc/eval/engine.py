@@ -76,6 +76,7 @@ class EvalSpec:
     prompts: str | None = None
     repeats: int = 1  # the grid, run this many times with other seeds
     aids: tuple[str, ...] = ()  # mhrc.core.fidelity names; () is the paper's fidelity
+    noise: str = "on"  # the world's motion noise (mhrc.core.fidelity.NOISE): on, the calibration, or off
     history_cap: int | None = None
     max_tokens: int = DEFAULT_MAX_TOKENS
     llm_seed: int | None = None
@@ -111,7 +112,7 @@ class EvalSpec:
         """What must match for --resume to continue a run: everything that changes the numbers
         (the grid may grow: more trials, repeats, object counts, scenes or tasks)."""
         return {
-            "method": self.method, "ablation": self.ablation, "horizon": self.horizon, "fidelity": self.fidelity,
+            "method": self.method, "ablation": self.ablation, "horizon": self.horizon, "fidelity": self.fidelity, "noise": self.noise,
             "history_cap": self.history_cap, "prompts": self.prompts, "mode": self.mode,
             "max_tokens": self.max_tokens if self.llm else None, "llm_seed": self.llm_seed, "schedule": self.schedule,
             "time_scale": self.time_scale, "scenario": self.scenario()[1],
@@ -135,7 +136,8 @@ class EvalSpec:
                                 "llm": self.llm, "ablation": self.ablation, "base_url": self.base_url,
                                 "llm_timeout": self.llm_timeout, "prompts": self.prompts,
                                 "llm_idle_timeout": self.llm_idle_timeout, "stream": None if self.stream else False,
-                                "aids": list(self.aids) or None, "history_cap": self.history_cap,
+                                "aids": list(self.aids) or None, "noise": None if self.noise == "on" else self.noise,
+                                "history_cap": self.history_cap,
                                 "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
                                 "step_deadline": self.step_deadline, "schedule": self.schedule,
                                 "time_scale": self.time_scale or None, "events": self.events,
@@ -220,13 +222,13 @@ def check_out(out: Path, spec: EvalSpec, resume: bool) -> None:
         if manifest.exists():
             old = json.loads(manifest.read_text())
             # a manifest written before a field was part of the identity ran with its default
-            before = {"fidelity": "paper", "history_cap": None, "prompts": None, "mode": "free", "max_tokens": None, "llm_seed": None,
+            before = {"fidelity": "paper", "noise": "on", "history_cap": None, "prompts": None, "mode": "free", "max_tokens": None, "llm_seed": None,
                       "schedule": "lockstep", "time_scale": 0.0, "scenario": None}
             before |= old.get("identity") or {}
             if before != spec.identity():
                 raise ConfigError(
                     f"--out: {out} holds an evaluation of {before}, not {spec.identity()}; --resume needs the same --llm, "
-                    "--ablation, --horizon, --aids, --history-cap, --prompts, --structured, --max-tokens, --llm-seed, --schedule, --time-scale and --events"
+                    "--ablation, --horizon, --aids, --noise, --history-cap, --prompts, --structured, --max-tokens, --llm-seed, --schedule, --time-scale and --events"
                 )
 
 

@@ -30,10 +30,11 @@ CI_LEVEL = 0.95
 CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as_ticks": "active_ticks", "as": "action_steps"}
 
 
+# noise: the world's motion noise, on (the calibration) or off (--noise off, or the exact_motion aid; mhrc.core.fidelity);
 # mode: free (the paper's) or structured replies; schedule: the world's time policy (mhrc/world/schedulers);
 # scenario: the --events scenario as NAME@SHA12 (its name and the first 12 hex digits of the file's sha256, as
 # `mhrc scenarios` lists it: two files of one name are two settings), None for a static episode
-SETTING = ("method", "ablation", "fidelity", "history_cap", "horizon", "mode", "schedule", "scenario")
+SETTING = ("method", "ablation", "fidelity", "noise", "history_cap", "horizon", "mode", "schedule", "scenario")
 
 
 def read_rows(path: Path) -> list[dict[str, Any]]:
@@ -66,6 +67,8 @@ def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
     """What a row's numbers depend on besides the episode; rows written before a field existed get its old meaning."""
     defaults = {"fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free", "schedule": "lockstep", "scenario": None}
     values = {k: row.get(k, defaults.get(k)) for k in SETTING}
+    if values["noise"] is None:  # a row older than the field ran with the calibration, or with none under exact_motion
+        values["noise"] = "off" if "exact_motion" in (row.get("aids") or ()) else "on"
     if values["scenario"] is not None and row.get("scenario_sha256"):
         values["scenario"] = f"{values['scenario']}@{str(row['scenario_sha256'])[:12]}"
     return tuple(values[k] for k in SETTING)
@@ -80,8 +83,9 @@ def order_key(key: Iterable[Any]) -> tuple[str, ...]:
 
 
 def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
-    method, abl, fidelity, cap, horizon, mode, schedule, scenario = setting
-    parts = [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["structured decisions"] if mode == "structured" else [])
+    method, abl, fidelity, noise, cap, horizon, mode, schedule, scenario = setting
+    parts = [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["noise off"] if noise == "off" else [])
+    parts += ["structured decisions"] if mode == "structured" else []
     if schedule != PAPER_SCHEDULE:
         parts.append(f"{schedule} schedule")
     if cap is not None:

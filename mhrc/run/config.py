@@ -12,7 +12,7 @@ import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from mhrc.core.endpoints import endpoint, free_port
-from mhrc.core.fidelity import AidsError, label, parse_aids
+from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse_aids, parse_noise
 from mhrc.core.keys import check_id, new_run_id
 
 from mhrc.agents.llm import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_TOKENS, DEFAULT_TIMEOUT, check_spec, robot_specs, split_url
@@ -86,6 +86,7 @@ class EpisodeConfig(BaseModel):
                                         "None: no bound but the call's own (a stalled stream ends after --llm-idle-timeout, one that "
                                         "keeps producing at --max-tokens)")
     aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.core.fidelity); none: the paper's")
+    noise: NoiseSetting = Field("on", description="the world's motion noise: on, the calibration (mhrc.core.fidelity), or off (none; recorded as a setting of its own)")
     history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
     events: Path | None = Field(None, description="a scenario file: events the world applies during the episode (mhrc/world/scenario.py)")
     credentials: Path | None = Field(
@@ -100,6 +101,14 @@ class EpisodeConfig(BaseModel):
         try:
             return parse_aids(v)  # type: ignore[arg-type]
         except AidsError as exc:
+            raise ValueError(str(exc)) from None
+
+    @field_validator("noise", mode="before")
+    @classmethod
+    def _noise(cls, v: object) -> NoiseSetting:
+        try:
+            return parse_noise(v if v is None else str(v))
+        except NoiseError as exc:
             raise ValueError(str(exc)) from None
 
     @field_validator("run")

@@ -152,6 +152,7 @@ class ProgressPrinter:
             self._print(
                 f"[bold]episode {ev.run}[/]: task {ev.task}, scene {ev.scene}, seed {ev.seed}, "
                 f"{ev.n_objects} objects, robots {', '.join(ev.robots)}, horizon {ev.horizon}, fidelity {ev.fidelity}"
+                + (", noise off" if ev.noise.setting == "off" else "")
                 + (f", {ev.scheduler} schedule" if ev.scheduler != "lockstep" else "")
             )
         elif isinstance(ev, TickClosed):

@@ -65,6 +65,8 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         cmd += ["--trace", str(cfg.trace)]
     if cfg.aids:
         cmd += ["--aids", ",".join(cfg.aids)]
+    if cfg.noise != "on":
+        cmd += ["--noise", cfg.noise]
     if cfg.tick_delay:
         cmd += ["--tick-delay", str(cfg.tick_delay)]
     if cfg.start_timeout is not None:

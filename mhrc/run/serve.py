@@ -40,7 +40,7 @@ async def serve_world(
     (the in-process runner stops it when an agent fails for good)."""
     sim = await asyncio.to_thread(
         Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots, aids=cfg.aids,
-        scenario=cfg.scenario(),
+        scenario=cfg.scenario(), noise=cfg.noise,
     )  # fmt: skip
     bus = None
     recorder = None

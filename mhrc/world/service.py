@@ -36,6 +36,7 @@ from mhrc.core.protocol import (
     FurnitureView,
     Message,
     Metrics,
+    MotionNoise,
     ObjectView,
     Observation,
     ObjectPose,
@@ -73,6 +74,7 @@ class SimLike(Protocol):
     seed: int
     n_objects: int
     aids: frozenset[str]
+    noise: MotionNoise
 
     def capabilities(self, robot: str) -> frozenset[str]: ...
     def finishers(self) -> frozenset[str]: ...
@@ -226,6 +228,7 @@ class WorldService:
                 lower_bound=self._bound,
                 fidelity=fidelity_label(self.sim.aids),
                 aids=sorted(self.sim.aids),
+                noise=self.sim.noise,
                 scheduler=self.scheduler.name,  # type: ignore[arg-type]
                 **self.scheduler.started_fields(),  # type: ignore[arg-type]
             ),

@@ -20,11 +20,12 @@ from typing import Any
 import numpy as np
 import structlog
 
-from mhrc.core.fidelity import parse_aids
+from mhrc.core.fidelity import motion_noise, parse_aids
 from mhrc.core.protocol import (
     Action,
     Communicate,
     FurnitureView,
+    MotionNoise,
     ObjectPose,
     ObjectView,
     Observation,
@@ -96,10 +97,14 @@ class Sim:
         robots: tuple[str, ...] = ROBOTS,
         aids: tuple[str, ...] | frozenset[str] = (),
         scenario: Scenario | None = None,
+        noise: str = "on",
     ) -> None:
-        """`scenario`: the events fired during the episode (`fire_events`; dynamics.py)."""
+        """`scenario`: the events fired during the episode (`fire_events`; dynamics.py); `noise`: on
+        (the calibrated motion noise) or off (none: bases stop exactly, releases do not slip)."""
         check_episode(task=task, scene=scene, n_objects=n_objects)
         self.aids: frozenset[str] = frozenset(parse_aids(aids))
+        # the motion noise's rates (`noise`: on, the calibration, or off); none with the exact_motion aid either
+        self.noise: MotionNoise = motion_noise(noise, self.aids)
         # motion noise: its own stream, apart from the generator's, and different for every episode of a seed
         rng = np.random.default_rng([seed, zlib.crc32(f"{task}/{scene}/{n_objects}".encode()), 0x4D485243])
         check_team(robots)
@@ -151,7 +156,7 @@ class Sim:
                 f = lay.get(pl.furniture)
                 assert f is not None
                 w.rest(obj, pl.xy[0], pl.xy[1], f.top)
-        self.skill_context = SkillContext(w, self.knowledge, rng)  # what the skills act through
+        self.skill_context = SkillContext(w, self.knowledge, rng, self.noise)  # what the skills act through
         self.dynamics = Dynamics(w, self.task, self.targets, self.goals, self.assets, self.seed, self._scenario)
         log.debug("episode built", task=self.task_id, scene=self.scene_id, seed=self.seed, objects=list(w.objects))
 

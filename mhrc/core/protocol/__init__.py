@@ -45,6 +45,7 @@ from mhrc.core.protocol.exchange import AttachReply
 from mhrc.core.protocol.exchange import Turn
 from mhrc.core.protocol.events import Metrics
 from mhrc.core.protocol.events import EpisodeStarted
+from mhrc.core.protocol.events import MotionNoise
 from mhrc.core.protocol.events import TickClosed
 from mhrc.core.protocol.events import RobotAttached
 from mhrc.core.protocol.events import RobotDetached
@@ -100,6 +101,7 @@ __all__ = [
     "Turn",
     "Metrics",
     "EpisodeStarted",
+    "MotionNoise",
     "TickClosed",
     "RobotAttached",
     "RobotDetached",

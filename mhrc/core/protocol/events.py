@@ -30,6 +30,21 @@ class Metrics(_Model):
     makespan: float = Field(0.0, ge=0.0, description="simulated seconds from the start to the end of the episode on the world's clock")
 
 
+class MotionNoise(_Model):
+    """The motion noise a world draws from (mhrc/world/skills: navigation.py, manipulation.py).
+    mhrc's calibration, not the paper's: the paper's Table III reports navigation that ends off
+    target and placements that fail, but no rates. The defaults are the calibration (`--noise
+    on`); `--noise off` and the exact_motion aid draw none (all zero)."""
+
+    setting: Literal["on", "off"] = Field("on", description="`on`: the calibration; `off`: no noise (--noise off, or the exact_motion aid)")
+    navigation_slip: float = Field(
+        0.03, ge=0.0, le=1.0, description="the chance that a navigate or move slips 0.11-0.3 m off its goal (beyond 0.1 m it fails off target)"
+    )
+    navigation_sigma: float = Field(0.015, ge=0.0, description="m: the Rayleigh scale of an ordinary stop's error (mean 1.9 cm)")
+    release_slip: float = Field(0.1, ge=0.0, le=1.0, description="the chance that a released object slips 2-4 cm on the suction cup as it is let go")
+    release_sigma: float = Field(0.003, ge=0.0, description="m: the Rayleigh scale of an ordinary release's error")
+
+
 class EpisodeStarted(Message):
     kind: Literal["episode_started"] = "episode_started"
     run: str
@@ -47,6 +62,10 @@ class EpisodeStarted(Message):
     lower_bound: int | None = None
     fidelity: str = Field("paper", description="`paper`, or `aids:` and the aids this episode ran with (mhrc.core.fidelity)")
     aids: list[str] = Field(default_factory=list)
+    noise: MotionNoise = Field(
+        default_factory=MotionNoise,
+        description="the motion noise this episode's world drew from (an event without it: the calibration, the defaults)",
+    )
 
 
 class TickClosed(Message):

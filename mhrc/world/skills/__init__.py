@@ -6,10 +6,11 @@ the aids: not the whole simulator), the acting robot and the action; it runs the
 `SkillOutcome` whose sentence comes from `feedback`. Bad arguments are failures, never
 exceptions.
 
-At the paper's fidelity motion is not exact: a base stops where seeded noise puts it, off target
-now and then, and a released object falls and settles under PyBullet physics, so navigation can
-end off target and a placed object can miss its goal, as in Table III. The exact_motion aid turns
-both off. Only a robot kind that finishes the task (Bob) places on the task's goal fixtures.
+By default motion is not exact: a base stops where seeded noise puts it, off target now and
+then, and a released object falls from a seeded error and settles under PyBullet physics, so
+navigation can end off target and a placed object can miss its goal, as in Table III (the
+noise's rates are mhrc's calibration: mhrc.core.fidelity). `--noise off` removes the noise, not
+the physics; the exact_motion aid removes both. Only a robot kind that finishes the task (Bob) places on the task's goal fixtures.
 
 Families, one module each: navigation (navigate, move), containers (open), manipulation (pick,
 place) on the shared arm motions of reaching, and wait. A new skill is one function decorated

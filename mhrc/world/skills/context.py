@@ -1,6 +1,6 @@
 """What a skill may use, and nothing more: the physical world (PyBullet client, scene, robots,
-objects, containers), each robot's knowledge, the episode's motion noise and the aids that
-shape the feedback.
+objects, containers), each robot's knowledge, the episode's motion noise (its rates and its
+random stream) and the aids that shape the feedback.
 """
 
 from __future__ import annotations
@@ -9,6 +9,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from mhrc.core.protocol import MotionNoise
 
 from ..observe import Knowledge
 from ..physics import ObjectState, PhysicalWorld
@@ -22,6 +24,7 @@ class SkillContext:
     world: PhysicalWorld
     knowledge: Knowledge
     rng: np.random.Generator  # motion noise: its own stream, apart from the task generator's
+    noise: MotionNoise  # its rates (mhrc.core.fidelity.motion_noise): none with --noise off or the exact_motion aid
 
     @property
     def aids(self) -> frozenset[str]:
@@ -34,8 +37,9 @@ class SkillContext:
 
     def motion_error(self, slip_p: float, slip: tuple[float, float], sigma: float) -> tuple[float, float]:
         """One draw from the motion noise: with chance `slip_p` a slip of a length in `slip`, else a
-        small error (Rayleigh, scale `sigma`), in a uniform direction; none with the exact_motion aid."""
-        if "exact_motion" in self.world.aids:
+        small error (Rayleigh, scale `sigma`), in a uniform direction; none, and nothing drawn, when
+        the episode has no noise (--noise off, the exact_motion aid)."""
+        if self.noise.setting == "off":
             return 0.0, 0.0
         slipped, size, heading = self.rng.random(3)
         if slipped < slip_p:

@@ -1,9 +1,10 @@
 """The gripper skills: pick an object by suction from its top, place the held object on a
 free spot of a surface or a goal fixture.
 
-At the paper's fidelity a released object falls from the tool with a small seeded error (a slip
-now and then, `release_error`) and settles under physics (PhysicalWorld.release), so a place can
-miss; the exact_motion aid sets it down. Only a robot kind that finishes the task (Bob) places on
+By default a released object falls from the tool with a small seeded error (a slip now and then,
+`release_error`: mhrc's calibration, mhrc.core.fidelity) and settles under physics
+(PhysicalWorld.release), so a place can miss; with `--noise off` it falls from exactly where the
+tool lets go, and the exact_motion aid sets it down without physics. Only a robot kind that finishes the task (Bob) places on
 the task's goal fixtures; a helper hands over within his reach.
 """
 
@@ -13,6 +14,7 @@ import math
 
 import numpy as np
 
+from mhrc.core.fidelity import CALIBRATION
 from mhrc.core.protocol import OutcomeCode, Pick, Place, SkillOutcome
 
 from .. import feedback as fb
@@ -24,9 +26,10 @@ from .registry import skill
 
 HANDOVER_CLEARANCE = 0.2  # m between a handed-over object and the hand of the robot that put it there
 # a released object falls under gravity from where the tool lets go of it, that point off by a small
-# error (Rayleigh-distributed length again) or, now and then, by a slip of the object off the suction cup
-RELEASE_SIGMA = 0.003  # m: the Rayleigh scale of an ordinary release's error
-RELEASE_SLIP_P = 0.1  # the chance that the object slips as it is let go
+# error (Rayleigh-distributed length again) or, now and then, by a slip of the object off the suction cup;
+# the rates are the episode's (SkillContext.noise), by default the calibration
+RELEASE_SIGMA = CALIBRATION.release_sigma  # m: the Rayleigh scale of an ordinary release's error
+RELEASE_SLIP_P = CALIBRATION.release_slip  # the chance that the object slips as it is let go (10%)
 RELEASE_SLIP = (0.02, 0.04)  # m: how far a slip shifts it (a solid never reaches the next colour panel)
 
 
@@ -127,7 +130,7 @@ def tool_yaw_for(r: RobotBody, object_yaw: float) -> float:
 
 def release_error(ctx: SkillContext) -> tuple[float, float]:
     """How far (x, y) from where the tool lets go a released object starts to fall: one draw per release."""
-    return ctx.motion_error(RELEASE_SLIP_P, RELEASE_SLIP, RELEASE_SIGMA)
+    return ctx.motion_error(ctx.noise.release_slip, RELEASE_SLIP, ctx.noise.release_sigma)
 
 
 def _handover_margin(ctx: SkillContext, spot: tuple[float, ...]) -> float:
@@ -162,8 +165,8 @@ def place(ctx: SkillContext, r: RobotBody, a: Place) -> SkillOutcome:
     cands, top = spots
     if a.location == ctx.world.layout.bob_table:
         cands = [c for c in cands if ctx.world.within_handover(c)] or cands
-        if "exact_motion" not in ctx.aids and not r.kind.finishes_task:  # a slip as it is let go must not carry it out of the finisher's reach
-            cands = [c for c in cands if _handover_margin(ctx, c) >= RELEASE_SLIP[1] + 3 * RELEASE_SIGMA] or cands
+        if ctx.noise.release_slip > 0 and not r.kind.finishes_task:  # a slip as it is let go must not carry it out of the finisher's reach
+            cands = [c for c in cands if _handover_margin(ctx, c) >= RELEASE_SLIP[1] + 3 * ctx.noise.release_sigma] or cands
         if r.kind.mobile:  # not under where this arm's hand will hover once it has retracted: Bob could not reach past it
             hand = r.tip()
             cands = [c for c in cands if horizontal(c, hand) >= HANDOVER_CLEARANCE] or cands

@@ -1,14 +1,16 @@
 """Base skills: navigate to a stand pose along an A* path, move the base by a short offset.
 
-At the paper's fidelity a base stops where seeded noise puts it (`base_error`), off target now
-and then: the skill then fails and says where the robot stopped. The exact_motion aid turns the
-noise off.
+By default a base stops where seeded noise puts it (`base_error`), off target now and then:
+the skill then fails and says where the robot stopped, as the paper's Table III has it. The
+rates are mhrc's calibration, not the paper's (mhrc.core.fidelity); `--noise off` and the
+exact_motion aid turn the noise off.
 """
 
 from __future__ import annotations
 
 import math
 
+from mhrc.core.fidelity import CALIBRATION
 from mhrc.core.protocol import Move, Navigate, OutcomeCode, SkillOutcome
 
 from .. import feedback as fb
@@ -19,10 +21,11 @@ from .registry import skill
 
 NAV_SPEED = 0.5  # m/s: simulated time of base motions
 MAX_MOVE = 1.0  # m, the longest `move`
-# motion noise (off with the exact_motion aid), drawn from the context's rng: where a base stops is its goal
-# plus an error of Rayleigh-distributed length (most stops within a few cm) or, now and then, a slip
-NAV_SIGMA = 0.015  # m: the Rayleigh scale of an ordinary stop's error (mean 1.9 cm; over 5 cm 0.4%)
-NAV_SLIP_P = 0.03  # the chance that a base slips
+# motion noise (off with --noise off or the exact_motion aid), drawn from the context's rng: where a base stops is
+# its goal plus an error of Rayleigh-distributed length (most stops within a few cm) or, now and then, a slip; the
+# rates are the episode's (SkillContext.noise, recorded in its trace), by default the calibration
+NAV_SIGMA = CALIBRATION.navigation_sigma  # m: the Rayleigh scale of an ordinary stop's error (mean 1.9 cm; over 5 cm 0.4%)
+NAV_SLIP_P = CALIBRATION.navigation_slip  # the chance that a base slips (3%)
 NAV_SLIP = (0.11, 0.3)  # m: how far a slip takes it from its goal (then pulled back onto free floor)
 OFF_TARGET = 0.1  # m: navigate and move fail when the base stops farther than this from the goal
 ROUTE_POINTS = 40  # at most this many points of a navigate's route go into its outcome (for viewers)
@@ -30,7 +33,7 @@ ROUTE_POINTS = 40  # at most this many points of a navigate's route go into its 
 
 def base_error(ctx: SkillContext) -> tuple[float, float]:
     """Where a base stops relative to its goal: one draw per navigate or move."""
-    return ctx.motion_error(NAV_SLIP_P, NAV_SLIP, NAV_SIGMA)
+    return ctx.motion_error(ctx.noise.navigation_slip, NAV_SLIP, ctx.noise.navigation_sigma)
 
 
 def stop_near(ctx: SkillContext, goal: tuple[float, float], error: tuple[float, float]) -> tuple[float, float]:
