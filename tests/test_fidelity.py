@@ -55,8 +55,8 @@ def test_reach_labels_are_an_aid_of_the_prompt() -> None:
     apple = ObjectView(name="apple", position=(-3.3, -0.1, 0.74), on="table_0")
     plain = LLMPolicy("bob", ScriptedClient([])).render(obs(robot="bob", objects=[apple]))[1]["content"]
     aided = LLMPolicy("bob", ScriptedClient([]), reach_labels=True).render(obs(robot="bob", objects=[apple]))[1]["content"]
-    assert "at (-3.30, -0.10, 0.74)\n" in plain and "reach)" not in plain.split("# Your status")[0]
-    assert "at (-3.30, -0.10, 0.74) (within your reach)" in aided
+    assert "- apple: position (-3.30, -0.10, 0.74)\n" in plain and "reach)" not in plain.split("# Your status")[0]
+    assert "- apple: position (-3.30, -0.10, 0.74) (within your reach)" in aided
 
 
 def test_alices_prompt_gives_the_simulators_real_picking_distances() -> None:
