@@ -272,6 +272,7 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
     assert sorted(by_key) == ["pack_objects/kitchen/3/0", "pack_objects/kitchen/4/0", "pack_objects/kitchen/5/0"]
     for r in rows:  # the configuration the episode ran with is on its row
         assert (r["method"], r["fidelity"], r["aids"], r["history_cap"], r["horizon"]) == ("openai:test-model", "aids:goal_map", ["goal_map"], 50_000, 2)
+        assert (r["prompts"], r["base_url"]) == (None, model.url)  # what says whether the paper's figures may stand beside it
         assert r["temporal_steps"] == 2 and r["llm_calls"] == 6  # three robots, two steps
     down = by_key["pack_objects/kitchen/4/0"]
     assert (down["llm_unreachable"], down["parse_failures"], down["prompt_tokens"], down["valid"]) == (6, 0, 0, False)

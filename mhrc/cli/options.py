@@ -14,6 +14,7 @@ from mhrc.core.fidelity import describe as describe_aids
 from mhrc.core.security import Credentials, SecurityError, load
 from mhrc.run.config import ConfigError, EpisodeConfig, SCHEDULES
 from mhrc.run.lifeline import PARENT_ENV
+from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import ScenarioError, resolve_scenario
 
 ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
@@ -38,6 +39,11 @@ EVENTS_HELP = (
     "A scenario: a JSON list of events the world applies during the episode, each with the tick it fires at and a kind "
     "(relocate, breakdown, new_target, close): a file's path, or the name of a shipped one (mhrc scenarios lists them; "
     "an existing file wins); checked before anything starts."
+)
+TOKEN_DEADLINE_HELP = (
+    "Seconds an agent has, once the world accepted its attach, to show its liveliness token (mhrc/RUN/alive/robot/ROBOT) "
+    "before the world detaches its robot. mhrc's agents declare the token before they attach, so this only bounds how long "
+    "an agent frozen or killed while attaching, or a hand-written one that skips the token, can hold up the episode."
 )
 HISTORY_CAP_HELP = "Bound each LLM prompt to CHARS characters, shortening older history (for small-context models); default: whole histories, as the paper."
 LLM_HELP = (
@@ -122,6 +128,7 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--noise", default="on", show_default=True, type=click.Choice(list(NOISE)), help=NOISE_HELP),
         click.option("--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP),
         click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP),
+        click.option("--token-deadline", default=TOKEN_DEADLINE, show_default=True, type=float, metavar="SECONDS", help=TOKEN_DEADLINE_HELP),
         events_option(),
         LOG_LEVEL,
     ]  # fmt: skip

@@ -29,8 +29,12 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
   model that stayed down after its retries: parse_error starting with LLM_ERROR_PREFIX),
   rejected_actions (`action_ack` events with accepted false, and the rejections of malformed
   requests the recorder counted as `junk` lines);
-- valid / invalid_reason: an episode whose every LLM step (at least one) found the model
-  unreachable measured the network, not the method: it is invalid and left out of summaries;
+- valid / invalid_code / invalid_reason: an episode that measured the machine, not the method,
+  is invalid and left out of summaries; `invalid_code` (an `Invalid`) says why for programs,
+  `invalid_reason` for people. `not_played`: it ended before any robot acted (no action
+  executed, `wait` included; at tick 0, or because every agent left: reason `no_agents`), e.g. a
+  loaded machine's agents let go before their first action; `model_unreachable`: every LLM
+  step (at least one) found the model unreachable, so it measured the network;
 - fidelity (`paper` or `aids:...`, from `episode_started`; `unrecorded` for traces older than
   the field) and horizon;
 - noise (`on` or `off`) and noise_rates (the motion noise's chances and error scales), from
@@ -69,6 +73,7 @@ import math
 from collections import Counter
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
+from enum import StrEnum
 from typing import Any
 
 from mhrc.core.fidelity import recorded_noise
@@ -79,6 +84,13 @@ UNRECORDED = "unrecorded"  # the fidelity of a trace written before episodes rec
 
 class TraceError(ValueError):
     """A trace that lacks what the metrics need (an episode that never finished)."""
+
+
+class Invalid(StrEnum):
+    """Why an episode is left out of every score (a row's `invalid_code`; the module docstring)."""
+
+    NOT_PLAYED = "not_played"  # it ended before any robot acted
+    MODEL_UNREACHABLE = "model_unreachable"  # every LLM step found the model unreachable
 
 
 @dataclass
@@ -108,6 +120,7 @@ class EpisodeMetrics:
     rejected_actions: int = 0
     valid: bool = True
     invalid_reason: str | None = None
+    invalid_code: Invalid | None = None
     fidelity: str = UNRECORDED
     noise: str = "on"  # the motion noise: on (the calibration) or off (--noise off, or the exact_motion aid)
     noise_rates: dict[str, float] = field(default_factory=dict)  # its chances and error scales (mhrc.core.protocol.MotionNoise)
@@ -154,7 +167,6 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
     thoughts = [t for t in every_thought if t.get("prompt") is not None]
     errors = [str(t["parse_error"]) for t in every_thought if t.get("parse_error")]
     unreachable = sum(1 for e in errors if e.startswith(LLM_ERROR_PREFIX))
-    invalid = bool(thoughts) and unreachable >= len(thoughts)
     scheduler = str(s.get("scheduler") or "lockstep")
     noise = recorded_noise(s)
     makespan = float(world.get("makespan", 0.0))
@@ -173,6 +185,7 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
     else:
         active = {int(r["tick"]) for r in acting}
     recovery = recovery_of(rows, scheduler, float(s.get("step_seconds") or 0.0), d)
+    invalid, why = _invalidity(rows, d, temporal_steps, results, len(thoughts), unreachable)
     recovered = [int(e["ticks_to_recover"]) for e in recovery if e["applied"] and e["ticks_to_recover"] is not None]
     return EpisodeMetrics(
         task=s["task"],
@@ -198,8 +211,9 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         parse_failures=len(errors) - unreachable,
         llm_unreachable=unreachable,
         rejected_actions=sum(1 for a in _msgs(rows, "action_ack") if a.get("accepted") is False) + junk_rejections(rows),
-        valid=not invalid,
-        invalid_reason=f"the model was unreachable for all {len(thoughts)} LLM steps" if invalid else None,
+        valid=invalid is None,
+        invalid_reason=why,
+        invalid_code=invalid,
         fidelity=str(s.get("fidelity") or UNRECORDED),
         noise=noise.setting,
         noise_rates=noise.model_dump(exclude={"setting"}),
@@ -214,6 +228,20 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
         recovery_ticks=round(statistics.fmean(recovered), 3) if recovered else None,
         unrecovered=sum(1 for e in recovery if e["applied"] and e["ticks_to_recover"] is None) if recovery else None,
     )
+
+
+def _invalidity(
+    rows: list[dict[str, Any]], done: dict[str, Any], temporal_steps: int, results: list[dict[str, Any]], llm_steps: int, unreachable: int
+) -> tuple[Invalid | None, str | None]:
+    """Why the episode measured the machine rather than the method (the code and a sentence), or (None, None)."""
+    reason = str(done["reason"])
+    if not results and not done["metrics"]["success"] and (temporal_steps == 0 or reason == "no_agents"):
+        left = sorted({str(e["robot"]) for e in _msgs(rows, "robot_detached")})
+        why = f"it ended ({reason}) at step {temporal_steps} before any robot acted" + (f"; detached: {', '.join(left)} (the trace says why)" if left else "")
+        return Invalid.NOT_PLAYED, why
+    if llm_steps and unreachable >= llm_steps:
+        return Invalid.MODEL_UNREACHABLE, f"the model was unreachable for all {llm_steps} LLM steps"
+    return None, None
 
 
 def recovery_of(rows: list[dict[str, Any]], scheduler: str, step_seconds: float, done: dict[str, Any]) -> list[dict[str, Any]]:

@@ -38,7 +38,7 @@ from mhrc.agents.llm import DEFAULT_MAX_TOKENS
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.eval.episode import EpisodeResult, Job
 from mhrc.core.fidelity import label
-from mhrc.core.metrics import TraceError, from_trace
+from mhrc.core.metrics import Invalid, TraceError, from_trace
 from mhrc.eval.paper import PAPER_OBJECTS
 from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import merge_runs, read_rows
@@ -187,6 +187,9 @@ ProgressHook = Callable[[Tally, dict[str, Any] | None], None]
 
 STOP_GRACE = 2.0  # s episodes told to stop (an interrupt) have before their processes are killed: Ctrl-C exits within 3 s
 RETRIES = 1  # an episode that fails (not fatally) is run this many more times before it is given up
+# invalid episodes whose cause is the machine's, as an error is: run again like one (RETRIES); one still so after that
+# is written as an invalid row, which every summary leaves out (mhrc.eval.report)
+RETRIED = frozenset({Invalid.NOT_PLAYED})
 
 
 class Executor(Protocol):
@@ -318,6 +321,9 @@ async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, pr
             except (TraceError, OSError) as exc:
                 res.error = f"{type(exc).__name__}: {exc}"
             else:
+                if m.invalid_code in RETRIED and attempts[res.key] <= RETRIES:
+                    log.warning("episode invalid, running it again", key=res.key, code=m.invalid_code, reason=m.invalid_reason)
+                    return job
                 _episode_report(trace_path)
         if res.error is not None:
             if attempts[res.key] <= RETRIES:
@@ -331,6 +337,7 @@ async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, pr
                 **m.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap, "mode": spec.mode,
                 "max_tokens": spec.max_tokens if spec.llm else None, "llm_seed": spec.llm_seed, "schedule": spec.schedule,
                 "time_scale": spec.time_scale, "scenario": scenario, "scenario_sha256": scenario_sha256,
+                "prompts": spec.prompts, "base_url": spec.base_url,  # whether the paper's figures may stand beside it (mhrc.eval.paper)
                 "worker": res.worker, "trace": str(trace_path.relative_to(out)),
                 **diag.columns(),
             }  # fmt: skip

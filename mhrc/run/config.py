@@ -18,6 +18,7 @@ from mhrc.core.keys import check_id, new_run_id
 from mhrc.agents.llm import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_TOKENS, DEFAULT_TIMEOUT, check_spec, robot_specs, split_url
 from mhrc.core.security import Credentials, check_for, load, make_run_credentials
 from mhrc.core.trace import unwritable
+from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import Scenario, check_scenario, load_scenario
 
 log = structlog.get_logger("mhrc.run.config")
@@ -71,6 +72,8 @@ class EpisodeConfig(BaseModel):
     tick_delay: float = Field(0.0, ge=0)
     schedule: Literal["sequential", "lockstep", "async"] = Field("lockstep", description="the world's time policy (docs/architecture.md, \"Time\")")
     time_scale: float = Field(0.0, ge=0, allow_inf_nan=False, description="async: simulated seconds per wall second; 0: as fast as possible")
+    token_deadline: float = Field(TOKEN_DEADLINE, gt=0, allow_inf_nan=False, description="seconds an attached agent has to show its liveliness "
+                                  "token before the world detaches it (mhrc/world/presence.py)")
     llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")

@@ -59,7 +59,7 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
         sys.executable, "-m", "mhrc", "world",
         "--task", cfg.task, "--scene", cfg.scene, "--seed", str(cfg.seed), "--objects", str(cfg.n_objects),
         "--horizon", str(cfg.horizon), "--run", cfg.run, "--host", cfg.host, "--port", str(cfg.port), "--quiet",
-        "--ablation", cfg.ablation, "--schedule", cfg.schedule,
+        "--ablation", cfg.ablation, "--schedule", cfg.schedule, "--token-deadline", str(cfg.token_deadline),
     ]  # fmt: skip
     if cfg.trace is not None:
         cmd += ["--trace", str(cfg.trace)]

@@ -59,7 +59,7 @@ async def serve_world(
             sim,
             WorldConfig(
                 run=cfg.run, horizon=cfg.horizon, start_timeout=cfg.start_timeout, tick_delay=cfg.tick_delay, schedule=cfg.schedule,
-                time_scale=cfg.time_scale,
+                time_scale=cfg.time_scale, token_deadline=cfg.token_deadline,
             ),  # fmt: skip
         )
         if on_service is not None:

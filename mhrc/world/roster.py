@@ -22,7 +22,6 @@ class Roster:
         self.robots = tuple(robots)
         self.attached: dict[str, str] = {}  # robot -> agent id
         self._sessions: dict[str, str] = {}  # robot -> the attaching session's secret (its attach query's `session` parameter)
-        self.tokens: set[str] = set()  # robots whose liveliness token is declared now
         self._log = log
 
     def _no_such_robot(self, robot: str) -> str:

@@ -57,12 +57,11 @@ from mhrc.core.protocol import (
 
 from .admission import Admission
 from .mail import Mailroom
+from .presence import TOKEN_DEADLINE, Presence
 from .roster import Roster
 from .schedulers import Executed, Scheduler, TaskResultLike, make_scheduler
 
 log = structlog.get_logger("mhrc.world")
-
-TOKEN_GRACE = 3.0  # s after an accepted attach by which the agent's liveliness token must exist (the lease is 2 s)
 
 
 class SimLike(Protocol):
@@ -111,6 +110,7 @@ class WorldConfig:
     tick_delay: float = 0.0  # pause between scheduler steps, for watching with --gui
     schedule: str = "lockstep"  # the time policy, a name in world.schedulers.SCHEDULERS
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
+    token_deadline: float = TOKEN_DEADLINE  # s an attached agent has to show its liveliness token (presence.py)
 
 
 @dataclass
@@ -141,7 +141,9 @@ class WorldService:
         self._t0 = 0.0
         self._evaluation: TaskResultLike = sim.evaluate()
         self._last_results: dict[str, str] = {}  # robot -> goal id of the last result released to it
-        self._token_checks: set[asyncio.Task[None]] = set()
+        self.presence = Presence(
+            bus, self.keys, self.roster, deadline=config.token_deadline, detach=self._detach, over=lambda: self.done is not None
+        )  # which attached robots still have a live agent
         self.scheduler: Scheduler = make_scheduler(config.schedule, self, time_scale=config.time_scale)
         self.admission = Admission(self.roster, self.scheduler, self._log)  # what gets to the scheduler
 
@@ -162,7 +164,7 @@ class WorldService:
         self.bus.serve(k.world_state, self._on_state_query)
         self.bus.serve(f"{k.base}/robot/*/attach", self._on_attach)
         self.bus.subscribe(k.any_action_request, self._on_request)
-        self.bus.watch_liveliness(k.alive_any_robot, self._on_liveliness)
+        self.presence.watch()
         self.bus.declare_token(k.alive_world)
         self._log.info("world ready", task=self.sim.task_id, seed=self.sim.seed, robots=list(self.sim.robots))
 
@@ -185,8 +187,7 @@ class WorldService:
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self._wake.wait(), max(0.0, wake_at - asyncio.get_running_loop().time()))
         assert self.done is not None
-        for check in self._token_checks:
-            check.cancel()
+        self.presence.close()
         return self.done
 
     async def _wait_for_start(self) -> None:
@@ -399,9 +400,7 @@ class WorldService:
         if self.roster.attach(robot, req.agent_id, session):  # said now, before the await below, during which the episode may start
             self.bus.put(self.keys.world_event, RobotAttached(robot=robot, agent_id=req.agent_id, tick=self.tick))
             self._log.info("robot attached", robot=robot, agent=req.agent_id, tick=self.tick)
-            check = asyncio.create_task(self._expect_token(robot, req.agent_id), name=f"token-{robot}")
-            self._token_checks.add(check)
-            check.add_done_callback(self._token_checks.discard)
+            self.presence.expect(robot, req.agent_id)
         obs = None
         wait_turn = self.scheduler.on_attach(robot)
         tick = self.scheduler.tick_of(robot)
@@ -425,29 +424,6 @@ class WorldService:
         if robot in self.sim.robots:
             ack = ActionAck(goal_id=goal_id, robot=robot, accepted=False, reason=rejection.reason, code=rejection.code)
             self.bus.put(self.keys.action_ack(robot), ack)
-
-    def _on_liveliness(self, sample: Sample) -> None:
-        robot = self.keys.robot_of(sample.key)
-        if sample.is_put:
-            self.roster.tokens.add(robot)
-            return
-        self.roster.tokens.discard(robot)
-        if robot not in self.attached:
-            return
-        self._detach(robot, "agent vanished (liveliness lost)")
-
-    async def _expect_token(self, robot: str, agent_id: str) -> None:
-        """An attached agent declares its liveliness token at once (docs/architecture.md, "Attach"); one that
-        has none TOKEN_GRACE seconds later (frozen or killed right after attaching, or a client
-        that skips it) would never be seen to leave: the sequential schedule would wait for its
-        turn forever. Detach it; it may attach again."""
-        await asyncio.sleep(TOKEN_GRACE)
-        if self.done is not None or self.attached.get(robot) != agent_id or robot in self.roster.tokens:
-            return
-        if await self.bus.alive(self.keys.alive_robot(robot), timeout=2.0):  # its put may have gone unseen: ask
-            return
-        if self.done is None and self.attached.get(robot) == agent_id:
-            self._detach(robot, f"its agent declared no liveliness token ({self.keys.alive_robot(robot)}) within {TOKEN_GRACE:.0f} s of attaching")
 
     def _detach(self, robot: str, why: str) -> None:
         agent_id = self.roster.detach(robot)
