@@ -122,7 +122,9 @@ def test_a_robot_does_not_see_what_happens_where_it_is_not() -> None:
         view = _obj(sim.observe("david", 5), c.item)
         assert view is not None and view.on == "table_0" and view.told_by == "alice" and view.last_seen_on is None
         assert f"{c.item}: on table_0 (Alice told you), at " in object_line(view, david, hints=True)
-        assert object_line(view, david) == f"- {c.item}: position ({view.position[0]:.2f}, {view.position[1]:.2f}, {view.position[2]:.2f})"
+        assert view.yaw is not None and object_line(view, david) == (
+            f"- {c.item}: position ({view.position[0]:.2f}, {view.position[1]:.2f}, {view.position[2]:.2f}), yaw {round(math.degrees(view.yaw)) or 0} deg"
+        )  # the appendix's fields: where it was and its orientation, as Alice saw them
 
 
 def test_the_live_state_aid_shows_the_truth() -> None:

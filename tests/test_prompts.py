@@ -90,7 +90,7 @@ def observe(robot: str, tick: int = 0, *, base: tuple[float, float, float] | Non
         "furniture": furniture(update.pop("drawer_open", False)),
         "objects": [
             ObjectView(name="phone", position=(-3.25, -0.24, 0.707), on="table_0"),
-            ObjectView(name="book", position=(-2.4, 0.05, 0.715), on="table_0"),
+            ObjectView(name="book", position=(-2.4, 0.05, 0.715), yaw=1.5708, on="table_0"),
         ]
         if bob
         else [],
@@ -132,7 +132,7 @@ def script(robot: str) -> list[tuple[str, SkillOutcome, Observation]]:
         ]
     if robot == "bob":
         in_tray = ObjectView(name="phone", position=(-3.4, 0.19, 0.72), on="tray")
-        book = ObjectView(name="book", position=(-2.4, 0.05, 0.715), on="table_0")
+        book = ObjectView(name="book", position=(-2.4, 0.05, 0.715), yaw=1.5708, on="table_0")
         status = "In the tray: phone. Not yet in the tray: book, soap, mug."
         return [
             ('Command: communicate("Alice, please bring these to table_0 within my reach: book, soap, mug.", alice)', ok("Message sent to alice."), observe("bob", 1)),
@@ -283,7 +283,7 @@ def test_the_user_prompt_carries_the_appendix_in_its_order(robot: str) -> None:
         assert "- drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; " + ("open;" if robot == "alice" else "closed;") in graph
         assert "stand poses 0 = (-3.30, -0.85, yaw 90 deg)" in graph and "place pose (-3.30, -0.22, 0.70)" in graph
     # known objects in the appendix's fields: position, nothing about where they lie or who told
-    known = {"alice": "- soap: position (-3.10, 3.30, 0.45)\n", "bob": "- book: position (-2.40, 0.05, 0.71)\n",
+    known = {"alice": "- soap: position (-3.10, 3.30, 0.45)\n", "bob": "- book: position (-2.40, 0.05, 0.71), yaw 90 deg\n",
              "david": "- mug: position (2.60, 2.40, 0.75)\n"}[robot]
     assert known in graph
     # status: position, orientation (where the base moves), gripper (where there is one); not the step, not the stand pose
@@ -329,7 +329,7 @@ def _without_hints(text: str, hints: str) -> str:
     text = re.sub(r"You are \w+, a [\w ]+\. Current step: \d+\.\n", "", text)
     text = re.sub(r"; (at stand pose \d+ of \w+|not at any stand pose)\.", ".", text)
     text = text.replace("; no stand pose (not a navigation target)", "").replace("closed (open it to see inside)", "closed")
-    text = re.sub(r"^(- \w+): .*?, at (\([^)]*\))$", r"\1: position \2", text, flags=re.M)  # where it lies, who told
+    text = re.sub(r"^(- \w+): .*?, at (\([^)]*\))(, yaw -?\d+ deg)?$", r"\1: position \2\3", text, flags=re.M)  # where it lies, who told
     return re.sub(r"^(- \w+) \([^)]*\):", r"\1:", text, flags=re.M)
 
 
@@ -381,7 +381,7 @@ def test_alice_at_step_5_sees_only_what_she_was_told_or_saw() -> None:
 
 def test_bob_sees_progress_and_no_stand_poses() -> None:
     text = (GOLDEN / "bob_step5.txt").read_text(encoding="utf-8")
-    assert "book: position (-2.40, 0.05, 0.71)\n" in text
+    assert "book: position (-2.40, 0.05, 0.71), yaw 90 deg\n" in text
     assert "(within your reach)" not in text and "(out of your reach)" not in text  # reach labels are an aid, not the paper's prompt
     assert "phone: position (-3.40, 0.19, 0.72)" in text and "Latest task progress:\nIn the tray: phone." in text
     assert "stand poses" not in text and "Gripper: empty." in text

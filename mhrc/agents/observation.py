@@ -57,14 +57,17 @@ def furniture_line(f: FurnitureView, navigates: bool = True, hints: bool = False
 
 
 def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False, hints: bool = False) -> str:
-    """`- name: position (x, y, z)` (the appendix's field); an object the robot looked for and
-    no longer found where it was: `position unknown`. With `hints`, where it lies, who told the
+    """`- name: position (x, y, z), yaw N deg` (the appendix's fields: position and
+    orientation, as last seen); an object the robot looked for and no longer found where it was:
+    `position unknown`. With `hints`, where it lies, who told the
     robot of it and its distance from the robot's arm base (or base); with the reach_labels
     aid, whether that is within the arm's reach (the paper's prompts leave all that to the model)."""
     gone = bool(o.last_seen_on and not (o.on or o.held_by))
     if not hints:
-        text = f"- {o.name}: position " + ("unknown" if gone else _xyz(o.position))
-        return text + _reach(o, obs) if reach_labels and not gone and not o.held_by else text
+        if gone:
+            return f"- {o.name}: position unknown"
+        text = f"- {o.name}: position {_xyz(o.position)}" + (f", yaw {_deg(o.yaw)}" if o.yaw is not None else "")
+        return text + _reach(o, obs) if reach_labels and not o.held_by else text
     told = f" ({o.told_by.capitalize()} told you)" if o.told_by else ""
     if gone:
         return f"- {o.name}: no longer on {o.last_seen_on}, where it was last seen at {_xyz(o.position)}; where it is now is unknown{told}"
@@ -74,7 +77,7 @@ def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False, hin
         where = f"inside {o.on}" if o.inside else (f"in the {o.on}" if o.on == "tray" else f"on {o.on}")
     else:
         where = "on the floor"
-    text = f"- {o.name}: {where}{told}, at {_xyz(o.position)}"
+    text = f"- {o.name}: {where}{told}, at {_xyz(o.position)}" + (f", yaw {_deg(o.yaw)}" if o.yaw is not None else "")
     if o.held_by:
         return text
     s = obs.status

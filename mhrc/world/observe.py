@@ -32,7 +32,9 @@ from .tasks import Task
 def object_view(world: PhysicalWorld, o: ObjectState) -> ObjectView:
     """An object as it is now."""
     x, y, z = world.position(o)
-    return ObjectView(name=o.name, position=(round(x, 3), round(y, 3), round(z, 3)), on=o.on, inside=o.inside, held_by=o.held_by)
+    return ObjectView(
+        name=o.name, position=(round(x, 3), round(y, 3), round(z, 3)), yaw=round(world.yaw(o), 3), on=o.on, inside=o.inside, held_by=o.held_by
+    )
 
 
 class Knowledge:

@@ -34,6 +34,7 @@ class ObjectView(_Model):
 
     name: str
     position: tuple[float, float, float]
+    yaw: float | None = Field(None, description="its orientation about the vertical axis (radians) when seen; None in traces before it was sent")
     on: str | None = Field(None, description="furniture (or receptacle) the object lies on or in")
     inside: bool = Field(False, description="inside a container rather than on a surface")
     held_by: str | None = None
