@@ -180,7 +180,7 @@ def test_the_examples_are_collected() -> None:
     by_page = {b.page.name for b in EXAMPLES if not b.not_run}
     assert {"README.md", "quickstart.md", "protocol.md", "testing.md", "security.md"} <= by_page
     block = parse_blocks(ROOT / "docs" / "fidelity.md")
-    assert [b.lang for b in block] == ["bash", "text"]
+    assert [b.lang for b in block] == ["bash", "text", "bash", "text"]
 
 
 def test_a_failing_example_fails(tmp_path: Path) -> None:

@@ -90,7 +90,8 @@ async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_pars
     bob = [t for t in ts if t["robot"] == "bob"]
     alice = [t for t in ts if t["robot"] == "alice"]
     assert bob[0]["finish_reason"] == "length" and "cut at the token limit" in bob[0]["parse_error"]
-    assert "cut at the token limit" in bob[1]["prompt"]  # the reason came back as feedback
+    assert "- (latest) step 0: Your command could not be read, so you waited." in bob[1]["prompt"]  # came back as the paper's feedback
+    assert "token limit" not in bob[1]["prompt"]  # the reason and advice are the feedback_advice aid's
     assert alice[0]["finish_reason"] == "length" and alice[0]["parse_error"] is None and alice[0]["action"] == "navigate(table_1, 0)"
     # the 1 MB reply: at most MAX_REPLY_CHARS (and a note) in the trace, a short reason in the next prompt
     assert len(bob[1]["reply"]) < MAX_REPLY_CHARS + 100 and "more characters cut by mhrc" in bob[1]["reply"]

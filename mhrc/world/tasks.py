@@ -238,7 +238,7 @@ class PackObjects:
 
     def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
         return (
-            f"Put every object on the list into the tray on {b.table}. {ask(b, 'objects')} "
+            f"Put every object on the list into the tray on {b.table}. {ask(b, self.things)} "
             f"The list: {', '.join(targets)}. Nothing that is not on the list goes into the tray."
         )
 
@@ -331,7 +331,7 @@ class SortSolids:
         else:  # the paper's: the solids and the panels; matching the colours is the finisher's job
             listed = f"{', '.join(targets)}; the colour panels: {', '.join(f'{c}_panel' for c in PANEL_COLORS)}"
         return (
-            f"Put every solid on the list on the panel of its colour on {b.table}. {ask(b, 'solids')} "
+            f"Put every solid on the list on the panel of its colour on {b.table}. {ask(b, self.things)} "
             f"The list: {listed}. Nothing that is not on the list goes onto a panel."
         )
 
@@ -448,6 +448,6 @@ class MakeSandwich:
 
     def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
         return (
-            f"Stack the menu's ingredients on the cutting board on {b.table}, bottom to top in the menu's order. {ask(b, 'ingredients')} "
+            f"Stack the menu's ingredients on the cutting board on {b.table}, bottom to top in the menu's order. {ask(b, self.things)} "
             f"The menu, bottom to top: {', '.join(targets)}. Nothing that is not on the menu goes onto the board."
         )
