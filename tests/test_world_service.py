@@ -278,6 +278,67 @@ async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(mhrc_world, mon
     assert lines[0]["code"] == "duplicate_goal" and lines[0]["goal"] == first.goal_id
 
 
+# --------------------------------------------------------------------------- a re-attach during a tick (issue 32)
+async def test_a_message_sent_while_its_receiver_reattaches_is_delivered_once_and_told(mhrc_world, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+    """Bob tells Alice about an object only he has seen. While the simulator's thread is held
+    right after his message was sent (mid-tick), Alice's agent attaches again, and the world
+    handles that attach up to its observation. Released, the message reaches Alice exactly once
+    (in the attach reply or in her result, not both, not neither), every observation that
+    carries it or comes after it knows the object, and no later observation repeats it."""
+    release, loop = threading.Event(), asyncio.get_running_loop()
+    held: asyncio.Queue[str] = asyncio.Queue()  # goal ids, as the simulator's thread stops after each message
+    observing: asyncio.Queue[str] = asyncio.Queue()  # robots, as the world starts making an observation on the loop
+    execute, observe = WorldService._execute, WorldService.observe
+
+    def execute_then_hold(self: WorldService, req: ActionRequest, tick: int) -> SkillOutcome:
+        outcome = execute(self, req, tick)
+        if isinstance(req.action, Communicate):
+            loop.call_soon_threadsafe(held.put_nowait, req.goal_id)
+            release.wait(60)  # until the test has re-attached Alice (bounded: never a hang)
+        return outcome
+
+    async def observe_seen(self: WorldService, robot: str, tick: int):  # type: ignore[no-untyped-def]
+        observing.put_nowait(robot)
+        return await observe(self, robot, tick)
+
+    monkeypatch.setattr(WorldService, "_execute", execute_then_hold)
+    monkeypatch.setattr(WorldService, "observe", observe_seen)
+    async with mhrc_world(seed=3, start_timeout=3.0) as world:
+        bus = await world.client()
+        try:
+            alice, bob = ManualAgent(bus, world.run, "alice"), ManualAgent(bus, world.run, "bob")
+            assert (first := await alice.attach()).accepted and first.observation is not None
+            assert (reply := await bob.attach()).accepted and reply.observation is not None
+            unknown = sorted({o.name for o in reply.observation.objects} - {o.name for o in first.observation.objects})
+            assert unknown, "Bob has seen an object Alice has not"
+            thing = unknown[0]
+            await asyncio.wait_for(alice.started.wait(), 30)
+            while not observing.empty():
+                observing.get_nowait()  # the attaches' own observations
+
+            acting = asyncio.ensure_future(
+                asyncio.gather(alice.act(Wait()), bob.act(Communicate(content=f"Alice, the {thing} is near me.", to="alice")))
+            )
+            await asyncio.wait_for(held.get(), 30)  # the message is sent, the tick not over
+            again = asyncio.ensure_future(alice.attach())
+            assert await asyncio.wait_for(observing.get(), 30) == "alice"  # the world is answering her attach, mid-tick
+            release.set()
+            reattached = await asyncio.wait_for(again, 60)
+            (_, result), _ = await asyncio.wait_for(acting, 60)
+            assert reattached.accepted and reattached.observation is not None and result is not None
+
+            carried = [m.content for obs in (reattached.observation, result.observation) for m in obs.new_messages]
+            assert carried == [f"Alice, the {thing} is near me."], carried
+            for obs in (reattached.observation, result.observation):
+                assert thing in {o.name for o in obs.objects}, f"Alice's observation of tick {obs.tick} does not know what Bob told"
+            alice.tick = result.tick + 1  # the attach reply said the tick it was asked in, which has closed since
+            (_, later), _ = await asyncio.gather(alice.act(Wait()), bob.act(Wait()))
+            assert later is not None and later.observation.new_messages == [] and thing in {o.name for o in later.observation.objects}
+        finally:
+            release.set()
+            await bus.close()
+
+
 @pytest.mark.slow
 async def test_world_notices_a_dead_agent_and_goes_on(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """An agent process killed mid-episode: liveliness tells the world, which does not hang."""

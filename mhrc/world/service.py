@@ -405,9 +405,13 @@ class WorldService:
         wait_turn = self.scheduler.on_attach(robot)
         tick = self.scheduler.tick_of(robot)
         if not wait_turn:
-            self.mail.delivered([robot])  # its waiting messages come with this observation
-            obs = await self.observe(robot, tick)
-            obs = obs.model_copy(update={"new_messages": self.mail.take(robot)})
+            messages = self.mail.deliver(robot)  # its waiting messages come with this observation, which knows what they tell
+            try:
+                obs = await self.observe(robot, tick)
+            except BaseException:
+                self.mail.hold(robot, messages)  # no observation carried them
+                raise
+            obs = obs.model_copy(update={"new_messages": messages})
         self._wake.set()
         return AttachReply(robot=robot, accepted=True, tick=tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn)
 
