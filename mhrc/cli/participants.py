@@ -24,6 +24,7 @@ from mhrc.cli.running import run_command
 from mhrc.cli.viewer import render_video_to
 from mhrc.core import logs
 from mhrc.core.security import SecurityError
+from mhrc.core.trace import TraceWriteError
 from mhrc.run.config import ConfigError, EpisodeConfig, ROBOTS
 
 
@@ -92,7 +93,7 @@ def up(
     except (AgentError, LLMError, ReplayMismatch) as exc:  # an agent could not play (its model, its replay, the world): one line
         click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(2)
-    except NobodyAttached as exc:
+    except (NobodyAttached, TraceWriteError) as exc:
         click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(1)
     except ProcessFailed as exc:
@@ -131,7 +132,7 @@ def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None 
 
     try:
         run_command(lambda: serve_world(cfg, observe=observe))
-    except NobodyAttached as exc:
+    except (NobodyAttached, TraceWriteError) as exc:
         click.echo(f"mhrc world: {exc}", err=True)
         sys.exit(1)
 

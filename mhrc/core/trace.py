@@ -13,6 +13,11 @@ request (its ack, its result) may reach the recorder before the request itself (
 handle the request before the recorder's thread is given it): it is held until the request comes,
 and the request is written first, with the time of its answer. An agent's `generating`
 status (a long model call's progress, for the console) is not recorded: its thought is.
+
+A write that fails (a full disk) stops the recording at once: the recorder keeps the error
+(`Recorder.error`, a TraceWriteError), cuts the file back to its last whole line, adds one
+`incomplete` line if it can, tells `on_error` (the world's side stops the run) and writes
+nothing more; it never raises on the bus's threads.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import json
 import os
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
@@ -34,11 +40,26 @@ MAX_HELD = 20_000  # requests awaiting their ack (a flood arrives faster than th
 MAX_REQUESTED = 100_000  # goal ids of the requests seen, remembered to tell an early ack or result from one of an old request
 
 
-class Recorder:
-    """Writes every sample of `run` to `path` (JSONL, flushed line by line)."""
+class TraceWriteError(RuntimeError):
+    """The trace could not be written (a full disk, an I/O error): the run stops, the trace is incomplete."""
 
-    def __init__(self, bus: Bus, run: str, path: str | Path) -> None:
+    code = "trace_write_failed"
+
+    def __init__(self, path: Path, cause: OSError) -> None:
+        self.path = path
+        self.cause = cause
+        super().__init__(f"cannot write the trace {path}: {cause.strerror or cause}; the run was stopped and the trace is incomplete")
+
+
+class Recorder:
+    """Writes every sample of `run` to `path` (JSONL, flushed line by line). `on_error` is called
+    once, on a bus thread, when a write fails (see TraceWriteError)."""
+
+    def __init__(self, bus: Bus, run: str, path: str | Path, on_error: Callable[[TraceWriteError], object] | None = None) -> None:
         self.path = Path(path)
+        self.error: TraceWriteError | None = None
+        self._on_error = on_error
+        self._good = 0  # bytes of whole lines on disk
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._keys = Keys(run)
         self._bus = bus
@@ -66,11 +87,40 @@ class Recorder:
         line = {"t": round((time.perf_counter() if t is None else t) - self._t0, 6), "key": key, "kind": kind, "msg": msg}
         text = json.dumps(line, separators=(",", ":")) + "\n"
         with self._lock:  # one whole line at a time, whichever thread
-            if self._file is None or self._file.closed:
+            if self._file is None or self._file.closed or self.error is not None:
                 return
-            self._file.write(text)
-            self._file.flush()
+            try:
+                self._file.write(text)
+                self._file.flush()
+            except OSError as exc:
+                self._fail(exc)
+                return
+            self._good += len(text.encode("utf-8"))
             self.count += 1
+
+    def _fail(self, exc: OSError) -> None:
+        """Stop recording after a failed write: keep the error, close the file, cut it back to its
+        whole lines, mark it incomplete (best effort: the disk may still be full) and tell `on_error`."""
+        self.error = TraceWriteError(self.path, exc)
+        file, self._file = self._file, None
+        if file is not None:
+            try:
+                file.close()  # its unwritten buffer fails again: dropped
+            except OSError:
+                pass
+        if self.path.is_file():
+            try:
+                os.truncate(self.path, self._good)
+                with self.path.open("a", encoding="utf-8") as f:
+                    t = round(time.perf_counter() - self._t0, 6)
+                    f.write(json.dumps({"t": t, "key": f"{self._keys.base}/trace", "kind": "incomplete", "msg": {"error": str(exc)}}) + "\n")
+            except OSError:
+                pass
+        if self._on_error is not None:
+            try:
+                self._on_error(self.error)
+            except Exception:  # a loop already closed: the caller reads self.error
+                pass
 
     def _on_sample(self, sample: Sample) -> None:
         if sample.key.endswith("/generating"):
@@ -201,7 +251,10 @@ class Recorder:
                 self._flush_junk(key)
         with self._lock:
             if self._file is not None:
-                self._file.close()
+                try:
+                    self._file.close()
+                except OSError as exc:
+                    self._fail(exc)
 
 
 def unwritable(path: Path, *, directory: bool = False) -> str | None:

@@ -103,6 +103,9 @@ async def _run_in_process(
                 raise failures[0]
             early = [t.exception() for t in agents if t in finished and t.exception() is not None]
             if early and not started.is_set():  # an agent gave up before the start (e.g. its attach timed out):
+                if services and services[0].done is not None:  # the world ended it first (its trace failed): its reason
+                    await asyncio.wait({world})
+                    world.result()
                 raise early[0]  # type: ignore[misc]  # the world would wait for its robot forever
             if world not in finished and not any(t in pending for t in agents):
                 errors = [t.exception() for t in agents if t.exception() is not None]
@@ -114,8 +117,9 @@ async def _run_in_process(
             if not t.done():
                 t.cancel()
         results = await asyncio.gather(*agents, return_exceptions=True)
+        world_failed = world.done() and not world.cancelled() and world.exception() is not None  # said by the run's error
         for r, res in zip(robots, results):
-            if isinstance(res, BaseException) and not isinstance(res, asyncio.CancelledError) and not (failures and _is_fatal(res)):
+            if not world_failed and isinstance(res, BaseException) and not isinstance(res, asyncio.CancelledError) and not (failures and _is_fatal(res)):
                 log.warning("agent ended with an error", robot=r, error=str(res))  # (the run's own failure is raised, not logged)
         if not world.done():
             world.cancel()

@@ -33,11 +33,11 @@ class ProcessFailed(RuntimeError):
     With a positive exit code the process has said why on stderr itself; a negative one is the
     signal that killed it."""
 
-    def __init__(self, who: str, returncode: int, before: str) -> None:
+    def __init__(self, who: str, returncode: int, before: str | None) -> None:
         self.who = who
         self.returncode = returncode
         how = f"was killed by signal {-returncode}" if returncode < 0 else f"exited with code {returncode}"
-        super().__init__(f"{who} {how} before the episode {before}")
+        super().__init__(f"{who} {how} " + ("after the episode ended" if before is None else f"before the episode {before}"))
 
 
 def _child_env() -> dict[str, str]:
@@ -174,6 +174,9 @@ async def _run_processes(
                 if code != 0 and not started.is_set() and not done_fut.done():  # as up_in_process: its robot would be waited for forever
                     raise ProcessFailed(who, code, "started")
         done = done_fut.result()
+        await asyncio.to_thread(_wait_or_kill, world, 20.0)
+        if world.returncode != 0:  # it ended the episode and then failed (its trace could not be written): said on its stderr
+            raise ProcessFailed("the world process", world.returncode, None)
         for p in procs:
             await asyncio.to_thread(_wait_or_kill, p, 20.0)
         if done.reason == "no_agents":  # as up_in_process: every agent gone, with an error, is the run's failure

@@ -50,8 +50,10 @@ async def serve_world(
         bus = await (
             open_client(connect, 30.0, security=security) if connect else Bus.open(mode="router", listen=[cfg.endpoint], security=security)
         )
+        trace_failed = asyncio.Event()
         if cfg.trace is not None:
-            recorder = Recorder(bus, cfg.run, cfg.trace).start()
+            loop = asyncio.get_running_loop()
+            recorder = Recorder(bus, cfg.run, cfg.trace, on_error=lambda _e: loop.call_soon_threadsafe(trace_failed.set)).start()
         if observe is not None:
             observe(bus, cfg.run)
         world = WorldService(
@@ -65,7 +67,7 @@ async def serve_world(
         if on_service is not None:
             on_service(world)
         try:
-            return await world.run()
+            return await _until(trace_failed, world)
         except asyncio.CancelledError:
             world.stop()
             raise
@@ -77,3 +79,21 @@ async def serve_world(
         if bus is not None:
             await bus.close()
         await asyncio.to_thread(sim.close)
+        if recorder is not None and recorder.error is not None:
+            raise recorder.error  # everything is closed: one line for the user, not a run that goes on unrecorded
+
+
+async def _until(failed: asyncio.Event, world: WorldService) -> EpisodeDone:
+    """The world's episode, stopped (its end said to the agents) as soon as `failed` is set."""
+    run, stop = asyncio.ensure_future(world.run()), asyncio.ensure_future(failed.wait())
+    try:
+        await asyncio.wait({run, stop}, return_when=asyncio.FIRST_COMPLETED)
+        if run.done():
+            return run.result()
+        world.stop()
+        assert world.done is not None
+        return world.done
+    finally:
+        for task in (run, stop):
+            task.cancel()
+        await asyncio.gather(run, stop, return_exceptions=True)
