@@ -73,3 +73,31 @@ def test_a_trace_that_fills_up_mid_run_is_cut_to_whole_lines_and_marked_incomple
     assert not any(r.get("msg", {}) and r["msg"].get("kind") == "episode_done" for r in rows if isinstance(r.get("msg"), dict)), "it ran on"
     assert os.path.getsize(trace) <= 40_000
 
+
+# --------------------------------------------------------------------------- participants' text on the console
+
+EVIL = ("[/]", "[bold red]x", "\x1b]0;pwned\x07\x1b[2J")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("processes", [False, True])
+def test_a_participants_text_is_printed_inert(processes: bool, tmp_path: Path) -> None:
+    """Alice's model writes markup and terminal escapes into a message and an object name: the console prints them as text (markup shown, control
+    characters gone), every line arrives, and the run ends normally. Before: `[/]` raised
+    MarkupError on the bus thread (the line lost) and the escapes reached the terminal raw."""
+    from mhrc.testing import ScriptedModelServer
+
+    said = " ".join(EVIL)
+    script = {"alice": [f"Command: communicate({said}, bob)", "Command: pick([bold red]x)"]}
+    with ScriptedModelServer(script) as server:
+        out = _mhrc(["up", "--insecure", "--horizon", "4", "--llm", "alice=openai:scripted", "--base-url", server.url,
+                     *(["--processes"] if processes else [])], tmp_path, env={**os.environ, "COLUMNS": "250", "OPENAI_API_KEY": "x"})  # fmt: skip
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "MarkupError" not in out.stderr and "Traceback" not in out.stderr, out.stderr[-3000:]
+    for control in ("\x1b", "\x07"):
+        assert control not in out.stdout and control not in out.stderr, repr(out.stdout[-2000:])
+    lines = out.stdout.splitlines()
+    message = [line for line in lines if "alice -> bob:" in line]
+    assert message and "[/] [bold red]x ]0;pwned[2J" in message[0], lines  # the markup shown as typed, the escapes' control bytes gone
+    assert any("pick([bold_red]x)" in line and "There is no '[bold_red]x'" in line for line in lines), lines  # the parser's name, as typed
+

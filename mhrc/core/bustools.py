@@ -32,6 +32,7 @@ from mhrc.core.bus import Bus, Sample, make_config
 
 from mhrc.core.endpoints import split_endpoint
 from mhrc.core.keys import ROOT, Keys
+from mhrc.core.printable import printable
 from mhrc.core.protocol import (
     PROTOCOL_VERSION,
     SUPPORTED_VERSIONS,
@@ -272,7 +273,7 @@ MODELS = _message_models()
 
 
 def _clip(text: str, n: int = SUMMARY_CHARS) -> str:
-    text = " ".join(text.split())
+    text = " ".join(printable(text).split())  # a participant's text: no escape sequence reaches the terminal
     return text if len(text) <= n else text[: n - 1] + "…"
 
 
@@ -398,7 +399,7 @@ async def bus_echo(
                     line["error"] = d.error
                 write(json.dumps(line, separators=(",", ":")))
             else:
-                write(f"{_clock(t)} {sample.key} {d.kind} {d.summary}".rstrip())
+                write(printable(f"{_clock(t)} {sample.key} {d.kind} {d.summary}").rstrip())
     return 0 if count is None or seen >= count else 1
 
 

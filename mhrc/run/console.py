@@ -17,6 +17,7 @@ from rich.table import Table
 
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys
+from mhrc.core.printable import printable
 from mhrc.core.protocol import (
     ActionResult,
     Communicate,
@@ -36,6 +37,11 @@ from mhrc.core.protocol import (
 )
 
 COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
+
+
+def inert(text: object) -> str:
+    """What a participant or a model wrote, as Rich prints it literally: no markup, no control characters."""
+    return escape(printable(text))
 
 
 @dataclass
@@ -110,7 +116,7 @@ class ProgressPrinter:
             self.console.print(line)
 
     def _robot(self, name: str) -> str:
-        return f"[{COLORS.get(name, 'white')}]{name:>5}[/]"
+        return f"[{COLORS.get(name, 'white')}]{inert(f'{name:>5}')}[/]"
 
     def _tick(self, tick: int) -> _Tick:
         return self._ticks.setdefault(tick, _Tick())
@@ -164,16 +170,16 @@ class ProgressPrinter:
             held.due = set(ev.actions) - self._printed.get(ev.tick, set())
             self._release()
         elif isinstance(ev, RobotAttached):
-            self._print(f"{self._robot(ev.robot)} attached (agent {ev.agent_id}) at tick {ev.tick}")
+            self._print(f"{self._robot(ev.robot)} attached (agent {inert(ev.agent_id)}) at tick {ev.tick}")
         elif isinstance(ev, RobotDetached):
             for held in self._ticks.values():  # its results that were due will not come
                 held.due.discard(ev.robot)
             self._release()
-            self._print(f"{self._robot(ev.robot)} [red]detached[/] at tick {ev.tick}: {ev.reason}")
+            self._print(f"{self._robot(ev.robot)} [red]detached[/] at tick {ev.tick}: {inert(ev.reason)}")
         elif isinstance(ev, ScenarioEvent):
             if not self.verbose:
                 return
-            line = f"[bold yellow]tick {ev.tick:>2} event[/] {escape(ev.text)}"
+            line = f"[bold yellow]tick {ev.tick:>2} event[/] {inert(ev.text)}"
             if self._stepped and ev.tick - 1 > self._last_closed:  # it fires as its tick opens: after the previous tick's lines
                 self._tick(ev.tick - 1).after.append(line)
             else:
@@ -194,7 +200,8 @@ class ProgressPrinter:
         for line in self._thoughts.pop((r.tick, r.robot), []):
             self._print(line)
         mark = "[green]ok[/]" if r.outcome.succeeded else "[red]failed[/]"
-        self._print(f"tick {r.tick:>2} {self._robot(r.robot)} {r.action.call():<34} {mark}  [dim]{r.outcome.feedback}[/]")
+        call = inert(f"{printable(r.action.call()):<34}")
+        self._print(f"tick {r.tick:>2} {self._robot(r.robot)} {call} {mark}  [dim]{inert(r.outcome.feedback)}[/]")
         self._printed.setdefault(r.tick, set()).add(r.robot)
         self._goals.add(r.goal_id)
         held = self._ticks.get(r.tick)
@@ -215,7 +222,7 @@ class ProgressPrinter:
             return
         if t.parse_error is None or not self.verbose:
             return
-        error = escape(t.parse_error[:200])
+        error = inert(t.parse_error[:200])
         if error.startswith(LLM_ERROR_PREFIX):
             what = "[red]model unavailable[/]: " + error.removeprefix(LLM_ERROR_PREFIX)
         else:
@@ -248,7 +255,7 @@ class ProgressPrinter:
             m = decode(sample.payload, RobotMessage)
         except ProtocolError:
             return
-        line = f"        {self._robot(m.sender)} -> {m.to}: [italic]{m.content}[/]"
+        line = f"        {self._robot(m.sender)} -> {inert(m.to)}: [italic]{inert(m.content)}[/]"
         if self._stepped and m.tick > self._last_closed:  # with the tick it was sent in, after its results
             held = self._tick(m.tick)
             held.messages.append(line)
@@ -264,7 +271,7 @@ def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = Non
     """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics").
     `recovery`: a scenario's events as mhrc.core.metrics scores them (`--events`), one row of them."""
     m = done.metrics
-    t = Table(title=f"episode {done.run}: {done.reason}", show_header=False)
+    t = Table(title=f"episode {inert(done.run)}: {inert(done.reason)}", show_header=False)
     t.add_row("success", "yes" if m.success else "no")
     t.add_row("partial success", f"{m.partial_success:.2f} ({m.placed}/{m.total} placed)")
     bound = f" (no team can need fewer than {m.lower_bound})" if m.lower_bound is not None else ""
