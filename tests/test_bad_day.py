@@ -101,3 +101,61 @@ def test_a_participants_text_is_printed_inert(processes: bool, tmp_path: Path) -
     assert message and "[/] [bold red]x ]0;pwned[2J" in message[0], lines  # the markup shown as typed, the escapes' control bytes gone
     assert any("pick([bold_red]x)" in line and "There is no '[bold_red]x'" in line for line in lines), lines  # the parser's name, as typed
 
+
+# --------------------------------------------------------------------------- secret files others can read
+
+
+@pytest.mark.parametrize("exposed", ["world.key", "users.txt", "world.json", "folder"])
+def test_a_world_whose_secrets_others_can_read_is_refused_with_the_chmod(exposed: str, tmp_path: Path) -> None:
+    """`mhrc world` with its key, its user dictionary or its password file readable by others, or
+    in a folder others can write: refused before anything listens, naming the file and the chmod
+    that fixes it (as ssh refuses a private key others can read). It ran without a word before."""
+    from mhrc.core.endpoints import free_port
+
+    made = _mhrc(["credentials", "--out", "creds", "--days", "1"], tmp_path)
+    assert made.returncode == 0, made.stderr
+    creds = tmp_path / "creds"
+    target = creds if exposed == "folder" else creds / exposed
+    os.chmod(target, 0o777 if exposed == "folder" else 0o644)
+    out = _mhrc(["world", "--port", str(free_port()), "--credentials", str(creds / "world.json"), "--start-timeout", "1", "--quiet"], tmp_path)
+    assert out.returncode == 2, (out.returncode, out.stderr[-2000:])
+    assert "Traceback" not in out.stderr
+    fix = f"chmod 700 {creds}" if exposed == "folder" else f"chmod 600 {target}"
+    assert str(target) in out.stderr and fix in out.stderr, out.stderr
+
+
+def test_an_agent_whose_password_file_others_can_read_is_refused(tmp_path: Path) -> None:
+    """`mhrc agent --credentials alice.json` with the file 0644: refused with the chmod, before connecting."""
+    made = _mhrc(["credentials", "--out", "creds", "--days", "1"], tmp_path)
+    assert made.returncode == 0, made.stderr
+    alice = tmp_path / "creds" / "alice.json"
+    os.chmod(alice, 0o644)
+    out = _mhrc(["agent", "--robot", "alice", "--connect", "tls/127.0.0.1:9", "--credentials", str(alice), "--attach-timeout", "1"], tmp_path)
+    assert out.returncode == 2 and f"chmod 600 {alice}" in out.stderr and "Traceback" not in out.stderr, out.stderr[-2000:]
+
+
+def test_credentials_are_written_0600_in_a_0700_folder_even_over_open_ones(tmp_path: Path) -> None:
+    """`mhrc credentials --force` over an open folder and open files, and `mhrc up`'s own: every
+    secret 0600 (the CA certificate, public, 0644) in a 0700 folder."""
+    import stat
+
+    creds = tmp_path / "creds"
+    creds.mkdir(mode=0o777)
+    os.chmod(creds, 0o777)
+    (creds / "world.key").write_text("old")
+    os.chmod(creds / "world.key", 0o666)
+    made = _mhrc(["credentials", "--out", "creds", "--days", "1", "--force"], tmp_path)
+    assert made.returncode == 0, made.stderr
+    up = _mhrc(["up", "--horizon", "1", "--objects", "3", "--quiet"], tmp_path)
+    assert up.returncode == 0, up.stderr[-2000:]
+    for folder in (creds, *(tmp_path / "runs").glob("*/credentials")):
+        assert stat.S_IMODE(folder.stat().st_mode) == 0o700, folder
+        for f in folder.iterdir():
+            assert stat.S_IMODE(f.stat().st_mode) == (0o644 if f.name == "ca.pem" else 0o600), f
+
+
+@pytest.mark.parametrize("days", ["0.0000001", "0.0006"])
+def test_certificates_valid_for_less_than_a_minute_are_refused(days: str, tmp_path: Path) -> None:
+    out = _mhrc(["credentials", "--out", "creds", "--days", days], tmp_path)
+    assert out.returncode == 2 and "at least a minute" in out.stderr, out.stderr
+    assert not (tmp_path / "creds").exists()

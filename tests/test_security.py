@@ -120,7 +120,7 @@ async def test_no_credentials_refused_with_a_clear_error(tmp_path: Path) -> None
             await open_client(ep.replace("tls/", "tcp/"), 60)
         wrong = json.loads(files["alice"].read_text())
         wrong["password"] = "guessed"
-        (tmp_path / "cred" / "wrong.json").write_text(json.dumps(wrong))
+        certs.write_private(tmp_path / "cred" / "wrong.json", json.dumps(wrong))  # private, as a password file must be
         with pytest.raises(BusRefused, match="refused the login"):
             await open_client(ep, 10, security=security.load(tmp_path / "cred" / "wrong.json"))
 
@@ -268,7 +268,7 @@ async def test_the_world_says_which_logins_it_refused(tmp_path: Path) -> None:
     other = _creds(tmp_path, run="other", name="other")
     wrong = json.loads(files["alice"].read_text())
     wrong["password"] = "guessed"
-    (tmp_path / "cred" / "wrong.json").write_text(json.dumps(wrong))
+    certs.write_private(tmp_path / "cred" / "wrong.json", json.dumps(wrong))  # private, as a password file must be
     port = free_port()
     err = tmp_path / "world.err"
     with err.open("wb") as sink:
@@ -338,7 +338,7 @@ def test_an_old_evaluation_login_is_refused_with_what_to_do_instead(tmp_path: Pa
     old "eval" kind is refused with a line saying so, not taken for a run's."""
     files = _creds(tmp_path)
     old = json.loads(files["alice"].read_text()) | {"kind": "eval", "user": "worker"}
-    (files["alice"].parent / "worker.json").write_text(json.dumps(old))
+    certs.write_private(files["alice"].parent / "worker.json", json.dumps(old))
     with pytest.raises(security.SecurityError, match="kind 'eval' is not a run's .*--ray"):
         security.load(files["alice"].parent / "worker.json")
     assert not hasattr(security, "make_eval_credentials")

@@ -25,16 +25,16 @@ from mhrc.core.bustools import bus_echo as run_echo
 from mhrc.core.bustools import bus_list as run_list
 from mhrc.core.bustools import doctor as run_doctor
 from mhrc.core.keys import check_id, new_run_id
-from mhrc.core.security import SecurityError, make_run_credentials
+from mhrc.core.security import MIN_DAYS, SecurityError, make_run_credentials
 from mhrc.run.config import ROBOTS
 
 MAX_DAYS = 36500  # a certificate's end date must be a date: 100 years is plenty and far from datetime's year 9999
 
 
 def _days(_ctx: click.Context, _param: click.Parameter, value: float) -> float:
-    """--days: a finite number of days in (0, MAX_DAYS]; checked before anything is written."""
-    if not (math.isfinite(value) and 0 < value <= MAX_DAYS):
-        raise click.BadParameter(f"must be more than 0 and at most {MAX_DAYS} (got {value:g})")
+    """--days: a finite number of days in [a minute, MAX_DAYS]; checked before anything is written."""
+    if not (math.isfinite(value) and MIN_DAYS <= value <= MAX_DAYS):
+        raise click.BadParameter(f"must be at least a minute ({MIN_DAYS:.6f}) and at most {MAX_DAYS} (got {value:g})")
     return value
 
 

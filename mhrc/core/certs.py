@@ -97,11 +97,11 @@ def make_server_cert(
 def write_private(path: Path, data: bytes | str, private: bool = True) -> Path:
     """Write `data`, created 0600 (never readable by others, even for a moment) when private."""
     raw = data.encode() if isinstance(data, str) else data
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
+    mode = 0o600 if private else 0o644
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
     try:
+        os.fchmod(fd, mode)  # a file that existed keeps its mode through open: made private before the secret is in it
         os.write(fd, raw)
     finally:
         os.close(fd)
-    if private:
-        os.chmod(path, 0o600)
     return path

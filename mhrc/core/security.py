@@ -1,7 +1,8 @@
 """Zenoh's own security for one run (docs/architecture.md, "Security"): TLS links, user/password
 authentication and access-control rules on the world's router.
 
-`make_run_credentials` writes, into one directory (files 0600):
+`make_run_credentials` writes, into one directory (0700; files 0600, `ca.pem` 0644); `load`
+refuses a key or password file others can read, or in a folder others can write (ExposedSecret):
 
 - `ca.pem`: the run's certificate authority (its private key is never written: nobody can
   sign another certificate for this run once the files exist);
@@ -48,6 +49,33 @@ RUN = "run"  # the only kind of credentials: one run's participants (an evaluati
 
 class SecurityError(RuntimeError):
     """Credentials that are missing, unreadable or refused; the message names the cause."""
+
+    code = "credentials"
+
+
+class ExposedSecret(SecurityError):
+    """A key or password file others can read (or a folder others can write into, where they could
+    swap one): refused, as ssh refuses a private key others can read. The message says the chmod."""
+
+    code = "exposed_secret"
+
+
+MIN_DAYS = 1 / 1440  # a minute: certificates that expire before the world and its agents have even met are a typo
+
+
+def check_private(path: Path) -> None:
+    """Raise ExposedSecret if `path` (a key or password file) is readable or writable by others
+    than its owner, or its folder is writable by them; checked on load, before anything uses it."""
+    try:
+        mode = path.stat().st_mode & 0o777
+        folder = path.parent.stat().st_mode & 0o777
+    except OSError:
+        return  # its absence or unreadability is said by the caller
+    if mode & 0o077:
+        raise ExposedSecret(f"{path} holds a secret but others can access it (mode {mode:04o}): run chmod 600 {path}")
+    if folder & 0o022:
+        raise ExposedSecret(f"{path.parent}, which holds the secret {path.name}, is writable by others (mode {folder:04o}): "
+                            f"run chmod 700 {path.parent}")  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------- credentials
@@ -112,6 +140,8 @@ def _issue(
 ) -> dict[str, Path]:
     """Write a CA, the server's (users[0]'s) certificate and a login per user; each user's
     files go to `directory`, or to a directory of its own with `split`."""
+    if not days >= MIN_DAYS:
+        raise SecurityError(f"certificates valid for {days:g} days would expire before the run starts: give at least a minute ({MIN_DAYS:.6f} days)")
     directory.mkdir(parents=True, exist_ok=True)
     os.chmod(directory, 0o700)
     ca, ca_key = make_ca(run, days=days)
@@ -173,6 +203,9 @@ def load(path: Path | str) -> Credentials:
     for f in (creds.ca, creds.cert, creds.key, creds.users):
         if f is not None and not f.is_file():
             raise SecurityError(f"credentials file {p} names {f}, which does not exist")
+    for secret in (p, creds.key, creds.users):  # the password, the world's private key, every participant's password
+        if secret is not None:
+            check_private(secret)
     if creds.kind != RUN:
         raise SecurityError(
             f"credentials file {p}: kind {creds.kind!r} is not a run's (an evaluation needs no credentials any more: "
