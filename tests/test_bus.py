@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import asyncio
 
+from structlog.testing import capture_logs
+
 from mhrc.core.bus import Bus, Sample
 
 from mhrc.core.endpoints import endpoint, free_port
@@ -68,6 +70,35 @@ async def test_a_failing_handler_does_not_stop_delivery() -> None:
             b.put("t/y", p)
         await asyncio.wait_for(last.wait(), 30)
         assert seen == [b"1", b"boom", b"2"]
+    finally:
+        await b.close()
+        await a.close()
+
+
+async def test_an_async_handlers_exception_is_logged_not_lost() -> None:
+    """A coroutine handler runs as a task the bus keeps until it ends (the loop holds tasks
+    weakly); what it raises is logged with its key, and the next sample is still handled."""
+    port = free_port()
+    a = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    b = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    try:
+        handled: asyncio.Queue[bytes] = asyncio.Queue()
+
+        async def flaky(s: Sample) -> None:
+            await asyncio.sleep(0)  # a real coroutine: it yields before it fails
+            if s.payload == b"boom":
+                raise RuntimeError("async handler bug")
+            handled.put_nowait(s.payload)
+
+        a.subscribe("t/z", flaky)
+        await subscribed(b, "t/z")
+        with capture_logs() as logs:
+            b.put("t/z", b"boom")
+            b.put("t/z", b"after")
+            assert await asyncio.wait_for(handled.get(), 30) == b"after"  # its task started second, so ended after the failing one
+        failed = [entry for entry in logs if entry["event"] == "bus handler failed"]
+        assert len(failed) == 1 and failed[0]["error"] == "async handler bug" and failed[0]["task"] == "handle t/z", failed
+        assert not a._tasks, "every handler's task is let go once it ended"
     finally:
         await b.close()
         await a.close()

@@ -3,14 +3,18 @@
 zenoh-python has no asyncio API: its callbacks run on zenoh threads. Every callback here
 copies the sample and hands it to the event loop with `call_soon_threadsafe`, then returns;
 all user handlers run on the loop. Blocking zenoh calls (`open`, `close`, reading `get`
-replies) run in `asyncio.to_thread`. A `Bus` owns its session and every entity it declared,
-and closes them all in `close()` (use `async with`)."""
+replies) run in `asyncio.to_thread`; a put, which blocks while the link is congested
+(congestion control BLOCK), runs on the bus's own sending thread, in the order put. A `Bus`
+owns its session, every entity it declared and the tasks its handlers started, keeps a
+reference to each task until it ends (the loop holds tasks weakly) and logs a handler's
+exception; `close()` (use `async with`) sends what was put, then closes them all."""
 
 from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import Awaitable, Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -79,6 +83,8 @@ class Bus:
         self._entities: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._tokens: dict[str, Any] = {}  # key -> this session's liveliness token on it
+        self._tasks: set[asyncio.Task[Any]] = set()  # the handlers' tasks still running (the loop keeps only weak references)
+        self._sender = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mhrc-bus-put")  # one thread: puts leave in order
         self._closed = False
         self.connected_to: tuple[str, ...] = ()  # the endpoints a client session was opened to
 
@@ -119,6 +125,7 @@ class Bus:
         if self._closed:
             return
         self._closed = True
+        await asyncio.to_thread(self._sender.shutdown, wait=True)  # what was put leaves before the session closes
         for ent in reversed(self._entities):
             try:
                 ent.undeclare()
@@ -146,9 +153,17 @@ class Bus:
 
     # ------------------------------------------------------------------ pub/sub
     def put(self, key: str, message: BaseModel | bytes) -> None:
-        """Publish reliably (congestion control BLOCK) on `key`."""
+        """Publish reliably (congestion control BLOCK) on `key`, without waiting: zenoh's put blocks
+        while the link is congested, so it runs on the bus's sending thread, in the order put (from
+        any thread). A put after `close()` is dropped."""
         payload = message if isinstance(message, bytes) else encode(message)
-        pub = self._publishers.get(key)
+        try:
+            self._sender.submit(self._send, key, payload).add_done_callback(_log_failed_put)
+        except RuntimeError:  # closed: the session is going away
+            log.debug("put after close dropped", key=key)
+
+    def _send(self, key: str, payload: bytes) -> None:
+        pub = self._publishers.get(key)  # only the sending thread touches the publishers until close
         if pub is None:
             pub = self._session.declare_publisher(
                 key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
@@ -156,16 +171,29 @@ class Bus:
             self._publishers[key] = pub
         pub.put(payload)
 
+    def spawn(self, coro: Coroutine[Any, Any, Any], name: str) -> asyncio.Task[Any]:
+        """Run `coro` as a task of this bus's loop (called on the loop): referenced until it ends,
+        its exception logged, never lost."""
+        task = self._loop.create_task(coro, name=name)
+        self._tasks.add(task)
+        task.add_done_callback(self._task_done)
+        return task
+
+    def _task_done(self, task: asyncio.Task[Any]) -> None:
+        self._tasks.discard(task)
+        if not task.cancelled() and (exc := task.exception()) is not None:
+            log.error("bus handler failed", task=task.get_name(), error=str(exc), exc_info=exc)
+
     def _bridge(self, handler: Handler, on_thread: bool = False) -> Callable[[zenoh.Sample], None]:
         loop = self._loop
 
         def on_sample(sample: zenoh.Sample) -> None:
             copy = Sample(str(sample.key_expr), sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT)
             if on_thread:
-                _run_handler(handler, copy)
+                self._run_handler(handler, copy)
                 return
             try:
-                loop.call_soon_threadsafe(_run_handler, handler, copy)
+                loop.call_soon_threadsafe(self._run_handler, handler, copy)
             except RuntimeError:  # loop closed while zenoh still delivers
                 pass
 
@@ -200,7 +228,7 @@ class Bus:
 
         def on_query(query: zenoh.Query) -> None:
             try:
-                loop.call_soon_threadsafe(lambda: loop.create_task(answer(query)))
+                loop.call_soon_threadsafe(lambda: self.spawn(answer(query), f"answer {key}"))
             except RuntimeError:
                 query.drop()
 
@@ -250,14 +278,18 @@ class Bus:
 
         return await asyncio.to_thread(run)
 
+    def _run_handler(self, handler: Handler, sample: Sample) -> None:
+        try:
+            result = handler(sample)
+            if asyncio.iscoroutine(result):
+                self.spawn(result, f"handle {sample.key}")
+        except Exception as exc:
+            log.exception("bus handler failed", key=sample.key, error=str(exc))
 
-def _run_handler(handler: Handler, sample: Sample) -> None:
-    try:
-        result = handler(sample)
-        if asyncio.iscoroutine(result):
-            asyncio.ensure_future(result)
-    except Exception as exc:
-        log.exception("bus handler failed", key=sample.key, error=str(exc))
+
+def _log_failed_put(done: Future[None]) -> None:
+    if (exc := done.exception()) is not None:
+        log.error("put failed", error=str(exc), exc_info=exc)
 
 
 async def open_client(connect: str, timeout: float, *, security: Credentials | None = None) -> Bus:
