@@ -159,3 +159,41 @@ def test_certificates_valid_for_less_than_a_minute_are_refused(days: str, tmp_pa
     out = _mhrc(["credentials", "--out", "creds", "--days", days], tmp_path)
     assert out.returncode == 2 and "at least a minute" in out.stderr, out.stderr
     assert not (tmp_path / "creds").exists()
+
+
+# --------------------------------------------------------------------------- a fixed port, at once again
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("processes", [False, True])
+def test_a_fixed_port_can_be_used_again_right_after_a_run(processes: bool, tmp_path: Path) -> None:
+    """Two episodes on the same --port, the second started as soon as the first ended: the
+    first's connections in TIME_WAIT do not make the port look taken (the pre-check bound
+    without SO_REUSEADDR, so for about a minute it said "already in use" while nothing listened)."""
+    from mhrc.core.endpoints import free_port
+
+    port = free_port()
+    args = ["up", "--insecure", "--port", str(port), "--objects", "3", "--horizon", "3", "--quiet", *(["--processes"] if processes else [])]
+    for run in ("first", "second"):
+        out = _mhrc([*args, "--run", run], tmp_path)
+        assert out.returncode == 0, (run, out.stderr[-2000:])
+        assert "already in use" not in out.stderr, out.stderr
+        if run == "first":
+            _time_wait_on(port)  # whether the world or its agents closed their links first: the world's side, for sure
+
+
+def _time_wait_on(port: int) -> None:
+    """Leave a connection in TIME_WAIT on 127.0.0.1:`port` and nothing listening there: the state a
+    port is in for a minute after a world that closed its links first."""
+    import socket
+
+    with socket.socket() as listener:
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind(("127.0.0.1", port))
+        listener.listen()
+        client = socket.create_connection(("127.0.0.1", port))
+        conn, _ = listener.accept()
+        conn.close()  # the listening side closes first: its socket on `port` goes to TIME_WAIT
+        assert client.recv(1) == b""
+        client.close()
+

@@ -43,6 +43,9 @@ def check_listen(host: str, port: int, proto: str = "tcp") -> None:
     import errno
 
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM) as s:
+        # as the world's listener binds (Zenoh sets it): connections of a run just ended, in TIME_WAIT,
+        # do not make the port look taken; a socket listening there still does
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind((host, port))
         except OSError as exc:
