@@ -197,3 +197,46 @@ def _time_wait_on(port: int) -> None:
         assert client.recv(1) == b""
         client.close()
 
+
+# --------------------------------------------------------------------------- a robot killed mid-episode
+
+
+def _child_with(parent: int, needle: str) -> int | None:
+    """The pid of a process of `parent`'s group whose command line holds `needle`."""
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+            pgid = os.getpgid(int(pid))
+        except (OSError, ProcessLookupError):
+            continue
+        if pgid == parent and needle in cmd and int(pid) != parent:
+            return int(pid)
+    return None
+
+
+@pytest.mark.slow
+def test_a_robot_killed_mid_episode_is_named_in_the_final_table(tmp_path: Path) -> None:
+    """`mhrc up --processes`, Alice's agent killed (SIGKILL) after tick 1 closed: the table says
+    she was lost and at which tick (before: only a 'detached ... agent vanished' line mid-run)."""
+    import signal
+
+    from tests.test_faults import _start, _until
+
+    proc = _start(["up", "--processes", "--insecure", "--tick-delay", "0.3", "--horizon", "30"], tmp_path)
+    try:
+        stdout = tmp_path / "stdout.txt"
+        _until(lambda: "tick  1 closed" in stdout.read_text(), HANG, "tick 1 closed", proc)
+        alice = _child_with(proc.pid, "--robot alice")
+        assert alice is not None, "no agent process for alice"
+        os.kill(alice, signal.SIGKILL)
+        proc.wait(timeout=HANG)
+    finally:
+        _kill_group(proc)
+    out = stdout.read_text()
+    table = out[out.index("┌"):] if "┌" in out else ""
+    row = [line for line in table.splitlines() if "robots lost" in line]
+    assert row and "alice at tick" in row[0] and "vanished" in row[0], out[-3000:]
+    tick = int(row[0].split("alice at tick", 1)[1].split()[0])
+    assert tick >= 1

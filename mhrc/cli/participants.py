@@ -102,7 +102,7 @@ def up(
         sys.exit(exc.returncode if exc.returncode > 0 else 1)
     if printer is not None:
         printer.close()  # what arrived late for its tick, then nothing more: the table is the last line
-    console.print(summary_table(done, _recovery(cfg.trace) if cfg.events is not None else None))
+    console.print(summary_table(done, _recovery(cfg.trace) if cfg.events is not None else None, _lost(cfg.trace)))
     if video is not None and cfg.trace is not None:
         path = render_video_to(cfg.trace, video)
         if not quiet:
@@ -122,6 +122,19 @@ def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:
         return from_trace(read_trace(trace)).recovery
     except (ValueError, OSError):  # a trace the metrics cannot read (TraceError, bad JSON): the table goes without the row
         return None
+
+
+def _lost(trace: Path | None) -> list[Any]:
+    """The robots lost mid-episode (mhrc.run.console.lost_robots), read back from the trace."""
+    from mhrc.core.trace import read_trace
+    from mhrc.run.console import lost_robots
+
+    if trace is None or not trace.is_file():
+        return []
+    try:
+        return lost_robots(read_trace(trace))
+    except (ValueError, OSError):  # a trace that cannot be read: the table goes without the row
+        return []
 
 
 def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None = None) -> None:

@@ -8,6 +8,7 @@ until every result that tick is known to have (`TickClosed.actions`) has printed
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -267,9 +268,10 @@ class ProgressPrinter:
             self._print(line)
 
 
-def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = None) -> Table:
+def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = None, lost: list[RobotDetached] | None = None) -> Table:
     """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics").
-    `recovery`: a scenario's events as mhrc.core.metrics scores them (`--events`), one row of them."""
+    `recovery`: a scenario's events as mhrc.core.metrics scores them (`--events`), one row of them;
+    `lost`: the robots whose agents left mid-episode and did not come back (mhrc.run.console.lost_robots)."""
     m = done.metrics
     t = Table(title=f"episode {inert(done.run)}: {inert(done.reason)}", show_header=False)
     t.add_row("success", "yes" if m.success else "no")
@@ -283,7 +285,33 @@ def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = Non
     t.add_row("wall time", f"{m.wall_time:.1f} s")
     if recovery:
         t.add_row("scenario events", ", ".join(_recovered(e) for e in recovery))
+    if lost:
+        t.add_row("[red]robots lost[/]", ", ".join(f"{inert(d.robot)} at tick {d.tick} ({inert(d.reason)})" for d in lost))
     return t
+
+
+def lost_robots(rows: list[dict[str, Any]]) -> list[RobotDetached]:
+    """From a trace's lines: the robots detached between the start and the end of the episode
+    (an agent killed, frozen past its lease, gone) that did not attach again before the end."""
+    lost: dict[str, RobotDetached] = {}
+    started = False
+    for row in rows:
+        msg = row.get("msg") if row.get("kind") == "put" else None
+        kind = msg.get("kind") if isinstance(msg, dict) else None
+        if kind == "episode_started":
+            started = True
+        elif kind == "episode_done":
+            break
+        elif started and kind in ("robot_detached", "robot_attached"):
+            try:
+                ev = decode_event(json.dumps(msg).encode())
+            except ProtocolError:
+                continue
+            if isinstance(ev, RobotDetached):
+                lost[ev.robot] = ev
+            elif isinstance(ev, RobotAttached):
+                lost.pop(ev.robot, None)
+    return list(lost.values())
 
 
 def _recovered(e: dict[str, Any]) -> str:
