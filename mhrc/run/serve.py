@@ -24,6 +24,7 @@ from mhrc.world.sim import Sim
 log = structlog.get_logger("mhrc.run.serve")
 
 EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
+LAST_WORDS = 2.0  # s the world waits, once the episode is over, for its agents to leave and its trace to record the end
 
 
 async def serve_world(
@@ -72,10 +73,10 @@ async def serve_world(
             world.stop()
             raise
         finally:
-            await asyncio.sleep(0.2)  # let the last results and the done event leave
+            await world.agents_left(LAST_WORDS)  # the last results and the done event reached the agents
     finally:
         if recorder is not None:
-            recorder.close(until_done=2.0 if world is not None and world.done is not None else 0.0)
+            await asyncio.to_thread(recorder.close, until_done=LAST_WORDS if world is not None and world.done is not None else 0.0)
         if bus is not None:
             await bus.close()
         await asyncio.to_thread(sim.close)

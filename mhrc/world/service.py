@@ -305,6 +305,16 @@ class WorldService:
         self._log.info("episode done", reason=reason, **metrics.model_dump(exclude={"action_steps_per_robot", "failed_actions"}))
         self._wake.set()
 
+    async def agents_left(self, timeout: float) -> None:
+        """Until every attached robot's agent has left (its token gone: the done event reached it),
+        or `timeout` seconds have passed: the episode's last messages leave before the session closes."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout
+        while self.attached and (left := deadline - loop.time()) > 0:
+            self._wake.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), left)
+
     def stop(self) -> None:
         """End the episode now (e.g. on Ctrl-C); publishes episode_done with reason 'stopped'."""
         self.finish("stopped")
@@ -433,6 +443,7 @@ class WorldService:
         agent_id = self.roster.detach(robot)
         self.scheduler.forget(robot)
         if self.done is not None:
+            self._wake.set()  # for agents_left
             return  # agents leaving after the episode: nothing to report
         stranded = self.roster.stranded(self.sim.finishers(), self.sim.capabilities)
         self._log.warning("robot detached", robot=robot, tick=self.tick, why=why, **({"stranded": stranded} if stranded else {}))
