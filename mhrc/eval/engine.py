@@ -303,13 +303,14 @@ async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, pr
     attempts: dict[str, int] = defaultdict(int)
     aborted: list[str] = []
 
-    def take(res: EpisodeResult) -> Job | None:
-        """Write the row of a finished episode (or count a given-up one); the job to run again, if any."""
+    def take(res: EpisodeResult) -> tuple[Job | None, bool, dict[str, Any] | None]:
+        """Write the row of a finished episode (or count a given-up one): the job to run again, if any,
+        whether the episode was counted, and its row. Blocking (trace, metrics, HTML): off the loop."""
         job = jobs[res.key]
         row: dict[str, Any] | None = None
         if res.fatal:
             aborted.append(f"{res.key}: {res.error}")
-            return None
+            return None, False, None
         trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
         if res.error is None:
             if res.trace_file is None:
@@ -323,11 +324,11 @@ async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, pr
             else:
                 if m.invalid_code in RETRIED and attempts[res.key] <= RETRIES:
                     log.warning("episode invalid, running it again", key=res.key, code=m.invalid_code, reason=m.invalid_reason)
-                    return job
+                    return job, False, None
                 _episode_report(trace_path)
         if res.error is not None:
             if attempts[res.key] <= RETRIES:
-                return job
+                return job, False, None
             tally.errors += 1
             with (out / "errors.jsonl").open("a", encoding="utf-8") as f:
                 f.write(json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n")
@@ -346,9 +347,14 @@ async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, pr
             tally.succeeded += bool(m.success)
             tally.invalid += not m.valid
         tally.done += 1
-        if progress is not None:
+        return None, True, row
+
+    def told(taken: tuple[Job | None, bool, dict[str, Any] | None]) -> Job | None:
+        """Report a counted episode to `progress` (on the loop); the job to run again, if any."""
+        again, counted, row = taken
+        if counted and progress is not None:
             progress(tally, row)
-        return None
+        return again
 
     if progress is not None:
         progress(tally, None)
@@ -361,27 +367,27 @@ async def _drive(spec: EvalSpec, out: Path, resume: bool, executor: Executor, pr
             while outstanding and not aborted:
                 res = await executor.next()
                 outstanding -= 1
-                again = take(res)
+                again = told(await asyncio.to_thread(take, res))  # one at a time: take's state is never shared
                 if again is not None:
                     attempts[again.key] += 1
                     executor.submit(again)
                     outstanding += 1
         except BaseException:  # interrupted (Ctrl-C, SIGTERM) or failed: stop the episodes, keep what finished
             for res in await asyncio.shield(executor.stop(STOP_GRACE)):
-                take(res)
+                told(take(res))  # on the loop: it is being stopped, and must not lose these rows to a second cancel
             raise
         if aborted:
             for res in await executor.stop(STOP_GRACE):
                 if not res.fatal and res.error is None:
-                    take(res)
+                    told(await asyncio.to_thread(take, res))
     if aborted:
         kept = read_rows(rows_path)
-        write_summaries(kept, out)
+        await asyncio.to_thread(write_summaries, kept, out)
         raise EvalAborted(
             f"stopped: {aborted[0]}. Every episode would fail the same way; "
             + (f"the {len(kept)} finished episode(s) are kept in {rows_path}" if kept else "no episode finished")
             + f" (fix the cause, then continue with --resume --out {out})"
         )
     rows = read_rows(rows_path)
-    write_summaries(rows, out)
+    await asyncio.to_thread(write_summaries, rows, out)
     return rows
