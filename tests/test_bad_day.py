@@ -240,3 +240,51 @@ def test_a_robot_killed_mid_episode_is_named_in_the_final_table(tmp_path: Path) 
     assert row and "alice at tick" in row[0] and "vanished" in row[0], out[-3000:]
     tick = int(row[0].split("alice at tick", 1)[1].split()[0])
     assert tick >= 1
+
+
+# --------------------------------------------------------------------------- a paused world
+
+
+@pytest.mark.slow
+def test_a_world_paused_until_its_agents_give_up_reports_its_own_end(tmp_path: Path) -> None:
+    """`mhrc up --processes`, the world stopped (SIGSTOP) after tick 2 until every agent process
+    has given up on it, then resumed (SIGCONT): the world ends `no_agents`, and `mhrc up` reports
+    that end with its metrics and exit 0. Before: "the world process exited with code 0 before the
+    episode ended", exit 1, no metrics (its observer session had lost the world too)."""
+    import signal
+    import time
+
+    from tests.test_faults import _start, _until
+
+    proc = _start(["up", "--processes", "--insecure", "--tick-delay", "0.3", "--horizon", "40"], tmp_path)
+    stdout = tmp_path / "stdout.txt"
+    try:
+        _until(lambda: "tick  2 closed" in stdout.read_text(), HANG, "tick 2 closed", proc)
+        world = _child_with(proc.pid, "-m mhrc world")
+        agents = [_child_with(proc.pid, f"--robot {r}") for r in ("alice", "bob", "david")]
+        assert world is not None and None not in agents, (world, agents)
+        os.kill(world, signal.SIGSTOP)
+        try:
+            deadline = time.monotonic() + HANG
+            while any(_alive(pid) for pid in agents if pid is not None):  # the agents give up on a world that does not answer
+                assert time.monotonic() < deadline, "the agents never gave up on the paused world"
+                time.sleep(0.2)
+        finally:
+            os.kill(world, signal.SIGCONT)
+        code = proc.wait(timeout=HANG)
+    finally:
+        _kill_group(proc)
+    out = stdout.read_text()
+    err = (tmp_path / "stderr.txt").read_text()
+    assert "before the episode ended" not in err, err[-2000:]
+    assert code == 0, (code, err[-2000:])
+    assert ": no_agents" in out and "partial success" in out and "robots lost" in out, out[-3000:]
+
+
+def _alive(pid: int) -> bool:
+    """Whether `pid` runs (a zombie, exited but not reaped yet, does not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import signal
 import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import structlog
@@ -20,6 +22,7 @@ from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decod
 from mhrc.run.config import EpisodeConfig
 from mhrc.core.bus import open_client
 from mhrc.core.keys import Keys
+from mhrc.core.trace import read_trace
 from mhrc.run.attach import local_models
 from mhrc.run.lifeline import child_env
 from mhrc.run.serve import EventHook
@@ -161,6 +164,7 @@ async def _run_processes(
             procs.append(agent)
             exits[asyncio.ensure_future(asyncio.to_thread(agent.wait))] = f"{r}'s agent process"
         watched: set[asyncio.Future[Any]] = {done_fut, *exits}
+        unheard = False  # the end was read from the world's trace, not heard on the bus
         while not done_fut.done():
             finished, watched = await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
             for fut in finished - {done_fut}:
@@ -169,6 +173,9 @@ async def _run_processes(
                     if code == 0:  # it ended the episode: its last event may still be on the way
                         with contextlib.suppress(TimeoutError):
                             await asyncio.wait_for(asyncio.shield(done_fut), 5.0)
+                    if not done_fut.done() and code == 0 and (heard := _end_in_trace(cfg.trace)) is not None:
+                        done_fut.set_result(heard)  # this observer lost the world (it was paused): its own record of the end
+                        unheard = True
                     if not done_fut.done():
                         raise ProcessFailed(who, code, "ended")
                 if code != 0 and not started.is_set() and not done_fut.done():  # as up_in_process: its robot would be waited for forever
@@ -179,7 +186,8 @@ async def _run_processes(
             raise ProcessFailed("the world process", world.returncode, None)
         for p in procs:
             await asyncio.to_thread(_wait_or_kill, p, 20.0)
-        if done.reason == "no_agents":  # as up_in_process: every agent gone, with an error, is the run's failure
+        if done.reason == "no_agents" and not unheard:  # as up_in_process: every agent gone, with an error, is the run's failure
+            # (not when this observer lost the world too: the agents gave up on a world that was paused, and its end says so)
             failed = [(r, p.returncode) for r, p in zip(robots, procs[1:]) if p.returncode != 0]
             if failed:
                 raise ProcessFailed(f"{failed[0][0]}'s agent process", failed[0][1], "ended")
@@ -192,6 +200,25 @@ async def _run_processes(
             await asyncio.to_thread(_wait_or_kill, p, 10.0)
         if bus is not None:
             await bus.close()
+
+
+def _end_in_trace(trace: Path | None) -> EpisodeDone | None:
+    """The world's last episode_done as its own trace recorded it, or None (no trace, no end in it)."""
+    if trace is None or not trace.is_file():
+        return None
+    try:
+        rows = read_trace(trace)
+    except (OSError, ValueError):
+        return None
+    for row in reversed(rows):
+        msg = row.get("msg")
+        if row.get("kind") == "put" and isinstance(msg, dict) and msg.get("kind") == "episode_done":
+            with contextlib.suppress(ProtocolError):
+                ev = decode_event(json.dumps(msg).encode())
+                if isinstance(ev, EpisodeDone):
+                    return ev
+            return None
+    return None
 
 
 def _wait_or_kill(proc: subprocess.Popen[bytes], timeout: float) -> None:
