@@ -32,6 +32,7 @@ from .heuristic_base import (
 )
 from .policy import Decision
 
+ON_POSE = 0.03  # m: a navigation that succeeded stops this close to its stand pose (one that counts as there within AT_POSE_TOL may not)
 ALICE_SHARE = 2 / 3  # of a search round's surfaces: she looks on arriving, David also has to report each
 
 
@@ -183,8 +184,13 @@ class AliceHeuristic(_RoleBase):
                 if fix is not None:
                     return self._decision(Move(dx=fix[0], dy=fix[1]))
         if last is not None and isinstance(last.action, Pick) and last.action.obj == o.name and failed(last):
-            # another stand pose after a failure that moving cannot fix
-            self.pose_choice[o.name] = (self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position)) + 1) % len(f.stand_poses)
+            # after a failure that moving cannot fix, the next nearest stand pose to the object (not the next by
+            # number: that can be the table's far side)
+            order = sorted(range(len(f.stand_poses)), key=lambda i: _dist2((f.stand_poses[i].x, f.stand_poses[i].y), o.position))
+            tried = self.pose_choice.get(o.name, order[0]) % len(f.stand_poses)
+            if not _at_stand_pose(obs, f, tried, tol=ON_POSE):  # she had stopped off target there: that pose again, exactly
+                return self._decision(Navigate(target=f.name, stand_pose=tried))
+            self.pose_choice[o.name] = order[(order.index(tried) + 1) % len(order)]
         idx = self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position)) % len(f.stand_poses)
         near = obs.status.base is not None and _dist2(o.position, (obs.status.base.x, obs.status.base.y)) <= 1.6
         moved_here = last is not None and isinstance(last.action, Move) and last.outcome.succeeded
