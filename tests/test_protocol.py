@@ -65,3 +65,63 @@ def test_keys_reject_ids_that_are_not_one_chunk() -> None:
             k.action_request(bad)
     with pytest.raises(InvalidId):
         Keys("run/1")
+
+
+# --------------------------------------------------------------------------- limits (issue 38; docs/protocol.md, "Limits")
+def _req(**fields: object) -> bytes:
+    import json
+
+    return json.dumps({"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "wait"}} | fields).encode()
+
+
+@pytest.mark.parametrize(
+    "payload, field",
+    [
+        (_req(agent_id="a" * 129), "agent_id"),
+        (_req(robot="r" * 65), "robot"),
+        (_req(action={"skill": "pick", "obj": "o" * 65}), "action.pick.obj"),
+        (_req(action={"skill": "place", "obj": "o", "location": "l" * 65}), "action.place.location"),
+        (_req(action={"skill": "navigate", "target": "t" * 65}), "action.navigate.target"),
+        (_req(action={"skill": "navigate", "target": "t", "stand_pose": 2**31}), "action.navigate.stand_pose"),
+        (_req(action={"skill": "communicate", "content": "hi", "to": "t" * 65}), "action.communicate.to"),
+        (_req(tick=2**31), "tick"),
+        (_req(goal_id="g" * 65), "goal_id"),
+        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": NaN, "dy": 0}}', "action.move.dx"),
+        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 0, "dy": -Infinity}}', "action.move.dy"),
+        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 1e999, "dy": 0}}', "action.move.dx"),
+        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 100.5, "dy": 0}}', "action.move.dx"),
+    ],
+)
+def test_fields_past_their_limits_are_malformed(payload: bytes, field: str) -> None:
+    with pytest.raises(ProtocolError, match=field.replace(".", r"\.")):
+        decode(payload, ActionRequest)
+
+
+def test_the_longest_names_and_moves_within_the_limits_are_valid() -> None:
+    from mhrc.core.protocol import Move, Navigate
+
+    req = decode(_req(agent_id="a" * 128, goal_id="g" * 64, action={"skill": "navigate", "target": "t" * 64, "stand_pose": 2**31 - 1}), ActionRequest)
+    assert req.action == Navigate(target="t" * 64, stand_pose=2**31 - 1)
+    assert decode(_req(action={"skill": "move", "dx": -100, "dy": 100.0}), ActionRequest).action == Move(dx=-100, dy=100)
+
+
+def test_size_and_nesting_are_bounded_before_python_recurses() -> None:
+    """A payload past max_bytes is refused unread; one nested 100k deep is a ProtocolError from
+    both parsers (Python's json raises RecursionError on it: `loads` turns that into one)."""
+    from mhrc.core.protocol.base import MAX_REQUEST_BYTES, loads
+
+    with pytest.raises(ProtocolError, match="more than the 65536"):
+        decode(_req(agent_id="a" * MAX_REQUEST_BYTES), ActionRequest, max_bytes=MAX_REQUEST_BYTES)
+    deep = b"[" * 100_000 + b"]" * 100_000
+    with pytest.raises(ProtocolError, match="recursion limit"):
+        decode(deep, ActionRequest)
+    with pytest.raises(ProtocolError, match="RecursionError"):
+        loads(deep)
+    with pytest.raises(ProtocolError, match="not JSON"):
+        loads(b"[1" + b"0" * 5000 + b"]")  # past Python's 4,300 digits
+
+
+def test_a_reason_never_quotes_a_long_input_whole() -> None:
+    with pytest.raises(ProtocolError) as exc:
+        decode(_req(action={"skill": "x" * 100_000}), ActionRequest)
+    assert len(str(exc.value)) < 1000

@@ -7,7 +7,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import Field, TypeAdapter, ValidationError
 
-from mhrc.core.protocol.base import ProtocolError, _Model, _reason
+from mhrc.core.protocol.base import MAX_INT, MAX_MOVE, MAX_NAME, ProtocolError, _Model, _reason
 
 # --------------------------------------------------------------------------- actions
 # The paper's skills, with their arguments. `skill` discriminates the union.
@@ -15,8 +15,8 @@ from mhrc.core.protocol.base import ProtocolError, _Model, _reason
 
 class Navigate(_Model):
     skill: Literal["navigate"] = "navigate"
-    target: str = Field(description="furniture name from the scene graph")
-    stand_pose: int = Field(0, ge=0, description="index of the target's stand pose")
+    target: str = Field(max_length=MAX_NAME, description="furniture name from the scene graph")
+    stand_pose: int = Field(0, ge=0, le=MAX_INT, description="index of the target's stand pose")
 
     def call(self) -> str:
         return f"navigate({self.target}, {self.stand_pose})"
@@ -24,8 +24,8 @@ class Navigate(_Model):
 
 class Move(_Model):
     skill: Literal["move"] = "move"
-    dx: float = Field(description="metres along the world x axis")
-    dy: float = Field(description="metres along the world y axis")
+    dx: float = Field(ge=-MAX_MOVE, le=MAX_MOVE, allow_inf_nan=False, description="metres along the world x axis")
+    dy: float = Field(ge=-MAX_MOVE, le=MAX_MOVE, allow_inf_nan=False, description="metres along the world y axis")
 
     def call(self) -> str:
         return f"move({self.dx:.2f}, {self.dy:.2f})"
@@ -33,7 +33,7 @@ class Move(_Model):
 
 class Open(_Model):
     skill: Literal["open"] = "open"
-    target: str
+    target: str = Field(max_length=MAX_NAME)
 
     def call(self) -> str:
         return f"open({self.target})"
@@ -41,7 +41,7 @@ class Open(_Model):
 
 class Pick(_Model):
     skill: Literal["pick"] = "pick"
-    obj: str
+    obj: str = Field(max_length=MAX_NAME)
 
     def call(self) -> str:
         return f"pick({self.obj})"
@@ -49,8 +49,8 @@ class Pick(_Model):
 
 class Place(_Model):
     skill: Literal["place"] = "place"
-    obj: str
-    location: str = Field(description="furniture or receptacle name, e.g. table_0 or tray")
+    obj: str = Field(max_length=MAX_NAME)
+    location: str = Field(max_length=MAX_NAME, description="furniture or receptacle name, e.g. table_0 or tray")
 
     def call(self) -> str:
         return f"place({self.obj}, {self.location})"
@@ -59,7 +59,7 @@ class Place(_Model):
 class Communicate(_Model):
     skill: Literal["communicate"] = "communicate"
     content: str = Field(min_length=1, max_length=4000)
-    to: str
+    to: str = Field(max_length=MAX_NAME)
 
     def call(self) -> str:
         return f"communicate({self.content!r}, {self.to})"

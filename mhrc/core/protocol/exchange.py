@@ -9,10 +9,13 @@ from typing import Literal, NamedTuple
 from pydantic import Field
 
 from mhrc.core.protocol.actions import Action, SkillOutcome
-from mhrc.core.protocol.base import Message
+from mhrc.core.protocol.base import MAX_AGENT_ID, MAX_INT, MAX_NAME, Message
 from mhrc.core.protocol.observation import Observation
 
 # --------------------------------------------------------------------------- action exchange
+
+
+GOAL_ID = rf"^[A-Za-z0-9_-]{{1,{MAX_NAME}}}$"  # what a goal id may be
 
 
 def new_goal_id() -> str:
@@ -21,10 +24,10 @@ def new_goal_id() -> str:
 
 class ActionRequest(Message):
     kind: Literal["action_request"] = "action_request"
-    goal_id: str = Field(default_factory=new_goal_id, pattern=r"^[A-Za-z0-9_-]{1,64}$")
-    robot: str
-    agent_id: str
-    tick: int = Field(ge=0, description="the tick of the observation the action was planned on")
+    goal_id: str = Field(default_factory=new_goal_id, pattern=GOAL_ID)
+    robot: str = Field(max_length=MAX_NAME)
+    agent_id: str = Field(max_length=MAX_AGENT_ID)
+    tick: int = Field(ge=0, le=MAX_INT, description="the tick of the observation the action was planned on")
     action: Action
 
 
@@ -84,8 +87,8 @@ class ActionResult(Message):
 
 class AttachRequest(Message):
     kind: Literal["attach_request"] = "attach_request"
-    robot: str
-    agent_id: str
+    robot: str = Field(max_length=MAX_NAME)
+    agent_id: str = Field(max_length=MAX_AGENT_ID)
 
 
 class AttachReply(Message):
