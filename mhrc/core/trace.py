@@ -4,9 +4,10 @@ It subscribes to `mhrc/<run>/**` and to the run's liveliness tokens, so it sees 
 ack, result, message, thought and world event, whichever process sent them. Each line is
 `{"t": seconds since recording started, "key": ..., "kind": "put"|"delete"|"alive"|"gone"|"junk",
 "msg": the decoded JSON payload}`; a payload that is not JSON is kept as `{"raw": text}`.
-Malformed action requests and the world's rejections of them are not copied: a `junk` line per
-key and second holds their count, bytes and first reason. So are well-formed requests the world
-rejects, past the first REJECTIONS_IN_FULL per robot and interval (a robot flooding its own key
+Malformed action requests (too long, too deep, out of bounds: docs/protocol.md, "Limits") and the
+world's rejections of them are not copied: a `junk` line per key and second holds their count,
+bytes, first reason and the first one's start (EXCERPT characters). So are well-formed requests the
+world rejects, past the first REJECTIONS_IN_FULL per robot and interval (a robot flooding its own key
 must not fill the disk either): the recorder holds each well-formed request until its ack, then
 writes both (the request with the time it was seen) or counts both. The world's answer to a
 request (its ack, its result) may reach the recorder before the request itself (the world may
@@ -33,10 +34,12 @@ from typing import IO, Any
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionRequest, ProtocolError, decode
+from mhrc.core.protocol.base import MAX_REQUEST_BYTES, loads
 
 JUNK_INTERVAL = 1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
 REJECTIONS_IN_FULL = 5  # well-formed requests rejected per robot and interval that are copied in full; the rest are counted
 MAX_HELD = 20_000  # requests awaiting their ack (a flood arrives faster than the world acks); past it the oldest is written at once
+EXCERPT = 200  # characters of a malformed request's payload kept in its junk line: enough to see what it was
 MAX_REQUESTED = 100_000  # goal ids of the requests seen, remembered to tell an early ack or result from one of an old request
 
 
@@ -126,8 +129,8 @@ class Recorder:
         if sample.key.endswith("/generating"):
             return  # an agent's live status of a long model call: its thought records the call
         try:
-            msg: Any = json.loads(sample.payload)
-        except (ValueError, UnicodeDecodeError):
+            msg: Any = loads(sample.payload)
+        except ProtocolError:
             msg = {"raw": sample.payload.decode("utf-8", "replace")}
         goal = msg.get("goal_id") if isinstance(msg, dict) else None
         with self._lock:
@@ -164,13 +167,13 @@ class Recorder:
     def _is_junk(self, sample: Sample, msg: Any) -> bool:
         """A malformed action request, or the world's rejection of one: counted, not copied
         (a flood of junk must not fill the disk). Lines of kind `junk` carry, per key and
-        interval, the count, the bytes and the first reason."""
-        reason = None
+        interval, the count, the bytes, the first reason and (a request) the first one's start."""
+        reason = excerpt = None
         if sample.key.endswith("/action/request"):
             try:
-                decode(sample.payload, ActionRequest)
+                decode(sample.payload, ActionRequest, max_bytes=MAX_REQUEST_BYTES)
             except ProtocolError as exc:
-                reason = str(exc)
+                reason, excerpt = str(exc), sample.payload[: EXCERPT * 4].decode("utf-8", "replace")[:EXCERPT]
         elif sample.key.endswith("/action/ack") and isinstance(msg, dict) and msg.get("accepted") is False:
             if msg.get("code") == "malformed":
                 reason = str(msg.get("reason", ""))
@@ -178,7 +181,7 @@ class Recorder:
             return False
         now = time.perf_counter()
         with self._lock:
-            self._count_junk(sample.key, reason, len(sample.payload), now, "malformed")
+            self._count_junk(sample.key, reason, len(sample.payload), now, "malformed", excerpt)
         return True
 
     def _held_or_counted(self, sample: Sample, msg: Any, t: float | None = None) -> bool:
@@ -217,10 +220,12 @@ class Recorder:
                 self._write(held[1], "put", held[2], held[0])
             return False
 
-    def _count_junk(self, key: str, reason: str, size: int, now: float, code: Any = None) -> None:
-        """Count one junk sample of `key`; `code` is the rejection's (mhrc.core.protocol.RejectCode), if it has one."""
+    def _count_junk(self, key: str, reason: str, size: int, now: float, code: Any = None, excerpt: str | None = None) -> None:
+        """Count one junk sample of `key`; `code` is the rejection's (mhrc.core.protocol.RejectCode), if it has one;
+        `excerpt`, the start of a malformed payload (the interval's first is kept)."""
         code = code if isinstance(code, str) else None
-        junk = self._junk.setdefault(key, {"count": 0, "bytes": 0, "reason": reason[:300], "code": code, "since": now})
+        first = {"reason": reason[:300], "code": code, **({"excerpt": excerpt} if excerpt is not None else {})}
+        junk = self._junk.setdefault(key, {"count": 0, "bytes": 0, **first, "since": now})
         junk["count"] += 1
         junk["bytes"] += size
         if now - junk["since"] >= JUNK_INTERVAL:
@@ -229,7 +234,7 @@ class Recorder:
     def _flush_junk(self, key: str) -> None:
         junk = self._junk.pop(key, None)
         if junk is not None and junk["count"]:
-            self._write(key, "junk", {k: junk[k] for k in ("count", "bytes", "reason", "code")})
+            self._write(key, "junk", {k: junk[k] for k in ("count", "bytes", "reason", "code", "excerpt") if k in junk})
 
     def _on_liveliness(self, sample: Sample) -> None:
         self._write(sample.key, "alive" if sample.is_put else "gone", None)

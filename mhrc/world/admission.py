@@ -1,7 +1,8 @@
 """Which action requests the world accepts: the checks a request passes, in order, before its
 scheduler may execute it (docs/architecture.md, "Time"; docs/protocol.md, "The tick rule").
 
-1. The payload is an `ActionRequest` (`malformed`).
+1. The payload is an `ActionRequest` of at most MAX_REQUEST_BYTES (`malformed`: too long, not
+   JSON, nested deeper than the parser's bound, a field out of its bounds; docs/protocol.md, "Limits").
 2. Its sender drives its robot now and the episode runs (the roster's: `wrong_key`,
    `no_such_robot`, `episode_over`, `not_attached`, `other_agent`).
 3. Its goal id is new: a goal executes at most once, as a ROS 2 action server refuses a goal id
@@ -17,12 +18,14 @@ back since the last line: a flood of repeats costs a line per interval, not a li
 
 from __future__ import annotations
 
-import json
+import re
 
 from structlog.typing import FilteringBoundLogger
 
 from mhrc.core.logs import Throttle
 from mhrc.core.protocol import ActionRequest, ProtocolError, Rejection, RejectCode, decode
+from mhrc.core.protocol.base import MAX_REQUEST_BYTES, loads
+from mhrc.core.protocol.exchange import GOAL_ID
 
 from .roster import Roster
 from .schedulers import Scheduler
@@ -44,8 +47,9 @@ class Admission:
     def request(self, robot: str, payload: bytes, *, over: bool) -> tuple[str, Rejection | None]:
         """The goal id of `payload`, sent on `robot`'s request key, and None when the scheduler
         accepted it, or why it was refused (`over`: the episode has ended)."""
+        rejection: Rejection | None
         try:
-            req = decode(payload, ActionRequest)
+            req = decode(payload, ActionRequest, max_bytes=MAX_REQUEST_BYTES)
         except ProtocolError as exc:
             goal_id, rejection = _goal_id_of(payload), Rejection(RejectCode.MALFORMED, f"malformed action request: {exc}")
         else:
@@ -65,6 +69,12 @@ class Admission:
             f"goal {req.goal_id} was accepted from {req.robot} before in this episode and a goal runs once: send each action with a fresh goal_id",
         )
 
+    def malformed_attach(self, robot: str, exc: ProtocolError) -> str:
+        """The reason a malformed attach query is refused, logged as a malformed request is (throttled)."""
+        reason = f"malformed attach request: {exc}"
+        self._note(robot, "attach", Rejection(RejectCode.MALFORMED, reason))
+        return reason
+
     def _note(self, robot: str, goal_id: str, rejection: Rejection) -> None:
         """Log a rejection, unless one of its robot and code was logged less than LOG_INTERVAL ago."""
         who = robot if robot in self.roster.robots else "?"  # the robot in a key is the sender's choice: keep the throttle's keys few
@@ -79,11 +89,18 @@ class Admission:
             self._log.warning(warned, **fields)
 
 
+_GOAL_ID = re.compile(GOAL_ID)
+_GOAL_FIELD = re.compile(rb'"goal_id"\s*:\s*"([A-Za-z0-9_-]{1,64})"')
+
+
 def _goal_id_of(payload: bytes) -> str:
-    """Best-effort goal id of a malformed request, so its sender can match the rejection."""
+    """Best-effort goal id of a malformed request, so its sender can match the rejection: its
+    `goal_id` if that is a valid one, else the first valid-looking one in its first bytes (a
+    document too deep or with a number too long for the parser), else "unknown"."""
     try:
-        data = json.loads(payload)
+        data = loads(payload[:MAX_REQUEST_BYTES])
         goal = data.get("goal_id") if isinstance(data, dict) else None
-        return goal if isinstance(goal, str) and goal else "unknown"
-    except (ValueError, UnicodeDecodeError):
-        return "unknown"
+        return goal if isinstance(goal, str) and _GOAL_ID.fullmatch(goal) else "unknown"
+    except ProtocolError:
+        found = _GOAL_FIELD.search(payload[:4096])
+        return found.group(1).decode() if found else "unknown"

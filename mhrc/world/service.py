@@ -54,6 +54,7 @@ from mhrc.core.protocol import (
     WorldState,
     decode,
 )
+from mhrc.core.protocol.base import MAX_REQUEST_BYTES
 
 from .admission import Admission
 from .mail import Mailroom
@@ -399,10 +400,9 @@ class WorldService:
     async def _on_attach(self, key: str, params: dict[str, str], payload: bytes) -> AttachReply:
         robot = self.keys.robot_of(key)
         try:
-            req = decode(payload, AttachRequest)
+            req = decode(payload, AttachRequest, max_bytes=MAX_REQUEST_BYTES)
         except ProtocolError as exc:
-            self._log.warning("malformed attach request rejected", robot=robot, reason=str(exc))
-            return AttachReply(robot=robot, accepted=False, reason=f"malformed attach request: {exc}")
+            return AttachReply(robot=robot, accepted=False, reason=self.admission.malformed_attach(robot, exc))
         session = params.get("session", "")
         refused = self.roster.refuse_attach(robot, req, session, over=self.done is not None)
         if refused is not None:
