@@ -244,8 +244,9 @@ def team_mismatches(row: Mapping[str, Any]) -> tuple[str | None, tuple[Mismatch,
     (missing: the defaults, no custom prompts and no base URL)."""
     robots = tuple(str(r) for r in row.get("robots") or ())
     method = str(row.get("method") or HEURISTIC)
+    specs: dict[str, str | None]
     try:
-        specs = {r: None for r in robots} if method == HEURISTIC else robot_specs(method, robots)
+        specs = dict.fromkeys(robots) if method == HEURISTIC else robot_specs(method, robots)
     except LLMSpecError:  # a method that names robots this row does not have
         specs = {r: method for r in robots}
     base_url = row.get("base_url")

@@ -198,10 +198,11 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
     for key, title in (("scene", "scene"), ("n_objects", "object count")):
         lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS sum, AS/robot) | episodes |",
                   "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
-        for (*setting, v), bucket in group(valid, *SETTING, key).items():
+        for (*fields, v), bucket in group(valid, *SETTING, key).items():
+            setting = tuple(fields)
             s = summarize(bucket)
             m, a, fid = (setting[SETTING.index(f)] for f in ("method", "ablation", "fidelity"))
-            extra = "".join(f" · {x}" for x in setting_label(tuple(setting)).split(" · ")[3:])  # mode, schedule, cap, horizon, scenario
+            extra = "".join(f" · {x}" for x in setting_label(setting).split(" · ")[3:])  # mode, schedule, cap, horizon, scenario
             lines.append(f"| {m}{extra} | {a} | {fid} | {v} | {_cell(s)} | {s['episodes']} |")
         lines.append("")
     return "\n".join(lines)
