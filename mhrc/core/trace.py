@@ -17,12 +17,13 @@ status (a long model call's progress, for the console) is not recorded: its thou
 
 A write that fails (a full disk) stops the recording at once: the recorder keeps the error
 (`Recorder.error`, a TraceWriteError), cuts the file back to its last whole line, adds one
-`incomplete` line if it can, tells `on_error` (the world's side stops the run) and writes
+`incomplete` line if it can (in place of the last line if it must), tells `on_error` (the world's side stops the run) and writes
 nothing more; it never raises on the bus's threads.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
@@ -63,6 +64,7 @@ class Recorder:
         self.error: TraceWriteError | None = None
         self._on_error = on_error
         self._good = 0  # bytes of whole lines on disk
+        self._last = 0  # where the last of them starts
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._keys = Keys(run)
         self._bus = bus
@@ -98,7 +100,7 @@ class Recorder:
             except OSError as exc:
                 self._fail(exc)
                 return
-            self._good += len(text.encode("utf-8"))
+            self._last, self._good = self._good, self._good + len(text.encode("utf-8"))
             self.count += 1
 
     def _fail(self, exc: OSError) -> None:
@@ -112,13 +114,17 @@ class Recorder:
             except OSError:
                 pass
         if self.path.is_file():
-            try:
-                os.truncate(self.path, self._good)
-                with self.path.open("a", encoding="utf-8") as f:
-                    t = round(time.perf_counter() - self._t0, 6)
-                    f.write(json.dumps({"t": t, "key": f"{self._keys.base}/trace", "kind": "incomplete", "msg": {"error": str(exc)}}) + "\n")
-            except OSError:
-                pass
+            t = round(time.perf_counter() - self._t0, 6)
+            mark = json.dumps({"t": t, "key": f"{self._keys.base}/trace", "kind": "incomplete", "msg": {"error": str(exc)}}, separators=(",", ":"))
+            for end in (self._good, self._last):  # the mark in place of the last whole line if it does not fit after it
+                try:
+                    os.truncate(self.path, end)
+                    with self.path.open("a", encoding="utf-8") as f:
+                        f.write(mark + "\n")
+                    break
+                except OSError:
+                    with contextlib.suppress(OSError):
+                        os.truncate(self.path, end)
         if self._on_error is not None:
             try:
                 self._on_error(self.error)

@@ -92,6 +92,8 @@ async def _until(failed: asyncio.Event, world: WorldService) -> EpisodeDone:
         if run.done():
             return run.result()
         world.stop()
+        if world.started:  # a step under way (a skill in the simulator's thread) ends before the simulator closes
+            await asyncio.wait({run}, timeout=30.0)  # bounded: a stop must end
         assert world.done is not None
         return world.done
     finally:
