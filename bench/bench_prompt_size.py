@@ -76,7 +76,8 @@ SCRIPT: dict[str, list[tuple[str, bool, str]]] = {
     "alice": [
         ("Command: navigate(fridge, 0)", True, "You reached stand pose 0 of fridge. fridge is closed: open it to see what is inside."),
         ("Command: open(fridge)", True, "You opened fridge. Inside: apple, milk."),
-        ("Command: pick(apple)", False, "The end effector cannot reach apple: it is 0.21 m away from the closest pose your arm can get to. Moving your base by dx=0.10, dy=0.25 would bring it within a good grasping distance."),
+        ("Command: pick(apple)", False, "The end effector cannot reach apple: it is 0.21 m away from the closest pose your arm can get to. Moving "
+            "your base by dx=0.10, dy=0.25 would bring it within a good grasping distance."),
         ("Command: move(0.10, 0.25)", True, "You moved by dx=0.10 m, dy=0.25 m."),
         ("Command: pick(apple)", True, "You picked up apple."),
         ("Command: navigate(table_0, 1)", True, "You reached stand pose 1 of table_0. On table_0: phone, book, tray."),

@@ -137,7 +137,7 @@ async def test_replay_reproduces_a_recorded_episode_exactly(mhrc_model_server, t
     second = await up_in_process(replayed)
 
     def actions(path: Any) -> list[tuple[str, int, str]]:
-        return sorted((l["msg"]["robot"], l["msg"]["tick"], l["msg"]["action"]["skill"]) for l in read_trace(path) if l["key"].endswith("/action/result"))
+        return sorted((m["msg"]["robot"], m["msg"]["tick"], m["msg"]["action"]["skill"]) for m in read_trace(path) if m["key"].endswith("/action/result"))
 
     assert first.metrics.model_dump(exclude={"wall_time"}) == second.metrics.model_dump(exclude={"wall_time"})
     assert actions(recorded.trace) == actions(replayed.trace)

@@ -133,7 +133,8 @@ async def test_results_messages_and_waits_go_into_memory() -> None:
     await policy.decide(obs(0))
     policy.record(result(0, Wait(), SkillOutcome.ok("You waited.")))
     d = await policy.decide(obs(1, messages=[("bob", "Alice, please bring these to table_0 within my reach: apple.", 0), ("david", "On table_1 I found: apple.", 0)]))
-    policy.record(result(1, Pick(obj="apple"), SkillOutcome.fail(OutcomeCode.TOO_FAR, "The end effector cannot reach apple. Moving your base by dx=0.10, dy=0.25 would bring it within a good grasping distance.")))
+    policy.record(result(1, Pick(obj="apple"), SkillOutcome.fail(OutcomeCode.TOO_FAR, "The end effector cannot reach apple. Moving your base by "
+        "dx=0.10, dy=0.25 would bring it within a good grasping distance.")))
     d = await policy.decide(obs(2))
     text = user(d)
     assert "- (latest) step 0: from Bob: Alice, please bring these" in text and "- (latest) step 0: from David: On table_1" in text
@@ -155,7 +156,8 @@ async def test_bob_gets_only_the_outcome_feedback_and_sees_progress_in_his_obser
 
 FEEDBACK = [
     ("navigate(table_1, 0)", True, "You reached stand pose 0 of table_1. On table_1: apple, book."),
-    ("pick(apple)", False, "The end effector cannot reach apple: it is 0.21 m away from the closest pose your arm can get to. Moving your base by dx=0.10, dy=0.25 would bring it within a good grasping distance."),
+    ("pick(apple)", False, "The end effector cannot reach apple: it is 0.21 m away from the closest pose your arm can get to. Moving your base by "
+        "dx=0.10, dy=0.25 would bring it within a good grasping distance."),
     ("place(apple, table_0)", True, "You placed apple on table_0."),
     ("open(drawer_unit)", True, "You opened drawer_unit. Inside: soap, phone."),
 ]
@@ -255,7 +257,8 @@ async def _record_episode(tmp_path: Path, replies: list[str | BaseException]) ->
             parse_error=d.parse_error, prompt_tokens=d.prompt_tokens, completion_tokens=d.completion_tokens, latency=d.latency,
         )
         lines.append({"t": tick * 0.1, "key": "mhrc/run-1/agent/alice/thought", "kind": "put", "msg": thought.model_dump(mode="json")})
-        lines.append({"t": tick * 0.1 + 0.01, "key": "mhrc/run-1/agent/bob/thought", "kind": "put", "msg": Thought(robot="bob", tick=tick, policy="heuristic", action="wait()").model_dump(mode="json")})
+        thought = Thought(robot="bob", tick=tick, policy="heuristic", action="wait()").model_dump(mode="json")
+        lines.append({"t": tick * 0.1 + 0.01, "key": "mhrc/run-1/agent/bob/thought", "kind": "put", "msg": thought})
         policy.record(result(tick, d.action, SkillOutcome.ok("Done.") if d.action.skill != "pick" else SkillOutcome.fail(OutcomeCode.TOO_FAR, "Too far.")))
     path = tmp_path / "trace.jsonl"
     path.write_text("".join(json.dumps(line) + "\n" for line in lines), encoding="utf-8")

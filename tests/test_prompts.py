@@ -137,18 +137,24 @@ def script(robot: str) -> list[tuple[str, SkillOutcome, Observation]]:
         return [
             ('Command: communicate("Alice, please bring these to table_0 within my reach: book, soap, mug.", alice)', ok("Message sent to alice."), observe("bob", 1)),
             ("Command: pick(phone)", ok("You picked up phone."), observe("bob", 2, holding="phone", objects=[book])),
-            ("Command: place(phone, tray)", ok("You placed phone in the tray."), observe("bob", 3, objects=[in_tray, book], task_status=status, new_messages=[message("alice", "bob", "Bob, I will bring book, soap and mug.", 2)])),
+            (
+                "Command: place(phone, tray)",
+                ok("You placed phone in the tray."),
+                observe("bob", 3, objects=[in_tray, book], task_status=status, new_messages=[message("alice", "bob", "Bob, I will bring book, soap and mug.", 2)]),
+            ),
             (
                 "Command: pick(book)",
                 SkillOutcome.fail(OutcomeCode.TOO_FAR, "The end effector cannot reach book: it is 0.73 m away from the closest pose your arm can get to."),
                 observe("bob", 4, objects=[in_tray, book], task_status=status),
             ),
         ]
+    at_table_1, mug = (2.8, 1.7, 1.5708), ObjectView(name="mug", position=(2.6, 2.4, 0.75), on="table_1")
     return [
-        ("Nothing to explore yet. Command: wait()", ok("You waited."), observe("david", 1, new_messages=[message("alice", "david", "David, please explore these surfaces and tell me what lies on them: counter, table_1, sofa.", 0)])),
+        ("Nothing to explore yet. Command: wait()", ok("You waited."), observe("david", 1, new_messages=[message("alice", "david", "David, please "
+            "explore these surfaces and tell me what lies on them: counter, table_1, sofa.", 0)])),
         ("Command: navigate(table_1, 0)", SkillOutcome.fail(OutcomeCode.NO_PATH, "Navigation failed: there is no collision-free path to stand pose 0 of table_1."), observe("david", 2)),
-        ("Command: navigate(table_1, 1)", ok("You reached stand pose 1 of table_1. On table_1: mug."), observe("david", 3, base=(2.8, 1.7, 1.5708), objects=[ObjectView(name="mug", position=(2.6, 2.4, 0.75), on="table_1")])),
-        ('Command: communicate("On table_1 I found: mug.", alice)', ok("Message sent to alice."), observe("david", 4, base=(2.8, 1.7, 1.5708), objects=[ObjectView(name="mug", position=(2.6, 2.4, 0.75), on="table_1")])),
+        ("Command: navigate(table_1, 1)", ok("You reached stand pose 1 of table_1. On table_1: mug."), observe("david", 3, base=at_table_1, objects=[mug])),
+        ('Command: communicate("On table_1 I found: mug.", alice)', ok("Message sent to alice."), observe("david", 4, base=at_table_1, objects=[mug])),
     ]
 
 

@@ -209,7 +209,8 @@ def _index(name: str) -> int:
             "drawer.inner: a drawer [0.6, 0.48] inside does not fit in dishwasher (0.6 wide, 0.6 deep)",
         ),
         (lambda d: _named(d, "dishwasher")["drawer"].update(max_object_height=0.2), "drawer.max_object_height: objects that tall do not fit in the drawer of dishwasher"),
-        (lambda d: _named(d, "table_1").update(facade={"front": [0, -1], "panels": [{"at": [0, 0.3], "size": [0.2, 0.2]}]}), "facade: only a block, a drawer_unit, a chest or a cupboard has one, not a table"),
+        (lambda d: _named(d, "table_1").update(facade={"front": [0, -1], "panels": [{"at": [0, 0.3], "size": [0.2, 0.2]}]}), "facade: only a block, "
+            "a drawer_unit, a chest or a cupboard has one, not a table"),
         (lambda d: _named(d, "bookcase")["facade"].pop("front"), "facade.front: a block's facade needs the side it faces"),
         (lambda d: _named(d, "fridge")["facade"].update(front=[1, 0]), "facade.front: a container's front is its axis [0.0, -1.0]; omit front"),
         (lambda d: _named(d, "microwave")["facade"]["panels"][0].update(size=[0.7, 0.2]), "facade.panels.0: [0.0, 0.24] size [0.7, 0.2] does not fit on the front (0.6 wide, 1.2 high)"),
@@ -224,7 +225,8 @@ def _index(name: str) -> int:
         ),
         (
             lambda d: _named(d, "cabinet_0").update(stand_poses=[[-3.775, 2.6, 1.570796]]),
-            f"furniture.{_index('cabinet_0')}.stand_poses.0 (cabinet_0): an arm in its carry posture at (-3.775, 2.6) would be within 0.03 m of the open door of furniture.{_index('cabinet_0')} (cabinet_0)",
+            f"furniture.{_index('cabinet_0')}.stand_poses.0 (cabinet_0): an arm in its carry posture at (-3.775, 2.6) would be within 0.03 m of the "
+                f"open door of furniture.{_index('cabinet_0')} (cabinet_0)",
         ),
         (
             lambda d: _named(d, "cabinet_0")["door"].update(at=-0.5),

@@ -232,7 +232,8 @@ def test_every_builtin_layout_loads_from_its_file() -> None:
         (lambda d: d["bob"].update(table="table_9"), "bob.table: no furniture named 'table_9'"),
         (lambda d: d["bob"].update(goal_area=[-3.3, 0.4, 0.5, 0.4]), "bob.goal_area: [-3.3, 0.4, 0.5, 0.4] does not lie on table_0"),
         (lambda d: d["furniture"][8]["slots"].append([9.0, 9.0]), "furniture.8: Value error, slots.3: [9.0, 9.0] is not on top of table_1"),
-        (lambda d: d.update(furniture=[f for f in d["furniture"] if f["style"] not in ("drawer_unit", "chest", "cupboard")]), "furniture: a layout needs at least 2 closed containers a target can hide in"),
+        (lambda d: d.update(furniture=[f for f in d["furniture"] if f["style"] not in ("drawer_unit", "chest", "cupboard")]), "furniture: a layout "
+            "needs at least 2 closed containers a target can hide in"),
         (lambda d: d["furniture"][8].update(name="cabinet_0"), "furniture.8.name: 'cabinet_0' is used twice"),
         (lambda d: d["furniture"][1]["drawer"].update(axis=[0.7, 0.7]), "axis must be a unit vector along x or y"),
         (lambda d: d.pop("bob"), "mine.json: bob: Field required"),

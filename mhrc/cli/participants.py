@@ -207,7 +207,8 @@ def _login_of(world: Any, user: str) -> str:
 @click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
 @llm_options
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
-@click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels, prompt_hints, feedback_advice: its unreadable-reply half); the world's aids are set on the world. " + AIDS_HELP)
+@click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels, prompt_hints, feedback_advice: its unreadable-reply "
+    "half); the world's aids are set on the world. " + AIDS_HELP)
 @LOG_LEVEL
 @credentials_option(
     "This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "

@@ -25,4 +25,7 @@ def make_scheduler(name: str, world: World, *, time_scale: float = 0.0) -> Sched
     return cls(world, time_scale=time_scale)
 
 
-__all__ = ["SCHEDULERS", "STEP_SECONDS", "AsyncScheduler", "Executed", "SchedulerOptionError", "LockstepScheduler", "Scheduler", "SequentialScheduler", "TaskResultLike", "UnknownScheduler", "World", "make_scheduler"]
+__all__ = [
+    "SCHEDULERS", "STEP_SECONDS", "AsyncScheduler", "Executed", "SchedulerOptionError", "LockstepScheduler", "Scheduler", "SequentialScheduler",
+    "TaskResultLike", "UnknownScheduler", "World", "make_scheduler",
+]
