@@ -1,9 +1,9 @@
 """The heuristic team on the full grid: 3 tasks x 3 scenes x 3-6 objects x seeds 0-9 (360
 episodes), in the paper's fidelity and, measured in the same run as the baseline it is compared
-with, with every aid (`--aids all`). Per task, scene and object count: Succ, PS, TS next to its
+with, without motion noise (`--noise off`) and with every aid (`--aids all`). Per task, scene and object count: Succ, PS, TS next to its
 lower bound (TS*), AS, and how often the paper's Table III failures occurred.
 
-    python bench/bench_grid.py [--seeds 10] [--workers 2] [--fidelities paper,all] [--schedule sequential] [--out bench/results/eval_grid.json]
+    python bench/bench_grid.py [--seeds 10] [--workers 2] [--fidelities paper,noise_off,all] [--schedule sequential] [--out bench/results/eval_grid.json]
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--fidelities", default="paper,all", help="comma-separated: paper and/or all")
+    ap.add_argument("--fidelities", default="paper,noise_off,all", help="comma-separated: paper, noise_off (the paper's, --noise off) and/or all")
     ap.add_argument("--schedule", default="sequential", help="the world's schedule (mhrc eval's default, the paper's: sequential)")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
@@ -67,9 +67,10 @@ def main() -> None:
         "outcomes counts actions per skill and the paper's Table III failures among them",
     }
     for fid in args.fidelities.split(","):
-        aids = parse_aids(None if fid == "paper" else fid)
+        aids = parse_aids(None if fid in ("paper", "noise_off") else fid)
+        noise = "off" if fid == "noise_off" else "on"
         spec = EvalSpec(tasks=tuple(TASKS), scenes=tuple(LAYOUTS), objects=(3, 4, 5, 6), trials=args.seeds, aids=aids,
-                        schedule=args.schedule)  # fmt: skip
+                        schedule=args.schedule, noise=noise)  # fmt: skip
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "ev"
             t0 = time.perf_counter()
@@ -78,6 +79,7 @@ def main() -> None:
             outcomes = _outcomes(out)
         result["runs"][fid] = {
             "fidelity": spec.fidelity,
+            "noise": noise,
             "wall_s": round(wall, 1),
             "episodes": len(rows),
             "solved": sum(1 for r in rows if r["success"]),
