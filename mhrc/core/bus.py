@@ -22,6 +22,7 @@ import structlog
 import zenoh
 from pydantic import BaseModel
 
+from mhrc.core.uncancelled import to_the_end
 from mhrc.core.protocol import encode
 from mhrc.core.security import Credentials, apply, diagnose
 from mhrc.core.endpoints import BusError, BusRefused, listen_error
@@ -122,10 +123,15 @@ class Bus:
         return bus
 
     async def close(self) -> None:
+        """Send what was put, undeclare everything and close the session; a cancellation meanwhile
+        waits for the session to close (an open one keeps the process from exiting)."""
         if self._closed:
             return
         self._closed = True
-        await asyncio.to_thread(self._sender.shutdown, wait=True)  # what was put leaves before the session closes
+        await to_the_end(asyncio.to_thread(self._close))
+
+    def _close(self) -> None:
+        self._sender.shutdown(wait=True)  # what was put leaves before the session closes
         for ent in reversed(self._entities):
             try:
                 ent.undeclare()
@@ -139,7 +145,7 @@ class Bus:
         self._entities.clear()
         self._publishers.clear()
         self._tokens.clear()
-        await asyncio.to_thread(self._session.close)
+        self._session.close()
 
     async def __aenter__(self) -> Bus:
         return self

@@ -20,6 +20,7 @@ from mhrc.core.trace import Recorder
 from mhrc.run.config import EpisodeConfig
 from mhrc.world.service import WorldConfig, WorldService
 from mhrc.world.sim import Sim
+from mhrc.core.uncancelled import to_the_end
 
 log = structlog.get_logger("mhrc.run.serve")
 
@@ -74,14 +75,19 @@ async def serve_world(
             raise
         finally:
             await world.agents_left(LAST_WORDS)  # the last results and the done event reached the agents
-    finally:
-        if recorder is not None:
-            await asyncio.to_thread(recorder.close, until_done=LAST_WORDS if world is not None and world.done is not None else 0.0)
-        if bus is not None:
-            await bus.close()
-        await asyncio.to_thread(sim.close)
+    finally:  # to its end, even when a cancellation (SIGTERM, Ctrl-C) comes in the middle of it
+        await to_the_end(_close(recorder, LAST_WORDS if world is not None and world.done is not None else 0.0, bus, sim))
         if recorder is not None and recorder.error is not None:
             raise recorder.error  # everything is closed: one line for the user, not a run that goes on unrecorded
+
+
+async def _close(recorder: Recorder | None, until_done: float, bus: Bus | None, sim: Sim) -> None:
+    """The trace (its last lines), then the bus, then the simulator."""
+    if recorder is not None:
+        await asyncio.to_thread(recorder.close, until_done=until_done)
+    if bus is not None:
+        await bus.close()
+    await asyncio.to_thread(sim.close)
 
 
 async def _until(failed: asyncio.Event, world: WorldService) -> EpisodeDone:
