@@ -3,17 +3,15 @@
 zenoh-python has no asyncio API: its callbacks run on zenoh threads. Every callback here
 copies the sample and hands it to the event loop with `call_soon_threadsafe`, then returns;
 all user handlers run on the loop. Blocking zenoh calls (`open`, `close`, reading `get`
-replies) run in `asyncio.to_thread`; a put, which blocks while the link is congested
-(congestion control BLOCK), runs on the bus's own sending thread, in the order put. A `Bus`
-owns its session, every entity it declared and the tasks its handlers started, keeps a
+replies) run in `asyncio.to_thread`; a put (congestion control BLOCK) runs on the loop. A
+`Bus` owns its session, every entity it declared and the tasks its handlers started, keeps a
 reference to each task until it ends (the loop holds tasks weakly) and logs a handler's
-exception; `close()` (use `async with`) sends what was put, then closes them all."""
+exception; `close()` (use `async with`) closes them all."""
 
 from __future__ import annotations
 
 import asyncio
 import json
-from concurrent.futures import Future, ThreadPoolExecutor
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -85,7 +83,6 @@ class Bus:
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._tokens: dict[str, Any] = {}  # key -> this session's liveliness token on it
         self._tasks: set[asyncio.Task[Any]] = set()  # the handlers' tasks still running (the loop keeps only weak references)
-        self._sender = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mhrc-bus-put")  # one thread: puts leave in order
         self._closed = False
         self.connected_to: tuple[str, ...] = ()  # the endpoints a client session was opened to
 
@@ -123,15 +120,14 @@ class Bus:
         return bus
 
     async def close(self) -> None:
-        """Send what was put, undeclare everything and close the session; a cancellation meanwhile
-        waits for the session to close (an open one keeps the process from exiting)."""
+        """Undeclare everything and close the session; a cancellation meanwhile waits for the
+        session to close (an open one keeps the process from exiting)."""
         if self._closed:
             return
         self._closed = True
         await to_the_end(asyncio.to_thread(self._close))
 
     def _close(self) -> None:
-        self._sender.shutdown(wait=True)  # what was put leaves before the session closes
         for ent in reversed(self._entities):
             try:
                 ent.undeclare()
@@ -159,17 +155,9 @@ class Bus:
 
     # ------------------------------------------------------------------ pub/sub
     def put(self, key: str, message: BaseModel | bytes) -> None:
-        """Publish reliably (congestion control BLOCK) on `key`, without waiting: zenoh's put blocks
-        while the link is congested, so it runs on the bus's sending thread, in the order put (from
-        any thread). A put after `close()` is dropped."""
+        """Publish reliably (congestion control BLOCK) on `key`."""
         payload = message if isinstance(message, bytes) else encode(message)
-        try:
-            self._sender.submit(self._send, key, payload).add_done_callback(_log_failed_put)
-        except RuntimeError:  # closed: the session is going away
-            log.debug("put after close dropped", key=key)
-
-    def _send(self, key: str, payload: bytes) -> None:
-        pub = self._publishers.get(key)  # only the sending thread touches the publishers until close
+        pub = self._publishers.get(key)
         if pub is None:
             pub = self._session.declare_publisher(
                 key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
@@ -291,11 +279,6 @@ class Bus:
                 self.spawn(result, f"handle {sample.key}")
         except Exception as exc:
             log.exception("bus handler failed", key=sample.key, error=str(exc))
-
-
-def _log_failed_put(done: Future[None]) -> None:
-    if (exc := done.exception()) is not None:
-        log.error("put failed", error=str(exc), exc_info=exc)
 
 
 async def open_client(connect: str, timeout: float, *, security: Credentials | None = None) -> Bus:
