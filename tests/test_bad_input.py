@@ -59,7 +59,7 @@ def _refused(result: subprocess.CompletedProcess[str], option: str) -> str:
 @pytest.mark.parametrize("days", ["inf", "1e9", "nan", "-1", "0", "36501"])
 def test_credentials_refuses_days_that_make_no_certificate_and_writes_nothing(tmp_path: Path, days: str) -> None:
     line = _refused(_mhrc("credentials", "--out", "creds/run", "--days", days, cwd=tmp_path), "--days")
-    assert "more than 0 and at most 36500" in line
+    assert "must be at least a minute (0.000694) and at most 36500" in line
     assert list(tmp_path.iterdir()) == []
 
 

@@ -16,6 +16,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -195,13 +196,13 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
     junk = b'{"v": 2, "robot": "alice", "agent_id": "x", "tick": 0, "action": {"skill": "teleport"}, "pad": "' + b"x" * 900 + b'"}'
 
     def attack(bus: Bus, run: str) -> None:
-        """From the world's own session, as soon as the world has subscribed (its first await)."""
+        """From the world's own session, as soon as the world has subscribed (its token says so)."""
 
         def flood_now() -> None:
             for _ in range(flood):
                 bus.put(Keys(run).action_request("alice"), junk)
 
-        asyncio.get_running_loop().call_soon(flood_now)
+        when_the_world_listens(bus, run, flood_now)
 
     clean = await up_in_process(EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "clean.jsonl").resolved())
     out = io.StringIO()
@@ -247,7 +248,7 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
             for req in forged:
                 bus.put(Keys(run).action_request("alice"), req)
 
-        asyncio.get_running_loop().call_soon(flood_now)
+        when_the_world_listens(bus, run, flood_now)
 
     done = await up_in_process(EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "t.jsonl").resolved(), observe=attack)
     assert done.reason == "success"
@@ -262,6 +263,22 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
     assert (tmp_path / "t.jsonl").stat().st_size < 1_000_000  # 2,000 of each copied came to ~1 MB
     assert from_trace(rows).rejected_actions >= flood
     assert diagnose(rows).rejected_by_reason.get("not_attached", 0) >= flood
+
+
+def when_the_world_listens(bus: Any, run: str, act: Callable[[], None]) -> None:
+    """Call `act` once, on the loop, when the world's liveliness token appears: the world declares
+    it after its subscriptions (its episode task may start after an observer's first callback)."""
+    from mhrc.core.keys import Keys
+
+    fired = False
+
+    def on_token(sample: Any) -> None:
+        nonlocal fired
+        if sample.is_put and not fired:
+            fired = True
+            act()
+
+    bus.watch_liveliness(Keys(run).alive_world, on_token)
 
 
 # --------------------------------------------------------------------------- startup errors
