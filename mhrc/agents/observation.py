@@ -66,7 +66,7 @@ def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False, hin
     if not hints:
         if gone:
             return f"- {o.name}: position unknown"
-        text = f"- {o.name}: position {_xyz(o.position)}" + (f", yaw {_deg(o.yaw)}" if o.yaw is not None else "")
+        text = f"- {o.name}: position {_xyz(o.position)}{_yaw(o)}"
         return text + _reach(o, obs) if reach_labels and not o.held_by else text
     told = f" ({o.told_by.capitalize()} told you)" if o.told_by else ""
     if gone:
@@ -77,7 +77,7 @@ def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False, hin
         where = f"inside {o.on}" if o.inside else (f"in the {o.on}" if o.on == "tray" else f"on {o.on}")
     else:
         where = "on the floor"
-    text = f"- {o.name}: {where}{told}, at {_xyz(o.position)}" + (f", yaw {_deg(o.yaw)}" if o.yaw is not None else "")
+    text = f"- {o.name}: {where}{told}, at {_xyz(o.position)}{_yaw(o)}"
     if o.held_by:
         return text
     s = obs.status
@@ -86,6 +86,11 @@ def object_line(o: ObjectView, obs: Observation, reach_labels: bool = False, hin
     elif s.base is not None:
         text += f", {_flat(o.position, (s.base.x, s.base.y)):.2f} m from you"
     return text + _reach(o, obs) if reach_labels else text
+
+
+def _yaw(o: ObjectView) -> str:
+    """`, yaw N deg`: the object's orientation as seen ("" in traces from before it was sent)."""
+    return f", yaw {_deg(o.yaw)}" if o.yaw is not None else ""
 
 
 def _reach(o: ObjectView, obs: Observation) -> str:
