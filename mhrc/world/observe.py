@@ -179,7 +179,7 @@ def observation(
     world: PhysicalWorld, knowledge: Knowledge, task: Task, targets: list[str], goals: dict[str, str], robot: str, tick: int
 ) -> Observation:
     """`robot`'s own partial view; new_messages is left for the world service to fill. Each
-    robot gets its role's brief and detail (world/tasks.py); the robot that finishes the task is
+    robot gets its role's brief and detail (world/briefs.py); the robot that finishes the task is
     also told the targets, its progress and (goal_map aid) the goals."""
     if robot not in world.bots:
         raise ValueError(f"there is no robot {robot!r} in this episode ({', '.join(world.bots)})")
@@ -190,15 +190,15 @@ def observation(
     live = "live_state" in aids  # the aid: known objects and containers as they are now
     beliefs = knowledge.beliefs[robot].objects
     role = role_of(finisher, r.kind.mobile, r.kind.has_arm)
-    briefing_ = briefing(world)
+    crew = briefing(world)
     return Observation(
         robot=robot,
         tick=tick,
         status=robot_status(r),
         furniture=furniture_views(world, None if live else knowledge.beliefs[robot]),
         objects=[object_view(world, o) if live else beliefs[o.name].view for o in world.objects.values() if o.name in known],
-        task_brief=brief(task, role, briefing_),
-        task_detail=detail(task, role, briefing_, targets, goals, aids),
+        task_brief=brief(task, role, crew),
+        task_detail=detail(task, role, crew, targets, goals, aids),
         targets=list(targets) if finisher else [],
         goals=dict(goals) if finisher and "goal_map" in aids else {},
         ordered=task.ordered,
