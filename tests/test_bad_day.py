@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.test_faults import HANG, _kill_group, _no_strays
+from test_faults import HANG, _kill_group, _no_strays
 
 FULL = Path("/dev/full")
 
@@ -222,7 +222,7 @@ def test_a_robot_killed_mid_episode_is_named_in_the_final_table(tmp_path: Path) 
     she was lost and at which tick (before: only a 'detached ... agent vanished' line mid-run)."""
     import signal
 
-    from tests.test_faults import _start, _until
+    from test_faults import _start, _until
 
     proc = _start(["up", "--processes", "--insecure", "--tick-delay", "0.3", "--horizon", "30"], tmp_path)
     try:
@@ -254,7 +254,7 @@ def test_a_world_paused_until_its_agents_give_up_reports_its_own_end(tmp_path: P
     import signal
     import time
 
-    from tests.test_faults import _start, _until
+    from test_faults import _start, _until
 
     proc = _start(["up", "--processes", "--insecure", "--tick-delay", "0.3", "--horizon", "40"], tmp_path)
     stdout = tmp_path / "stdout.txt"
