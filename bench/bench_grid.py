@@ -62,7 +62,7 @@ def main() -> None:
         "workers": args.workers,
         "schedule": args.schedule,
         "runs": {},
-        "note": "TS* (ts_bound) is mhrc/world/bound.py's relaxation bound; as_ticks is AS as set beside the paper's (steps with a "
+        "note": "TS* (ts_bound) is world/bound.py's relaxation bound; as_ticks is AS as set beside the paper's (steps with a "
         "non-wait action), as sums robots, as_per_robot divides by 3; "
         "outcomes counts actions per skill and the paper's Table III failures among them",
     }

@@ -1,5 +1,5 @@
 """The heuristic team on dynamic episodes (issue 25): the grid 3 tasks x 3 scenes x objects 3-6 x
-seeds 0-9, static and with each shipped scenario (mhrc/world/scenarios/*.json), all in one run.
+seeds 0-9, static and with each shipped scenario (world/scenarios/*.json), all in one run.
 
 Per scenario: Succ, PS, TS and its difference from the static episode over the same episodes
 (same task, scene, object count and seed), how many of its events applied, were skipped (and

@@ -349,7 +349,12 @@ def test_dockerfile_is_pinned_non_root_with_mhrc_entrypoint() -> None:
     assert {"runs/", ".git/", "bench/"} <= set(ignore)
     # the build context holds what pyproject installs
     sources = {src.rstrip("/") for w, a in ins if w == "COPY" and "--from" not in a for src in a.split()[:-1]}
-    assert {"mhrc", "pyproject.toml", "README.md"} <= sources  # world, agents and prompts are packages of mhrc
+    # ... the package, and every top-level folder it links to (mhrc/world -> ../world): a link whose
+    # target is not in the context would leave a dangling link and a package without its world
+    linked = {os.readlink(p).removeprefix("../") for p in (ROOT / "mhrc").iterdir() if p.is_symlink()}
+    assert linked == {"world", "agents", "prompts"}
+    assert {"mhrc", "pyproject.toml", "README.md"} | linked <= sources
+    assert {f"!{name}/" for name in {"mhrc"} | linked} <= set(ignore)
 
 
 # --- The compose episode, run as local processes ---------------------------------------------

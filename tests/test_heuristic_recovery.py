@@ -21,7 +21,7 @@ from mhrc.core.trace import read_trace
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 
-SCENARIOS = Path(__file__).resolve().parents[1] / "mhrc" / "world" / "scenarios"
+SCENARIOS = Path(__file__).resolve().parents[1] / "world" / "scenarios"
 BREAKDOWN_RE = re.compile(r"I broke down: I can only communicate and wait until tick (\d+)\.")  # the sentence's fixed shape
 
 pytestmark = pytest.mark.slow  # each runs a whole episode (1-3 s of simulation, more to start)

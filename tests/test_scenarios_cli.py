@@ -17,7 +17,7 @@ from mhrc.cli import main
 from mhrc.world.scenario import load_scenario, resolve_scenario, shipped_scenarios
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = sorted(p.stem for p in (ROOT / "mhrc" / "world" / "scenarios").glob("*.json"))
+SHIPPED = sorted(p.stem for p in (ROOT / "world" / "scenarios").glob("*.json"))
 
 
 def _errors(text: str) -> list[str]:
@@ -43,7 +43,7 @@ def test_scenarios_lists_each_with_its_events_and_hash() -> None:
     lines = res.stdout.splitlines()
     assert [line.split()[0] for line in lines] == SHIPPED
     for line, name in zip(lines, SHIPPED):
-        path = ROOT / "mhrc" / "world" / "scenarios" / f"{name}.json"
+        path = ROOT / "world" / "scenarios" / f"{name}.json"
         events = json.loads(path.read_text(encoding="utf-8"))
         assert line.split()[-1] == hashlib.sha256(path.read_bytes()).hexdigest()[:12]
         assert ", ".join(f"{e['kind']}@{e['tick']}" for e in events) in line
@@ -54,7 +54,7 @@ def test_scenarios_lists_each_with_its_events_and_hash() -> None:
 def test_scenarios_name_prints_every_event_with_what_it_does() -> None:
     res = CliRunner().invoke(main, ["scenarios", "busy_house"])
     assert res.exit_code == 0, res.output
-    sha = hashlib.sha256((ROOT / "mhrc/world/scenarios/busy_house.json").read_bytes()).hexdigest()
+    sha = hashlib.sha256((ROOT / "world/scenarios/busy_house.json").read_bytes()).hexdigest()
     lines = res.stdout.splitlines()
     assert sha in lines[0] and "4 event(s)" in lines[0]
     assert lines[1].startswith("  [0] tick 6: relocate: someone moves a target not yet in place")

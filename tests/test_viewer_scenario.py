@@ -27,7 +27,7 @@ from test_viewer import record_heuristic, show
 
 browser, driver = test_viewer_browser.browser, test_viewer_browser.driver  # the browser tests' fixtures, shared
 
-BUSY_HOUSE = Path(__file__).resolve().parents[1] / "mhrc" / "world" / "scenarios" / "busy_house.json"
+BUSY_HOUSE = Path(__file__).resolve().parents[1] / "world" / "scenarios" / "busy_house.json"
 HORIZON = 20  # past busy_house's last event (tick 14) and its breakdown's end (tick 17)
 SKIP_HORIZON = 3
 

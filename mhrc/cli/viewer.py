@@ -11,7 +11,7 @@ from mhrc.cli.options import VIDEO_HELP
 
 @click.command()
 def scenes() -> None:
-    """List the scene layouts (mhrc/world/scenes/*.json; `--scene FILE.json` loads your own)."""
+    """List the scene layouts (world/scenes/*.json; `--scene FILE.json` loads your own)."""
     from mhrc.world.scene import LAYOUTS
 
     for layout in LAYOUTS.values():

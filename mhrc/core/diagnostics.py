@@ -58,7 +58,7 @@ PREFIX = "diag_"
 REJECT_KINDS = ("stale_tick", "busy", "out_of_turn", "episode_over", "malformed", "not_attached", "other")
 # The world's codes for a name it does not know (the fallback when the planning observation is not in the trace)
 UNKNOWN_NAME_CODES = (OutcomeCode.TARGET_UNKNOWN.value, OutcomeCode.OBJECT_UNKNOWN.value, OutcomeCode.LOCATION_UNKNOWN.value)
-UNKNOWN_NAME_FEEDBACK = "There is no "  # mhrc/world/feedback.py: unknown_furniture, object_unknown, location_unknown
+UNKNOWN_NAME_FEEDBACK = "There is no "  # world/feedback.py: unknown_furniture, object_unknown, location_unknown
 NAMED_ARGS = {"navigate": ("target",), "open": ("target",), "pick": ("obj",), "place": ("obj", "location")}
 
 

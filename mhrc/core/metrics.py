@@ -40,8 +40,8 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
 - noise (`on` or `off`) and noise_rates (the motion noise's chances and error scales), from
   `episode_started` (mhrc.core.fidelity.recorded_noise: a trace older than the field ran with
   the calibration, or with none under the exact_motion aid);
-- wall_time (world's measure), lower_bound (mhrc/world/bound.py, from `episode_started`).
-- recovery (a scenario's events, `--events`; mhrc/world/scenario.py): per `scenario_event` in the
+- wall_time (world's measure), lower_bound (world/bound.py, from `episode_started`).
+- recovery (a scenario's events, `--events`; world/scenario.py): per `scenario_event` in the
   trace, in firing order, {index, kind, tick, applied, ticks_to_recover}. ticks_to_recover is the
   number of steps from the event to the first moment the team has one more target in place than
   it had when the event fired, i.e. until its progress resumes:

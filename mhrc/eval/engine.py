@@ -84,7 +84,7 @@ class EvalSpec:
     step_deadline: float | None = None
     schedule: str = "sequential"  # the world's time policy (mhrc.run.config.SCHEDULES); the paper's loop by default
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
-    # a scenario (mhrc/world/scenario.py), applied to every episode: a file's path, or a shipped scenario's name, which
+    # a scenario (world/scenario.py), applied to every episode: a file's path, or a shipped scenario's name, which
     # travels to the workers as the name so that each (a Ray node too) reads the copy installed with its own package
     events: str | None = None
 

@@ -49,7 +49,7 @@ AS_NOTE = (
     "because the paper's AS is below its TS in every row of its tables (48.56 of 50 where episodes fail), which a "
     "sum over three robots cannot be and a per-robot mean reaches only if every robot acts in nearly every step. "
     "The other readings are columns: AS sum (actions of all robots, wait excluded) and AS/robot (that sum over the "
-    "number of robots); rows written before AS existed show '-'. TS* is the mean lower bound on TS (mhrc/world/bound.py)."
+    "number of robots); rows written before AS existed show '-'. TS* is the mean lower bound on TS (world/bound.py)."
 )
 
 

@@ -31,7 +31,7 @@ CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps"
 
 
 # noise: the world's motion noise, on (the calibration) or off (--noise off, or the exact_motion aid; mhrc.core.fidelity);
-# mode: free (the paper's) or structured replies; schedule: the world's time policy (mhrc/world/schedulers);
+# mode: free (the paper's) or structured replies; schedule: the world's time policy (world/schedulers);
 # scenario: the --events scenario as NAME@SHA12 (its name and the first 12 hex digits of the file's sha256, as
 # `mhrc scenarios` lists it: two files of one name are two settings), None for a static episode
 SETTING = ("method", "ablation", "fidelity", "noise", "history_cap", "horizon", "mode", "schedule", "scenario")

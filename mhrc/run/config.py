@@ -73,7 +73,7 @@ class EpisodeConfig(BaseModel):
     schedule: Literal["sequential", "lockstep", "async"] = Field("lockstep", description="the world's time policy (docs/architecture.md, \"Time\")")
     time_scale: float = Field(0.0, ge=0, allow_inf_nan=False, description="async: simulated seconds per wall second; 0: as fast as possible")
     token_deadline: float = Field(TOKEN_DEADLINE, gt=0, allow_inf_nan=False, description="seconds an attached agent has to show its liveliness "
-                                  "token before the world detaches it (mhrc/world/presence.py)")
+                                  "token before the world detaches it (world/presence.py)")
     llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
@@ -91,7 +91,7 @@ class EpisodeConfig(BaseModel):
     aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.core.fidelity); none: the paper's")
     noise: NoiseSetting = Field("on", description="the world's motion noise: on, the calibration (mhrc.core.fidelity), or off (none; recorded as a setting of its own)")
     history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
-    events: Path | None = Field(None, description="a scenario file: events the world applies during the episode (mhrc/world/scenario.py)")
+    events: Path | None = Field(None, description="a scenario file: events the world applies during the episode (world/scenario.py)")
     credentials: Path | None = Field(
         None,
         description="the run's credentials (mhrc.core.security): the directory of every participant's files, or one participant's "

@@ -233,7 +233,7 @@ def _poses(steps: list[Step], frames_per_step: int) -> Iterator[tuple[int, tuple
 
 
 def _camera(sim: Sim, view: str, width: int, height: int) -> np.ndarray:
-    """An RGB picture of the scene (TinyRenderer): `overview`, or one of mhrc/world/render.py's views."""
+    """An RGB picture of the scene (TinyRenderer): `overview`, or one of world/render.py's views."""
     if view != OVERVIEW:
         return render(sim, view, width, height)
     x0, x1, y0, y1 = sim.layout.bounds

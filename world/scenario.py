@@ -9,7 +9,7 @@ A scenario file is a JSON list of events, each with the `tick` it fires at and a
     close        a container closes (optional `target`; by default the one opened last)
 
 A scenario is given as a file path or as the name of one shipped with the package
-(`mhrc/world/scenarios/*.json`, listed by `mhrc scenarios`): `resolve_scenario` finds it, an
+(`world/scenarios/*.json`, listed by `mhrc scenarios`): `resolve_scenario` finds it, an
 existing path first. A name travels as a name (to `mhrc eval`'s workers, to a `--processes`
 world), so each process reads the copy installed with its own package.
 

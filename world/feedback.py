@@ -28,7 +28,7 @@ def no_such_robot(robot: str, robots: tuple[str, ...]) -> str:
 
 
 def broken_down(skill: str, ticks: int) -> str:
-    """A scenario's breakdown (mhrc/world/dynamics.py): the robot can only communicate and wait."""
+    """A scenario's breakdown (world/dynamics.py): the robot can only communicate and wait."""
     return (
         f"You cannot {skill}: you are broken down for {ticks} more step{'s' if ticks != 1 else ''}; "
         "until then you can only communicate and wait."
