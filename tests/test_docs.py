@@ -30,7 +30,7 @@ from mhrc.core.endpoints import free_port
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 RUNNABLE = {"bash", "sh", "console", "python"}
-LINKED = ("mhrc", "examples", "bench", "docker", "deploy")  # what an example may read from the checkout
+LINKED = ("mhrc", "world", "agents", "prompts", "examples", "bench", "docker", "deploy")  # what an example may read from the checkout
 EXAMPLE_TIMEOUT = 240.0  # s: a bound so that a hung example fails instead of hanging the suite
 FENCE = re.compile(r"^(?P<indent> *)(?P<fence>`{3,}|~{3,})(?P<info>[^`]*)$")
 NOTE = re.compile(r"^<!--\s*(?P<note>.*?)\s*-->$")
