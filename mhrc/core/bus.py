@@ -24,6 +24,7 @@ from mhrc.core.uncancelled import to_the_end
 from mhrc.core.protocol import encode
 from mhrc.core.security import Credentials, apply, diagnose
 from mhrc.core.endpoints import BusError, BusRefused, listen_error
+from mhrc.core.polling import poll
 
 
 log = structlog.get_logger("mhrc.core.bus")
@@ -285,17 +286,23 @@ async def open_client(connect: str, timeout: float, *, security: Credentials | N
     """A client session to `connect` (logged in with `security`), retrying while the world is
     still starting up; a world that refuses the session (BusRefused) is not retried."""
     loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    refused_at = None
-    while True:
+    refused_at: float | None = None
+    failed: list[BusError] = []
+
+    async def session() -> Bus | None:
+        nonlocal refused_at
         try:
             return await Bus.open(mode="client", connect=[connect], security=security)
         except BusRefused as exc:
             refused_at = loop.time() if refused_at is None else refused_at
-            if exc.final or loop.time() - refused_at > 3.0 or loop.time() >= deadline:
+            if exc.final or loop.time() - refused_at > 3.0:
                 raise
-            await asyncio.sleep(0.2)
-        except BusError:
-            if loop.time() >= deadline:
-                raise
-            await asyncio.sleep(0.2)
+            failed.append(exc)
+        except BusError as exc:
+            failed.append(exc)
+        return None
+
+    bus = await poll(session, timeout=timeout, every=0.2)
+    if bus is None:
+        raise failed[-1]
+    return bus

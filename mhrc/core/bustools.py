@@ -32,6 +32,7 @@ from mhrc.core.bus import Bus, Sample, make_config
 
 from mhrc.core.endpoints import split_endpoint
 from mhrc.core.keys import ROOT, Keys
+from mhrc.core.polling import poll
 from mhrc.core.printable import printable
 from mhrc.core.protocol import (
     PROTOCOL_VERSION,
@@ -230,13 +231,11 @@ def group_tokens(keys: list[str]) -> list[Group]:
 async def alive_tokens(bus: Bus, patterns: list[str] | None = None, *, settle: float = 1.5) -> list[str]:
     """Every liveliness token under `mhrc/` (or `patterns`); asks again for up to `settle`
     seconds while the answer is empty (a freshly connected session may not see them at once)."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + settle
-    while True:
-        keys = sorted({k for pattern in patterns or [f"{ROOT}/**"] for k in await bus.alive(pattern, timeout=1.0)})
-        if keys or loop.time() >= deadline:
-            return keys
-        await asyncio.sleep(0.25)
+
+    async def tokens() -> list[str] | None:
+        return sorted({k for pattern in patterns or [f"{ROOT}/**"] for k in await bus.alive(pattern, timeout=1.0)}) or None
+
+    return await poll(tokens, timeout=settle, every=0.25) or []
 
 
 async def bus_list(ep: str, *, as_json: bool = False, credentials: Path | None = None, write: Write = print) -> int:

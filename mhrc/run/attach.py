@@ -3,7 +3,6 @@ world, and serve the in-process gguf: models its robots need."""
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Callable
 from typing import TYPE_CHECKING, Any
@@ -11,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import structlog
 
 from mhrc.core.bus import Bus
+from mhrc.core.polling import poll
 from mhrc.core.protocol import EpisodeDone
 
 if TYPE_CHECKING:
@@ -102,13 +102,11 @@ async def find_run(bus: Bus, timeout: float = 5.0) -> str:
     """The run id of the only world alive on this bus (raises if there is none or several).
 
     Asks again for a while: a freshly connected session may not see the tokens at once."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while True:
-        runs = sorted({key.split("/")[1] for key in await bus.alive("mhrc/*/alive/world", timeout=1.0)})
-        if runs or loop.time() >= deadline:
-            break
-        await asyncio.sleep(0.3)
+
+    async def worlds() -> list[str] | None:
+        return sorted({key.split("/")[1] for key in await bus.alive("mhrc/*/alive/world", timeout=1.0)}) or None
+
+    runs = await poll(worlds, timeout=timeout, every=0.3) or []
     if len(runs) != 1:
         found = ", ".join(runs) if runs else "none"
         raise ConfigError(f"pass --run: expected exactly one world on the bus, found {found}")
