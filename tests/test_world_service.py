@@ -24,6 +24,7 @@ from mhrc.core.bus import Bus, Sample
 from mhrc.core.endpoints import endpoint
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.processes import agent_command, wait_for_port, world_command
+from mhrc.run.serve import serve_world
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import (
     Action,
@@ -480,3 +481,22 @@ def test_processes_mode_exits_cleanly(tmp_path) -> None:  # type: ignore[no-unty
     metrics = json.loads(out.stdout.strip().splitlines()[-1])
     assert metrics["success"] is True and metrics["temporal_steps"] > 0
     assert _stray(run) == []
+
+
+async def test_the_world_listens_before_an_observer_can_act() -> None:
+    """serve_world's observers subscribe before the world exists; the first thing the loop runs
+    after them finds the world already serving attaches and requests (WorldService.listen), so
+    an observer that reacts at once (a flood, an attach) never meets a world not yet listening."""
+    cfg = EpisodeConfig.build(seed=1, n_objects=4, horizon=1, start_timeout=60.0).resolved()
+    services: list[WorldService] = []
+    first: asyncio.Future[bool] = asyncio.get_running_loop().create_future()
+
+    def observe(bus: Bus, run: str) -> None:
+        asyncio.get_running_loop().call_soon(lambda: first.done() or first.set_result(services[0].listening))
+
+    world = asyncio.create_task(serve_world(cfg, observe=observe, on_service=services.append))
+    try:
+        assert await asyncio.wait_for(first, 120) is True
+    finally:
+        world.cancel()
+        await asyncio.gather(world, return_exceptions=True)

@@ -129,6 +129,7 @@ class WorldService:
         self.bus = bus
         self.sim = sim
         self.cfg = config
+        self.listening = False
         self.keys = Keys(config.run)
         self.started = False
         self.done: EpisodeDone | None = None
@@ -159,8 +160,13 @@ class WorldService:
         return self.roster.attached
 
     # ------------------------------------------------------------------ running
-    async def run(self) -> EpisodeDone:
-        """Serve the episode; returns its final event (also published on world/event)."""
+    def listen(self) -> None:
+        """Serve the world's queries, take requests and declare its token, at once (no await): a
+        caller that then hands the loop to observers knows the world listens before any of them
+        acts. `run` listens first if nobody has called this."""
+        if self.listening:
+            return
+        self.listening = True
         k = self.keys
         self.bus.serve(k.world_state, self._on_state_query)
         self.bus.serve(f"{k.base}/robot/*/attach", self._on_attach)
@@ -169,6 +175,9 @@ class WorldService:
         self.bus.declare_token(k.alive_world)
         self._log.info("world ready", task=self.sim.task_id, seed=self.sim.seed, robots=list(self.sim.robots))
 
+    async def run(self) -> EpisodeDone:
+        """Serve the episode; returns its final event (also published on world/event)."""
+        self.listen()
         await self._wait_for_start()
         self._start()
         while self.done is None:

@@ -68,6 +68,7 @@ async def serve_world(
         )
         if on_service is not None:
             on_service(world)
+        world.listen()  # before the loop runs anything else: no observer acts before the world listens
         try:
             return await _until(trace_failed, world)
         except asyncio.CancelledError:
