@@ -56,7 +56,7 @@ from mhrc.core.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
 
 from . import observation as describe
 from . import structured as json_mode
-from .completion import DEFAULT_TEMPERATURE, LLMClient, LLMError, LLMFatalError, LLMSilent, LLMTimeout, Messages, prompt_text
+from .llm.completion import DEFAULT_TEMPERATURE, LLMClient, LLMError, LLMFatalError, LLMSilent, LLMTimeout, Messages, prompt_text
 from .memory import HISTORIES, TITLES, Memory
 from .parse import SIGNATURES, ReplyFormatError, parse_command
 from .policy import Decision

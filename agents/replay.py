@@ -24,7 +24,7 @@ from typing import Any
 from mhrc.core.protocol import LLM_ERROR_PREFIX
 from mhrc.core.trace import read_trace
 
-from .completion import DEFAULT_TEMPERATURE, Completion, LLMError, Messages, prompt_text
+from .llm.completion import DEFAULT_TEMPERATURE, Completion, LLMError, Messages, prompt_text
 
 THOUGHT_SUFFIX = "/agent/{robot}/thought"
 

@@ -14,7 +14,7 @@ from typing import Any
 from mhrc.core.protocol import ActionResult
 
 from .llm_policy import UNREADABLE_TAG, LLMPolicy
-from .scripted_client import ScriptedClient
+from .llm.scripted_client import ScriptedClient
 
 
 class ScriptedLLMPolicy(LLMPolicy):

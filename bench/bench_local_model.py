@@ -33,7 +33,7 @@ from typing import Any
 
 from report import emit, percentile
 
-from mhrc.agents.local import LocalModelServer
+from mhrc.agents.llm.local import LocalModelServer
 from mhrc.run.config import EpisodeConfig, IDLE_TIMEOUT, SERVER_TIMEOUT
 from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import LLM_ERROR_PREFIX

@@ -320,7 +320,7 @@ async def test_a_workers_default_concurrency_is_sized_to_the_model_server(mhrc_m
 @pytest.mark.slow
 async def test_a_llama_cpp_servers_slots_size_the_default_concurrency(gemma: Path) -> None:
     from mhrc.agents.llm import episodes_at_once
-    from mhrc.agents.local import LocalModelServer
+    from mhrc.agents.llm.local import LocalModelServer
 
     async with LocalModelServer(gemma, slots=6, n_ctx_per_slot=512) as srv:
         assert await episodes_at_once([f"llamacpp:m@{srv.base_url}"] * 3) == 2  # 6 slots, 3 robots an episode

@@ -1,4 +1,4 @@
-"""The in-process llama.cpp server for `--llm gguf:PATH` (mhrc.agents.local).
+"""The in-process llama.cpp server for `--llm gguf:PATH` (mhrc.agents.llm.local).
 
 Fast tests check `check_gguf` and the header reader; slow ones load the packaged Gemma 3 270M
 (Q4_K_M, 253 MB) and talk to it over real HTTP on loopback. That model is a base (not
@@ -20,7 +20,7 @@ from typing import Any
 import httpx
 import pytest
 
-from mhrc.agents.local import (
+from mhrc.agents.llm.local import (
     GEMMA_CHAT_TEMPLATE,
     GGUFError,
     LocalModelError,

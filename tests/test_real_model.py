@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from mhrc.agents.local import LocalModelServer
+from mhrc.agents.llm.local import LocalModelServer
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import Observation

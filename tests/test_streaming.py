@@ -306,7 +306,7 @@ async def test_an_abandoned_call_frees_llama_cpps_slot_at_once_on_a_busy_server(
     tokens never leave it."""
     import httpx
 
-    from mhrc.agents.local import LocalModelServer
+    from mhrc.agents.llm.local import LocalModelServer
 
     long = 1500
     prompt = [{"role": "user", "content": "Count to ten thousand:"}]
@@ -346,7 +346,7 @@ async def test_a_step_deadline_ends_a_long_generation_and_leaves_llama_cpp_idle(
     tokens decoded before the deadline, plus one)."""
     import httpx
 
-    from mhrc.agents.local import LocalModelServer
+    from mhrc.agents.llm.local import LocalModelServer
 
     async with LocalModelServer(gemma, slots=1, n_ctx_per_slot=2048, seed=1) as srv:
         async with httpx.AsyncClient(base_url=srv.base_url.removesuffix("/v1"), timeout=300) as admin:
@@ -371,7 +371,7 @@ async def test_a_retry_does_not_wait_behind_its_abandoned_predecessor(gemma: Pat
     one whole reply)."""
     import httpx
 
-    from mhrc.agents.local import LocalModelServer
+    from mhrc.agents.llm.local import LocalModelServer
 
     async with LocalModelServer(gemma, slots=1, n_ctx_per_slot=2048, seed=1) as srv:
         async with httpx.AsyncClient(base_url=srv.base_url.removesuffix("/v1"), timeout=300) as admin:

@@ -288,7 +288,7 @@ async def _ask(client: httpx.AsyncClient, url: str, schema: dict[str, Any]) -> h
 @pytest.mark.slow
 async def test_llama_cpp_server_compiles_every_robots_schema(gemma: Path, observations: list[Observation]) -> None:
     """llama.cpp's server (in-process, over HTTP on loopback) compiles each robot's schema for real."""
-    from mhrc.agents.local import LocalModelServer
+    from mhrc.agents.llm.local import LocalModelServer
 
     async with LocalModelServer(gemma, slots=1, n_ctx_per_slot=2048) as srv, httpx.AsyncClient(timeout=60) as client:
         bad = await _ask(client, srv.base_url, {"type": "object", "properties": {"a": {"type": "string", "enum": []}}, "required": ["a"]})

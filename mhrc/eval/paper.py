@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
-from mhrc.agents.model_spec import PROVIDERS, LLMSpecError, robot_specs, split_url
+from mhrc.agents.llm.model_spec import PROVIDERS, LLMSpecError, robot_specs, split_url
 
 
 PAPER_OBJECTS = (3, 4, 5, 6)  # one episode per object count per scene

@@ -20,7 +20,7 @@ from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm import make_client
 from mhrc.agents.llm_policy import LLMPolicy
-from mhrc.agents.local import LocalModelServer
+from mhrc.agents.llm.local import LocalModelServer
 from mhrc.agents.replay import ReplayClient
 from mhrc.core.bus import open_client
 from mhrc.core.security import check_for
@@ -80,7 +80,7 @@ async def run_agent(
 
 @contextlib.asynccontextmanager
 async def local_models(specs: dict[str, str | None], seed: int | None = None) -> AsyncIterator[dict[str, str | None]]:
-    """Serve every `gguf:PATH` spec in-process (mhrc.agents.local): one llama.cpp server per
+    """Serve every `gguf:PATH` spec in-process (mhrc.agents.llm.local): one llama.cpp server per
     model file with one slot per robot on it, so the robots decode in parallel; yields the specs
     with each gguf one replaced by `llamacpp:MODEL@URL` of its server. The servers stop on exit."""
     paths = sorted({s.removeprefix("gguf:") for s in specs.values() if s and s.startswith("gguf:")})

@@ -20,12 +20,13 @@ from mhrc.core.security import Credentials, check_for, load, make_run_credential
 from mhrc.core.trace import unwritable
 from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import Scenario, check_scenario, load_scenario
+from mhrc.world.schedulers import SCHEDULERS
 
 log = structlog.get_logger("mhrc.run.config")
 
 
 ROBOTS = ("alice", "bob", "david")
-SCHEDULES = ("sequential", "lockstep", "async")
+SCHEDULES = tuple(SCHEDULERS)  # the world's registry, in its order: sequential (the paper's), lockstep, async
 
 
 class ConfigError(ValueError):

@@ -117,7 +117,7 @@ def make_client(spec: str, base_url: str | None = None, *, api_key_env: str | No
     if spec.startswith("replay:"):
         raise LLMSpecError(f"{spec!r} is a recorded trace: use mhrc.agents.replay.replay_clients for it")
     if spec.startswith("gguf:"):
-        raise LLMSpecError(f"{spec!r} is a local model file: serve it with mhrc.agents.local.LocalModelServer first")
+        raise LLMSpecError(f"{spec!r} is a local model file: serve it with mhrc.agents.llm.local.LocalModelServer first")
     provider = spec.partition(":")[0]
     return OpenAIChatClient(model, url, api_key=api_key, provider=provider if provider in PROVIDERS else "", **options)
 

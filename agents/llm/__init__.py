@@ -1,13 +1,13 @@
 """The LLM clients' public surface: import from here, whichever module holds the name.
 
-- `mhrc.agents.completion`: what a model answers (`Completion`), how a call fails (`LLMError`
+- `mhrc.agents.llm.completion`: what a model answers (`Completion`), how a call fails (`LLMError`
   and its kinds), the `LLMClient` protocol every policy needs, reasoning split off a reply;
-- `mhrc.agents.openai_client`: `OpenAIChatClient`, an OpenAI-compatible server over httpx:
+- `mhrc.agents.llm.openai_client`: `OpenAIChatClient`, an OpenAI-compatible server over httpx:
   streamed, timed to the first token and between chunks, retried, bounded;
-- `mhrc.agents.reply`: a reply's body (whole or streamed) read into a `Completion`;
-- `mhrc.agents.model_spec`: `--llm` specs (`openai:gpt-4o`, `alice=SPEC,bob=SPEC`, `SPEC@URL`)
+- `mhrc.agents.llm.reply`: a reply's body (whole or streamed) read into a `Completion`;
+- `mhrc.agents.llm.model_spec`: `--llm` specs (`openai:gpt-4o`, `alice=SPEC,bob=SPEC`, `SPEC@URL`)
   checked and turned into clients, and how many episodes keep a server busy;
-- `mhrc.agents.scripted_client`: `ScriptedClient`, a model answering from a list, in process.
+- `mhrc.agents.llm.scripted_client`: `ScriptedClient`, a model answering from a list, in process.
 """
 
 from __future__ import annotations

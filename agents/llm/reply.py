@@ -10,7 +10,7 @@ from typing import Any
 import httpx
 
 from .completion import Completion, Messages, bounded, estimate_tokens, prompt_text, split_reasoning
-from .progress import Progress
+from ..progress import Progress
 
 
 class Unreadable(ValueError):

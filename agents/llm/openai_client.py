@@ -40,7 +40,7 @@ from .completion import (
     LLMTimeout,
     Messages,
 )
-from .progress import PROGRESS
+from ..progress import PROGRESS
 from .reply import StreamedReply, Unreadable, whole_completion
 
 log = structlog.get_logger("mhrc.llm")
@@ -128,7 +128,7 @@ class OpenAIChatClient:
         if self.stream:
             body |= {"stream": True, "stream_options": {"include_usage": True}}
         if schema is not None:
-            from .structured import response_format  # lazily: it loads the protocol models, which plain replies never need
+            from ..structured import response_format  # lazily: it loads the protocol models, which plain replies never need
 
             body |= response_format(schema, self.provider)
         return body | self.extra_body
