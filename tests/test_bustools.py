@@ -19,7 +19,7 @@ import pytest
 from mhrc.core.bus import Bus, Sample
 
 from mhrc.core.endpoints import free_port
-from mhrc.core.bustools import MODELS, bus_echo, describe_sample, group_tokens, split_endpoint
+from mhrc.cli.bustools import MODELS, bus_echo, describe_sample, group_tokens, split_endpoint
 from mhrc.run.attach import run_agent
 from mhrc.core.protocol import PROTOCOL_VERSION
 from waits import robots_alive, subscribed

@@ -20,10 +20,10 @@ from mhrc.cli.running import run_command
 from mhrc.core import schema as schema_mod
 from mhrc.core.bus import Bus
 from mhrc.core.endpoints import endpoint
-from mhrc.core.bustools import BusToolError
-from mhrc.core.bustools import bus_echo as run_echo
-from mhrc.core.bustools import bus_list as run_list
-from mhrc.core.bustools import doctor as run_doctor
+from mhrc.cli.bustools import BusToolError
+from mhrc.cli.bustools import bus_echo as run_echo
+from mhrc.cli.bustools import bus_list as run_list
+from mhrc.cli.bustools import doctor as run_doctor
 from mhrc.core.keys import check_id, new_run_id
 from mhrc.core.security import MIN_DAYS, SecurityError, make_run_credentials
 from mhrc.run.config import ROBOTS
@@ -121,7 +121,7 @@ def bus_group() -> None:
 
 
 def _bus_tool(name: str, coro_fn: Callable[[], Coroutine[Any, Any, int]]) -> None:
-    """Run a bus tool: its exit code, or one clear line on stderr and exit 1 (mhrc.core.bustools)."""
+    """Run a bus tool: its exit code, or one clear line on stderr and exit 1 (mhrc.cli.bustools)."""
     try:
         code = run_command(coro_fn)
     except BusToolError as exc:

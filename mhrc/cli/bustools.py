@@ -276,7 +276,7 @@ def _clip(text: str, n: int = SUMMARY_CHARS) -> str:
     return text if len(text) <= n else text[: n - 1] + "…"
 
 
-def summarize(msg: BaseModel) -> str:
+def one_line(msg: BaseModel) -> str:
     """One line about a protocol message: who, what, how it went."""
     if isinstance(msg, ActionRequest):
         return f"{msg.robot} {msg.action.call()} tick {msg.tick} goal {msg.goal_id}"
@@ -348,7 +348,7 @@ def describe_sample(sample: Sample) -> Decoded:
         what = f"unknown kind {kind!r}" if kind is not None else "JSON without a protocol kind"
         return Decoded("json", f"{what}: {_clip(json.dumps(msg), 160)}", msg)
     try:
-        return Decoded(str(kind), _clip(summarize(decode(sample.payload, model))), msg)
+        return Decoded(str(kind), _clip(one_line(decode(sample.payload, model))), msg)
     except ProtocolError as exc:
         return Decoded(f"invalid:{kind}", f"not a valid {kind} (protocol v{PROTOCOL_VERSION}): {_clip(str(exc), 160)}", msg, str(exc))
     except Exception as exc:  # a summary that tripped on an odd but valid message: still one line
