@@ -240,9 +240,9 @@ class RobotAgent:
         if self.security is not None and self.endpoint is not None:
             import datetime
 
-            from mhrc.core.security import diagnose, expiry
+            from mhrc.core.security import why_refused, expiry
 
-            why = await asyncio.to_thread(diagnose, self.endpoint, self.security)
+            why = await asyncio.to_thread(why_refused, self.endpoint, self.security)
             if why.final:
                 raise WorldGone(f"the link to the world closed while {self.robot} awaited {what}: {why}")
             ends = expiry(self.security)  # the router may close links a moment before a handshake sees the certificate expired

@@ -56,7 +56,7 @@ from mhrc.core.protocol import (
     WorldState,
     decode,
 )
-from mhrc.core.security import OBSERVER, WORLD, diagnose, speaks_tls
+from mhrc.core.security import OBSERVER, WORLD, why_refused, speaks_tls
 
 OPEN_TIMEOUT_MS = 2000  # a zenoh handshake over loopback takes milliseconds; a silent non-zenoh listener would hold 10 s
 PROBE_TIMEOUT = 2.0  # s for the plain TCP connect
@@ -165,7 +165,7 @@ async def open_connection(ep: str, *, credentials: Path | None = None, open_time
                 f"it is not zenoh (or a secured world: connect to tls/{host}:{port} with --credentials)"
             ) from None
         if proto in ("tcp", "tls"):
-            raise BusToolError(f"{ep}: {await asyncio.to_thread(diagnose, ep, security)}") from None
+            raise BusToolError(f"{ep}: {await asyncio.to_thread(why_refused, ep, security)}") from None
         raise BusToolError(f"{ep}: no zenoh session could be opened: {str(exc).split(' at ')[0]}") from None
     bus = Bus(session, asyncio.get_running_loop())
     if security is None:

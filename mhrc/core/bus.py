@@ -22,7 +22,7 @@ from pydantic import BaseModel
 
 from mhrc.core.uncancelled import to_the_end
 from mhrc.core.protocol import encode
-from mhrc.core.security import Credentials, apply, diagnose
+from mhrc.core.security import Credentials, apply, why_refused
 from mhrc.core.endpoints import BusError, BusRefused, listen_error
 from mhrc.core.polling import poll
 
@@ -107,7 +107,7 @@ class Bus:
         except zenoh.ZError as exc:
             where = ", ".join([*listen, *connect]) or "no endpoints"
             if mode == "client" and len(connect) == 1:
-                why = await asyncio.to_thread(diagnose, connect[0], security)
+                why = await asyncio.to_thread(why_refused, connect[0], security)
                 if why.final:  # retrying cannot help: a certificate, a missing login, the wrong transport
                     raise BusRefused(f"could not open a zenoh session ({where}): {why}") from None
                 if why.login_refused:  # or a world still starting: open_client retries a little

@@ -422,7 +422,7 @@ def speaks_tls(host: str, port: int, timeout: float = 3.0) -> bool:
         return False
 
 
-def diagnose(endpoint: str, creds: Credentials | None, timeout: float = 3.0) -> Diagnosis:
+def why_refused(endpoint: str, creds: Credentials | None, timeout: float = 3.0) -> Diagnosis:
     """Why a client session to `endpoint` could not open, as far as a plain TLS handshake with
     the run's CA can tell: nothing listening, a secured world reached on plain tcp (or the
     reverse), an expired or foreign certificate, or (the handshake succeeding) credentials the
