@@ -102,3 +102,37 @@ async def test_an_async_handlers_exception_is_logged_not_lost() -> None:
     finally:
         await b.close()
         await a.close()
+
+
+async def test_an_outstanding_query_holds_no_thread() -> None:
+    """Queries that wait out their timeout (a queryable that keeps them and never answers) leave
+    the loop's thread pool free: with one thread in the pool, work handed to it finishes before
+    any of twenty queries ends (a query read on a thread would hold the only one until its
+    timeout, and the work would come last)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    port = free_port()
+    loop = asyncio.get_running_loop()
+    loop.set_default_executor(ThreadPoolExecutor(max_workers=1))
+    router = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    client = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    held: list[object] = []  # the queries, kept unanswered until their timeout
+    try:
+        silent = router._session.declare_queryable("silent/**", held.append)
+        await served(client, "silent/probe")
+        order: list[str] = []
+
+        async def ask(n: int) -> None:
+            assert await client.get(f"silent/{n}", timeout=2.0) == []
+            order.append("query")
+
+        queries = [asyncio.create_task(ask(n)) for n in range(20)]
+        await asyncio.sleep(0)  # every query asked
+        await asyncio.to_thread(order.append, "thread work")
+        await asyncio.gather(*queries)
+        assert len(held) >= 20 and order[0] == "thread work" and order.count("query") == 20
+        silent.undeclare()
+    finally:
+        held.clear()
+        await client.close()
+        await router.close()

@@ -2,8 +2,9 @@
 
 zenoh-python has no asyncio API: its callbacks run on zenoh threads. Every callback here
 copies the sample and hands it to the event loop with `call_soon_threadsafe`, then returns;
-all user handlers run on the loop. Blocking zenoh calls (`open`, `close`, reading `get`
-replies) run in `asyncio.to_thread`; a put (congestion control BLOCK) runs on the loop. A
+all user handlers run on the loop. Blocking zenoh calls (`open`, `close`) run in
+`asyncio.to_thread`; a query's replies come to a callback and hold no thread while the query is
+outstanding; a put (congestion control BLOCK) runs on the loop. A
 `Bus` owns its session, every entity it declared and the tasks its handlers started, keeps a
 reference to each task until it ends (the loop holds tasks weakly) and logs a handler's
 exception; `close()` (use `async with`) closes them all."""
@@ -11,6 +12,7 @@ exception; `close()` (use `async with`) closes them all."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
@@ -233,17 +235,33 @@ class Bus:
         """Query `selector`; return the payloads of the OK replies received within `timeout`."""
         data = None if payload is None else payload if isinstance(payload, bytes) else encode(payload)
 
-        def run() -> list[bytes]:
-            out = []
-            replies = self._session.get(selector, payload=data, timeout=timeout)
-            for reply in replies:
-                if reply.ok is not None:
-                    out.append(reply.ok.payload.to_bytes())
-                elif reply.err is not None:
-                    log.debug("query error reply", selector=selector, error=reply.err.payload.to_string())
-            return out
+        def keep(reply: zenoh.Reply, out: list[bytes]) -> None:
+            if reply.ok is not None:
+                out.append(reply.ok.payload.to_bytes())
+            elif reply.err is not None:
+                log.debug("query error reply", selector=selector, error=reply.err.payload.to_string())
 
-        return await asyncio.to_thread(run)
+        return await self._replies(lambda handler: self._session.get(selector, payload=data, timeout=timeout, handler=handler), keep)
+
+    async def _replies(self, ask: Callable[[Any], object], keep: Callable[[zenoh.Reply, list[Any]], None]) -> list[Any]:
+        """A query's replies, kept by `keep` as zenoh's threads deliver them; returned when zenoh
+        drops the query's handler (the last reply came, or its timeout passed). No thread of
+        this process waits for them meanwhile: a query costs nothing while it is outstanding."""
+        loop = asyncio.get_running_loop()
+        finished: asyncio.Future[None] = loop.create_future()
+        out: list[Any] = []
+
+        def settle() -> None:
+            if not finished.done():
+                finished.set_result(None)
+
+        def finish() -> None:
+            with contextlib.suppress(RuntimeError):  # the loop closed first: nobody waits any more
+                loop.call_soon_threadsafe(settle)
+
+        ask(zenoh.handlers.Callback(lambda reply: keep(reply, out), finish))
+        await finished
+        return list(out)
 
     # ------------------------------------------------------------------ liveliness
     def declare_token(self, key: str) -> None:
@@ -268,10 +286,11 @@ class Bus:
     async def alive(self, key_expr: str, timeout: float = 2.0) -> list[str]:
         """Keys of the liveliness tokens currently matching `key_expr`."""
 
-        def run() -> list[str]:
-            return [str(r.ok.key_expr) for r in self._session.liveliness().get(key_expr, timeout=timeout) if r.ok is not None]
+        def keep(reply: zenoh.Reply, out: list[str]) -> None:
+            if reply.ok is not None:
+                out.append(str(reply.ok.key_expr))
 
-        return await asyncio.to_thread(run)
+        return await self._replies(lambda handler: self._session.liveliness().get(key_expr, timeout=timeout, handler=handler), keep)
 
     def _run_handler(self, handler: Handler, sample: Sample) -> None:
         try:
