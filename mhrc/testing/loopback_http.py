@@ -160,7 +160,7 @@ class LoopbackHTTP:
         app = Starlette(routes=[Route("/{path:path}", self._endpoint, methods=_METHODS)])
         config = uvicorn.Config(
             app, host="127.0.0.1", port=0, http=Counted, ws="none", lifespan="off", log_config=None,
-            access_log=False, timeout_keep_alive=3600, timeout_graceful_shutdown=5.0,
+            access_log=False, timeout_keep_alive=3600, timeout_graceful_shutdown=5,
         )  # fmt: skip
         self._server = _Server(config)
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
