@@ -176,6 +176,17 @@ def test_a_reply_can_stall_after_its_headers_or_drop_the_connection(mhrc_model_s
     assert len(server.requests) == 3 and server.remaining() == 0
 
 
+def test_a_content_length_that_lies_is_a_body_cut_short(mhrc_model_server: Any) -> None:
+    """A length longer than the body: the body, then the connection closes (a server dying
+    mid-body); the client reads a truncated message, not a hang."""
+    server = mhrc_model_server([ModelReply(body=b'{"choices": [', headers={"Content-Length": "100"}), "Command: wait()"], when_done=None)
+    with httpx.Client(timeout=10.0) as http:
+        with pytest.raises(httpx.RemoteProtocolError, match="incomplete|closed"):
+            http.post(f"{server.url}/chat/completions", json={})
+        assert http.post(f"{server.url}/chat/completions", json={}).status_code == 200  # the server serves on
+    assert [c.connection for c in server.calls] == [1, 2]
+
+
 def test_a_keep_alive_server_answers_many_requests_on_one_connection(mhrc_model_server: Any) -> None:
     server = mhrc_model_server(["Command: wait()"] * 3, keep_alive=True)
     with socket.create_connection(("127.0.0.1", server.port)) as sock:
