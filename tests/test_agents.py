@@ -27,7 +27,7 @@ from mhrc.core.protocol import (
     decode,
 )
 from mhrc.core.trace import read_trace
-from waits import served, subscribed
+from waits import served, subscribed, until
 
 
 async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(mhrc_world) -> None:  # type: ignore[no-untyped-def]
@@ -71,6 +71,7 @@ class _OvertakingWorld:
 
     def __init__(self, bus: Bus, run: str, *, name_final_result: bool) -> None:
         self.bus, self.keys, self.name_final_result = bus, Keys(run), name_final_result
+        self.release_result = asyncio.Event()  # the test sets it once the agent has seen episode_done
         self.sent_result = asyncio.Event()
 
     def start(self) -> None:
@@ -91,7 +92,7 @@ class _OvertakingWorld:
         metrics = Metrics(success=False, partial_success=0.0, placed=0, total=1, temporal_steps=1, action_steps=0, action_steps_per_robot={"bob": 0})
         final = {"bob": req.goal_id} if self.name_final_result else {}
         self.bus.put(self.keys.world_event, EpisodeDone(run=self.keys.run, reason="horizon", metrics=metrics, final_results=final))
-        await asyncio.sleep(0.5)  # the result arrives well after the event
+        await self.release_result.wait()  # the result arrives after the agent has seen the event
         result = ActionResult(
             goal_id=req.goal_id, robot="bob", tick=0, action=req.action, outcome=SkillOutcome.ok("You waited."),
             observation=self._observation(), done=True,
@@ -105,19 +106,30 @@ async def test_a_result_overtaken_by_episode_done_is_still_recorded_when_the_wor
     port = free_port()
     world_bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
     agent_bus = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    running: asyncio.Future[EpisodeDone | None] | None = None
     try:
         world = _OvertakingWorld(world_bus, "overtake", name_final_result=named)
         world.start()
         await served(agent_bus, world.keys.attach("bob"))  # the world's declarations reached the agent's session
         await subscribed(agent_bus, world.keys.action_request("bob"))
         policy = ScriptedLLMPolicy("bob", ["Command: wait()"])
-        done = await asyncio.wait_for(RobotAgent(agent_bus, policy, run="overtake", robot="bob").run(), 30)
-        assert done is not None and done.reason == "horizon"
-        if named:  # the world said it executed the request: the agent waits for its result
-            assert [r.action.call() for r in policy.results] == ["wait()"]
-        else:  # the world ended without executing it: the agent does not wait for a result
+        agent = RobotAgent(agent_bus, policy, run="overtake", robot="bob")
+        running = asyncio.ensure_future(agent.run())
+        await until(lambda: agent.episode is not None or running.done(), "the agent seeing episode_done")
+        if named:  # the world said it executed the request: the agent waits for its result, sent only now
+            assert not running.done()
+            world.release_result.set()
+            done = await asyncio.wait_for(running, 30)
+            assert [r.action.call() for r in policy.results] == ["wait()"] and world.sent_result.is_set()
+        else:  # the world ended without executing it: the agent ends without a result, which was never sent
+            done = await asyncio.wait_for(running, 30)
             assert policy.results == [] and not world.sent_result.is_set()
+            world.release_result.set()  # the world's handler ends before its bus closes
+            await asyncio.wait_for(world.sent_result.wait(), 30)
+        assert done is not None and done.reason == "horizon"
     finally:
+        if running is not None and not running.done():
+            running.cancel()
         await agent_bus.close()
         await world_bus.close()
 

@@ -17,9 +17,12 @@ from typing import Any
 import httpx
 import pytest
 
+from mhrc.agents.heuristic import heuristic_policy
+from mhrc.agents.llm_policy import LLMPolicy
+from mhrc.agents.model_spec import make_client
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import EpisodeDone, decode_event
-from mhrc.testing import ModelCall, ModelReply, ScriptedModelServer, ScriptedPolicy
+from mhrc.core.protocol import Action, EpisodeDone, Observation, OutcomeCode, SkillOutcome, decode_event
+from mhrc.testing import ModelCall, ModelReply, PolicyHarness, ScriptedModelServer, ScriptedPolicy, observation, outcome
 
 
 def test_the_plugin_is_registered(pytestconfig: pytest.Config) -> None:
@@ -135,7 +138,7 @@ def test_an_endless_stream_is_written_until_the_client_hangs_up_or_the_server_cl
         assert got.startswith(b'{"choices": [') and got[13:].strip() == b""
         with socket.create_connection(("127.0.0.1", server.port)) as sock:  # a client that listens on
             sock.sendall(b"POST /v1/chat/completions HTTP/1.0\r\nContent-Length: 2\r\n\r\n{}")
-            assert sock.recv(12).startswith(b"HTTP/1.0 200")
+            assert sock.recv(12).startswith(b"HTTP/1.1 200")  # uvicorn's status line, to an HTTP/1.0 client too
             sock.settimeout(10.0)
             ender = threading.Timer(0.2, server.close)
             ender.start()
@@ -151,7 +154,7 @@ def test_an_endless_stream_is_written_until_the_client_hangs_up_or_the_server_cl
             time.sleep(0.01)
         slow.close()  # cuts the 30 s latency short: the answer comes before the socket's 10 s timeout
         sock.settimeout(10.0)
-        assert sock.recv(12).startswith(b"HTTP/1.0 200")
+        assert sock.recv(12).startswith(b"HTTP/1.1 200")  # uvicorn's status line, to an HTTP/1.0 client too
 
 
 def test_a_reply_can_stall_after_its_headers_or_drop_the_connection(mhrc_model_server: Any) -> None:
@@ -171,6 +174,17 @@ def test_a_reply_can_stall_after_its_headers_or_drop_the_connection(mhrc_model_s
             with pytest.raises(httpx.ReadTimeout):  # headers, and no body
                 resp.read()
     assert len(server.requests) == 3 and server.remaining() == 0
+
+
+def test_a_content_length_that_lies_is_a_body_cut_short(mhrc_model_server: Any) -> None:
+    """A length longer than the body: the body, then the connection closes (a server dying
+    mid-body); the client reads a truncated message, not a hang."""
+    server = mhrc_model_server([ModelReply(body=b'{"choices": [', headers={"Content-Length": "100"}), "Command: wait()"], when_done=None)
+    with httpx.Client(timeout=10.0) as http:
+        with pytest.raises(httpx.RemoteProtocolError, match="incomplete|closed"):
+            http.post(f"{server.url}/chat/completions", json={})
+        assert http.post(f"{server.url}/chat/completions", json={}).status_code == 200  # the server serves on
+    assert [c.connection for c in server.calls] == [1, 2]
 
 
 def test_a_keep_alive_server_answers_many_requests_on_one_connection(mhrc_model_server: Any) -> None:
@@ -250,3 +264,74 @@ async def test_attached_returns_once_the_robots_named_are_attached(mhrc_world: A
             await world.attached("david", timeout=0.5)
         await world.agent("david", ScriptedPolicy([]))
         assert (await world.done()).reason == "horizon"
+
+
+# -- the in-memory harness: a policy's unit tests, nothing started ----------------------------------
+
+
+async def test_the_heuristic_bob_picks_then_places_and_asks_alice_for_what_is_missing() -> None:
+    """Bob's scripted expert, fed hand-built observations: a target on his table is picked and
+    put in the tray; one he cannot see he asks Alice for."""
+    harness = PolicyHarness(heuristic_policy("bob"))
+    assert (await harness.decide(observation("bob", objects={"phone": "table_0"}, targets=["phone"]))).action.call() == "pick(phone)"
+    harness.answer(observation=observation("bob", holding="phone", targets=["phone"], tick=1))
+    assert (await harness.decide(harness.next_observation)).action.call() == "place(phone, tray)"
+    harness.answer()
+    assert [r.tick for r in harness.results] == [0, 1] and harness.next_observation.tick == 2
+
+    asking = PolicyHarness(heuristic_policy("bob"))
+    actions = await asking.run(observation("bob", objects={"phone": "table_2"}, targets=["phone", "book"]), 2)
+    assert actions[0] == "communicate('Alice, please bring these to table_0 within my reach: phone, book.', alice)"
+    assert actions[1] == "wait()" and all(r.outcome.succeeded for r in asking.results)
+
+
+async def test_the_heuristic_david_explores_what_alice_hands_him_and_reports_it() -> None:
+    """A message in, a navigation out; the world function answers with what he then sees."""
+    def world(action: Action, obs: Observation) -> tuple[SkillOutcome, Observation | None]:
+        if action.skill == "navigate":  # he arrives and sees the book on table_2
+            return outcome(feedback="You arrived at table_2."), observation("david", tick=obs.tick + 1, objects={"book": "table_2"})
+        return outcome(), None
+
+    harness = PolicyHarness(heuristic_policy("david"))
+    ask = observation("david", messages=[("alice", "David, please explore these surfaces and tell me what lies on them: table_2.")])
+    assert await harness.run(ask, 3, world) == ["navigate(table_2, 0)", "communicate('On table_2 I found: book.', alice)", "wait()"]
+    assert harness.steps[1].observation.objects[0].on == "table_2" and harness.steps[1].result is not None
+
+
+async def test_an_llm_policy_in_the_harness_reads_its_feedback_and_survives_a_reply_without_a_command(mhrc_model_server: Any) -> None:
+    """The LLM robot against a scripted model, without a world: its prompt shows the hand-built
+    observation, a failure's feedback reaches the next prompt, and an unreadable reply becomes
+    a wait with the parse error."""
+    server = mhrc_model_server({"bob": ["Analysis: the phone is close.\nCommand: pick(phone)", "I am not sure."]})
+    client = make_client("openai:test", base_url=server.url)
+    try:
+        harness = PolicyHarness(LLMPolicy("bob", client))
+        obs = observation("bob", objects={"phone": "table_0"}, targets=["phone"])
+        first = await harness.step(obs, outcome("out_of_reach", "The phone is beyond your arm's reach."))
+        second = await harness.decide(harness.next_observation)
+    finally:
+        await client.aclose()
+    assert (first.action.call(), first.parse_error) == ("pick(phone)", None) and first.reply is not None
+    assert second.action.call() == "wait()" and second.parse_error and "no command" in second.parse_error
+    prompts = [r["messages"][-1]["content"] for r in server.requests_of("bob")]
+    assert "- phone: position" in prompts[0] and "The list: phone." in prompts[0]
+    assert "The phone is beyond your arm's reach." in prompts[1] and [ScriptedModelServer.step_of(r) for r in server.requests] == [0, 1]
+    assert harness.actions == ["pick(phone)", "wait()"] and harness.results[0].outcome.code is OutcomeCode.OUT_OF_REACH
+
+
+def test_the_harness_builds_observations_the_protocol_accepts_and_keeps_the_loop_in_order() -> None:
+    obs = observation("alice", tick=3, holding="apple", objects={"apple": "cabinet_0"}, messages=[("bob", "hi")], goals={"apple": "tray"})
+    assert obs.status.holding == "apple" and obs.objects[0].inside and obs.new_messages[0].sender == "bob"
+    assert set(obs.teammates) == {"bob", "david"} and obs.goals == {"apple": "tray"} and obs.tick == 3
+    assert Observation.model_validate_json(obs.model_dump_json()) == obs  # what the world would send
+    with pytest.raises(ValueError, match="not among the observation's furniture"):
+        observation("bob", objects={"phone": "moon"})
+    with pytest.raises(ValueError, match="no default status for robot 'zed'"):
+        observation("zed")
+    assert outcome("no_path", "No path.").code is OutcomeCode.NO_PATH and outcome().succeeded
+    harness = PolicyHarness(ScriptedPolicy(["wait()"]))
+    with pytest.raises(RuntimeError, match="decide\\(\\) first"):
+        harness.answer()
+    asyncio.run(harness.decide(obs))
+    with pytest.raises(RuntimeError, match="answer\\(\\) it before deciding again"):
+        asyncio.run(harness.decide(obs))

@@ -1,6 +1,8 @@
-"""Waiting on what a test can observe on the bus, instead of sleeping for a declaration to travel.
+"""Waiting on what a test can observe, instead of sleeping for it to happen.
 
-Zenoh tells a publisher or a querier whether something matches it (its matching status): a
+`until` and `until_sync` poll a condition a test can see (an agent's state, a file, a process)
+and fail the test, naming what never came, if it is still false after a generous timeout; the
+timeout bounds a hang, it is never a claim about speed. On the bus, Zenoh tells a publisher or a querier whether something matches it (its matching status): a
 subscriber's or a queryable's declaration has reached that session exactly when it does. `Bus`
 has no call for it, so these helpers declare their probe on the bus's own zenoh session.
 """
@@ -8,12 +10,33 @@ has no call for it, so these helpers declare their probe on the bus's own zenoh 
 from __future__ import annotations
 
 import asyncio
+import time
+from collections.abc import Callable
 from typing import Any
 
 from mhrc.core.bus import Bus
 from mhrc.testing.world import robots_attached
 
 TIMEOUT = 30.0  # s: generous; a declaration that never arrives fails the test instead of hanging it
+
+
+async def until(condition: Callable[[], object], what: str, timeout: float = TIMEOUT, every: float = 0.01) -> None:
+    """Return once `condition()` is true, checked every `every` seconds on the running loop;
+    fail the test with `what` (the thing awaited) after `timeout`."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what}: not within {timeout:g} s")
+        await asyncio.sleep(every)
+
+
+def until_sync(condition: Callable[[], object], what: str, timeout: float = TIMEOUT, every: float = 0.1) -> None:
+    """`until` for a test without a loop (subprocesses, /proc): blocks the thread between checks."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what}: not within {timeout:g} s")
+        time.sleep(every)
 
 
 async def _matched(entity: Any, what: str, timeout: float) -> None:

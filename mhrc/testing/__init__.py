@@ -10,6 +10,9 @@ every session, task and server it opened, whatever happens:
   server) answering from a script, with per-call latency, errors, reasoning fields and
   trickling or endless bodies, recording every request (and which ones overlapped); point an
   LLM robot at it with ``llm="openai:test", base_url=server.url``.
+- `PolicyHarness(policy)`: a policy's unit test in memory, with nothing started (no bus, no
+  world): hand it observations (`observation("bob", objects={"phone": "table_0"})` builds a
+  plausible one), say how each action went (`outcome("no_path", ...)`), read its decisions.
 - `world_on_loopback(...)`: the world serving one episode on a free loopback port; attach
   agents with your policies, open sessions of your own, await the end.
 - `run_episode(policies, ...)`: one whole episode, your policies for the robots you name, the
@@ -35,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # the same names, imported on first use (below) so that the plugin stays cheap
     from mhrc.testing.model_server import ModelCall, ModelReply, ScriptedModelServer
     from mhrc.testing.policy import ScriptedPolicy
+    from mhrc.testing.policy_harness import PolicyHarness, Step, observation, outcome
     from mhrc.testing.world import AgentSpec, EpisodeResult, LoopbackWorld, run_episode, world_on_loopback
 
 __all__ = [
@@ -43,8 +47,12 @@ __all__ = [
     "LoopbackWorld",
     "ModelCall",
     "ModelReply",
+    "PolicyHarness",
     "ScriptedModelServer",
     "ScriptedPolicy",
+    "Step",
+    "observation",
+    "outcome",
     "run_episode",
     "world_on_loopback",
 ]
@@ -52,6 +60,10 @@ __all__ = [
 # where each name lives: the public ones, then helpers importable from here as before the split
 _HOME = {
     "ScriptedPolicy": "policy",
+    "PolicyHarness": "policy_harness",
+    "Step": "policy_harness",
+    "observation": "policy_harness",
+    "outcome": "policy_harness",
     "ModelCall": "model_server",
     "ModelReply": "model_server",
     "ScriptedModelServer": "model_server",

@@ -1,5 +1,12 @@
 """`ScriptedModelServer`: an OpenAI-compatible chat-completions server on loopback answering
-from a script, a real threaded HTTP server standing in for a model's judgement."""
+from a script, a real HTTP server (uvicorn and Starlette, `mhrc.testing.loopback_http`) standing
+in for a model's judgement.
+
+The script, the records of the calls and the completion bodies are here; how an answer goes on
+the wire (faults included: a lying ``Content-Length``, a stall, a dropped connection) is the
+transport's. uvicorn and starlette are dependencies of mhrc itself, since `mhrc.testing` is
+public; they are imported when the first server is built, never by the pytest plugin's load.
+"""
 
 from __future__ import annotations
 
@@ -10,8 +17,9 @@ import time
 import uuid
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, TypeAlias
+
+from mhrc.testing.loopback_http import Answer, Incoming, LoopbackHTTP
 
 __all__ = ["ModelCall", "ModelReply", "Reply", "Script", "ScriptedModelServer", "WHEN_DONE"]
 
@@ -33,12 +41,14 @@ class ModelReply:
 
     `stream` (an iterable of bytes, which may be endless, e.g. ``itertools.repeat(b"a")``)
     makes the body be written chunk by chunk, flushed each time, `stream_interval` seconds apart,
-    after the status and headers (no ``Content-Length`` unless `headers` give one; the end of the
-    body is the end of the connection, or with `keep_alive` a chunked body whose end keeps the
-    connection open for the next request): a server that trickles or never stops writing. The
-    stream ends when the iterable does, the client hangs up, or the server is closed. A
-    generator is consumed by the one call it answers: return a fresh reply from a callable
-    script to stream to every call.
+    after the status and headers (no ``Content-Length`` unless `headers` give one; chunked to an
+    HTTP/1.1 client, whose connection is then closed, or with `keep_alive` kept open for the next
+    request; to an HTTP/1.0 client the end of the body is the end of the connection): a server
+    that trickles or never stops writing. The stream ends when the iterable does, the client
+    hangs up, or the server is closed. Its chunks are taken on the server's event loop, between
+    writes: pace a stream with `stream_interval`, not by blocking in a generator. A generator is
+    consumed by the one call it answers: return a fresh reply from a callable script to stream
+    to every call.
 
     Two faults of a server gone bad: `stall` writes the status, the headers and the `stream`'s
     chunks (or no body at all, without a `stream`), then nothing more, the connection held open
@@ -94,14 +104,11 @@ WHEN_DONE = "Analysis: the script is over.\nCommand: wait()"
 
 
 @dataclass
-class _Answer:
-    status: int
-    headers: Mapping[str, str]
-    payload: bytes
-    delay: float
+class _Answer(Answer):
+    """What to write, with the latency before it and the reply it came from."""
+
+    delay: float = 0.0
     reply: ModelReply | None = None
-    stream: Iterable[bytes] | None = None
-    interval: float = 0.0
 
 
 class ScriptedModelServer:
@@ -113,11 +120,13 @@ class ScriptedModelServer:
     JSON returning the reply (called from the server's threads, one per request: guard any
     state it shares). A reply is a `str` (the assistant's text) or a `ModelReply`. After a list
     runs out the server answers `when_done` (a wait command), or with `when_done=None` HTTP 500.
-    `latency` (seconds, or a callable on the request JSON) delays each answer; the server is
-    threaded, so concurrent requests are answered concurrently. `close()` cuts short the
-    latencies and streams still running. With `keep_alive` the server speaks HTTP/1.1 and keeps
-    connections open between requests, as production servers do, so that a client's
-    connection pool is exercised (the default is HTTP/1.0: one connection a request).
+    `latency` (seconds, or a callable on the request JSON) delays each answer; requests are
+    answered concurrently (each waits its latency on the server's event loop, each script call
+    runs in a thread of its own). `close()` cuts short the latencies and streams still running.
+    With `keep_alive` connections stay open between requests, as production servers keep them,
+    so that a client's connection pool is exercised; the default closes each connection after
+    its answer (``Connection: close``: one connection a request). The status line always says
+    HTTP/1.1 (uvicorn's); a client speaking HTTP/1.0 is answered as one.
 
     Every request is recorded: `requests` (the JSON bodies, in arrival order), `headers` (the
     matching request headers) and `paths`, and `calls` (a `ModelCall` each: the request, the
@@ -145,94 +154,15 @@ class ScriptedModelServer:
         self.in_flight = 0
         self.max_in_flight = 0
         self._seq = 0
-        self._connections = 0
         self._lock = threading.Lock()
-        self._closing = threading.Event()
         self._queues: dict[str | None, list[Reply]] = {}
         if isinstance(script, Mapping):
             self._queues = {robot: list(replies) for robot, replies in script.items()}
         elif not callable(script):
             self._queues = {None: list(script)}
-        server = self
-
-        class Handler(BaseHTTPRequestHandler):
-            protocol_version = "HTTP/1.1" if keep_alive else "HTTP/1.0"
-
-            def setup(self) -> None:
-                super().setup()
-                with server._lock:
-                    server._connections += 1
-                    self.connection_no = server._connections
-
-            def do_POST(self) -> None:  # noqa: N802
-                raw = self.rfile.read(int(self.headers.get("Content-Length") or 0))
-                try:
-                    body = json.loads(raw or b"{}")
-                except ValueError:
-                    self._send(_Answer(400, {}, b'{"error": "the request body is not JSON"}', 0.0))
-                    return
-                call = server._begin(body, dict(self.headers), self.path, self.connection_no)
-                answer = server._answer(body)
-                if answer.delay > 0:
-                    server._closing.wait(answer.delay)
-                server._end(call, answer)
-                if answer.reply is not None and answer.reply.drop:
-                    self.close_connection = True  # not a byte: the client sees the connection close
-                    return
-                self._send(answer)
-
-            def do_GET(self) -> None:  # noqa: N802
-                self._send(_Answer(404, {}, b'{"error": "only POST /v1/chat/completions is served"}', 0.0))
-
-            def _send(self, answer: _Answer) -> None:
-                names = {k.lower() for k in answer.headers}
-                try:
-                    self.send_response(answer.status)
-                    if "content-type" not in names:
-                        self.send_header("Content-Type", "application/json")
-                    for k, v in answer.headers.items():
-                        self.send_header(k, v)
-                    # a stream on a kept-alive connection is chunked, so that its end leaves the connection open
-                    chunked = answer.stream is not None and "content-length" not in names and self.protocol_version != "HTTP/1.0"
-                    if chunked:
-                        self.send_header("Transfer-Encoding", "chunked")
-                    elif answer.stream is not None or "content-length" in names:
-                        self.close_connection = True  # the body may not be what a length says
-                        if self.protocol_version != "HTTP/1.0":
-                            self.send_header("Connection", "close")
-                    if answer.stream is None and "content-length" not in names:
-                        self.send_header("Content-Length", str(len(answer.payload)))
-                    self.end_headers()
-                    if answer.stream is None:
-                        self.wfile.write(answer.payload)
-                        return
-                    for i, chunk in enumerate(answer.stream):
-                        if server._closing.is_set() or (i and answer.interval > 0 and server._closing.wait(answer.interval)):
-                            self.close_connection = True  # cut short: the body has no proper end
-                            break
-                        self.wfile.write(b"%x\r\n%s\r\n" % (len(chunk), chunk) if chunked and chunk else chunk)
-                        self.wfile.flush()
-                    else:
-                        if answer.reply is not None and answer.reply.stall:
-                            server._closing.wait()  # not another byte until the server is closed
-                            self.close_connection = True
-                        elif chunked:
-                            self.wfile.write(b"0\r\n\r\n")
-                            self.wfile.flush()
-                except OSError:  # the client gave up (its timeout): what a timeout should do
-                    self.close_connection = True
-
-            def log_message(self, *args: object) -> None:
-                pass
-
-        self._httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-        self._httpd.daemon_threads = True
-        self.port = int(self._httpd.server_address[1])
+        self._http = LoopbackHTTP(self._serve, keep_alive=keep_alive, name="mhrc-scripted-model")
+        self.port = self._http.port
         self.url = f"http://127.0.0.1:{self.port}/v1"
-        self._thread = threading.Thread(
-            target=self._httpd.serve_forever, kwargs={"poll_interval": 0.05}, name="mhrc-scripted-model", daemon=True
-        )
-        self._thread.start()
         self._closed = False
 
     @staticmethod
@@ -270,6 +200,15 @@ class ScriptedModelServer:
                 return sum(len(queue) for queue in self._queues.values())
             return len(self._queues.get(robot, []))
 
+    async def _serve(self, incoming: Incoming) -> Answer:
+        """One request, on the server's loop: record it, ask the script (in a thread of its own),
+        wait the latency (cut short by `close()`), record its end."""
+        call = self._begin(incoming.body, incoming.headers, incoming.path, incoming.connection)
+        answer: _Answer = await self._http.off_loop(self._answer, incoming.body)
+        await self._http.pause(answer.delay)
+        self._end(call, answer)
+        return answer
+
     def _begin(self, body: dict[str, Any], headers: dict[str, str], path: str, connection: int = 0) -> ModelCall:
         with self._lock:
             self.requests.append(body)
@@ -306,13 +245,15 @@ class ScriptedModelServer:
         try:
             reply = self._next(body)
         except Exception as exc:  # a bug in the test's script: answer it, visibly
-            return _Answer(500, {}, json.dumps({"error": f"the script raised {exc!r}"}).encode(), 0.0)
+            return _Answer(500, payload=json.dumps({"error": f"the script raised {exc!r}"}).encode())
         if reply is None:
-            return _Answer(500, {}, b'{"error": "the script is exhausted"}', 0.0)
+            return _Answer(500, payload=b'{"error": "the script is exhausted"}')
         if isinstance(reply, str):
             reply = ModelReply(text=reply)
         delay = reply.latency if reply.latency is not None else (self.latency(body) if callable(self.latency) else self.latency)
-        answer = _Answer(reply.status, reply.headers, b"", delay, reply, reply.stream, reply.stream_interval)
+        answer = _Answer(
+            reply.status, reply.headers, stream=reply.stream, interval=reply.stream_interval, stall=reply.stall, drop=reply.drop, delay=delay, reply=reply
+        )
         if reply.stall and reply.stream is None:
             answer.stream = ()  # the headers, then silence
         if answer.stream is not None:
@@ -346,10 +287,7 @@ class ScriptedModelServer:
         if self._closed:
             return
         self._closed = True
-        self._closing.set()  # ends the latencies and streams still running
-        self._httpd.shutdown()
-        self._httpd.server_close()
-        self._thread.join(timeout=5.0)
+        self._http.close()  # ends the latencies and streams still running
 
     def __enter__(self) -> ScriptedModelServer:
         return self
