@@ -183,7 +183,7 @@ def test_the_default_grid_is_the_papers_and_repeats_multiply_it_with_new_seeds()
     assert len(big) == 12 and sorted({s for _, _, s in big}) == [0, 1, 2, 3, 4, 5]
 
     spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), repeats=2)
-    assert [j.config["seed"] for j in spec.jobs()] == [0, 0, 0, 0, 1, 1, 1, 1]
+    assert [j.config.seed for j in spec.jobs()] == [0, 0, 0, 0, 1, 1, 1, 1]
     with pytest.raises(ConfigError, match="--repeats"):
         EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), repeats=0).validate()
 

@@ -76,7 +76,7 @@ class _Stalling:
         if self.attempts[job.key] > self.stall.get(job.key, 0):
             return await run_job(job, worker_name())
         trace = self.tmp / f"{job.key.replace('/', '_')}-{self.attempts[job.key]}.jsonl"
-        await _stalled_episode(job.config, trace)
+        await _stalled_episode(job.config.model_dump(exclude={"run"}, exclude_defaults=True), trace)
         return EpisodeResult(key=job.key, worker="stalled", trace_z=zlib.compress(trace.read_bytes()))
 
     async def stop(self, grace: float) -> list[EpisodeResult]:
@@ -107,7 +107,7 @@ async def test_an_unplayed_episode_is_run_again_and_never_averaged_into_a_score(
     spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2, horizon=20)
     never, second = "pack_objects/kitchen/3/0", "pack_objects/kitchen/3/1"
     executor = _Stalling(tmp_path, {never: RETRIES + 1, second: 1})
-    rows = await _drive(spec, tmp_path / "ev", False, executor, None)
+    rows = await _drive(spec.validate(), tmp_path / "ev", False, executor, None)
     assert executor.attempts == {never: RETRIES + 1, second: 2}
     by_key = {r["key"]: r for r in rows}
     assert sorted(by_key) == [never, second]  # one row each: a retried attempt leaves none

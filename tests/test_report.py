@@ -171,7 +171,7 @@ def test_the_papers_figures_stand_only_beside_a_whole_team_of_the_papers_model_w
     line = next(x for x in text.splitlines() if x.startswith(NO_PAPER))
     assert line == NO_PAPER + "bob and david run the heuristic, not the paper's model."  # one line, in the setting's section
     assert text.index("### alice=openai:gpt-4o · ablation none · paper") < text.index(line)
-    assert "<p>" + NO_PAPER + "bob and david run the heuristic, not the paper&#x27;s model.</p>" in html_summary(_rows("alice=openai:gpt-4o"), [None] * 12)
+    assert "<p>" + NO_PAPER + "bob and david run the heuristic, not the paper's model.</p>" in html_summary(_rows("alice=openai:gpt-4o"), [None] * 12)
 
 
 @pytest.mark.parametrize(

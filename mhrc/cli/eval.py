@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-import os
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any
@@ -15,7 +15,7 @@ from mhrc.cli.running import run_command
 from mhrc.core import logs
 from mhrc.core.fidelity import NOISE
 from mhrc.core.trace import unwritable
-from mhrc.run.config import ConfigError, EpisodeConfig, SCHEDULES
+from mhrc.run.config import ConfigError, SCHEDULES
 
 def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
     if text is None:
@@ -81,23 +81,16 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 
-    from mhrc.eval.engine import EvalAborted, EvalSpec, Tally, check_out, evaluate
+    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, check_out, run
     from mhrc.core.fidelity import AidsError, parse_aids
     from mhrc.eval.paper import PAPER_OBJECTS
-    from mhrc.eval.report import summary_markdown
     from mhrc.eval.summaries import SUMMARY_FILES
 
     logs.configure(log_level)
-    if ray_address is not None and workers is not None:
-        raise click.UsageError("--workers: not with --ray (the Ray cluster's resources say how many episodes run at once)")
-    if shared_out and ray_address is None:
-        raise click.UsageError("--shared-out: only with --ray (a local run writes into --out anyway)")
-    if workers is not None and workers < 1:
-        raise click.BadParameter(f"must be at least 1 (got {workers})", param_hint="--workers")
-    workers = workers or os.cpu_count() or 1
-    try:
+    try:  # every option checked once, here: the engine and the workers take what these checks made
+        options = RunOptions(workers=workers, concurrency=concurrency, ray=ray_address, shared_out=shared_out)
         aid_names = parse_aids(aids)
-    except AidsError as exc:
+    except (ConfigError, AidsError) as exc:
         raise click.UsageError(str(exc)) from None
     prompts = llm.pop("prompts")
     spec = EvalSpec(
@@ -106,8 +99,6 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, noise=noise,
         schedule=schedule, time_scale=time_scale, events=events, **llm,
     )  # fmt: skip
-    if concurrency is not None and concurrency < 1:
-        raise click.BadParameter(f"must be at least 1 (got {concurrency})", param_hint="--concurrency")
     out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
     console = Console(stderr=True)
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console)
@@ -126,17 +117,17 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
             progress.console.print(f"[yellow]not solved[/]: {row['key']} (PS {row['partial_success']:.2f}, TS {row['temporal_steps']})")
 
     try:
-        spec.validate()
+        plan = spec.validate()
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
-    n_jobs = len(spec.jobs())
+    n_jobs = len(plan.jobs)
     if dry_run:
-        for job in spec.jobs():
-            click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config['seed']}")
+        for job in plan.jobs:
+            click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config.seed}")
         click.echo(f"{n_jobs} episodes ({spec.fidelity} fidelity{', noise off' if spec.noise == 'off' else ''})")
         return
     try:
-        check_out(out, spec, resume)  # before the model server is asked or a worker starts
+        check_out(out, plan, resume)  # before the model server is asked or a worker starts
         if ray_address is not None:  # a missing extra, an old Ray, an address nothing answers at: one line, now
             from mhrc.eval.cluster import import_ray, probe
 
@@ -155,9 +146,10 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     if concurrency is None:
         from mhrc.agents.llm import episodes_at_once
 
-        specs = EpisodeConfig.build(**spec.jobs()[0].config).robot_specs().values() if spec.llm else [None]
+        specs = plan.jobs[0].config.robot_specs().values() if spec.llm else [None]
         concurrency = asyncio.run(episodes_at_once(list(specs), spec.base_url))
-    where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {workers} worker(s)"
+        options = dataclasses.replace(options, concurrency=concurrency)
+    where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {options.processes} worker(s)"
     console.print(
         f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}{', noise off' if spec.noise == 'off' else ''}, {spec.mode} replies) on {n_jobs} episodes "
         f"into {out} {where}, {concurrency} episode(s) at once each"
@@ -165,11 +157,7 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     t0 = time.perf_counter()
     with progress:
         try:
-            rows = run_command(
-                lambda: evaluate(spec, out, workers=1 if ray_address else workers, resume=resume, progress=hook, concurrency=concurrency,
-                                 ray=ray_address, shared_out=shared_out),
-                stopping=stopping,
-            )
+            rows = run_command(lambda: run(plan, out, options, resume=resume, progress=hook), stopping=stopping)
         except ConfigError as exc:
             raise click.UsageError(str(exc)) from None
         except EvalAborted as exc:
@@ -182,7 +170,7 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         + (f" (episodes given up: {errors})" if errors.exists() else "")
     )
     if rows:
-        click.echo(summary_markdown(rows))
+        click.echo((out / "summary.md").read_text(encoding="utf-8"))  # the summary written, not computed again
 
 
 @click.command("report")
@@ -198,8 +186,11 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     configuration. Invalid episodes (model unreachable throughout) are left out and listed.
     With --out FILE.md, the markdown goes there instead, with FILE.csv and FILE.html (tables,
     plots, a link to each episode's report) beside it."""
-    from mhrc.eval.report import summary_csv, summary_markdown
+    from mhrc.eval.html import links_of
+    from mhrc.eval.report import markdown
     from mhrc.eval.rows import merge_runs
+    from mhrc.eval.summaries import write_summary_files
+    from mhrc.eval.summary import Summary
 
     if out is not None:
         files = [out, out.with_suffix(".csv"), out.with_suffix(".html")]
@@ -209,19 +200,17 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
             if why := unwritable(f):
                 raise click.BadParameter(why, param_hint="--out")
     try:
-        rows = merge_runs(list(dirs))
+        per_dir = [(d, merge_runs([d])) for d in dirs]
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
+    rows = [r for _, mine in per_dir for r in mine]
     if not rows:
         raise click.UsageError("no finished episodes in " + ", ".join(map(str, dirs)))
-    text = summary_markdown(rows, resamples=resamples, seed=seed)
+    summary = Summary.of(rows, resamples=resamples, seed=seed)  # every statistic, once, for the three files
     if out is None:
-        click.echo(text)
+        click.echo(markdown(summary))
         return
-    from mhrc.eval.html import write_report_html
-
     md, csv, html = files
-    md.write_text(text, encoding="utf-8")
-    csv.write_text(summary_csv(rows, resamples=resamples, seed=seed), encoding="utf-8")
-    write_report_html(list(dirs), html, resamples=resamples, seed=seed)
+    links = [link for d, mine in per_dir for link in links_of(mine, d, html.parent)]
+    write_summary_files(summary, md, csv, html, links)
     click.echo(f"wrote {md}, {csv}, {html}", err=True)

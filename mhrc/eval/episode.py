@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict
 
 from mhrc.run import malloc as memory
 from mhrc.core.bus import Bus, Sample
+from mhrc.core.keys import new_run_id
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.run.serve import EventHook
@@ -32,11 +33,12 @@ log = structlog.get_logger("mhrc.eval")
 
 
 class Job(BaseModel):
-    """One episode of the grid: its key (`task/scene/objects/seed`) and its EpisodeConfig fields
-    (no run, port or trace: the process that runs it picks those)."""
+    """One episode of the grid: its key (`task/scene/objects/seed`) and its config, built and
+    checked once by the driver (mhrc.eval.spec); the process that runs it picks the run id, the
+    port and the trace, and checks nothing again."""
 
     key: str
-    config: dict[str, Any]
+    config: EpisodeConfig
     repeat: int = 0
     trial: int = 0
 
@@ -91,7 +93,7 @@ async def run_job(job: Job, worker: str, *, observe: EventHook | None = None, tr
     with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
         trace = Path(tmp) / "trace.jsonl"
         try:
-            cfg = EpisodeConfig.build(**job.config, trace=trace).resolved()
+            cfg = job.config.model_copy(update={"run": new_run_id(), "trace": trace}).resolved()  # a run id per attempt
             await up_in_process(cfg, observe=observe)
             if trace_dest is not None:
                 trace_dest.parent.mkdir(parents=True, exist_ok=True)

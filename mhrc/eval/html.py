@@ -1,8 +1,8 @@
 """The evaluation's HTML summary (summary.html): one self-contained page with the tables of
 summary.md, plots of them, and a link per episode to its report.
 
-The tables are `mhrc.eval.report.summary_markdown`'s own, rendered as HTML (the same rows, the same
-statistics, nothing recomputed here); the plots draw `mhrc.core.metrics.summarize` over
+The tables are summary.md's own (`mhrc.eval.report.markdown` of the same `mhrc.eval.summary.Summary`),
+rendered as HTML by markdown-it-py; the plots draw `mhrc.core.metrics.summarize` over
 `mhrc.eval.report.group`'s buckets and `mhrc.core.diagnostics.summarize_diagnostics`. Plots are inline
 SVG drawn with matplotlib's object API (no pyplot state, no display), so the page needs no
 network and no other file. Each episode links to `traces/<trace file stem>.html` next to the
@@ -15,15 +15,15 @@ from __future__ import annotations
 import html
 import io
 import os
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from mhrc.core.diagnostics import summarize_diagnostics
 from mhrc.core.metrics import summarize
-from mhrc.eval.report import summary_markdown
-from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, group, is_valid, read_rows, setting_label, setting_of
+from mhrc.eval.report import markdown
+from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, group, is_valid, setting_label, setting_of
+from mhrc.eval.summary import Summary
 from mhrc.viewer.wording import diagnostic_label, partial_success
 
 PLOTTED_DIAGNOSTICS = tuple(
@@ -41,52 +41,14 @@ figcaption { font-size: 0.85em; color: #555; }
 """
 
 
-# --------------------------------------------------------------------------- markdown tables, as HTML
+# --------------------------------------------------------------------------- markdown, as HTML
 
 
-def _inline(text: str) -> str:
-    return re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", html.escape(text.strip()))
+def markdown_html(md: str) -> str:
+    """summary.md as HTML (CommonMark with pipe tables, by markdown-it-py); raw HTML in it is escaped."""
+    from markdown_it import MarkdownIt
 
-
-def _cells(line: str) -> list[str]:
-    return [c.strip() for c in line.strip().strip("|").split("|")]
-
-
-def markdown_to_html(md: str) -> str:
-    """The markdown `mhrc.eval.report` writes (headings, paragraphs, lists, pipe tables) as HTML."""
-    out: list[str] = []
-    lines = md.splitlines()
-    i = 0
-    while i < len(lines):
-        line = lines[i]
-        if not line.strip():
-            i += 1
-        elif m := re.match(r"^(#{1,6}) (.*)$", line):
-            level = len(m.group(1))
-            out.append(f"<h{level}>{_inline(m.group(2))}</h{level}>")
-            i += 1
-        elif line.startswith("|"):
-            block = []
-            while i < len(lines) and lines[i].startswith("|"):
-                block.append(lines[i])
-                i += 1
-            head, body = block[0], [b for b in block[1:] if not re.fullmatch(r"\|(\s*:?-+:?\s*\|)+", b.strip())]
-            out.append("<table><thead><tr>" + "".join(f"<th>{_inline(c)}</th>" for c in _cells(head)) + "</tr></thead><tbody>")
-            out += ["<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in _cells(b)) + "</tr>" for b in body]
-            out.append("</tbody></table>")
-        elif line.startswith("- "):
-            items = []
-            while i < len(lines) and lines[i].startswith("- "):
-                items.append(f"<li>{_inline(lines[i][2:])}</li>")
-                i += 1
-            out.append("<ul>" + "".join(items) + "</ul>")
-        else:
-            para = []
-            while i < len(lines) and lines[i].strip() and not re.match(r"^(#|\||- )", lines[i]):
-                para.append(lines[i])
-                i += 1
-            out.append(f"<p>{_inline(' '.join(para))}</p>")
-    return "\n".join(out)
+    return MarkdownIt("commonmark", {"html": False}).enable("table").render(md)
 
 
 # --------------------------------------------------------------------------- plots
@@ -218,11 +180,17 @@ def html_summary(
     resamples: int = RESAMPLES,
     seed: int = CI_SEED,
 ) -> str:
-    """The page: summary.md's tables as HTML, the plots, and the episodes with their links (`links[i]` is rows[i]'s)."""
-    valid = [r for r in rows if is_valid(r)]
+    """`page` of the Summary of `rows`."""
+    return page(Summary.of(rows, resamples=resamples, seed=seed), links, title=title)
+
+
+def page(summary: Summary, links: Sequence[str | None], *, title: str = "Evaluation summary", md: str | None = None) -> str:
+    """The page: summary.md's tables as HTML (`md`, when the caller rendered it already), the plots,
+    and the episodes with their links (`links[i]` is summary.rows[i]'s)."""
+    rows, valid = summary.rows, summary.valid
     plots = success_by_objects(valid) + ts_against_bound(valid) + diagnostics_by_setting(valid) if valid else []
     figures = "\n".join(f"<figure>{svg}<figcaption>{html.escape(caption)}</figcaption></figure>" for svg, caption in plots)
-    body = markdown_to_html(summary_markdown(rows, resamples=resamples, seed=seed))
+    body = markdown_html(markdown(summary) if md is None else md)
     return "\n".join([
         "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">', f"<title>{html.escape(title)}</title>",
         f"<style>{STYLE}</style></head><body>",
@@ -232,6 +200,11 @@ def html_summary(
         _episode_table(rows, links),
         "</body></html>", "",
     ])  # fmt: skip
+
+
+def links_of(rows: Sequence[dict[str, Any]], base: Path, page_dir: Path) -> list[str | None]:
+    """Each row's link to its episode report, from a page in `page_dir` (`_link`)."""
+    return [_link(r, base, page_dir) for r in rows]
 
 
 def write_html_summary(
@@ -247,21 +220,6 @@ def write_html_summary(
     `traces/<stem>.html` under `base`, the evaluation directory the rows' `trace` paths are
     relative to (default: the page's own directory, as for `mhrc eval --out DIR`)."""
     page_dir = out_path.parent
-    links = [_link(r, base if base is not None else page_dir, page_dir) for r in rows]
-    out_path.write_text(html_summary(rows, links, title=title, resamples=resamples, seed=seed), encoding="utf-8")
-    return out_path
-
-
-def write_report_html(
-    dirs: Sequence[Path], out_path: Path, *, title: str = "Evaluation summary", resamples: int = RESAMPLES, seed: int = CI_SEED
-) -> Path:
-    """`mhrc report DIR...`'s page: the rows of several evaluation directories (as
-    `mhrc.eval.report.merge_runs` reads them), each episode linked into its own directory."""
-    rows: list[dict[str, Any]] = []
-    links: list[str | None] = []
-    for d in dirs:
-        mine = read_rows(Path(d) / "episodes.jsonl")
-        rows += mine
-        links += [_link(r, Path(d), out_path.parent) for r in mine]
+    links = links_of(rows, base if base is not None else page_dir, page_dir)
     out_path.write_text(html_summary(rows, links, title=title, resamples=resamples, seed=seed), encoding="utf-8")
     return out_path

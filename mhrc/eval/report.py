@@ -23,15 +23,14 @@ from __future__ import annotations
 
 import csv
 import io
-from collections import Counter, defaultdict
 from typing import Any
 
 import structlog
 
-from mhrc.core.diagnostics import summarize_diagnostics
 from mhrc.core.metrics import summarize
-from mhrc.eval.paper import PaperMatch, paper_cell, paper_match
-from mhrc.eval.rows import CI_METRICS, CI_SEED, RESAMPLES, SETTING, by_setting_task, cell_stats, group, is_valid, order_key, setting_label, setting_of
+from mhrc.eval.paper import PaperMatch, paper_cell
+from mhrc.eval.rows import CI_METRICS, CI_SEED, RESAMPLES, SETTING, group, is_valid, order_key, setting_label, setting_of
+from mhrc.eval.summary import Summary
 
 
 log = structlog.get_logger("mhrc.eval.report")
@@ -78,12 +77,6 @@ def _ci(s: dict[str, Any], name: str, digits: int) -> str:
     return f"{s[name]:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
 
 
-def matches_of(cells: dict[tuple[tuple[Any, ...], str], list[dict[str, Any]]]) -> dict[tuple[tuple[Any, ...], str], PaperMatch]:
-    """`paper_match` of every (setting, task) cell, the setting given by its field names."""
-    defaults = dict(zip(SETTING, setting_of({})))  # a row that records no field: every field's default
-    return {k: paper_match(dict(zip(SETTING, k[0])), k[1], v, defaults) for k, v in cells.items()}
-
-
 def why_no_paper(shown: list[PaperMatch]) -> str | None:
     """The one line a setting without paper cells gets: its team's and setting's reasons (its
     tasks' own reasons are listed per task); None when a task has paper cells or only tasks' reasons."""
@@ -104,10 +97,15 @@ def invalid_note(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str:
+    """`markdown` of the Summary of `rows`."""
+    return markdown(Summary.of(rows, resamples=resamples, seed=seed))
+
+
+def markdown(summary: Summary) -> str:
     """Table I (settings without ablation) and Table II (ablations per method), the paper's
     figures beside matching settings, then per setting each task with 95% bootstrap intervals,
     the LLM failures and costs, and the breakdown by scene and by object count."""
-    valid = [r for r in rows if is_valid(r)]
+    rows, valid, resamples, seed = summary.rows, summary.valid, summary.resamples, summary.seed
     n_bad = len(rows) - len(valid)
     lines = ["# Evaluation summary", ""]
     lines.append(f"{len(rows)} episodes, {len(valid)} valid" + (f", {n_bad} invalid" if n_bad else "") + ".")
@@ -121,9 +119,7 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
         AS_NOTE,
         "",
     ]
-    cells = {k: cell_stats(v, resamples=resamples, seed=seed) for k, v in by_setting_task(valid).items()}
-    matches = matches_of(by_setting_task(valid))
-    tasks = sorted({r["task"] for r in valid})
+    cells, matches, tasks = summary.stats, summary.matches, summary.tasks
 
     def paper_of(setting: tuple[Any, ...], task: str) -> PaperMatch | None:
         m = matches.get((setting, task))
@@ -151,7 +147,7 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
         out += [f"| {t} | " + " | ".join(value(p, s, t) for p, s in cols) + " |" for t in tasks]
         return out + [""]
 
-    settings = sorted({setting_of(r) for r in valid}, key=order_key)
+    settings = summary.settings
     full = [s for s in settings if s[1] == "none"]
     if full:
         lines += matrix("Table I: methods", [(s, setting_label(s, ablation=False)) for s in full])
@@ -194,7 +190,7 @@ def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, 
                 f"{s['rejected_actions']:.2f} | {s['prompt_tokens']:.0f} | {s['completion_tokens']:.0f} |"
             )
         lines.append("")
-    lines += diagnostics_markdown(valid)
+    lines += diagnostics_markdown(summary)
     for key, title in (("scene", "scene"), ("n_objects", "object count")):
         lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS sum, AS/robot) | episodes |",
                   "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
@@ -230,25 +226,22 @@ def _mean_breakdown(total: dict[str, int] | None, n: int, top: int = 3) -> str:
     return f" ({shown})"
 
 
-def diagnostics_markdown(valid: list[dict[str, Any]]) -> list[str]:
-    """The "Failure diagnostics" section: per setting, a table of `summarize_diagnostics` per task.
+def diagnostics_markdown(summary: Summary) -> list[str]:
+    """The "Failure diagnostics" section: per setting, a table of the summary's diagnostics per task.
     Rows written before diagnostics existed are unknown (n/a), never counted as zero."""
     lines = ["## Failure diagnostics", "", DIAG_NOTE, ""]
-    by_setting: dict[tuple[Any, ...], list[dict[str, Any]]] = defaultdict(list)
-    for r in valid:
-        by_setting[setting_of(r)].append(r)
-    for setting in sorted(by_setting, key=order_key):
+    for setting in summary.settings:
         head = (
             "| task | episodes (with diagnostics) | unparsed replies | hallucinations | not capable | rejected (by kind) | "
             "failed (by code) | repeated failures | waits w/ pending / waits | messages sent / read | steps above TS* |"
         )
         lines += [f"### {setting_label(setting)}", "", head, "| --- |" + " --- |" * (head.count("|") - 2)]
         unknown = 0
-        for task, mine in group(by_setting[setting], "task").items():
-            d = summarize_diagnostics(mine)
+        for task in (t for s, t in summary.diagnostics if s == setting):
+            d = summary.diagnostics[(setting, task)]
             unknown += d["unknown"]
             if not d["known"]:
-                lines.append(f"| {task[0]} | {d['episodes']} (0) |" + " n/a |" * 9)
+                lines.append(f"| {task} | {d['episodes']} (0) |" + " n/a |" * 9)
                 continue
             m, n = d["mean"], d["known"]
 
@@ -256,7 +249,7 @@ def diagnostics_markdown(valid: list[dict[str, Any]]) -> list[str]:
                 return "n/a" if m[name] is None else f"{m[name]:.{digits}f}"
 
             lines.append(
-                f"| {task[0]} | {d['episodes']} ({n}) | {f('parse_failures')} | {f('hallucinations')} | {f('not_capable')} | "
+                f"| {task} | {d['episodes']} ({n}) | {f('parse_failures')} | {f('hallucinations')} | {f('not_capable')} | "
                 f"{f('rejected')}{_mean_breakdown(d['rejected_by_reason'], n)} | {f('failed')}{_mean_breakdown(d['failed_by_code'], n)} | "
                 f"{f('repeated_failures')} | {f('waits_with_pending')} / {f('waits')} | {f('messages_sent')} / {f('messages_read')} | "
                 f"{f('steps_above_bound', 1)} |"
@@ -269,6 +262,11 @@ def diagnostics_markdown(valid: list[dict[str, Any]]) -> list[str]:
 
 
 def summary_csv(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str:
+    """`csv_text` of the Summary of `rows`."""
+    return csv_text(Summary.of(rows, resamples=resamples, seed=seed))
+
+
+def csv_text(summary: Summary) -> str:
     """One line per setting and task (valid episodes only): means, intervals and, where the
     configuration matches, the paper's figures."""
     buf = io.StringIO()
@@ -276,15 +274,13 @@ def summary_csv(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed:
     ci_cols = [f"{m}_{e}" for m in CI_METRICS for e in ("lo", "hi")]
     diag_cols = ["diag_episodes", *(f"diag_{c}" for c in DIAG_COLUMNS)]  # means over the rows with diagnostics; empty: unknown
     w.writerow([*SETTING, "task", *COLUMNS, *ci_cols, "invalid_left_out", "paper_model", "paper_succ", "paper_ps", "paper_ts", "paper_as", *diag_cols])
-    invalid = Counter((setting_of(r), r["task"]) for r in rows if not is_valid(r))
-    cells = by_setting_task([r for r in rows if is_valid(r)])
-    matches = matches_of(cells)
-    for (setting, task), mine in cells.items():
-        s = cell_stats(mine, resamples=resamples, seed=seed)
-        m = matches[(setting, task)]
+    invalid = summary.invalid
+    for setting, task in summary.cells:
+        s = summary.stats[(setting, task)]
+        m = summary.matches[(setting, task)]
         paper: list[Any] = [m.model, *m.figures] if m.figures is not None else ["", "", "", "", ""]
         cis = ["" if s[f"{name}_ci"] is None else round(x, 4) for name in CI_METRICS for x in (s[f"{name}_ci"] or (0.0, 0.0))]
-        d = summarize_diagnostics(mine)
+        d = summary.diagnostics[(setting, task)]
         diag = [d["known"], *("" if d["mean"][c] is None else d["mean"][c] for c in DIAG_COLUMNS)]
         w.writerow([*("" if x is None else x for x in setting), task, *(s[c] for c in COLUMNS), *cis, invalid[(setting, task)], *paper, *diag])
     return buf.getvalue()

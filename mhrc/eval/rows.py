@@ -1,19 +1,18 @@
-"""The rows of `mhrc eval` (`episodes.jsonl`): reading and merging them, their setting (what may
-be averaged together), validity, grouping, and 95% bootstrap intervals over a cell of them."""
+"""The rows of `mhrc eval` (`episodes.jsonl`, read and upgraded by mhrc.eval.records): their setting
+(what may be averaged together), validity, grouping, and 95% bootstrap intervals over a cell of them."""
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import structlog
 
-from mhrc.run.config import ConfigError
-from mhrc.core.metrics import UNRECORDED, summarize
+from mhrc.core.metrics import summarize
+from mhrc.eval.records import OLD_MEANING, old_noise
+from mhrc.eval.records import merge_runs as merge_runs, read_rows as read_rows  # where callers have always found them
 from mhrc.eval.paper import PAPER_HORIZON, PAPER_SCHEDULE
 
 log = structlog.get_logger("mhrc.eval.rows")
@@ -37,38 +36,11 @@ CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps"
 SETTING = ("method", "ablation", "fidelity", "noise", "history_cap", "horizon", "mode", "schedule", "scenario")
 
 
-def read_rows(path: Path) -> list[dict[str, Any]]:
-    """The rows of an episodes.jsonl (a torn last line, from an interrupted write, is skipped)."""
-    if not path.exists():
-        return []
-    rows = []
-    for i, line in enumerate(path.read_text(encoding="utf-8").splitlines()):
-        if not line.strip():
-            continue
-        try:
-            rows.append(json.loads(line))
-        except json.JSONDecodeError:
-            log.warning("skipping a torn line of episodes.jsonl (an interrupted write)", line=i + 1)
-    return rows
-
-
-def merge_runs(dirs: list[Path]) -> list[dict[str, Any]]:
-    """Every episode row of several evaluation directories (for `mhrc report`)."""
-    rows = []
-    for d in dirs:
-        path = d / "episodes.jsonl"
-        if not path.exists():
-            raise ConfigError(f"{d}: no episodes.jsonl here; is it an `mhrc eval --out` directory?")
-        rows += read_rows(path)
-    return rows
-
-
 def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
     """What a row's numbers depend on besides the episode; rows written before a field existed get its old meaning."""
-    defaults = {"fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free", "schedule": "lockstep", "scenario": None}
-    values = {k: row.get(k, defaults.get(k)) for k in SETTING}
-    if values["noise"] is None:  # a row older than the field ran with the calibration, or with none under exact_motion
-        values["noise"] = "off" if "exact_motion" in (row.get("aids") or ()) else "on"
+    values = {k: row.get(k, OLD_MEANING.get(k)) for k in SETTING}  # rows read from a file are upgraded already (read_row)
+    if values["noise"] is None:
+        values["noise"] = old_noise(row.get("aids"))
     if values["scenario"] is not None and row.get("scenario_sha256"):
         values["scenario"] = f"{values['scenario']}@{str(row['scenario_sha256'])[:12]}"
     return tuple(values[k] for k in SETTING)

@@ -1,23 +1,36 @@
 """The files `mhrc eval` and `mhrc report` write beside the rows: summary.md, summary.csv and
-summary.html."""
+summary.html, three renderings of one `mhrc.eval.summary.Summary`."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from mhrc.eval.html import write_html_summary
-from mhrc.eval.report import summary_csv, summary_markdown
+from mhrc.eval.html import links_of, page
+from mhrc.eval.report import csv_text, markdown
+from mhrc.eval.rows import CI_SEED, RESAMPLES
+from mhrc.eval.summary import Summary
 
 
 SUMMARY_FILES = ("summary.md", "summary.csv", "summary.html")  # what write_summaries writes, in the order people read them
 
 
-def write_summaries(rows: list[dict[str, Any]], out: Path) -> None:
-    """SUMMARY_FILES in `out`: summary.md, summary.csv and summary.html (tables and plots, `mhrc.eval.html`)."""
+def write_summary_files(
+    summary: Summary, md: Path, csv: Path, html: Path, links: Sequence[str | None], *, title: str = "Evaluation summary"
+) -> str:
+    """Render `summary` once each to `md`, `csv` and `html` (the page's tables are the markdown's); returns the markdown."""
+    text = markdown(summary)
+    csv.write_text(csv_text(summary), encoding="utf-8")
+    md.write_text(text, encoding="utf-8")
+    html.write_text(page(summary, links, title=title, md=text), encoding="utf-8")
+    return text
+
+
+def write_summaries(rows: list[dict[str, Any]], out: Path, *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str | None:
+    """SUMMARY_FILES in `out` (an evaluation directory, which the rows' trace paths are relative to);
+    returns summary.md's text, None without rows (nothing written)."""
     if not rows:
-        return
+        return None
     md, csv, html = (out / name for name in SUMMARY_FILES)
-    csv.write_text(summary_csv(rows), encoding="utf-8")
-    md.write_text(summary_markdown(rows), encoding="utf-8")
-    write_html_summary(rows, html)
+    return write_summary_files(Summary.of(rows, resamples=resamples, seed=seed), md, csv, html, links_of(rows, out, out))

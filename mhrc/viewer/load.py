@@ -80,12 +80,19 @@ def load_trace(path: str | Path) -> LoadedTrace:
         if nonblank == 0:
             raise NotATrace(f"{p} is empty")
         raise NotATrace(f"{p} is not an mhrc trace: no line is a JSON object with a `key` under mhrc/ and a `msg`")
-    trace = LoadedTrace(path=p, rows=rows)
+    warnings = []
     if truncated:
-        trace.warnings.append(f"the trace is truncated: its last line (line {len(lines)}) was cut off mid-line and is left out")
+        warnings.append(f"the trace is truncated: its last line (line {len(lines)}) was cut off mid-line and is left out")
     if bad:
         shown = ", ".join(str(n) for n in bad[:5]) + (" ..." if len(bad) > 5 else "")
-        trace.warnings.append(f"{len(bad)} line(s) are not trace lines and are left out: line {shown}")
+        warnings.append(f"{len(bad)} line(s) are not trace lines and are left out: line {shown}")
+    return from_rows(p, rows, warnings)
+
+
+def from_rows(path: Path, rows: list[dict[str, Any]], warnings: list[str] | None = None) -> LoadedTrace:
+    """A trace whose lines were parsed already (by `load_trace`, or by a caller that read the file
+    once for its own use, as `mhrc eval` does), with the warnings about what it holds."""
+    trace = LoadedTrace(path=path, rows=rows, warnings=list(warnings or ()))
     for r in rows:
         msg = r.get("msg")
         if isinstance(msg, dict) and isinstance(msg.get("v"), int):

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from mhrc.core.diagnostics import diagnose
-from mhrc.viewer.load import load_trace, resolve
+from mhrc.viewer.load import LoadedTrace, load_trace, resolve
 from mhrc.viewer.model import build_view
 from mhrc.viewer.page import render_page
 
@@ -31,9 +31,14 @@ def write_report(path: str | Path, out: str | Path | None = None) -> tuple[Path,
     """Render the trace at `path` (file or run directory) to `out`; returns it and the warnings.
     Raises load.NotATrace for a file that is no trace."""
     trace = load_trace(path)
-    view = build_view(trace)
-    diag, note = diagnostics_for(trace.rows)
     target = Path(out) if out is not None else default_out(path)
+    return target, render_report(trace, target, *diagnostics_for(trace.rows))
+
+
+def render_report(trace: LoadedTrace, target: Path, diag: dict[str, Any] | None, note: str | None = None) -> list[str]:
+    """Write the report of a trace already read, with its diagnostics already computed (`mhrc eval`
+    has both); returns the warnings."""
+    view = build_view(trace)
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text(render_page(view, diag, note), encoding="utf-8")
-    return target, view.warnings
+    return view.warnings

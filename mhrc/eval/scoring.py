@@ -1,0 +1,52 @@
+"""One finished episode as the driver scores it: its trace read once, its metrics
+(`mhrc.core.metrics`) and failure diagnostics (`mhrc.core.diagnostics`) computed once, and its
+HTML report drawn from the same lines and the same diagnostics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import structlog
+
+from mhrc.core.diagnostics import Diagnostics, diagnose
+from mhrc.core.metrics import EpisodeMetrics, from_trace
+from mhrc.core.trace import read_trace
+
+log = structlog.get_logger("mhrc.eval")
+
+
+def read_episode_trace(path: Path) -> list[dict[str, Any]]:
+    """The lines of an episode's trace: the one place the evaluation reads a trace (a typed
+    reader replaces `read_trace` here). Raises OSError or ValueError."""
+    return read_trace(path)
+
+
+@dataclass(frozen=True)
+class Scored:
+    """An episode's trace lines with what the evaluation computes from them, once each."""
+
+    path: Path
+    lines: list[dict[str, Any]]
+    metrics: EpisodeMetrics
+    diagnostics: Diagnostics
+
+
+def score(path: Path) -> Scored:
+    """Read the trace at `path` and score it. Raises OSError or ValueError (mhrc.core.metrics.TraceError
+    for a trace without what the metrics need)."""
+    lines = read_episode_trace(path)
+    return Scored(path=path, lines=lines, metrics=from_trace(lines), diagnostics=diagnose(lines))
+
+
+def write_episode_report(scored: Scored) -> None:
+    """The episode's HTML report beside its trace (summary.html links it), from the lines and the
+    diagnostics already in hand; a report that cannot be drawn costs a warning, never the row."""
+    from mhrc.viewer.load import from_rows
+    from mhrc.viewer.show import default_out, render_report
+
+    try:
+        render_report(from_rows(scored.path, scored.lines), default_out(scored.path), scored.diagnostics.as_dict())
+    except Exception as exc:
+        log.warning("episode report not written", trace=str(scored.path), error=f"{type(exc).__name__}: {exc}")

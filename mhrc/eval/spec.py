@@ -1,0 +1,178 @@
+"""What an evaluation runs, validated once: `EvalSpec` (the grid and how each episode is driven,
+as the CLI or a caller gives it), its `EvalIdentity` (what `--resume` must find unchanged) and
+the `Plan` that `EvalSpec.validate` returns, every episode's `EpisodeConfig` already built.
+
+The spec is checked in one place (`validate`): each cell of the grid (task, scene, object
+count) is built once with `EpisodeConfig.build`, the full check (task, scene, scenario, model
+specs, prompt templates); the episodes of a cell differ only in their seed. Workers receive
+those configs inside their `Job` and run them as they are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pydantic import BaseModel, ConfigDict
+
+from mhrc.agents.llm import DEFAULT_MAX_TOKENS
+from mhrc.core.fidelity import label
+from mhrc.eval.episode import Job
+from mhrc.eval.paper import PAPER_OBJECTS
+from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.world.scenario import load_scenario
+
+__all__ = ["EvalIdentity", "EvalSpec", "Plan"]
+
+
+class EvalIdentity(BaseModel):
+    """What must match for --resume to continue a run: everything that changes the numbers (the
+    grid may grow: more trials, repeats, object counts, scenes or tasks). A field's default is
+    what a manifest written before the field existed ran with."""
+
+    model_config = ConfigDict(frozen=True)
+
+    method: str
+    ablation: str
+    horizon: int
+    fidelity: str = "paper"
+    noise: str = "on"
+    history_cap: int | None = None
+    prompts: str | None = None
+    mode: str = "free"
+    max_tokens: int | None = None
+    llm_seed: int | None = None
+    schedule: str = "lockstep"
+    time_scale: float = 0.0
+    scenario: str | None = None  # the scenario file's sha256
+
+
+class EvalSpec(BaseModel):
+    """What an evaluation runs: the grid and how each episode is driven. Values are checked by
+    `validate`, which names the option, not by the model (a bad value is a usage error)."""
+
+    model_config = ConfigDict(frozen=True)
+
+    tasks: tuple[str, ...]
+    scenes: tuple[str, ...]
+    objects: tuple[int, ...] = PAPER_OBJECTS
+    trials: int = 1  # episodes per (task, scene, object count) in each repeat
+    llm: str | None = None
+    ablation: str = "none"
+    horizon: int = 50
+    base_url: str | None = None
+    llm_timeout: float | None = None  # None: per spec (mhrc.run.config.EpisodeConfig.timeout_for)
+    llm_idle_timeout: float | None = None  # None: mhrc.run.config.IDLE_TIMEOUT
+    stream: bool = True  # False: --no-stream
+    prompts: str | None = None
+    repeats: int = 1  # the grid, run this many times with other seeds
+    aids: tuple[str, ...] = ()  # mhrc.core.fidelity names; () is the paper's fidelity
+    noise: str = "on"  # the world's motion noise (mhrc.core.fidelity.NOISE): on, the calibration, or off
+    history_cap: int | None = None
+    max_tokens: int = DEFAULT_MAX_TOKENS
+    llm_seed: int | None = None
+    structured: bool = False  # JSON decisions (not the paper's free text)
+    step_deadline: float | None = None
+    schedule: str = "sequential"  # the world's time policy (mhrc.run.config.SCHEDULES); the paper's loop by default
+    time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
+    # a scenario (world/scenario.py), applied to every episode: a file's path, or a shipped scenario's name, which
+    # travels to the workers as the name so that each (a Ray node too) reads the copy installed with its own package
+    events: str | None = None
+
+    def scenario(self) -> tuple[str, str] | tuple[None, None]:
+        """The scenario's short name and sha256 (None, None without one): what rows record of it."""
+        if self.events is None:
+            return None, None
+        sc = load_scenario(self.events)
+        return sc.name, sc.sha256
+
+    @property
+    def mode(self) -> str:
+        """How the model answers: free (the paper's text) or structured (JSON Schema)."""
+        return "structured" if self.structured else "free"
+
+    @property
+    def method(self) -> str:
+        return self.llm or "heuristic"
+
+    @property
+    def fidelity(self) -> str:
+        return label(self.aids)
+
+    def identity(self, scenario_sha256: str | None = None) -> EvalIdentity:
+        """This spec's identity; `scenario_sha256` when the caller has read the scenario already."""
+        return EvalIdentity(
+            method=self.method, ablation=self.ablation, horizon=self.horizon, fidelity=self.fidelity, noise=self.noise,
+            history_cap=self.history_cap, prompts=self.prompts, mode=self.mode,
+            max_tokens=self.max_tokens if self.llm else None, llm_seed=self.llm_seed, schedule=self.schedule,
+            time_scale=self.time_scale, scenario=scenario_sha256 if scenario_sha256 is not None else self.scenario()[1],
+        )  # fmt: skip
+
+    def seed(self, repeat: int, trial: int) -> int:
+        """The episode seed of a trial in a repeat: distinct for every (repeat, trial)."""
+        return repeat * self.trials + trial
+
+    def episode_values(self, task: str, scene: str, n_objects: int) -> dict[str, object]:
+        """The EpisodeConfig fields of a cell of the grid (seed 0; no run, port or trace: the process that runs it picks those)."""
+        cfg: dict[str, object] = {
+            "task": task, "scene": scene, "seed": 0, "n_objects": n_objects, "horizon": self.horizon,
+            "llm": self.llm, "ablation": self.ablation, "base_url": self.base_url,
+            "llm_timeout": self.llm_timeout, "prompts": self.prompts,
+            "llm_idle_timeout": self.llm_idle_timeout, "stream": None if self.stream else False,
+            "aids": list(self.aids) or None, "noise": None if self.noise == "on" else self.noise,
+            "history_cap": self.history_cap,
+            "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
+            "step_deadline": self.step_deadline, "schedule": self.schedule,
+            "time_scale": self.time_scale or None, "events": self.events,
+        }  # fmt: skip
+        return {k: v for k, v in cfg.items() if v is not None}
+
+    def validate(self) -> Plan:  # type: ignore[override]  # pydantic's deprecated classmethod of the same name
+        """The plan of this spec, or ConfigError naming the option: every cell of the grid must be
+        a valid episode. The one place the grid is checked."""
+        if self.repeats < 1:
+            raise ConfigError(f"--repeats: must be at least 1 (got {self.repeats})")
+        if self.trials < 1:
+            raise ConfigError(f"--trials: must be at least 1 (got {self.trials})")
+        if not (self.tasks and self.scenes and self.objects):
+            raise ConfigError("--tasks, --scenes and --objects must each name at least one value")
+        cells: dict[tuple[str, str, int], EpisodeConfig] = {}
+        for task in self.tasks:
+            for scene in self.scenes:
+                for n in self.objects:
+                    if (task, scene, n) in cells:
+                        continue
+                    try:
+                        cells[(task, scene, n)] = EpisodeConfig.build(**self.episode_values(task, scene, n))
+                    except ConfigError as exc:  # a scenario is checked against every task and scene of the grid: say which
+                        raise ConfigError(f"{exc} (in {task}/{scene})" if self.events else str(exc)) from None
+        scenario, sha256 = self.scenario()
+        return Plan(spec=self, jobs=tuple(self._jobs(cells)), scenario=scenario, scenario_sha256=sha256, identity=self.identity(sha256 or None))
+
+    def _jobs(self, cells: dict[tuple[str, str, int], EpisodeConfig]) -> list[Job]:
+        """Repeat by repeat (a finished repeat is a whole grid), then task, scene, objects, trial."""
+        out = []
+        for repeat in range(self.repeats):
+            for task in self.tasks:
+                for scene in self.scenes:
+                    for n in self.objects:
+                        for trial in range(self.trials):
+                            seed = self.seed(repeat, trial)
+                            config = cells[(task, scene, n)].model_copy(update={"seed": seed})
+                            out.append(Job(key=f"{task}/{scene}/{n}/{seed}", config=config, repeat=repeat, trial=trial))
+        return out
+
+    def jobs(self) -> list[Job]:
+        """Every episode of the grid (validates the spec: use `validate().jobs` to keep the plan)."""
+        return list(self.validate().jobs)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A validated evaluation: its spec, every episode's job (config built and checked), the
+    scenario every row records and the identity --resume checks."""
+
+    spec: EvalSpec
+    jobs: tuple[Job, ...]
+    scenario: str | None
+    scenario_sha256: str | None
+    identity: EvalIdentity

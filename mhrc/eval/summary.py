@@ -1,0 +1,59 @@
+"""The statistics of a set of evaluation rows, computed once: `Summary` holds, per setting and
+task, the valid rows, their means with 95% bootstrap intervals, their failure diagnostics and the
+paper's figures where the configuration matches. summary.md, summary.csv and summary.html are
+renderings of one Summary (mhrc.eval.report, mhrc.eval.html); none computes a statistic again."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+from mhrc.core.diagnostics import summarize_diagnostics
+from mhrc.eval.paper import PaperMatch, paper_match
+from mhrc.eval.records import Row
+from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, by_setting_task, cell_stats, is_valid, order_key, setting_of
+
+Cell = tuple[tuple[Any, ...], str]  # (setting, task)
+
+
+def matches_of(cells: dict[Cell, list[Row]]) -> dict[Cell, PaperMatch]:
+    """`paper_match` of every (setting, task) cell, the setting given by its field names."""
+    defaults = dict(zip(SETTING, setting_of({})))  # a row that records no field: every field's default
+    return {k: paper_match(dict(zip(SETTING, k[0])), k[1], v, defaults) for k, v in cells.items()}
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Every statistic the summaries show of `rows` (of one or several evaluations)."""
+
+    rows: list[Row]
+    valid: list[Row]
+    resamples: int
+    seed: int
+    cells: dict[Cell, list[Row]]  # the valid rows by setting and task, in the order every table lists them
+    stats: dict[Cell, dict[str, Any]]  # means and intervals (mhrc.eval.rows.cell_stats)
+    diagnostics: dict[Cell, dict[str, Any]]  # mhrc.core.diagnostics.summarize_diagnostics
+    matches: dict[Cell, PaperMatch]  # the paper's figures, or why not
+    invalid: Counter[Cell]  # invalid rows left out, by setting and task
+
+    @classmethod
+    def of(cls, rows: list[Row], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> Summary:
+        valid = [r for r in rows if is_valid(r)]
+        cells = by_setting_task(valid)
+        return cls(
+            rows=rows, valid=valid, resamples=resamples, seed=seed, cells=cells,
+            stats={k: cell_stats(v, resamples=resamples, seed=seed) for k, v in cells.items()},
+            diagnostics={k: summarize_diagnostics(v) for k, v in cells.items()},
+            matches=matches_of(cells),
+            invalid=Counter((setting_of(r), r["task"]) for r in rows if not is_valid(r)),
+        )  # fmt: skip
+
+    @property
+    def tasks(self) -> list[str]:
+        return sorted({r["task"] for r in self.valid})
+
+    @property
+    def settings(self) -> list[tuple[Any, ...]]:
+        """The valid rows' settings, in the order every table lists them."""
+        return sorted({setting for setting, _ in self.cells}, key=order_key)
