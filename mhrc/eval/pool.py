@@ -36,7 +36,7 @@ from mhrc.run.lifeline import child_env
 
 log = structlog.get_logger("mhrc.eval")
 
-THREADS_PER_EPISODE = 6  # to_thread calls one episode may have in flight: its world's sim, its four sessions' opens and gets
+THREADS_PER_EPISODE = 6  # to_thread calls one episode may have in flight: its world's sim, its four sessions opening or closing (a query holds none: core/bus.py)
 STARTS_AT_ONCE = 4  # episodes of one worker building their scene and attaching their agents at the same time
 LINE_LIMIT = 1 << 30  # a result line carries a whole trace
 RESPAWNS_PER_WORKER = 3  # workers that die before the grid is done are replaced this many times per --workers
@@ -53,8 +53,8 @@ async def _serve(concurrency: int, results: IO[bytes]) -> None:
     assert task is not None
     loop.add_signal_handler(signal.SIGTERM, task.cancel)
     if concurrency > 1:
-        # asyncio's default pool (cores + 4 threads) starves with several episodes: their agents'
-        # attach gets hold threads while the worlds they wait on need one to answer
+        # asyncio's default pool (cores + 4 threads) is too small for several episodes starting at
+        # once: each builds its scene and opens four sessions on threads
         loop.set_default_executor(ThreadPoolExecutor(max_workers=THREADS_PER_EPISODE * concurrency + 4, thread_name_prefix="mhrc-worker"))
     reader = asyncio.StreamReader(limit=LINE_LIMIT)
     await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin)
