@@ -52,11 +52,11 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from mhrc.core.metrics import Rows, TraceError, from_trace
+from mhrc.core.metrics import TraceError, from_trace
 from mhrc.core.protocol import (
     Action, ActionAck, ActionResult, EpisodeStarted, Observation, OutcomeCode, Place, RejectCode, RobotMessage, SkillOutcome, Thought, Turn,
 )  # fmt: skip
-from mhrc.core.records import LineKind, as_records, messages
+from mhrc.core.records import LineKind, Rows, as_records, messages
 from mhrc.core.upgrade import legacy_reject_code
 
 PREFIX = "diag_"

@@ -71,7 +71,6 @@ from __future__ import annotations
 import statistics
 import math
 from collections import Counter
-from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -79,7 +78,7 @@ from typing import Any
 from pydantic import BaseModel
 
 from mhrc.core.protocol import ActionAck, ActionResult, EpisodeDone, EpisodeStarted, RobotDetached, ScenarioEvent, Snapshot, Thought, TickClosed
-from mhrc.core.records import LineKind, TraceLine, as_records, messages
+from mhrc.core.records import LineKind, Rows, TraceLine, as_records, messages
 from mhrc.core.upgrade import UNRECORDED
 
 __all__ = ["UNRECORDED", "EpisodeMetrics", "Invalid", "TraceError", "from_trace", "junk_rejections", "recovery_of", "summarize"]
@@ -140,9 +139,6 @@ class EpisodeMetrics:
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-Rows = Iterable[TraceLine | Mapping[str, Any]]  # decoded trace lines (mhrc.core.records), or lines as json.loads reads them
 
 
 def junk_rejections(rows: Rows) -> int:

@@ -139,6 +139,9 @@ class TraceLine:
         return {"t": self.t, "key": self.key, "kind": self.kind.value, "msg": self.raw}
 
 
+Rows = Iterable[TraceLine | Mapping[str, Any]]  # decoded trace lines, or lines as json.loads reads them (read_trace's)
+
+
 def _model_of(key: str) -> Callable[[Any], Payload] | None:
     """How a message on `key` decodes (mhrc.core.keys), or None for a key that names no model."""
     parts = key.split("/")
@@ -263,7 +266,7 @@ def read_records(path: str | Path) -> list[TraceLine]:
     return out
 
 
-def as_records(rows: Iterable[TraceLine | Mapping[str, Any]]) -> list[TraceLine]:
+def as_records(rows: Rows) -> list[TraceLine]:
     """Trace lines from decoded records or from rows as `json.loads` reads them (numbered in order)."""
     return [r if isinstance(r, TraceLine) else decode_row(r, n) for n, r in enumerate(rows, 1)]
 
