@@ -2,15 +2,14 @@
 
 A trace (mhrc.core.trace, the recorder) is JSONL, one line per bus sample: `{"t", "key", "kind",
 "msg"}`. `read_records` turns each line into a `TraceLine`: its kind a `LineKind`, and for a
-`put` its message decoded into the model its key names (an `ActionResult` on `.../action/result`,
-a world event on `.../world/event`, ...). What machines branch on is decided here, once, as codes:
+`put` its message decoded into the protocol's model its `kind` names (`action_result`: an
+`ActionResult`, as on `.../action/result`; `snapshot`: a `Snapshot`, as on `.../world/event`; ...). What machines branch on is decided here, once, as codes:
 a thought's `failure` (`ReplyFailure`, from its parse_error) and a junk line's count (`JunkCount`,
 with its `RejectCode`). Lines of older traces are brought to today's shape first
 (mhrc.core.upgrade).
 
 A line that is not a trace line raises `TraceLineError` (a code, the file and the line number). A
-`put` whose message does not fit its key's model (anything may be published under a run's keys)
-is kept, with `msg` None and the reason in `problem`: a trace records the bus, junk included.
+`put` whose message does not fit its model (anything may be published under a run's keys) is kept, with `msg` None and the reason in `problem`: a trace records the bus, junk included.
 """
 
 from __future__ import annotations
@@ -26,7 +25,6 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from mhrc.core.protocol import (
     LLM_ERROR_PREFIX,
-    WORLD_EVENT_ADAPTER,
     ActionAck,
     ActionRequest,
     ActionResult,
@@ -131,7 +129,7 @@ class TraceLine:
     msg: Payload | None = None  # a put's message, as its key's model
     failure: ReplyFailure | None = None  # a thought's, when its step gave no action
     junk: JunkCount | None = None  # a junk line's count
-    problem: str | None = None  # why a put's message did not decode (msg is then None)
+    problem: str | None = None  # why a put's message did not decode as the model its kind names (msg is then None)
     raw: Any = None  # the line's `msg` as written (JSON), before any upgrade
 
     def as_row(self) -> dict[str, Any]:
@@ -142,24 +140,17 @@ class TraceLine:
 Rows = Iterable[TraceLine | Mapping[str, Any]]  # decoded trace lines, or lines as json.loads reads them (read_trace's)
 
 
-def _model_of(key: str) -> Callable[[Any], Payload] | None:
-    """How a message on `key` decodes (mhrc.core.keys), or None for a key that names no model."""
-    parts = key.split("/")
-    if key.endswith("/world/event"):
-        return WORLD_EVENT_ADAPTER.validate_python
-    if key.endswith("/action/request"):
-        return ActionRequest.model_validate
-    if key.endswith("/action/ack"):
-        return ActionAck.model_validate
-    if key.endswith("/action/result"):
-        return ActionResult.model_validate
-    if key.endswith("/turn"):
-        return Turn.model_validate
-    if len(parts) >= 2 and parts[-2] == "inbox":
-        return RobotMessage.model_validate
-    if key.endswith("/thought"):
-        return Thought.model_validate
-    return None
+MODELS: dict[str, type[Payload]] = {  # a message's `kind` -> its model (the key it travels on says the same)
+    m.model_fields["kind"].default: m
+    for m in (ActionRequest, ActionAck, ActionResult, Turn, RobotMessage, Thought,
+              EpisodeStarted, TickClosed, RobotAttached, RobotDetached, EpisodeDone, Snapshot, ScenarioEvent)
+}  # fmt: skip
+
+
+def _model_of(msg: Any) -> type[Payload] | None:
+    """The model a message names by its `kind`, or None for one that names none of the recorded kinds."""
+    kind = msg.get("kind") if isinstance(msg, dict) else None
+    return MODELS.get(kind) if isinstance(kind, str) else None
 
 
 def _reason(exc: ValidationError) -> str:
@@ -230,11 +221,11 @@ def decode_row(row: Any, number: int) -> TraceLine:
             return TraceLine(number, float(t), key, kind, junk=JunkCount.model_validate(msg), raw=raw)
         except ValidationError as exc:
             return TraceLine(number, float(t), key, kind, problem=_reason(exc), raw=raw)
-    decoder = _model_of(key) if kind is LineKind.PUT else None
-    if decoder is None:
+    model = _model_of(msg) if kind is LineKind.PUT else None
+    if model is None:
         return TraceLine(number, float(t), key, kind, raw=raw)
     try:
-        payload = _decode(decoder, msg)
+        payload = _decode(model.model_validate, msg)
     except ValidationError as exc:
         return TraceLine(number, float(t), key, kind, problem=_reason(exc), raw=raw)
     failure = reply_failure(payload) if isinstance(payload, Thought) else None
