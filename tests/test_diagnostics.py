@@ -35,7 +35,10 @@ def _put(kind: str, key: str = "world/event", **msg: Any) -> dict[str, Any]:
 
 # What a message of each kind must hold (the protocol's required fields) that a test's message leaves out
 REQUIRED: dict[str, dict[str, Any]] = {
-    "action_result": {"goal_id": "g", "observation": {"robot": "r", "tick": 0, "status": {"name": "r", "kind": "k", "skills": []}, "furniture": [], "objects": [], "task_brief": "", "task_detail": ""}},
+    "action_result": {"goal_id": "g", "observation": {
+        "robot": "r", "tick": 0, "status": {"name": "r", "kind": "k", "skills": []}, "furniture": [], "objects": [],
+        "task_brief": "", "task_detail": "",
+    }},  # fmt: skip
     "tick": {"actions": {}, "outcomes": {}, "placed": 0, "total": 3},
 }
 METRICS = {"temporal_steps": 0, "action_steps": 0, "action_steps_per_robot": {}}
