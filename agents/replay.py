@@ -21,8 +21,8 @@ from pathlib import Path
 from string import Template
 from typing import Any
 
-from mhrc.core.protocol import LLM_ERROR_PREFIX
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import LLM_ERROR_PREFIX, Thought
+from mhrc.core.records import ReplyFailure, TraceLine, read_records
 
 from .llm.completion import DEFAULT_TEMPERATURE, Completion, LLMError, Messages, prompt_text
 
@@ -58,15 +58,16 @@ def _first_difference(got: str, want: str) -> str:
 class ReplayClient:
     """One robot's recorded replies, handed out in order against matching prompts."""
 
-    def __init__(self, trace: str | Path, robot: str, *, thoughts: list[dict[str, Any]] | None = None) -> None:
+    def __init__(self, trace: str | Path, robot: str, *, thoughts: list[TraceLine] | None = None) -> None:
         self.model = "replay"
         self.robot = robot
         self.trace = Path(trace)
         if thoughts is None:
             suffix = THOUGHT_SUFFIX.format(robot=robot)
-            thoughts = [line["msg"] for line in read_trace(trace) if line["key"].endswith(suffix)]
-        self._thoughts = thoughts
-        if not thoughts or thoughts[0].get("prompt") is None:
+            thoughts = [line for line in read_records(trace) if line.key.endswith(suffix) and isinstance(line.msg, Thought)]
+        self._lines = thoughts
+        self._thoughts = [line.msg for line in thoughts if isinstance(line.msg, Thought)]
+        if not self._thoughts or self._thoughts[0].prompt is None:
             raise ReplayMismatch(
                 f"{trace} holds no LLM prompts for {robot}: only episodes run with an LLM policy can be replayed"
             )
@@ -75,7 +76,7 @@ class ReplayClient:
     def check_templates(self, templates: Mapping[str, Template]) -> None:
         """ReplayMismatch unless the first recorded prompt holds the text of every template, in
         order: a prompt rendered from other templates cannot be replayed step by step."""
-        recorded = _words(str(self._thoughts[0].get("prompt") or ""))
+        recorded = _words(self._thoughts[0].prompt or "")
         at = 0
         for name, template in templates.items():
             for part in literal_parts(template):
@@ -84,7 +85,7 @@ class ReplayClient:
                     shown = re.sub(r"\s+", " ", part)[:120]
                     raise ReplayMismatch(
                         f"{self.trace} was recorded with other prompts than the ones {self.robot} is given now: its first "
-                        f"prompt (tick {self._thoughts[0].get('tick')}) lacks {shown!r} from {name}, so its replies no longer "
+                        f"prompt (tick {self._thoughts[0].tick}) lacks {shown!r} from {name}, so its replies no longer "
                         "match (an older mhrc's prompt set, or other --prompts); record the episode again to replay it"
                     )
                 at = found + len(part)
@@ -99,31 +100,33 @@ class ReplayClient:
     ) -> Completion:
         if self.calls >= len(self._thoughts):
             raise ReplayMismatch(f"{self.robot} asked for call {self.calls + 1}; {self.trace} holds {len(self._thoughts)}")
-        t = self._thoughts[self.calls]
+        line, t = self._lines[self.calls], self._thoughts[self.calls]
         self.calls += 1
         prompt = prompt_text(messages)
-        if prompt != t.get("prompt"):
+        if prompt != t.prompt:
             raise ReplayMismatch(
-                f"{self.robot}'s prompt at call {self.calls} (tick {t.get('tick')}) differs from the one recorded "
-                f"in {self.trace}: {_first_difference(prompt, t.get('prompt') or '')}"
+                f"{self.robot}'s prompt at call {self.calls} (tick {t.tick}) differs from the one recorded "
+                f"in {self.trace}: {_first_difference(prompt, t.prompt or '')}"
             )
-        if t.get("reply") is None:  # the model stayed down in the recorded run: fail the same way
-            raise LLMError(str(t.get("parse_error") or "recorded model failure").removeprefix(LLM_ERROR_PREFIX))
+        if t.reply is None:  # the model stayed down in the recorded run: fail the same way
+            reason = t.parse_error or "recorded model failure"
+            raise LLMError(reason.removeprefix(LLM_ERROR_PREFIX) if line.failure is ReplyFailure.MODEL_UNREACHABLE else reason)
         return Completion(
-            t["reply"], t.get("prompt_tokens", 0), t.get("completion_tokens", 0), t.get("latency", 0.0),
-            finish_reason=t.get("finish_reason"), reasoning=t.get("reasoning"), reasoning_tokens=t.get("reasoning_tokens", 0),
+            t.reply, t.prompt_tokens, t.completion_tokens, t.latency,
+            finish_reason=t.finish_reason, reasoning=t.reasoning, reasoning_tokens=t.reasoning_tokens,
         )  # fmt: skip
 
 
 def replay_clients(trace: str | Path) -> dict[str, ReplayClient]:
     """A ReplayClient for every robot whose LLM thoughts the trace holds."""
-    by_robot: dict[str, list[dict[str, Any]]] = defaultdict(list)
-    for line in read_trace(trace):
-        key, msg = line.get("key", ""), line.get("msg")
-        parts = key.rsplit("/", 3)
-        if len(parts) == 4 and parts[1] == "agent" and parts[3] == "thought" and isinstance(msg, dict):
-            by_robot[parts[2]].append(msg)
-    clients = {r: ReplayClient(trace, r, thoughts=ts) for r, ts in by_robot.items() if ts and ts[0].get("prompt") is not None}
+    by_robot: dict[str, list[TraceLine]] = defaultdict(list)
+    for line in read_records(trace):
+        parts = line.key.rsplit("/", 3)
+        if len(parts) == 4 and parts[1] == "agent" and parts[3] == "thought" and isinstance(line.msg, Thought):
+            by_robot[parts[2]].append(line)
+    clients = {
+        r: ReplayClient(trace, r, thoughts=ts) for r, ts in by_robot.items() if isinstance(ts[0].msg, Thought) and ts[0].msg.prompt is not None
+    }
     if not clients:
         raise ReplayMismatch(f"{trace} holds no LLM thoughts: only episodes run with an LLM policy can be replayed")
     return clients

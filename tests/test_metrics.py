@@ -19,7 +19,28 @@ from sweep import sweep
 
 
 def _put(kind: str, **msg: Any) -> dict[str, Any]:
-    return {"t": 0.0, "key": f"mhrc/r/{kind}", "kind": "put", "msg": {"v": 1, "kind": kind, **msg}}
+    return {"t": 0.0, "key": f"mhrc/r/{kind}", "kind": "put", "msg": {"v": 1, "kind": kind, **_complete(kind, msg)}}
+
+# What a message of each kind must hold (the protocol's required fields) that a test's message leaves out
+REQUIRED: dict[str, dict[str, Any]] = {
+    "action_result": {"goal_id": "g", "observation": {
+        "robot": "r", "tick": 0, "status": {"name": "r", "kind": "k", "skills": []}, "furniture": [], "objects": [],
+        "task_brief": "", "task_detail": "",
+    }},  # fmt: skip
+    "tick": {"actions": {}, "outcomes": {}, "placed": 0, "total": 3},
+}
+METRICS = {"temporal_steps": 0, "action_steps": 0, "action_steps_per_robot": {}}
+
+
+def _complete(kind: str, msg: dict[str, Any]) -> dict[str, Any]:
+    """`msg` with the protocol's required fields it lacks filled in (the trace reader decodes every message)."""
+    full = {**REQUIRED.get(kind, {}), **msg}
+    if isinstance(full.get("outcome"), dict):
+        full["outcome"] = {"feedback": "", **full["outcome"]}
+    if isinstance(full.get("metrics"), dict):
+        full["metrics"] = {**METRICS, **full["metrics"]}
+    return full
+
 
 
 def _result(robot: str, tick: int, skill: str, ok: bool = True, **action: Any) -> dict[str, Any]:
@@ -80,7 +101,7 @@ def test_the_three_action_step_readings_differ_as_the_paper_needs() -> None:
         _put("tick", tick=0),
         _result("alice", 1, "wait"), _result("bob", 1, "wait"),
         _put("tick", tick=1),
-        _result("bob", 2, "place", obj="apple", target="tray"),
+        _result("bob", 2, "place", obj="apple", location="tray"),
         _put("tick", tick=2),
         _put("episode_done", run="r", reason="horizon", metrics={"success": False, "placed": 1, "total": 3, "partial_success": 1 / 3}),
     ]  # fmt: skip

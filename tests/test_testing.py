@@ -19,9 +19,10 @@ import pytest
 
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm_policy import LLMPolicy
-from mhrc.agents.model_spec import make_client
+from mhrc.agents.llm import make_client
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import Action, EpisodeDone, Observation, OutcomeCode, SkillOutcome, decode_event
+from mhrc.core.protocol import Action, EpisodeDone, Observation, OutcomeCode, SkillOutcome, Thought, decode_event
+from mhrc.core.records import ReplyFailure
 from mhrc.testing import ModelCall, ModelReply, PolicyHarness, ScriptedModelServer, ScriptedPolicy, observation, outcome
 
 
@@ -212,9 +213,10 @@ async def test_a_scripted_robot_among_heuristic_teammates(mhrc_run_episode: Any)
     assert result.done.reason in ("success", "horizon") and result.metrics.success == result.done.metrics.success
     assert [r.action.call() for r in david.results[:2]] == script
     assert all(r.action.call() == "wait()" for r in david.results[2:])
-    assert [r["action"] for r in result.results("david")][:2] == [a.model_dump() for a in ScriptedPolicy(script).actions]
-    assert {t["robot"] for t in result.thoughts()} == {"alice", "bob", "david"}
-    assert {t["policy"] for t in result.thoughts("david")} == {"script"}
+    assert [r.action for r in result.results("david")][:2] == ScriptedPolicy(script).actions
+    assert {t.robot for t in result.thoughts()} == {"alice", "bob", "david"}
+    assert {t.policy for t in result.thoughts("david")} == {"script"}
+    assert [m.kind for m in result.messages("action_result", "david")] == ["action_result"] * len(result.results("david"))
     assert result.trace.is_file() and result.metrics.temporal_steps == result.done.metrics.temporal_steps
 
 
@@ -225,11 +227,13 @@ async def test_a_scripted_llm_robot_whose_bad_reply_becomes_feedback(mhrc_model_
     result = await mhrc_run_episode({}, seed=0, horizon=3, llm="bob=openai:test", base_url=server.url)
     assert result.done.reason == "horizon" and result.metrics.temporal_steps == 3
     bob = result.thoughts("bob")
-    assert bob[0]["parse_error"] and "no command" in bob[0]["parse_error"] and bob[0]["action"] == "wait()"
-    assert "Your command could not be read, so you waited." in bob[1]["prompt"]  # the format error came back as feedback
-    assert bob[1]["action"] == "pick(ghost)" and result.done.metrics.failed_actions.get("pick") == 1
-    assert all(t["policy"] == "llm:test" for t in bob) and len(server.requests_of("bob")) == len(bob) == len(server.requests)
-    assert {t["policy"] for t in result.thoughts("alice") + result.thoughts("david")} == {"heuristic"}
+    assert bob[0].parse_error and "no command" in bob[0].parse_error and bob[0].action == "wait()"
+    assert "Your command could not be read, so you waited." in (bob[1].prompt or "")  # the format error came back as feedback
+    assert bob[1].action == "pick(ghost)" and result.done.metrics.failed_actions.get("pick") == 1
+    assert all(t.policy == "llm:test" for t in bob) and len(server.requests_of("bob")) == len(bob) == len(server.requests)
+    assert {t.policy for t in result.thoughts("alice") + result.thoughts("david")} == {"heuristic"}
+    failures = [line.failure for line in result.records if isinstance(line.msg, Thought) and line.msg.robot == "bob"]
+    assert failures[:2] == [ReplyFailure.UNREADABLE, None]  # the code the trace's reader derived, once
     assert result.metrics.parse_failures == 1
 
 

@@ -114,25 +114,25 @@ def up(
 def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:
     """A scenario's events as the metrics score them (mhrc.core.metrics), read back from the trace."""
     from mhrc.core.metrics import from_trace
-    from mhrc.core.trace import read_trace
+    from mhrc.core.records import read_records
 
     if trace is None or not trace.exists():
         return None
     try:
-        return from_trace(read_trace(trace)).recovery
+        return from_trace(read_records(trace)).recovery
     except (ValueError, OSError):  # a trace the metrics cannot read (TraceError, bad JSON): the table goes without the row
         return None
 
 
 def _lost(trace: Path | None) -> list[Any]:
     """The robots lost mid-episode (mhrc.run.console.lost_robots), read back from the trace."""
-    from mhrc.core.trace import read_trace
+    from mhrc.core.records import read_records
     from mhrc.run.console import lost_robots
 
     if trace is None or not trace.is_file():
         return []
     try:
-        return lost_robots(read_trace(trace))
+        return lost_robots(read_records(trace))
     except (ValueError, OSError):  # a trace that cannot be read: the table goes without the row
         return []
 

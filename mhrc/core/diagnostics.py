@@ -2,11 +2,11 @@
 
 `mhrc.core.metrics` says how well an episode went; this module says what went wrong, per episode
 (`diagnose`) and over episodes (`summarize_diagnostics`). Every count comes from the bus
-messages of one trace (`mhrc.core.trace.read_trace`); nothing is re-simulated. Definitions:
+messages of one trace (`mhrc.core.records.read_records`); nothing is re-simulated. Definitions:
 
-- parse_failures: replies that did not parse into one command (a `thought` whose parse_error
-  is set and does not start with LLM_ERROR_PREFIX); llm_unreachable: steps lost to a model
-  that stayed down (parse_error starting with LLM_ERROR_PREFIX). Both make the robot wait.
+- parse_failures: replies that did not parse into one command (a `thought` whose failure,
+  mhrc.core.records.ReplyFailure, is unreadable or cut_off); llm_unreachable: steps lost to a
+  model that stayed down (failure model_unreachable). Both make the robot wait.
 - hallucinations: executed commands (`action_result`) naming an object or furniture the robot
   had no source for. The names checked are navigate/open's target, pick's obj, place's obj
   and location. The observation the robot planned on is the one delivered to it (in an
@@ -47,12 +47,17 @@ from __future__ import annotations
 
 import statistics
 from collections import Counter, defaultdict
-from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
+from pydantic import BaseModel
+
 from mhrc.core.metrics import TraceError, from_trace
-from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX, OutcomeCode
+from mhrc.core.protocol import (
+    Action, ActionAck, ActionResult, EpisodeStarted, Observation, OutcomeCode, Place, RejectCode, RobotMessage, SkillOutcome, Thought, Turn,
+)  # fmt: skip
+from mhrc.core.records import LineKind, Rows, as_records, messages
+from mhrc.core.upgrade import legacy_reject_code
 
 PREFIX = "diag_"
 REJECT_KINDS = ("stale_tick", "busy", "out_of_turn", "episode_over", "malformed", "not_attached", "other")
@@ -138,108 +143,92 @@ KIND_OF_CODE = {  # RejectCode -> the kind diagnostics count it under
 }  # fmt: skip
 
 
+def kind_of(code: RejectCode | None) -> str:
+    """The kind diagnostics count a rejection under, from its code (None: a reason no code covers)."""
+    return KIND_OF_CODE[code.value] if code is not None else "other"
+
+
 def reject_kind(reason: str, code: object = None) -> str:
-    """The kind of a rejection: from the `action_ack`'s `code` (mhrc.core.protocol.RejectCode); a
-    trace recorded before acks had one is read from the reason's text."""
+    """The kind of a rejection: from its code (mhrc.core.protocol.RejectCode); a rejection recorded
+    before acks had one, from the reason's text (mhrc.core.upgrade.legacy_reject_code)."""
     if isinstance(code, str) and code in KIND_OF_CODE:
         return KIND_OF_CODE[code]
-    r = reason.lower()
-    if reason == EPISODE_OVER:
-        return "episode_over"
-    if r.startswith("malformed"):
-        return "malformed"
-    if "the request is for tick" in r:
-        return "stale_tick"
-    if "already submitted" in r or "still busy" in r:
-        return "busy"
-    if "'s turn" in r:
-        return "out_of_turn"
-    if "not attached" in r or "attached to another agent" in r or "sent on the key of" in r or "there is no robot" in r:
-        return "not_attached"
-    return "other"
+    return kind_of(legacy_reject_code(reason))
 
 
-def _msgs(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
-    return [r["msg"] for r in rows if r.get("kind") == "put" and isinstance(r.get("msg"), dict)]
+def _known_names(obs: Observation) -> set[str]:
+    names = {f.name for f in obs.furniture} | {o.name for o in obs.objects}
+    holding = obs.status.holding
+    return names | ({holding} if holding else set()) | set(obs.targets) | set(obs.goals) | set(obs.goals.values())
 
 
-def _known_names(obs: dict[str, Any]) -> set[str]:
-    names = {f["name"] for f in obs.get("furniture", [])} | {o["name"] for o in obs.get("objects", [])}
-    holding = (obs.get("status") or {}).get("holding")
-    goals = obs.get("goals") or {}
-    return names | ({holding} if holding else set()) | set(obs.get("targets") or []) | set(goals) | set(goals.values())
+def _world_says_unknown(outcome: SkillOutcome) -> bool:
+    return outcome.code.value in UNKNOWN_NAME_CODES and outcome.feedback.startswith(UNKNOWN_NAME_FEEDBACK)
 
 
-def _world_says_unknown(outcome: dict[str, Any]) -> bool:
-    return outcome.get("code") in UNKNOWN_NAME_CODES and str(outcome.get("feedback", "")).startswith(UNKNOWN_NAME_FEEDBACK)
-
-
-def diagnose(rows: list[dict[str, Any]]) -> Diagnostics:
-    """The failure diagnostics of one episode from its trace rows (`mhrc.core.trace.read_trace`)."""
-    msgs = _msgs(rows)
+def diagnose(rows: Rows) -> Diagnostics:
+    """The failure diagnostics of one episode from its trace (`mhrc.core.records.read_records`, or the rows of `read_trace`)."""
+    lines = as_records(rows)
     d = Diagnostics()
     # what each robot planned on: (robot, tick) -> the last observation of that tick, and every message it delivered
-    planned: dict[tuple[str, int], dict[str, Any]] = {}
-    delivered: dict[tuple[str, int], list[dict[str, Any]]] = defaultdict(list)
+    planned: dict[tuple[str, int], Observation] = {}
+    delivered: dict[tuple[str, int], list[RobotMessage]] = defaultdict(list)
     read: set[tuple[str, str, int, str]] = set()
-    for m in msgs:
-        if m.get("kind") in ("action_result", "turn") and isinstance(m.get("observation"), dict):
-            obs = m["observation"]
-            key = (str(obs.get("robot", m.get("robot"))), int(obs.get("tick", 0)))
+    for m in messages(lines, BaseModel):
+        if isinstance(m, (ActionResult, Turn)):
+            obs = m.observation
+            key = (obs.robot, obs.tick)
             planned[key] = obs
-            for note in obs.get("new_messages") or []:
+            for note in obs.new_messages:
                 delivered[key].append(note)
-                read.add((note.get("sender", ""), note.get("to", ""), int(note.get("tick", 0)), note.get("content", "")))
-    errors: dict[tuple[str, int], str] = {}
-    for m in msgs:
-        if m.get("kind") != "thought":
+                read.add((note.sender, note.to, note.tick, note.content))
+    errors: set[tuple[str, int]] = set()  # the steps whose reply gave no action
+    for line in lines:
+        if line.kind is not LineKind.PUT or not isinstance(line.msg, Thought):
             continue
-        if m.get("prompt") is not None:
+        if line.msg.prompt is not None:
             d.llm_steps += 1
-        if m.get("parse_error"):
-            errors[(m["robot"], int(m["tick"]))] = str(m["parse_error"])
-            if str(m["parse_error"]).startswith(LLM_ERROR_PREFIX):
-                d.llm_unreachable += 1
-            else:
+        if line.failure is not None:
+            errors.add((line.msg.robot, line.msg.tick))
+            if line.failure.unparsed:
                 d.parse_failures += 1
+            else:
+                d.llm_unreachable += 1
 
     reasons: Counter[str] = Counter()
-    for m in msgs:
-        if m.get("kind") == "action_ack" and m.get("accepted") is False:
-            reasons[reject_kind(str(m.get("reason", "")), m.get("code"))] += 1
-    for row in rows:  # a flood of junk or of rejections, counted by the recorder (mhrc.core.trace)
-        if row.get("kind") == "junk" and str(row.get("key", "")).endswith("/action/ack") and isinstance(row.get("msg"), dict):
-            junk = row["msg"]
-            reasons[reject_kind(str(junk.get("reason", "")).removeprefix("rejected: "), junk.get("code"))] += int(junk.get("count", 0))
+    for ack in messages(lines, ActionAck):
+        if ack.accepted is False:
+            reasons[kind_of(ack.code)] += 1
+    for line in lines:  # a flood of junk or of rejections, counted by the recorder (mhrc.core.trace)
+        if line.junk is not None and line.key.endswith("/action/ack"):
+            reasons[kind_of(line.junk.code)] += line.junk.count
     d.rejected, d.rejected_by_reason = sum(reasons.values()), dict(sorted(reasons.items()))
 
     names: Counter[str] = Counter()
     by_code: Counter[str] = Counter()
     by_skill: dict[str, Counter[str]] = defaultdict(Counter)
-    last: dict[str, tuple[dict[str, Any], bool]] = {}  # robot -> (its previous action, whether it failed)
+    last: dict[str, tuple[Action, bool]] = {}  # robot -> (its previous action, whether it failed)
     pending: dict[str, set[str]] = defaultdict(set)  # robot -> teammates whose messages it has not acted on
-    for m in msgs:
-        if m.get("kind") != "action_result":
-            continue
-        robot, tick, action, outcome = str(m["robot"]), int(m["tick"]), m["action"], m["outcome"]
-        skill, ok = str(action.get("skill")), bool(outcome.get("succeeded"))
-        obs = planned.get((robot, tick))
-        pending[robot] |= {n.get("sender", "") for n in delivered.get((robot, tick), []) if n.get("sender") != robot}
+    for m in messages(lines, ActionResult):
+        robot, tick, action, outcome = m.robot, m.tick, m.action, m.outcome
+        skill, ok = action.skill, outcome.succeeded
+        seen = planned.get((robot, tick))
+        pending[robot] |= {n.sender for n in delivered.get((robot, tick), []) if n.sender != robot}
         # hallucinations: names against the scene graph planned on, else the world's verdict
-        args = [str(action[a]) for a in NAMED_ARGS.get(skill, ()) if action.get(a) is not None]
-        if obs is not None:
-            unknown = [n for n in args if n not in _known_names(obs)]
+        args = [str(getattr(action, a)) for a in NAMED_ARGS.get(skill, ()) if getattr(action, a, None) is not None]
+        if seen is not None:
+            unknown = [n for n in args if n not in _known_names(seen)]
         else:
             unknown = args[:1] if _world_says_unknown(outcome) and args else []
-            if unknown and skill == "place":  # which of the two names the world did not know
-                unknown = [str(action["location" if outcome["code"] == OutcomeCode.LOCATION_UNKNOWN.value else "obj"])]
+            if unknown and isinstance(action, Place):  # which of the two names the world did not know
+                unknown = [action.location if outcome.code is OutcomeCode.LOCATION_UNKNOWN else action.obj]
         if unknown:
             d.hallucinations += 1
             names.update(unknown)
-        if outcome.get("code") == OutcomeCode.NOT_CAPABLE.value:
+        if outcome.code is OutcomeCode.NOT_CAPABLE:
             d.not_capable += 1
         if not ok:
-            code = str(outcome.get("code"))
+            code = outcome.code.value
             by_code[code] += 1
             by_skill[skill][code] += 1
             prev = last.get(robot)
@@ -259,11 +248,11 @@ def diagnose(rows: list[dict[str, Any]]) -> Diagnostics:
     d.failed, d.failed_by_code = sum(by_code.values()), dict(sorted(by_code.items()))
     d.failed_by_skill = {s: dict(sorted(c.items())) for s, c in sorted(by_skill.items())}
     d.messages_read = len(read)
-    started = [m for m in msgs if m.get("kind") == "episode_started"]
-    bound = started[0].get("lower_bound") if started else None
+    started = messages(lines, EpisodeStarted)
+    bound = started[0].lower_bound if started else None
     if bound is not None:
         try:
-            d.steps_above_bound = from_trace(rows).temporal_steps - int(bound)
+            d.steps_above_bound = from_trace(lines).temporal_steps - bound
         except TraceError:
             d.steps_above_bound = None
     return d

@@ -71,15 +71,17 @@ from __future__ import annotations
 import statistics
 import math
 from collections import Counter
-from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any
 
-from mhrc.core.fidelity import recorded_noise
-from mhrc.core.protocol import LLM_ERROR_PREFIX
+from pydantic import BaseModel
 
-UNRECORDED = "unrecorded"  # the fidelity of a trace written before episodes recorded it
+from mhrc.core.protocol import ActionAck, ActionResult, EpisodeDone, EpisodeStarted, RobotDetached, ScenarioEvent, Snapshot, Thought, TickClosed
+from mhrc.core.records import LineKind, Rows, TraceLine, as_records, messages
+from mhrc.core.upgrade import UNRECORDED
+
+__all__ = ["UNRECORDED", "EpisodeMetrics", "Invalid", "TraceError", "from_trace", "junk_rejections", "recovery_of", "summarize"]
 
 
 class TraceError(ValueError):
@@ -139,90 +141,82 @@ class EpisodeMetrics:
         return asdict(self)
 
 
-def _msgs(rows: Iterable[dict[str, Any]], kind: str) -> list[dict[str, Any]]:
-    return [r["msg"] for r in rows if r.get("kind") == "put" and isinstance(r.get("msg"), dict) and r["msg"].get("kind") == kind]
-
-
-def junk_rejections(rows: Iterable[dict[str, Any]]) -> int:
+def junk_rejections(rows: Rows) -> int:
     """Rejections of malformed requests, which the recorder counts instead of copying (`junk` lines)."""
-    return sum(
-        int(r["msg"].get("count", 0))
-        for r in rows
-        if r.get("kind") == "junk" and isinstance(r.get("msg"), dict) and str(r.get("key", "")).endswith("/action/ack")
-    )
+    return sum(line.junk.count for line in as_records(rows) if line.junk is not None and line.key.endswith("/action/ack"))
 
 
-def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
-    """The metrics of one episode from its trace rows (`mhrc.core.trace.read_trace`)."""
-    started, done = _msgs(rows, "episode_started"), _msgs(rows, "episode_done")
+def from_trace(rows: Rows) -> EpisodeMetrics:
+    """The metrics of one episode from its trace (`mhrc.core.records.read_records`, or the rows of `read_trace`)."""
+    lines = as_records(rows)
+    started, done = messages(lines, EpisodeStarted), messages(lines, EpisodeDone)
     if not started or not done:
         raise TraceError("the trace has no episode_started or no episode_done event: the episode did not finish")
     s, d = started[0], done[-1]
-    world = d["metrics"]
-    results = _msgs(rows, "action_result")
-    acting = [r for r in results if r["action"]["skill"] != "wait"]
-    per_robot = Counter(r["robot"] for r in acting)
-    failed = Counter(r["action"]["skill"] for r in results if not r["outcome"]["succeeded"])
-    every_thought = _msgs(rows, "thought")
-    thoughts = [t for t in every_thought if t.get("prompt") is not None]
-    errors = [str(t["parse_error"]) for t in every_thought if t.get("parse_error")]
-    unreachable = sum(1 for e in errors if e.startswith(LLM_ERROR_PREFIX))
-    scheduler = str(s.get("scheduler") or "lockstep")
-    noise = recorded_noise(s)
-    makespan = float(world.get("makespan", 0.0))
+    world = d.metrics
+    results = messages(lines, ActionResult)
+    acting = [r for r in results if r.action.skill != "wait"]
+    per_robot = Counter(r.robot for r in acting)
+    failed = Counter(r.action.skill for r in results if not r.outcome.succeeded)
+    every_thought = [line for line in lines if isinstance(line.msg, Thought) and line.kind is LineKind.PUT]
+    thoughts = [line.msg for line in every_thought if isinstance(line.msg, Thought) and line.msg.prompt is not None]
+    failures = [line.failure for line in every_thought if line.failure is not None]
+    unreachable = sum(1 for f in failures if not f.unparsed)
+    scheduler = s.scheduler
+    makespan = world.makespan
     if scheduler == "async":
-        temporal_steps = math.ceil(round(makespan / float(s["step_seconds"]), 9))
+        temporal_steps = math.ceil(round(makespan / float(s.step_seconds or 0.0), 9))
     else:
-        temporal_steps = len(_msgs(rows, "tick"))
+        temporal_steps = len(messages(lines, TickClosed))
     busy: dict[str, float] = {}
     for r in results:
-        if r.get("started") is not None and r.get("ended") is not None:
-            busy[r["robot"]] = busy.get(r["robot"], 0.0) + max(0.0, min(float(r["ended"]), makespan) - float(r["started"]))
-    everything = Counter(r["robot"] for r in results)
+        if r.started is not None and r.ended is not None:
+            busy[r.robot] = busy.get(r.robot, 0.0) + max(0.0, min(r.ended, makespan) - r.started)
+    everything = Counter(r.robot for r in results)
     if scheduler == "async":
-        step = float(s["step_seconds"])
-        active = {math.floor(round(float(r.get("started") or 0.0) / step, 9)) for r in acting}
+        step = float(s.step_seconds or 0.0)
+        active = {math.floor(round((r.started or 0.0) / step, 9)) for r in acting}
     else:
-        active = {int(r["tick"]) for r in acting}
-    recovery = recovery_of(rows, scheduler, float(s.get("step_seconds") or 0.0), d)
-    invalid, why = _invalidity(rows, d, temporal_steps, results, len(thoughts), unreachable)
+        active = {r.tick for r in acting}
+    recovery = recovery_of(lines, scheduler, s.step_seconds or 0.0, d)
+    invalid, why = _invalidity(lines, d, temporal_steps, results, len(thoughts), unreachable)
     recovered = [int(e["ticks_to_recover"]) for e in recovery if e["applied"] and e["ticks_to_recover"] is not None]
     return EpisodeMetrics(
-        task=s["task"],
-        scene=s["scene"],
-        seed=s["seed"],
-        n_objects=s["n_objects"],
-        robots=list(s["robots"]),
-        reason=d["reason"],
-        success=bool(world["success"]),
-        placed=int(world["placed"]),
-        total=int(world["total"]),
-        partial_success=float(world["partial_success"]),
+        task=s.task,
+        scene=s.scene,
+        seed=s.seed,
+        n_objects=s.n_objects,
+        robots=list(s.robots),
+        reason=d.reason,
+        success=world.success,
+        placed=world.placed,
+        total=world.total,
+        partial_success=world.partial_success,
         temporal_steps=temporal_steps,
         action_steps=len(acting),
-        action_steps_per_robot={r: per_robot.get(r, 0) for r in s["robots"]},
+        action_steps_per_robot={r: per_robot.get(r, 0) for r in s.robots},
         failed_actions=dict(sorted(failed.items())),
-        messages=sum(1 for r in results if r["action"]["skill"] == "communicate" and r["outcome"]["succeeded"]),
+        messages=sum(1 for r in results if r.action.skill == "communicate" and r.outcome.succeeded),
         llm_calls=len(thoughts),
-        prompt_tokens=sum(int(t.get("prompt_tokens") or 0) for t in thoughts),
-        completion_tokens=sum(int(t.get("completion_tokens") or 0) for t in thoughts),
-        wall_time=float(world.get("wall_time", 0.0)),
-        lower_bound=s.get("lower_bound"),
-        parse_failures=len(errors) - unreachable,
+        prompt_tokens=sum(t.prompt_tokens for t in thoughts),
+        completion_tokens=sum(t.completion_tokens for t in thoughts),
+        wall_time=world.wall_time,
+        lower_bound=s.lower_bound,
+        parse_failures=len(failures) - unreachable,
         llm_unreachable=unreachable,
-        rejected_actions=sum(1 for a in _msgs(rows, "action_ack") if a.get("accepted") is False) + junk_rejections(rows),
+        rejected_actions=sum(1 for a in messages(lines, ActionAck) if a.accepted is False) + junk_rejections(lines),
         valid=invalid is None,
         invalid_reason=why,
         invalid_code=invalid,
-        fidelity=str(s.get("fidelity") or UNRECORDED),
-        noise=noise.setting,
-        noise_rates=noise.model_dump(exclude={"setting"}),
-        horizon=s.get("horizon"),
+        fidelity=s.fidelity or UNRECORDED,
+        noise=s.noise.setting,
+        noise_rates=s.noise.model_dump(exclude={"setting"}),
+        horizon=s.horizon,
         scheduler=scheduler,
         makespan=round(makespan, 3),
-        busy={r: round(busy.get(r, 0.0), 3) for r in s["robots"]},
-        idle={r: round(max(0.0, makespan - busy.get(r, 0.0)), 3) for r in s["robots"]},
-        actions_per_robot={r: everything.get(r, 0) for r in s["robots"]},
+        busy={r: round(busy.get(r, 0.0), 3) for r in s.robots},
+        idle={r: round(max(0.0, makespan - busy.get(r, 0.0)), 3) for r in s.robots},
+        actions_per_robot={r: everything.get(r, 0) for r in s.robots},
         active_ticks=len(active),
         recovery=recovery,
         recovery_ticks=round(statistics.fmean(recovered), 3) if recovered else None,
@@ -231,12 +225,12 @@ def from_trace(rows: list[dict[str, Any]]) -> EpisodeMetrics:
 
 
 def _invalidity(
-    rows: list[dict[str, Any]], done: dict[str, Any], temporal_steps: int, results: list[dict[str, Any]], llm_steps: int, unreachable: int
+    lines: list[TraceLine], done: EpisodeDone, temporal_steps: int, results: list[ActionResult], llm_steps: int, unreachable: int
 ) -> tuple[Invalid | None, str | None]:
     """Why the episode measured the machine rather than the method (the code and a sentence), or (None, None)."""
-    reason = str(done["reason"])
-    if not results and not done["metrics"]["success"] and (temporal_steps == 0 or reason == "no_agents"):
-        left = sorted({str(e["robot"]) for e in _msgs(rows, "robot_detached")})
+    reason = done.reason
+    if not results and not done.metrics.success and (temporal_steps == 0 or reason == "no_agents"):
+        left = sorted({e.robot for e in messages(lines, RobotDetached)})
         why = f"it ended ({reason}) at step {temporal_steps} before any robot acted" + (f"; detached: {', '.join(left)} (the trace says why)" if left else "")
         return Invalid.NOT_PLAYED, why
     if llm_steps and unreachable >= llm_steps:
@@ -244,52 +238,50 @@ def _invalidity(
     return None, None
 
 
-def recovery_of(rows: list[dict[str, Any]], scheduler: str, step_seconds: float, done: dict[str, Any]) -> list[dict[str, Any]]:
+def recovery_of(rows: Rows, scheduler: str, step_seconds: float, done: EpisodeDone) -> list[dict[str, Any]]:
     """Per scenario event of the trace, the steps until the team's progress resumes (module docstring)."""
-    events = _msgs(rows, "scenario_event")
+    lines = as_records(rows)
+    events = messages(lines, ScenarioEvent)
     if not events:
         return []
     if scheduler == "async":
-        since = _async_progress(rows, step_seconds, done)
+        since = _async_progress(lines, step_seconds, done)
     else:
-        placed = {int(t["tick"]): int(t["placed"]) for t in _msgs(rows, "tick")}
+        placed = {t.tick: t.placed for t in messages(lines, TickClosed)}
         since = {}
         for ev in events:
-            tick = int(ev["tick"])
+            tick = ev.tick
             before = max((t for t in placed if t < tick), default=None)
             at_event = placed[before] if before is not None else 0
             later = [t for t in sorted(placed) if t >= tick and placed[t] > at_event]
-            since[int(ev["index"])] = later[0] + 1 - tick if later else None
+            since[ev.index] = later[0] + 1 - tick if later else None
     return [
         {
-            "index": int(ev["index"]), "kind": str(ev["event"]), "tick": int(ev["tick"]), "applied": bool(ev["applied"]),
-            "ticks_to_recover": since.get(int(ev["index"])) if ev["applied"] else None,
+            "index": ev.index, "kind": ev.event, "tick": ev.tick, "applied": ev.applied,
+            "ticks_to_recover": since.get(ev.index) if ev.applied else None,
         }  # fmt: skip
         for ev in events
     ]
 
 
-def _async_progress(rows: list[dict[str, Any]], step_seconds: float, done: dict[str, Any]) -> dict[int, int | None]:
+def _async_progress(lines: list[TraceLine], step_seconds: float, done: EpisodeDone) -> dict[int, int | None]:
     """Async: scenario event index -> ceil((end of the first action after it that put one more target
     in place - its firing time) / step_seconds), None if none did; counted on the snapshots."""
-    goals = {str(k): str(v) for k, v in (done.get("goals") or {}).items()}
-    targets = [str(t) for t in done.get("targets") or goals]
-    ended = {str(r["goal_id"]): float(r["ended"]) for r in _msgs(rows, "action_result") if r.get("ended") is not None}
-    end_of_episode = float((done.get("metrics") or {}).get("makespan", 0.0))
+    goals = dict(done.goals)
+    targets = list(done.targets or goals)
+    ended = {r.goal_id: r.ended for r in messages(lines, ActionResult) if r.ended is not None}
+    end_of_episode = done.metrics.makespan
     count = 0
     waiting: dict[int, tuple[float, int]] = {}  # event index -> (its firing time, the count then)
     out: dict[int, int | None] = {}
-    for r in rows:
-        msg = r.get("msg") if r.get("kind") == "put" else None
-        if not isinstance(msg, dict):
-            continue
-        if msg.get("kind") == "scenario_event":
-            waiting[int(msg["index"])] = (int(msg["tick"]) * step_seconds, count)
-            out[int(msg["index"])] = None
-        elif msg.get("kind") == "snapshot":
-            objects = msg.get("objects") or {}
-            count = sum(1 for t in targets if t in objects and objects[t].get("on") == goals.get(t) and not objects[t].get("held_by"))
-            at = max((ended.get(str(g), end_of_episode) for g in msg.get("goals") or []), default=end_of_episode)
+    for msg in messages(lines, BaseModel):
+        if isinstance(msg, ScenarioEvent):
+            waiting[msg.index] = (msg.tick * step_seconds, count)
+            out[msg.index] = None
+        elif isinstance(msg, Snapshot):
+            objects = msg.objects
+            count = sum(1 for t in targets if t in objects and objects[t].on == goals.get(t) and not objects[t].held_by)
+            at = max((ended.get(g, end_of_episode) for g in msg.goals), default=end_of_episode)
             for index, (fired, then) in list(waiting.items()):
                 if count > then:
                     out[index] = max(0, math.ceil(round((at - fired) / step_seconds, 9)))

@@ -36,6 +36,7 @@ from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionRequest, ProtocolError, decode
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES, loads
+from mhrc.core.records import read_records
 
 JUNK_INTERVAL = 1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
 REJECTIONS_IN_FULL = 5  # well-formed requests rejected per robot and interval that are copied in full; the rest are counted
@@ -289,6 +290,7 @@ def unwritable(path: Path, *, directory: bool = False) -> str | None:
 
 
 def read_trace(path: str | Path) -> list[dict[str, Any]]:
-    """The lines of a trace file, parsed."""
-    with Path(path).open(encoding="utf-8") as f:
-        return [json.loads(line) for line in f if line.strip()]
+    """The lines of a trace file as JSON dicts, for scripts and tests that look at the raw JSON
+    (bench/, tests/). It reads through mhrc.core.records.read_records (a line that is not a trace
+    line raises its TraceLineError, a ValueError); the package's own code reads the records."""
+    return [line.as_row() for line in read_records(path)]

@@ -14,6 +14,7 @@ import os
 import socket
 import tempfile
 import zlib
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +44,13 @@ class Job(BaseModel):
     trial: int = 0
 
 
+class WorkerFailure(StrEnum):
+    """An episode lost to its worker rather than to itself (EpisodeResult.error_code)."""
+
+    WORKER_DIED = "worker_died"  # the worker process ended during the episode
+    WORKERS_KEEP_DYING = "workers_keep_dying"  # every worker died, again and again: the job was never run
+
+
 class EpisodeResult(BaseModel):
     """What comes back of a job: the trace (zlib of the JSONL), or where it was written
     (a shared --out), or the error that ended the episode. Its JSON carries the trace in base64
@@ -55,6 +63,7 @@ class EpisodeResult(BaseModel):
     trace_z: bytes = b""
     trace_file: str | None = None  # written there by the worker (--shared-out): nothing to carry back
     error: str | None = None
+    error_code: WorkerFailure | None = None  # what ended the episode outside it, for programs (`error` says it for people)
     fatal: bool = False  # the error will recur in every episode (bad credentials, no such model): stop the evaluation
 
 

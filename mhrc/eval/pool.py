@@ -31,7 +31,7 @@ from typing import IO
 import structlog
 from pydantic import ValidationError
 
-from mhrc.eval.episode import EpisodeResult, Job, run_job, watch_start, worker_name
+from mhrc.eval.episode import EpisodeResult, Job, WorkerFailure, run_job, watch_start, worker_name
 from mhrc.run.lifeline import child_env
 
 log = structlog.get_logger("mhrc.eval")
@@ -182,7 +182,7 @@ class PoolExecutor:
         self._pool.remove(w)
         for job in w.jobs.values():  # died with these unfinished
             why = f"the worker process ended (exit {code}) during the episode"
-            self._results.put_nowait(EpisodeResult(key=job.key, worker=f"pid {w.proc.pid}", error=why))
+            self._results.put_nowait(EpisodeResult(key=job.key, worker=f"pid {w.proc.pid}", error=why, error_code=WorkerFailure.WORKER_DIED))
         w.jobs.clear()
         if not self._stopping:
             await self._dispatch()
@@ -205,7 +205,7 @@ class PoolExecutor:
             elif not self._pool:  # every worker died, again and again: give the jobs back as errors
                 while self._queue:
                     job = self._queue.popleft()
-                    self._results.put_nowait(EpisodeResult(key=job.key, worker="", error="the worker processes keep dying; see their errors above"))
+                    self._results.put_nowait(EpisodeResult(key=job.key, worker="", error="the worker processes keep dying; see their errors above", error_code=WorkerFailure.WORKERS_KEEP_DYING))
                 return
             else:
                 return
@@ -246,7 +246,7 @@ class PoolExecutor:
         out = []
         while not self._results.empty():
             res = self._results.get_nowait()
-            if res.error is None or not res.error.startswith("the worker process ended"):
+            if res.error_code is not WorkerFailure.WORKER_DIED:
                 out.append(res)
         return out
 

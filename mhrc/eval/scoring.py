@@ -6,21 +6,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import structlog
 
 from mhrc.core.diagnostics import Diagnostics, diagnose
 from mhrc.core.metrics import EpisodeMetrics, from_trace
-from mhrc.core.trace import read_trace
+from mhrc.core.records import TraceLine, read_records
 
 log = structlog.get_logger("mhrc.eval")
 
 
-def read_episode_trace(path: Path) -> list[dict[str, Any]]:
-    """The lines of an episode's trace: the one place the evaluation reads a trace (a typed
-    reader replaces `read_trace` here). Raises OSError or ValueError."""
-    return read_trace(path)
+def read_episode_trace(path: Path) -> list[TraceLine]:
+    """The lines of an episode's trace, decoded once (mhrc.core.records): the one place the
+    evaluation reads a trace. Raises OSError or ValueError (records.TraceLineError)."""
+    return read_records(path)
 
 
 @dataclass(frozen=True)
@@ -28,7 +27,7 @@ class Scored:
     """An episode's trace lines with what the evaluation computes from them, once each."""
 
     path: Path
-    lines: list[dict[str, Any]]
+    lines: list[TraceLine]
     metrics: EpisodeMetrics
     diagnostics: Diagnostics
 
@@ -43,10 +42,10 @@ def score(path: Path) -> Scored:
 def write_episode_report(scored: Scored) -> None:
     """The episode's HTML report beside its trace (summary.html links it), from the lines and the
     diagnostics already in hand; a report that cannot be drawn costs a warning, never the row."""
-    from mhrc.viewer.load import from_rows
+    from mhrc.viewer.load import from_records
     from mhrc.viewer.show import default_out, render_report
 
     try:
-        render_report(from_rows(scored.path, scored.lines), default_out(scored.path), scored.diagnostics.as_dict())
+        render_report(from_records(scored.path, scored.lines), default_out(scored.path), scored.diagnostics.as_dict())
     except Exception as exc:
         log.warning("episode report not written", trace=str(scored.path), error=f"{type(exc).__name__}: {exc}")

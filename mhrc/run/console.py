@@ -8,10 +8,10 @@ until every result that tick is known to have (`TickClosed.actions`) has printed
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from typing import Any
 
+from pydantic import BaseModel
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
@@ -36,6 +36,7 @@ from mhrc.core.protocol import (
     decode,
     decode_event,
 )
+from mhrc.core.records import ReplyFailure, Rows, as_records, messages, reply_failure
 
 COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
 
@@ -224,10 +225,11 @@ class ProgressPrinter:
         if t.parse_error is None or not self.verbose:
             return
         error = inert(t.parse_error[:200])
-        if error.startswith(LLM_ERROR_PREFIX):
+        failure = reply_failure(t)
+        if failure is ReplyFailure.MODEL_UNREACHABLE:
             what = "[red]model unavailable[/]: " + error.removeprefix(LLM_ERROR_PREFIX)
         else:
-            cut = " (cut at --max-tokens)" if t.finish_reason == "length" else ""
+            cut = " (cut at --max-tokens)" if failure is ReplyFailure.CUT_OFF else ""
             what = f"[red]reply did not parse{cut}[/]: {error}"
         line = f"tick {t.tick:>2} {self._robot(t.robot)} {what}; it waits"
         if t.robot in self._printed.get(t.tick, set()):  # its result came first
@@ -290,27 +292,20 @@ def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = Non
     return t
 
 
-def lost_robots(rows: list[dict[str, Any]]) -> list[RobotDetached]:
-    """From a trace's lines: the robots detached between the start and the end of the episode
-    (an agent killed, frozen past its lease, gone) that did not attach again before the end."""
+def lost_robots(rows: Rows) -> list[RobotDetached]:
+    """From a trace (records, or the rows of read_trace): the robots detached between the start and the end of
+    the episode (an agent killed, frozen past its lease, gone) that did not attach again before the end."""
     lost: dict[str, RobotDetached] = {}
     started = False
-    for row in rows:
-        msg = row.get("msg") if row.get("kind") == "put" else None
-        kind = msg.get("kind") if isinstance(msg, dict) else None
-        if kind == "episode_started":
+    for ev in messages(as_records(rows), BaseModel):
+        if isinstance(ev, EpisodeStarted):
             started = True
-        elif kind == "episode_done":
+        elif isinstance(ev, EpisodeDone):
             break
-        elif started and kind in ("robot_detached", "robot_attached"):
-            try:
-                ev = decode_event(json.dumps(msg).encode())
-            except ProtocolError:
-                continue
-            if isinstance(ev, RobotDetached):
-                lost[ev.robot] = ev
-            elif isinstance(ev, RobotAttached):
-                lost.pop(ev.robot, None)
+        elif started and isinstance(ev, RobotDetached):
+            lost[ev.robot] = ev
+        elif started and isinstance(ev, RobotAttached):
+            lost.pop(ev.robot, None)
     return list(lost.values())
 
 

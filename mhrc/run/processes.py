@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import signal
 import socket
 import subprocess
@@ -22,7 +21,7 @@ from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decod
 from mhrc.run.config import EpisodeConfig
 from mhrc.core.bus import open_client
 from mhrc.core.keys import Keys
-from mhrc.core.trace import read_trace
+from mhrc.core.records import messages, read_records
 from mhrc.run.attach import local_models
 from mhrc.run.lifeline import child_env
 from mhrc.run.serve import EventHook
@@ -207,18 +206,10 @@ def _end_in_trace(trace: Path | None) -> EpisodeDone | None:
     if trace is None or not trace.is_file():
         return None
     try:
-        rows = read_trace(trace)
+        ends = messages(read_records(trace), EpisodeDone)
     except (OSError, ValueError):
         return None
-    for row in reversed(rows):
-        msg = row.get("msg")
-        if row.get("kind") == "put" and isinstance(msg, dict) and msg.get("kind") == "episode_done":
-            with contextlib.suppress(ProtocolError):
-                ev = decode_event(json.dumps(msg).encode())
-                if isinstance(ev, EpisodeDone):
-                    return ev
-            return None
-    return None
+    return ends[-1] if ends else None
 
 
 def _wait_or_kill(proc: subprocess.Popen[bytes], timeout: float) -> None:

@@ -17,8 +17,8 @@ from mhrc.agents.policy import Policy
 from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.keys import Keys
 from mhrc.core.metrics import EpisodeMetrics, from_trace
-from mhrc.core.protocol import EpisodeDone, ProtocolError, RobotAttached, RobotDetached, WorldState, decode, decode_event
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, EpisodeDone, ProtocolError, RobotAttached, RobotDetached, Thought, WorldState, decode, decode_event
+from mhrc.core.records import Payload, TraceLine, messages, read_records
 from mhrc.run.attach import run_agent
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.serve import serve_world
@@ -200,32 +200,31 @@ async def world_on_loopback(**options: Any) -> AsyncIterator[LoopbackWorld]:
 
 @dataclass
 class EpisodeResult:
-    """What `run_episode` returns: the world's final event, the trace and the metrics from it."""
+    """What `run_episode` returns: the world's final event, the trace (its file and its typed
+    records, mhrc.core.records) and the metrics from it."""
 
     done: EpisodeDone
     trace: Path
-    rows: list[dict[str, Any]]
+    records: list[TraceLine]
     metrics: EpisodeMetrics
     config: EpisodeConfig
 
-    def messages(self, kind: str, robot: str | None = None) -> list[dict[str, Any]]:
-        """The decoded messages of one kind in the trace (``action_result``, ``thought``,
-        ``action_request``, ``episode_started``, ...), optionally of one robot, in order."""
-        out = []
-        for row in self.rows:
-            msg = row.get("msg")
-            if row.get("kind") == "put" and isinstance(msg, dict) and msg.get("kind") == kind:
-                if robot is None or msg.get("robot") == robot:
-                    out.append(msg)
-        return out
+    def messages(self, kind: str, robot: str | None = None) -> list[Payload]:
+        """The messages of one kind in the trace (``action_result``, ``thought``,
+        ``action_request``, ``episode_started``, ...), optionally of one robot, in order, as the
+        protocol's models."""
+        return [
+            line.msg for line in self.records
+            if line.msg is not None and line.msg.kind == kind and (robot is None or getattr(line.msg, "robot", None) == robot)
+        ]  # fmt: skip
 
-    def results(self, robot: str | None = None) -> list[dict[str, Any]]:
+    def results(self, robot: str | None = None) -> list[ActionResult]:
         """Every action result in the trace (or one robot's), in order."""
-        return self.messages("action_result", robot)
+        return [r for r in messages(self.records, ActionResult) if robot is None or r.robot == robot]
 
-    def thoughts(self, robot: str | None = None) -> list[dict[str, Any]]:
+    def thoughts(self, robot: str | None = None) -> list[Thought]:
         """Every published thought (prompt, reply, parse error, action), or one robot's."""
-        return self.messages("thought", robot)
+        return [t for t in messages(self.records, Thought) if robot is None or t.robot == robot]
 
 
 async def run_episode(
@@ -261,5 +260,5 @@ async def run_episode(
         for task in world.agents.values():  # they end on the world's episode_done
             await task
         trace = world.trace
-        rows = read_trace(trace)
-        return EpisodeResult(done=done, trace=trace, rows=rows, metrics=from_trace(rows), config=world.config)
+        records = read_records(trace)
+        return EpisodeResult(done=done, trace=trace, records=records, metrics=from_trace(records), config=world.config)

@@ -8,12 +8,12 @@ a file that is no trace at all.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from mhrc.core.protocol import PROTOCOL_VERSION
+from mhrc.core.records import LineError, TraceLine, TraceLineError, parse_line
 
 
 class NotATrace(ValueError):
@@ -22,15 +22,20 @@ class NotATrace(ValueError):
 
 @dataclass
 class LoadedTrace:
-    """The parsed lines of a trace, with warnings about what could not be read."""
+    """The decoded lines of a trace (mhrc.core.records), with warnings about what could not be read.
+    `rows` are the same lines as JSON, for the page's data (mhrc.viewer.model)."""
 
     path: Path
-    rows: list[dict[str, Any]]
+    records: list[TraceLine]
     warnings: list[str] = field(default_factory=list)
     versions: set[int] = field(default_factory=set)
+    rows: list[dict[str, Any]] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.rows = [line.as_row() for line in self.records]
 
     def messages(self, kind: str) -> list[dict[str, Any]]:
-        """The `msg` of every put line whose message is of `kind`, in trace order."""
+        """The `msg` (JSON) of every line whose message is of `kind`, in trace order."""
         return [r["msg"] for r in self.rows if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == kind]
 
 
@@ -42,10 +47,6 @@ def resolve(path: str | Path) -> Path:
     return p
 
 
-def _is_trace_line(obj: Any) -> bool:
-    return isinstance(obj, dict) and isinstance(obj.get("key"), str) and "msg" in obj and obj["key"].startswith("mhrc/")
-
-
 def load_trace(path: str | Path) -> LoadedTrace:
     """Read `path` (a trace file or a run directory). Raises NotATrace or OSError."""
     p = resolve(path)
@@ -55,7 +56,7 @@ def load_trace(path: str | Path) -> LoadedTrace:
     text = raw.decode("utf-8", "replace")
     lines = text.split("\n")
     ends_with_newline = text.endswith("\n")
-    rows: list[dict[str, Any]] = []
+    records: list[TraceLine] = []
     bad: list[int] = []
     truncated = False
     nonblank = 0
@@ -65,18 +66,18 @@ def load_trace(path: str | Path) -> LoadedTrace:
         nonblank += 1
         last = i == len(lines) - 1 and not ends_with_newline
         try:
-            obj = json.loads(line)
-        except ValueError:
-            if last:
+            record = parse_line(line, i + 1)
+        except TraceLineError as exc:
+            if exc.code is LineError.NOT_JSON and last:
                 truncated = True
             else:
                 bad.append(i + 1)
             continue
-        if _is_trace_line(obj):
-            rows.append(obj)
+        if record.key.startswith("mhrc/"):
+            records.append(record)
         else:
             bad.append(i + 1)
-    if not rows:
+    if not records:
         if nonblank == 0:
             raise NotATrace(f"{p} is empty")
         raise NotATrace(f"{p} is not an mhrc trace: no line is a JSON object with a `key` under mhrc/ and a `msg`")
@@ -86,14 +87,14 @@ def load_trace(path: str | Path) -> LoadedTrace:
     if bad:
         shown = ", ".join(str(n) for n in bad[:5]) + (" ..." if len(bad) > 5 else "")
         warnings.append(f"{len(bad)} line(s) are not trace lines and are left out: line {shown}")
-    return from_rows(p, rows, warnings)
+    return from_records(p, records, warnings)
 
 
-def from_rows(path: Path, rows: list[dict[str, Any]], warnings: list[str] | None = None) -> LoadedTrace:
-    """A trace whose lines were parsed already (by `load_trace`, or by a caller that read the file
+def from_records(path: Path, records: list[TraceLine], warnings: list[str] | None = None) -> LoadedTrace:
+    """A trace whose lines were decoded already (by `load_trace`, or by a caller that read the file
     once for its own use, as `mhrc eval` does), with the warnings about what it holds."""
-    trace = LoadedTrace(path=path, rows=rows, warnings=list(warnings or ()))
-    for r in rows:
+    trace = LoadedTrace(path=path, records=records, warnings=list(warnings or ()))
+    for r in trace.rows:
         msg = r.get("msg")
         if isinstance(msg, dict) and isinstance(msg.get("v"), int):
             trace.versions.add(msg["v"])

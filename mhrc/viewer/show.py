@@ -6,12 +6,13 @@ from pathlib import Path
 from typing import Any
 
 from mhrc.core.diagnostics import diagnose
+from mhrc.core.records import Rows
 from mhrc.viewer.load import LoadedTrace, load_trace, resolve
 from mhrc.viewer.model import build_view
 from mhrc.viewer.page import render_page
 
 
-def diagnostics_for(rows: list[dict[str, Any]]) -> tuple[dict[str, Any] | None, str | None]:
+def diagnostics_for(rows: Rows) -> tuple[dict[str, Any] | None, str | None]:
     """mhrc.core.diagnostics' findings for the failure panel, or why there are none."""
     try:
         result = diagnose(rows).as_dict()
@@ -32,7 +33,7 @@ def write_report(path: str | Path, out: str | Path | None = None) -> tuple[Path,
     Raises load.NotATrace for a file that is no trace."""
     trace = load_trace(path)
     target = Path(out) if out is not None else default_out(path)
-    return target, render_report(trace, target, *diagnostics_for(trace.rows))
+    return target, render_report(trace, target, *diagnostics_for(trace.records))
 
 
 def render_report(trace: LoadedTrace, target: Path, diag: dict[str, Any] | None, note: str | None = None) -> list[str]:

@@ -33,10 +33,9 @@ import numpy as np
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import structlog
 from PIL import Image, ImageDraw, ImageFont
-from pydantic import ValidationError
 
-from mhrc.core.protocol import ACTION_ADAPTER, EpisodeStarted, ObjectPose, RobotPose, ScenarioEvent, Snapshot
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, EpisodeStarted, ObjectPose, RobotPose, ScenarioEvent, Snapshot
+from mhrc.core.records import read_records
 from mhrc.viewer.events import caption as event_caption
 from mhrc.viewer.events import captions_by_snapshot, scenario_label
 from mhrc.world.render import VIEWS, render
@@ -117,32 +116,27 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step], str | None]:
     started: EpisodeStarted | None = None
     scenario: str | None = None
     snapshots: list[Snapshot] = []
-    results: dict[str, dict[str, Any]] = {}
+    results: dict[str, ActionResult] = {}
     positions: list[tuple[int, int]] = []  # each snapshot's (line, tick)
     events: list[tuple[int, int, str]] = []  # each scenario event's (line, tick, caption)
     added: list[tuple[int, str, str]] = []  # each new target's (line, object, furniture)
-    for n, line in enumerate(read_trace(trace)):
-        msg = line.get("msg")
-        if line.get("kind") != "put" or not isinstance(msg, dict):
-            continue
-        kind = msg.get("kind")
-        try:
-            if kind == "episode_started" and started is None:
-                started = EpisodeStarted.model_validate(msg)
-            elif kind == "snapshot":
-                snapshots.append(Snapshot.model_validate(msg))
-                positions.append((n, snapshots[-1].tick))
-            elif kind == "scenario_event":
-                ev = ScenarioEvent.model_validate(msg)
-                scenario = scenario or scenario_label(ev.scenario, ev.sha256)
-                skipped = f" (skipped: {ev.skipped})" if not ev.applied and ev.skipped and ev.skipped not in ev.text else ""
-                events.append((n, ev.tick, event_caption(ev.tick, ev.text) + skipped))
-                if ev.applied and ev.event == "new_target" and ev.changed.get("object") and ev.changed.get("on"):
-                    added.append((n, ev.changed["object"], ev.changed["on"]))
-        except ValidationError as exc:
-            raise VideoError(f"{trace}: a {kind} event does not match this version of mhrc ({exc.errors()[0]['msg']})") from None
-        if kind == "action_result" and isinstance(msg.get("goal_id"), str):
-            results[msg["goal_id"]] = msg
+    for n, line in enumerate(read_records(trace)):
+        msg = line.msg
+        if line.problem is not None and isinstance(line.raw, dict) and line.raw.get("kind") in ("episode_started", "snapshot", "scenario_event"):
+            raise VideoError(f"{trace}: a {line.raw['kind']} event does not match this version of mhrc ({line.problem})")
+        if isinstance(msg, EpisodeStarted) and started is None:
+            started = msg
+        elif isinstance(msg, Snapshot):
+            snapshots.append(msg)
+            positions.append((n, msg.tick))
+        elif isinstance(msg, ScenarioEvent):
+            scenario = scenario or scenario_label(msg.scenario, msg.sha256)
+            skipped = f" (skipped: {msg.skipped})" if not msg.applied and msg.skipped and msg.skipped not in msg.text else ""
+            events.append((n, msg.tick, event_caption(msg.tick, msg.text) + skipped))
+            if msg.applied and msg.event == "new_target" and msg.changed.get("object") and msg.changed.get("on"):
+                added.append((n, msg.changed["object"], msg.changed["on"]))
+        elif isinstance(msg, ActionResult):
+            results[msg.goal_id] = msg
     if started is None:
         raise VideoError(f"{trace}: no episode_started event; is it an mhrc trace (runs/<run>/trace.jsonl)?")
     if not snapshots:
@@ -155,9 +149,9 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step], str | None]:
     first = [bisect_right([line for line, _ in positions], line) for line, _, _ in added]
     for k, (snap, said) in enumerate(zip(snapshots, shown)):
         done = [results[g] for g in snap.goals if g in results]
-        by_robot = {r["robot"]: r for r in done}
+        by_robot = {r.robot: r for r in done}
         captions = [_caption(robot, by_robot.get(robot)) for robot in robots]
-        ended = [float(r["ended"]) for r in done if isinstance(r.get("ended"), (int, float))]
+        ended = [r.ended for r in done if r.ended is not None]
         new = tuple((obj, on) for (_, obj, on), at in zip(added, first) if at == k)
         steps.append(Step(snap, captions, max(ended) if ended else None, tuple(said), new))
     return started, steps, scenario
@@ -171,18 +165,12 @@ def _spawns(steps: list[Step]) -> Scenario | None:
     return Scenario(name="trace", sha256="", events=list(events)) if events else None
 
 
-def _caption(robot: str, result: dict[str, Any] | None) -> Caption:
+def _caption(robot: str, result: ActionResult | None) -> Caption:
     if result is None:
         return Caption(robot, "-", None)
-    action = result.get("action") or {}
-    try:
-        call = ACTION_ADAPTER.validate_python(action).call()
-    except ValidationError:
-        call = str(action.get("skill", "?"))
-    outcome = result.get("outcome") or {}
-    ok = bool(outcome.get("succeeded"))
-    feedback = " ".join(str(outcome.get("feedback", "")).split())
-    return Caption(robot, f"{call} -> {'ok' if ok else 'FAILED'}: {feedback}", ok)
+    ok = result.outcome.succeeded
+    feedback = " ".join(result.outcome.feedback.split())
+    return Caption(robot, f"{result.action.call()} -> {'ok' if ok else 'FAILED'}: {feedback}", ok)
 
 
 # --------------------------------------------------------------------------- poses between snapshots

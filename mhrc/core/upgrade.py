@@ -1,0 +1,79 @@
+"""Traces written by older mhrc versions, brought to today's shape as they are read: the one place
+that knows what changed (`upgrade`), so no reader of a trace guesses from missing fields or texts.
+
+The line format (`t`, `key`, `kind`, `msg`) never changed, and no field of a message was renamed or
+removed (every field added later has a default). What older traces lack, and what each is read as:
+
+- an `action_ack` rejected without a `code` (before reject codes, issue 24): the code its reason's
+  text stands for (`legacy_reject_code`), None for a reason no code covers;
+- a `junk` line without a `code` (the recorder's counts before reject codes): the same, read from
+  its reason (`rejected: ` and the ack's reason), and without an `excerpt`: none;
+- an `episode_started` without `fidelity` (before fidelity was recorded): UNRECORDED, not the
+  model's default `paper`;
+- an `episode_started` without `noise` (before the motion noise was recorded): the calibration, or
+  none under the exact_motion aid (mhrc.core.fidelity.recorded_noise).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mhrc.core.fidelity import recorded_noise
+from mhrc.core.protocol import EPISODE_OVER, RejectCode
+
+UNRECORDED = "unrecorded"  # the fidelity of a trace written before episodes recorded it
+JUNK_REJECTED = "rejected: "  # how the recorder's junk lines start the reason of a counted rejection
+
+
+def legacy_reject_code(reason: str) -> RejectCode | None:
+    """The code of a rejection recorded before acks carried one, from the world's sentence of that
+    time (world/admission.py), or None where no code says it."""
+    r = reason.lower()
+    if reason == EPISODE_OVER:
+        return RejectCode.EPISODE_OVER
+    if r.startswith("malformed"):
+        return RejectCode.MALFORMED
+    if "the request is for tick" in r:
+        return RejectCode.STALE_TICK
+    if "already submitted" in r:
+        return RejectCode.TICK_TAKEN
+    if "still busy" in r:
+        return RejectCode.BUSY
+    if "'s turn" in r:
+        return RejectCode.NOT_YOUR_TURN
+    if "not attached" in r:
+        return RejectCode.NOT_ATTACHED
+    if "attached to another agent" in r:
+        return RejectCode.OTHER_AGENT
+    if "sent on the key of" in r:
+        return RejectCode.WRONG_KEY
+    if "there is no robot" in r:
+        return RejectCode.NO_SUCH_ROBOT
+    return None
+
+
+def _code(value: Any, reason: str) -> str | None:
+    """A recorded code if it is one of today's, else the one the reason's text stands for."""
+    if isinstance(value, str) and value in RejectCode._value2member_map_:
+        return value
+    legacy = legacy_reject_code(reason)
+    return legacy.value if legacy is not None else None
+
+
+def upgrade(kind: str, msg: Any) -> Any:
+    """A line's `msg` (its JSON) in today's shape; `kind` is the line's. A new dict where something
+    changed, the same object otherwise."""
+    if not isinstance(msg, dict):
+        return msg
+    if kind == "junk":
+        if msg.get("code") is None or "excerpt" not in msg:
+            return {"excerpt": None, **msg, "code": _code(msg.get("code"), str(msg.get("reason", "")).removeprefix(JUNK_REJECTED))}
+        return msg
+    if kind != "put":
+        return msg
+    what = msg.get("kind")
+    if what == "action_ack" and msg.get("accepted") is False and msg.get("code") is None:
+        return {**msg, "code": _code(None, str(msg.get("reason", "")))}
+    if what == "episode_started" and ("fidelity" not in msg or not isinstance(msg.get("noise"), dict)):
+        return {**msg, "fidelity": msg.get("fidelity") or UNRECORDED, "noise": recorded_noise(msg).model_dump()}
+    return msg
