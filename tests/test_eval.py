@@ -189,7 +189,11 @@ def test_the_default_grid_is_the_papers_and_repeats_multiply_it_with_new_seeds()
 
 
 def _put(kind: str, **msg: Any) -> dict[str, Any]:
-    return {"t": 0.0, "key": f"mhrc/r/{kind}", "kind": "put", "msg": {"v": 1, "kind": kind, **msg}}
+    """A hand-built trace line, with the protocol's required fields the test leaves out filled in
+    (test_metrics' helper: the trace reader decodes every message)."""
+    from test_metrics import _put as put
+
+    return put(kind, **msg)
 
 
 def test_llm_failures_and_validity_are_counted_from_the_trace() -> None:
