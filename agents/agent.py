@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import socket
 import secrets
+import socket
 import uuid
 from typing import TYPE_CHECKING
 
@@ -46,10 +46,14 @@ if TYPE_CHECKING:
 
 log = structlog.get_logger("mhrc.agent")
 
-RESYNC_BACKOFF = 0.5  # s: the first wait before attaching again for a tick whose action is already taken; doubles each time
+RESYNC_BACKOFF = (
+    0.5  # s: the first wait before attaching again for a tick whose action is already taken; doubles each time
+)
 RESYNC_BACKOFF_MAX = 8.0  # s
 EXPIRY_SLACK = 10.0  # s: a secured link that closes this close to the run's certificates' end closed because of it
-GENERATING_EVERY = 5.0  # s: a model call longer than this says how far it got (agent/<robot>/generating), then again every as long
+GENERATING_EVERY = (
+    5.0  # s: a model call longer than this says how far it got (agent/<robot>/generating), then again every as long
+)
 
 
 class AgentError(RuntimeError):
@@ -112,7 +116,9 @@ class RobotAgent:
         self.keys = Keys(run)
         self.keys.alive_robot(robot)  # validates the robot id
         self.agent_id = agent_id or f"{robot}-{uuid.uuid4().hex[:8]}"
-        self._session = secrets.token_hex(16)  # sent to the world alone, with each attach: a copy of the public agent id cannot re-attach
+        self._session = secrets.token_hex(
+            16
+        )  # sent to the world alone, with each attach: a copy of the public agent id cannot re-attach
         self.attach_timeout = attach_timeout
         self.ack_timeout = ack_timeout
         self.result_timeout = result_timeout
@@ -224,15 +230,21 @@ class RobotAgent:
         listens is gone: say so now. Otherwise this agent's own link was cut (it was frozen, the
         network blinked) and the world detached it: attach again and go on."""
         if await asyncio.to_thread(_listening, self.endpoint) is False:  # a connect of up to 1 s: off the loop
-            raise WorldGone(f"the world disappeared while {self.robot} awaited {what}: nothing listens at {self.endpoint} any more")
+            raise WorldGone(
+                f"the world disappeared while {self.robot} awaited {what}: nothing listens at {self.endpoint} any more"
+            )
         await self._closed_for_good(what)
         self._log.warning("lost the world's token, but the world may be there: attaching again", awaited=what)
         self._world_gone.clear()
         try:
             return await self._attach(again=True)
         except WorldGone:
-            await self._closed_for_good(what)  # a certificate that expired in the meantime (the link may close a moment before)
-            raise WorldGone(f"the world disappeared while {self.robot} awaited {what} and did not answer an attach since") from None
+            await self._closed_for_good(
+                what
+            )  # a certificate that expired in the meantime (the link may close a moment before)
+            raise WorldGone(
+                f"the world disappeared while {self.robot} awaited {what} and did not answer an attach since"
+            ) from None
 
     async def _closed_for_good(self, what: str) -> None:
         """WorldGone naming the cause when a secured link closed for a reason no new attach
@@ -240,13 +252,18 @@ class RobotAgent:
         if self.security is not None and self.endpoint is not None:
             import datetime
 
-            from mhrc.core.security import why_refused, expiry
+            from mhrc.core.security import expiry, why_refused
 
             why = await asyncio.to_thread(why_refused, self.endpoint, self.security)
             if why.final:
                 raise WorldGone(f"the link to the world closed while {self.robot} awaited {what}: {why}")
-            ends = expiry(self.security)  # the router may close links a moment before a handshake sees the certificate expired
-            if ends is not None and (ends - datetime.datetime.now(datetime.timezone.utc)).total_seconds() < EXPIRY_SLACK:
+            ends = expiry(
+                self.security
+            )  # the router may close links a moment before a handshake sees the certificate expired
+            if (
+                ends is not None
+                and (ends - datetime.datetime.now(datetime.timezone.utc)).total_seconds() < EXPIRY_SLACK
+            ):
                 raise WorldGone(
                     f"the link to the world closed while {self.robot} awaited {what}: the run's certificate expired "
                     f"({ends:%Y-%m-%d %H:%M:%S} UTC): issue new credentials (mhrc credentials, or a new mhrc up)"
@@ -268,8 +285,9 @@ class RobotAgent:
             if delay == RESYNC_BACKOFF:
                 self._log.warning(
                     "this robot's action of the tick is already taken (its own earlier request, or another agent "
-                    "process driving it): waiting for the tick to close", tick=tick,
-                )  # fmt: skip
+                    "process driving it): waiting for the tick to close",
+                    tick=tick,
+                )
             clock = asyncio.ensure_future(self._clock.wait())
             done = asyncio.ensure_future(self._done.wait())
             try:
@@ -295,7 +313,9 @@ class RobotAgent:
         self._via_turn = False
         try:
             while True:
-                replies = await self.bus.get(f"{self.keys.attach(self.robot)}?session={self._session}", request, timeout=2.0)
+                replies = await self.bus.get(
+                    f"{self.keys.attach(self.robot)}?session={self._session}", request, timeout=2.0
+                )
                 if replies:
                     try:
                         reply = decode(replies[0], AttachReply)
@@ -313,7 +333,9 @@ class RobotAgent:
                         raise AttachRejected(f"the world refused {self.robot}: {reply.reason}")
                     self._log.info("attached", tick=reply.tick)
                     return reply.observation
-                if not again and self._world_gone.is_set():  # its token went while this attach went unanswered: probe, attach again
+                if (
+                    not again and self._world_gone.is_set()
+                ):  # its token went while this attach went unanswered: probe, attach again
                     return await self._reattach("its attach reply")
                 if loop.time() >= deadline:
                     raise WorldGone(f"no world answered for run {self.keys.run!r} within {self.attach_timeout:.0f} s")
@@ -344,13 +366,19 @@ class RobotAgent:
             if ack is None:
                 return None
             if not ack.accepted:
-                if ack.code is RejectCode.EPISODE_OVER:  # the world ended as this robot planned; its event is on the way
+                if (
+                    ack.code is RejectCode.EPISODE_OVER
+                ):  # the world ended as this robot planned; its event is on the way
                     self._over = True
                     with contextlib.suppress(TimeoutError):
                         await asyncio.wait_for(self._done.wait(), self.final_result_grace)
                     return None
-                if ack.code in OUT_OF_STEP and not self._done.is_set():  # planned on a tick that is not (or no longer) its own
-                    self._log.info("request out of step, resynchronizing", reason=ack.reason, code=getattr(ack.code, "value", None))
+                if (
+                    ack.code in OUT_OF_STEP and not self._done.is_set()
+                ):  # planned on a tick that is not (or no longer) its own
+                    self._log.info(
+                        "request out of step, resynchronizing", reason=ack.reason, code=getattr(ack.code, "value", None)
+                    )
                     return None
                 raise AgentError(f"the world rejected {decision.action.call()}: {ack.reason}")
             return await self._await(req.goal_id, res_fut, self.result_timeout, "result")
@@ -373,7 +401,9 @@ class RobotAgent:
         done_wait = asyncio.ensure_future(self._done.wait())
         gone_wait = asyncio.ensure_future(self._world_gone.wait())
         try:
-            finished, _ = await asyncio.wait({fut, done_wait, gone_wait}, timeout=timeout, return_when=asyncio.FIRST_COMPLETED)
+            finished, _ = await asyncio.wait(
+                {fut, done_wait, gone_wait}, timeout=timeout, return_when=asyncio.FIRST_COMPLETED
+            )
         finally:
             done_wait.cancel()
             gone_wait.cancel()
@@ -411,7 +441,13 @@ class RobotAgent:
             await asyncio.sleep(GENERATING_EVERY)
             if progress.attempt == 0:
                 continue  # no model call (a heuristic or scripted policy), or none under way yet
-            msg = Generating(robot=self.robot, tick=tick, elapsed=round(progress.elapsed(), 1), tokens=progress.tokens, attempt=progress.attempt)
+            msg = Generating(
+                robot=self.robot,
+                tick=tick,
+                elapsed=round(progress.elapsed(), 1),
+                tokens=progress.tokens,
+                attempt=progress.attempt,
+            )
             self.bus.put(self.keys.generating(self.robot), msg)
 
     def _publish_thought(self, obs: Observation, d: Decision) -> None:

@@ -60,9 +60,21 @@ from .policy import Decision
 STRETCH = 0.1  # m beyond Bob's (conservative) reach he still tries for a target brought to his table
 
 __all__ = [
-    "BREAKDOWN_RE", "EXPLORE_RE", "HANDOVER", "REPORT_RE", "REQUEST_RE", "ROLES", "UNREACHABLE_RE",
-    "AliceHeuristic", "BobHeuristic", "DavidHeuristic", "breakdown_sentence", "corrective_move", "goal_of", "heuristic_policy",
-]  # fmt: skip
+    "BREAKDOWN_RE",
+    "EXPLORE_RE",
+    "HANDOVER",
+    "REPORT_RE",
+    "REQUEST_RE",
+    "ROLES",
+    "UNREACHABLE_RE",
+    "AliceHeuristic",
+    "BobHeuristic",
+    "DavidHeuristic",
+    "breakdown_sentence",
+    "corrective_move",
+    "goal_of",
+    "heuristic_policy",
+]
 
 
 # --------------------------------------------------------------------------- Bob
@@ -90,7 +102,9 @@ class BobHeuristic(_RoleBase):
             self.pick_failures[name] = self.pick_failures.get(name, 0) + 1
         holding = obs.status.holding
         if holding:
-            return self._decision(Place(obj=holding, location=goal_of(obs, holding) if holding in obs.targets else HANDOVER))
+            return self._decision(
+                Place(obj=holding, location=goal_of(obs, holding) if holding in obs.targets else HANDOVER)
+            )
         done = {o.name for o in obs.objects if o.name in obs.targets and o.on == goal_of(obs, o.name)}
         todo = [t for t in obs.targets if t not in done]
         self._notice_gone(obs, todo)
@@ -105,7 +119,9 @@ class BobHeuristic(_RoleBase):
             for t in ask:
                 self.pick_failures.pop(t, None)
             return self._decision(
-                Communicate(to="alice", content=f"Alice, please bring these to table_0 within my reach: {', '.join(ask)}.")
+                Communicate(
+                    to="alice", content=f"Alice, please bring these to table_0 within my reach: {', '.join(ask)}."
+                )
             )
         return self._decision(Wait())
 
@@ -125,7 +141,12 @@ class BobHeuristic(_RoleBase):
         table leaves it (seen: a seventh target 0.629 m away, reach 0.62): worth a pick rather
         than waiting for ever."""
         o = _object(obs, name)
-        return o is not None and o.on == HANDOVER and name not in (self.at_start or set()) and _within_reach(obs, o, STRETCH)
+        return (
+            o is not None
+            and o.on == HANDOVER
+            and name not in (self.at_start or set())
+            and _within_reach(obs, o, STRETCH)
+        )
 
     @staticmethod
     def _in_reach(obs: Observation, name: str) -> bool:

@@ -8,7 +8,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import Communicate, FurnitureView, Move, Navigate, Observation, ObjectView, Open, OutcomeCode, Pick, Place, Wait
+from mhrc.core.protocol import (
+    Communicate,
+    FurnitureView,
+    Move,
+    Navigate,
+    ObjectView,
+    Observation,
+    Open,
+    OutcomeCode,
+    Pick,
+    Place,
+    Wait,
+)
 
 from .heuristic_base import (
     BREAKDOWN_RE,
@@ -130,7 +142,11 @@ class AliceHeuristic(_RoleBase):
             self.given_up.add(name)
 
     def _open_surfaces(self, obs: Observation) -> list[str]:
-        return [f.name for f in obs.furniture if not f.openable and f.stand_poses and f.name != HANDOVER and f.place_pose is not None]
+        return [
+            f.name
+            for f in obs.furniture
+            if not f.openable and f.stand_poses and f.name != HANDOVER and f.place_pose is not None
+        ]
 
     def _david_works(self, obs: Observation) -> bool:
         """David is attached and not broken down (as far as his messages say)."""
@@ -175,7 +191,12 @@ class AliceHeuristic(_RoleBase):
         if f.openable and not f.is_open:
             return self._open(obs, f)  # still closed, or closed again since she saw inside: open it (again)
         last = self.last
-        if last is not None and isinstance(last.action, Pick) and last.action.obj == o.name and last.outcome.code == OutcomeCode.TOO_FAR:
+        if (
+            last is not None
+            and isinstance(last.action, Pick)
+            and last.action.obj == o.name
+            and last.outcome.code == OutcomeCode.TOO_FAR
+        ):
             d = last.outcome.details
             if "dx" in d and "dy" in d:  # the solved_move aid
                 return self._decision(Move(dx=float(d["dx"]), dy=float(d["dy"])))
@@ -186,9 +207,13 @@ class AliceHeuristic(_RoleBase):
         if last is not None and isinstance(last.action, Pick) and last.action.obj == o.name and failed(last):
             # after a failure that moving cannot fix, the next nearest stand pose to the object (not the next by
             # number: that can be the table's far side)
-            order = sorted(range(len(f.stand_poses)), key=lambda i: _dist2((f.stand_poses[i].x, f.stand_poses[i].y), o.position))
+            order = sorted(
+                range(len(f.stand_poses)), key=lambda i: _dist2((f.stand_poses[i].x, f.stand_poses[i].y), o.position)
+            )
             tried = self.pose_choice.get(o.name, order[0]) % len(f.stand_poses)
-            if not _at_stand_pose(obs, f, tried, tol=ON_POSE):  # she had stopped off target there: that pose again, exactly
+            if not _at_stand_pose(
+                obs, f, tried, tol=ON_POSE
+            ):  # she had stopped off target there: that pose again, exactly
                 return self._decision(Navigate(target=f.name, stand_pose=tried))
             self.pose_choice[o.name] = order[(order.index(tried) + 1) % len(order)]
         idx = self.pose_choice.get(o.name, _nearest_stand_pose(f, o.position)) % len(f.stand_poses)
@@ -217,7 +242,9 @@ class AliceHeuristic(_RoleBase):
         before the containers if it moved or joined the task late (what moves or appears while
         the team works lands on a surface)."""
         here = obs.status.base
-        containers = [f for f in obs.furniture if f.openable and not f.is_open and f.name not in self.explored and f.stand_poses]
+        containers = [
+            f for f in obs.furniture if f.openable and not f.is_open and f.name not in self.explored and f.stand_poses
+        ]
         if not self.needed and not containers:
             return None
         moved = set(self._moved(obs))
@@ -234,7 +261,9 @@ class AliceHeuristic(_RoleBase):
                     self.searched_for |= moved
                     return self._search_round(obs)
         todo = [f for f in obs.furniture if f.name in names] if names and (moved or not containers) else containers
-        if todo is containers and not self._david_works(obs):  # David is down: his surfaces count as much as the containers
+        if todo is containers and not self._david_works(
+            obs
+        ):  # David is down: his surfaces count as much as the containers
             todo = containers + [f for f in obs.furniture if f.name in self.david_todo and f.name not in self.explored]
         if here is not None:
             todo.sort(key=lambda f: _dist2(f.position, (here.x, here.y)))

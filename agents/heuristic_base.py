@@ -12,7 +12,16 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import Action, ActionResult, Communicate, FurnitureView, Observation, ObjectView, OutcomeCode, Wait
+from mhrc.core.protocol import (
+    Action,
+    ActionResult,
+    Communicate,
+    FurnitureView,
+    ObjectView,
+    Observation,
+    OutcomeCode,
+    Wait,
+)
 
 from .policy import Decision
 
@@ -133,7 +142,9 @@ class _RoleBase:
         self.last = result
         if result.outcome.code == OutcomeCode.BROKEN_DOWN:
             ticks = result.outcome.details.get("ticks")
-            until = result.tick + (int(ticks) if isinstance(ticks, (int, float)) else 1)  # without the count: try again next tick
+            until = result.tick + (
+                int(ticks) if isinstance(ticks, (int, float)) else 1
+            )  # without the count: try again next tick
             if self.broken_until <= result.tick:  # a new breakdown: everyone is to hear of it
                 self.to_tell = list(ORDER)
             self.broken_until = max(self.broken_until, until)

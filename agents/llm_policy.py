@@ -56,7 +56,16 @@ from mhrc.core.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
 
 from . import observation as describe
 from . import structured as json_mode
-from .llm.completion import DEFAULT_TEMPERATURE, LLMClient, LLMError, LLMFatalError, LLMSilent, LLMTimeout, Messages, prompt_text
+from .llm.completion import (
+    DEFAULT_TEMPERATURE,
+    LLMClient,
+    LLMError,
+    LLMFatalError,
+    LLMSilent,
+    LLMTimeout,
+    Messages,
+    prompt_text,
+)
 from .memory import HISTORIES, TITLES, Memory
 from .parse import SIGNATURES, ReplyFormatError, parse_command
 from .policy import Decision
@@ -74,7 +83,9 @@ MEANINGS = {
     "wait": "do nothing this step",
 }
 ROLE_MEANINGS = {  # the appendix words some skills differently for Bob and David
-    "bob": {"communicate": "send content to that robot; when objects are missing and you need help, sum up how things stand in it"},
+    "bob": {
+        "communicate": "send content to that robot; when objects are missing and you need help, sum up how things stand in it"
+    },
     "david": {
         "navigate": "go to the stand pose with that id of that piece of furniture, both taken from your scene graph",
         "communicate": "send content to that robot; when you discover new objects, send one too, summing up what you did and how things stand",
@@ -90,12 +101,19 @@ SMALL_CONTEXT_CAP = 12_000  # ~3,000 tokens: a --history-cap that fits a 4k-cont
 UNREADABLE = "Your command could not be read, so you waited."  # the paper's: that it failed, no format advice
 # with the feedback_advice aid: the reason and how to answer
 FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. Give your command on one line: Command: skill(arguments)."
-JSON_FORMAT_ERROR = "Your reply could not be executed ({reason}), so you waited. Answer with one JSON object: analysis, then command."
+JSON_FORMAT_ERROR = (
+    "Your reply could not be executed ({reason}), so you waited. Answer with one JSON object: analysis, then command."
+)
 CUT_REPLY = "your reply was cut at the token limit before it gave a command; think more briefly"
 # The appendix's first feedback of the robot that finishes the task: before any action, talk to Alice.
-FIRST_STEP = {"bob": "This is the first step of the task: do nothing else now; communicate with Alice and share what you know so far."}
+FIRST_STEP = {
+    "bob": "This is the first step of the task: do nothing else now; communicate with Alice and share what you know so far."
+}
 MODEL_DOWN = "Your planner could not reach its model ({reason}), so you waited."
-UNREADABLE_TAG, MODEL_DOWN_TAG = "unreadable", "model down"  # the feedback entries' tags (what a history summary counts)
+UNREADABLE_TAG, MODEL_DOWN_TAG = (
+    "unreadable",
+    "model down",
+)  # the feedback entries' tags (what a history summary counts)
 FEEDBACK_CHARS = 300  # what one error may put into the next prompt
 
 
@@ -218,7 +236,9 @@ class LLMPolicy:
         self.system_t = load_template(robot, "system", prompts_dir)
         self.user_t = load_template(robot, "user", prompts_dir)
         self.hints = load_hints(robot, prompts_dir) if prompt_hints else ""
-        if isinstance(client, ReplayClient):  # a trace recorded with other prompts is refused now, not at its first step
+        if isinstance(
+            client, ReplayClient
+        ):  # a trace recorded with other prompts is refused now, not at its first step
             client.check_templates({f"{robot}_system.txt": self.system_t, f"{robot}_user.txt": self.user_t})
         self._pending: tuple[int, str, str] | None = None  # (tick, why this step's reply gave no action, its tag)
         self._log = log.bind(robot=robot, model=client.model)
@@ -281,7 +301,10 @@ class LLMPolicy:
         verb = "is" if len(self.absent) == 1 else "are"
         note = f"{names} {verb} not part of the team in this episode."
         if self.prompt_hints:  # advice the paper's ablation does not give
-            note += f" Nobody else will do {names}'s part: ignore what this prompt says about working with them and take over their part yourself where you can."
+            note += (
+                f" Nobody else will do {names}'s part: "
+                "ignore what this prompt says about working with them and take over their part yourself where you can."
+            )
         return note
 
     # ------------------------------------------------------------------ deciding
@@ -299,14 +322,18 @@ class LLMPolicy:
         except LLMFatalError:
             raise
         except (LLMError, TimeoutError) as exc:
-            silent = isinstance(exc, LLMSilent) or getattr(self.client, "answered", True) is False  # not even a status line, ever
+            silent = (
+                isinstance(exc, LLMSilent) or getattr(self.client, "answered", True) is False
+            )  # not even a status line, ever
             if isinstance(exc, TimeoutError):
                 exc = LLMTimeout(f"no answer within the step deadline of {self.step_deadline:g} s")
             if not self._answered and (silent or not isinstance(exc, LLMTimeout)):
                 raise LLMUnreachable(f"{self.robot}'s model never answered during its first step: {exc}") from None
             self._log.warning("model unavailable, waiting", tick=obs.tick, error=str(exc))
             self._pending = (obs.tick, MODEL_DOWN.format(reason=_short(str(exc))), MODEL_DOWN_TAG)
-            return Decision(action=Wait(), prompt=prompt, parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000), schema_hash=digest)
+            return Decision(
+                action=Wait(), prompt=prompt, parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000), schema_hash=digest
+            )
         self._answered = True
         try:
             action = json_mode.parse_structured(c.text)[0] if self.structured else parse_command(c.text)
@@ -316,11 +343,25 @@ class LLMPolicy:
             self._log.info("unparseable reply, waiting", tick=obs.tick, reason=reason)
             action, error = Wait(), reason
             advice = JSON_FORMAT_ERROR if self.structured else FORMAT_ERROR
-            self._pending = (obs.tick, advice.format(reason=reason) if self.feedback_advice else UNREADABLE, UNREADABLE_TAG)
+            self._pending = (
+                obs.tick,
+                advice.format(reason=reason) if self.feedback_advice else UNREADABLE,
+                UNREADABLE_TAG,
+            )
         return Decision(
-            action, prompt, c.text, error, c.prompt_tokens, c.completion_tokens, c.latency,
-            reasoning=c.reasoning, reasoning_tokens=c.reasoning_tokens, finish_reason=c.finish_reason, schema_hash=digest, ttft=c.ttft,
-        )  # fmt: skip
+            action,
+            prompt,
+            c.text,
+            error,
+            c.prompt_tokens,
+            c.completion_tokens,
+            c.latency,
+            reasoning=c.reasoning,
+            reasoning_tokens=c.reasoning_tokens,
+            finish_reason=c.finish_reason,
+            schema_hash=digest,
+            ttft=c.ttft,
+        )
 
     def _flush_pending(self) -> None:
         """A format or model error whose result never came back still becomes feedback."""
@@ -341,4 +382,6 @@ class LLMPolicy:
         if ok and result.action.skill == "wait":
             return  # nothing learned; Bob's task status is in his observation
         verdict = "succeeded" if ok else "FAILED"
-        self.memory.add("feedback", result.tick, f"{call} {verdict}: {result.outcome.feedback}", tag="succeeded" if ok else "failed")
+        self.memory.add(
+            "feedback", result.tick, f"{call} {verdict}: {result.outcome.feedback}", tag="succeeded" if ok else "failed"
+        )

@@ -64,7 +64,9 @@ class ReplayClient:
         self.trace = Path(trace)
         if thoughts is None:
             suffix = THOUGHT_SUFFIX.format(robot=robot)
-            thoughts = [line for line in read_records(trace) if line.key.endswith(suffix) and isinstance(line.msg, Thought)]
+            thoughts = [
+                line for line in read_records(trace) if line.key.endswith(suffix) and isinstance(line.msg, Thought)
+            ]
         self._lines = thoughts
         self._thoughts = [line.msg for line in thoughts if isinstance(line.msg, Thought)]
         if not self._thoughts or self._thoughts[0].prompt is None:
@@ -99,7 +101,9 @@ class ReplayClient:
         self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
     ) -> Completion:
         if self.calls >= len(self._thoughts):
-            raise ReplayMismatch(f"{self.robot} asked for call {self.calls + 1}; {self.trace} holds {len(self._thoughts)}")
+            raise ReplayMismatch(
+                f"{self.robot} asked for call {self.calls + 1}; {self.trace} holds {len(self._thoughts)}"
+            )
         line, t = self._lines[self.calls], self._thoughts[self.calls]
         self.calls += 1
         prompt = prompt_text(messages)
@@ -110,11 +114,18 @@ class ReplayClient:
             )
         if t.reply is None:  # the model stayed down in the recorded run: fail the same way
             reason = t.parse_error or "recorded model failure"
-            raise LLMError(reason.removeprefix(LLM_ERROR_PREFIX) if line.failure is ReplyFailure.MODEL_UNREACHABLE else reason)
+            raise LLMError(
+                reason.removeprefix(LLM_ERROR_PREFIX) if line.failure is ReplyFailure.MODEL_UNREACHABLE else reason
+            )
         return Completion(
-            t.reply, t.prompt_tokens, t.completion_tokens, t.latency,
-            finish_reason=t.finish_reason, reasoning=t.reasoning, reasoning_tokens=t.reasoning_tokens,
-        )  # fmt: skip
+            t.reply,
+            t.prompt_tokens,
+            t.completion_tokens,
+            t.latency,
+            finish_reason=t.finish_reason,
+            reasoning=t.reasoning,
+            reasoning_tokens=t.reasoning_tokens,
+        )
 
 
 def replay_clients(trace: str | Path) -> dict[str, ReplayClient]:
@@ -125,7 +136,9 @@ def replay_clients(trace: str | Path) -> dict[str, ReplayClient]:
         if len(parts) == 4 and parts[1] == "agent" and parts[3] == "thought" and isinstance(line.msg, Thought):
             by_robot[parts[2]].append(line)
     clients = {
-        r: ReplayClient(trace, r, thoughts=ts) for r, ts in by_robot.items() if isinstance(ts[0].msg, Thought) and ts[0].msg.prompt is not None
+        r: ReplayClient(trace, r, thoughts=ts)
+        for r, ts in by_robot.items()
+        if isinstance(ts[0].msg, Thought) and ts[0].msg.prompt is not None
     }
     if not clients:
         raise ReplayMismatch(f"{trace} holds no LLM thoughts: only episodes run with an LLM policy can be replayed")

@@ -13,8 +13,8 @@ from typing import Any
 
 from mhrc.core.protocol import ActionResult
 
-from .llm_policy import UNREADABLE_TAG, LLMPolicy
 from .llm.scripted_client import ScriptedClient
+from .llm_policy import UNREADABLE_TAG, LLMPolicy
 
 
 class ScriptedLLMPolicy(LLMPolicy):

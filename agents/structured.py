@@ -67,12 +67,17 @@ def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, d
     known = [o.name for o in obs.objects] + ([obs.status.holding] if obs.status.holding else [])
     most = max((len(f.stand_poses) for f in stand), default=0) - 1
     return {
-        "navigate": {"furniture": _names(f.name for f in stand), "stand_pose": _number(0, most, "integer")} if stand else None,
+        "navigate": {"furniture": _names(f.name for f in stand), "stand_pose": _number(0, most, "integer")}
+        if stand
+        else None,
         "move": {"dx": _number(-MAX_STEP, MAX_STEP), "dy": _number(-MAX_STEP, MAX_STEP)},
         "open": {"furniture": _names(openable)} if openable else None,
         "pick": {"object": _names(free)} if free else None,
         "place": {"object": _names(known), "location": _names(places)} if known and places else None,
-        "communicate": {"content": {"type": "string", "minLength": 1, "maxLength": MAX_MESSAGE}, "to": _names(recipients)}
+        "communicate": {
+            "content": {"type": "string", "minLength": 1, "maxLength": MAX_MESSAGE},
+            "to": _names(recipients),
+        }
         if recipients
         else None,
         "wait": {},
@@ -95,7 +100,9 @@ def analysis_bound(max_tokens: int | None) -> int:
     return max(0, min(MAX_ANALYSIS, max_tokens - COMMAND_TOKENS))
 
 
-def decision_schema(obs: Observation, teammates: Iterable[str] | None = None, *, max_analysis: int = MAX_ANALYSIS) -> dict[str, Any]:
+def decision_schema(
+    obs: Observation, teammates: Iterable[str] | None = None, *, max_analysis: int = MAX_ANALYSIS
+) -> dict[str, Any]:
     """The JSON Schema of one decision of `obs.robot`: its analysis (at most `max_analysis`
     characters), then one command among its own skills with names from its own scene graph.
     `teammates` are the robots it may message (by default every teammate in the observation).
@@ -128,18 +135,27 @@ def response_format(schema: dict[str, Any], provider: str) -> dict[str, Any]:
     """The request-body fields that ask `provider` to enforce `schema` (Ollama takes the bare schema)."""
     if provider == "ollama":
         return {"format": schema}
-    return {"response_format": {"type": "json_schema", "json_schema": {"name": "decision", "strict": True, "schema": schema}}}
+    return {
+        "response_format": {
+            "type": "json_schema",
+            "json_schema": {"name": "decision", "strict": True, "schema": schema},
+        }
+    }
 
 
 def _json_object(text: str) -> dict[str, Any]:
     """The outermost {...} of a reply, so code fences and text around it do not matter."""
     start, end = text.find("{"), text.rfind("}")
     if start < 0 or end < start:
-        raise ReplyFormatError('no JSON object found: answer with {"analysis": "...", "command": {"skill": "...", ...}}')
+        raise ReplyFormatError(
+            'no JSON object found: answer with {"analysis": "...", "command": {"skill": "...", ...}}'
+        )
     try:
         value = json.loads(text[start : end + 1])
     except json.JSONDecodeError as exc:
-        raise ReplyFormatError(f"the reply is not valid JSON ({exc.msg} at character {exc.pos}): answer with one JSON object") from None
+        raise ReplyFormatError(
+            f"the reply is not valid JSON ({exc.msg} at character {exc.pos}): answer with one JSON object"
+        ) from None
     if not isinstance(value, dict):
         raise ReplyFormatError("the reply must be one JSON object")
     return value
@@ -165,7 +181,9 @@ def parse_structured(text: str) -> tuple[Action, str]:
     missing, extra = [n for n in params if n not in given], sorted(given - set(params))
     if missing or extra:
         takes = ", ".join(params) or "no arguments"
-        problems = ([f"missing {', '.join(missing)}"] if missing else []) + ([f"unexpected {', '.join(extra)}"] if extra else [])
+        problems = ([f"missing {', '.join(missing)}"] if missing else []) + (
+            [f"unexpected {', '.join(extra)}"] if extra else []
+        )
         raise ReplyFormatError(f"{skill} takes {takes}: {'; '.join(problems)}")
     fields: dict[str, Any] = {"skill": skill} | {field: command[name] for name, field in params.items()}
     if skill == "communicate" and isinstance(fields["to"], str):

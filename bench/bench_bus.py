@@ -18,19 +18,15 @@ import tempfile
 import time
 from pathlib import Path
 
-
 from report import emit, percentile
 
 from mhrc.core.bus import open_client
-
-from mhrc.run.config import EpisodeConfig
-
-from mhrc.run.processes import wait_for_port, world_command
-
-from mhrc.run.serve import serve_world
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionAck, ActionRequest, ActionResult, AttachReply, AttachRequest, Wait, decode
 from mhrc.core.security import Credentials
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.processes import wait_for_port, world_command
+from mhrc.run.serve import serve_world
 
 
 async def _round_trips(endpoint: str, run: str, n: int, security: Credentials | None = None) -> dict[str, float]:

@@ -19,12 +19,10 @@ from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
-from mhrc.run.config import EpisodeConfig
-
-from mhrc.run.inprocess import up_in_process
-
-from mhrc.run.processes import up_processes
 from mhrc.core.protocol import EpisodeDone, Metrics
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
+from mhrc.run.processes import up_processes
 
 RUNNERS: dict[str, Callable[[EpisodeConfig], Coroutine[Any, Any, EpisodeDone]]] = {
     "in_process": lambda cfg: up_in_process(cfg),
@@ -66,12 +64,17 @@ def main() -> None:
         for mode in modes:
             for n in _range(args.objects):
                 for seed in _range(args.seeds):
-                    cfg = EpisodeConfig.build(seed=seed, n_objects=n, trace=Path(tmp) / f"{mode}-{n}-{seed}.jsonl").resolved()
+                    cfg = EpisodeConfig.build(
+                        seed=seed, n_objects=n, trace=Path(tmp) / f"{mode}-{n}-{seed}.jsonl"
+                    ).resolved()
                     done = asyncio.run(RUNNERS[mode](cfg))
                     episodes[mode][f"{n}-{seed}"] = done.metrics
                     m = done.metrics
-                    print(f"{mode} objects={n} seed={seed}: success={m.success} PS={m.partial_success:.2f} "
-                          f"TS={m.temporal_steps} AS={m.action_steps} wall={m.wall_time:.1f}s", file=sys.stderr)  # fmt: skip
+                    print(
+                        f"{mode} objects={n} seed={seed}: success={m.success} PS={m.partial_success:.2f} "
+                        f"TS={m.temporal_steps} AS={m.action_steps} wall={m.wall_time:.1f}s",
+                        file=sys.stderr,
+                    )
     report: dict[str, object] = {
         "bench": "heuristic_pack_objects_grid",
         "seeds": args.seeds,

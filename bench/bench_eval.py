@@ -67,21 +67,39 @@ def main() -> None:
         for w in (int(x) for x in args.workers.split(",")):
             grids = {}
             for schedule in SCHEDULES:
-                spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=args.trials,
-                                llm="openai:fixed-latency", base_url=url, horizon=args.horizon, schedule=schedule)  # fmt: skip
+                spec = EvalSpec(
+                    tasks=("pack_objects",),
+                    scenes=("kitchen",),
+                    objects=(3,),
+                    trials=args.trials,
+                    llm="openai:fixed-latency",
+                    base_url=url,
+                    horizon=args.horizon,
+                    schedule=schedule,
+                )
                 grids[schedule] = run_grid(httpd, spec, w)
             runs[f"workers_{w}"] = {
                 "sequential": grids["sequential"],
                 "lockstep": grids["lockstep"],
-                "speedup_lockstep_vs_sequential": round(grids["sequential"]["grid_wall_s"] / grids["lockstep"]["grid_wall_s"], 2),
+                "speedup_lockstep_vs_sequential": round(
+                    grids["sequential"]["grid_wall_s"] / grids["lockstep"]["grid_wall_s"], 2
+                ),
             }
     finally:
         httpd.shutdown()
         httpd.server_close()
-    emit({"bench": "eval_fixed_latency_llm", "llm_latency_s": args.latency, "horizon": args.horizon, "trials": args.trials,
-          "runs": runs,
-          "note": "both schedules measured in this run against the same server, lockstep first at each worker count; "
-                  "grid wall time includes starting the worker processes and building every scene"}, args.out)  # fmt: skip
+    emit(
+        {
+            "bench": "eval_fixed_latency_llm",
+            "llm_latency_s": args.latency,
+            "horizon": args.horizon,
+            "trials": args.trials,
+            "runs": runs,
+            "note": "both schedules measured in this run against the same server, lockstep first at each worker count; "
+            "grid wall time includes starting the worker processes and building every scene",
+        },
+        args.out,
+    )
 
 
 if __name__ == "__main__":

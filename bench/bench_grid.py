@@ -18,10 +18,10 @@ from typing import Any
 
 from report import emit
 
-from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.core.fidelity import parse_aids
 from mhrc.core.metrics import summarize
 from mhrc.core.trace import read_trace
+from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.tasks import TASKS
 
@@ -51,8 +51,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--fidelities", default="paper,noise_off,all", help="comma-separated: paper, noise_off (the paper's, --noise off) and/or all")
-    ap.add_argument("--schedule", default="sequential", help="the world's schedule (mhrc eval's default, the paper's: sequential)")
+    ap.add_argument(
+        "--fidelities",
+        default="paper,noise_off,all",
+        help="comma-separated: paper, noise_off (the paper's, --noise off) and/or all",
+    )
+    ap.add_argument(
+        "--schedule", default="sequential", help="the world's schedule (mhrc eval's default, the paper's: sequential)"
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     result: dict[str, Any] = {
@@ -69,8 +75,15 @@ def main() -> None:
     for fid in args.fidelities.split(","):
         aids = parse_aids(None if fid in ("paper", "noise_off") else fid)
         noise = "off" if fid == "noise_off" else "on"
-        spec = EvalSpec(tasks=tuple(TASKS), scenes=tuple(LAYOUTS), objects=(3, 4, 5, 6), trials=args.seeds, aids=aids,
-                        schedule=args.schedule, noise=noise)  # fmt: skip
+        spec = EvalSpec(
+            tasks=tuple(TASKS),
+            scenes=tuple(LAYOUTS),
+            objects=(3, 4, 5, 6),
+            trials=args.seeds,
+            aids=aids,
+            schedule=args.schedule,
+            noise=noise,
+        )
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "ev"
             t0 = time.perf_counter()

@@ -28,11 +28,10 @@ from typing import Any
 
 from report import emit
 
-from mhrc.run.config import EpisodeConfig
-
-from mhrc.run.inprocess import up_in_process
 from mhrc.core.metrics import from_trace
 from mhrc.core.trace import read_trace
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 
 SEED = 0
 SCHEDULES = ("lockstep", "sequential")  # in the order they run
@@ -83,7 +82,11 @@ def run_episode(httpd: CountingServer, schedule: str, horizon: int) -> dict[str,
         done = asyncio.run(up_in_process(cfg.resolved()))
         rows = read_trace(trace)
     m = from_trace(rows)
-    ran = [r["msg"].get("scheduler") for r in rows if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "episode_started"]
+    ran = [
+        r["msg"].get("scheduler")
+        for r in rows
+        if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "episode_started"
+    ]
     if ran != [schedule]:
         raise RuntimeError(f"asked for the {schedule} schedule, the world reported {ran}")
     return {
@@ -114,7 +117,9 @@ def main() -> None:
             "horizon": args.horizon,
             "seed": SEED,
             "runs": {s: runs[s] for s in ("sequential", "lockstep")},
-            "speedup_lockstep_vs_sequential": round(runs["sequential"]["episode_wall_s"] / runs["lockstep"]["episode_wall_s"], 2),
+            "speedup_lockstep_vs_sequential": round(
+                runs["sequential"]["episode_wall_s"] / runs["lockstep"]["episode_wall_s"], 2
+            ),
             "note": "both schedules measured in this run against the same server; lockstep ran first",
         },
         args.out,

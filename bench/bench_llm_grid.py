@@ -62,10 +62,20 @@ class FixedLatencyModel(ThreadingHTTPServer):
                 time.sleep(model.latency)
                 with model.lock:
                     model.in_flight -= 1
-                body = json.dumps({
-                    "choices": [{"message": {"role": "assistant", "content": "Analysis: nothing to do yet.\nCommand: wait()"}, "finish_reason": "stop"}],
-                    "usage": {"prompt_tokens": 1000, "completion_tokens": 10},
-                }).encode()  # fmt: skip
+                body = json.dumps(
+                    {
+                        "choices": [
+                            {
+                                "message": {
+                                    "role": "assistant",
+                                    "content": "Analysis: nothing to do yet.\nCommand: wait()",
+                                },
+                                "finish_reason": "stop",
+                            }
+                        ],
+                        "usage": {"prompt_tokens": 1000, "completion_tokens": 10},
+                    }
+                ).encode()
                 self.send_response(200)
                 self.send_header("Content-Type", "application/json")
                 self.send_header("Content-Length", str(len(body)))
@@ -111,22 +121,39 @@ def run(spec: EvalSpec, model: FixedLatencyModel, concurrency: int) -> dict[str,
         "episode_wall_s_mean": round(sum(r["wall_time"] for r in rows) / len(rows), 2),
         "episode_wall_s_max": round(max(r["wall_time"] for r in rows), 2),
         # the worker process (every episode) and this one (the coordinator's router, scoring, the model server)
-        "worker_cpu_s": {"user": round(cpu.children_user - cpu0.children_user, 1), "sys": round(cpu.children_system - cpu0.children_system, 1)},
+        "worker_cpu_s": {
+            "user": round(cpu.children_user - cpu0.children_user, 1),
+            "sys": round(cpu.children_system - cpu0.children_system, 1),
+        },
         "coordinator_cpu_s": {"user": round(cpu.user - cpu0.user, 1), "sys": round(cpu.system - cpu0.system, 1)},
     }
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--latency", type=float, default=1.0, help="seconds the model takes per request (the issue's 1 s; 0.2 for a quicker run)")
+    ap.add_argument(
+        "--latency",
+        type=float,
+        default=1.0,
+        help="seconds the model takes per request (the issue's 1 s; 0.2 for a quicker run)",
+    )
     ap.add_argument("--horizon", type=int, default=50)
-    ap.add_argument("--concurrency", default="1,36", help="comma-separated: episodes the worker runs at once, one evaluation each")
+    ap.add_argument(
+        "--concurrency", default="1,36", help="comma-separated: episodes the worker runs at once, one evaluation each"
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     levels = [int(x) for x in args.concurrency.split(",")]
     model = FixedLatencyModel(args.latency)
-    spec = EvalSpec(tasks=tuple(TASKS), scenes=tuple(LAYOUTS), objects=(3, 4, 5, 6), horizon=args.horizon, llm="m", base_url=model.url,
-                    schedule="lockstep")  # as its recorded figures ran (mhrc eval now defaults to sequential)
+    spec = EvalSpec(
+        tasks=tuple(TASKS),
+        scenes=tuple(LAYOUTS),
+        objects=(3, 4, 5, 6),
+        horizon=args.horizon,
+        llm="m",
+        base_url=model.url,
+        schedule="lockstep",
+    )  # as its recorded figures ran (mhrc eval now defaults to sequential)
     try:
         runs = {f"concurrency_{c}": run(spec, model, c) for c in levels}
     finally:

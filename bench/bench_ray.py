@@ -83,7 +83,9 @@ def main() -> None:
     url = f"http://127.0.0.1:{httpd.server_address[1]}/v1"
     specs = {
         "default": EvalSpec(tasks=TASKS, scenes=SCENES),
-        "paper_llm": EvalSpec(tasks=TASKS, scenes=SCENES, llm="openai:scripted", base_url=url, horizon=args.horizon, llm_timeout=60.0),
+        "paper_llm": EvalSpec(
+            tasks=TASKS, scenes=SCENES, llm="openai:scripted", base_url=url, horizon=args.horizon, llm_timeout=60.0
+        ),
     }
     results: dict[str, Any] = {}
     startup: dict[str, Any] = {}
@@ -94,9 +96,22 @@ def main() -> None:
         port = free_port("127.0.0.1")
         (tmp / "work").mkdir()
         t0 = time.perf_counter()
-        subprocess.run([ray_exe, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", f"--num-cpus={args.cpus}",
-                        "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={tmp / 'ray'}"],
-                       check=True, capture_output=True, env=dict(os.environ, TMPDIR=str(tmp / "work")))  # fmt: skip
+        subprocess.run(
+            [
+                ray_exe,
+                "start",
+                "--head",
+                "--node-ip-address=127.0.0.1",
+                f"--port={port}",
+                f"--num-cpus={args.cpus}",
+                "--include-dashboard=false",
+                "--disable-usage-stats",
+                f"--temp-dir={tmp / 'ray'}",
+            ],
+            check=True,
+            capture_output=True,
+            env=dict(os.environ, TMPDIR=str(tmp / "work")),
+        )
         startup["ray_start_head_s"] = round(time.perf_counter() - t0, 2)
         address = f"127.0.0.1:{port}"
         probe = subprocess.run([sys.executable, "-c", STARTUP, address], check=True, capture_output=True, text=True)
@@ -115,10 +130,20 @@ def main() -> None:
         httpd.shutdown()
         httpd.server_close()
         shutil.rmtree(tmp, ignore_errors=True)
-    emit({"bench": "eval_local_vs_ray", "cpus": args.cpus, "llm_latency_s": args.latency, "llm_horizon": args.horizon,
-          "llm_concurrency": args.concurrency, "ray_startup": startup, "grids": results,
-          "note": "one machine: the local pool and a one-node Ray cluster with the same CPUs, same grids, same run, local first; "
-                  "Ray's figures include its task scheduling and sending each trace through the object store"}, args.out)  # fmt: skip
+    emit(
+        {
+            "bench": "eval_local_vs_ray",
+            "cpus": args.cpus,
+            "llm_latency_s": args.latency,
+            "llm_horizon": args.horizon,
+            "llm_concurrency": args.concurrency,
+            "ray_startup": startup,
+            "grids": results,
+            "note": "one machine: the local pool and a one-node Ray cluster with the same CPUs, same grids, same run, local first; "
+            "Ray's figures include its task scheduling and sending each trace through the object store",
+        },
+        args.out,
+    )
 
 
 if __name__ == "__main__":

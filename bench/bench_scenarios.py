@@ -57,27 +57,48 @@ def _mean(xs: list[float]) -> float | None:
     return round(statistics.fmean(xs), 3) if xs else None
 
 
-def _scenario_run(name: str, path: Path, rows: list[dict[str, Any]], out: Path, static: dict[tuple[str, str, int, int], dict[str, Any]]) -> dict[str, Any]:
+def _scenario_run(
+    name: str,
+    path: Path,
+    rows: list[dict[str, Any]],
+    out: Path,
+    static: dict[tuple[str, str, int, int], dict[str, Any]],
+) -> dict[str, Any]:
     """One scenario's figures against the static rows of the same episodes."""
     spec = load_scenario(path)
     fired = _fired(out, rows)
     events = []
     for i, ev in enumerate(spec.events):
         seen = [e for evs in fired.values() for e in evs if e["index"] == i]
-        events.append({
-            "index": i, "kind": ev.kind, "tick": ev.tick,
-            "applied": sum(1 for e in seen if e["applied"]),
-            "skipped": sum(1 for e in seen if not e["applied"]),
-            "not_fired": len(rows) - len(seen),
-            "skipped_why": dict(Counter(e["skipped"] for e in seen if not e["applied"])),
-        })  # fmt: skip
-    deltas = {_episode(r): r["temporal_steps"] - static[_episode(r)]["temporal_steps"] for r in rows if _episode(r) in static}
+        events.append(
+            {
+                "index": i,
+                "kind": ev.kind,
+                "tick": ev.tick,
+                "applied": sum(1 for e in seen if e["applied"]),
+                "skipped": sum(1 for e in seen if not e["applied"]),
+                "not_fired": len(rows) - len(seen),
+                "skipped_why": dict(Counter(e["skipped"] for e in seen if not e["applied"])),
+            }
+        )
+    deltas = {
+        _episode(r): r["temporal_steps"] - static[_episode(r)]["temporal_steps"] for r in rows if _episode(r) in static
+    }
     per_kind: dict[str, dict[str, Any]] = {}
     for kind in sorted({ev.kind for ev in spec.events}):
         hit = [k for k, evs in fired.items() if any(e["event"] == kind and e["applied"] for e in evs)]
-        recovery = [float(e["ticks_to_recover"]) for r in rows for e in r.get("recovery") or []
-                    if e.get("kind") == kind and e.get("applied") and e.get("ticks_to_recover") is not None]  # fmt: skip
-        unrecovered = sum(1 for r in rows for e in r.get("recovery") or [] if e.get("kind") == kind and e.get("applied") and e.get("ticks_to_recover") is None)
+        recovery = [
+            float(e["ticks_to_recover"])
+            for r in rows
+            for e in r.get("recovery") or []
+            if e.get("kind") == kind and e.get("applied") and e.get("ticks_to_recover") is not None
+        ]
+        unrecovered = sum(
+            1
+            for r in rows
+            for e in r.get("recovery") or []
+            if e.get("kind") == kind and e.get("applied") and e.get("ticks_to_recover") is None
+        )
         per_kind[kind] = {
             "applied_in": len(hit),
             "ts_cost_applied": _mean([deltas[k] for k in hit if k in deltas]),
@@ -112,7 +133,9 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="a small run: seed 0, objects 3 and 6")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--scenarios", default=None, help="comma-separated shipped scenarios; default: all of them")
-    ap.add_argument("--schedule", default="sequential", help="the world's schedule (mhrc eval's default, the paper's: sequential)")
+    ap.add_argument(
+        "--schedule", default="sequential", help="the world's schedule (mhrc eval's default, the paper's: sequential)"
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     shipped = shipped_scenarios()
@@ -136,8 +159,14 @@ def main() -> None:
     static: dict[tuple[str, str, int, int], dict[str, Any]] = {}
     table = []
     for name in [STATIC, *names]:
-        spec = EvalSpec(tasks=tuple(TASKS), scenes=tuple(LAYOUTS), objects=objects, trials=seeds, schedule=args.schedule,
-                        events=None if name == STATIC else name)  # fmt: skip
+        spec = EvalSpec(
+            tasks=tuple(TASKS),
+            scenes=tuple(LAYOUTS),
+            objects=objects,
+            trials=seeds,
+            schedule=args.schedule,
+            events=None if name == STATIC else name,
+        )
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "ev"
             t0 = time.perf_counter()
@@ -146,18 +175,47 @@ def main() -> None:
             if name == STATIC:
                 static = {_episode(r): r for r in rows}
                 summary = summarize(rows)
-                run = {"scenario": STATIC, "episodes": len(rows), "solved": sum(1 for r in rows if r["success"]),
-                       "unsolved": sorted(r["key"] for r in rows if not r["success"]), "succ": summary["succ"],
-                       "ts": summary["ts"], "all": summary}  # fmt: skip
+                run = {
+                    "scenario": STATIC,
+                    "episodes": len(rows),
+                    "solved": sum(1 for r in rows if r["success"]),
+                    "unsolved": sorted(r["key"] for r in rows if not r["success"]),
+                    "succ": summary["succ"],
+                    "ts": summary["ts"],
+                    "all": summary,
+                }
             else:
                 run = _scenario_run(name, shipped[name], rows, out, static)
         run["wall_s"] = wall
         result["runs"][name] = run
-        table.append({k: run.get(k) for k in ("scenario", "events_text", "episodes", "succ", "ts", "ts_static", "ts_delta", "applied", "skipped", "not_fired")})
+        table.append(
+            {
+                k: run.get(k)
+                for k in (
+                    "scenario",
+                    "events_text",
+                    "episodes",
+                    "succ",
+                    "ts",
+                    "ts_static",
+                    "ts_delta",
+                    "applied",
+                    "skipped",
+                    "not_fired",
+                )
+            }
+        )
     result["table"] = table
     # the figure: TS cost per event kind, from the scenario holding only that kind
     result["per_kind"] = [
-        {"kind": kind, "scenario": name, "episodes": run["episodes"], "succ": run["succ"], "ts_cost": run["ts_delta"], **run["per_kind"][kind]}
+        {
+            "kind": kind,
+            "scenario": name,
+            "episodes": run["episodes"],
+            "succ": run["succ"],
+            "ts_cost": run["ts_delta"],
+            **run["per_kind"][kind],
+        }
         for name, run in result["runs"].items()
         if name != STATIC and len(run["per_kind"]) == 1
         for kind in run["per_kind"]

@@ -38,13 +38,12 @@ from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm import OpenAIChatClient
 from mhrc.agents.llm_policy import LLMPolicy
 from mhrc.agents.policy import Decision
-from mhrc.core.bus import Bus
-from mhrc.core.bus import open_client
-from mhrc.run.config import EpisodeConfig
-from mhrc.run.serve import serve_world
+from mhrc.core.bus import Bus, open_client
 from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import ActionResult, EpisodeDone, Observation
 from mhrc.core.trace import read_trace
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.serve import serve_world
 
 LATENCY = {"bob": 0.5, "alice": 1.5, "david": 1.0}  # s per call, before jitter
 JITTER = 0.5  # each call's latency is drawn uniformly in [1 - JITTER, 1 + JITTER] x the robot's
@@ -77,8 +76,10 @@ class _Handler(BaseHTTPRequestHandler):
         script = body["mhrc_bench"]
         time.sleep(self.server.latency(script["robot"]))
         payload = json.dumps(
-            {"choices": [{"message": {"role": "assistant", "content": script["reply"]}, "finish_reason": "stop"}],
-             "usage": {"prompt_tokens": len(json.dumps(body["messages"])) // 4, "completion_tokens": 12}}  # fmt: skip
+            {
+                "choices": [{"message": {"role": "assistant", "content": script["reply"]}, "finish_reason": "stop"}],
+                "usage": {"prompt_tokens": len(json.dumps(body["messages"])) // 4, "completion_tokens": 12},
+            }
         ).encode()
         self.send_response(200)
         self.send_header("Content-Type", "application/json")
@@ -149,10 +150,20 @@ def run(task: str, seed: int, schedule: str, server: ScriptedServer, n_objects: 
         m = from_trace(read_trace(trace))
     calls = server.calls - before
     return {
-        "task": task, "seed": seed, "schedule": schedule, "reason": done.reason, "success": m.success, "ts": m.temporal_steps,
-        "wall_s": round(m.wall_time, 2), "llm_calls": sum(calls.values()), "llm_calls_per_robot": dict(calls),
-        "makespan_s": m.makespan, "actions_per_robot": m.actions_per_robot, "busy_s": m.busy, "reply_mismatches": mismatches,
-    }  # fmt: skip
+        "task": task,
+        "seed": seed,
+        "schedule": schedule,
+        "reason": done.reason,
+        "success": m.success,
+        "ts": m.temporal_steps,
+        "wall_s": round(m.wall_time, 2),
+        "llm_calls": sum(calls.values()),
+        "llm_calls_per_robot": dict(calls),
+        "makespan_s": m.makespan,
+        "actions_per_robot": m.actions_per_robot,
+        "busy_s": m.busy,
+        "reply_mismatches": mismatches,
+    }
 
 
 def main() -> None:
@@ -171,7 +182,10 @@ def main() -> None:
                 for schedule in SCHEDULES:  # interleaved: a drift of the machine touches all three alike
                     rows.append(run(task, seed, schedule, server, args.objects))
                     r = rows[-1]
-                    print(f"{task} seed {seed} {schedule:<10} {r['reason']:<8} TS {r['ts']:>3} wall {r['wall_s']:>7.2f} s  calls {r['llm_calls']}", flush=True)
+                    print(
+                        f"{task} seed {seed} {schedule:<10} {r['reason']:<8} TS {r['ts']:>3} wall {r['wall_s']:>7.2f} s  calls {r['llm_calls']}",
+                        flush=True,
+                    )
     finally:
         server.shutdown()
         server.server_close()
@@ -179,22 +193,36 @@ def main() -> None:
     for s in SCHEDULES:
         mine = [r for r in rows if r["schedule"] == s]
         per[s] = {
-            "episodes": len(mine), "succ": statistics.fmean(r["success"] for r in mine), "ts": statistics.fmean(r["ts"] for r in mine),
-            "wall_s": round(statistics.fmean(r["wall_s"] for r in mine), 2), "llm_calls": statistics.fmean(r["llm_calls"] for r in mine),
+            "episodes": len(mine),
+            "succ": statistics.fmean(r["success"] for r in mine),
+            "ts": statistics.fmean(r["ts"] for r in mine),
+            "wall_s": round(statistics.fmean(r["wall_s"] for r in mine), 2),
+            "llm_calls": statistics.fmean(r["llm_calls"] for r in mine),
             "makespan_s": round(statistics.fmean(r["makespan_s"] for r in mine), 1),
-        }  # fmt: skip
-    slept = {r: {"calls": len(v), "mean_s": round(statistics.fmean(v), 3), "min_s": round(min(v), 3), "max_s": round(max(v), 3)}
-             for r, v in server.slept.items() if v}  # fmt: skip
+        }
+    slept = {
+        r: {
+            "calls": len(v),
+            "mean_s": round(statistics.fmean(v), 3),
+            "min_s": round(min(v), 3),
+            "max_s": round(max(v), 3),
+        }
+        for r, v in server.slept.items()
+        if v
+    }
     emit(
         {
             "bench": "schedulers",
-            "latency_s": LATENCY, "jitter": JITTER, "measured_latency": slept, "objects": args.objects,
+            "latency_s": LATENCY,
+            "jitter": JITTER,
+            "measured_latency": slept,
+            "objects": args.objects,
             "summary": per,
             "lockstep_speedup_over_sequential": round(per["sequential"]["wall_s"] / per["lockstep"]["wall_s"], 2),
             "async_speedup_over_lockstep": round(per["lockstep"]["wall_s"] / per["async"]["wall_s"], 2),
             "episodes": rows,
             "note": "wall_s is the world's measure of each episode; every schedule ran the same episodes against the same server",
-        },  # fmt: skip
+        },
         args.out,
     )
 

@@ -26,7 +26,12 @@ from mhrc.world.team_plan import play_team_plan
 
 
 def _stats(xs: list[float]) -> dict[str, float]:
-    return {"n": len(xs), "p50": round(statistics.median(xs), 5), "p99": round(percentile(xs, 0.99), 5), "max": round(max(xs), 5)}
+    return {
+        "n": len(xs),
+        "p50": round(statistics.median(xs), 5),
+        "p99": round(percentile(xs, 0.99), 5),
+        "max": round(max(xs), 5),
+    }
 
 
 def bench_scene(scene: str, tasks: list[str], seeds: range, objects: int) -> dict[str, object]:

@@ -21,7 +21,6 @@ import imageio.v3 as iio
 from report import emit
 
 from mhrc.run.config import EpisodeConfig
-
 from mhrc.run.inprocess import up_in_process
 from mhrc.viewer.video import FPS, render_video
 
@@ -41,7 +40,9 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="bench_video_") as tmp:
         trace, video = Path(tmp) / "trace.jsonl", Path(tmp) / "episode.mp4"
-        cfg = EpisodeConfig.build(task=args.task, scene=args.scene, seed=args.seed, n_objects=args.objects, trace=trace).resolved()
+        cfg = EpisodeConfig.build(
+            task=args.task, scene=args.scene, seed=args.seed, n_objects=args.objects, trace=trace
+        ).resolved()
         t0 = time.perf_counter()
         done = asyncio.run(up_in_process(cfg))
         episode_s = time.perf_counter() - t0
@@ -56,20 +57,33 @@ def main() -> None:
             "benchmark": "video",
             "machine": {"python": platform.python_version(), "cpu": platform.processor() or platform.machine()},
             "episode": {
-                "task": args.task, "scene": args.scene, "seed": args.seed, "n_objects": args.objects,
-                "reason": done.reason, "temporal_steps": done.metrics.temporal_steps, "wall_s": round(episode_s, 3),
+                "task": args.task,
+                "scene": args.scene,
+                "seed": args.seed,
+                "n_objects": args.objects,
+                "reason": done.reason,
+                "temporal_steps": done.metrics.temporal_steps,
+                "wall_s": round(episode_s, 3),
             },
             "video": {
-                "format": "mp4 (H.264, imageio-ffmpeg)", "width": info.width, "height": info.height, "fps": FPS,
-                "frames_per_step": args.frames_per_step, "snapshots": info.steps, "frames": info.frames, "decoded_frames": len(frames),
+                "format": "mp4 (H.264, imageio-ffmpeg)",
+                "width": info.width,
+                "height": info.height,
+                "fps": FPS,
+                "frames_per_step": args.frames_per_step,
+                "snapshots": info.steps,
+                "frames": info.frames,
+                "decoded_frames": len(frames),
                 "duration_s": round(info.duration, 2),
                 "render_s_per_frame": round(info.render_seconds / info.frames, 4),
-                "render_s": round(info.render_seconds, 3), "total_s": round(info.seconds, 3),
-                "bytes": info.bytes, "mb": round(info.bytes / 1e6, 3),
+                "render_s": round(info.render_seconds, 3),
+                "total_s": round(info.seconds, 3),
+                "bytes": info.bytes,
+                "mb": round(info.bytes / 1e6, 3),
             },
         },
         args.out,
-    )  # fmt: skip
+    )
 
 
 if __name__ == "__main__":

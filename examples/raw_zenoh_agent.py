@@ -35,8 +35,14 @@ import zenoh
 
 PROTOCOL_VERSION = 2
 EPISODE_OVER = "the episode is over"  # an AttachReply's reason after the episode's end
-OUT_OF_STEP = ("stale_tick", "tick_taken", "not_your_turn")  # ActionAck codes: the request was for a tick not (or no longer) ours
-EXPLORE_RE = re.compile(r"explore these surfaces and tell me what lies on them:\s*([A-Za-z0-9_]+(?:\s*,\s*[A-Za-z0-9_]+)*)")
+OUT_OF_STEP = (
+    "stale_tick",
+    "tick_taken",
+    "not_your_turn",
+)  # ActionAck codes: the request was for a tick not (or no longer) ours
+EXPLORE_RE = re.compile(
+    r"explore these surfaces and tell me what lies on them:\s*([A-Za-z0-9_]+(?:\s*,\s*[A-Za-z0-9_]+)*)"
+)
 
 Json = dict[str, Any]
 
@@ -144,12 +150,20 @@ class Agent:
         self.box = Mailbox(robot)
         self.entities: list[Any] = []
         self.token: Any = None
-        self.requests = session.declare_publisher(f"{self.base}/action/request", congestion_control=zenoh.CongestionControl.BLOCK)
+        self.requests = session.declare_publisher(
+            f"{self.base}/action/request", congestion_control=zenoh.CongestionControl.BLOCK
+        )
         self.entities.append(self.requests)
-        for key, what in ((f"{self.base}/action/ack", "ack"), (f"{self.base}/action/result", "result"),
-                          (f"{self.base}/turn", "turn"), (f"mhrc/{run}/world/event", "event")):  # fmt: skip
+        for key, what in (
+            (f"{self.base}/action/ack", "ack"),
+            (f"{self.base}/action/result", "result"),
+            (f"{self.base}/turn", "turn"),
+            (f"mhrc/{run}/world/event", "event"),
+        ):
             self.entities.append(session.declare_subscriber(key, self.box.callback(what)))
-        self.entities.append(session.liveliness().declare_subscriber(f"mhrc/{run}/alive/world", self.box.callback("alive")))
+        self.entities.append(
+            session.liveliness().declare_subscriber(f"mhrc/{run}/alive/world", self.box.callback("alive"))
+        )
         self.policy = ExplorerPolicy(robot)
 
     def close(self) -> None:
@@ -162,7 +176,9 @@ class Agent:
     # attach ------------------------------------------------------------------
     def attach(self, timeout: float) -> Json:
         """Attach (again) and return the observation to plan on; Stop when the episode ended."""
-        request = json.dumps({"v": PROTOCOL_VERSION, "kind": "attach_request", "robot": self.robot, "agent_id": self.agent_id})
+        request = json.dumps(
+            {"v": PROTOCOL_VERSION, "kind": "attach_request", "robot": self.robot, "agent_id": self.agent_id}
+        )
         self.box.turn = None  # a Turn from before this attach is stale
         if self.token is None:  # before attaching: the world detaches an attached robot whose token does not come
             self.token = self.session.liveliness().declare_token(self.alive_key)
@@ -183,9 +199,13 @@ class Agent:
             if reply.get("reason") == EPISODE_OVER:
                 raise Stop("the episode is over")
             raise Failure(f"attach refused: {reply.get('reason')}")
-        print(f"attached {self.robot} as {self.agent_id} at tick {reply['tick']} (horizon {reply['horizon']})", flush=True)
+        print(
+            f"attached {self.robot} as {self.agent_id} at tick {reply['tick']} (horizon {reply['horizon']})", flush=True
+        )
         if reply.get("wait_turn"):  # sequential schedule: the observation comes with a Turn
-            if not self.box.wait(lambda: self.box.turn is not None or self.box.done is not None or self.box.world_gone, self.step_timeout):
+            if not self.box.wait(
+                lambda: self.box.turn is not None or self.box.done is not None or self.box.world_gone, self.step_timeout
+            ):
                 raise Failure(f"no turn within {self.step_timeout:.0f} s")
             if self.box.turn is None:
                 raise Stop("the episode ended while waiting for the turn")
@@ -198,8 +218,15 @@ class Agent:
         """Request `action` for the observation's tick; the result, or None when the world
         refused the tick (the caller attaches again to resynchronize)."""
         goal = uuid.uuid4().hex[:16]
-        request = {"v": PROTOCOL_VERSION, "kind": "action_request", "goal_id": goal, "robot": self.robot,
-                   "agent_id": self.agent_id, "tick": obs["tick"], "action": action}  # fmt: skip
+        request = {
+            "v": PROTOCOL_VERSION,
+            "kind": "action_request",
+            "goal_id": goal,
+            "robot": self.robot,
+            "agent_id": self.agent_id,
+            "tick": obs["tick"],
+            "action": action,
+        }
         self.requests.put(json.dumps(request).encode())
         box = self.box
         if not box.wait(lambda: goal in box.acks or box.world_gone, 30.0):
@@ -216,6 +243,7 @@ class Agent:
                 print(f"rejected ({reason}): resynchronizing", flush=True)
                 return None
             raise Failure(f"the world rejected {action}: {reason}")
+
         # Sequential: the result comes at this robot's next turn, after the teammates acted.
         # Results and world events travel on different keys: episode_done may come first;
         # its final_results says whether this goal's result is still on its way.
@@ -226,7 +254,11 @@ class Agent:
 
         if not box.wait(settled, self.step_timeout):
             raise Failure(f"no result for {goal} within {self.step_timeout:.0f} s")
-        if goal not in box.results and box.done is not None and box.done.get("final_results", {}).get(self.robot) == goal:
+        if (
+            goal not in box.results
+            and box.done is not None
+            and box.done.get("final_results", {}).get(self.robot) == goal
+        ):
             box.wait(lambda: goal in box.results, 10.0)
         result = box.results.pop(goal, None)
         if result is None:
@@ -242,7 +274,10 @@ class Agent:
                 obs = self.attach(attach_timeout)
                 continue
             outcome = result["outcome"]
-            print(f"tick {result['tick']}: {action} -> {'ok' if outcome['succeeded'] else 'failed'}: {outcome['feedback']}", flush=True)
+            print(
+                f"tick {result['tick']}: {action} -> {'ok' if outcome['succeeded'] else 'failed'}: {outcome['feedback']}",
+                flush=True,
+            )
             self.policy.record(action, outcome)
             obs = result["observation"]
             if result.get("done"):
@@ -326,7 +361,10 @@ def main(argv: list[str] | None = None) -> int:
         done = agent.box.done
         if done is not None:
             m = done["metrics"]
-            print(f"episode_done reason={done['reason']} success={m['success']} TS={m['temporal_steps']} AS={m['action_steps']}", flush=True)
+            print(
+                f"episode_done reason={done['reason']} success={m['success']} TS={m['temporal_steps']} AS={m['action_steps']}",
+                flush=True,
+            )
         return 0
     except Failure as exc:
         print(f"error: {exc}", file=sys.stderr, flush=True)

@@ -17,5 +17,7 @@ def sweep(cases: Iterable[Any], fast: int = 1, ids: Iterable[str] | None = None)
     out = []
     for i, case in enumerate(cases):
         values = case if isinstance(case, tuple) else (case,)
-        out.append(pytest.param(*values, marks=() if i < fast else pytest.mark.slow, id=None if names is None else names[i]))
+        out.append(
+            pytest.param(*values, marks=() if i < fast else pytest.mark.slow, id=None if names is None else names[i])
+        )
     return out

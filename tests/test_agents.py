@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 
 import pytest
+from waits import served, subscribed, until
 
 from mhrc.agents.agent import AttachRejected, RobotAgent, WorldGone
 from mhrc.agents.llm_policy import UNREADABLE
@@ -27,14 +28,15 @@ from mhrc.core.protocol import (
     decode,
 )
 from mhrc.core.trace import read_trace
-from waits import served, subscribed, until
 
 
 async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(mhrc_world) -> None:  # type: ignore[no-untyped-def]
     async with mhrc_world(seed=0, horizon=3, start_timeout=3.0) as world:
         bus = await world.client()
         try:
-            policy = ScriptedLLMPolicy("bob", ["I am not sure what to do.", "**Command:** pick(ghost).", "Command: wait()"])
+            policy = ScriptedLLMPolicy(
+                "bob", ["I am not sure what to do.", "**Command:** pick(ghost).", "Command: wait()"]
+            )
             agent = RobotAgent(bus, policy, run=world.config.run, robot="bob")
             done = await asyncio.wait_for(agent.run(), 60)
         finally:
@@ -45,7 +47,9 @@ async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(mh
     assert policy.results[1].outcome.code == OutcomeCode.OBJECT_UNKNOWN
     assert policy.format_feedback == [UNREADABLE]  # the paper's feedback: only that the command could not be read
     thoughts = [line["msg"] for line in read_trace(world.config.trace) if line["key"].endswith("/agent/bob/thought")]
-    assert [t["parse_error"] is not None for t in thoughts] == [True, False, False] and "no command found" in thoughts[0]["parse_error"]
+    assert [t["parse_error"] is not None for t in thoughts] == [True, False, False] and "no command found" in thoughts[
+        0
+    ]["parse_error"]
     assert thoughts[0]["reply"] == "I am not sure what to do."
 
 
@@ -53,7 +57,9 @@ async def test_a_second_agent_for_an_attached_robot_is_refused(mhrc_world) -> No
     async with mhrc_world(seed=0) as world:
         first, second = await world.client(), await world.client()
         try:
-            a = asyncio.create_task(RobotAgent(first, ScriptedLLMPolicy("bob", []), run=world.config.run, robot="bob").run())
+            a = asyncio.create_task(
+                RobotAgent(first, ScriptedLLMPolicy("bob", []), run=world.config.run, robot="bob").run()
+            )
             await world.attached("bob")
             with pytest.raises(AttachRejected, match="already attached"):
                 await RobotAgent(second, ScriptedLLMPolicy("bob", []), run=world.config.run, robot="bob").run()
@@ -81,7 +87,9 @@ class _OvertakingWorld:
 
     def _observation(self) -> Observation:
         status = RobotStatus(name="bob", kind="arm", skills=["pick", "place", "communicate", "wait"])
-        return Observation(robot="bob", tick=0, status=status, furniture=[], objects=[], task_brief="b", task_detail="d")
+        return Observation(
+            robot="bob", tick=0, status=status, furniture=[], objects=[], task_brief="b", task_detail="d"
+        )
 
     async def _attach(self, key: str, params: dict[str, str], payload: bytes) -> AttachReply:
         return AttachReply(robot="bob", accepted=True, tick=0, horizon=1, observation=self._observation())
@@ -89,13 +97,29 @@ class _OvertakingWorld:
     async def _request(self, sample: Sample) -> None:
         req = decode(sample.payload, ActionRequest)
         self.bus.put(self.keys.action_ack("bob"), ActionAck(goal_id=req.goal_id, robot="bob", accepted=True))
-        metrics = Metrics(success=False, partial_success=0.0, placed=0, total=1, temporal_steps=1, action_steps=0, action_steps_per_robot={"bob": 0})
+        metrics = Metrics(
+            success=False,
+            partial_success=0.0,
+            placed=0,
+            total=1,
+            temporal_steps=1,
+            action_steps=0,
+            action_steps_per_robot={"bob": 0},
+        )
         final = {"bob": req.goal_id} if self.name_final_result else {}
-        self.bus.put(self.keys.world_event, EpisodeDone(run=self.keys.run, reason="horizon", metrics=metrics, final_results=final))
+        self.bus.put(
+            self.keys.world_event,
+            EpisodeDone(run=self.keys.run, reason="horizon", metrics=metrics, final_results=final),
+        )
         await self.release_result.wait()  # the result arrives after the agent has seen the event
         result = ActionResult(
-            goal_id=req.goal_id, robot="bob", tick=0, action=req.action, outcome=SkillOutcome.ok("You waited."),
-            observation=self._observation(), done=True,
+            goal_id=req.goal_id,
+            robot="bob",
+            tick=0,
+            action=req.action,
+            outcome=SkillOutcome.ok("You waited."),
+            observation=self._observation(),
+            done=True,
         )
         self.bus.put(self.keys.action_result("bob"), result)
         self.sent_result.set()
@@ -156,7 +180,9 @@ async def test_an_agent_declares_its_liveliness_token_before_it_attaches() -> No
         world_bus.watch_liveliness(token, lambda s: None if s.is_put else gone.set())
         await served(agent_bus, keys.attach("bob"))
         with pytest.raises(AttachRejected, match="only looks"):
-            await asyncio.wait_for(RobotAgent(agent_bus, ScriptedLLMPolicy("bob", []), run="tokenfirst", robot="bob").run(), 30)
+            await asyncio.wait_for(
+                RobotAgent(agent_bus, ScriptedLLMPolicy("bob", []), run="tokenfirst", robot="bob").run(), 30
+            )
         assert at_attach == [[token]], "the agent's token did not exist when its attach reached the world"
         await asyncio.wait_for(gone.wait(), 10)  # withdrawn on the refusal, while the agent's session stays open
     finally:

@@ -7,6 +7,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+
 from mhrc.world.arm import HOME, LOWER, UPPER, ArmPlanner, straight
 from mhrc.world.assets import AssetDir
 from mhrc.world.scene import LAYOUTS, StaticBody, scene_statics
@@ -29,7 +30,13 @@ def test_ik_solutions_are_verified_by_forward_kinematics(planner: ArmPlanner) ->
         assert np.all(q >= LOWER - 1e-9) and np.all(q <= UPPER + 1e-9)
         pos, orn = planner.fk(q)
         assert np.linalg.norm(pos - np.array(target)) < 0.002
-        z_axis = np.array([2 * (orn[0] * orn[2] + orn[3] * orn[1]), 2 * (orn[1] * orn[2] - orn[3] * orn[0]), 1 - 2 * (orn[0] ** 2 + orn[1] ** 2)])
+        z_axis = np.array(
+            [
+                2 * (orn[0] * orn[2] + orn[3] * orn[1]),
+                2 * (orn[1] * orn[2] - orn[3] * orn[0]),
+                1 - 2 * (orn[0] ** 2 + orn[1] ** 2),
+            ]
+        )
         assert z_axis[2] < -0.99  # the tool points down
 
 

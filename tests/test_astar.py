@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+
 from mhrc.world.astar import SQRT2, Grid, astar, line_free, path_length, smooth
 from mhrc.world.scene import LAYOUTS, occupancy
 

@@ -12,23 +12,23 @@ from typing import Any
 
 import pytest
 from click.testing import CliRunner
+from sweep import sweep
 
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.parse import parse_command
-from mhrc.core.bus import Bus
 from mhrc.cli import main
-from mhrc.run.config import ConfigError, EpisodeConfig
-from mhrc.run.inprocess import up_in_process
+from mhrc.core.bus import Bus
 from mhrc.core.keys import Keys
 from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import ActionAck, ActionRequest, ActionResult, Wait, decode
-from mhrc.testing import ModelReply, ScriptedModelServer, ScriptedPolicy, run_episode, world_on_loopback
 from mhrc.core.trace import read_trace
+from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.run.inprocess import up_in_process
+from mhrc.testing import ModelReply, ScriptedModelServer, ScriptedPolicy, run_episode, world_on_loopback
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.schedulers import SCHEDULERS, STEP_SECONDS, AsyncScheduler, SchedulerOptionError
 from mhrc.world.service import WorldConfig, WorldService
 from mhrc.world.sim import Sim
-from sweep import sweep
 
 WAIT = 180.0  # s: a bound on every wait, so that a regression fails instead of hanging
 
@@ -47,9 +47,14 @@ def test_async_is_registered_and_its_options_are_checked() -> None:
         EpisodeConfig.build(schedule="async", time_scale=-1)
     with pytest.raises(ConfigError, match=r"^--time-scale: only the async schedule"):
         EpisodeConfig.build(schedule="lockstep", time_scale=2)
-    for argv in (["up", "--schedule", "async", "--time-scale", "-1"], ["world", "--schedule", "async", "--time-scale", "-0.5"]):
+    for argv in (
+        ["up", "--schedule", "async", "--time-scale", "-1"],
+        ["world", "--schedule", "async", "--time-scale", "-0.5"],
+    ):
         result = CliRunner().invoke(main, argv)
-        assert result.exit_code == 2 and "--time-scale" in result.output and "Traceback" not in result.output, result.output
+        assert result.exit_code == 2 and "--time-scale" in result.output and "Traceback" not in result.output, (
+            result.output
+        )
     result = CliRunner().invoke(main, ["eval", "--schedule", "async", "--time-scale", "nan"])
     assert result.exit_code == 2, result.output
 
@@ -68,7 +73,10 @@ async def test_the_scheduler_refuses_a_negative_time_scale() -> None:
 # --------------------------------------------------------------------------- the heuristic team
 
 
-@pytest.mark.parametrize(("task", "scene"), sweep([(t, s) for s in sorted(LAYOUTS) for t in ("pack_objects", "sort_solids", "make_sandwich")]))
+@pytest.mark.parametrize(
+    ("task", "scene"),
+    sweep([(t, s) for s in sorted(LAYOUTS) for t in ("pack_objects", "sort_solids", "make_sandwich")]),
+)
 async def test_heuristic_team_solves_every_task_async(task: str, scene: str, tmp_path: Path) -> None:
     trace = tmp_path / "t.jsonl"
     cfg = EpisodeConfig.build(task=task, scene=scene, seed=0, n_objects=4, schedule="async", trace=trace)
@@ -77,7 +85,10 @@ async def test_heuristic_team_solves_every_task_async(task: str, scene: str, tmp
     m = from_trace(read_trace(trace))
     # TS is the makespan in steps of STEP_SECONDS; the trace and the world agree on both
     assert m.scheduler == "async" and m.makespan == pytest.approx(done.metrics.makespan, abs=1e-3)
-    assert m.temporal_steps == done.metrics.temporal_steps and (m.temporal_steps - 1) * STEP_SECONDS < m.makespan <= m.temporal_steps * STEP_SECONDS
+    assert (
+        m.temporal_steps == done.metrics.temporal_steps
+        and (m.temporal_steps - 1) * STEP_SECONDS < m.makespan <= m.temporal_steps * STEP_SECONDS
+    )
     results = _results(trace)
     assert len({r["goal_id"] for r in results}) == len(results), "a result went out twice"
     for robot in cfg.robots:
@@ -88,7 +99,9 @@ async def test_heuristic_team_solves_every_task_async(task: str, scene: str, tmp
         assert m.busy[robot] + m.idle[robot] == pytest.approx(m.makespan, abs=0.01)
         assert m.actions_per_robot[robot] == len(own)
     starts = [r["started"] for r in results]
-    assert starts == sorted(starts), "the clock never runs backwards (0 = as fast as possible: results go out as executed)"
+    assert starts == sorted(starts), (
+        "the clock never runs backwards (0 = as fast as possible: results go out as executed)"
+    )
     assert results[-1]["done"] and results[-1]["ended"] == pytest.approx(m.makespan, abs=1e-3)
 
 
@@ -108,10 +121,19 @@ async def test_a_slow_robot_does_not_hold_back_the_fast_ones(schedule: str, tmp_
     fast robots at least 80 x 0.05 s of model latency, so David has time for at least one.)"""
     latency = {"alice": 0.05, "bob": 0.05, "david": 2.0}
 
-    server = ScriptedModelServer(lambda body: ModelReply("Command: wait()", latency=latency[_robot_of(body)]), when_done=None)
+    server = ScriptedModelServer(
+        lambda body: ModelReply("Command: wait()", latency=latency[_robot_of(body)]), when_done=None
+    )
     try:
         trace = tmp_path / "t.jsonl"
-        cfg = EpisodeConfig.build(seed=0, horizon=10 if schedule == "async" else 3, schedule=schedule, llm="openai:scripted", base_url=server.url, trace=trace)
+        cfg = EpisodeConfig.build(
+            seed=0,
+            horizon=10 if schedule == "async" else 3,
+            schedule=schedule,
+            llm="openai:scripted",
+            base_url=server.url,
+            trace=trace,
+        )
         done = await asyncio.wait_for(up_in_process(cfg.resolved()), WAIT)
     finally:
         server.close()
@@ -135,8 +157,19 @@ async def test_two_robots_go_for_the_same_object(tmp_path: Path) -> None:
     request the world executes first gets it, the other fails with the feedback any robot would
     get; each request has exactly one result, and the soap is held by one robot."""
     trace = tmp_path / "t.jsonl"
-    alice = ScriptedPolicy(["navigate(cabinet_1, 0)", "open(cabinet_1)", "pick(soap)", "navigate(table_0, 0)", "place(soap, table_0)", "pick(soap)"])  # fmt: skip
-    bob = ScriptedPolicy(["pick(soap)"], until=lambda obs: any(o.name == "soap" and o.on == "table_0" for o in obs.objects))
+    alice = ScriptedPolicy(
+        [
+            "navigate(cabinet_1, 0)",
+            "open(cabinet_1)",
+            "pick(soap)",
+            "navigate(table_0, 0)",
+            "place(soap, table_0)",
+            "pick(soap)",
+        ]
+    )
+    bob = ScriptedPolicy(
+        ["pick(soap)"], until=lambda obs: any(o.name == "soap" and o.on == "table_0" for o in obs.objects)
+    )
     episode = {"seed": 0, "horizon": 12, "schedule": "async", "start_timeout": 5.0, "trace": trace}
     done = (await run_episode({"alice": alice, "bob": bob, "david": None}, timeout=WAIT, **episode)).done  # no David
     assert done.reason == "horizon"
@@ -152,12 +185,25 @@ async def test_two_robots_go_for_the_same_object(tmp_path: Path) -> None:
     assert sorted(holding.values(), key=str) == sorted([None, "soap"], key=str), holding
     # nothing duplicated, nothing lost: every accepted request has exactly one result
     lines = read_trace(trace)
-    accepted = [line["msg"]["goal_id"] for line in lines if line["key"].endswith("/action/ack") and line["msg"]["accepted"]]
+    accepted = [
+        line["msg"]["goal_id"] for line in lines if line["key"].endswith("/action/ack") and line["msg"]["accepted"]
+    ]
     released = [r["goal_id"] for r in _results(trace)]
     assert len(released) == len(set(released)) and set(released) <= set(accepted)
-    assert set(accepted) - set(released) <= set(done.final_results.values()) | _unfinished(lines), "an accepted request got no result"
-    script = ["navigate(cabinet_1, 0)", "open(cabinet_1)", "pick(soap)", "navigate(table_0, 0)", "place(soap, table_0)", "pick(soap)"]
-    assert [r.action.call() for r in alice.results[:6]] == script and all(r.outcome.succeeded for r in alice.results[:5])
+    assert set(accepted) - set(released) <= set(done.final_results.values()) | _unfinished(lines), (
+        "an accepted request got no result"
+    )
+    script = [
+        "navigate(cabinet_1, 0)",
+        "open(cabinet_1)",
+        "pick(soap)",
+        "navigate(table_0, 0)",
+        "place(soap, table_0)",
+        "pick(soap)",
+    ]
+    assert [r.action.call() for r in alice.results[:6]] == script and all(
+        r.outcome.succeeded for r in alice.results[:5]
+    )
 
 
 def _unfinished(lines: list[dict[str, Any]]) -> set[str]:
@@ -180,7 +226,9 @@ def _unfinished(lines: list[dict[str, Any]]) -> set[str]:
 async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_is_lost(tmp_path: Path) -> None:
     """On a clock at real time, Alice's navigation takes seconds: a second request meanwhile is
     rejected with the reason, and the first one's result still comes."""
-    async with world_on_loopback(seed=0, horizon=5, schedule="async", time_scale=1.0, start_timeout=3.0, trace=tmp_path / "t.jsonl") as world:
+    async with world_on_loopback(
+        seed=0, horizon=5, schedule="async", time_scale=1.0, start_timeout=3.0, trace=tmp_path / "t.jsonl"
+    ) as world:
         cfg = world.config
         bus = await world.client()
         keys = Keys(cfg.run)
@@ -191,7 +239,9 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
         agent = RobotAgent(bus, ScriptedPolicy([]), run=cfg.run, robot="alice")
         obs = await asyncio.wait_for(agent._attach(), 30)  # attach (and declare liveliness) as an agent would
         assert obs is not None and obs.tick == 0
-        first = ActionRequest(robot="alice", agent_id=agent.agent_id, tick=0, action=parse_command("Command: navigate(table_0, 0)"))
+        first = ActionRequest(
+            robot="alice", agent_id=agent.agent_id, tick=0, action=parse_command("Command: navigate(table_0, 0)")
+        )
         bus.put(keys.action_request("alice"), first)
         assert (await asyncio.wait_for(acks.get(), 30)).accepted
         sent = asyncio.get_running_loop().time()
@@ -202,7 +252,12 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
         assert "alice is still busy with navigate(table_0, 0)" in ack.reason and ack.code == "busy", ack
         result = await asyncio.wait_for(results.get(), 60)
         waited = asyncio.get_running_loop().time() - sent
-        assert result.goal_id == first.goal_id and result.tick == 0 and result.observation.tick == 1 and result.outcome.succeeded
+        assert (
+            result.goal_id == first.goal_id
+            and result.tick == 0
+            and result.observation.tick == 1
+            and result.outcome.succeeded
+        )
         assert result.ended is not None and result.started is not None and result.ended - result.started >= 0.5
         # the clock runs at real time: the result is held until its simulated duration has passed
         assert waited >= 0.9 * (result.ended - result.started), (waited, result.started, result.ended)
@@ -210,8 +265,17 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
         bus.put(keys.action_request("alice"), stale)
         ack = await asyncio.wait_for(acks.get(), 30)
         assert not ack.accepted and "is for tick 0 but alice is at tick 1" in ack.reason and ack.code == "stale_tick"
-    started = [line["msg"] for line in read_trace(tmp_path / "t.jsonl") if line["msg"] and line["msg"].get("kind") == "episode_started"]
-    assert started and started[0]["scheduler"] == "async" and started[0]["time_scale"] == 1.0 and started[0]["step_seconds"] == STEP_SECONDS
+    started = [
+        line["msg"]
+        for line in read_trace(tmp_path / "t.jsonl")
+        if line["msg"] and line["msg"].get("kind") == "episode_started"
+    ]
+    assert (
+        started
+        and started[0]["scheduler"] == "async"
+        and started[0]["time_scale"] == 1.0
+        and started[0]["step_seconds"] == STEP_SECONDS
+    )
 
 
 @pytest.mark.slow
@@ -222,10 +286,18 @@ async def test_async_runs_across_processes_with_its_time_scale(tmp_path: Path) -
 
     cfg = EpisodeConfig.build(seed=0, schedule="async", time_scale=40.0, trace=tmp_path / "t.jsonl").resolved()
     argv = world_command(cfg)[3:]  # after `python -m mhrc`
-    assert argv[0] == "world" and argv[argv.index("--schedule") + 1] == "async" and argv[argv.index("--time-scale") + 1] == "40.0"
+    assert (
+        argv[0] == "world"
+        and argv[argv.index("--schedule") + 1] == "async"
+        and argv[argv.index("--time-scale") + 1] == "40.0"
+    )
     parsed = world_command_cli.make_context("world", argv[1:])
     assert parsed.params["schedule"] == "async" and parsed.params["time_scale"] == 40.0
     done = await asyncio.wait_for(up_processes(cfg), WAIT)
     assert done.reason == "success"
-    started = [line["msg"] for line in read_trace(tmp_path / "t.jsonl") if line["msg"] and line["msg"].get("kind") == "episode_started"]
+    started = [
+        line["msg"]
+        for line in read_trace(tmp_path / "t.jsonl")
+        if line["msg"] and line["msg"].get("kind") == "episode_started"
+    ]
     assert [(m["scheduler"], m["time_scale"]) for m in started] == [("async", 40.0)]

@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from test_faults import HANG, _kill_group, _no_strays
 
 FULL = Path("/dev/full")
@@ -23,8 +22,15 @@ FULL = Path("/dev/full")
 
 def _mhrc(args: list[str], cwd: Path, **kwargs: object) -> subprocess.CompletedProcess[str]:
     """`mhrc ARGS` to its end (killed with its group after HANG s: a hang fails the test, not the suite)."""
-    proc = subprocess.Popen([sys.executable, "-m", "mhrc", *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, **kwargs)  # type: ignore[call-overload]  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mhrc", *args],
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        **kwargs,
+    )  # type: ignore[call-overload]
     try:
         out, err = proc.communicate(timeout=HANG)
     except subprocess.TimeoutExpired:
@@ -49,7 +55,9 @@ def test_a_trace_on_a_full_disk_stops_the_run_in_one_line(processes: bool, tmp_p
     assert out.returncode != 0, out.stderr[-3000:]
     assert "Traceback" not in out.stderr, out.stderr[-3000:]
     assert len(said) == 1 and str(FULL) in said[0] and "No space left on device" in said[0], out.stderr[-3000:]
-    assert "episode" not in out.stdout.split("trace /dev/full", 1)[-1], out.stdout  # no metrics table for a run unrecorded
+    assert "episode" not in out.stdout.split("trace /dev/full", 1)[-1], (
+        out.stdout
+    )  # no metrics table for a run unrecorded
 
 
 def _fsize_limit(limit: int) -> None:  # in the child, before exec: files it writes cannot grow past `limit` bytes
@@ -70,7 +78,9 @@ def test_a_trace_that_fills_up_mid_run_is_cut_to_whole_lines_and_marked_incomple
     assert text.endswith("\n"), text[-300:]
     rows = [json.loads(line) for line in text.splitlines()]
     assert rows[-1]["kind"] == "incomplete" and "File too large" in rows[-1]["msg"]["error"], rows[-1]
-    assert not any(r.get("msg", {}) and r["msg"].get("kind") == "episode_done" for r in rows if isinstance(r.get("msg"), dict)), "it ran on"
+    assert not any(
+        r.get("msg", {}) and r["msg"].get("kind") == "episode_done" for r in rows if isinstance(r.get("msg"), dict)
+    ), "it ran on"
     assert os.path.getsize(trace) <= 40_000
 
 
@@ -90,16 +100,33 @@ def test_a_participants_text_is_printed_inert(processes: bool, tmp_path: Path) -
     said = " ".join(EVIL)
     script = {"alice": [f"Command: communicate({said}, bob)", "Command: pick([bold red]x)"]}
     with ScriptedModelServer(script) as server:
-        out = _mhrc(["up", "--insecure", "--horizon", "4", "--llm", "alice=openai:scripted", "--base-url", server.url,
-                     *(["--processes"] if processes else [])], tmp_path, env={**os.environ, "COLUMNS": "250", "OPENAI_API_KEY": "x"})  # fmt: skip
+        out = _mhrc(
+            [
+                "up",
+                "--insecure",
+                "--horizon",
+                "4",
+                "--llm",
+                "alice=openai:scripted",
+                "--base-url",
+                server.url,
+                *(["--processes"] if processes else []),
+            ],
+            tmp_path,
+            env={**os.environ, "COLUMNS": "250", "OPENAI_API_KEY": "x"},
+        )
     assert out.returncode == 0, out.stderr[-3000:]
     assert "MarkupError" not in out.stderr and "Traceback" not in out.stderr, out.stderr[-3000:]
     for control in ("\x1b", "\x07"):
         assert control not in out.stdout and control not in out.stderr, repr(out.stdout[-2000:])
     lines = out.stdout.splitlines()
     message = [line for line in lines if "alice -> bob:" in line]
-    assert message and "[/] [bold red]x ]0;pwned[2J" in message[0], lines  # the markup shown as typed, the escapes' control bytes gone
-    assert any("pick([bold_red]x)" in line and "There is no '[bold_red]x'" in line for line in lines), lines  # the parser's name, as typed
+    assert message and "[/] [bold red]x ]0;pwned[2J" in message[0], (
+        lines
+    )  # the markup shown as typed, the escapes' control bytes gone
+    assert any("pick([bold_red]x)" in line and "There is no '[bold_red]x'" in line for line in lines), (
+        lines
+    )  # the parser's name, as typed
 
 
 # --------------------------------------------------------------------------- secret files others can read
@@ -117,7 +144,19 @@ def test_a_world_whose_secrets_others_can_read_is_refused_with_the_chmod(exposed
     creds = tmp_path / "creds"
     target = creds if exposed == "folder" else creds / exposed
     os.chmod(target, 0o777 if exposed == "folder" else 0o644)
-    out = _mhrc(["world", "--port", str(free_port()), "--credentials", str(creds / "world.json"), "--start-timeout", "1", "--quiet"], tmp_path)
+    out = _mhrc(
+        [
+            "world",
+            "--port",
+            str(free_port()),
+            "--credentials",
+            str(creds / "world.json"),
+            "--start-timeout",
+            "1",
+            "--quiet",
+        ],
+        tmp_path,
+    )
     assert out.returncode == 2, (out.returncode, out.stderr[-2000:])
     assert "Traceback" not in out.stderr
     fix = f"chmod 700 {creds}" if exposed == "folder" else f"chmod 600 {target}"
@@ -130,8 +169,23 @@ def test_an_agent_whose_password_file_others_can_read_is_refused(tmp_path: Path)
     assert made.returncode == 0, made.stderr
     alice = tmp_path / "creds" / "alice.json"
     os.chmod(alice, 0o644)
-    out = _mhrc(["agent", "--robot", "alice", "--connect", "tls/127.0.0.1:9", "--credentials", str(alice), "--attach-timeout", "1"], tmp_path)
-    assert out.returncode == 2 and f"chmod 600 {alice}" in out.stderr and "Traceback" not in out.stderr, out.stderr[-2000:]
+    out = _mhrc(
+        [
+            "agent",
+            "--robot",
+            "alice",
+            "--connect",
+            "tls/127.0.0.1:9",
+            "--credentials",
+            str(alice),
+            "--attach-timeout",
+            "1",
+        ],
+        tmp_path,
+    )
+    assert out.returncode == 2 and f"chmod 600 {alice}" in out.stderr and "Traceback" not in out.stderr, out.stderr[
+        -2000:
+    ]
 
 
 def test_credentials_are_written_0600_in_a_0700_folder_even_over_open_ones(tmp_path: Path) -> None:
@@ -173,7 +227,18 @@ def test_a_fixed_port_can_be_used_again_right_after_a_run(processes: bool, tmp_p
     from mhrc.core.endpoints import free_port
 
     port = free_port()
-    args = ["up", "--insecure", "--port", str(port), "--objects", "3", "--horizon", "3", "--quiet", *(["--processes"] if processes else [])]
+    args = [
+        "up",
+        "--insecure",
+        "--port",
+        str(port),
+        "--objects",
+        "3",
+        "--horizon",
+        "3",
+        "--quiet",
+        *(["--processes"] if processes else []),
+    ]
     for run in ("first", "second"):
         out = _mhrc([*args, "--run", run], tmp_path)
         assert out.returncode == 0, (run, out.stderr[-2000:])
@@ -235,7 +300,7 @@ def test_a_robot_killed_mid_episode_is_named_in_the_final_table(tmp_path: Path) 
     finally:
         _kill_group(proc)
     out = stdout.read_text()
-    table = out[out.index("┌"):] if "┌" in out else ""
+    table = out[out.index("┌") :] if "┌" in out else ""
     row = [line for line in table.splitlines() if "robots lost" in line]
     assert row and "alice at tick" in row[0] and "vanished" in row[0], out[-3000:]
     tick = int(row[0].split("alice at tick", 1)[1].split()[0])
@@ -266,7 +331,9 @@ def test_a_world_paused_until_its_agents_give_up_reports_its_own_end(tmp_path: P
         os.kill(world, signal.SIGSTOP)
         try:
             deadline = time.monotonic() + HANG
-            while any(_alive(pid) for pid in agents if pid is not None):  # the agents give up on a world that does not answer
+            while any(
+                _alive(pid) for pid in agents if pid is not None
+            ):  # the agents give up on a world that does not answer
                 assert time.monotonic() < deadline, "the agents never gave up on the paused world"
                 time.sleep(0.2)
         finally:

@@ -43,7 +43,14 @@ from mhrc.testing import LoopbackWorld, world_on_loopback
 
 
 def _mhrc(*args: str, cwd: Path, preexec_fn: Callable[[], None] | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=120, preexec_fn=preexec_fn)
+    return subprocess.run(
+        [sys.executable, "-m", "mhrc", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=preexec_fn,
+    )
 
 
 def _refused(result: subprocess.CompletedProcess[str], option: str) -> str:
@@ -98,7 +105,12 @@ def test_certificates_are_valid_until_now_plus_days(tmp_path: Path, days: float)
     for name in ("ca.pem", "world.pem"):
         cert = x509.load_pem_x509_certificate((tmp_path / name).read_bytes())
         # certificates hold whole seconds: the end may be up to a second before now + days
-        assert t0 + span - datetime.timedelta(seconds=1) <= cert.not_valid_after_utc <= t1 + span, (name, cert.not_valid_after_utc, t0, t1)
+        assert t0 + span - datetime.timedelta(seconds=1) <= cert.not_valid_after_utc <= t1 + span, (
+            name,
+            cert.not_valid_after_utc,
+            t0,
+            t1,
+        )
         assert cert.not_valid_before_utc <= t0 - datetime.timedelta(minutes=4), name  # backdated for clock skew
         assert cert.not_valid_after_utc > t1, f"{name} was written already expired"
 
@@ -125,8 +137,23 @@ def test_a_trace_that_cannot_be_written_is_refused_before_anything_starts(tmp_pa
 
 
 def test_an_eval_out_that_cannot_be_created_is_refused_before_anything_starts(tmp_path: Path) -> None:
-    line = _refused(_mhrc("eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--workers", "1",
-                          "--out", "/dev/null/x", cwd=tmp_path), "--out")  # fmt: skip
+    line = _refused(
+        _mhrc(
+            "eval",
+            "--tasks",
+            "pack_objects",
+            "--scenes",
+            "kitchen",
+            "--objects",
+            "3",
+            "--workers",
+            "1",
+            "--out",
+            "/dev/null/x",
+            cwd=tmp_path,
+        ),
+        "--out",
+    )
     assert "/dev/null is not a directory" in line
     assert list(tmp_path.iterdir()) == []
 
@@ -149,7 +176,9 @@ class Mallory:
 
     async def attach(self) -> None:
         await served(self.bus, self.keys.attach("alice"))
-        replies = await self.bus.get(self.keys.attach("alice"), AttachRequest(robot="alice", agent_id="mallory"), timeout=30)
+        replies = await self.bus.get(
+            self.keys.attach("alice"), AttachRequest(robot="alice", agent_id="mallory"), timeout=30
+        )
         assert replies and decode(replies[0], AttachReply).accepted
         self.bus.declare_token(self.keys.alive_robot("alice"))
 
@@ -188,7 +217,9 @@ async def _mallory(tmp_path: Path) -> AsyncIterator[Mallory]:
     and a client session with alice's login, closed in finally."""
     creds = tmp_path / "cred"
     security.make_run_credentials("hostile", ROBOTS, creds)
-    async with world_on_loopback(run="hostile", credentials=creds, seed=0, n_objects=3, trace=tmp_path / "trace.jsonl") as world:
+    async with world_on_loopback(
+        run="hostile", credentials=creds, seed=0, n_objects=3, trace=tmp_path / "trace.jsonl"
+    ) as world:
         bus = await open_client(world.endpoint, 30, security=world.config.participant("alice"))
         try:
             mallory = Mallory(world, bus)
@@ -199,7 +230,15 @@ async def _mallory(tmp_path: Path) -> AsyncIterator[Mallory]:
 
 
 def _request(goal: str, **fields: Any) -> dict[str, Any]:
-    return {"v": 2, "kind": "action_request", "goal_id": goal, "robot": "alice", "agent_id": "mallory", "tick": 0, "action": {"skill": "wait"}} | fields
+    return {
+        "v": 2,
+        "kind": "action_request",
+        "goal_id": goal,
+        "robot": "alice",
+        "agent_id": "mallory",
+        "tick": 0,
+        "action": {"skill": "wait"},
+    } | fields
 
 
 def _junk(trace: Path, key_end: str) -> list[dict[str, Any]]:
@@ -219,7 +258,11 @@ async def test_deeply_nested_json_and_a_huge_tick_are_rejected_at_the_ack(tmp_pa
         elif i % 3 == 1:
             payloads[goal] = (head + ', "pad": ' + '{"a": ' * depth + "1" + "}" * depth + "}").encode()
         else:
-            payloads[goal] = json.dumps(_request(goal)).replace('{"skill": "wait"}', '{"skill": "wait", "x": ' + "[" * depth + "]" * depth + "}").encode()
+            payloads[goal] = (
+                json.dumps(_request(goal))
+                .replace('{"skill": "wait"}', '{"skill": "wait", "x": ' + "[" * depth + "]" * depth + "}")
+                .encode()
+            )
     payloads["huge-tick"] = json.dumps(_request("huge-tick")).replace('"tick": 0', '"tick": 1' + "0" * 5000).encode()
     with capture_logs() as logs:
         async with _mallory(tmp_path) as mallory:
@@ -247,14 +290,18 @@ async def test_megabyte_ids_and_names_cannot_fill_the_trace(tmp_path: Path) -> N
             for goal in big:
                 mallory.put(json.dumps(_request(goal, agent_id="A" * 3_000_000)).encode())
             mallory.put(json.dumps(_request("long-name", action={"skill": "pick", "obj": "o" * 1_000_000})).encode())
-            mallory.put(json.dumps(_request("long-id", agent_id="A" * 129)).encode())  # short payloads, one field too long
+            mallory.put(
+                json.dumps(_request("long-id", agent_id="A" * 129)).encode()
+            )  # short payloads, one field too long
             mallory.put(json.dumps(_request("long-obj", action={"skill": "pick", "obj": "o" * 65})).encode())
             acks = await mallory.answered([*big, "long-name", "long-id", "long-obj"])
             await mallory.recorded()
     size = mallory.world.trace.stat().st_size
     longest = max(len(line) for line in mallory.world.trace.read_text().splitlines())
     assert size < 1_000_000 and longest < 64 * 1024, (size, longest)
-    assert {g: (a.accepted, a.code) for g, a in acks.items()} == dict.fromkeys([*big, "long-name", "long-id", "long-obj"], (False, RejectCode.MALFORMED))
+    assert {g: (a.accepted, a.code) for g, a in acks.items()} == dict.fromkeys(
+        [*big, "long-name", "long-id", "long-obj"], (False, RejectCode.MALFORMED)
+    )
     assert "more than the 65536" in acks["big-0"].reason and "more than the 65536" in acks["long-name"].reason
     assert "agent_id" in acks["long-id"].reason and "action.pick.obj" in acks["long-obj"].reason
     junk = _junk(mallory.world.trace, "/action/request")
@@ -263,13 +310,18 @@ async def test_megabyte_ids_and_names_cannot_fill_the_trace(tmp_path: Path) -> N
 
 
 @pytest.mark.parametrize(
-    "dx, dy", [("NaN", "0"), ("0", "Infinity"), ("-Infinity", "0"), ("1e999", "0"), ("-1e308", "0"), ("0", "1e6")],
+    "dx, dy",
+    [("NaN", "0"), ("0", "Infinity"), ("-Infinity", "0"), ("1e999", "0"), ("-1e308", "0"), ("0", "1e6")],
     ids=["nan", "inf", "-inf", "overflow", "-1e308", "a-thousand-km"],
-)  # fmt: skip
+)
 async def test_non_finite_and_absurd_moves_are_rejected_at_the_ack(tmp_path: Path, dx: str, dy: str) -> None:
     """Python's and pydantic's JSON both read NaN, Infinity and 1e999 (as inf): a move must be
     finite and within 100 m a side, or the world would run (and echo, as `null`) what no schema allows."""
-    payload = json.dumps(_request("bad-move", action={"skill": "move", "dx": "DX", "dy": "DY"})).replace('"DX"', dx).replace('"DY"', dy)
+    payload = (
+        json.dumps(_request("bad-move", action={"skill": "move", "dx": "DX", "dy": "DY"}))
+        .replace('"DX"', dx)
+        .replace('"DY"', dy)
+    )
     with capture_logs():
         async with _mallory(tmp_path) as mallory:
             mallory.put(payload.encode())

@@ -9,11 +9,9 @@ import math
 from dataclasses import dataclass
 
 from mhrc.agents.observation import furniture_line, object_line
+from mhrc.core.protocol import Move, Navigate, ObjectView, Observation, Open, OutcomeCode, Pick, Place, SkillOutcome
 from mhrc.world.beliefs import Beliefs
 from mhrc.world.sim import Sim
-
-from mhrc.core.protocol import Move, Navigate, ObjectView, Observation, Open, OutcomeCode, Pick, Place, SkillOutcome
-
 
 EXACT = ("exact_motion",)  # bases stop on their poses, placed objects stay put: the story stays the story
 
@@ -50,7 +48,11 @@ def _far_on_table_0(sim: Sim) -> str:
     bob = sim.observe("bob", 0)
     ab, reach = bob.status.arm_base, bob.status.reach
     assert ab is not None and reach is not None
-    return next(o.name for o in bob.objects if o.on == "table_0" and math.hypot(o.position[0] - ab[0], o.position[1] - ab[1]) > reach)
+    return next(
+        o.name
+        for o in bob.objects
+        if o.on == "table_0" and math.hypot(o.position[0] - ab[0], o.position[1] - ab[1]) > reach
+    )
 
 
 @dataclass(frozen=True)
@@ -67,13 +69,21 @@ class Cast:
 
 def _cast(sim: Sim) -> Cast:
     lay = sim.layout
-    item = next(o for o in sim.objects.values() if o.on not in (lay.bob_table, None) and not o.inside and lay.get(o.on).stand_poses)  # type: ignore[union-attr]
+    item = next(
+        o
+        for o in sim.objects.values()
+        if o.on not in (lay.bob_table, None) and not o.inside and lay.get(o.on).stand_poses
+    )  # type: ignore[union-attr]
     hidden = next(o for o in sim.objects.values() if o.inside)
     assert item.on is not None and hidden.on is not None
     other = next(
-        f.name for f in lay.furniture
-        if f.container is None and f.stand_poses and f.name not in (lay.bob_table, item.on) and not sim.objects_on(f.name)
-    )  # fmt: skip
+        f.name
+        for f in lay.furniture
+        if f.container is None
+        and f.stand_poses
+        and f.name not in (lay.bob_table, item.on)
+        and not sim.objects_on(f.name)
+    )
     return Cast(item.name, item.on, hidden.name, hidden.on, other)
 
 
@@ -85,7 +95,9 @@ def _carry_to_table_0_unseen_by_david(sim: Sim, c: Cast) -> ObjectView:
     assert seen is not None and seen.on == c.shelf and seen.told_by is None and seen.last_seen_on is None
     sim.tell("alice", "david", f"On {c.shelf} I found: {c.item}.")
     told = _obj(sim.observe("alice", 1), c.item)
-    assert told == (seen if "live_state" in sim.aids else seen.model_copy(update={"told_by": "david"}))  # David's belief, who said so
+    assert told == (
+        seen if "live_state" in sim.aids else seen.model_copy(update={"told_by": "david"})
+    )  # David's belief, who said so
     _ok(sim.execute("david", Navigate(target=c.other, stand_pose=0)))
     _ok(sim.execute("alice", Navigate(target=c.shelf, stand_pose=_pose_near(sim, c.shelf, c.item))))
     _pick(sim, "alice", c.item)
@@ -115,8 +127,12 @@ def test_a_robot_does_not_see_what_happens_where_it_is_not() -> None:
         assert gone == seen.model_copy(update={"on": None, "last_seen_on": c.shelf})
         x, y, z = seen.position
         where = f"where it was last seen at ({x:.2f}, {y:.2f}, {z:.2f}); where it is now is unknown"
-        assert object_line(gone, david) == f"- {c.item}: position unknown"  # the paper's field: where it is he does not know
-        assert object_line(gone, david, hints=True) == f"- {c.item}: no longer on {c.shelf}, {where}"  # the prompt_hints aid says more
+        assert (
+            object_line(gone, david) == f"- {c.item}: position unknown"
+        )  # the paper's field: where it is he does not know
+        assert (
+            object_line(gone, david, hints=True) == f"- {c.item}: no longer on {c.shelf}, {where}"
+        )  # the prompt_hints aid says more
         # Alice tells him where it went: her newer belief replaces his
         sim.tell("david", "alice", f"I put the {c.item} on table_0.")
         view = _obj(sim.observe("david", 5), c.item)
@@ -152,7 +168,9 @@ def test_a_container_is_open_only_for_those_who_saw_it_open() -> None:
         david = sim.observe("david", 1)
         assert _is_open(david, c.box) is False and _obj(david, c.hidden) is None
         box = next(f for f in david.furniture if f.name == c.box)
-        assert "; closed;" in furniture_line(box) and "closed (open it to see inside)" in furniture_line(box, hints=True)
+        assert "; closed;" in furniture_line(box) and "closed (open it to see inside)" in furniture_line(
+            box, hints=True
+        )
         _ok(sim.execute("david", Navigate(target=c.other, stand_pose=0)))
         assert _is_open(sim.observe("david", 2), c.box) is False  # elsewhere: still as he last knew it
         _ok(sim.execute("david", Navigate(target=c.box, stand_pose=0)))
@@ -175,7 +193,9 @@ def test_a_message_carries_the_senders_belief_and_newer_news_wins() -> None:
         _pick(sim, "alice", c.item)
         sim.tell("bob", "david", f"{c.item} is on {c.shelf}, {c.hidden} maybe, and a unicorn somewhere")
         bob = sim.observe("bob", 2)
-        assert seen is not None and _obj(bob, c.item) == seen.model_copy(update={"told_by": "david"})  # not the truth: Alice holds it
+        assert seen is not None and _obj(bob, c.item) == seen.model_copy(
+            update={"told_by": "david"}
+        )  # not the truth: Alice holds it
         assert _obj(bob, c.hidden) is None  # nobody has seen it
         assert {o.name for o in bob.objects} == {c.item} | set(sim.objects_on("table_0"))
         sim.tell("bob", "alice", f"I have the {c.item}.")
@@ -195,13 +215,17 @@ def test_bob_sees_his_table_and_a_robot_sees_where_it_stands() -> None:
         _ok(sim.execute("alice", Navigate(target="table_0", stand_pose=_pose_near(sim, "table_0", far))))
         _pick(sim, "alice", far)
         gone = _obj(sim.observe("bob", 1), far)  # it left his table: he saw that, not who took it
-        assert gone is not None and gone.on is None and gone.last_seen_on == "table_0" and gone.position == before.position
+        assert (
+            gone is not None and gone.on is None and gone.last_seen_on == "table_0" and gone.position == before.position
+        )
         held = _obj(sim.observe("alice", 1), far)
         assert held is not None and held.held_by == "alice"  # a robot knows what it holds
         _ok(sim.execute("alice", Navigate(target="table_0", stand_pose=0)))
         _ok(sim.execute("alice", Place(obj=far, location="table_0")))
         back = _obj(sim.observe("bob", 2), far)
-        assert back is not None and back.on == "table_0" and back.last_seen_on is None and back.position != before.position
+        assert (
+            back is not None and back.on == "table_0" and back.last_seen_on is None and back.position != before.position
+        )
         assert _obj(sim.observe("alice", 2), far) == back  # Alice sees her own place
         # Bob packs it while Alice still stands at table_0: she sees it land on its goal
         goal = sim.goals[far]
@@ -237,7 +261,9 @@ def test_the_belief_store_on_its_own() -> None:
     assert b.is_open("box") and b.objects["key"].view.inside
     a.see("shelf", {"shelf"}, None, [view("pen", "shelf", x=1.0)], stamp=4)
     assert a.objects["cup"].view == view("cup", None, last_seen_on="shelf") and a.objects["pen"].view.position[0] == 1.0
-    b.see("desk", {"desk"}, None, [view("cup", "desk", x=2.0)], stamp=3)  # seen on the desk before Alice missed it on the shelf
+    b.see(
+        "desk", {"desk"}, None, [view("cup", "desk", x=2.0)], stamp=3
+    )  # seen on the desk before Alice missed it on the shelf
     assert b.told("a", a, ["cup", "pen", "ghost"]) == ["pen"]  # "gone from the shelf" does not beat "on the desk"
     assert b.objects["pen"].view.told_by == "a" and "ghost" not in b.objects
     assert a.told("b", b, ["pen", "key"]) == ["key"] and a.objects["pen"].view.told_by is None

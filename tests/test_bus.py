@@ -5,12 +5,11 @@ from __future__ import annotations
 import asyncio
 
 from structlog.testing import capture_logs
+from waits import served, subscribed
 
 from mhrc.core.bus import Bus, Sample
-
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.protocol import ActionAck, decode
-from waits import served, subscribed
 
 
 async def test_pub_sub_query_and_liveliness_across_sessions() -> None:
@@ -95,9 +94,13 @@ async def test_an_async_handlers_exception_is_logged_not_lost() -> None:
         with capture_logs() as logs:
             b.put("t/z", b"boom")
             b.put("t/z", b"after")
-            assert await asyncio.wait_for(handled.get(), 30) == b"after"  # its task started second, so ended after the failing one
+            assert (
+                await asyncio.wait_for(handled.get(), 30) == b"after"
+            )  # its task started second, so ended after the failing one
         failed = [entry for entry in logs if entry["event"] == "bus handler failed"]
-        assert len(failed) == 1 and failed[0]["error"] == "async handler bug" and failed[0]["task"] == "handle t/z", failed
+        assert len(failed) == 1 and failed[0]["error"] == "async handler bug" and failed[0]["task"] == "handle t/z", (
+            failed
+        )
         assert not a._tasks, "every handler's task is let go once it ended"
     finally:
         await b.close()

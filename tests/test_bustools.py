@@ -15,14 +15,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
-from mhrc.core.bus import Bus, Sample
-
-from mhrc.core.endpoints import free_port
-from mhrc.cli.bustools import MODELS, bus_echo, describe_sample, group_tokens, split_endpoint
-from mhrc.run.attach import run_agent
-from mhrc.core.protocol import PROTOCOL_VERSION
 from waits import robots_alive, subscribed
+
+from mhrc.cli.bustools import MODELS, bus_echo, describe_sample, group_tokens, split_endpoint
+from mhrc.core.bus import Bus, Sample
+from mhrc.core.endpoints import free_port
+from mhrc.core.protocol import PROTOCOL_VERSION
+from mhrc.run.attach import run_agent
 
 MHRC = [sys.executable, "-m", "mhrc"]
 BANNER = "pybullet build time"
@@ -90,13 +89,18 @@ async def test_list_and_doctor_show_the_run_and_its_robots(mhrc_world) -> None: 
             async with agents("bt-list", ep, ("alice", "bob")):
                 await world.attached("alice", "bob")
                 listed, listed_json, doc = await asyncio.gather(
-                    amhrc("bus", "list", "--connect", ep), amhrc("bus", "list", "--json", "--connect", ep), amhrc("doctor", "--connect", ep)
+                    amhrc("bus", "list", "--connect", ep),
+                    amhrc("bus", "list", "--json", "--connect", ep),
+                    amhrc("doctor", "--connect", ep),
                 )
         finally:
             await client.close()
     assert listed.returncode == 0, listed.stderr
     assert listed.stdout.strip() == "run bt-list: world alive; robots attached: alice, bob"
-    assert json.loads(listed_json.stdout) == {"endpoint": ep, "groups": [{"run": "bt-list", "world": True, "robots": ["alice", "bob"]}]}
+    assert json.loads(listed_json.stdout) == {
+        "endpoint": ep,
+        "groups": [{"run": "bt-list", "world": True, "robots": ["alice", "bob"]}],
+    }
     assert doc.returncode == 0, doc.stdout + doc.stderr
     lines = doc.stdout.splitlines()
     assert lines[0].startswith(f"ok   {ep}: zenoh router ")
@@ -113,9 +117,36 @@ async def test_echo_prints_an_episodes_action_results(mhrc_world) -> None:  # ty
         # Each echo's key also matches a probe key of no run (the world records only its own run's
         # keys): a subscriber of the probe is the echo, subscribed. The second echo's key is wider
         # than the first's, with a probe of its own.
-        text = asyncio.create_task(amhrc("bus", "echo", "mhrc/*/robot/*/action/result", "--connect", ep, "--count", "4", "--timeout", "60", timeout=90))
+        text = asyncio.create_task(
+            amhrc(
+                "bus",
+                "echo",
+                "mhrc/*/robot/*/action/result",
+                "--connect",
+                ep,
+                "--count",
+                "4",
+                "--timeout",
+                "60",
+                timeout=90,
+            )
+        )
         await subscribed(client, "mhrc/probe/robot/x/action/result")
-        as_json = asyncio.create_task(amhrc("bus", "echo", "mhrc/**/action/result", "--json", "--connect", ep, "--count", "4", "--timeout", "60", timeout=90))
+        as_json = asyncio.create_task(
+            amhrc(
+                "bus",
+                "echo",
+                "mhrc/**/action/result",
+                "--json",
+                "--connect",
+                ep,
+                "--count",
+                "4",
+                "--timeout",
+                "60",
+                timeout=90,
+            )
+        )
         await subscribed(client, "mhrc/probe/action/result")
         async with agents("bt-echo", ep, ("alice", "bob", "david")):
             out_text, out_json = await asyncio.gather(text, as_json)
@@ -192,7 +223,10 @@ def test_bus_tools_fail_in_one_line_when_nothing_listens() -> None:
     for args in (["bus", "list"], ["bus", "echo", "mhrc/**"]):
         out = mhrc(*args, "--connect", f"tcp/127.0.0.1:{port}")
         assert out.returncode == 1 and out.stdout == ""
-        assert out.stderr.strip() == f"mhrc {' '.join(args[:2])}: tcp/127.0.0.1:{port}: nothing listens there (connection refused)"
+        assert (
+            out.stderr.strip()
+            == f"mhrc {' '.join(args[:2])}: tcp/127.0.0.1:{port}: nothing listens there (connection refused)"
+        )
     out = mhrc("bus", "echo", "mhrc//bad", "--connect", f"tcp/127.0.0.1:{port}")
     assert out.returncode == 1 and "is not a key expression" in out.stderr and "Traceback" not in out.stderr
 
@@ -201,10 +235,14 @@ def test_bus_tools_fail_in_one_line_when_nothing_listens() -> None:
 
 
 def test_group_tokens() -> None:
-    groups = group_tokens([
-        "mhrc/r1/alive/world", "mhrc/r1/alive/robot/bob", "mhrc/r1/alive/robot/alice",
-        "mhrc/r2/alive/robot/david",
-    ])  # fmt: skip
+    groups = group_tokens(
+        [
+            "mhrc/r1/alive/world",
+            "mhrc/r1/alive/robot/bob",
+            "mhrc/r1/alive/robot/alice",
+            "mhrc/r2/alive/robot/david",
+        ]
+    )
     assert [g.describe() for g in groups] == [
         "run r1: world alive; robots attached: alice, bob",
         "run r2: no world; robots attached: david",
@@ -215,7 +253,15 @@ def test_split_endpoint_and_known_kinds() -> None:
     assert split_endpoint("tcp/127.0.0.1:7447") == ("tcp", "127.0.0.1", 7447)
     assert split_endpoint("tcp/[::1]:7447") == ("tcp", "::1", 7447)
     assert split_endpoint("localhost:7447") == ("tcp", "localhost", 7447)
-    assert {"action_request", "action_ack", "action_result", "message", "thought", "episode_done", "world_state"} <= set(MODELS)
+    assert {
+        "action_request",
+        "action_ack",
+        "action_result",
+        "message",
+        "thought",
+        "episode_done",
+        "world_state",
+    } <= set(MODELS)
     assert describe_sample(Sample("k", b"", is_put=False)).kind == "delete"
 
 
@@ -235,7 +281,17 @@ def test_commands_print_no_pybullet_banner(tmp_path: Path) -> None:
     assert json.loads(up.stdout)["total"] == 3
 
 
-@pytest.mark.parametrize("module", ["mhrc.world.sim", "mhrc.world.render", "mhrc.world.arm", "mhrc.world.robots", "mhrc.world.scene", "mhrc.world.skills"])
+@pytest.mark.parametrize(
+    "module",
+    [
+        "mhrc.world.sim",
+        "mhrc.world.render",
+        "mhrc.world.arm",
+        "mhrc.world.robots",
+        "mhrc.world.scene",
+        "mhrc.world.skills",
+    ],
+)
 def test_importing_pybullet_modules_is_silent(module: str) -> None:
     out = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and out.stdout == "" and out.stderr == "", out.stderr
@@ -253,7 +309,11 @@ async def test_the_observers_login_reads_a_secured_run(tmp_path: Path) -> None:
     from mhrc.run.config import EpisodeConfig
     from mhrc.run.inprocess import up_in_process
 
-    cfg = EpisodeConfig.build(seed=0, n_objects=4, tick_delay=0.2, trace=tmp_path / "t.jsonl").resolved().with_credentials(tmp_path / "cred")
+    cfg = (
+        EpisodeConfig.build(seed=0, n_objects=4, tick_delay=0.2, trace=tmp_path / "t.jsonl")
+        .resolved()
+        .with_credentials(tmp_path / "cred")
+    )
     observer, alice = str(cfg.credentials_file("observer")), str(cfg.credentials_file("alice"))
     world = asyncio.create_task(up_in_process(cfg, robots=("alice", "bob")))  # waits for david: alive, not started
     client = await open_client(cfg.endpoint, 60, security=cfg.participant("observer"))
@@ -264,12 +324,31 @@ async def test_the_observers_login_reads_a_secured_run(tmp_path: Path) -> None:
             amhrc("doctor", "--connect", cfg.endpoint, "--credentials", alice),
         )
         assert doc.returncode == 0, doc.stdout + doc.stderr
-        assert f"run {cfg.run}: world speaks protocol v{PROTOCOL_VERSION}" in doc.stdout and doc.stdout.splitlines()[-1] == "healthy"
+        assert (
+            f"run {cfg.run}: world speaks protocol v{PROTOCOL_VERSION}" in doc.stdout
+            and doc.stdout.splitlines()[-1] == "healthy"
+        )
         assert as_alice.returncode == 0, as_alice.stdout
         assert "observer's login" in as_alice.stdout
-        echo = asyncio.create_task(amhrc("bus", "echo", "mhrc/**", "--connect", cfg.endpoint, "--credentials", observer,
-                                         "--count", "5", "--timeout", "60", timeout=90))  # fmt: skip
-        listing = await amhrc("bus", "list", "--connect", cfg.endpoint, "--credentials", observer)  # echo is subscribed by now
+        echo = asyncio.create_task(
+            amhrc(
+                "bus",
+                "echo",
+                "mhrc/**",
+                "--connect",
+                cfg.endpoint,
+                "--credentials",
+                observer,
+                "--count",
+                "5",
+                "--timeout",
+                "60",
+                timeout=90,
+            )
+        )
+        listing = await amhrc(
+            "bus", "list", "--connect", cfg.endpoint, "--credentials", observer
+        )  # echo is subscribed by now
         assert listing.stdout.startswith(f"run {cfg.run}: world alive"), listing.stdout + listing.stderr
         david = asyncio.create_task(run_agent("david", cfg.run, cfg.endpoint, security=cfg.participant("david")))
         out = await echo

@@ -17,6 +17,8 @@ from typing import Any
 
 import pytest
 from rich.console import Console
+from sweep import sweep
+from waits import served
 
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision, Policy
@@ -37,14 +39,14 @@ from mhrc.core.protocol import (
     decode_event,
 )
 from mhrc.testing import world_on_loopback
-from sweep import sweep
-from waits import served
 
 
 def mhrc(*args: str, cwd: Path, timeout: float = 240) -> subprocess.CompletedProcess[str]:
     """The real command line, in `cwd` (where runs/ goes)."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}
-    return subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env
+    )
 
 
 # --------------------------------------------------------------------------- 6. a tick taken by another process
@@ -131,7 +133,9 @@ async def test_an_agent_whose_tick_was_taken_backs_off_instead_of_resubmitting_i
 
         # bob and david act: tick 0 closes, and alice plays tick 1
         for robot in ("bob", "david"):
-            bus.put(keys.action_request(robot), ActionRequest(robot=robot, agent_id=f"hand-{robot}", tick=0, action=Wait()))
+            bus.put(
+                keys.action_request(robot), ActionRequest(robot=robot, agent_id=f"hand-{robot}", tick=0, action=Wait())
+            )
         await asyncio.wait_for(own_accepted.wait(), 30)
 
 
@@ -169,13 +173,20 @@ def test_quiet_prints_only_the_summary_table_with_the_reports_makespan(processes
 
 
 def test_the_summary_table_shows_the_makespan_not_the_sum_of_skill_times() -> None:
-    from mhrc.run.console import summary_table
     from mhrc.core.protocol import EpisodeDone, Metrics
+    from mhrc.run.console import summary_table
 
     metrics = Metrics(
-        success=True, partial_success=1.0, placed=4, total=4, temporal_steps=17, action_steps=42,
-        action_steps_per_robot={"alice": 17, "bob": 9, "david": 16}, sim_time=215.2, makespan=147.08,
-    )  # fmt: skip
+        success=True,
+        partial_success=1.0,
+        placed=4,
+        total=4,
+        temporal_steps=17,
+        action_steps=42,
+        action_steps_per_robot={"alice": 17, "bob": 9, "david": 16},
+        sim_time=215.2,
+        makespan=147.08,
+    )
     out = io.StringIO()
     Console(file=out, width=120).print(summary_table(EpisodeDone(run="r", reason="success", metrics=metrics)))
     rows = _table_rows(out.getvalue())
@@ -192,17 +203,27 @@ MESSAGE_LINE = re.compile(r"^ +(alice|bob|david) -> (alice|bob|david): ")
 
 @pytest.mark.parametrize(
     ("summary", "schedule"),
-    sweep([(True, "lockstep"), (False, "lockstep"), (True, "sequential"), (False, "sequential")], fast=2,
-          ids=["table-at-the-end-lockstep", "table-by-mhrc-up-lockstep", "table-at-the-end-sequential", "table-by-mhrc-up-sequential"]),
-)  # fmt: skip
-async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table(schedule: str, summary: bool, tmp_path: Path) -> None:
+    sweep(
+        [(True, "lockstep"), (False, "lockstep"), (True, "sequential"), (False, "sequential")],
+        fast=2,
+        ids=[
+            "table-at-the-end-lockstep",
+            "table-by-mhrc-up-lockstep",
+            "table-at-the-end-sequential",
+            "table-by-mhrc-up-sequential",
+        ],
+    ),
+)
+async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table(
+    schedule: str, summary: bool, tmp_path: Path
+) -> None:
     """Results, messages and the tick events travel on different keys; the console must still
     read in tick order: a tick's results, then its messages, then "tick N closed"; the table
     last, after every result (`mhrc world`'s printer prints it; `mhrc up` after the run)."""
-    from mhrc.run.config import EpisodeConfig
-    from mhrc.run.inprocess import up_in_process
-    from mhrc.run.console import ProgressPrinter, summary_table
     from mhrc.core.trace import read_trace
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.console import ProgressPrinter, summary_table
+    from mhrc.run.inprocess import up_in_process
 
     out = io.StringIO()
     console = Console(file=out, width=400, highlight=False, soft_wrap=True)
@@ -219,7 +240,9 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     assert list(closed_at.values()) == sorted(closed_at.values()), "tick closed lines out of order"
     results = [(i, int(m.group(1)), m.group(2)) for i, line in enumerate(lines) if (m := TICK_LINE.match(line))]
     assert cfg.trace is not None
-    published = [r for r in read_trace(cfg.trace) if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "action_result"]
+    published = [
+        r for r in read_trace(cfg.trace) if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "action_result"
+    ]
     assert len(results) == len(published), "a result is missing"
     for i, tick, robot in results:
         assert closed_at.get(tick - 1, -1) < i < closed_at[tick], f"line {i} ({lines[i]!r}) is outside tick {tick}"
@@ -228,9 +251,13 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     assert len(messages) == done.metrics.messages
     for i, sender in messages:
         tick = min(t for t, at in closed_at.items() if at > i)  # the tick whose closed line follows the message
-        assert sent.get((tick, sender), len(lines)) < i, f"message line {i} ({lines[i]!r}) before its communicate result"
+        assert sent.get((tick, sender), len(lines)) < i, (
+            f"message line {i} ({lines[i]!r}) before its communicate result"
+        )
     title = next(i for i, line in enumerate(lines) if line.startswith(f"episode {cfg.run}: success"))
-    assert title > closed_at[done.metrics.temporal_steps - 1] and all(TABLE_ROW.match(line) for line in lines[title + 1 :])
+    assert title > closed_at[done.metrics.temporal_steps - 1] and all(
+        TABLE_ROW.match(line) for line in lines[title + 1 :]
+    )
 
 
 class _Replay:
@@ -265,7 +292,9 @@ async def test_messages_that_come_after_the_end_still_print_before_the_table(tmp
     records = [r for r in read_trace(cfg.trace) if isinstance(r.get("msg"), dict)]
     last = done.metrics.temporal_steps - 1
     late = [r for r in records if "/inbox/" in r["key"]]
-    assert any(r["msg"]["tick"] == last for r in late), "the episode no longer sends a message in its last tick: pick another seed"
+    assert any(r["msg"]["tick"] == last for r in late), (
+        "the episode no longer sends a message in its last tick: pick another seed"
+    )
 
     out = io.StringIO()
     printer = ProgressPrinter(Console(file=out, width=400, highlight=False, soft_wrap=True), summary=True)
@@ -290,7 +319,9 @@ async def test_messages_that_come_after_the_end_still_print_before_the_table(tmp
 EVENT_LINE = re.compile(r"^tick +(\d+) event (.*)$")
 
 
-async def test_scenario_events_print_as_their_tick_opens_and_the_table_says_how_the_team_recovered(tmp_path: Path) -> None:
+async def test_scenario_events_print_as_their_tick_opens_and_the_table_says_how_the_team_recovered(
+    tmp_path: Path,
+) -> None:
     """A dynamic episode (issue 25) at the console: each scenario event's line comes right after
     the closed line of the tick before it (it fires as its tick opens) and before that tick's
     results; the table ends with each event's recovery as the metrics score it."""
@@ -311,16 +342,28 @@ async def test_scenario_events_print_as_their_tick_opens_and_the_table_says_how_
     console.print(summary_table(done, recovery))
     lines = out.getvalue().splitlines()
     events = [(i, int(m.group(1)), m.group(2)) for i, line in enumerate(lines) if (m := EVENT_LINE.match(line))]
-    fired = [r["msg"] for r in read_trace(cfg.trace) if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "scenario_event"]
+    fired = [
+        r["msg"]
+        for r in read_trace(cfg.trace)
+        if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "scenario_event"
+    ]
     assert [(t, text) for _, t, text in events] == [(e["tick"], e["text"]) for e in fired] and len(events) == 4
     for i, tick, _ in events:
-        assert CLOSED_LINE.match(lines[i - 1]) and int(CLOSED_LINE.match(lines[i - 1]).group(1)) == tick - 1, lines[i - 1 : i + 1]  # type: ignore[union-attr]
-        first_result = next(j for j, line in enumerate(lines) if (m := TICK_LINE.match(line)) and int(m.group(1)) == tick)
+        assert CLOSED_LINE.match(lines[i - 1]) and int(CLOSED_LINE.match(lines[i - 1]).group(1)) == tick - 1, lines[
+            i - 1 : i + 1
+        ]  # type: ignore[union-attr]
+        first_result = next(
+            j for j, line in enumerate(lines) if (m := TICK_LINE.match(line)) and int(m.group(1)) == tick
+        )
         assert i < first_result
     said = _table_rows(out.getvalue()).get("scenario events", "")
     for e in recovery:
         steps = e["ticks_to_recover"]
-        assert f"{e['kind']}@{e['tick']} " + ("skipped" if not e["applied"] else "unrecovered" if steps is None else f"recovered in {steps} step") in said, said
+        assert (
+            f"{e['kind']}@{e['tick']} "
+            + ("skipped" if not e["applied"] else "unrecovered" if steps is None else f"recovered in {steps} step")
+            in said
+        ), said
 
 
 # --------------------------------------------------------------------------- 4. nobody attaches within --start-timeout
@@ -338,13 +381,24 @@ async def test_a_world_nobody_attaches_to_ends_at_the_start_timeout(tmp_path: Pa
 
 @pytest.mark.parametrize(
     "args",
-    sweep([["world", "--insecure"], ["up", "--insecure", "--external", "alice", "--external", "bob", "--external", "david"]],
-          ids=["world", "up-all-external"]),
-)  # fmt: skip
+    sweep(
+        [
+            ["world", "--insecure"],
+            ["up", "--insecure", "--external", "alice", "--external", "bob", "--external", "david"],
+        ],
+        ids=["world", "up-all-external"],
+    ),
+)
 def test_start_timeout_with_nobody_attached_is_one_line_and_a_failure(args: list[str], tmp_path: Path) -> None:
-    run = mhrc(*args, "--start-timeout", "1", cwd=tmp_path, timeout=120)  # before: waited forever (up had no such option)
+    run = mhrc(
+        *args, "--start-timeout", "1", cwd=tmp_path, timeout=120
+    )  # before: waited forever (up had no such option)
     assert run.returncode == 1, (run.returncode, run.stderr[-2000:])
-    errors = [line for line in run.stderr.splitlines() if re.match(r"mhrc (world|up): ", line) or "warning" in line or "rror" in line]
+    errors = [
+        line
+        for line in run.stderr.splitlines()
+        if re.match(r"mhrc (world|up): ", line) or "warning" in line or "rror" in line
+    ]
     assert len(errors) == 1 and errors[0].startswith(f"mhrc {args[0]}: "), run.stderr
     assert "--start-timeout 1 s" in errors[0] and "alice, bob, david never attached" in errors[0]
     assert "Traceback" not in run.stderr and "episode" not in run.stdout
@@ -356,7 +410,16 @@ def test_start_timeout_with_nobody_attached_is_one_line_and_a_failure(args: list
 @pytest.mark.parametrize("processes", [False, True], ids=["in-process", "processes"])
 def test_no_model_server_is_one_line_exit_2_and_nothing_left_behind(processes: bool, tmp_path: Path) -> None:
     url = f"http://127.0.0.1:{free_port()}/v1"  # nothing listens there
-    run = mhrc("up", "--llm", "ollama:llama3.1:8b", "--base-url", url, *(["--processes"] if processes else []), cwd=tmp_path, timeout=120)
+    run = mhrc(
+        "up",
+        "--llm",
+        "ollama:llama3.1:8b",
+        "--base-url",
+        url,
+        *(["--processes"] if processes else []),
+        cwd=tmp_path,
+        timeout=120,
+    )
     assert run.returncode == 2, (run.returncode, run.stderr[-3000:])
     assert run.stdout == ""  # no world line, no table
     assert run.stderr.splitlines() == [
@@ -367,15 +430,28 @@ def test_no_model_server_is_one_line_exit_2_and_nothing_left_behind(processes: b
 
 
 @pytest.mark.parametrize("processes", sweep([False, True], ids=["in-process", "processes"]))
-def test_a_model_that_refuses_every_request_is_one_error_no_table_no_vanished_robots(processes: bool, tmp_path: Path) -> None:
+def test_a_model_that_refuses_every_request_is_one_error_no_table_no_vanished_robots(
+    processes: bool, tmp_path: Path
+) -> None:
     """A server that is there but has no such model (HTTP 404, as Ollama answers for a model not
     pulled): the run stops with the model's error, not with robots 'vanished' and a table of
     zeros (and with --processes it ends at all: every agent gone before the start was a hang)."""
     from mhrc.testing import ModelReply, ScriptedModelServer
 
-    with ScriptedModelServer(lambda body: ModelReply(status=404, body={"error": "model 'llama3.1:8b' not found"})) as server:
-        run = mhrc("up", "--insecure", "--llm", "ollama:llama3.1:8b", "--base-url", server.url, *(["--processes"] if processes else []),
-                   cwd=tmp_path, timeout=120)  # fmt: skip
+    with ScriptedModelServer(
+        lambda body: ModelReply(status=404, body={"error": "model 'llama3.1:8b' not found"})
+    ) as server:
+        run = mhrc(
+            "up",
+            "--insecure",
+            "--llm",
+            "ollama:llama3.1:8b",
+            "--base-url",
+            server.url,
+            *(["--processes"] if processes else []),
+            cwd=tmp_path,
+            timeout=120,
+        )
     assert run.returncode == 2, (run.returncode, run.stderr[-3000:])
     assert "success" not in run.stdout and "┌" not in run.stdout, run.stdout  # no summary table
     assert "Traceback" not in run.stderr
@@ -384,14 +460,21 @@ def test_a_model_that_refuses_every_request_is_one_error_no_table_no_vanished_ro
         return
     assert "vanished" not in run.stdout + run.stderr and "detached" not in run.stdout, run.stdout + run.stderr
     errors = [line for line in run.stderr.splitlines() if not line.startswith("insecure:")]
-    assert len(errors) == 1 and errors[0].startswith("mhrc up: ") and "HTTP 404: no model 'llama3.1:8b'" in errors[0], run.stderr
+    assert len(errors) == 1 and errors[0].startswith("mhrc up: ") and "HTTP 404: no model 'llama3.1:8b'" in errors[0], (
+        run.stderr
+    )
 
 
 @pytest.mark.slow
 def test_the_open_bus_is_said_once_under_processes(tmp_path: Path) -> None:
     """`mhrc up --processes --insecure`: the warning about the open bus comes once, from the
     command the user typed, not again from each of its world and agent processes."""
-    done = subprocess.run([sys.executable, "-m", "mhrc", "up", "--processes", "--insecure", "--objects", "3", "--quiet"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=300)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-m", "mhrc", "up", "--processes", "--insecure", "--objects", "3", "--quiet"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stderr.count("insecure: the open tcp bus") == 1, done.stderr

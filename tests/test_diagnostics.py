@@ -15,14 +15,14 @@ from typing import Any
 import pytest
 
 from mhrc.core.diagnostics import diagnose, reject_kind, row_diagnostics, summarize_diagnostics
-from mhrc.run.config import EpisodeConfig
-from mhrc.run.inprocess import up_in_process
-from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX
+from mhrc.core.trace import read_trace
+from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.rows import read_rows
 from mhrc.eval.summaries import write_summaries
-from mhrc.core.trace import read_trace
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer
 
 # --------------------------------------------------------------------------- a hand-built trace
@@ -33,12 +33,21 @@ FURNITURE = [{"name": n, "kind": "table", "position": [0.0, 0.0, 0.0]} for n in 
 def _put(kind: str, key: str = "world/event", **msg: Any) -> dict[str, Any]:
     return {"t": 0.0, "key": f"mhrc/r/{key}", "kind": "put", "msg": {"v": 2, "kind": kind, **_complete(kind, msg)}}
 
+
 # What a message of each kind must hold (the protocol's required fields) that a test's message leaves out
 REQUIRED: dict[str, dict[str, Any]] = {
-    "action_result": {"goal_id": "g", "observation": {
-        "robot": "r", "tick": 0, "status": {"name": "r", "kind": "k", "skills": []}, "furniture": [], "objects": [],
-        "task_brief": "", "task_detail": "",
-    }},  # fmt: skip
+    "action_result": {
+        "goal_id": "g",
+        "observation": {
+            "robot": "r",
+            "tick": 0,
+            "status": {"name": "r", "kind": "k", "skills": []},
+            "furniture": [],
+            "objects": [],
+            "task_brief": "",
+            "task_detail": "",
+        },
+    },
     "tick": {"actions": {}, "outcomes": {}, "placed": 0, "total": 3},
 }
 METRICS = {"temporal_steps": 0, "action_steps": 0, "action_steps_per_robot": {}}
@@ -54,23 +63,49 @@ def _complete(kind: str, msg: dict[str, Any]) -> dict[str, Any]:
     return full
 
 
-
-def _obs(robot: str, tick: int, objects: tuple[str, ...] = (), messages: tuple[dict[str, Any], ...] = ()) -> dict[str, Any]:
+def _obs(
+    robot: str, tick: int, objects: tuple[str, ...] = (), messages: tuple[dict[str, Any], ...] = ()
+) -> dict[str, Any]:
     return {
-        "robot": robot, "tick": tick, "status": {"name": robot, "kind": "k", "skills": []}, "furniture": FURNITURE,
-        "objects": [{"name": o, "position": [0.0, 0.0, 0.0], "on": "table_0"} for o in objects], "task_brief": "", "task_detail": "",
+        "robot": robot,
+        "tick": tick,
+        "status": {"name": robot, "kind": "k", "skills": []},
+        "furniture": FURNITURE,
+        "objects": [{"name": o, "position": [0.0, 0.0, 0.0], "on": "table_0"} for o in objects],
+        "task_brief": "",
+        "task_detail": "",
         "new_messages": list(messages),
-    }  # fmt: skip
+    }
 
 
-def _result(robot: str, tick: int, action: dict[str, Any], code: str = "ok", feedback: str = "", **obs: Any) -> dict[str, Any]:
+def _result(
+    robot: str, tick: int, action: dict[str, Any], code: str = "ok", feedback: str = "", **obs: Any
+) -> dict[str, Any]:
     outcome = {"succeeded": code == "ok", "code": code, "feedback": feedback, "details": {}, "sim_time": 0.5}
-    return _put("action_result", f"robot/{robot}/action/result", goal_id=f"{robot}{tick}", robot=robot, tick=tick, action=action,
-                outcome=outcome, observation=_obs(robot, tick + 1, **obs), done=False)  # fmt: skip
+    return _put(
+        "action_result",
+        f"robot/{robot}/action/result",
+        goal_id=f"{robot}{tick}",
+        robot=robot,
+        tick=tick,
+        action=action,
+        outcome=outcome,
+        observation=_obs(robot, tick + 1, **obs),
+        done=False,
+    )
 
 
 def _thought(robot: str, tick: int, error: str | None = None) -> dict[str, Any]:
-    return _put("thought", f"agent/{robot}/thought", robot=robot, tick=tick, policy="llm:m", prompt="p", reply="r", parse_error=error)
+    return _put(
+        "thought",
+        f"agent/{robot}/thought",
+        robot=robot,
+        tick=tick,
+        policy="llm:m",
+        prompt="p",
+        reply="r",
+        parse_error=error,
+    )
 
 
 WAIT = {"skill": "wait"}
@@ -84,48 +119,90 @@ def hand_built() -> list[dict[str, Any]]:
     second a repeated failure), a capability violation (David picks), a parse failure (Bob, tick
     0), a lost LLM step (David, tick 2), a rejected action (stale tick), a chosen wait with a
     message pending (Bob, tick 1), two messages sent and read."""
-    started: dict[str, Any] = {"run": "r", "task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3, "robots": ["alice", "bob", "david"],
-               "horizon": 10, "lower_bound": 2}  # fmt: skip
+    started: dict[str, Any] = {
+        "run": "r",
+        "task": "pack_objects",
+        "scene": "kitchen",
+        "seed": 0,
+        "n_objects": 3,
+        "robots": ["alice", "bob", "david"],
+        "horizon": 10,
+        "lower_bound": 2,
+    }
     rows = [_put("episode_started", **started), _thought("bob", 0, "no command found: end the reply with one command")]
     rows += [
         _result("alice", 0, {"skill": "communicate", "content": TO_BOB["content"], "to": "bob"}, objects=("mug",)),
         _result("bob", 0, WAIT, messages=(TO_BOB,)),
         _result("david", 0, {"skill": "pick", "obj": "mug"}, "not_capable", "David cannot pick."),
         _put("message", "robot/bob/inbox/alice", **TO_BOB),
-        _put("action_ack", "robot/david/action/ack", goal_id="late", robot="david", accepted=False,
-             reason="the request is for tick 0 but the world is at tick 1"),  # fmt: skip
+        _put(
+            "action_ack",
+            "robot/david/action/ack",
+            goal_id="late",
+            robot="david",
+            accepted=False,
+            reason="the request is for tick 0 but the world is at tick 1",
+        ),
         _put("tick", tick=0),
         _thought("bob", 1),
-        _result("alice", 1, GARAGE, "target_unknown", "There is no 'garage' in your scene graph; furniture: table_0.", objects=("mug",)),
+        _result(
+            "alice",
+            1,
+            GARAGE,
+            "target_unknown",
+            "There is no 'garage' in your scene graph; furniture: table_0.",
+            objects=("mug",),
+        ),
         _result("bob", 1, WAIT),
         _result("david", 1, {"skill": "navigate", "target": "cabinet_0", "stand_pose": 0}),
         _put("tick", tick=1),
         _thought("david", 2, LLM_ERROR_PREFIX + "m at http://x failed after 5 attempts: HTTP 503"),
-        _result("alice", 2, GARAGE, "target_unknown", "There is no 'garage' in your scene graph; furniture: table_0.", messages=(TO_ALICE,)),
+        _result(
+            "alice",
+            2,
+            GARAGE,
+            "target_unknown",
+            "There is no 'garage' in your scene graph; furniture: table_0.",
+            messages=(TO_ALICE,),
+        ),
         _result("bob", 2, {"skill": "communicate", "content": TO_ALICE["content"], "to": "alice"}),
         _result("david", 2, WAIT),
         _put("message", "robot/alice/inbox/bob", **TO_ALICE),
         _put("tick", tick=2),
     ]
-    metrics = {"success": False, "placed": 1, "total": 3, "partial_success": 1 / 3, "temporal_steps": 3, "action_steps": 6,
-               "action_steps_per_robot": {}}  # fmt: skip
+    metrics = {
+        "success": False,
+        "placed": 1,
+        "total": 3,
+        "partial_success": 1 / 3,
+        "temporal_steps": 3,
+        "action_steps": 6,
+        "action_steps_per_robot": {},
+    }
     return rows + [_put("episode_done", run="r", reason="horizon", metrics=metrics)]
 
 
 def test_a_hand_built_trace_gives_exactly_what_it_holds() -> None:
     d = diagnose(hand_built()).as_dict()
     assert d == {
-        "llm_steps": 3, "parse_failures": 1, "llm_unreachable": 1,
-        "hallucinations": 2, "hallucinated_names": {"garage": 2},
+        "llm_steps": 3,
+        "parse_failures": 1,
+        "llm_unreachable": 1,
+        "hallucinations": 2,
+        "hallucinated_names": {"garage": 2},
         "not_capable": 1,
-        "rejected": 1, "rejected_by_reason": {"stale_tick": 1},
-        "failed": 3, "failed_by_code": {"not_capable": 1, "target_unknown": 2},
+        "rejected": 1,
+        "rejected_by_reason": {"stale_tick": 1},
+        "failed": 3,
+        "failed_by_code": {"not_capable": 1, "target_unknown": 2},
         "failed_by_skill": {"navigate": {"target_unknown": 2}, "pick": {"not_capable": 1}},
         "repeated_failures": 1,
-        "waits": 1, "waits_with_pending": 1,  # Bob's tick-0 and David's tick-2 waits were forced, not chosen
-        "messages_sent": 2, "messages_read": 2,
+        "waits": 1,
+        "waits_with_pending": 1,  # Bob's tick-0 and David's tick-2 waits were forced, not chosen
+        "messages_sent": 2,
+        "messages_read": 2,
         "steps_above_bound": 1,  # 3 ticks, bound 2
-    }  # fmt: skip
+    }
     m = from_trace(hand_built())  # the same trace, the metrics' own counts
     assert (m.parse_failures, m.llm_unreachable, m.rejected_actions, m.messages) == (1, 1, 1, 2)
     assert m.failed_actions == {"navigate": 2, "pick": 1}
@@ -134,17 +211,55 @@ def test_a_hand_built_trace_gives_exactly_what_it_holds() -> None:
 def test_without_the_planning_observation_the_worlds_verdict_decides() -> None:
     """A robot's first step plans on its attach reply, which the trace does not hold: an unknown
     name is then what the world said it did not know, not an object another robot holds."""
-    started: dict[str, Any] = {"run": "r", "task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3, "robots": ["alice", "bob"], "horizon": 5}
+    started: dict[str, Any] = {
+        "run": "r",
+        "task": "pack_objects",
+        "scene": "kitchen",
+        "seed": 0,
+        "n_objects": 3,
+        "robots": ["alice", "bob"],
+        "horizon": 5,
+    }
     rows = [
         _put("episode_started", **started),
-        _result("alice", 0, {"skill": "pick", "obj": "ghost"}, "object_unknown", "There is no 'ghost' in your scene graph; objects you know: mug.", objects=("mug",)),
-        _result("bob", 0, {"skill": "pick", "obj": "mug"}, "object_unknown", "mug is held by alice; you cannot pick it now.", objects=("mug",)),
-        _result("bob", 1, {"skill": "place", "obj": "mug", "location": "moon"}, "location_unknown", "There is no place called 'moon'; places: tray."),
-        _result("alice", 1, {"skill": "place", "obj": "mug", "location": "sofa"}, "location_unknown", "Objects cannot be placed on or into sofa."),
+        _result(
+            "alice",
+            0,
+            {"skill": "pick", "obj": "ghost"},
+            "object_unknown",
+            "There is no 'ghost' in your scene graph; objects you know: mug.",
+            objects=("mug",),
+        ),
+        _result(
+            "bob",
+            0,
+            {"skill": "pick", "obj": "mug"},
+            "object_unknown",
+            "mug is held by alice; you cannot pick it now.",
+            objects=("mug",),
+        ),
+        _result(
+            "bob",
+            1,
+            {"skill": "place", "obj": "mug", "location": "moon"},
+            "location_unknown",
+            "There is no place called 'moon'; places: tray.",
+        ),
+        _result(
+            "alice",
+            1,
+            {"skill": "place", "obj": "mug", "location": "sofa"},
+            "location_unknown",
+            "Objects cannot be placed on or into sofa.",
+        ),
     ]
     # bob's and alice's tick-1 actions planned on observations the trace holds: neither "moon" nor "sofa" is in them
     d = diagnose(rows)
-    assert (d.hallucinations, d.hallucinated_names, d.steps_above_bound) == (3, {"ghost": 1, "moon": 1, "sofa": 1}, None)
+    assert (d.hallucinations, d.hallucinated_names, d.steps_above_bound) == (
+        3,
+        {"ghost": 1, "moon": 1, "sofa": 1},
+        None,
+    )
     assert d.failed_by_code == {"location_unknown": 2, "object_unknown": 2} and d.repeated_failures == 0
 
 
@@ -165,15 +280,24 @@ def test_rejections_recorded_without_a_code_are_grouped_by_their_text(reason: st
     assert reject_kind(reason) == kind
 
 
-@pytest.mark.parametrize(("code", "kind"), [
-    ("stale_tick", "stale_tick"), ("tick_taken", "busy"), ("busy", "busy"), ("not_your_turn", "out_of_turn"),
-    ("episode_over", "episode_over"), ("malformed", "malformed"), ("not_attached", "not_attached"), ("other_agent", "not_attached"),
-    ("wrong_key", "not_attached"), ("no_such_robot", "not_attached"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("code", "kind"),
+    [
+        ("stale_tick", "stale_tick"),
+        ("tick_taken", "busy"),
+        ("busy", "busy"),
+        ("not_your_turn", "out_of_turn"),
+        ("episode_over", "episode_over"),
+        ("malformed", "malformed"),
+        ("not_attached", "not_attached"),
+        ("other_agent", "not_attached"),
+        ("wrong_key", "not_attached"),
+        ("no_such_robot", "not_attached"),
+    ],
+)
 def test_a_rejections_code_decides_its_kind_whatever_its_text(code: str, kind: str) -> None:
-    from mhrc.core.protocol import RejectCode
-
     from mhrc.core.diagnostics import KIND_OF_CODE
+    from mhrc.core.protocol import RejectCode
 
     assert set(KIND_OF_CODE) == {c.value for c in RejectCode}  # every code the world sends has its kind
     assert reject_kind("a sentence a later world may word differently", code) == kind
@@ -206,7 +330,15 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     asyncio.run(up_in_process(EpisodeConfig.build(seed=0, horizon=50, trace=heuristic).resolved()))
     server = ScriptedModelServer(_scripted, when_done=None)
     try:
-        cfg = EpisodeConfig.build(seed=0, horizon=5, trace=llm, llm="openai:test-model", base_url=server.url, llm_timeout=5.0, schedule="sequential")
+        cfg = EpisodeConfig.build(
+            seed=0,
+            horizon=5,
+            trace=llm,
+            llm="openai:test-model",
+            base_url=server.url,
+            llm_timeout=5.0,
+            schedule="sequential",
+        )
         asyncio.run(up_in_process(cfg.resolved()))
     finally:
         server.close()
@@ -215,8 +347,15 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def _consistent(rows: list[dict[str, Any]]) -> tuple[Any, Any]:
     d, m = diagnose(rows), from_trace(rows)
-    assert (d.parse_failures, d.llm_unreachable, d.rejected, d.messages_sent) == (m.parse_failures, m.llm_unreachable, m.rejected_actions, m.messages)
-    assert {s: sum(c.values()) for s, c in d.failed_by_skill.items()} == m.failed_actions and d.failed == sum(m.failed_actions.values())
+    assert (d.parse_failures, d.llm_unreachable, d.rejected, d.messages_sent) == (
+        m.parse_failures,
+        m.llm_unreachable,
+        m.rejected_actions,
+        m.messages,
+    )
+    assert {s: sum(c.values()) for s, c in d.failed_by_skill.items()} == m.failed_actions and d.failed == sum(
+        m.failed_actions.values()
+    )
     assert d.llm_steps == m.llm_calls and d.messages_read <= d.messages_sent
     assert m.lower_bound is not None and d.steps_above_bound == m.temporal_steps - m.lower_bound
     return d, m
@@ -260,14 +399,32 @@ class _Page(HTMLParser):
 
 def _row(key: str, trace: Path, **extra: Any) -> dict[str, Any]:
     rows = read_trace(trace)
-    return {"key": key, "method": extra.pop("method", "heuristic"), "ablation": "none", "repeat": 0, "trial": 0, **from_trace(rows).as_dict(),
-            "history_cap": None, "mode": "free", "schedule": "sequential", "trace": f"traces/{key.replace('/', '_')}.jsonl",
-            **diagnose(rows).columns(), **extra}  # fmt: skip
+    return {
+        "key": key,
+        "method": extra.pop("method", "heuristic"),
+        "ablation": "none",
+        "repeat": 0,
+        "trial": 0,
+        **from_trace(rows).as_dict(),
+        "history_cap": None,
+        "mode": "free",
+        "schedule": "sequential",
+        "trace": f"traces/{key.replace('/', '_')}.jsonl",
+        **diagnose(rows).columns(),
+        **extra,
+    }
 
 
-def test_summaries_carry_the_diagnostics_and_the_page_links_every_episode(recorded: dict[str, Path], tmp_path: Path) -> None:
-    rows = [_row("pack_objects/kitchen/4/0", recorded["heuristic"]), _row("pack_objects/kitchen/4/1", recorded["llm"], method="openai:test-model")]
-    old = {k: v for k, v in _row("pack_objects/kitchen/4/2", recorded["heuristic"]).items() if not k.startswith("diag_")}  # before diagnostics
+def test_summaries_carry_the_diagnostics_and_the_page_links_every_episode(
+    recorded: dict[str, Path], tmp_path: Path
+) -> None:
+    rows = [
+        _row("pack_objects/kitchen/4/0", recorded["heuristic"]),
+        _row("pack_objects/kitchen/4/1", recorded["llm"], method="openai:test-model"),
+    ]
+    old = {
+        k: v for k, v in _row("pack_objects/kitchen/4/2", recorded["heuristic"]).items() if not k.startswith("diag_")
+    }  # before diagnostics
     rows.append(old)
     assert row_diagnostics(old) is None and row_diagnostics(rows[0]) is not None
     s = summarize_diagnostics(rows)
@@ -279,18 +436,38 @@ def test_summaries_carry_the_diagnostics_and_the_page_links_every_episode(record
     write_summaries(rows, tmp_path)
     md = (tmp_path / "summary.md").read_text()
     assert "## Failure diagnostics" in md
-    assert re.search(r"\| pack_objects \| 1 \(1\) \| 1\.00 \| 3\.00 \| 1\.00 \| 0\.00 \| 3\.00 \(target_unknown 2\.00, not_capable 1\.00\) \| 1\.00 \| 2\.00 / ", md), md
-    assert "| pack_objects | 2 (1) |" in md and "1 episode(s) of this setting were recorded before diagnostics existed" in md
-    line = next(r for r in csv.DictReader(io.StringIO((tmp_path / "summary.csv").read_text())) if r["method"] == "openai:test-model")
+    assert re.search(
+        r"\| pack_objects \| 1 \(1\) \| 1\.00 \| 3\.00 \| 1\.00 \| 0\.00 \| 3\.00 \(target_unknown 2\.00, not_capable 1\.00\) \| 1\.00 \| 2\.00 / ",
+        md,
+    ), md
+    assert (
+        "| pack_objects | 2 (1) |" in md
+        and "1 episode(s) of this setting were recorded before diagnostics existed" in md
+    )
+    line = next(
+        r
+        for r in csv.DictReader(io.StringIO((tmp_path / "summary.csv").read_text()))
+        if r["method"] == "openai:test-model"
+    )
     assert (line["diag_episodes"], line["diag_hallucinations"], line["diag_repeated_failures"]) == ("1", "3.0", "1.0")
 
     page = (tmp_path / "summary.html").read_text()
     parser = _Page()
     parser.feed(page)
     parser.close()
-    assert "table" in parser.tags and ("svg" in parser.tags or any(i.startswith("data:image/png;base64,") for i in parser.images))
-    assert "Table I: methods" in page and "Failure diagnostics" in page and "Per setting, with 95% confidence intervals" in page
-    assert sorted(parser.links) == ["traces/pack_objects_kitchen_4_0.html", "traces/pack_objects_kitchen_4_1.html", "traces/pack_objects_kitchen_4_2.html"]
+    assert "table" in parser.tags and (
+        "svg" in parser.tags or any(i.startswith("data:image/png;base64,") for i in parser.images)
+    )
+    assert (
+        "Table I: methods" in page
+        and "Failure diagnostics" in page
+        and "Per setting, with 95% confidence intervals" in page
+    )
+    assert sorted(parser.links) == [
+        "traces/pack_objects_kitchen_4_0.html",
+        "traces/pack_objects_kitchen_4_1.html",
+        "traces/pack_objects_kitchen_4_2.html",
+    ]
     assert not re.search(r"(src|href)=\"(https?:|//)|<link|<script", page)  # self-contained: nothing to fetch
 
 
@@ -300,6 +477,9 @@ def test_an_evaluation_writes_diagnostics_on_every_row_and_an_html_summary(tmp_p
     assert rows == read_rows(tmp_path / "ev" / "episodes.jsonl") and len(rows) == 1
     r = rows[0]
     assert (r["diag_parse_failures"], r["diag_hallucinations"], r["diag_rejected_by_reason"]) == (0, 0, {})
-    assert r["diag_steps_above_bound"] == r["temporal_steps"] - r["lower_bound"] and r["diag_messages_sent"] == r["messages"]
+    assert (
+        r["diag_steps_above_bound"] == r["temporal_steps"] - r["lower_bound"]
+        and r["diag_messages_sent"] == r["messages"]
+    )
     page = (tmp_path / "ev" / "summary.html").read_text()
     assert f'href="traces/{Path(r["trace"]).stem}.html"' in page

@@ -26,8 +26,8 @@ import click
 import pytest
 import yaml
 
-from mhrc.core.endpoints import free_port
 from mhrc.cli import main
+from mhrc.core.endpoints import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCKER = ROOT / "docker"
@@ -38,12 +38,28 @@ ROBOT_SERVICES = ("alice", "bob", "david")
 
 # every setting the compose files read, set to a non-default value: exercises each ${VAR:+...}
 FULL_ENV = {
-    "MHRC_TASK": "sort_solids", "MHRC_SCENE": "bedroom", "MHRC_SEED": "7", "MHRC_OBJECTS": "5", "MHRC_HORIZON": "30",
-    "MHRC_SCHEDULE": "async", "MHRC_ABLATION": "no_history", "MHRC_RUN": "docker-run", "MHRC_AIDS": "goal_map,status_hints",
-    "MHRC_LLM": "llamacpp:local", "MHRC_BASE_URL": "http://llm:8080/v1", "MHRC_LOG_LEVEL": "info",
-    "MHRC_TASKS": "pack_objects,make_sandwich", "MHRC_SCENES": "kitchen", "MHRC_TRIALS": "2", "MHRC_REPEATS": "3",
-    "MHRC_EVAL_NAME": "gemma", "MHRC_WORKERS": "4", "MHRC_WORKER_CPUS": "8", "MHRC_CONCURRENCY": "3", "OPENAI_API_KEY": "sk-test",
-}  # fmt: skip
+    "MHRC_TASK": "sort_solids",
+    "MHRC_SCENE": "bedroom",
+    "MHRC_SEED": "7",
+    "MHRC_OBJECTS": "5",
+    "MHRC_HORIZON": "30",
+    "MHRC_SCHEDULE": "async",
+    "MHRC_ABLATION": "no_history",
+    "MHRC_RUN": "docker-run",
+    "MHRC_AIDS": "goal_map,status_hints",
+    "MHRC_LLM": "llamacpp:local",
+    "MHRC_BASE_URL": "http://llm:8080/v1",
+    "MHRC_LOG_LEVEL": "info",
+    "MHRC_TASKS": "pack_objects,make_sandwich",
+    "MHRC_SCENES": "kitchen",
+    "MHRC_TRIALS": "2",
+    "MHRC_REPEATS": "3",
+    "MHRC_EVAL_NAME": "gemma",
+    "MHRC_WORKERS": "4",
+    "MHRC_WORKER_CPUS": "8",
+    "MHRC_CONCURRENCY": "3",
+    "OPENAI_API_KEY": "sk-test",
+}
 
 
 # --- Compose interpolation -------------------------------------------------------------------
@@ -244,13 +260,17 @@ def test_eval_compose_is_a_ray_head_running_mhrc_eval_and_ray_workers(env: dict[
         assert interpolate(service["image"], env) == "mhrc:ray" and service["build"]["args"]["EXTRAS"] == "ray", name
         assert service["build"]["dockerfile"] == "docker/Dockerfile"
         senv = service_env(service, env)
-        assert senv["RAY_AUTH_MODE"] == "token" and senv["RAY_AUTH_TOKEN_PATH"] == "/credentials/ray_auth_token", name  # Ray's token auth, on
+        assert senv["RAY_AUTH_MODE"] == "token" and senv["RAY_AUTH_TOKEN_PATH"] == "/credentials/ray_auth_token", (
+            name
+        )  # Ray's token auth, on
         token = next(v for v in service["volumes"] if isinstance(v, dict) and v["source"] == "ray-token")
         assert token["target"] == "/credentials" and token.get("read_only", False) is (name != "ray-token"), name
         assert ("OPENAI_API_KEY" in senv) is ("OPENAI_API_KEY" in env)
     # the one-shot token service writes a random token once, private to its owner
     code = services["ray-token"]["command"][0]
-    assert services["ray-token"]["entrypoint"] == ["python", "-c"] and "secrets.token_hex(32)" in code and "0o600" in code
+    assert (
+        services["ray-token"]["entrypoint"] == ["python", "-c"] and "secrets.token_hex(32)" in code and "0o600" in code
+    )
     compile(code, "ray-token", "exec")
     assert services["head"]["depends_on"]["ray-token"]["condition"] == "service_completed_successfully"
     # the head: `ray start --head`, then the driver, `mhrc eval --ray auto`
@@ -259,12 +279,21 @@ def test_eval_compose_is_a_ray_head_running_mhrc_eval_and_ray_workers(env: dict[
     ray_start, argv = _eval_argv(head, env)
     assert ray_start[:3] == ["ray", "start", "--head"] and "--port=6379" in ray_start and "--num-cpus=0" in ray_start
     params = parse(argv).params
-    assert argv[0] == "eval" and params["ray_address"] == "auto" and params["workers"] is None and params["resume"] is True
+    assert (
+        argv[0] == "eval" and params["ray_address"] == "auto" and params["workers"] is None and params["resume"] is True
+    )
     assert str(params["out"]) == "/data/results/" + env.get("MHRC_EVAL_NAME", "eval")
-    assert "results:/data/results" in head["volumes"] and head["ports"] == ["127.0.0.1:8265:8265"]  # the dashboard, on loopback
+    assert "results:/data/results" in head["volumes"] and head["ports"] == [
+        "127.0.0.1:8265:8265"
+    ]  # the dashboard, on loopback
     assert "6379" in " ".join(head["healthcheck"]["test"])
     if env:
-        assert (params["llm"], params["base_url"], params["concurrency"], params["repeats"]) == ("llamacpp:local", "http://llm:8080/v1", 3, 3)
+        assert (params["llm"], params["base_url"], params["concurrency"], params["repeats"]) == (
+            "llamacpp:local",
+            "http://llm:8080/v1",
+            3,
+            3,
+        )
     else:
         assert params["llm"] is None and params["concurrency"] is None
     # the workers: `ray start --address=head:6379 --block`, N replicas, after the head is healthy
@@ -287,7 +316,10 @@ def test_kuberay_raycluster_runs_the_mhrc_image_with_token_auth() -> None:
     head = rc["spec"]["headGroupSpec"]
     assert head["rayStartParams"]["num-cpus"] == "0"  # the head runs the driver, not episodes
     groups = rc["spec"]["workerGroupSpecs"]
-    assert groups and all(int(g["rayStartParams"]["num-cpus"]) >= 1 and g["minReplicas"] <= g["replicas"] <= g["maxReplicas"] for g in groups)
+    assert groups and all(
+        int(g["rayStartParams"]["num-cpus"]) >= 1 and g["minReplicas"] <= g["replicas"] <= g["maxReplicas"]
+        for g in groups
+    )
     pods = [head["template"]["spec"], *(g["template"]["spec"] for g in groups)]
     for pod in pods:
         (c,) = pod["containers"]
@@ -331,13 +363,29 @@ def instructions(path: Path) -> list[tuple[str, str]]:
 
 def test_dockerfile_is_pinned_non_root_with_mhrc_entrypoint() -> None:
     ins = instructions(DOCKER / "Dockerfile")
-    known = {"FROM", "ARG", "ENV", "WORKDIR", "COPY", "RUN", "USER", "ENTRYPOINT", "CMD", "LABEL", "EXPOSE", "VOLUME", "HEALTHCHECK"}
+    known = {
+        "FROM",
+        "ARG",
+        "ENV",
+        "WORKDIR",
+        "COPY",
+        "RUN",
+        "USER",
+        "ENTRYPOINT",
+        "CMD",
+        "LABEL",
+        "EXPOSE",
+        "VOLUME",
+        "HEALTHCHECK",
+    }
     assert {w for w, _ in ins} <= known
     assert ins[0][0] in ("FROM", "ARG")
     froms = [a.split()[0] for w, a in ins if w == "FROM"]
     assert froms
     for image in froms:  # an exact version tag or a digest, never a floating one
-        assert re.search(r"@sha256:[0-9a-f]{64}$", image) or re.fullmatch(r"python:3\.11\.\d+-slim(-\w+)?", image), image
+        assert re.search(r"@sha256:[0-9a-f]{64}$", image) or re.fullmatch(r"python:3\.11\.\d+-slim(-\w+)?", image), (
+            image
+        )
     users = [a for w, a in ins if w == "USER"]
     assert users and users[-1].split(":")[0] not in ("root", "0")
     entry = [a for w, a in ins if w == "ENTRYPOINT"]
@@ -375,7 +423,11 @@ def _to_loopback(argv: list[str], port: int) -> list[str]:
 
 def _mhrc() -> list[str]:
     exe = Path(sys.executable).parent / "mhrc"
-    return [str(exe)] if exe.exists() else ([shutil.which("mhrc")] if shutil.which("mhrc") else [sys.executable, "-m", "mhrc"])  # type: ignore[list-item]
+    return (
+        [str(exe)]
+        if exe.exists()
+        else ([shutil.which("mhrc")] if shutil.which("mhrc") else [sys.executable, "-m", "mhrc"])
+    )  # type: ignore[list-item]
 
 
 def _in_groups(pgids: set[int]) -> list[str]:
@@ -401,16 +453,23 @@ class Processes:
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: list[Any] = []
 
-    def start(self, name: str, service: dict[str, Any], env: dict[str, str], port: int, rewrite: dict[str, str] | None = None) -> None:
+    def start(
+        self, name: str, service: dict[str, Any], env: dict[str, str], port: int, rewrite: dict[str, str] | None = None
+    ) -> None:
         argv = _to_loopback(argv_of(service, env), port)
         for old, new in (rewrite or {}).items():
             argv = [a.replace(old, new) for a in argv]
         log = open(self.cwd / f"{name}.log", "wb")  # noqa: SIM115
         self._logs.append(log)
         self.procs[name] = subprocess.Popen(
-            _mhrc() + argv, cwd=self.cwd, env={**env, **service_env(service, env)}, stdout=log, stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL, start_new_session=True,
-        )  # fmt: skip
+            _mhrc() + argv,
+            cwd=self.cwd,
+            env={**env, **service_env(service, env)},
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
 
     def out(self, name: str) -> str:
         return (self.cwd / f"{name}.log").read_text(errors="replace")[-3000:]
@@ -420,7 +479,10 @@ class Processes:
         try:
             return self.procs[name].wait(timeout=timeout)
         except subprocess.TimeoutExpired:
-            pytest.fail(f"{name} did not end within {timeout:.0f} s\n" + "\n".join(f"--- {n}\n{self.out(n)}" for n in self.procs))
+            pytest.fail(
+                f"{name} did not end within {timeout:.0f} s\n"
+                + "\n".join(f"--- {n}\n{self.out(n)}" for n in self.procs)
+            )
 
     def __enter__(self) -> Processes:
         return self
@@ -457,7 +519,9 @@ def test_compose_episode_runs_as_local_processes(tmp_path: Path) -> None:
         ps.start("credentials", services["credentials"], env, port, rewrite={"/credentials": str(creds)})
         assert ps.wait("credentials", 60) == 0, ps.out("credentials")
         for name in ("world", *ROBOT_SERVICES):
-            ps.start(name, services[name], env, port, rewrite={"/credentials": str(creds / str(_subpath(services[name])))})
+            ps.start(
+                name, services[name], env, port, rewrite={"/credentials": str(creds / str(_subpath(services[name])))}
+            )
         code = ps.wait("world", 240)
         assert code == 0, f"world: {code}\n{ps.out('world')}\n" + "\n".join(map(ps.out, ROBOT_SERVICES))
         for name in ROBOT_SERVICES:
@@ -487,4 +551,6 @@ def test_documented_up_commands_survive_the_one_shot_services() -> None:
     for line in lines:
         if "--exit-code-from" in line:
             assert "--abort-on-container-failure" in line, line
-    assert any("--exit-code-from world" in line for line in lines) and any("--exit-code-from head" in line for line in lines)
+    assert any("--exit-code-from world" in line for line in lines) and any(
+        "--exit-code-from head" in line for line in lines
+    )

@@ -30,7 +30,16 @@ from mhrc.core.endpoints import free_port
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 RUNNABLE = {"bash", "sh", "console", "python"}
-LINKED = ("mhrc", "world", "agents", "prompts", "examples", "bench", "docker", "deploy")  # what an example may read from the checkout
+LINKED = (
+    "mhrc",
+    "world",
+    "agents",
+    "prompts",
+    "examples",
+    "bench",
+    "docker",
+    "deploy",
+)  # what an example may read from the checkout
 EXAMPLE_TIMEOUT = 240.0  # s: a bound so that a hung example fails instead of hanging the suite
 FENCE = re.compile(r"^(?P<indent> *)(?P<fence>`{3,}|~{3,})(?P<info>[^`]*)$")
 NOTE = re.compile(r"^<!--\s*(?P<note>.*?)\s*-->$")
@@ -125,11 +134,24 @@ def run_block(block: Block, where: Path) -> subprocess.CompletedProcess[str]:
         is_test = re.search(r"^(async )?def test_", block.text, re.M) is not None
         source = where / ("test_example.py" if is_test else "example.py")
         source.write_text(text)
-        cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-o", "asyncio_mode=auto", source.name] if is_test else [sys.executable, source.name]
+        cmd = (
+            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-o", "asyncio_mode=auto", source.name]
+            if is_test
+            else [sys.executable, source.name]
+        )
     else:
         (where / "example.sh").write_text(text)
         cmd = ["bash", "-e", "-o", "pipefail", "example.sh"]
-    proc = subprocess.Popen(cmd, cwd=where, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        cmd,
+        cwd=where,
+        env=env,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
     try:
         out, _ = proc.communicate(timeout=EXAMPLE_TIMEOUT)
     except subprocess.TimeoutExpired:
@@ -146,12 +168,16 @@ def run_block(block: Block, where: Path) -> subprocess.CompletedProcess[str]:
 
 def check_block(block: Block, where: Path) -> None:
     result = run_block(block, where)
-    assert result.returncode == 0, f"{block.id} ({block.lang}) exited with {result.returncode}:\n{result.stdout[-4000:]}"
+    assert result.returncode == 0, (
+        f"{block.id} ({block.lang}) exited with {result.returncode}:\n{result.stdout[-4000:]}"
+    )
 
 
 # An example that runs an episode, a world, a benchmark or Python is in the slow tier (it takes
 # seconds to minutes); the fast tier keeps those that only ask the CLI (--help, --dry-run, schema).
-RUNS_SOMETHING = re.compile(r"\bmhrc (up|world|agent|render|show|report|router|bus|doctor)\b|\bmhrc eval\b(?!.*--dry-run)|bench/|pytest|python")
+RUNS_SOMETHING = re.compile(
+    r"\bmhrc (up|world|agent|render|show|report|router|bus|doctor)\b|\bmhrc eval\b(?!.*--dry-run)|bench/|pytest|python"
+)
 
 
 def in_slow_tier(block: Block) -> bool:
@@ -192,7 +218,10 @@ def test_a_failing_example_fails(tmp_path: Path) -> None:
         check_block(Block(page, 1, "python", "import sys\nsys.exit(1)\n"), tmp_path)
     with pytest.raises(AssertionError, match="exited with 1"):
         check_block(Block(page, 1, "python", "def test_no():\n    assert False\n"), tmp_path)
-    check_block(Block(page, 1, "console", "$ mhrc --help > help.txt\nUsage: mhrc [OPTIONS]\n$ grep -q 'mhrc up' help.txt\n"), tmp_path)
+    check_block(
+        Block(page, 1, "console", "$ mhrc --help > help.txt\nUsage: mhrc [OPTIONS]\n$ grep -q 'mhrc up' help.txt\n"),
+        tmp_path,
+    )
     with pytest.raises(AssertionError, match="exited with 2"):
         check_block(Block(page, 1, "bash", "mhrc up --no-such-option\n"), tmp_path)
 
@@ -221,7 +250,9 @@ def test_readme_is_short_and_keeps_ci_line() -> None:
     assert len(text.splitlines()) <= 200
     assert README_TEST_LINE in [b.text.strip() for b in parse_blocks(ROOT / "README.md")]  # .ci/run runs this line
     linked = re.findall(r"\]\((docs/[^)#]+)", text)
-    assert linked and all((ROOT / link).is_file() for link in linked), [link for link in linked if not (ROOT / link).is_file()]
+    assert linked and all((ROOT / link).is_file() for link in linked), [
+        link for link in linked if not (ROOT / link).is_file()
+    ]
 
 
 # --------------------------------------------------------------------------- the site
@@ -237,10 +268,16 @@ def load_hook(name: str) -> ModuleType:
 
 def test_bench_placeholders_render_from_the_json(tmp_path: Path) -> None:
     bench = load_hook("bench")
-    (tmp_path / "rt.json").write_text(json.dumps({
-        "open": {"p50": 1.5, "n": 300}, "tls": {"p50": 1.71234, "n": 300},
-        "speedup": 2.5, "runs": [{"mode": "a", "t": {"p50": 0.25}}, {"mode": "b", "t": None}],
-    }))
+    (tmp_path / "rt.json").write_text(
+        json.dumps(
+            {
+                "open": {"p50": 1.5, "n": 300},
+                "tls": {"p50": 1.71234, "n": 300},
+                "speedup": 2.5,
+                "runs": [{"mode": "a", "t": {"p50": 0.25}}, {"mode": "b", "t": None}],
+            }
+        )
+    )
     assert bench.render("rt:speedup", tmp_path) == "2.5"
     table = bench.render("rt", tmp_path).splitlines()
     assert table[:4] == ["|  | p50 | n |", "| --- | --- | --- |", "| open | 1.5 | 300 |", "| tls | 1.71 | 300 |"]
@@ -267,7 +304,11 @@ def test_the_site_builds_strict(tmp_path: Path) -> None:
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
     proc = subprocess.run(
         [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=EXAMPLE_TIMEOUT,
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=EXAMPLE_TIMEOUT,
     )
     assert proc.returncode == 0, proc.stderr[-4000:]
     assert not [line for line in proc.stderr.splitlines() if line.startswith("WARNING")]

@@ -7,18 +7,16 @@ generator put behind a door."""
 from __future__ import annotations
 
 import numpy as np
+import pybullet_data
 import pytest
 
-from mhrc.run.config import EpisodeConfig
-
-from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import Navigate, Open, Pick
-from mhrc.world.quiet import pybullet as p
 from mhrc.core.trace import read_trace
-import pybullet_data
-
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.world.arm import HOME
 from mhrc.world.layouts import CHASSIS_FOOTPRINT, HOME_FOOTPRINT, MIN_CONTAINERS
+from mhrc.world.quiet import pybullet as p
 from mhrc.world.robots import ARM_FORWARD, CHASSIS
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.sim import Sim
@@ -49,10 +47,14 @@ def test_the_layout_check_knows_where_the_carry_posture_reaches() -> None:
     in its carry posture, measured from its link boxes, from Alice's base centre."""
     cid = p.connect(p.DIRECT)
     try:
-        arm = p.loadURDF(pybullet_data.getDataPath() + "/franka_panda/panda.urdf", useFixedBase=True, physicsClientId=cid)
+        arm = p.loadURDF(
+            pybullet_data.getDataPath() + "/franka_panda/panda.urdf", useFixedBase=True, physicsClientId=cid
+        )
         for j, v in enumerate(HOME):
             p.resetJointState(arm, j, float(v), physicsClientId=cid)
-        boxes = [p.getAABB(arm, link, physicsClientId=cid) for link in range(-1, p.getNumJoints(arm, physicsClientId=cid))]
+        boxes = [
+            p.getAABB(arm, link, physicsClientId=cid) for link in range(-1, p.getNumJoints(arm, physicsClientId=cid))
+        ]
     finally:
         p.disconnect(cid)
     back, ahead, wide = HOME_FOOTPRINT
@@ -68,7 +70,9 @@ def test_open_reveals_what_lies_behind_the_door(name: str) -> None:
         assert hidden and not sim.is_open(name)
         out = sim.execute("alice", Navigate(target=name, stand_pose=0))
         assert out.succeeded, out.feedback
-        assert not any(h in out.feedback for h in hidden) and not set(hidden) & sim.known_objects("alice"), "seen through a shut door"
+        assert not any(h in out.feedback for h in hidden) and not set(hidden) & sim.known_objects("alice"), (
+            "seen through a shut door"
+        )
         assert sim.execute("alice", Pick(obj=hidden[0])).succeeded is False
         out = sim.execute("alice", Open(target=name))
         assert out.succeeded, out.feedback
@@ -105,7 +109,10 @@ def test_a_swinging_door_hits_no_stand_pose_and_no_furniture() -> None:
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=sim.cid)
         poses = [sp for f in lay.furniture for sp in f.stand_poses] + list(lay.starts.values())
         chassis = [
-            p.createMultiBody(0, shape, -1, (x, y, half[2]), p.getQuaternionFromEuler((0, 0, yaw)), physicsClientId=sim.cid) for x, y, yaw in poses
+            p.createMultiBody(
+                0, shape, -1, (x, y, half[2]), p.getQuaternionFromEuler((0, 0, yaw)), physicsClientId=sim.cid
+            )
+            for x, y, yaw in poses
         ]
         furniture = [sim.scene.bodies[f.name] for f in lay.furniture]
         walls = [b for n, b in sim.scene.bodies.items() if n.startswith("wall_")]
@@ -124,8 +131,9 @@ def test_a_swinging_door_hits_no_stand_pose_and_no_furniture() -> None:
 @pytest.mark.slow
 async def test_heuristic_team_fetches_a_target_from_behind_a_door(tmp_path) -> None:  # type: ignore[no-untyped-def]
     seed = _episode_with_target_in("microwave")
-    cfg = EpisodeConfig.build(task="pack_objects", scene="kitchen", n_objects=3, seed=seed, schedule="sequential",
-                              trace=tmp_path / "t.jsonl").resolved()  # fmt: skip
+    cfg = EpisodeConfig.build(
+        task="pack_objects", scene="kitchen", n_objects=3, seed=seed, schedule="sequential", trace=tmp_path / "t.jsonl"
+    ).resolved()
     done = await up_in_process(cfg)
     assert done.metrics.success, done.metrics
     assert cfg.trace is not None
@@ -133,6 +141,8 @@ async def test_heuristic_team_fetches_a_target_from_behind_a_door(tmp_path) -> N
     opened = [m["action"]["target"] for m in alice if m["action"]["skill"] == "open" and m["outcome"]["succeeded"]]
     assert "microwave" in opened
     with Sim(task="pack_objects", scene="kitchen", seed=seed, n_objects=3) as sim:
-        hidden = next(o.name for o in sim.objects.values() if o.on == "microwave" and o.inside and o.name in sim.targets)
+        hidden = next(
+            o.name for o in sim.objects.values() if o.on == "microwave" and o.inside and o.name in sim.targets
+        )
     picked = [m["action"]["obj"] for m in alice if m["action"]["skill"] == "pick" and m["outcome"]["succeeded"]]
     assert hidden in picked

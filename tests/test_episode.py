@@ -8,21 +8,16 @@ import sys
 
 import pytest
 
-from mhrc.core.bus import open_client
-
 from mhrc.agents.agent import AttachRejected
-from mhrc.run.attach import run_agent
-
-from mhrc.run.config import ConfigError, EpisodeConfig
-
-from mhrc.run.inprocess import up_in_process
-
-from mhrc.run.processes import up_processes
-
-from mhrc.run.serve import serve_world
+from mhrc.core.bus import open_client
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import decode_event
 from mhrc.core.trace import read_trace
+from mhrc.run.attach import run_agent
+from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.run.inprocess import up_in_process
+from mhrc.run.processes import up_processes
+from mhrc.run.serve import serve_world
 
 
 async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -34,7 +29,13 @@ async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None: 
 
     trace = read_trace(tmp_path / "trace.jsonl")
     kinds = {line["key"].split("/", 2)[2] for line in trace}
-    assert {"world/event", "robot/bob/action/request", "robot/bob/action/ack", "robot/bob/action/result", "agent/bob/thought"} <= kinds
+    assert {
+        "world/event",
+        "robot/bob/action/request",
+        "robot/bob/action/ack",
+        "robot/bob/action/result",
+        "agent/bob/thought",
+    } <= kinds
     assert any(k.startswith("robot/alice/inbox/") for k in kinds), "Bob's request to Alice was not recorded"
     assert any(line["msg"] and line["msg"].get("kind") == "episode_done" for line in trace)
     results = [line["msg"] for line in trace if line["key"].endswith("/action/result")]
@@ -88,9 +89,13 @@ def test_bad_config_fails_before_anything_starts(values: dict[str, object], fiel
 
 
 def test_cli_names_the_bad_field() -> None:
-    out = subprocess.run([sys.executable, "-m", "mhrc", "up", "--objects", "9"], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "mhrc", "up", "--objects", "9"], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2 and "--objects" in out.stderr and "n_objects" not in out.stderr
-    out = subprocess.run([sys.executable, "-m", "mhrc", "up", "--aids", "cheat"], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "mhrc", "up", "--aids", "cheat"], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2 and "--aids: unknown aid 'cheat'" in out.stderr and "Value error" not in out.stderr
 
 
@@ -99,13 +104,17 @@ async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ign
     """The world starts with Alice and Bob; David attaches once ticks are running and is
     scheduled from then on."""
     # horizon 8: David joins in the first ticks and acts; the rest of the episode would prove nothing more
-    cfg = EpisodeConfig.build(seed=6, n_objects=6, horizon=8, start_timeout=3.0, tick_delay=0.3, trace=tmp_path / "t.jsonl").resolved()
+    cfg = EpisodeConfig.build(
+        seed=6, n_objects=6, horizon=8, start_timeout=3.0, tick_delay=0.3, trace=tmp_path / "t.jsonl"
+    ).resolved()
     world = asyncio.create_task(serve_world(cfg))
     agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint)) for r in ("alice", "bob")]
     observer = await open_client(cfg.endpoint, 30.0)
     try:
         ticks: asyncio.Queue[int] = asyncio.Queue()
-        observer.subscribe(Keys(cfg.run).world_event, lambda s: ticks.put_nowait(decode_event(s.payload).kind == "tick"))
+        observer.subscribe(
+            Keys(cfg.run).world_event, lambda s: ticks.put_nowait(decode_event(s.payload).kind == "tick")
+        )
         while not await asyncio.wait_for(ticks.get(), 60):
             pass
         late = asyncio.create_task(run_agent("david", cfg.run, cfg.endpoint))
@@ -146,8 +155,9 @@ async def test_heuristic_approaches_again_after_a_failed_open(tmp_path) -> None:
     within the stand pose's tolerance but where her arm cannot follow the drawer's handle. She
     used to try opening from there to the horizon (34 failed opens, 2 of 5 placed); she now
     approaches again from another stand pose and the team solves it."""
-    cfg = EpisodeConfig.build(task="make_sandwich", scene="kitchen", n_objects=5, seed=1, schedule="sequential",
-                              trace=tmp_path / "t.jsonl").resolved()  # fmt: skip
+    cfg = EpisodeConfig.build(
+        task="make_sandwich", scene="kitchen", n_objects=5, seed=1, schedule="sequential", trace=tmp_path / "t.jsonl"
+    ).resolved()
     done = await up_in_process(cfg)
     assert done.metrics.success, done.metrics
     alice = [line["msg"] for line in read_trace(cfg.trace) if line["key"].endswith("/robot/alice/action/result")]

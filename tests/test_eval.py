@@ -16,10 +16,10 @@ from typing import Any
 import pytest
 
 from mhrc.core.endpoints import free_port
-from mhrc.run.config import ConfigError
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.report import summary_markdown
 from mhrc.eval.rows import merge_runs
+from mhrc.run.config import ConfigError
 from mhrc.testing import ModelReply, ScriptedModelServer
 
 SMALL = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2)
@@ -44,11 +44,32 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     for r in rows_a:
         assert (a / r["trace"]).exists()
     summary = (a / "summary.md").read_text()
-    assert "Table I" in summary and "| pack_objects | 1.00 / 1.00 /" in summary and "set beside the paper's AS" in summary
-    assert (a / "summary.csv").read_text().startswith("method,ablation,fidelity,noise,history_cap,horizon,mode,schedule,scenario,task,episodes,succ,ps,ts,ts_bound,as_ticks,as,as_per_robot")
+    assert (
+        "Table I" in summary and "| pack_objects | 1.00 / 1.00 /" in summary and "set beside the paper's AS" in summary
+    )
+    assert (
+        (a / "summary.csv")
+        .read_text()
+        .startswith(
+            "method,ablation,fidelity,noise,history_cap,horizon,mode,schedule,scenario,task,episodes,succ,ps,ts,ts_bound,as_ticks,as,as_per_robot"
+        )
+    )
     for r in rows_a:  # fidelity and the LLM failures are on every row (the heuristic has none)
-        assert (r["fidelity"], r["aids"], r["history_cap"], r["horizon"], r["repeat"], r["trial"]) == ("paper", [], None, 50, 0, r["seed"])
-        assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"], r["invalid_reason"]) == (0, 0, 0, True, None)
+        assert (r["fidelity"], r["aids"], r["history_cap"], r["horizon"], r["repeat"], r["trial"]) == (
+            "paper",
+            [],
+            None,
+            50,
+            0,
+            r["seed"],
+        )
+        assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"], r["invalid_reason"]) == (
+            0,
+            0,
+            0,
+            True,
+            None,
+        )
     # an existing directory is never overwritten by accident
     with pytest.raises(ConfigError, match="not empty; pass --resume"):
         asyncio.run(evaluate(SMALL, a, workers=1))
@@ -59,18 +80,39 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     (c / "episodes.jsonl").write_text(first + "\n" + '{"key": "pack_obj')
     more = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=3)
     rows_c = asyncio.run(evaluate(more, c, workers=1, resume=True))
-    assert sorted(r["key"] for r in rows_c) == ["pack_objects/kitchen/3/0", "pack_objects/kitchen/3/1", "pack_objects/kitchen/3/2"]
+    assert sorted(r["key"] for r in rows_c) == [
+        "pack_objects/kitchen/3/0",
+        "pack_objects/kitchen/3/1",
+        "pack_objects/kitchen/3/2",
+    ]
     assert json.loads(first) in rows_c  # the finished row is kept as it was
     assert _stable(rows_c)[json.loads(first)["key"]] == _stable(rows_a)[json.loads(first)["key"]]
     for other in ({"ablation": "no_mobile"}, {"aids": ("goal_map",)}, {"history_cap": 9000}):
         with pytest.raises(ConfigError, match="--resume needs the same"):
-            asyncio.run(evaluate(EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2, **other), c, resume=True))  # type: ignore[arg-type]
+            asyncio.run(
+                evaluate(
+                    EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2, **other),
+                    c,
+                    resume=True,
+                )
+            )  # type: ignore[arg-type]
     # mhrc report merges directories into one table
     merged = merge_runs([a, b])
-    assert len(merged) == 4 and "| heuristic | none | paper | kitchen |" in summary_markdown(merged) and "| 4 |" in summary_markdown(merged)
-    out = subprocess.run([sys.executable, "-m", "mhrc", "report", str(a), str(b), "--out", str(tmp_path / "r.md")], capture_output=True, text=True, timeout=60)
+    assert (
+        len(merged) == 4
+        and "| heuristic | none | paper | kitchen |" in summary_markdown(merged)
+        and "| 4 |" in summary_markdown(merged)
+    )
+    out = subprocess.run(
+        [sys.executable, "-m", "mhrc", "report", str(a), str(b), "--out", str(tmp_path / "r.md")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0 and "Table I" in (tmp_path / "r.md").read_text() and (tmp_path / "r.csv").exists()
-    bad = subprocess.run([sys.executable, "-m", "mhrc", "report", str(tmp_path)], capture_output=True, text=True, timeout=60)
+    bad = subprocess.run(
+        [sys.executable, "-m", "mhrc", "report", str(tmp_path)], capture_output=True, text=True, timeout=60
+    )
     assert bad.returncode == 2 and "no episodes.jsonl" in bad.stderr
 
 
@@ -95,7 +137,12 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     ],
 )
 def test_bad_eval_options_fail_before_anything_starts(tmp_path: Path, args: list[str], message: str) -> None:
-    out = subprocess.run([sys.executable, "-m", "mhrc", "eval", "--out", str(tmp_path / "x"), *args], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "mhrc", "eval", "--out", str(tmp_path / "x"), *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2 and message in out.stderr, out.stderr
     assert not (tmp_path / "x").exists()
 
@@ -123,9 +170,25 @@ def test_an_episode_whose_worker_process_dies_runs_again_on_a_new_one(tmp_path: 
 
     tmp = tmp_path / "tmp"
     tmp.mkdir()
-    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--workers", "1",
-           "--out", str(tmp_path / "ev")]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ, TMPDIR=str(tmp)))
+    cmd = [
+        sys.executable,
+        "-m",
+        "mhrc",
+        "eval",
+        "--tasks",
+        "pack_objects",
+        "--scenes",
+        "kitchen",
+        "--objects",
+        "3",
+        "--workers",
+        "1",
+        "--out",
+        str(tmp_path / "ev"),
+    ]
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ, TMPDIR=str(tmp))
+    )
     try:
         deadline = time.monotonic() + 120
         while not any(p.stat().st_size for p in tmp.glob("mhrc-eval-*/trace.jsonl")):  # an episode is under way
@@ -167,7 +230,9 @@ def test_the_default_grid_is_the_papers_and_repeats_multiply_it_with_new_seeds()
     for key, repeat, seed in jobs:
         by_task.setdefault(key.split("/")[0], []).append(key)
         assert (repeat, seed) == (0, 0)
-    assert sorted(by_task) == ["make_sandwich", "pack_objects", "sort_solids"] and all(len(v) == 12 for v in by_task.values())
+    assert sorted(by_task) == ["make_sandwich", "pack_objects", "sort_solids"] and all(
+        len(v) == 12 for v in by_task.values()
+    )
     cells: dict[tuple[str, str], list[int]] = {}
     for key, _, _ in jobs:
         task, scene, n, _seed = key.split("/")
@@ -179,7 +244,9 @@ def test_the_default_grid_is_the_papers_and_repeats_multiply_it_with_new_seeds()
     assert {(r, s) for _, r, s in twice} == {(0, 0), (1, 1)}  # repeat r runs with seed r
     assert [k for k, r, _ in twice if r == 0] == [k for k, _, _ in jobs]  # repeat 0 is the run without --repeats
     # explicit --objects and --trials build larger grids: every object count x trials, per repeat
-    big = _dry_run("--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3,5", "--trials", "3", "--repeats", "2")
+    big = _dry_run(
+        "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3,5", "--trials", "3", "--repeats", "2"
+    )
     assert len(big) == 12 and sorted({s for _, _, s in big}) == [0, 1, 2, 3, 4, 5]
 
     spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), repeats=2)
@@ -201,12 +268,26 @@ def test_llm_failures_and_validity_are_counted_from_the_trace() -> None:
     from mhrc.core.metrics import from_trace
 
     def trace(*thoughts: str | None, fidelity: str | None = "aids:goal_map") -> list[dict[str, Any]]:
-        started: dict[str, Any] = {"run": "r", "task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3, "robots": ["bob"], "horizon": 4}
+        started: dict[str, Any] = {
+            "run": "r",
+            "task": "pack_objects",
+            "scene": "kitchen",
+            "seed": 0,
+            "n_objects": 3,
+            "robots": ["bob"],
+            "horizon": 4,
+        }
         if fidelity is not None:
             started["fidelity"] = fidelity
         rows = [_put("episode_started", **started)]
-        rows += [_put("thought", robot="bob", tick=i, policy="llm:m", prompt="p", parse_error=e) for i, e in enumerate(thoughts)]
-        rows += [_put("action_ack", goal_id="g1", robot="bob", accepted=False, reason="stale"), _put("action_ack", goal_id="g2", robot="bob", accepted=True)]
+        rows += [
+            _put("thought", robot="bob", tick=i, policy="llm:m", prompt="p", parse_error=e)
+            for i, e in enumerate(thoughts)
+        ]
+        rows += [
+            _put("action_ack", goal_id="g1", robot="bob", accepted=False, reason="stale"),
+            _put("action_ack", goal_id="g2", robot="bob", accepted=True),
+        ]
         metrics = {"success": False, "placed": 0, "total": 3, "partial_success": 0.0}
         return rows + [_put("tick", tick=0), _put("episode_done", run="r", reason="horizon", metrics=metrics)]
 
@@ -252,9 +333,15 @@ class ScriptedModel:
             self.last_step = step
             episode = self.episode
         if episode == self.down:
-            return ModelReply(status=503, body={"error": {"message": "too late"}}, latency=3600.0)  # never, in the test's time
+            return ModelReply(
+                status=503, body={"error": {"message": "too late"}}, latency=3600.0
+            )  # never, in the test's time
         robot = system.split()[2].rstrip(",").lower()  # "You are Bob, ..."
-        text = "Let me think about the tray first." if robot == "bob" and step == 0 else "Analysis: nothing to do yet.\nCommand: wait()"
+        text = (
+            "Let me think about the tray first."
+            if robot == "bob" and step == 0
+            else "Analysis: nothing to do yet.\nCommand: wait()"
+        )
         return ModelReply(text, usage={"prompt_tokens": 50, "completion_tokens": 9})
 
     def close(self) -> None:
@@ -262,12 +349,21 @@ class ScriptedModel:
 
 
 @pytest.mark.slow
-def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_model_never_answered(tmp_path: Path) -> None:
+def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_model_never_answered(
+    tmp_path: Path,
+) -> None:
     model = ScriptedModel(down=1)  # the second episode (4 objects) never reaches the model
     spec = EvalSpec(
-        tasks=("pack_objects",), scenes=("kitchen",), objects=(3, 4, 5), horizon=2, llm="openai:test-model",
-        base_url=model.url, llm_timeout=0.5, aids=("goal_map",), history_cap=50_000,
-    )  # fmt: skip
+        tasks=("pack_objects",),
+        scenes=("kitchen",),
+        objects=(3, 4, 5),
+        horizon=2,
+        llm="openai:test-model",
+        base_url=model.url,
+        llm_timeout=0.5,
+        aids=("goal_map",),
+        history_cap=50_000,
+    )
     try:
         rows = asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))
     finally:
@@ -275,8 +371,17 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
     by_key = {r["key"]: r for r in rows}
     assert sorted(by_key) == ["pack_objects/kitchen/3/0", "pack_objects/kitchen/4/0", "pack_objects/kitchen/5/0"]
     for r in rows:  # the configuration the episode ran with is on its row
-        assert (r["method"], r["fidelity"], r["aids"], r["history_cap"], r["horizon"]) == ("openai:test-model", "aids:goal_map", ["goal_map"], 50_000, 2)
-        assert (r["prompts"], r["base_url"]) == (None, model.url)  # what says whether the paper's figures may stand beside it
+        assert (r["method"], r["fidelity"], r["aids"], r["history_cap"], r["horizon"]) == (
+            "openai:test-model",
+            "aids:goal_map",
+            ["goal_map"],
+            50_000,
+            2,
+        )
+        assert (r["prompts"], r["base_url"]) == (
+            None,
+            model.url,
+        )  # what says whether the paper's figures may stand beside it
         assert r["temporal_steps"] == 2 and r["llm_calls"] == 6  # three robots, two steps
     down = by_key["pack_objects/kitchen/4/0"]
     assert (down["llm_unreachable"], down["parse_failures"], down["prompt_tokens"], down["valid"]) == (6, 0, 0, False)
@@ -287,11 +392,16 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
         assert (r["prompt_tokens"], r["completion_tokens"]) == (6 * 50, 6 * 9)
     summary = (tmp_path / "ev" / "summary.md").read_text()
     assert "3 episodes, 2 valid, 1 invalid" in summary and "1 invalid episode(s) left out" in summary
-    assert "- pack_objects/kitchen/4/0 (openai:test-model · ablation none · aids:goal_map · history cap 50000 · horizon 2): the model was unreachable" in summary
+    assert (
+        "- pack_objects/kitchen/4/0 (openai:test-model · ablation none · aids:goal_map · history cap 50000 · horizon 2): the model was unreachable"
+        in summary
+    )
     assert "| pack_objects | 2 | 0.00 [0.00, 0.00] |" in summary  # only the two valid episodes are averaged
     assert "paper GPT" not in summary  # no model of the paper's
     csv_line = (tmp_path / "ev" / "summary.csv").read_text().splitlines()[1]
-    assert csv_line.startswith("openai:test-model,none,aids:goal_map,on,50000,2,free,sequential,,pack_objects,2,")  # eval runs the paper's loop by default (no scenario), with the calibrated noise
+    assert csv_line.startswith(
+        "openai:test-model,none,aids:goal_map,on,50000,2,free,sequential,,pack_objects,2,"
+    )  # eval runs the paper's loop by default (no scenario), with the calibrated noise
 
 
 def test_a_wrong_api_key_stops_the_evaluation_with_one_error_and_a_failing_exit(tmp_path: Path) -> None:
@@ -300,17 +410,38 @@ def test_a_wrong_api_key_stops_the_evaluation_with_one_error_and_a_failing_exit(
 
     from mhrc.cli import main
 
-    server = ScriptedModelServer(lambda body: ModelReply(status=401, body={"error": {"message": "Incorrect API key provided"}}), when_done=None)
+    server = ScriptedModelServer(
+        lambda body: ModelReply(status=401, body={"error": {"message": "Incorrect API key provided"}}), when_done=None
+    )
     try:
-        result = CliRunner().invoke(main, [
-            "eval", "--llm", "openai:gpt-4o", "--base-url", server.url, "--tasks", "pack_objects", "--scenes", "kitchen",
-            "--workers", "1", "--concurrency", "1", "--out", str(tmp_path / "ev"),
-        ])  # fmt: skip
+        result = CliRunner().invoke(
+            main,
+            [
+                "eval",
+                "--llm",
+                "openai:gpt-4o",
+                "--base-url",
+                server.url,
+                "--tasks",
+                "pack_objects",
+                "--scenes",
+                "kitchen",
+                "--workers",
+                "1",
+                "--concurrency",
+                "1",
+                "--out",
+                str(tmp_path / "ev"),
+            ],
+        )
     finally:
         server.close()
     assert result.exit_code == 1, result.output
     assert "refused the credentials (HTTP 401)" in result.output and "--resume" in result.output
-    assert not (tmp_path / "ev" / "episodes.jsonl").exists() or not (tmp_path / "ev" / "episodes.jsonl").read_text().strip()
+    assert (
+        not (tmp_path / "ev" / "episodes.jsonl").exists()
+        or not (tmp_path / "ev" / "episodes.jsonl").read_text().strip()
+    )
     assert len(server.requests) <= 6  # the first episode's robots (and at most one more episode's) asked once each
 
 
@@ -341,7 +472,11 @@ def test_eval_names_every_file_it_wrote_and_a_resume_counts_the_earlier_episodes
     assert "Table I" in _mhrc("report", "ev", cwd=tmp_path).stdout  # without --out, on stdout
     for bad in ("/dev/null/r.md", "r.csv"):  # not writable; overwritten by the CSV beside it
         refused = _mhrc("report", "ev", "--out", bad, cwd=tmp_path)
-        assert refused.returncode == 2 and "Error: Invalid value for --out" in refused.stderr and "Traceback" not in refused.stderr, refused.stderr
+        assert (
+            refused.returncode == 2
+            and "Error: Invalid value for --out" in refused.stderr
+            and "Traceback" not in refused.stderr
+        ), refused.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "r.csv", "r.html", "r.md"]
 
 
@@ -364,9 +499,27 @@ def test_a_second_ctrl_c_on_eval_quits_at_once_and_loses_no_row(tmp_path: Path) 
     err = tmp_path / "stderr.txt"
     with err.open("w") as stderr:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3,4,5,6", "--workers", "2",
-             "--out", "ev"],
-            cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=stderr, text=True, start_new_session=True,
+            [
+                sys.executable,
+                "-m",
+                "mhrc",
+                "eval",
+                "--tasks",
+                "pack_objects",
+                "--scenes",
+                "kitchen",
+                "--objects",
+                "3,4,5,6",
+                "--workers",
+                "2",
+                "--out",
+                "ev",
+            ],
+            cwd=tmp_path,
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            text=True,
+            start_new_session=True,
         )  # fmt: skip  (a session of its own: the signals go to its group, as a terminal's Ctrl-C)
 
     def until(what: str, predicate: Any) -> None:

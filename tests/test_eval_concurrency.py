@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from mhrc.run.config import ConfigError
 from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.run.config import ConfigError
 from mhrc.testing import ScriptedModelServer
 
 LATENCY = 0.3  # s the scripted model takes per reply: long enough for episodes to overlap at the server
@@ -55,7 +55,15 @@ class SlowModel:
 @pytest.mark.slow
 def test_one_worker_runs_llm_episodes_at_once_and_writes_each_row_once(tmp_path: Path) -> None:
     model = SlowModel()
-    spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3, 4, 5, 6), horizon=3, llm="m", base_url=model.url, llm_timeout=20.0)
+    spec = EvalSpec(
+        tasks=("pack_objects",),
+        scenes=("kitchen",),
+        objects=(3, 4, 5, 6),
+        horizon=3,
+        llm="m",
+        base_url=model.url,
+        llm_timeout=20.0,
+    )
     try:
         rows = asyncio.run(evaluate(spec, tmp_path / "ev", workers=1, concurrency=4))
     finally:
@@ -92,7 +100,22 @@ def test_concurrency_below_one_fails_before_anything_starts(tmp_path: Path) -> N
     with pytest.raises(ConfigError, match=re.escape("--concurrency: must be at least 1 (got 0)")):
         asyncio.run(evaluate(spec, tmp_path / "x", concurrency=0))
     assert not (tmp_path / "x").exists()
-    out = subprocess.run([sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--concurrency", "0", "--out", str(tmp_path / "x")],
-                         capture_output=True, text=True, timeout=60)  # fmt: skip
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mhrc",
+            "eval",
+            "--tasks",
+            "pack_objects",
+            "--concurrency",
+            "0",
+            "--out",
+            str(tmp_path / "x"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2 and "--concurrency" in out.stderr, out.stderr
     assert not (tmp_path / "x").exists()

@@ -12,21 +12,30 @@ from pathlib import Path
 
 import jsonschema
 import pytest
+from sweep import sweep
 
 from mhrc.core import protocol
+from mhrc.core.trace import read_trace
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
-from mhrc.core.trace import read_trace
-from sweep import sweep
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "raw_zenoh_agent.py"
 
 
 def test_schema_command_writes_every_payload(tmp_path: Path) -> None:
-    out = subprocess.run([sys.executable, "-m", "mhrc", "schema", "--out", str(tmp_path / "s")], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "mhrc", "schema", "--out", str(tmp_path / "s")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0, out.stderr
     index = json.loads((tmp_path / "s" / "index.json").read_text())
-    names = {m.__name__ for m in vars(protocol).values() if isinstance(m, type) and issubclass(m, protocol.Message) and m is not protocol.Message}
+    names = {
+        m.__name__
+        for m in vars(protocol).values()
+        if isinstance(m, type) and issubclass(m, protocol.Message) and m is not protocol.Message
+    }
     assert names | {"WorldEvent"} == set(index["payloads"])
     assert index["payloads"]["Turn"]["key"] == "mhrc/<run>/robot/<rid>/turn"
     assert index["payloads"]["AttachRequest"]["key"] == "mhrc/<run>/robot/<rid>/attach"
@@ -48,8 +57,21 @@ def test_example_imports_nothing_of_mhrc() -> None:
 async def test_raw_zenoh_agent_plays_david(tmp_path: Path, schedule: str) -> None:
     trace_path = tmp_path / "t.jsonl"
     cfg = EpisodeConfig.build(seed=0, n_objects=3, horizon=30, schedule=schedule, trace=trace_path).resolved()
-    world = asyncio.create_task(up_in_process(cfg, robots=("alice", "bob")))  # the world and the heuristic Alice and Bob
-    cmd = [sys.executable, str(EXAMPLE), "--connect", cfg.endpoint, "--run", cfg.run, "--robot", "david", "--step-timeout", "120"]
+    world = asyncio.create_task(
+        up_in_process(cfg, robots=("alice", "bob"))
+    )  # the world and the heuristic Alice and Bob
+    cmd = [
+        sys.executable,
+        str(EXAMPLE),
+        "--connect",
+        cfg.endpoint,
+        "--run",
+        cfg.run,
+        "--robot",
+        "david",
+        "--step-timeout",
+        "120",
+    ]
     david = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         done = await asyncio.wait_for(world, 240)
@@ -70,12 +92,16 @@ async def test_raw_zenoh_agent_plays_david(tmp_path: Path, schedule: str) -> Non
     requests = [m for k, m in msgs if k == "robot/david/action/request"]
     acks = [m for k, m in msgs if k == "robot/david/action/ack"]
     results = [m for k, m in msgs if k == "robot/david/action/result"]
-    assert requests and all("-raw-" in m["agent_id"] for m in requests), "David's requests did not come from the example"
+    assert requests and all("-raw-" in m["agent_id"] for m in requests), (
+        "David's requests did not come from the example"
+    )
     assert not [a for a in acks if not a["accepted"] and "malformed" in a["reason"]]
     assert [r for r in results if r["action"]["skill"] == "navigate"], "the example never navigated"
     assert any(k.startswith("robot/alice/inbox/david") for k, _ in msgs), "the example never reported to Alice"
     assert done.metrics.action_steps_per_robot["david"] > 0
-    schema = json.loads(subprocess.run([sys.executable, "-m", "mhrc", "schema"], capture_output=True, text=True, timeout=60).stdout)["schemas"]
+    schema = json.loads(
+        subprocess.run([sys.executable, "-m", "mhrc", "schema"], capture_output=True, text=True, timeout=60).stdout
+    )["schemas"]
     for req in requests:  # what the example wrote from the docs is what the schema says
         jsonschema.validate(req, schema["ActionRequest"])
     for result in results:

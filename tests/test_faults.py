@@ -15,12 +15,11 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
-
 from waits import until_sync
 
 HANG = 120.0  # s: not a speed bound (exits take 1-3 s): a command that never exits fails here, its group killed
@@ -33,8 +32,13 @@ def _start(args: list[str], tmp_path: Path) -> subprocess.Popen[str]:
     out = (tmp_path / "stdout.txt").open("w")
     err = (tmp_path / "stderr.txt").open("w")
     return subprocess.Popen(
-        [sys.executable, "-m", "mhrc", *args], cwd=tmp_path, stdout=out, stderr=err, text=True, start_new_session=True,
-    )  # fmt: skip
+        [sys.executable, "-m", "mhrc", *args],
+        cwd=tmp_path,
+        stdout=out,
+        stderr=err,
+        text=True,
+        start_new_session=True,
+    )
 
 
 def _stderr(tmp_path: Path) -> str:
@@ -110,7 +114,19 @@ def _rows(path: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in text.splitlines()]
 
 
-EVAL = ["eval", "--tasks", "pack_objects,sort_solids", "--scenes", "kitchen,bedroom", "--objects", "3,4,5,6", "--workers", "2", "--out", "ev"]
+EVAL = [
+    "eval",
+    "--tasks",
+    "pack_objects,sort_solids",
+    "--scenes",
+    "kitchen,bedroom",
+    "--objects",
+    "3,4,5,6",
+    "--workers",
+    "2",
+    "--out",
+    "ev",
+]
 
 
 @pytest.mark.slow
@@ -127,7 +143,9 @@ def test_ctrl_c_on_eval_exits_soon_and_keeps_every_finished_row(times: int, tmp_
     assert [r["key"] for r in after[: len(before)]] == [r["key"] for r in before], "a finished row was lost"
     assert len({r["key"] for r in after}) == len(after), "a row was written twice"
     if times == 1:
-        assert "interrupted: stopping the workers; every finished episode is kept in" in err and "--resume --out" in err, err[-2000:]
+        assert (
+            "interrupted: stopping the workers; every finished episode is kept in" in err and "--resume --out" in err
+        ), err[-2000:]
     else:  # the second quit at once, unless the first had already finished stopping when it came
         assert "quitting at once" in err or "\ninterrupted\n" in err, err[-2000:]
     assert "Traceback" not in err, err[-3000:]
@@ -135,9 +153,26 @@ def test_ctrl_c_on_eval_exits_soon_and_keeps_every_finished_row(times: int, tmp_
     print(f"{times} Ctrl-C: exited with {len(after)} rows kept")
     # --resume continues where it stopped, never duplicating
     resumed = subprocess.run(
-        [sys.executable, "-m", "mhrc", *EVAL[:-2], "--objects", "3", "--tasks", "pack_objects", "--scenes", "kitchen", "--out", "ev", "--resume"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "mhrc",
+            *EVAL[:-2],
+            "--objects",
+            "3",
+            "--tasks",
+            "pack_objects",
+            "--scenes",
+            "kitchen",
+            "--out",
+            "ev",
+            "--resume",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     keys = [r["key"] for r in _rows(rows_path)]
     assert len(keys) == len(set(keys)) and "pack_objects/kitchen/3/0" in keys
@@ -166,8 +201,12 @@ def test_ctrl_c_on_up_processes_leaves_a_complete_trace(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_double_ctrl_c_on_up_processes_exits_at_once(tmp_path: Path) -> None:
-    proc = _start(["up", "--processes", "--quiet", "--tick-delay", "0.3", "--trace", str(tmp_path / "t.jsonl")], tmp_path)
-    _until(lambda: (tmp_path / "t.jsonl").exists() and '"tick"' in (tmp_path / "t.jsonl").read_text(), 120, "a tick", proc)
+    proc = _start(
+        ["up", "--processes", "--quiet", "--tick-delay", "0.3", "--trace", str(tmp_path / "t.jsonl")], tmp_path
+    )
+    _until(
+        lambda: (tmp_path / "t.jsonl").exists() and '"tick"' in (tmp_path / "t.jsonl").read_text(), 120, "a tick", proc
+    )
     _interrupt(proc, 2)
     err = _stderr(tmp_path)
     # 130, or killed by the second SIGINT itself when it lands while Python finalizes (handlers reset): either way, at once
@@ -189,14 +228,18 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
 
     from mhrc.core import logs
     from mhrc.core.bus import Bus
-    from mhrc.run.config import EpisodeConfig
-    from mhrc.run.inprocess import up_in_process
     from mhrc.core.keys import Keys
     from mhrc.core.metrics import from_trace
     from mhrc.core.trace import read_trace
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.inprocess import up_in_process
 
     flood = 2000
-    junk = b'{"v": 2, "robot": "alice", "agent_id": "x", "tick": 0, "action": {"skill": "teleport"}, "pad": "' + b"x" * 900 + b'"}'
+    junk = (
+        b'{"v": 2, "robot": "alice", "agent_id": "x", "tick": 0, "action": {"skill": "teleport"}, "pad": "'
+        + b"x" * 900
+        + b'"}'
+    )
 
     def attack(bus: Bus, run: str) -> None:
         """From the world's own session, as soon as the world has subscribed (its token says so)."""
@@ -211,19 +254,27 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
     out = io.StringIO()
     structlog.configure(
         processors=[structlog.processors.add_log_level, structlog.dev.ConsoleRenderer(colors=False)],
-        wrapper_class=structlog.make_filtering_bound_logger(30), logger_factory=structlog.PrintLoggerFactory(file=out),
-    )  # fmt: skip
+        wrapper_class=structlog.make_filtering_bound_logger(30),
+        logger_factory=structlog.PrintLoggerFactory(file=out),
+    )
     try:
-        done = await up_in_process(EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "t.jsonl").resolved(), observe=attack)
+        done = await up_in_process(
+            EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "t.jsonl").resolved(), observe=attack
+        )
     finally:
         logs.configure("info")
     assert done.reason == clean.reason == "success" and done.metrics.temporal_steps == clean.metrics.temporal_steps
     warnings = [line for line in out.getvalue().splitlines() if "malformed action request rejected" in line]
     assert 1 <= len(warnings) <= 5, len(warnings)  # one per 5 s interval, not one per message
     rows = read_trace(tmp_path / "t.jsonl")
-    counted = {key: sum(r["msg"]["count"] for r in rows if r["kind"] == "junk" and r["key"].endswith(key)) for key in ("/action/request", "/action/ack")}
+    counted = {
+        key: sum(r["msg"]["count"] for r in rows if r["kind"] == "junk" and r["key"].endswith(key))
+        for key in ("/action/request", "/action/ack")
+    }
     assert counted == {"/action/request": flood, "/action/ack": flood}, counted
-    assert not any(r["kind"] == "put" and r["key"].endswith("/action/request") and "teleport" in json.dumps(r["msg"]) for r in rows)
+    assert not any(
+        r["kind"] == "put" and r["key"].endswith("/action/request") and "teleport" in json.dumps(r["msg"]) for r in rows
+    )
     size, clean_size = (tmp_path / "t.jsonl").stat().st_size, (tmp_path / "clean.jsonl").stat().st_size
     assert size < 1.2 * clean_size + 10_000, (size, clean_size)  # 2 MB of junk would have been copied
     assert from_trace(rows).rejected_actions == flood
@@ -236,12 +287,12 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
     and the metrics and diagnostics still count every rejection, by reason."""
     from mhrc.core.bus import Bus
     from mhrc.core.diagnostics import diagnose
-    from mhrc.run.config import EpisodeConfig
-    from mhrc.run.inprocess import up_in_process
     from mhrc.core.keys import Keys
     from mhrc.core.metrics import from_trace
     from mhrc.core.protocol import ActionRequest, Wait
     from mhrc.core.trace import REJECTIONS_IN_FULL, read_trace
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.inprocess import up_in_process
 
     flood = 2000
     forged = [ActionRequest(robot="alice", agent_id="not-attached", tick=0, action=Wait()) for _ in range(flood)]
@@ -253,15 +304,23 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
 
         when_the_world_listens(bus, run, flood_now)
 
-    done = await up_in_process(EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "t.jsonl").resolved(), observe=attack)
+    done = await up_in_process(
+        EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "t.jsonl").resolved(), observe=attack
+    )
     assert done.reason == "success"
     rows = read_trace(tmp_path / "t.jsonl")
     ids = {r.goal_id for r in forged}
     copied = [r for r in rows if r["kind"] == "put" and isinstance(r["msg"], dict) and r["msg"].get("goal_id") in ids]
-    counted = {key: sum(r["msg"]["count"] for r in rows if r["kind"] == "junk" and r["key"].endswith(key)) for key in ("/action/request", "/action/ack")}
+    counted = {
+        key: sum(r["msg"]["count"] for r in rows if r["kind"] == "junk" and r["key"].endswith(key))
+        for key in ("/action/request", "/action/ack")
+    }
     requests = sum(1 for r in copied if r["key"].endswith("/action/request"))
     acks = sum(1 for r in copied if r["key"].endswith("/action/ack"))
-    assert requests == acks and 1 <= acks < 40 * REJECTIONS_IN_FULL, (requests, acks)  # a few per interval, each request beside its ack
+    assert requests == acks and 1 <= acks < 40 * REJECTIONS_IN_FULL, (
+        requests,
+        acks,
+    )  # a few per interval, each request beside its ack
     assert counted == {"/action/request": flood - requests, "/action/ack": flood - acks}, counted
     assert (tmp_path / "t.jsonl").stat().st_size < 1_000_000  # 2,000 of each copied came to ~1 MB
     assert from_trace(rows).rejected_actions >= flood
@@ -304,7 +363,9 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
             sock.listen()
         else:
             (tmp_path / "first").mkdir()
-            world = _start(["world", "--port", str(port), "--run", "first", "--insecure", "--quiet"], tmp_path / "first")
+            world = _start(
+                ["world", "--port", str(port), "--run", "first", "--insecure", "--quiet"], tmp_path / "first"
+            )
             from mhrc.core.endpoints import ListenError, check_listen
 
             def listening() -> bool:
@@ -316,9 +377,15 @@ def test_a_port_in_use_is_one_line_and_exit_2(holder: str, tmp_path: Path) -> No
                 return False
 
             until_sync(listening, "the first world listening", 60)
-        for args in (["world", "--port", str(port), "--insecure"], ["up", "--port", str(port)], ["up", "--processes", "--port", str(port), "--insecure"],
-                     ["up", "--processes", "--port", str(port)]):  # fmt: skip
-            out = subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=tmp_path, capture_output=True, text=True, timeout=HANG)
+        for args in (
+            ["world", "--port", str(port), "--insecure"],
+            ["up", "--port", str(port)],
+            ["up", "--processes", "--port", str(port), "--insecure"],
+            ["up", "--processes", "--port", str(port)],
+        ):
+            out = subprocess.run(
+                [sys.executable, "-m", "mhrc", *args], cwd=tmp_path, capture_output=True, text=True, timeout=HANG
+            )
             lines = [line for line in out.stderr.splitlines() if line.startswith("mhrc:")]
             assert out.returncode == 2, (args, out.returncode, out.stderr[-2000:])
             assert len(lines) == 1 and f"port {port} is already in use" in lines[0] and "--port" in lines[0], out.stderr
@@ -345,8 +412,21 @@ def test_a_world_killed_under_its_agent_is_one_line_and_exit_2(tmp_path: Path) -
     agent = None
     try:
         _until(lambda: "world listening" in _stderr(tmp_path / "w"), 60, "the world listening", world)
-        agent = _start(["agent", "--robot", "alice", "--run", "gone", "--connect", f"tcp/127.0.0.1:{port}", "--insecure", "--log-level", "info"],
-                       tmp_path / "a")  # fmt: skip
+        agent = _start(
+            [
+                "agent",
+                "--robot",
+                "alice",
+                "--run",
+                "gone",
+                "--connect",
+                f"tcp/127.0.0.1:{port}",
+                "--insecure",
+                "--log-level",
+                "info",
+            ],
+            tmp_path / "a",
+        )
         _until(lambda: "attached" in _stderr(tmp_path / "a"), 60, "alice attached", agent)
         os.killpg(world.pid, signal.SIGKILL)
         try:
@@ -357,9 +437,23 @@ def test_a_world_killed_under_its_agent_is_one_line_and_exit_2(tmp_path: Path) -
         lines = [line for line in err.splitlines() if line.startswith("mhrc agent alice:")]
         assert code == 2 and len(lines) == 1 and "world disappeared" in lines[0] and "Traceback" not in err, err[-2000:]
         nobody = subprocess.run(
-            [sys.executable, "-m", "mhrc", "agent", "--robot", "bob", "--connect", f"tcp/127.0.0.1:{port}", "--insecure", "--attach-timeout", "3"],
-            capture_output=True, text=True, timeout=120,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "mhrc",
+                "agent",
+                "--robot",
+                "bob",
+                "--connect",
+                f"tcp/127.0.0.1:{port}",
+                "--insecure",
+                "--attach-timeout",
+                "3",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert nobody.returncode == 2 and "Traceback" not in nobody.stderr, nobody.stderr[-2000:]
         assert len([line for line in nobody.stderr.splitlines() if line.startswith("mhrc")]) == 1, nobody.stderr
     finally:
@@ -375,11 +469,21 @@ def test_an_agent_failing_before_the_start_ends_the_episode_at_once(tmp_path: Pa
     exits 2 instead (it hung until killed before)."""
     (tmp_path / "h").mkdir()
     heuristic = tmp_path / "h" / "trace.jsonl"
-    first = subprocess.run([sys.executable, "-m", "mhrc", "up", "--insecure", "-q", "--trace", str(heuristic)],
-                           cwd=tmp_path / "h", capture_output=True, text=True, timeout=300)  # fmt: skip
+    first = subprocess.run(
+        [sys.executable, "-m", "mhrc", "up", "--insecure", "-q", "--trace", str(heuristic)],
+        cwd=tmp_path / "h",
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert first.returncode == 0, first.stderr[-2000:]
-    out = subprocess.run([sys.executable, "-m", "mhrc", "up", "--insecure", "-q", "--llm", f"alice=replay:{heuristic}"],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=HANG)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-m", "mhrc", "up", "--insecure", "-q", "--llm", f"alice=replay:{heuristic}"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=HANG,
+    )
     lines = [line for line in out.stderr.splitlines() if line.startswith("mhrc up:")]
     assert out.returncode == 2 and len(lines) == 1 and "holds no LLM prompts for alice" in lines[0], out.stderr[-2000:]
     assert "Traceback" not in out.stderr, out.stderr[-2000:]
@@ -398,7 +502,9 @@ async def test_an_agent_frozen_and_resumed_attaches_again(schedule: str, tmp_pat
     from mhrc.core.protocol import RobotAttached, RobotDetached
     from mhrc.testing import world_on_loopback
 
-    async with world_on_loopback(seed=0, n_objects=4, tick_delay=0.4, schedule=schedule, trace=tmp_path / "t.jsonl") as world:
+    async with world_on_loopback(
+        seed=0, n_objects=4, tick_delay=0.4, schedule=schedule, trace=tmp_path / "t.jsonl"
+    ) as world:
         events: list[Any] = []
         news = asyncio.Event()
         client = await world.client()
@@ -414,9 +520,23 @@ async def test_an_agent_frozen_and_resumed_attaches_again(schedule: str, tmp_pat
         client.subscribe(Keys(world.run).world_event, on_event)
         log = (tmp_path / "david.txt").open("w")
         david = subprocess.Popen(
-            [sys.executable, "-m", "mhrc", "agent", "--robot", "david", "--run", world.run, "--connect", world.endpoint, "--insecure"],
-            stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "mhrc",
+                "agent",
+                "--robot",
+                "david",
+                "--run",
+                world.run,
+                "--connect",
+                world.endpoint,
+                "--insecure",
+            ],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
         try:
             alice = await world.agent("alice", "heuristic")
             bob = await world.agent("bob", "heuristic")
@@ -429,10 +549,16 @@ async def test_an_agent_frozen_and_resumed_attaches_again(schedule: str, tmp_pat
             if schedule == "sequential":  # frozen at once: David, last in the order, awaits his first turn
                 await until(lambda: sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) == 1)
             else:  # frozen mid-episode, awaiting a result
-                await until(lambda: sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) == 1
-                            and any(getattr(e, "kind", "") == "tick" for e in events))  # fmt: skip
+                await until(
+                    lambda: (
+                        sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) == 1
+                        and any(getattr(e, "kind", "") == "tick" for e in events)
+                    )
+                )
             os.kill(david.pid, signal.SIGSTOP)
-            await until(lambda: any(isinstance(e, RobotDetached) and e.robot == "david" for e in events))  # his lease ran out
+            await until(
+                lambda: any(isinstance(e, RobotDetached) and e.robot == "david" for e in events)
+            )  # his lease ran out
             os.kill(david.pid, signal.SIGCONT)
             await until(lambda: sum(isinstance(e, RobotAttached) and e.robot == "david" for e in events) >= 2)
             done = await world.done(180)
@@ -458,10 +584,14 @@ async def test_an_agent_that_attaches_without_a_token_is_detached_not_waited_for
     from mhrc.testing import world_on_loopback
 
     grace = 3.0  # s: the world's token deadline (30 by default)
-    async with world_on_loopback(seed=0, n_objects=3, schedule="sequential", token_deadline=grace, trace=tmp_path / "t.jsonl") as world:
+    async with world_on_loopback(
+        seed=0, n_objects=3, schedule="sequential", token_deadline=grace, trace=tmp_path / "t.jsonl"
+    ) as world:
         client = await world.client()
         detached: list[RobotDetached] = []
-        seen: list[RobotAttached | RobotDetached] = []  # alice's attach and detach, in the world's order (one publisher, one key)
+        seen: list[
+            RobotAttached | RobotDetached
+        ] = []  # alice's attach and detach, in the world's order (one publisher, one key)
         got = asyncio.Event()
 
         def on_event(sample: Any) -> None:
@@ -478,13 +608,24 @@ async def test_an_agent_that_attaches_without_a_token_is_detached_not_waited_for
             replies: list[bytes] = []
             deadline = time.monotonic() + 120
             while not replies and time.monotonic() < deadline:  # until the world serves attaches (its scene is built)
-                replies = await client.get(k.attach("alice"), AttachRequest(robot="alice", agent_id="tokenless"), timeout=2)
+                replies = await client.get(
+                    k.attach("alice"), AttachRequest(robot="alice", agent_id="tokenless"), timeout=2
+                )
             assert replies and decode(replies[0], AttachReply).accepted
             await asyncio.wait_for(got.wait(), grace + 30)
-            assert detached[0].robot == "alice" and detached[0].agent_id == "tokenless" and "no liveliness token" in detached[0].reason
-            assert f"within {grace:g} s of attaching" in detached[0].reason  # the token deadline, not any other cause, let it go
+            assert (
+                detached[0].robot == "alice"
+                and detached[0].agent_id == "tokenless"
+                and "no liveliness token" in detached[0].reason
+            )
+            assert (
+                f"within {grace:g} s of attaching" in detached[0].reason
+            )  # the token deadline, not any other cause, let it go
             # the world admitted the tokenless agent, then let it go: the deadline ran from an attach that happened
-            assert [(type(e).__name__, e.agent_id) for e in seen] == [("RobotAttached", "tokenless"), ("RobotDetached", "tokenless")]
+            assert [(type(e).__name__, e.agent_id) for e in seen] == [
+                ("RobotAttached", "tokenless"),
+                ("RobotDetached", "tokenless"),
+            ]
             # a real agent takes the robot afterwards, and the episode is played to the end
             agents = [await world.agent(r, "heuristic") for r in ("alice", "bob", "david")]
             done = await world.done(180)

@@ -7,19 +7,18 @@ from importlib import resources
 from pathlib import Path
 
 import pytest
+from test_llm_policy import obs
 
 from mhrc.agents.llm import ScriptedClient
 from mhrc.agents.llm_policy import LLMPolicy
-from mhrc.run.config import ConfigError, EpisodeConfig
-from mhrc.run.inprocess import up_in_process
 from mhrc.core.fidelity import AIDS, label, parse_aids
 from mhrc.core.protocol import ActionResult, SkillOutcome, Wait
 from mhrc.core.trace import read_trace
-from mhrc.world.skills import reaching
+from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.world.robots import ARM_FORWARD
 from mhrc.world.sim import Sim
-
-from test_llm_policy import obs
+from mhrc.world.skills import reaching
 
 
 def test_the_default_is_the_papers_fidelity_and_aids_are_named() -> None:
@@ -32,11 +31,17 @@ def test_the_default_is_the_papers_fidelity_and_aids_are_named() -> None:
         EpisodeConfig.build(aids="x-ray")
 
 
-@pytest.mark.parametrize("aids, fidelity", [((), "paper"), (("goal_map", "status_hints"), "aids:goal_map,status_hints")])
+@pytest.mark.parametrize(
+    "aids, fidelity", [((), "paper"), (("goal_map", "status_hints"), "aids:goal_map,status_hints")]
+)
 async def test_every_trace_records_its_fidelity(tmp_path: Path, aids: tuple[str, ...], fidelity: str) -> None:
     cfg = EpisodeConfig.build(seed=1, n_objects=3, horizon=2, aids=aids, trace=tmp_path / "t.jsonl").resolved()
     await up_in_process(cfg)
-    started = [r["msg"] for r in read_trace(cfg.trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_started"]
+    started = [
+        r["msg"]
+        for r in read_trace(cfg.trace)
+        if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_started"
+    ]
     assert [(s["fidelity"], s["aids"]) for s in started] == [(fidelity, list(aids))]
 
 
@@ -54,7 +59,9 @@ def test_reach_labels_are_an_aid_of_the_prompt() -> None:
 
     apple = ObjectView(name="apple", position=(-3.3, -0.1, 0.74), on="table_0")
     plain = LLMPolicy("bob", ScriptedClient([])).render(obs(robot="bob", objects=[apple]))[1]["content"]
-    aided = LLMPolicy("bob", ScriptedClient([]), reach_labels=True).render(obs(robot="bob", objects=[apple]))[1]["content"]
+    aided = LLMPolicy("bob", ScriptedClient([]), reach_labels=True).render(obs(robot="bob", objects=[apple]))[1][
+        "content"
+    ]
     assert "- apple: position (-3.30, -0.10, 0.74)\n" in plain and "reach)" not in plain.split("# Your status")[0]
     assert "- apple: position (-3.30, -0.10, 0.74) (within your reach)" in aided
 
@@ -72,11 +79,20 @@ def test_alices_prompt_gives_the_simulators_real_picking_distances() -> None:
 
 def test_histories_are_whole_by_default_and_capped_only_on_request() -> None:
     """The paper keeps whole histories; --history-cap bounds them for small-context models."""
+
     def fill(policy: LLMPolicy) -> str:
         for step in range(60):
             text = f"step {step} waited " + "x" * 250
-            policy.record(ActionResult(goal_id=f"g{step}", robot="alice", tick=step, action=Wait(), observation=obs(step),
-                                       outcome=SkillOutcome.fail(code="plan_failed", feedback=text)))  # type: ignore[arg-type]
+            policy.record(
+                ActionResult(
+                    goal_id=f"g{step}",
+                    robot="alice",
+                    tick=step,
+                    action=Wait(),
+                    observation=obs(step),
+                    outcome=SkillOutcome.fail(code="plan_failed", feedback=text),
+                )
+            )  # type: ignore[arg-type]
         return "".join(m["content"] for m in policy.render(obs(60)))
 
     whole = fill(LLMPolicy("alice", ScriptedClient([])))

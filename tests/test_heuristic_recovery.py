@@ -22,7 +22,9 @@ from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "world" / "scenarios"
-BREAKDOWN_RE = re.compile(r"I broke down: I can only communicate and wait until tick (\d+)\.")  # the sentence's fixed shape
+BREAKDOWN_RE = re.compile(
+    r"I broke down: I can only communicate and wait until tick (\d+)\."
+)  # the sentence's fixed shape
 
 pytestmark = pytest.mark.slow  # each runs a whole episode (1-3 s of simulation, more to start)
 
@@ -73,12 +75,27 @@ def test_relocate_alice_searches_again(tmp_path: Path) -> None:
     ev = _applied(ep, "relocate")
     moved, to, tick = ev["changed"]["object"], ev["changed"]["to"], ev["tick"]
     assert ep.done.metrics.success, ep.done.metrics
-    rounds = [m for m in ep.messages if m["sender"] == "alice" and EXPLORE_RE.search(m["content"]) and m["tick"] >= tick]
+    rounds = [
+        m for m in ep.messages if m["sender"] == "alice" and EXPLORE_RE.search(m["content"]) and m["tick"] >= tick
+    ]
     assert rounds, "Alice never handed surfaces over again after the relocation"
-    picked = [r for r in ep.results if r["robot"] == "alice" and r["action"]["skill"] == "pick" and r["action"].get("obj") == moved and r["outcome"]["succeeded"]]
+    picked = [
+        r
+        for r in ep.results
+        if r["robot"] == "alice"
+        and r["action"]["skill"] == "pick"
+        and r["action"].get("obj") == moved
+        and r["outcome"]["succeeded"]
+    ]
     assert picked and picked[0]["tick"] > rounds[0]["tick"], "the moved object was fetched before any search, by luck"
-    where = [r for r in ep.results if r["robot"] == "alice" and r["action"]["skill"] == "navigate" and r["tick"] < picked[0]["tick"]]
-    assert where and where[-1]["action"]["target"] == to, f"Alice picked {moved} without going to {to}, where it was moved"
+    where = [
+        r
+        for r in ep.results
+        if r["robot"] == "alice" and r["action"]["skill"] == "navigate" and r["tick"] < picked[0]["tick"]
+    ]
+    assert where and where[-1]["action"]["target"] == to, (
+        f"Alice picked {moved} without going to {to}, where it was moved"
+    )
 
 
 def test_breakdown_alice_tells_and_waits(tmp_path: Path) -> None:
@@ -90,7 +107,11 @@ def test_breakdown_alice_tells_and_waits(tmp_path: Path) -> None:
     ev = _applied(ep, "breakdown")
     until = int(ev["changed"]["until"])
     assert ep.done.metrics.success, ep.done.metrics
-    told = {m["to"] for m in ep.messages if m["sender"] == "alice" and (hit := BREAKDOWN_RE.search(m["content"])) and int(hit.group(1)) == until}
+    told = {
+        m["to"]
+        for m in ep.messages
+        if m["sender"] == "alice" and (hit := BREAKDOWN_RE.search(m["content"])) and int(hit.group(1)) == until
+    }
     assert told == {"bob", "david"}, f"Alice told {told or 'nobody'} of her breakdown"
     broken = [r for r in ep.results if r["robot"] == "alice" and r["outcome"]["code"] == "broken_down"]
     assert len(broken) == 1, f"Alice tried {len(broken)} actions while broken down instead of waiting it out"
@@ -110,9 +131,19 @@ def test_breakdown_of_david_alice_takes_over(tmp_path: Path) -> None:
     assert told == {"alice", "bob"}, told
     handed = next(hit for m in ep.messages if m["sender"] == "alice" and (hit := EXPLORE_RE.search(m["content"])))
     surfaces = {s.strip() for s in handed.group(1).split(",")}
-    reported = {m["content"].split()[1] for m in ep.messages if m["sender"] == "david" and m["content"].startswith("On ") and m["tick"] < until}
-    took_over = [r for r in ep.results if r["robot"] == "alice" and r["action"]["skill"] == "navigate" and ev["tick"] < r["tick"] < until
-                 and r["action"]["target"] in surfaces - reported]  # fmt: skip
+    reported = {
+        m["content"].split()[1]
+        for m in ep.messages
+        if m["sender"] == "david" and m["content"].startswith("On ") and m["tick"] < until
+    }
+    took_over = [
+        r
+        for r in ep.results
+        if r["robot"] == "alice"
+        and r["action"]["skill"] == "navigate"
+        and ev["tick"] < r["tick"] < until
+        and r["action"]["target"] in surfaces - reported
+    ]
     assert took_over, "Alice never looked at David's surfaces while he was broken down"
 
 
@@ -124,9 +155,20 @@ def test_new_target_bob_asks_and_team_finds_it(tmp_path: Path) -> None:
     ev = _applied(ep, "new_target")
     new = ev["changed"]["object"]
     assert ep.done.metrics.success and ep.done.metrics.total == 4, ep.done.metrics
-    asked = [m for m in ep.messages if m["sender"] == "bob" and (hit := REQUEST_RE.search(m["content"])) and new in hit.group(1)]
+    asked = [
+        m
+        for m in ep.messages
+        if m["sender"] == "bob" and (hit := REQUEST_RE.search(m["content"])) and new in hit.group(1)
+    ]
     assert asked and asked[0]["tick"] >= ev["tick"], "Bob never asked for the new target"
-    fetched = [r for r in ep.results if r["robot"] == "alice" and r["action"]["skill"] == "pick" and r["action"].get("obj") == new and r["outcome"]["succeeded"]]
+    fetched = [
+        r
+        for r in ep.results
+        if r["robot"] == "alice"
+        and r["action"]["skill"] == "pick"
+        and r["action"].get("obj") == new
+        and r["outcome"]["succeeded"]
+    ]
     assert fetched and fetched[0]["tick"] > asked[0]["tick"]
 
 
@@ -139,8 +181,22 @@ def test_close_alice_reopens(tmp_path: Path) -> None:
     ev = _applied(ep, "close")
     container = ev["changed"]["container"]
     assert ep.done.metrics.success, ep.done.metrics
-    reopened = [r for r in ep.results if r["robot"] == "alice" and r["action"]["skill"] == "open" and r["action"]["target"] == container
-                and r["outcome"]["succeeded"] and r["tick"] >= ev["tick"]]  # fmt: skip
+    reopened = [
+        r
+        for r in ep.results
+        if r["robot"] == "alice"
+        and r["action"]["skill"] == "open"
+        and r["action"]["target"] == container
+        and r["outcome"]["succeeded"]
+        and r["tick"] >= ev["tick"]
+    ]
     assert reopened, f"Alice never opened {container} again"
-    picked_inside = [r for r in ep.results if r["robot"] == "alice" and r["action"]["skill"] == "pick" and r["outcome"]["succeeded"] and r["tick"] > reopened[0]["tick"]]
+    picked_inside = [
+        r
+        for r in ep.results
+        if r["robot"] == "alice"
+        and r["action"]["skill"] == "pick"
+        and r["outcome"]["succeeded"]
+        and r["tick"] > reopened[0]["tick"]
+    ]
     assert picked_inside, "nothing was taken out of the reopened container"

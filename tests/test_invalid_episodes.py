@@ -13,13 +13,14 @@ from collections import Counter, deque
 from pathlib import Path
 from typing import Any
 
+from waits import served
+
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import AttachReply, AttachRequest, EpisodeDone, RobotDetached, decode, decode_event
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec
 from mhrc.eval.episode import EpisodeResult, Job, run_job, worker_name
 from mhrc.testing import world_on_loopback
-from waits import served
 
 DEADLINE = 1.0  # s: the world's token deadline in these tests (30 by default)
 
@@ -43,7 +44,9 @@ async def _stalled_episode(config: dict[str, Any], trace: Path) -> tuple[list[Ro
         client.subscribe(keys.world_event, on_event)
         await served(client, keys.attach("alice"))  # the world's scene is built and it takes attaches
         for robot in world.config.robots:
-            replies = await client.get(keys.attach(robot), AttachRequest(robot=robot, agent_id=f"{robot}-stalled"), timeout=30)
+            replies = await client.get(
+                keys.attach(robot), AttachRequest(robot=robot, agent_id=f"{robot}-stalled"), timeout=30
+            )
             assert replies and decode(replies[0], AttachReply).accepted, robot
         await asyncio.wait_for(ended.wait(), 120)  # every event before it, on the same key, has come
         await world.done(60)  # and the trace is written
@@ -91,7 +94,11 @@ async def test_a_team_without_tokens_is_let_go_at_the_deadline_and_its_episode_i
 
     config = {"task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3, "schedule": "sequential"}
     detached, done = await _stalled_episode(config, tmp_path / "t.jsonl")
-    assert sorted((d.robot, d.agent_id) for d in detached) == [("alice", "alice-stalled"), ("bob", "bob-stalled"), ("david", "david-stalled")]
+    assert sorted((d.robot, d.agent_id) for d in detached) == [
+        ("alice", "alice-stalled"),
+        ("bob", "bob-stalled"),
+        ("david", "david-stalled"),
+    ]
     assert (done.reason, done.metrics.temporal_steps, done.metrics.action_steps) == ("no_agents", 0, 0)
     m = from_trace(read_trace(tmp_path / "t.jsonl"))
     assert (m.valid, m.invalid_code) == (False, Invalid.NOT_PLAYED)
@@ -111,7 +118,11 @@ async def test_an_unplayed_episode_is_run_again_and_never_averaged_into_a_score(
     assert executor.attempts == {never: RETRIES + 1, second: 2}
     by_key = {r["key"]: r for r in rows}
     assert sorted(by_key) == [never, second]  # one row each: a retried attempt leaves none
-    assert (by_key[never]["valid"], by_key[never]["invalid_code"], by_key[never]["reason"]) == (False, "not_played", "no_agents")
+    assert (by_key[never]["valid"], by_key[never]["invalid_code"], by_key[never]["reason"]) == (
+        False,
+        "not_played",
+        "no_agents",
+    )
     assert by_key[never]["temporal_steps"] == 0
     played = by_key[second]
     assert (played["valid"], played["invalid_code"], played["worker"]) == (True, None, worker_name())

@@ -79,9 +79,7 @@ def test_a_wrong_import_planted_anywhere_is_caught(tmp_path: Path) -> None:
     """A copy of the tree (links kept as links) with one wrong import of each kind, the first two
     in the top-level folders: every contract breaks, naming the planted module."""
     for name in ("mhrc", *TOP):
-        shutil.copytree(
-            ROOT / name, tmp_path / name, symlinks=True, ignore=shutil.ignore_patterns("__pycache__")
-        )
+        shutil.copytree(ROOT / name, tmp_path / name, symlinks=True, ignore=shutil.ignore_patterns("__pycache__"))
     shutil.copy(ROOT / "pyproject.toml", tmp_path)
     clean = lint_imports(tmp_path, PYTHONPATH=str(tmp_path))
     assert clean.returncode == 0, clean.stdout[-3000:]
@@ -97,7 +95,5 @@ def test_a_wrong_import_planted_anywhere_is_caught(tmp_path: Path) -> None:
 
 def test_no_source_module_is_over_500_lines() -> None:
     files = {p.resolve() for d in ("mhrc", *TOP, "bench") for p in (ROOT / d).rglob("*.py")}
-    long = {
-        str(p.relative_to(ROOT)): n for p in files if (n := len(p.read_text(encoding="utf-8").splitlines())) > 500
-    }
+    long = {str(p.relative_to(ROOT)): n for p in files if (n := len(p.read_text(encoding="utf-8").splitlines())) > 500}
     assert not long, f"modules over 500 lines (split them by job): {long}"

@@ -13,10 +13,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-
 from waits import until_sync
 
-pytestmark = [pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads children from /proc (Linux)"), pytest.mark.slow]
+pytestmark = [
+    pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads children from /proc (Linux)"),
+    pytest.mark.slow,
+]
 
 
 def children(pid: int) -> set[int]:
@@ -55,10 +57,14 @@ def _ticks(trace: Path) -> list[int]:
     return ticks
 
 
-def _children_die_with_a_killed_parent(cmd: list[str], expected: int, working: Callable[[], bool], what: str, env: dict[str, str] | None = None) -> None:
+def _children_die_with_a_killed_parent(
+    cmd: list[str], expected: int, working: Callable[[], bool], what: str, env: dict[str, str] | None = None
+) -> None:
     """Start `cmd`, wait for its `expected` children and for `working()` (they are busy, not
     starting), SIGKILL the parent: every child must be gone within 20 s."""
-    parent = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env)
+    parent = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env
+    )
     kids: set[int] = set()
 
     def started() -> bool:
@@ -72,7 +78,9 @@ def _children_die_with_a_killed_parent(cmd: list[str], expected: int, working: C
         until_sync(working, f"{what} at work", 120)
         parent.send_signal(signal.SIGKILL)
         parent.wait()
-        until_sync(lambda: not any(alive(k) for k in kids), f"{what} gone after their parent was SIGKILLed", 20, every=0.2)
+        until_sync(
+            lambda: not any(alive(k) for k in kids), f"{what} gone after their parent was SIGKILLed", 20, every=0.2
+        )
     finally:
         for k in kids:
             if alive(k):
@@ -84,15 +92,33 @@ def _children_die_with_a_killed_parent(cmd: list[str], expected: int, working: C
 def test_the_world_and_agents_die_with_a_killed_parent(tmp_path: Path) -> None:
     trace = tmp_path / "t.jsonl"
     cmd = [sys.executable, "-m", "mhrc", "up", "--processes", "--quiet", "--tick-delay", "1", "--trace", str(trace)]
-    _children_die_with_a_killed_parent(cmd, 4, lambda: bool(_ticks(trace)), "the world and 3 agents")  # killed mid-episode: ticks take a second each
+    _children_die_with_a_killed_parent(
+        cmd, 4, lambda: bool(_ticks(trace)), "the world and 3 agents"
+    )  # killed mid-episode: ticks take a second each
 
 
 def test_eval_workers_die_with_a_killed_coordinator(tmp_path: Path) -> None:
     """The workers' episodes write their traces under TMPDIR: one with a tick is a worker in an episode."""
     scratch = tmp_path / "scratch"
     scratch.mkdir()
-    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "6", "--trials", "20",
-           "--workers", "2", "--out", str(tmp_path / "ev")]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "mhrc",
+        "eval",
+        "--tasks",
+        "pack_objects",
+        "--scenes",
+        "kitchen",
+        "--objects",
+        "6",
+        "--trials",
+        "20",
+        "--workers",
+        "2",
+        "--out",
+        str(tmp_path / "ev"),
+    ]
     in_episode = lambda: any(_ticks(t) for t in scratch.glob("*/trace.jsonl"))  # noqa: E731
     _children_die_with_a_killed_parent(cmd, 2, in_episode, "the 2 workers", env={**os.environ, "TMPDIR": str(scratch)})
 
@@ -101,7 +127,20 @@ def test_processes_json_prints_only_json_and_the_tick_delay_reaches_the_world(tm
     """The world process is started with the tick delay (the pause itself is the world's
     `asyncio.sleep`, not something to time here); stdout holds the metrics' JSON alone."""
     trace = tmp_path / "t.jsonl"
-    cmd = [sys.executable, "-m", "mhrc", "up", "--processes", "--json", "--horizon", "3", "--tick-delay", "0.5", "--trace", str(trace)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "mhrc",
+        "up",
+        "--processes",
+        "--json",
+        "--horizon",
+        "3",
+        "--tick-delay",
+        "0.5",
+        "--trace",
+        str(trace),
+    ]
     out, err = tmp_path / "stdout.txt", tmp_path / "stderr.txt"
     with out.open("w") as stdout_file, err.open("w") as stderr_file:  # files: a pipe nobody reads yet could fill
         parent = subprocess.Popen(cmd, stdout=stdout_file, stderr=stderr_file, start_new_session=True)

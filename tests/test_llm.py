@@ -8,10 +8,10 @@ from typing import Any
 import pytest
 
 from mhrc.agents.llm import LLMError, OpenAIChatClient, check_spec
+from mhrc.core.trace import read_trace
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply
-from mhrc.core.trace import read_trace
 
 USAGE = {"prompt_tokens": 11, "completion_tokens": 7}
 
@@ -36,7 +36,11 @@ async def test_transient_failures_are_retried_then_usage_recorded(mhrc_model_ser
     assert len(server.requests) == 5 and server.remaining() == 0
     body, headers = server.requests[-1], server.headers[-1]
     streamed = {"stream": True, "stream_options": {"include_usage": True}}  # the default: replies are streamed
-    assert body == {"model": "m1", "messages": [{"role": "user", "content": "hi"}], "temperature": 0.5, "max_tokens": 1024} | streamed
+    assert (
+        body
+        == {"model": "m1", "messages": [{"role": "user", "content": "hi"}], "temperature": 0.5, "max_tokens": 1024}
+        | streamed
+    )
     assert headers["Authorization"] == "Bearer sekret"
 
 
@@ -87,9 +91,17 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
     """Three LLM agents against one scripted server: malformed replies, a 500 and a 429 along
     the way; the episode runs to its horizon, and the robots' calls overlap in time."""
     script = {  # each robot's hiccups (answered at once), then its replies (0.3 s each), then waits
-        "bob": [ModelReply(status=500, body=b"boom", latency=0.0), ModelReply(body=b"not json at all", latency=0.0), "I am thinking about the tray.", "Command: pick(ghost)"],
+        "bob": [
+            ModelReply(status=500, body=b"boom", latency=0.0),
+            ModelReply(body=b"not json at all", latency=0.0),
+            "I am thinking about the tray.",
+            "Command: pick(ghost)",
+        ],
         "alice": [ModelReply(status=429, headers={"Retry-After": "0"}, body=b"", latency=0.0)],
-        "david": [ModelReply("Command: wait()", latency=3.0), "Command: navigate(table_1, 0)"],  # beyond the request timeout: retried
+        "david": [
+            ModelReply("Command: wait()", latency=3.0),
+            "Command: navigate(table_1, 0)",
+        ],  # beyond the request timeout: retried
     }
     server = mhrc_model_server(script, latency=0.3, when_done="Analysis: nothing to do.\nCommand: wait()")
     cfg = EpisodeConfig.build(
@@ -102,7 +114,9 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
     thoughts = [line["msg"] for line in read_trace(cfg.trace) if line["key"].endswith("/thought")]
     bob = [t for t in thoughts if t["robot"] == "bob"]
     assert bob[0]["parse_error"] and "no command" in bob[0]["parse_error"] and bob[0]["action"] == "wait()"
-    assert "Your command could not be read, so you waited." in bob[1]["prompt"]  # the format error came back as feedback
+    assert (
+        "Your command could not be read, so you waited." in bob[1]["prompt"]
+    )  # the format error came back as feedback
     assert all(t["policy"] == "llm:test-model" and t["prompt"] and t["prompt_tokens"] > 0 for t in thoughts)
 
     for robot, extra in (("David", 1), ("Bob", 2), ("Alice", 1)):  # each hiccup cost one retried request
@@ -126,22 +140,38 @@ async def test_replay_reproduces_a_recorded_episode_exactly(mhrc_model_server, t
         if system.startswith("You are Bob"):
             return "Command: pick(phone)" if "Gripper: empty" in user else "Command: place(phone, tray)"
         if system.startswith("You are Alice"):
-            return "Analysis: look around.\nCommand: navigate(drawer_unit, 0)" if "drawer_unit" not in user.split("actions so far")[-1] else "Command: open(drawer_unit)"
-        return "Command: navigate(sofa, 0)" if "sofa" not in user.split("actions so far")[-1] else "I should wait maybe?"
+            return (
+                "Analysis: look around.\nCommand: navigate(drawer_unit, 0)"
+                if "drawer_unit" not in user.split("actions so far")[-1]
+                else "Command: open(drawer_unit)"
+            )
+        return (
+            "Command: navigate(sofa, 0)" if "sofa" not in user.split("actions so far")[-1] else "I should wait maybe?"
+        )
 
     server = mhrc_model_server(respond)
-    recorded = EpisodeConfig.build(seed=0, horizon=5, llm="openai:m", base_url=server.url, trace=tmp_path / "rec.jsonl").resolved()
+    recorded = EpisodeConfig.build(
+        seed=0, horizon=5, llm="openai:m", base_url=server.url, trace=tmp_path / "rec.jsonl"
+    ).resolved()
     first = await up_in_process(recorded)
     calls = len(server.requests)  # before the replay: it must add none
-    replayed = EpisodeConfig.build(seed=0, horizon=5, llm=f"replay:{recorded.trace}", trace=tmp_path / "rep.jsonl").resolved()
+    replayed = EpisodeConfig.build(
+        seed=0, horizon=5, llm=f"replay:{recorded.trace}", trace=tmp_path / "rep.jsonl"
+    ).resolved()
     second = await up_in_process(replayed)
 
     def actions(path: Any) -> list[tuple[str, int, str]]:
-        return sorted((m["msg"]["robot"], m["msg"]["tick"], m["msg"]["action"]["skill"]) for m in read_trace(path) if m["key"].endswith("/action/result"))
+        return sorted(
+            (m["msg"]["robot"], m["msg"]["tick"], m["msg"]["action"]["skill"])
+            for m in read_trace(path)
+            if m["key"].endswith("/action/result")
+        )
 
     assert first.metrics.model_dump(exclude={"wall_time"}) == second.metrics.model_dump(exclude={"wall_time"})
     assert actions(recorded.trace) == actions(replayed.trace)
-    assert first.metrics.action_steps > 5 and calls > 0 and len(server.requests) == calls  # the replay asked the server nothing
+    assert (
+        first.metrics.action_steps > 5 and calls > 0 and len(server.requests) == calls
+    )  # the replay asked the server nothing
 
     client = ReplayClient(recorded.trace, "bob")
     with pytest.raises(ReplayMismatch, match="differs"):

@@ -13,6 +13,8 @@ from collections.abc import Callable, Iterator, MutableMapping
 from typing import Any
 
 import pytest
+from structlog.testing import capture_logs
+
 from mhrc.agents.llm import (
     GENERIC_KEY_ENV,
     LLMError,
@@ -25,7 +27,6 @@ from mhrc.agents.llm import (
     make_client,
 )
 from mhrc.testing import ModelReply, Script, ScriptedModelServer
-from structlog.testing import capture_logs
 
 HI = [{"role": "system", "content": "You are a test."}, {"role": "user", "content": "Say something."}]
 
@@ -60,7 +61,9 @@ async def test_every_transient_failure_is_retried_and_then_the_reply_comes_throu
         [
             ModelReply(status=429, headers={"Retry-After": "0.05"}, body=b'{"error": {"message": "rate limited"}}'),
             ModelReply(status=500, body=b"internal error"),
-            ModelReply("too late", usage={"prompt_tokens": 1, "completion_tokens": 1}, latency=5.0),  # beyond the timeout
+            ModelReply(
+                "too late", usage={"prompt_tokens": 1, "completion_tokens": 1}, latency=5.0
+            ),  # beyond the timeout
             ModelReply(body=b'{"choices": [{"message": '),  # malformed JSON
             ModelReply(body=b'{"choices": []}'),  # JSON, but no completion in it
             ModelReply("Command: wait()", usage={"prompt_tokens": 123, "completion_tokens": 45}),
@@ -91,7 +94,9 @@ async def test_every_transient_failure_is_retried_and_then_the_reply_comes_throu
 async def test_the_retry_budget_ends_in_a_typed_error(serve) -> None:  # type: ignore[no-untyped-def]
     server = serve(lambda body: ModelReply(status=503, headers={"Retry-After": "0"}, body=b"overloaded"))
     async with OpenAIChatClient("m", server.url, retries=2, backoff=0.01) as client:
-        with pytest.raises(LLMError, match=r"m at http://127\.0\.0\.1:\d+/v1 failed after 3 attempts: HTTP 503: overloaded"):
+        with pytest.raises(
+            LLMError, match=r"m at http://127\.0\.0\.1:\d+/v1 failed after 3 attempts: HTTP 503: overloaded"
+        ):
             await client.complete(HI)
     assert len(server.requests) == 3
 
@@ -131,7 +136,11 @@ async def test_usage_is_estimated_when_the_server_reports_none(serve) -> None:  
     async with OpenAIChatClient("m", server.url) as client:
         c = await client.complete(HI, temperature=0.2)
     prompt = "You are a test.\n\nSay something."
-    assert (c.prompt_tokens, c.completion_tokens) == (estimate_tokens(prompt), estimate_tokens(reply)) == (len(prompt) // 4, len(reply) // 4)
+    assert (
+        (c.prompt_tokens, c.completion_tokens)
+        == (estimate_tokens(prompt), estimate_tokens(reply))
+        == (len(prompt) // 4, len(reply) // 4)
+    )
     assert server.requests[0]["temperature"] == 0.2 and "Authorization" not in server.headers[0]
 
 
@@ -143,7 +152,9 @@ async def test_the_concurrency_limit_is_shared_by_all_calls_of_a_client(serve) -
     assert server.max_in_flight == 2
 
 
-async def test_make_client_takes_the_key_from_the_named_variable_or_the_generic_one(serve, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+async def test_make_client_takes_the_key_from_the_named_variable_or_the_generic_one(
+    serve, monkeypatch: pytest.MonkeyPatch
+) -> None:  # type: ignore[no-untyped-def]
     server = serve(["Command: wait()"] * 3)
     monkeypatch.setenv("MY_LLM_KEY", "from-my-var")
     monkeypatch.setenv(GENERIC_KEY_ENV, "from-generic")
@@ -176,7 +187,11 @@ def test_specs_are_checked_before_any_request(monkeypatch: pytest.MonkeyPatch) -
     assert check_spec("vllm:m")[1] == "http://127.0.0.1:8000/v1"
     assert check_spec("lmstudio:m")[1] == "http://127.0.0.1:1234/v1"
     assert check_spec("llamacpp:m")[1] == "http://127.0.0.1:8080/v1"
-    assert check_spec("openai:m", "http://127.0.0.1:9/v1") == ("m", "http://127.0.0.1:9/v1", None)  # a local server needs no key
+    assert check_spec("openai:m", "http://127.0.0.1:9/v1") == (
+        "m",
+        "http://127.0.0.1:9/v1",
+        None,
+    )  # a local server needs no key
     monkeypatch.setenv("OPENAI_API_KEY", "sk-test")
     client = make_client("openai:gpt-4o")
     assert client.base_url == "https://api.openai.com/v1" and client.model == "gpt-4o"  # built, never called

@@ -81,7 +81,9 @@ def test_check_gguf_not_gguf(tmp_path: Path) -> None:
         check_gguf(str(text))
 
 
-def test_check_gguf_names_the_install_command_without_xllamacpp(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_check_gguf_names_the_install_command_without_xllamacpp(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     model = tmp_path / "m.gguf"
     model.write_bytes(gguf_header({}))
     monkeypatch.setitem(sys.modules, "xllamacpp", None)  # makes `import xllamacpp` fail
@@ -147,7 +149,11 @@ async def test_answers_chat_completions_on_loopback(server: LocalModelServer, ge
     async with httpx.AsyncClient(base_url=server.base_url, timeout=60) as http:
         listed = (await http.get("/models")).raise_for_status().json()
         assert server.model == listed["data"][0]["id"] == str(gemma)
-        reply = (await http.post("/chat/completions", json=chat(server, "Name a colour.", max_tokens=6))).raise_for_status().json()
+        reply = (
+            (await http.post("/chat/completions", json=chat(server, "Name a colour.", max_tokens=6)))
+            .raise_for_status()
+            .json()
+        )
     assert reply["object"] == "chat.completion"
     assert reply["choices"][0]["finish_reason"] in {"length", "stop"}
     assert isinstance(reply["choices"][0]["message"]["content"], str)
@@ -185,9 +191,10 @@ async def test_three_slots_decode_three_requests_together(server: LocalModelServ
             most_busy = max(most_busy, sum(bool(slot["is_processing"]) for slot in slots))
             await asyncio.sleep(0.02)
 
-    async with httpx.AsyncClient(base_url=server.base_url, timeout=120) as http, httpx.AsyncClient(
-        base_url=root(server), timeout=120
-    ) as admin:
+    async with (
+        httpx.AsyncClient(base_url=server.base_url, timeout=120) as http,
+        httpx.AsyncClient(base_url=root(server), timeout=120) as admin,
+    ):
         watcher = asyncio.create_task(watch(admin))
         await asyncio.gather(*(robot(http, i) for i in range(3)))
         finished.set()
@@ -225,7 +232,9 @@ async def test_same_seed_and_temperature_give_the_same_text(server: LocalModelSe
     body = chat(server, "Tell me about robots.", max_tokens=16, temperature=1.0, seed=7)
     async with httpx.AsyncClient(base_url=server.base_url, timeout=60) as http:
         first, second = [
-            (await http.post("/chat/completions", json=body)).raise_for_status().json()["choices"][0]["message"]["content"]
+            (await http.post("/chat/completions", json=body))
+            .raise_for_status()
+            .json()["choices"][0]["message"]["content"]
             for _ in range(2)
         ]
     assert first == second

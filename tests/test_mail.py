@@ -68,8 +68,12 @@ def test_a_message_sent_while_its_receiver_reattaches_is_kept_and_told_once(busy
     mail.learn()
 
     expected = [f"m{i}" for i in range(SENDS)]
-    assert sorted(carried) == sorted(expected), f"{SENDS - len(set(carried))} messages lost, {len(carried) - len(set(carried))} doubled"
-    assert sorted(told) == sorted(expected), f"{SENDS - len(set(told))} tellings lost, {len(told) - len(set(told))} doubled"
+    assert sorted(carried) == sorted(expected), (
+        f"{SENDS - len(set(carried))} messages lost, {len(carried) - len(set(carried))} doubled"
+    )
+    assert sorted(told) == sorted(expected), (
+        f"{SENDS - len(set(told))} tellings lost, {len(told) - len(set(told))} doubled"
+    )
     assert carried == sorted(carried, key=lambda c: int(c[1:])), "messages reach the robot in the order sent"
 
 

@@ -20,12 +20,21 @@ STEP = 8.0  # async step_seconds of these traces
 def _put(kind: str, **msg: Any) -> dict[str, Any]:
     return {"t": 0.0, "key": f"mhrc/r/{kind}", "kind": "put", "msg": {"v": 2, "kind": kind, **_complete(kind, msg)}}
 
+
 # What a message of each kind must hold (the protocol's required fields) that a test's message leaves out
 REQUIRED: dict[str, dict[str, Any]] = {
-    "action_result": {"goal_id": "g", "observation": {
-        "robot": "r", "tick": 0, "status": {"name": "r", "kind": "k", "skills": []}, "furniture": [], "objects": [],
-        "task_brief": "", "task_detail": "",
-    }},  # fmt: skip
+    "action_result": {
+        "goal_id": "g",
+        "observation": {
+            "robot": "r",
+            "tick": 0,
+            "status": {"name": "r", "kind": "k", "skills": []},
+            "furniture": [],
+            "objects": [],
+            "task_brief": "",
+            "task_detail": "",
+        },
+    },
     "tick": {"actions": {}, "outcomes": {}, "placed": 0, "total": 3},
 }
 METRICS = {"temporal_steps": 0, "action_steps": 0, "action_steps_per_robot": {}}
@@ -41,23 +50,50 @@ def _complete(kind: str, msg: dict[str, Any]) -> dict[str, Any]:
     return full
 
 
-
 def _event(index: int, tick: int, kind: str = "relocate", applied: bool = True) -> dict[str, Any]:
-    return _put("scenario_event", scenario="s", sha256="ab" * 32, index=index, event=kind, tick=tick, applied=applied,
-                skipped=None if applied else "every target is in place or held", changed={}, text="")  # fmt: skip
+    return _put(
+        "scenario_event",
+        scenario="s",
+        sha256="ab" * 32,
+        index=index,
+        event=kind,
+        tick=tick,
+        applied=applied,
+        skipped=None if applied else "every target is in place or held",
+        changed={},
+        text="",
+    )
 
 
 def _started(scheduler: str = "lockstep") -> dict[str, Any]:
-    return _put("episode_started", run="r", task="pack_objects", scene="kitchen", seed=0, n_objects=3, robots=["alice", "bob"],
-                horizon=50, scheduler=scheduler, step_seconds=STEP if scheduler == "async" else None)  # fmt: skip
+    return _put(
+        "episode_started",
+        run="r",
+        task="pack_objects",
+        scene="kitchen",
+        seed=0,
+        n_objects=3,
+        robots=["alice", "bob"],
+        horizon=50,
+        scheduler=scheduler,
+        step_seconds=STEP if scheduler == "async" else None,
+    )
 
 
 def _done(placed: int, total: int = 3, makespan: float = 0.0, **extra: Any) -> dict[str, Any]:
-    metrics = {"success": placed == total, "placed": placed, "total": total, "partial_success": placed / total, "makespan": makespan}
+    metrics = {
+        "success": placed == total,
+        "placed": placed,
+        "total": total,
+        "partial_success": placed / total,
+        "makespan": makespan,
+    }
     return _put("episode_done", run="r", reason="success" if placed == total else "horizon", metrics=metrics, **extra)
 
 
-def _ticks(placed: list[int], events: dict[int, list[dict[str, Any]]] | None = None, scheduler: str = "lockstep") -> list[dict[str, Any]]:
+def _ticks(
+    placed: list[int], events: dict[int, list[dict[str, Any]]] | None = None, scheduler: str = "lockstep"
+) -> list[dict[str, Any]]:
     """A lockstep (or sequential) trace: tick t closes with placed[t]; `events[T]` fire when tick T
     opens, published (as the world does) before tick T-1's tick event."""
     events = events or {}
@@ -106,11 +142,19 @@ def test_several_events_each_from_its_own_tick_and_count() -> None:
     """Events at 2 (1 in place), 3 and 6 (2 in place); one skipped at 4: values 2, 1 and none (no
     third target after tick 6); the mean is over the two that recovered."""
     placed = [1, 1, 1, 2, 2, 2, 2, 2]
-    events = {2: [_event(0, 2, "relocate")], 3: [_event(1, 3, "close")], 4: [_event(2, 4, "close", applied=False)], 6: [_event(3, 6, "new_target")]}
+    events = {
+        2: [_event(0, 2, "relocate")],
+        3: [_event(1, 3, "close")],
+        4: [_event(2, 4, "close", applied=False)],
+        6: [_event(3, 6, "new_target")],
+    }
     m = from_trace(_ticks(placed, events))
     assert [(e["index"], e["kind"], e["applied"], e["ticks_to_recover"]) for e in m.recovery] == [
-        (0, "relocate", True, 2), (1, "close", True, 1), (2, "close", False, None), (3, "new_target", True, None),
-    ]  # fmt: skip
+        (0, "relocate", True, 2),
+        (1, "close", True, 1),
+        (2, "close", False, None),
+        (3, "new_target", True, None),
+    ]
     assert m.recovery_ticks == 1.5 and m.unrecovered == 1
 
 
@@ -123,25 +167,44 @@ def test_a_static_episode_has_no_recovery() -> None:
 
 
 def _snapshot(goals: list[str], where: dict[str, str], held: str | None = None) -> dict[str, Any]:
-    objects = {n: {"x": 0.0, "y": 0.0, "z": 0.7, "on": on, "inside": False, "held_by": held if n == "mug" else None} for n, on in where.items()}
+    objects = {
+        n: {"x": 0.0, "y": 0.0, "z": 0.7, "on": on, "inside": False, "held_by": held if n == "mug" else None}
+        for n, on in where.items()
+    }
     return _put("snapshot", tick=0, goals=goals, robots={}, objects=objects, open={})
 
 
 def _action(goal: str, robot: str, started: float, ended: float) -> dict[str, Any]:
-    return _put("action_result", goal_id=goal, robot=robot, tick=0, action={"skill": "place", "obj": "x", "location": "tray"},
-                outcome={"succeeded": True, "code": "ok"}, started=started, ended=ended)  # fmt: skip
+    return _put(
+        "action_result",
+        goal_id=goal,
+        robot=robot,
+        tick=0,
+        action={"skill": "place", "obj": "x", "location": "tray"},
+        outcome={"succeeded": True, "code": "ok"},
+        started=started,
+        ended=ended,
+    )
 
 
-def _async_trace(events_at: list[dict[str, Any]], mug_placed_at: float | None, mug_held: bool = False) -> list[dict[str, Any]]:
+def _async_trace(
+    events_at: list[dict[str, Any]], mug_placed_at: float | None, mug_held: bool = False
+) -> list[dict[str, Any]]:
     """phone in the tray from the start; a relocate at tick 3 (24 s); bob puts the mug in the tray
     in an action ending at `mug_placed_at` (None: never). Goals from episode_done (the tray)."""
     start = {"phone": "tray", "mug": "table_3", "book": "table_1"}
     rows = [_started("async"), _snapshot([], start)]
     rows += [_action("g1", "alice", 0.0, 20.0), _snapshot(["g1"], start)]
     rows += events_at
-    rows += [_action("g2", "alice", 26.0, 30.0), _snapshot(["g2"], start | {"mug": "table_4"}, held="alice" if mug_held else None)]
+    rows += [
+        _action("g2", "alice", 26.0, 30.0),
+        _snapshot(["g2"], start | {"mug": "table_4"}, held="alice" if mug_held else None),
+    ]
     if mug_placed_at is not None:
-        rows += [_action("g3", "bob", 40.0, mug_placed_at), _snapshot(["g3"], start | {"mug": "tray"}, held="bob" if mug_held else None)]
+        rows += [
+            _action("g3", "bob", 40.0, mug_placed_at),
+            _snapshot(["g3"], start | {"mug": "tray"}, held="bob" if mug_held else None),
+        ]
     tray = {"phone": "tray", "mug": "tray", "book": "tray"}
     return rows + [_done(2 if mug_placed_at is not None else 1, makespan=400.0, targets=list(tray), goals=tray)]
 
@@ -156,7 +219,9 @@ def test_async_counts_in_steps_from_the_events_simulated_time() -> None:
 
 def test_async_without_progress_and_a_held_object_is_not_in_place() -> None:
     assert _by_index(_async_trace([_event(0, 3)], mug_placed_at=None)) == {0: None}
-    assert _by_index(_async_trace([_event(0, 3)], mug_placed_at=45.0, mug_held=True)) == {0: None}  # on the tray's spot but in a gripper
+    assert _by_index(_async_trace([_event(0, 3)], mug_placed_at=45.0, mug_held=True)) == {
+        0: None
+    }  # on the tray's spot but in a gripper
 
 
 def test_async_counts_each_event_from_the_targets_in_place_when_it_fired() -> None:
@@ -171,10 +236,23 @@ def test_async_counts_each_event_from_the_targets_in_place_when_it_fired() -> No
 # --------------------------------------------------------------------------- summaries and the report
 
 
-def _row(m: Any, *, scenario: str | None, sha: str | None = None, key: str = "pack_objects/kitchen/3/0") -> dict[str, Any]:
-    return {**m.as_dict(), "key": key, "method": "heuristic", "ablation": "none", "fidelity": "paper", "horizon": 50,
-            "schedule": "sequential", "mode": "free", "history_cap": None, "aids": [], "scenario": scenario,
-            "scenario_sha256": sha}  # fmt: skip
+def _row(
+    m: Any, *, scenario: str | None, sha: str | None = None, key: str = "pack_objects/kitchen/3/0"
+) -> dict[str, Any]:
+    return {
+        **m.as_dict(),
+        "key": key,
+        "method": "heuristic",
+        "ablation": "none",
+        "fidelity": "paper",
+        "horizon": 50,
+        "schedule": "sequential",
+        "mode": "free",
+        "history_cap": None,
+        "aids": [],
+        "scenario": scenario,
+        "scenario_sha256": sha,
+    }
 
 
 def test_summarize_averages_recovery_over_the_episodes_that_have_one() -> None:
@@ -186,7 +264,9 @@ def test_summarize_averages_recovery_over_the_episodes_that_have_one() -> None:
     s = summarize(rows)
     assert s["recovery_ticks"] == 2.0  # (3 + 1) / 2: neither the unrecovered nor the static episode adds a value
     assert s["unrecovered"] == pytest.approx(1 / 3, abs=1e-3)  # over the three scenario episodes
-    assert summarize([static.as_dict()])["recovery_ticks"] is None and summarize([static.as_dict()])["unrecovered"] is None
+    assert (
+        summarize([static.as_dict()])["recovery_ticks"] is None and summarize([static.as_dict()])["unrecovered"] is None
+    )
     old = [{k: v for k, v in r.items() if k not in ("recovery", "recovery_ticks", "unrecovered")} for r in rows]
     assert summarize(old)["recovery_ticks"] is None  # rows written before the fields
 
@@ -195,14 +275,21 @@ def test_the_report_shows_recovery_only_where_a_scenario_ran_and_never_mixes_two
     sha_a, sha_b = "a" * 64, "b" * 64
     scen = from_trace(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5)]}))
     static = from_trace(_ticks([1, 2, 3]))
-    rows = [_row(static, scenario=None), _row(scen, scenario="relocate", sha=sha_a), _row(scen, scenario="relocate", sha=sha_b)]
+    rows = [
+        _row(static, scenario=None),
+        _row(scen, scenario="relocate", sha=sha_a),
+        _row(scen, scenario="relocate", sha=sha_b),
+    ]
     # two files of one name are two settings, labelled as `mhrc scenarios` lists them
     assert [setting_of(r)[-1] for r in rows] == [None, "relocate@aaaaaaaaaaaa", "relocate@bbbbbbbbbbbb"]
     md = summary_markdown(rows, resamples=50)
     per_setting = md.split("## Per setting")[1].split("## Failure diagnostics")[0]
     sections = {s.splitlines()[0]: s for s in per_setting.split("### ")[1:]}
-    assert set(sections) == {"heuristic · ablation none · paper", "heuristic · ablation none · paper · scenario relocate@aaaaaaaaaaaa",
-                             "heuristic · ablation none · paper · scenario relocate@bbbbbbbbbbbb"}  # fmt: skip
+    assert set(sections) == {
+        "heuristic · ablation none · paper",
+        "heuristic · ablation none · paper · scenario relocate@aaaaaaaaaaaa",
+        "heuristic · ablation none · paper · scenario relocate@bbbbbbbbbbbb",
+    }
     for title, text in sections.items():
         head = next(line for line in text.splitlines() if line.startswith("| task |"))
         row = next(line for line in text.splitlines() if line.startswith("| pack_objects |"))
@@ -212,8 +299,10 @@ def test_the_report_shows_recovery_only_where_a_scenario_ran_and_never_mixes_two
             assert "recovery" not in head and head.count("|") == row.count("|")
     table = list(csv.DictReader(io.StringIO(summary_csv(rows, resamples=50))))
     assert [(r["scenario"], r["recovery_ticks"], r["unrecovered"]) for r in table] == [
-        ("", "", ""), ("relocate@aaaaaaaaaaaa", "3.0", "0.0"), ("relocate@bbbbbbbbbbbb", "3.0", "0.0"),
-    ]  # fmt: skip
+        ("", "", ""),
+        ("relocate@aaaaaaaaaaaa", "3.0", "0.0"),
+        ("relocate@bbbbbbbbbbbb", "3.0", "0.0"),
+    ]
 
 
 def test_the_html_summary_lists_each_episodes_recovery_only_where_a_scenario_ran() -> None:
@@ -221,7 +310,14 @@ def test_the_html_summary_lists_each_episodes_recovery_only_where_a_scenario_ran
 
     scen = from_trace(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5), _event(1, 5, "close", applied=False)]}))
     static = from_trace(_ticks([1, 2, 3]))
-    page = html_summary([_row(static, scenario=None), _row(scen, scenario="relocate", sha="a" * 64, key="pack_objects/kitchen/3/1")], [None, None], resamples=50)
+    page = html_summary(
+        [_row(static, scenario=None), _row(scen, scenario="relocate", sha="a" * 64, key="pack_objects/kitchen/3/1")],
+        [None, None],
+        resamples=50,
+    )
     episodes = page.split("<h2>Episodes</h2>")[1]
     assert "<th>recovery (steps)</th>" in episodes and "<td>relocate@5: 3, close@5: skipped</td>" in episodes
-    assert "recovery" not in html_summary([_row(static, scenario=None)], [None], resamples=50).split("<h2>Episodes</h2>")[1]
+    assert (
+        "recovery"
+        not in html_summary([_row(static, scenario=None)], [None], resamples=50).split("<h2>Episodes</h2>")[1]
+    )

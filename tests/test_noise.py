@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from test_table3 import play
 
 from mhrc.core.fidelity import CALIBRATION, NOISELESS, recorded_noise
 from mhrc.core.metrics import from_trace
@@ -26,15 +27,15 @@ from mhrc.eval.rows import setting_label, setting_of
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.world.sim import Sim
 
-from test_table3 import play
-
 RATES = {"navigation_slip": 0.03, "navigation_sigma": 0.015, "release_slip": 0.1, "release_sigma": 0.003}
 # seeded episodes whose default run has a navigation off target and releases that slip (2-4 cm)
 NOISY = [("make_sandwich", "kitchen", 6, 7), ("make_sandwich", "bathroom", 5, 1)]
 
 
 def _started(trace: Path) -> dict[str, Any]:
-    return next(r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_started")
+    return next(
+        r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_started"
+    )
 
 
 def _rows(out: Path) -> list[dict[str, Any]]:
@@ -61,7 +62,14 @@ def _run(key: tuple[str, str, int, int], noise: str) -> tuple[list[Any], list[tu
         errors: list[tuple[float, float]] = []
         release = sim.world.release
 
-        def spy(r: Any, obj: Any, spot: Any, yaw: float, location: str | None = None, error: tuple[float, float] = (0.0, 0.0)) -> None:
+        def spy(
+            r: Any,
+            obj: Any,
+            spot: Any,
+            yaw: float,
+            location: str | None = None,
+            error: tuple[float, float] = (0.0, 0.0),
+        ) -> None:
             errors.append(error)
             release(r, obj, spot, yaw, location, error)
 
@@ -80,23 +88,52 @@ def test_noise_off_stops_exactly_and_nothing_slips_where_the_default_has_both() 
         steps, errors = _run(key, "off")
         assert not [s for s in steps if s.outcome.code == OutcomeCode.OFF_TARGET], key
         stops = [s for s in steps if isinstance(s.action, Navigate) and s.outcome.succeeded]
-        assert stops and all(float(s.outcome.details["distance"]) == 0.0 for s in stops), key  # exactly on the stand pose
+        assert stops and all(float(s.outcome.details["distance"]) == 0.0 for s in stops), (
+            key
+        )  # exactly on the stand pose
         for s in (s for s in steps if isinstance(s.action, Move) and s.outcome.succeeded):
-            assert (s.outcome.details["dx"], s.outcome.details["dy"]) == pytest.approx((s.action.dx, s.action.dy), abs=1e-9), key
-        assert errors and all(e == (0.0, 0.0) for e in errors), key  # every release falls from exactly where the tool let go
+            assert (s.outcome.details["dx"], s.outcome.details["dy"]) == pytest.approx(
+                (s.action.dx, s.action.dy), abs=1e-9
+            ), key
+        assert errors and all(e == (0.0, 0.0) for e in errors), (
+            key
+        )  # every release falls from exactly where the tool let go
 
 
-def test_a_real_episode_records_the_rates_in_its_trace_and_row_and_noise_off_is_a_setting_of_its_own(tmp_path: Path) -> None:
+def test_a_real_episode_records_the_rates_in_its_trace_and_row_and_noise_off_is_a_setting_of_its_own(
+    tmp_path: Path,
+) -> None:
     spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), horizon=3)
     default = asyncio.run(evaluate(spec, tmp_path / "on", workers=1))
     # --noise off through the command line: mhrc eval's option, its workers' worlds
-    cmd = [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3", "--horizon", "3",
-           "--workers", "1", "--noise", "off", "--out", str(tmp_path / "off")]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "mhrc",
+        "eval",
+        "--tasks",
+        "pack_objects",
+        "--scenes",
+        "kitchen",
+        "--objects",
+        "3",
+        "--horizon",
+        "3",
+        "--workers",
+        "1",
+        "--noise",
+        "off",
+        "--out",
+        str(tmp_path / "off"),
+    ]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "fidelity paper, noise off" in out.stderr
     noiseless = _rows(tmp_path / "off")
-    for rows, where, noise, rates in ((default, tmp_path / "on", "on", RATES), (noiseless, tmp_path / "off", "off", dict.fromkeys(RATES, 0.0))):
+    for rows, where, noise, rates in (
+        (default, tmp_path / "on", "on", RATES),
+        (noiseless, tmp_path / "off", "off", dict.fromkeys(RATES, 0.0)),
+    ):
         (row,) = rows
         started = _started(where / row["trace"])
         assert started["noise"] == {"setting": noise, **rates}
@@ -105,15 +142,32 @@ def test_a_real_episode_records_the_rates_in_its_trace_and_row_and_noise_off_is_
     assert on != off and setting_label(on) == "heuristic · ablation none · paper · horizon 3"
     assert setting_label(off) == "heuristic · ablation none · paper · noise off · horizon 3"
     summary = summary_markdown(default + noiseless)  # a section each, never averaged together
-    assert "### heuristic · ablation none · paper · horizon 3\n" in summary and "### heuristic · ablation none · paper · noise off · horizon 3\n" in summary
+    assert (
+        "### heuristic · ablation none · paper · horizon 3\n" in summary
+        and "### heuristic · ablation none · paper · noise off · horizon 3\n" in summary
+    )
     assert json.loads((tmp_path / "on" / "eval.json").read_text())["identity"]["noise"] == "on"
 
 
 def test_mhrc_up_and_its_world_process_run_without_noise_when_asked(tmp_path: Path) -> None:
     """`mhrc up --processes --noise off` hands the setting to the `mhrc world` process it starts."""
     trace = tmp_path / "t.jsonl"
-    cmd = [sys.executable, "-m", "mhrc", "up", "--processes", "--insecure", "--noise", "off", "--objects", "3", "--horizon", "2",
-           "--trace", str(trace)]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "mhrc",
+        "up",
+        "--processes",
+        "--insecure",
+        "--noise",
+        "off",
+        "--objects",
+        "3",
+        "--horizon",
+        "2",
+        "--trace",
+        str(trace),
+    ]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert _started(trace)["noise"] == NOISELESS.model_dump()
@@ -121,30 +175,61 @@ def test_mhrc_up_and_its_world_process_run_without_noise_when_asked(tmp_path: Pa
 
 
 def test_a_trace_or_row_from_before_the_field_reads_as_the_calibration() -> None:
-    old = {"kind": "episode_started", "run": "r", "task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3, "robots": ["alice"],
-           "horizon": 5, "fidelity": "paper", "aids": []}  # fmt: skip
+    old = {
+        "kind": "episode_started",
+        "run": "r",
+        "task": "pack_objects",
+        "scene": "kitchen",
+        "seed": 0,
+        "n_objects": 3,
+        "robots": ["alice"],
+        "horizon": 5,
+        "fidelity": "paper",
+        "aids": [],
+    }
     event = decode_event(json.dumps(old))
     assert isinstance(event, EpisodeStarted) and event.noise == CALIBRATION
     assert recorded_noise(old) == CALIBRATION
-    assert recorded_noise({**old, "fidelity": "aids:exact_motion", "aids": ["exact_motion"]}) == NOISELESS  # that aid never drew noise
-    done = {"kind": "episode_done", "run": "r", "reason": "horizon", "metrics": {"success": False, "placed": 0, "total": 3, "partial_success": 0.0}}
+    assert (
+        recorded_noise({**old, "fidelity": "aids:exact_motion", "aids": ["exact_motion"]}) == NOISELESS
+    )  # that aid never drew noise
+    done = {
+        "kind": "episode_done",
+        "run": "r",
+        "reason": "horizon",
+        "metrics": {"success": False, "placed": 0, "total": 3, "partial_success": 0.0},
+    }
     m = from_trace([{"kind": "put", "msg": old}, {"kind": "put", "msg": done}])
     assert (m.noise, m.noise_rates) == ("on", RATES)
     row = {"method": "heuristic", "ablation": "none", "fidelity": "paper", "aids": [], "schedule": "sequential"}
-    assert setting_of(row) == setting_of({**row, "noise": "on"}) and setting_label(setting_of(row)) == "heuristic · ablation none · paper"
+    assert (
+        setting_of(row) == setting_of({**row, "noise": "on"})
+        and setting_label(setting_of(row)) == "heuristic · ablation none · paper"
+    )
     assert setting_of({**row, "fidelity": "aids:exact_motion", "aids": ["exact_motion"]})[3] == "off"
 
 
 @pytest.mark.parametrize("command", ["up", "world", "eval"])
 def test_a_bad_noise_value_fails_before_anything_starts_naming_the_option(tmp_path: Path, command: str) -> None:
-    where = ["--out", str(tmp_path / "x")] if command == "eval" else ["--trace", str(tmp_path / "x" / "t.jsonl"), "--insecure"]
-    out = subprocess.run([sys.executable, "-m", "mhrc", command, "--noise", "loud", *where], capture_output=True, text=True, timeout=60)
-    assert out.returncode == 2 and "Invalid value for '--noise': 'loud' is not one of 'on', 'off'" in out.stderr, out.stderr
+    where = (
+        ["--out", str(tmp_path / "x")]
+        if command == "eval"
+        else ["--trace", str(tmp_path / "x" / "t.jsonl"), "--insecure"]
+    )
+    out = subprocess.run(
+        [sys.executable, "-m", "mhrc", command, "--noise", "loud", *where], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 2 and "Invalid value for '--noise': 'loud' is not one of 'on', 'off'" in out.stderr, (
+        out.stderr
+    )
     assert not (tmp_path / "x").exists()
 
 
 def test_a_bad_noise_value_through_the_api_names_the_option() -> None:
-    with pytest.raises(ConfigError, match=r"^--noise: unknown setting 'loud'; use on \(the calibrated motion noise, the default\) or off \(none\)$"):
+    with pytest.raises(
+        ConfigError,
+        match=r"^--noise: unknown setting 'loud'; use on \(the calibrated motion noise, the default\) or off \(none\)$",
+    ):
         EpisodeConfig.build(noise="loud")
     with pytest.raises(ConfigError, match="^--noise: unknown setting 'loud'"):
         EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), noise="loud").validate()

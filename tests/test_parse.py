@@ -16,7 +16,10 @@ from mhrc.core.protocol import Communicate, Move, Navigate, Open, Pick, Place, W
         ("command: open(drawer_unit).", Open(target="drawer_unit")),
         ("Command: wait()", Wait()),
         ("I could pick(apple) but first: **Command:** wait().", Wait()),
-        ('Command: communicate("Alice, bring me the fork, please.", alice)', Communicate(content="Alice, bring me the fork, please.", to="alice")),
+        (
+            'Command: communicate("Alice, bring me the fork, please.", alice)',
+            Communicate(content="Alice, bring me the fork, please.", to="alice"),
+        ),
         ("Command: navigate(table 1, 2)", Navigate(target="table_1", stand_pose=2)),
     ],
 )
@@ -43,12 +46,20 @@ def test_ambiguous_or_broken_replies_explain_themselves(reply: str, reason: str)
     "reply, action",
     [
         # the order the paper's prompts list (Command, Analysis, Reasoning); the analysis names other calls
-        ("Command: navigate(drawer, stand pose 0)\nAnalysis: ham and soap could be in the drawer or in cabinet 0; "
-         "after that I could open(cabinet_0).\nReasoning: the drawer is the nearest unexplored place.", Navigate(target="drawer", stand_pose=0)),
+        (
+            "Command: navigate(drawer, stand pose 0)\nAnalysis: ham and soap could be in the drawer or in cabinet 0; "
+            "after that I could open(cabinet_0).\nReasoning: the drawer is the nearest unexplored place.",
+            Navigate(target="drawer", stand_pose=0),
+        ),
         # the order of the paper's example response (Analysis, Reasoning, Command), its trailing period kept
-        ("Analysis:\nTask Understanding: the fork is in my gripper.\nReasoning: placing it completes one more item.\nCommand: place(fork, tray).",
-         Place(obj="fork", location="tray")),
-        ("1. Command: pick(apple)\n2. Analysis: it is 0.4 m away, so pick(apple) can work.\n3. Reasoning: Bob needs it.", Pick(obj="apple")),
+        (
+            "Analysis:\nTask Understanding: the fork is in my gripper.\nReasoning: placing it completes one more item.\nCommand: place(fork, tray).",
+            Place(obj="fork", location="tray"),
+        ),
+        (
+            "1. Command: pick(apple)\n2. Analysis: it is 0.4 m away, so pick(apple) can work.\n3. Reasoning: Bob needs it.",
+            Pick(obj="apple"),
+        ),
     ],
 )
 def test_the_papers_command_analysis_reasoning_format_parses_in_either_order(reply: str, action: object) -> None:

@@ -23,12 +23,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
 from mhrc.agents.llm import ScriptedClient
 from mhrc.agents.llm_policy import LLMPolicy, TemplateError, load_hints, load_template
 from mhrc.agents.replay import ReplayClient, ReplayMismatch
-from mhrc.world.briefs import Briefing, Role, brief, detail
-from mhrc.world.tasks import get_task
-
 from mhrc.core.protocol import (
     ActionResult,
     FurnitureView,
@@ -41,6 +39,8 @@ from mhrc.core.protocol import (
     SkillOutcome,
     Thought,
 )
+from mhrc.world.briefs import Briefing, Role, brief, detail
+from mhrc.world.tasks import get_task
 
 GOLDEN = Path(__file__).parent / "golden"
 SKILLS = {
@@ -55,14 +55,30 @@ PACK, CREW = get_task("pack_objects"), Briefing(finisher="Bob", fetcher="Alice",
 
 
 def furniture(drawer_open: bool = False) -> list[FurnitureView]:
-    def f(name: str, kind: str, pos: tuple[float, float, float], poses: list[tuple[float, float, float]], **kw: Any) -> FurnitureView:
-        return FurnitureView(name=name, kind=kind, position=pos, stand_poses=[Pose2D(x=x, y=y, yaw=w) for x, y, w in poses], **kw)
+    def f(
+        name: str, kind: str, pos: tuple[float, float, float], poses: list[tuple[float, float, float]], **kw: Any
+    ) -> FurnitureView:
+        return FurnitureView(
+            name=name, kind=kind, position=pos, stand_poses=[Pose2D(x=x, y=y, yaw=w) for x, y, w in poses], **kw
+        )
 
     up, down = 1.5708, -1.5708
     return [
-        f("table_0", "table", (-3.0, 0.0, 0.7), [(-3.3, -0.85, up), (-2.5, -0.85, up), (-2.5, 0.85, down)], place_pose=(-3.3, -0.22, 0.7)),
+        f(
+            "table_0",
+            "table",
+            (-3.0, 0.0, 0.7),
+            [(-3.3, -0.85, up), (-2.5, -0.85, up), (-2.5, 0.85, down)],
+            place_pose=(-3.3, -0.22, 0.7),
+        ),
         f("drawer_unit", "drawer unit", (-3.0, 3.45, 0.6), [(-3.0, 2.12, up)], openable=True, is_open=drawer_open),
-        f("counter", "counter", (-1.0, -3.5, 0.75), [(-1.3, -2.75, down), (-0.7, -2.75, down)], place_pose=(-1.0, -3.45, 0.75)),
+        f(
+            "counter",
+            "counter",
+            (-1.0, -3.5, 0.75),
+            [(-1.3, -2.75, down), (-0.7, -2.75, down)],
+            place_pose=(-1.0, -3.45, 0.75),
+        ),
         f("table_1", "table", (2.5, 2.5, 0.7), [(2.2, 1.7, up), (2.8, 1.7, up)], place_pose=(2.5, 2.45, 0.7)),
         f("sofa", "sofa", (4.3, -1.6, 0.45), [(3.45, -2.0, 0.0), (3.45, -1.2, 0.0)], place_pose=(4.1, -1.6, 0.45)),
         f("tray", "tray on table_0", (-3.4, 0.19, 0.71), [], place_pose=(-3.4, 0.19, 0.71)),
@@ -120,14 +136,33 @@ def script(robot: str) -> list[tuple[str, SkillOutcome, Observation]]:
             (
                 'Analysis: ...\nCommand: communicate("David, please explore these surfaces and tell me what lies on them: counter, table_1, sofa.", david)',
                 ok("Message sent to david."),
-                observe("alice", 1, new_messages=[message("bob", "alice", "Alice, please bring these to table_0 within my reach: book, soap, mug.", 0)]),
+                observe(
+                    "alice",
+                    1,
+                    new_messages=[
+                        message(
+                            "bob", "alice", "Alice, please bring these to table_0 within my reach: book, soap, mug.", 0
+                        )
+                    ],
+                ),
             ),
-            ("Command: navigate(drawer_unit, 0)", ok("You reached stand pose 0 of drawer_unit. drawer_unit is closed: open it to see what is inside."), observe("alice", 2, base=at_drawer)),
+            (
+                "Command: navigate(drawer_unit, 0)",
+                ok("You reached stand pose 0 of drawer_unit. drawer_unit is closed: open it to see what is inside."),
+                observe("alice", 2, base=at_drawer),
+            ),
             ("I should open the drawer now.", ok("You waited."), observe("alice", 3, base=at_drawer)),
             (
                 "Command: open(drawer_unit)",
                 ok("You opened drawer_unit. Inside: soap."),
-                observe("alice", 4, base=at_drawer, drawer_open=True, objects=[soap], new_messages=[message("david", "alice", "On table_1 I found: mug.", 3)]),
+                observe(
+                    "alice",
+                    4,
+                    base=at_drawer,
+                    drawer_open=True,
+                    objects=[soap],
+                    new_messages=[message("david", "alice", "On table_1 I found: mug.", 3)],
+                ),
             ),
         ]
     if robot == "bob":
@@ -135,26 +170,67 @@ def script(robot: str) -> list[tuple[str, SkillOutcome, Observation]]:
         book = ObjectView(name="book", position=(-2.4, 0.05, 0.715), yaw=1.5708, on="table_0")
         status = "In the tray: phone. Not yet in the tray: book, soap, mug."
         return [
-            ('Command: communicate("Alice, please bring these to table_0 within my reach: book, soap, mug.", alice)', ok("Message sent to alice."), observe("bob", 1)),
+            (
+                'Command: communicate("Alice, please bring these to table_0 within my reach: book, soap, mug.", alice)',
+                ok("Message sent to alice."),
+                observe("bob", 1),
+            ),
             ("Command: pick(phone)", ok("You picked up phone."), observe("bob", 2, holding="phone", objects=[book])),
             (
                 "Command: place(phone, tray)",
                 ok("You placed phone in the tray."),
-                observe("bob", 3, objects=[in_tray, book], task_status=status, new_messages=[message("alice", "bob", "Bob, I will bring book, soap and mug.", 2)]),
+                observe(
+                    "bob",
+                    3,
+                    objects=[in_tray, book],
+                    task_status=status,
+                    new_messages=[message("alice", "bob", "Bob, I will bring book, soap and mug.", 2)],
+                ),
             ),
             (
                 "Command: pick(book)",
-                SkillOutcome.fail(OutcomeCode.TOO_FAR, "The end effector cannot reach book: it is 0.73 m away from the closest pose your arm can get to."),
+                SkillOutcome.fail(
+                    OutcomeCode.TOO_FAR,
+                    "The end effector cannot reach book: it is 0.73 m away from the closest pose your arm can get to.",
+                ),
                 observe("bob", 4, objects=[in_tray, book], task_status=status),
             ),
         ]
     at_table_1, mug = (2.8, 1.7, 1.5708), ObjectView(name="mug", position=(2.6, 2.4, 0.75), on="table_1")
     return [
-        ("Nothing to explore yet. Command: wait()", ok("You waited."), observe("david", 1, new_messages=[message("alice", "david", "David, please "
-            "explore these surfaces and tell me what lies on them: counter, table_1, sofa.", 0)])),
-        ("Command: navigate(table_1, 0)", SkillOutcome.fail(OutcomeCode.NO_PATH, "Navigation failed: there is no collision-free path to stand pose 0 of table_1."), observe("david", 2)),
-        ("Command: navigate(table_1, 1)", ok("You reached stand pose 1 of table_1. On table_1: mug."), observe("david", 3, base=at_table_1, objects=[mug])),
-        ('Command: communicate("On table_1 I found: mug.", alice)', ok("Message sent to alice."), observe("david", 4, base=at_table_1, objects=[mug])),
+        (
+            "Nothing to explore yet. Command: wait()",
+            ok("You waited."),
+            observe(
+                "david",
+                1,
+                new_messages=[
+                    message(
+                        "alice",
+                        "david",
+                        "David, please explore these surfaces and tell me what lies on them: counter, table_1, sofa.",
+                        0,
+                    )
+                ],
+            ),
+        ),
+        (
+            "Command: navigate(table_1, 0)",
+            SkillOutcome.fail(
+                OutcomeCode.NO_PATH, "Navigation failed: there is no collision-free path to stand pose 0 of table_1."
+            ),
+            observe("david", 2),
+        ),
+        (
+            "Command: navigate(table_1, 1)",
+            ok("You reached stand pose 1 of table_1. On table_1: mug."),
+            observe("david", 3, base=at_table_1, objects=[mug]),
+        ),
+        (
+            'Command: communicate("On table_1 I found: mug.", alice)',
+            ok("Message sent to alice."),
+            observe("david", 4, base=at_table_1, objects=[mug]),
+        ),
     ]
 
 
@@ -166,7 +242,11 @@ async def play(policy: LLMPolicy, robot: str) -> list[str]:
     for reply, outcome, nxt in steps:
         d = await policy.decide(obs)
         prompts.append(d.prompt or "")
-        policy.record(ActionResult(goal_id=f"g{obs.tick}", robot=robot, tick=obs.tick, action=d.action, outcome=outcome, observation=nxt))
+        policy.record(
+            ActionResult(
+                goal_id=f"g{obs.tick}", robot=robot, tick=obs.tick, action=d.action, outcome=outcome, observation=nxt
+            )
+        )
         obs = nxt
     d = await policy.decide(obs)
     return prompts + [d.prompt or ""]
@@ -178,20 +258,50 @@ def check_golden(name: str, text: str) -> None:
         path.parent.mkdir(exist_ok=True)
         path.write_text(text, encoding="utf-8")
     assert path.exists(), f"{path} is missing: run with MHRC_UPDATE_GOLDEN=1 and review it"
-    assert text == path.read_text(encoding="utf-8"), f"{name} changed: if deliberate, regenerate with MHRC_UPDATE_GOLDEN=1"
+    assert text == path.read_text(encoding="utf-8"), (
+        f"{name} changed: if deliberate, regenerate with MHRC_UPDATE_GOLDEN=1"
+    )
 
 
 ROBOTS = ("alice", "bob", "david")
 # Text of the prompt_hints aid that the observation adds (the rest is <robot>_hints.txt)
-DYNAMIC_HINTS = ("m from your arm base", "m from you", "reach about", "Arm base:", "not a navigation target", "(drawer unit)", "(table)", "(tray on table_0)")
+DYNAMIC_HINTS = (
+    "m from your arm base",
+    "m from you",
+    "reach about",
+    "Arm base:",
+    "not a navigation target",
+    "(drawer unit)",
+    "(table)",
+    "(tray on table_0)",
+)
 # Sentences of the old prompts that the issue moves into the aid: none may be in the default
 AID_PHRASES = (
-    "Current step", "at stand pose", "not at any stand pose", "open it to see inside", "told you", "at most 1 m", "give your command",
-    "take over their part", "## Your teammates",
-    "0.20 m ahead", "0.30 to 0.58", "compare it with your reach", "with your reach", "Do not repeat work",
-    "Do not visit a surface twice", "Until Alice asks", "please explore these surfaces", "I placed soap on table_0 for you",
-    "On table_1 I found:", "please bring these to table_0 within my reach", "hand the open surfaces",
-    "not a navigation target", "reach about", "from your arm base", "## Hints",
+    "Current step",
+    "at stand pose",
+    "not at any stand pose",
+    "open it to see inside",
+    "told you",
+    "at most 1 m",
+    "give your command",
+    "take over their part",
+    "## Your teammates",
+    "0.20 m ahead",
+    "0.30 to 0.58",
+    "compare it with your reach",
+    "with your reach",
+    "Do not repeat work",
+    "Do not visit a surface twice",
+    "Until Alice asks",
+    "please explore these surfaces",
+    "I placed soap on table_0 for you",
+    "On table_1 I found:",
+    "please bring these to table_0 within my reach",
+    "hand the open surfaces",
+    "not a navigation target",
+    "reach about",
+    "from your arm base",
+    "## Hints",
 )
 
 
@@ -202,7 +312,9 @@ async def test_prompts_at_step_1_and_step_5(robot: str) -> None:
     check_golden(f"{robot}_step1.txt", first)
     check_golden(f"{robot}_step5.txt", later)
 
-    assert first.startswith(f"You are {robot.capitalize()}, a smart robot")  # the role first (mhrc.testing reads the robot from it) and "Think step by step." in first
+    assert first.startswith(
+        f"You are {robot.capitalize()}, a smart robot"
+    )  # the role first (mhrc.testing reads the robot from it) and "Think step by step." in first
     if robot == "bob":  # the appendix's first feedback: before acting, talk to Alice
         assert first.count("- (none yet)") == 2 and "- (latest) step 0: This is the first step of the task" in first
     else:
@@ -225,9 +337,20 @@ def _sections(text: str, heads: list[str]) -> list[str]:
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None:
     system = (GOLDEN / f"{robot}_step1.txt").read_text(encoding="utf-8").split("# Scene graph")[0]
-    heads = ["You are", "## Background", "## Profile", "## Constraints", "## Skills", "## Response format", "Think step by step."]
+    heads = [
+        "You are",
+        "## Background",
+        "## Profile",
+        "## Constraints",
+        "## Skills",
+        "## Response format",
+        "Think step by step.",
+    ]
     role, background, profile, constraints, skills, fmt, _ = _sections(system, heads)
-    low = {k: v.lower() for k, v in {"role": role, "background": background, "profile": profile, "constraints": constraints}.items()}
+    low = {
+        k: v.lower()
+        for k, v in {"role": role, "background": background, "profile": profile, "constraints": constraints}.items()
+    }
     # role: name and capabilities; the arms' ideal picking distance
     assert f"you are {robot}" in low["role"]
     assert ("navigate" in low["role"]) is (robot != "bob") and ("manipulate" in low["role"]) is (robot != "david")
@@ -237,15 +360,23 @@ def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None
     assert "cooperating" in background and "communicating" in background
     assert "wait()" not in background and "pick(object)" not in background
     if robot == "alice":
-        assert "Bob is a robot arm" in background and "manipulate" in background and "David is a mobile base" in background
+        assert (
+            "Bob is a robot arm" in background and "manipulate" in background and "David is a mobile base" in background
+        )
     else:
-        assert "Alice" in background and "navigate" in background and "Bob" not in background and "David" not in background
+        assert (
+            "Alice" in background and "navigate" in background and "Bob" not in background and "David" not in background
+        )
         assert ("manipulate" in background) is (robot == "david")
     if robot == "david":
         assert "You do what Alice asks of you" in background
     # profile: an unexplored house whose scene graph shows furniture, not what lies on or in it; the robot's job
     if robot == "bob":
-        assert "You stand on table_0" in profile and "ask Alice for help" in profile and "answer her as soon as you can" in profile
+        assert (
+            "You stand on table_0" in profile
+            and "ask Alice for help" in profile
+            and "answer her as soon as you can" in profile
+        )
     else:
         assert "unexplored" in profile and "not which objects lie on them or inside them" in profile
     if robot == "alice":
@@ -254,13 +385,23 @@ def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None
         assert "needs no opening" in profile
     # constraints as the appendix gives them
     expected = {
-        "alice": ["Your first step in the episode: communicate with Bob and ask him whether he needs your help finding objects",
-                  "placed an object on the table, tell Bob right away", "you may give David the objects that still have to be found",
-                  "cannot go on without another robot, execute wait()",
-                  "When a pick fails, first navigate to the furniture again at another stand pose id, and only after that adjust your position with move"],
-        "bob": ["Your first step in the episode: communicate with Alice and tell her what you need, judging from the whole task",
-                "Answer a request as soon as it arrives", "Do not send the same content again and again", "cannot go on without another robot, execute wait()"],
-        "david": ["Follow Alice's instructions and explore the whole house together with her", "Tell Alice what you discover without delay"],
+        "alice": [
+            "Your first step in the episode: communicate with Bob and ask him whether he needs your help finding objects",
+            "placed an object on the table, tell Bob right away",
+            "you may give David the objects that still have to be found",
+            "cannot go on without another robot, execute wait()",
+            "When a pick fails, first navigate to the furniture again at another stand pose id, and only after that adjust your position with move",
+        ],
+        "bob": [
+            "Your first step in the episode: communicate with Alice and tell her what you need, judging from the whole task",
+            "Answer a request as soon as it arrives",
+            "Do not send the same content again and again",
+            "cannot go on without another robot, execute wait()",
+        ],
+        "david": [
+            "Follow Alice's instructions and explore the whole house together with her",
+            "Tell Alice what you discover without delay",
+        ],
     }[robot]
     for item in expected:
         assert item in constraints, item
@@ -270,7 +411,11 @@ def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None
 
     for skill in SKILLS[robot]:
         assert f"- {SIGNATURES[skill]}: " in skills
-    assert [line.split(":")[0] for line in fmt.splitlines() if re.match(r"\d\. ", line)] == ["1. Command", "2. Analysis", "3. Reasoning"]
+    assert [line.split(":")[0] for line in fmt.splitlines() if re.match(r"\d\. ", line)] == [
+        "1. Command",
+        "2. Analysis",
+        "3. Reasoning",
+    ]
     assert "exactly one action per reply" in fmt and "only things that are in your scene graph" in fmt
 
 
@@ -286,11 +431,17 @@ def test_the_user_prompt_carries_the_appendix_in_its_order(robot: str) -> None:
         assert "table_0" not in graph and "drawer_unit" not in graph and "stand poses" not in graph
         assert "- tray: position (-3.40, 0.19, 0.71), yaw 0 deg; place pose (-3.40, 0.19, 0.71)" in graph
     else:
-        assert "- drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; " + ("open;" if robot == "alice" else "closed;") in graph
+        assert (
+            "- drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; " + ("open;" if robot == "alice" else "closed;")
+            in graph
+        )
         assert "stand poses 0 = (-3.30, -0.85, yaw 90 deg)" in graph and "place pose (-3.30, -0.22, 0.70)" in graph
     # known objects in the appendix's fields: position, nothing about where they lie or who told
-    known = {"alice": "- soap: position (-3.10, 3.30, 0.45)\n", "bob": "- book: position (-2.40, 0.05, 0.71), yaw 90 deg\n",
-             "david": "- mug: position (2.60, 2.40, 0.75)\n"}[robot]
+    known = {
+        "alice": "- soap: position (-3.10, 3.30, 0.45)\n",
+        "bob": "- book: position (-2.40, 0.05, 0.71), yaw 90 deg\n",
+        "david": "- mug: position (2.60, 2.40, 0.75)\n",
+    }[robot]
     assert known in graph
     # status: position, orientation (where the base moves), gripper (where there is one); not the step, not the stand pose
     if robot == "bob":
@@ -301,13 +452,20 @@ def test_the_user_prompt_carries_the_appendix_in_its_order(robot: str) -> None:
     assert "step" not in status and "stand pose" not in status
     # each robot's own brief and detail (the appendix's Task section of its role)
     assert task.startswith("# Task\nBrief: ") and "\nDetails: " in task
-    first_line = {"alice": "Brief: Explore the whole house and hand Bob the objects the task needs.",
-                  "bob": "Brief: Put the listed objects into the tray.", "david": "Brief: Search the whole house for the objects the task needs."}
+    first_line = {
+        "alice": "Brief: Explore the whole house and hand Bob the objects the task needs.",
+        "bob": "Brief: Put the listed objects into the tray.",
+        "david": "Brief: Search the whole house for the objects the task needs.",
+    }
     assert first_line[robot] in task
     assert "fetch" not in task  # David cannot fetch; nobody is told to
     if robot == "bob":
         assert task.count("phone, book, soap, mug") == 1  # the list once
-        assert "ask Alice to move it" in task and "ask Alice to search for them and bring them" in task and "Nothing that is not on the list goes into the tray" in task
+        assert (
+            "ask Alice to move it" in task
+            and "ask Alice to search for them and bring them" in task
+            and "Nothing that is not on the list goes into the tray" in task
+        )
         assert rest[0] == "Latest task progress:\nIn the tray: phone. Not yet in the tray: book, soap, mug.\n\n"
     for section in rest[-3:]:
         assert "(latest) step" in section
@@ -334,8 +492,12 @@ def _without_hints(text: str, hints: str) -> str:
     text = re.sub(r"\nArm base: \([^)]*\); reach about \d+\.\d\d m from it\.", "", text)
     text = re.sub(r"You are \w+, a [\w ]+\. Current step: \d+\.\n", "", text)
     text = re.sub(r"; (at stand pose \d+ of \w+|not at any stand pose)\.", ".", text)
-    text = text.replace("; no stand pose (not a navigation target)", "").replace("closed (open it to see inside)", "closed")
-    text = re.sub(r"^(- \w+): .*?, at (\([^)]*\))(, yaw -?\d+ deg)?$", r"\1: position \2\3", text, flags=re.M)  # where it lies, who told
+    text = text.replace("; no stand pose (not a navigation target)", "").replace(
+        "closed (open it to see inside)", "closed"
+    )
+    text = re.sub(
+        r"^(- \w+): .*?, at (\([^)]*\))(, yaw -?\d+ deg)?$", r"\1: position \2\3", text, flags=re.M
+    )  # where it lies, who told
     return re.sub(r"^(- \w+) \([^)]*\):", r"\1:", text, flags=re.M)
 
 
@@ -350,17 +512,27 @@ async def test_prompt_hints_adds_exactly_its_text(robot: str) -> None:
         assert constraints_end < a.index(hints) < skills_at
     # and it does add each kind of text it stands for
     last = aided[-1]
-    assert ("(tray on table_0)" if robot == "bob" else "(drawer unit)") in last and ("m from your arm base" in last) is (robot != "david") and ("reach about" in last) is (robot != "david")
+    assert (
+        ("(tray on table_0)" if robot == "bob" else "(drawer unit)") in last
+        and ("m from your arm base" in last) is (robot != "david")
+        and ("reach about" in last) is (robot != "david")
+    )
     assert ("not a navigation target" in last) is (robot != "bob")
     assert ("m from you\n" in last) is (robot == "david")
 
 
 def test_the_pick_window_and_message_templates_live_in_the_aid() -> None:
     alice, bob, david = (load_hints(r) for r in ROBOTS)
-    assert "0.20 m ahead" in alice and "0.30 to 0.58 m" in alice and 'to Bob: "Bob, I placed soap on table_0 for you."' in alice
+    assert (
+        "0.20 m ahead" in alice
+        and "0.30 to 0.58 m" in alice
+        and 'to Bob: "Bob, I placed soap on table_0 for you."' in alice
+    )
     assert "Right at the start, hand the open surfaces" in alice and "Do not repeat work" in alice
     assert "compare it with your reach" in bob and "please bring these to table_0 within my reach" in bob
-    assert "Until Alice asks" in david and "Do not visit a surface twice" in david and "On sofa I found nothing." in david
+    assert (
+        "Until Alice asks" in david and "Do not visit a surface twice" in david and "On sofa I found nothing." in david
+    )
 
 
 def test_skill_signatures_in_the_prompts_are_what_the_parser_accepts() -> None:
@@ -372,15 +544,25 @@ def test_skill_signatures_in_the_prompts_are_what_the_parser_accepts() -> None:
             assert f"- {SIGNATURES[skill]}:" in text
             call = SIGNATURES[skill].replace("stand_pose_id", "0").replace("dx", "0.1").replace("dy", "0.2")
             # the paper's own order (Command first) and its example's (Command last) both parse
-            assert parse_command(f"Command: {call}\nAnalysis: I could also navigate(sofa, 0).\nReasoning: it matters.").skill == skill
+            assert (
+                parse_command(
+                    f"Command: {call}\nAnalysis: I could also navigate(sofa, 0).\nReasoning: it matters."
+                ).skill
+                == skill
+            )
             assert parse_command(f"Analysis: ...\nReasoning: ...\nCommand: {call}").skill == skill
 
 
 def test_alice_at_step_5_sees_only_what_she_was_told_or_saw() -> None:
     text = (GOLDEN / "alice_step5.txt").read_text(encoding="utf-8")
-    assert "soap: position (-3.10, 3.30, 0.45)" in text and "phone" not in text.split("# Scene graph")[1].split("# Your status")[0]
+    assert (
+        "soap: position (-3.10, 3.30, 0.45)" in text
+        and "phone" not in text.split("# Scene graph")[1].split("# Your status")[0]
+    )
     # the unparseable reply at step 2 came back as feedback saying only that (Table III has no format advice)
-    assert "- step 2: Your command could not be read, so you waited.\n" in text and "Command: skill(arguments)" not in text
+    assert (
+        "- step 2: Your command could not be read, so you waited.\n" in text and "Command: skill(arguments)" not in text
+    )
     assert "drawer_unit: position (-3.00, 3.45, 0.60), yaw 0 deg; open" in text
     assert "(latest) step 3: from David: On table_1 I found: mug." in text
 
@@ -388,7 +570,9 @@ def test_alice_at_step_5_sees_only_what_she_was_told_or_saw() -> None:
 def test_bob_sees_progress_and_no_stand_poses() -> None:
     text = (GOLDEN / "bob_step5.txt").read_text(encoding="utf-8")
     assert "book: position (-2.40, 0.05, 0.71), yaw 90 deg\n" in text
-    assert "(within your reach)" not in text and "(out of your reach)" not in text  # reach labels are an aid, not the paper's prompt
+    assert (
+        "(within your reach)" not in text and "(out of your reach)" not in text
+    )  # reach labels are an aid, not the paper's prompt
     assert "phone: position (-3.40, 0.19, 0.72)" in text and "Latest task progress:\nIn the tray: phone." in text
     assert "stand poses" not in text and "Gripper: empty." in text
     assert "The list: phone, book, soap, mug." in text
@@ -407,7 +591,9 @@ def test_custom_templates_are_checked_when_loaded(tmp_path: Path) -> None:
         load_template("bob", "system", tmp_path)
     with pytest.raises(TemplateError, match=r"--prompts: prompt template .*alice_user.txt is missing"):
         load_template("alice", "user", tmp_path)
-    (tmp_path / "bob_user.txt").write_text("$scene_graph\n$status\n$task\n$feedback\n$messages\nCommand?", encoding="utf-8")
+    (tmp_path / "bob_user.txt").write_text(
+        "$scene_graph\n$status\n$task\n$feedback\n$messages\nCommand?", encoding="utf-8"
+    )
     with pytest.raises(TemplateError, match=r"bob_user.txt: required placeholder\(s\) \$actions, \$progress missing"):
         load_template("bob", "user", tmp_path)
     (tmp_path / "bob_system.txt").write_text("You are $robot.", encoding="utf-8")
@@ -419,17 +605,27 @@ def test_custom_templates_are_checked_when_loaded(tmp_path: Path) -> None:
     policy = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path)
     system, user = (m["content"] for m in policy.render(observe("bob")))
     assert system.startswith("You are Bob. Skills:\n- pick(object):")
-    assert user.startswith("Furniture:\n- tray: ") and user.endswith("Your actions so far (oldest first):\n- (none yet)\nCommand?\n")
+    assert user.startswith("Furniture:\n- tray: ") and user.endswith(
+        "Your actions so far (oldest first):\n- (none yet)\nCommand?\n"
+    )
     # a template without $hints gets the aid's text at its end, and without $teammates the aid's
     # table of the teammates' skills after it; a hints file of your own replaces the built-in one
     team = "\n\n## Your teammates in this episode and their skills\n- Alice: navigate(furniture, stand_pose_id), move(dx, dy), open(furniture)"
-    aided = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path, prompt_hints=True).render(observe("bob"))[0]["content"]
-    assert load_hints("bob") + team in aided and aided.endswith("- David: navigate(furniture, stand_pose_id), communicate(content, robot), wait()\n")
+    aided = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path, prompt_hints=True).render(observe("bob"))[0][
+        "content"
+    ]
+    assert load_hints("bob") + team in aided and aided.endswith(
+        "- David: navigate(furniture, stand_pose_id), communicate(content, robot), wait()\n"
+    )
     (tmp_path / "bob_hints.txt").write_text("## Hints\n- Be quick.\n", encoding="utf-8")
-    aided = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path, prompt_hints=True).render(observe("bob"))[0]["content"]
-    assert ("Skills:\n- pick(object): pick up that object\n- place(object, location): put the object in your gripper at that location\n"
-            "- communicate(content, robot): send content to that robot; when objects are missing and you need help, sum up how things stand in it\n"
-            "- wait(): do nothing this step\n\n## Hints\n- Be quick." + team) in aided and load_hints("bob") not in aided
+    aided = LLMPolicy("bob", ScriptedClient([]), prompts_dir=tmp_path, prompt_hints=True).render(observe("bob"))[0][
+        "content"
+    ]
+    assert (
+        "Skills:\n- pick(object): pick up that object\n- place(object, location): put the object in your gripper at that location\n"
+        "- communicate(content, robot): send content to that robot; when objects are missing and you need help, sum up how things stand in it\n"
+        "- wait(): do nothing this step\n\n## Hints\n- Be quick." + team
+    ) in aided and load_hints("bob") not in aided
 
 
 def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
@@ -438,7 +634,17 @@ def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 
 def _thought_line(robot: str, tick: int, prompt: str, reply: str) -> str:
     t = Thought(robot=robot, tick=tick, policy="llm:m", prompt=prompt, reply=reply, action="wait()")
-    return json.dumps({"t": 0.1 * tick, "key": f"mhrc/run-1/agent/{robot}/thought", "kind": "put", "msg": t.model_dump(mode="json")}) + "\n"
+    return (
+        json.dumps(
+            {
+                "t": 0.1 * tick,
+                "key": f"mhrc/run-1/agent/{robot}/thought",
+                "kind": "put",
+                "msg": t.model_dump(mode="json"),
+            }
+        )
+        + "\n"
+    )
 
 
 def test_up_refuses_prompts_missing_a_placeholder_before_anything_starts(tmp_path: Path) -> None:
@@ -449,7 +655,9 @@ def test_up_refuses_prompts_missing_a_placeholder_before_anything_starts(tmp_pat
     trace.write_text(_thought_line("alice", 0, "x", "Command: wait()"), encoding="utf-8")
     for robot in ROBOTS:
         (prompts / f"{robot}_system.txt").write_text(SYSTEM_OK, encoding="utf-8")
-        (prompts / f"{robot}_user.txt").write_text(USER_OK.replace("$progress\n", "") if robot != "bob" else USER_OK, encoding="utf-8")
+        (prompts / f"{robot}_user.txt").write_text(
+            USER_OK.replace("$progress\n", "") if robot != "bob" else USER_OK, encoding="utf-8"
+        )
     (prompts / "alice_user.txt").write_text("$scene_graph\n$status\n$task\n$feedback\n$actions\n", encoding="utf-8")
     out = _mhrc("up", "--insecure", "-q", "--llm", f"alice=replay:{trace}", "--prompts", str(prompts), cwd=work)
     errors = [line for line in out.stderr.splitlines() if line.startswith("Error:")]
@@ -460,7 +668,12 @@ def test_up_refuses_prompts_missing_a_placeholder_before_anything_starts(tmp_pat
     (prompts / "david_system.txt").unlink()
     out = _mhrc("up", "--insecure", "-q", "--llm", f"david=replay:{trace}", "--prompts", str(prompts), cwd=work)
     errors = [line for line in out.stderr.splitlines() if line.startswith("Error:")]
-    assert out.returncode == 2 and len(errors) == 1 and "--prompts" in errors[0] and "david_system.txt is missing" in errors[0], out.stderr[-3000:]
+    assert (
+        out.returncode == 2
+        and len(errors) == 1
+        and "--prompts" in errors[0]
+        and "david_system.txt is missing" in errors[0]
+    ), out.stderr[-3000:]
     assert list(work.iterdir()) == []
 
 
@@ -473,7 +686,10 @@ def test_a_trace_recorded_with_the_old_prompts_is_refused_with_the_reason(tmp_pa
     trace = tmp_path / "trace.jsonl"
     trace.write_text(_thought_line("alice", 0, OLD.read_text(encoding="utf-8"), "Command: wait()"), encoding="utf-8")
     client = ReplayClient(trace, "alice")
-    with pytest.raises(ReplayMismatch, match=r"recorded with other prompts than the ones alice is given now: .*lacks 'You are Alice, a smart robot .*alice_system.txt"):
+    with pytest.raises(
+        ReplayMismatch,
+        match=r"recorded with other prompts than the ones alice is given now: .*lacks 'You are Alice, a smart robot .*alice_system.txt",
+    ):
         LLMPolicy("alice", client)
 
 
@@ -490,7 +706,9 @@ async def test_a_trace_recorded_with_the_current_prompts_replays(tmp_path: Path,
 def test_up_refuses_to_replay_a_trace_recorded_with_the_old_prompts(tmp_path: Path) -> None:
     trace = tmp_path / "old.jsonl"
     trace.write_text(_thought_line("alice", 0, OLD.read_text(encoding="utf-8"), "Command: wait()"), encoding="utf-8")
-    out = _mhrc("up", "--insecure", "-q", "--llm", f"alice=replay:{trace}", "--trace", str(tmp_path / "new.jsonl"), cwd=tmp_path)
+    out = _mhrc(
+        "up", "--insecure", "-q", "--llm", f"alice=replay:{trace}", "--trace", str(tmp_path / "new.jsonl"), cwd=tmp_path
+    )
     lines = [line for line in out.stderr.splitlines() if line.startswith("mhrc up:")]
     assert out.returncode == 2 and "Traceback" not in out.stderr and len(lines) == 1, out.stderr[-3000:]
     assert "recorded with other prompts" in lines[0] and "record the episode again" in lines[0], lines[0]

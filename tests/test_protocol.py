@@ -18,7 +18,9 @@ from mhrc.core.protocol import (
 
 
 def test_actions_are_a_discriminated_union() -> None:
-    assert parse_action({"skill": "navigate", "target": "table_1", "stand_pose": 1}) == Navigate(target="table_1", stand_pose=1)
+    assert parse_action({"skill": "navigate", "target": "table_1", "stand_pose": 1}) == Navigate(
+        target="table_1", stand_pose=1
+    )
     assert parse_action({"skill": "pick", "obj": "apple"}) == Pick(obj="apple")
     with pytest.raises(ProtocolError, match="fly"):
         parse_action({"skill": "fly"})
@@ -71,7 +73,9 @@ def test_keys_reject_ids_that_are_not_one_chunk() -> None:
 def _req(**fields: object) -> bytes:
     import json
 
-    return json.dumps({"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "wait"}} | fields).encode()
+    return json.dumps(
+        {"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "wait"}} | fields
+    ).encode()
 
 
 @pytest.mark.parametrize(
@@ -86,10 +90,22 @@ def _req(**fields: object) -> bytes:
         (_req(action={"skill": "communicate", "content": "hi", "to": "t" * 65}), "action.communicate.to"),
         (_req(tick=2**31), "tick"),
         (_req(goal_id="g" * 65), "goal_id"),
-        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": NaN, "dy": 0}}', "action.move.dx"),
-        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 0, "dy": -Infinity}}', "action.move.dy"),
-        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 1e999, "dy": 0}}', "action.move.dx"),
-        (b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 100.5, "dy": 0}}', "action.move.dx"),
+        (
+            b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": NaN, "dy": 0}}',
+            "action.move.dx",
+        ),
+        (
+            b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 0, "dy": -Infinity}}',
+            "action.move.dy",
+        ),
+        (
+            b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 1e999, "dy": 0}}',
+            "action.move.dx",
+        ),
+        (
+            b'{"v": 2, "robot": "alice", "agent_id": "a", "tick": 0, "action": {"skill": "move", "dx": 100.5, "dy": 0}}',
+            "action.move.dx",
+        ),
     ],
 )
 def test_fields_past_their_limits_are_malformed(payload: bytes, field: str) -> None:
@@ -100,9 +116,18 @@ def test_fields_past_their_limits_are_malformed(payload: bytes, field: str) -> N
 def test_the_longest_names_and_moves_within_the_limits_are_valid() -> None:
     from mhrc.core.protocol import Move, Navigate
 
-    req = decode(_req(agent_id="a" * 128, goal_id="g" * 64, action={"skill": "navigate", "target": "t" * 64, "stand_pose": 2**31 - 1}), ActionRequest)
+    req = decode(
+        _req(
+            agent_id="a" * 128,
+            goal_id="g" * 64,
+            action={"skill": "navigate", "target": "t" * 64, "stand_pose": 2**31 - 1},
+        ),
+        ActionRequest,
+    )
     assert req.action == Navigate(target="t" * 64, stand_pose=2**31 - 1)
-    assert decode(_req(action={"skill": "move", "dx": -100, "dy": 100.0}), ActionRequest).action == Move(dx=-100, dy=100)
+    assert decode(_req(action={"skill": "move", "dx": -100, "dy": 100.0}), ActionRequest).action == Move(
+        dx=-100, dy=100
+    )
 
 
 def test_size_and_nesting_are_bounded_before_python_recurses() -> None:

@@ -42,19 +42,34 @@ def ray_cluster() -> Iterator[Cluster]:
     port, client = free_port("127.0.0.1"), free_port("127.0.0.1")
     root = Path(tempfile.mkdtemp(prefix="mhrc-ray-", dir="/tmp"))  # short: Ray's socket paths must fit 107 bytes
     (root / "work").mkdir()
-    env = dict(os.environ, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(16))  # Ray's token authentication, on
+    env = dict(
+        os.environ, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(16)
+    )  # Ray's token authentication, on
     # TMPDIR: where its workers' episodes keep their traces; a Ray Client's server process may take more than Ray's 30 s
     # to start on 2 cores shared with other work
     cluster_env = dict(env, TMPDIR=str(root / "work"), RAY_CLIENT_SERVER_CHECK_CHANNEL_TIMEOUT_S="180")
-    start = [sys.executable, "-m", "ray.scripts.scripts", "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}",
-             "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={root / 'ray'}",
-             f"--ray-client-server-port={client}"]  # fmt: skip
+    start = [
+        sys.executable,
+        "-m",
+        "ray.scripts.scripts",
+        "start",
+        "--head",
+        "--node-ip-address=127.0.0.1",
+        f"--port={port}",
+        "--num-cpus=2",
+        "--include-dashboard=false",
+        "--disable-usage-stats",
+        f"--temp-dir={root / 'ray'}",
+        f"--ray-client-server-port={client}",
+    ]
     try:
         started = subprocess.run(start, env=cluster_env, capture_output=True, text=True, timeout=180)
         assert started.returncode == 0, started.stdout[-2000:] + started.stderr[-2000:]
         yield Cluster(address=f"127.0.0.1:{port}", client=f"ray://127.0.0.1:{client}", env=env, tmp=root / "work")
     finally:
-        subprocess.run([sys.executable, "-m", "ray.scripts.scripts", "stop", "--force"], env=env, capture_output=True, timeout=120)
+        subprocess.run(
+            [sys.executable, "-m", "ray.scripts.scripts", "stop", "--force"], env=env, capture_output=True, timeout=120
+        )
         shutil.rmtree(root, ignore_errors=True)
 
 
@@ -64,7 +79,9 @@ def _rows(out: Path) -> list[dict[str, Any]]:
 
 
 def _scores(rows: list[dict[str, Any]]) -> dict[str, tuple[Any, ...]]:
-    return {r["key"]: (r["success"], r["partial_success"], r["temporal_steps"], r["action_steps"], r["valid"]) for r in rows}
+    return {
+        r["key"]: (r["success"], r["partial_success"], r["temporal_steps"], r["action_steps"], r["valid"]) for r in rows
+    }
 
 
 # --------------------------------------------------------------------------- on a cluster
@@ -77,11 +94,23 @@ GRID = ["--tasks", "pack_objects", "--scenes", "kitchen,bedroom,bathroom"]
 
 @pytest.mark.slow
 def test_a_grid_on_ray_gives_the_rows_of_a_local_run(ray_cluster: Cluster, tmp_path: Path) -> None:
-    on_ray = subprocess.run([*MHRC, "eval", "--ray", ray_cluster.address, *GRID, "--out", "ray"], cwd=tmp_path, env=ray_cluster.env,
-                            capture_output=True, text=True, timeout=900)  # fmt: skip
+    on_ray = subprocess.run(
+        [*MHRC, "eval", "--ray", ray_cluster.address, *GRID, "--out", "ray"],
+        cwd=tmp_path,
+        env=ray_cluster.env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert on_ray.returncode == 0, on_ray.stderr[-3000:]
     assert f"on the Ray cluster at {ray_cluster.address}" in on_ray.stderr
-    local = subprocess.run([*MHRC, "eval", "--workers", "2", *GRID, "--out", "local"], cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    local = subprocess.run(
+        [*MHRC, "eval", "--workers", "2", *GRID, "--out", "local"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert local.returncode == 0, local.stderr[-3000:]
     ray_rows, local_rows = _rows(tmp_path / "ray"), _rows(tmp_path / "local")
     assert len(ray_rows) == 12 and len({r["key"] for r in ray_rows}) == 12
@@ -106,11 +135,19 @@ def _holder_of(trace_dir: Path) -> tuple[int, Path] | None:
 
 @pytest.mark.slow
 def test_a_ray_worker_killed_mid_episode_costs_no_row(ray_cluster: Cluster, tmp_path: Path) -> None:
-    proc = subprocess.Popen([*MHRC, "eval", "--ray", ray_cluster.address, *SMALL, "--objects", "6", "--out", "ev"], cwd=tmp_path,
-                            env=ray_cluster.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [*MHRC, "eval", "--ray", ray_cluster.address, *SMALL, "--objects", "6", "--out", "ev"],
+        cwd=tmp_path,
+        env=ray_cluster.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         deadline = time.monotonic() + 300
-        while (held := _holder_of(ray_cluster.tmp)) is None or held[1].stat().st_size == 0:  # an episode under way on a Ray worker
+        while (held := _holder_of(ray_cluster.tmp)) is None or held[
+            1
+        ].stat().st_size == 0:  # an episode under way on a Ray worker
             assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-3000:]
             time.sleep(0.05)
         pid, _trace = held
@@ -129,10 +166,24 @@ def test_a_ray_worker_killed_mid_episode_costs_no_row(ray_cluster: Cluster, tmp_
 
 @pytest.mark.slow
 def test_ctrl_c_keeps_the_finished_rows_and_resume_completes_on_ray(ray_cluster: Cluster, tmp_path: Path) -> None:
-    args = [*MHRC, "eval", "--ray", ray_cluster.address, *SMALL, "--objects", "3,4,5,6", "--repeats", "2", "--out", "ev"]
+    args = [
+        *MHRC,
+        "eval",
+        "--ray",
+        ray_cluster.address,
+        *SMALL,
+        "--objects",
+        "3,4,5,6",
+        "--repeats",
+        "2",
+        "--out",
+        "ev",
+    ]
     err = tmp_path / "stderr.txt"
     with err.open("w") as stderr:
-        proc = subprocess.Popen(args, cwd=tmp_path, env=ray_cluster.env, stdout=subprocess.DEVNULL, stderr=stderr, start_new_session=True)
+        proc = subprocess.Popen(
+            args, cwd=tmp_path, env=ray_cluster.env, stdout=subprocess.DEVNULL, stderr=stderr, start_new_session=True
+        )
     rows_path = tmp_path / "ev" / "episodes.jsonl"
     try:
         deadline = time.monotonic() + 300
@@ -147,13 +198,17 @@ def test_ctrl_c_keeps_the_finished_rows_and_resume_completes_on_ray(ray_cluster:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
     text = err.read_text()
-    assert proc.returncode == 130 and "interrupted: stopping the workers; every finished episode is kept in" in text, text[-3000:]
+    assert proc.returncode == 130 and "interrupted: stopping the workers; every finished episode is kept in" in text, (
+        text[-3000:]
+    )
     assert "Traceback" not in text, text[-3000:]
     kept = rows_path.read_text()
     assert kept.startswith(before) and kept.endswith("\n")  # nothing lost or cut
     n_kept = len(kept.splitlines())
     assert 1 <= n_kept < 8
-    resumed = subprocess.run([*args, "--resume"], cwd=tmp_path, env=ray_cluster.env, capture_output=True, text=True, timeout=900)
+    resumed = subprocess.run(
+        [*args, "--resume"], cwd=tmp_path, env=ray_cluster.env, capture_output=True, text=True, timeout=900
+    )
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     assert f"({n_kept} from before)" in resumed.stderr, resumed.stderr[-3000:]
     rows = _rows(tmp_path / "ev")
@@ -164,33 +219,66 @@ def test_ctrl_c_keeps_the_finished_rows_and_resume_completes_on_ray(ray_cluster:
 @pytest.mark.slow
 def test_with_a_shared_out_the_ray_task_writes_the_trace_itself(ray_cluster: Cluster, tmp_path: Path) -> None:
     """One machine: --out is trivially shared. The trace is where the row says, written whole."""
-    out = subprocess.run([*MHRC, "eval", "--ray", ray_cluster.address, "--shared-out", *SMALL, "--objects", "3", "--out", "ev"],
-                         cwd=tmp_path, env=ray_cluster.env, capture_output=True, text=True, timeout=600)  # fmt: skip
+    out = subprocess.run(
+        [*MHRC, "eval", "--ray", ray_cluster.address, "--shared-out", *SMALL, "--objects", "3", "--out", "ev"],
+        cwd=tmp_path,
+        env=ray_cluster.env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     (row,) = _rows(tmp_path / "ev")
     trace = tmp_path / "ev" / row["trace"]
     assert row["success"] and trace.read_text().endswith("\n") and '"episode_done"' in trace.read_text()
-    assert sorted(p.name for p in trace.parent.iterdir()) == ["pack_objects_kitchen_3_0.html", "pack_objects_kitchen_3_0.jsonl"]  # no partial file left
+    assert sorted(p.name for p in trace.parent.iterdir()) == [
+        "pack_objects_kitchen_3_0.html",
+        "pack_objects_kitchen_3_0.jsonl",
+    ]  # no partial file left
 
 
 @pytest.mark.slow
 def test_a_driver_outside_the_cluster_runs_episodes_through_ray_client(ray_cluster: Cluster, tmp_path: Path) -> None:
-    out = subprocess.run([*MHRC, "eval", "--ray", ray_cluster.client, *SMALL, "--objects", "4", "--out", "ev"],
-                         cwd=tmp_path, env=ray_cluster.env, capture_output=True, text=True, timeout=600)  # fmt: skip
+    out = subprocess.run(
+        [*MHRC, "eval", "--ray", ray_cluster.client, *SMALL, "--objects", "4", "--out", "ev"],
+        cwd=tmp_path,
+        env=ray_cluster.env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     (row,) = _rows(tmp_path / "ev")
-    assert row["key"] == "pack_objects/kitchen/4/0" and row["success"] and (tmp_path / "ev" / row["trace"]).stat().st_size > 0
+    assert (
+        row["key"] == "pack_objects/kitchen/4/0"
+        and row["success"]
+        and (tmp_path / "ev" / row["trace"]).stat().st_size > 0
+    )
 
 
 @pytest.mark.slow
-def test_a_driver_without_the_clusters_token_is_refused_before_any_episode(ray_cluster: Cluster, tmp_path: Path) -> None:
-    env = {k: v for k, v in ray_cluster.env.items() if not k.startswith("RAY_AUTH")} | {"HOME": str(tmp_path)}  # no ~/.ray/auth_token either
-    out = subprocess.run([*MHRC, "eval", "--ray", ray_cluster.address, *SMALL, "--objects", "3", "--out", "ev"],
-                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)  # fmt: skip
+def test_a_driver_without_the_clusters_token_is_refused_before_any_episode(
+    ray_cluster: Cluster, tmp_path: Path
+) -> None:
+    env = {k: v for k, v in ray_cluster.env.items() if not k.startswith("RAY_AUTH")} | {
+        "HOME": str(tmp_path)
+    }  # no ~/.ray/auth_token either
+    out = subprocess.run(
+        [*MHRC, "eval", "--ray", ray_cluster.address, *SMALL, "--objects", "3", "--out", "ev"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 2, out.stderr[-3000:]
     (line,) = [x for x in out.stderr.splitlines() if x.startswith("Error:")]
-    assert line.startswith(f"Error: --ray: could not join the Ray cluster at {ray_cluster.address}: "), out.stderr[-3000:]
-    assert line.endswith("this driver has no Ray token: set RAY_AUTH_MODE=token and RAY_AUTH_TOKEN (or copy the head's ~/.ray/auth_token)")
+    assert line.startswith(f"Error: --ray: could not join the Ray cluster at {ray_cluster.address}: "), out.stderr[
+        -3000:
+    ]
+    assert line.endswith(
+        "this driver has no Ray token: set RAY_AUTH_MODE=token and RAY_AUTH_TOKEN (or copy the head's ~/.ray/auth_token)"
+    )
     assert "Traceback" not in out.stderr and not (tmp_path / "ev").exists()
 
 
@@ -207,14 +295,21 @@ def test_llm_episodes_take_a_fraction_of_a_cpu_and_heuristic_ones_a_whole_cpu() 
 def _eval_without(fake_ray: str, tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
     """`mhrc eval` in a process where `import ray` gives `fake_ray` (None: not installed)."""
     code = f"import sys, types\nsys.modules['ray'] = {fake_ray}\nfrom mhrc.cli import main\nmain(sys.argv[1:], prog_name='mhrc')"
-    return subprocess.run([sys.executable, "-c", code, "eval", *SMALL, "--out", str(tmp_path / "x"), *args],
-                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-c", code, "eval", *SMALL, "--out", str(tmp_path / "x"), *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_without_the_ray_extra_eval_says_how_to_install_it(tmp_path: Path) -> None:
     out = _eval_without("None", tmp_path, "--ray", "auto")
     assert out.returncode == 2, out.stderr
-    assert out.stderr.strip().splitlines()[-1] == 'Error: --ray: Ray is not installed; install the extra: pip install -e ".[ray]"'
+    assert (
+        out.stderr.strip().splitlines()[-1]
+        == 'Error: --ray: Ray is not installed; install the extra: pip install -e ".[ray]"'
+    )
     assert "Traceback" not in out.stderr and not (tmp_path / "x").exists()
     local = _eval_without("None", tmp_path, "--dry-run")  # without --ray nothing needs Ray
     assert local.returncode == 0 and "4 episodes" in local.stdout, local.stderr
@@ -231,9 +326,16 @@ def test_an_address_nothing_listens_at_is_one_line(scheme: str, tmp_path: Path) 
     """Returns (no wall-clock assertion: ray.init alone would retry for a minute) with one line."""
     pytest.importorskip("ray")
     address = f"{scheme}127.0.0.1:{free_port('127.0.0.1')}"
-    out = subprocess.run([*MHRC, "eval", *SMALL, "--ray", address, "--out", str(tmp_path / "x")], capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [*MHRC, "eval", *SMALL, "--ray", address, "--out", str(tmp_path / "x")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert out.returncode == 2, out.stderr
     error = [line for line in out.stderr.splitlines() if line.startswith("Error:")]
-    assert error == [f"Error: --ray: nothing answers at {address} (Connection refused); start the head with `ray start --head` "
-                     "(it prints the address), or pass --ray auto on a node of the cluster"], out.stderr  # fmt: skip
+    assert error == [
+        f"Error: --ray: nothing answers at {address} (Connection refused); start the head with `ray start --head` "
+        "(it prints the address), or pass --ray auto on a node of the cluster"
+    ], out.stderr
     assert "Traceback" not in out.stderr and not (tmp_path / "x").exists()

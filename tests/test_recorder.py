@@ -46,11 +46,15 @@ async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_p
     rows = read_trace(tmp_path / "t.jsonl")
     order = [(r["msg"]["kind"], r["msg"].get("goal_id")) for r in rows]
     assert order == [
-        ("action_request", "in-order"), ("action_ack", "in-order"),
-        ("action_request", "late"), ("action_ack", "late"),
-        ("action_request", "late-rejected"), ("action_ack", "late-rejected"),
-        ("end", None), ("action_ack", "orphan"),
-    ], order  # fmt: skip
+        ("action_request", "in-order"),
+        ("action_ack", "in-order"),
+        ("action_request", "late"),
+        ("action_ack", "late"),
+        ("action_request", "late-rejected"),
+        ("action_ack", "late-rejected"),
+        ("end", None),
+        ("action_ack", "orphan"),
+    ], order
     for goal in ("late", "late-rejected"):
         request, answer = (r["t"] for r in rows if r["msg"].get("goal_id") == goal)
         assert request == answer, f"the {goal} request takes the time of its answer"

@@ -19,7 +19,9 @@ def _line(msg: Any, key: str = "mhrc/r/world/event", kind: str = "put", t: float
 
 
 def _write(path: Path, lines: list[Any]) -> Path:
-    path.write_text("".join((line if isinstance(line, str) else json.dumps(line)) + "\n" for line in lines), encoding="utf-8")
+    path.write_text(
+        "".join((line if isinstance(line, str) else json.dumps(line)) + "\n" for line in lines), encoding="utf-8"
+    )
     return path
 
 
@@ -28,17 +30,31 @@ STARTED = {"v": 1, "kind": "episode_started", "run": "r", "task": "pack_objects"
 
 
 def test_a_trace_reads_as_typed_records_and_read_trace_keeps_its_rows(tmp_path: Path) -> None:
-    thought = Thought(robot="bob", tick=0, policy="llm:m", prompt="p", parse_error=LLM_ERROR_PREFIX + "m failed after 5 attempts").model_dump(mode="json")
-    path = _write(tmp_path / "t.jsonl", [
-        _line(STARTED), _line(thought, "mhrc/r/agent/bob/thought", t=1.0), "",
-        _line(None, "mhrc/r/alive/robot/bob", "alive"), _line({"raw": "x"}, "mhrc/r/robot/bob/action/request"),
-    ])  # fmt: skip
+    thought = Thought(
+        robot="bob", tick=0, policy="llm:m", prompt="p", parse_error=LLM_ERROR_PREFIX + "m failed after 5 attempts"
+    ).model_dump(mode="json")
+    path = _write(
+        tmp_path / "t.jsonl",
+        [
+            _line(STARTED),
+            _line(thought, "mhrc/r/agent/bob/thought", t=1.0),
+            "",
+            _line(None, "mhrc/r/alive/robot/bob", "alive"),
+            _line({"raw": "x"}, "mhrc/r/robot/bob/action/request"),
+        ],
+    )
     lines = read_records(path)
     assert [line.number for line in lines] == [1, 2, 4, 5]  # the blank line 3 is skipped, still counted
     assert isinstance(lines[0].msg, EpisodeStarted) and isinstance(lines[1].msg, Thought)
-    assert lines[1].failure is ReplyFailure.MODEL_UNREACHABLE and lines[2].kind is LineKind.ALIVE and lines[2].msg is None
-    assert lines[3].msg is None and lines[3].problem is None and lines[3].raw == {"raw": "x"}  # names no model: kept as written
-    assert read_trace(path) == [json.loads(text) for text in path.read_text().splitlines() if text]  # eval's rows, unchanged
+    assert (
+        lines[1].failure is ReplyFailure.MODEL_UNREACHABLE and lines[2].kind is LineKind.ALIVE and lines[2].msg is None
+    )
+    assert (
+        lines[3].msg is None and lines[3].problem is None and lines[3].raw == {"raw": "x"}
+    )  # names no model: kept as written
+    assert read_trace(path) == [
+        json.loads(text) for text in path.read_text().splitlines() if text
+    ]  # eval's rows, unchanged
 
 
 def test_older_lines_are_upgraded_on_read() -> None:
@@ -46,17 +62,37 @@ def test_older_lines_are_upgraded_on_read() -> None:
     assert isinstance(started, EpisodeStarted) and started.fidelity == UNRECORDED and started.noise.setting == "on"
     exact = decode_row(_line({**STARTED, "aids": ["exact_motion"]}), 1).msg
     assert isinstance(exact, EpisodeStarted) and exact.noise.setting == "off"  # it ran without noise
-    old_ack = {"v": 1, "kind": "action_ack", "goal_id": "g", "robot": "bob", "accepted": False, "reason": "the request is for tick 2, the world is at tick 3"}
+    old_ack = {
+        "v": 1,
+        "kind": "action_ack",
+        "goal_id": "g",
+        "robot": "bob",
+        "accepted": False,
+        "reason": "the request is for tick 2, the world is at tick 3",
+    }
     ack = decode_row(_line(old_ack, "mhrc/r/robot/bob/action/ack"), 1).msg
     assert isinstance(ack, ActionAck) and ack.code is RejectCode.STALE_TICK  # the code its reason stood for
-    junk = decode_row(_line({"count": 4, "bytes": 900, "reason": "rejected: Bob is still busy"}, "mhrc/r/robot/bob/action/ack", "junk"), 1).junk
+    junk = decode_row(
+        _line(
+            {"count": 4, "bytes": 900, "reason": "rejected: Bob is still busy"}, "mhrc/r/robot/bob/action/ack", "junk"
+        ),
+        1,
+    ).junk
     assert junk is not None and (junk.count, junk.code, junk.excerpt) == (4, RejectCode.BUSY, None)
 
 
 def test_a_name_longer_than_todays_bound_reads_as_recorded() -> None:
     """An older world executed a pick of a 1,000-character name; today's bound is for admission, not reading."""
     name = "x" * 1000
-    request = {"v": 2, "kind": "action_request", "goal_id": "g1", "robot": "bob", "agent_id": "a" * 300, "tick": 0, "action": {"skill": "pick", "obj": name}}
+    request = {
+        "v": 2,
+        "kind": "action_request",
+        "goal_id": "g1",
+        "robot": "bob",
+        "agent_id": "a" * 300,
+        "tick": 0,
+        "action": {"skill": "pick", "obj": name},
+    }
     line = decode_row(_line(request, "mhrc/r/robot/bob/action/request"), 7)
     assert line.problem is None and line.msg is not None and line.msg.model_dump(mode="json") == request
 
@@ -70,7 +106,9 @@ def test_a_name_longer_than_todays_bound_reads_as_recorded() -> None:
         ('{"t": 0.1, "key": "mhrc/r/world/event", "kind": "shout", "msg": null}', LineError.UNKNOWN_KIND, "line 3"),
     ],
 )
-def test_a_malformed_line_is_a_typed_error_naming_its_line(tmp_path: Path, text: str, code: LineError, where: str) -> None:
+def test_a_malformed_line_is_a_typed_error_naming_its_line(
+    tmp_path: Path, text: str, code: LineError, where: str
+) -> None:
     path = _write(tmp_path / "t.jsonl", [_line(STARTED), _line(None, "mhrc/r/alive/world", "alive"), text])
     with pytest.raises(TraceLineError) as caught:
         read_records(path)
@@ -91,13 +129,25 @@ def test_a_message_that_does_not_fit_its_model_is_kept_with_the_reason() -> None
         (None, "stop", None),
         ("", "stop", None),
         (LLM_ERROR_PREFIX + "no answer within the step deadline of 6 s", None, ReplyFailure.MODEL_UNREACHABLE),
-        (LLM_ERROR_PREFIX + "m at http://x failed after 5 attempts: HTTP 503", "length", ReplyFailure.MODEL_UNREACHABLE),
-        ("your reply was cut at the token limit before it gave a command; think more briefly", "length", ReplyFailure.CUT_OFF),
+        (
+            LLM_ERROR_PREFIX + "m at http://x failed after 5 attempts: HTTP 503",
+            "length",
+            ReplyFailure.MODEL_UNREACHABLE,
+        ),
+        (
+            "your reply was cut at the token limit before it gave a command; think more briefly",
+            "length",
+            ReplyFailure.CUT_OFF,
+        ),
         ("no command found: give one command, such as Command: pick(apple)", "stop", ReplyFailure.UNREADABLE),
     ],
 )
-def test_a_thoughts_failure_code_is_derived_once(parse_error: str | None, finish_reason: str | None, code: ReplyFailure | None) -> None:
-    thought = Thought(robot="bob", tick=0, policy="llm:m", prompt="p", parse_error=parse_error, finish_reason=finish_reason)
+def test_a_thoughts_failure_code_is_derived_once(
+    parse_error: str | None, finish_reason: str | None, code: ReplyFailure | None
+) -> None:
+    thought = Thought(
+        robot="bob", tick=0, policy="llm:m", prompt="p", parse_error=parse_error, finish_reason=finish_reason
+    )
     assert reply_failure(thought) is code
     assert decode_row(_line(thought.model_dump(mode="json"), "mhrc/r/agent/bob/thought"), 1).failure is code
     assert code is None or code.unparsed == (code is not ReplyFailure.MODEL_UNREACHABLE)

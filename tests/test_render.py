@@ -7,7 +7,18 @@ from pathlib import Path
 
 
 def test_render_writes_two_views_as_png(tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "mhrc", "render", "--scene", "bathroom", "--task", "sort_solids", "--out", str(tmp_path)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "mhrc",
+        "render",
+        "--scene",
+        "bathroom",
+        "--task",
+        "sort_solids",
+        "--out",
+        str(tmp_path),
+    ]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     for view in ("top", "perspective"):
@@ -19,6 +30,12 @@ def test_render_writes_two_views_as_png(tmp_path: Path) -> None:
 
 def test_scenes_lists_the_layouts() -> None:
     out = subprocess.run([sys.executable, "-m", "mhrc", "scenes"], capture_output=True, text=True, timeout=60)
-    assert out.returncode == 0 and all(f"{name}:" in out.stdout for name in ("kitchen", "bathroom", "bedroom")) and "drawer_unit" in out.stdout
-    bad = subprocess.run([sys.executable, "-m", "mhrc", "render", "--scene", "castle"], capture_output=True, text=True, timeout=60)
+    assert (
+        out.returncode == 0
+        and all(f"{name}:" in out.stdout for name in ("kitchen", "bathroom", "bedroom"))
+        and "drawer_unit" in out.stdout
+    )
+    bad = subprocess.run(
+        [sys.executable, "-m", "mhrc", "render", "--scene", "castle"], capture_output=True, text=True, timeout=60
+    )
     assert bad.returncode == 2 and "unknown scene 'castle'" in bad.stderr

@@ -34,7 +34,10 @@ def _facts(task: str = "pack_objects", horizon: int = 50, robots: tuple[str, ...
     ("events", "where"),
     [
         ({"tick": 1, "kind": "close"}, "a scenario is a JSON list"),
-        ([{"tick": 1, "kind": "close"}, {"tick": 2, "kind": "explode"}], "events[1].kind: must be one of relocate, breakdown, new_target, close"),
+        (
+            [{"tick": 1, "kind": "close"}, {"tick": 2, "kind": "explode"}],
+            "events[1].kind: must be one of relocate, breakdown, new_target, close",
+        ),
         ([{"tick": 3, "kind": "breakdown", "robot": "bob"}], "events[0].ticks: Field required"),
         ([{"tick": 0, "kind": "close"}], "events[0].tick:"),
         ([{"tick": 2, "kind": "close", "when": "later"}], "events[0].when:"),
@@ -50,15 +53,26 @@ def test_a_malformed_file_names_the_event_and_field(tmp_path: Path, events: Any,
 @pytest.mark.parametrize(
     ("event", "where"),
     [
-        ({"tick": 2, "kind": "breakdown", "robot": "eve", "ticks": 2}, "events[1].robot: 'eve' is not a robot of this episode"),
+        (
+            {"tick": 2, "kind": "breakdown", "robot": "eve", "ticks": 2},
+            "events[1].robot: 'eve' is not a robot of this episode",
+        ),
         ({"tick": 50, "kind": "close"}, "events[1].tick: 50 is past the horizon"),
         ({"tick": 2, "kind": "relocate", "to": "moon"}, "events[1].to: 'moon' is not a surface of this scene"),
         ({"tick": 2, "kind": "new_target", "on": "moon"}, "events[1].on: 'moon' is not a surface of this scene"),
-        ({"tick": 2, "kind": "new_target", "object": "red_cube"}, "events[1].object: 'red_cube' is not an object this task can have"),
-        ({"tick": 2, "kind": "close", "target": "table_0"}, "events[1].target: 'table_0' is not a container of this scene"),
+        (
+            {"tick": 2, "kind": "new_target", "object": "red_cube"},
+            "events[1].object: 'red_cube' is not an object this task can have",
+        ),
+        (
+            {"tick": 2, "kind": "close", "target": "table_0"},
+            "events[1].target: 'table_0' is not a container of this scene",
+        ),
     ],
 )
-def test_an_event_the_episode_cannot_honour_names_its_index_and_field(tmp_path: Path, event: dict[str, Any], where: str) -> None:
+def test_an_event_the_episode_cannot_honour_names_its_index_and_field(
+    tmp_path: Path, event: dict[str, Any], where: str
+) -> None:
     scenario = load_scenario(_write(tmp_path, [{"tick": 1, "kind": "close"}, event]))
     with pytest.raises(ScenarioError) as err:
         check_scenario(scenario, _facts())
@@ -66,10 +80,18 @@ def test_an_event_the_episode_cannot_honour_names_its_index_and_field(tmp_path: 
 
 
 def test_a_good_file_loads_with_its_name_and_hash(tmp_path: Path) -> None:
-    path = _write(tmp_path, [{"tick": 1, "kind": "relocate"}, {"tick": 2, "kind": "breakdown", "robot": "david", "ticks": 3}], "mixed")
+    path = _write(
+        tmp_path,
+        [{"tick": 1, "kind": "relocate"}, {"tick": 2, "kind": "breakdown", "robot": "david", "ticks": 3}],
+        "mixed",
+    )
     scenario = load_scenario(path)
     check_scenario(scenario, _facts())
-    assert scenario.name == "mixed" and len(scenario.sha256) == 64 and [e.kind for e in scenario.events] == ["relocate", "breakdown"]
+    assert (
+        scenario.name == "mixed"
+        and len(scenario.sha256) == 64
+        and [e.kind for e in scenario.events] == ["relocate", "breakdown"]
+    )
 
 
 # --------------------------------------------------------------------------- the events, on the simulator
@@ -105,7 +127,9 @@ def test_relocate_is_not_seen_until_the_robot_looks(tmp_path: Path) -> None:
         name = next(t for t in probe.targets if probe.objects[t].on != bob_table and not probe.objects[t].inside)
         old = probe.objects[name].on
         assert old is not None
-        to = next(f.name for f in probe.layout.furniture if f.slots and f.container is None and f.name not in (old, bob_table))
+        to = next(
+            f.name for f in probe.layout.furniture if f.slots and f.container is None and f.name not in (old, bob_table)
+        )
     with _sim(tmp_path, [{"tick": 2, "kind": "relocate", "object": name, "to": to}]) as sim:
         sim.learn("alice", [name])
         (event,) = sim.fire_events(2)
@@ -168,7 +192,9 @@ def test_close_shuts_the_last_opened_container_and_hides_its_contents(tmp_path: 
         robots1, objects1, open1 = sim.poses()
         assert event.applied and event.changed == {"container": last}
         assert _changed(open0, open1) == {last} and open1[last] is False and open1[first] is True
-        assert _changed(objects0, objects1) <= set(inside) and robots1 == robots0  # only what lies in it moves (with it)
+        assert (
+            _changed(objects0, objects1) <= set(inside) and robots1 == robots0
+        )  # only what lies in it moves (with it)
         sim.knowledge.look_at("alice", last)
         assert sim.knowledge.beliefs["alice"].is_open(last) is False
         assert not {o.name for o in sim.observe("alice", 2).objects} & set(inside)
@@ -186,7 +212,11 @@ def test_an_event_that_cannot_apply_is_skipped_and_recorded(tmp_path: Path) -> N
         poses0 = sim.poses()
         fired = sim.fire_events(1) + sim.fire_events(2)
         assert [(e.index, e.applied) for e in fired] == [(0, False), (1, False), (2, False)]
-        assert [e.skipped for e in fired] == ["no container is open", f"{distractor} is not a target of this episode", f"{distractor} is already in the scene"]
+        assert [e.skipped for e in fired] == [
+            "no container is open",
+            f"{distractor} is not a target of this episode",
+            f"{distractor} is already in the scene",
+        ]
         assert all("skipped" in e.text and e.changed == {} for e in fired)
         assert sim.poses() == poses0 and sim.evaluate().total == 4
 
@@ -204,7 +234,20 @@ def test_the_world_publishes_each_event_and_observations_follow_its_tick(tmp_pat
     those of tick 3 on do (async: actions that start at 3 x step_seconds or later)."""
     events = _write(tmp_path, [{"tick": 3, "kind": "new_target"}])
     trace = tmp_path / "trace.jsonl"
-    done = _mhrc("up", "--events", str(events), "--horizon", "25", "--schedule", schedule, "--quiet", "--json", "--trace", str(trace), cwd=tmp_path)
+    done = _mhrc(
+        "up",
+        "--events",
+        str(events),
+        "--horizon",
+        "25",
+        "--schedule",
+        schedule,
+        "--quiet",
+        "--json",
+        "--trace",
+        str(trace),
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stderr
     lines = [r for r in map(json.loads, trace.read_text().splitlines()) if isinstance(r.get("msg"), dict)]
     (event,) = [r["msg"] for r in lines if r["msg"].get("kind") == "scenario_event"]

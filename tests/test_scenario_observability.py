@@ -80,7 +80,10 @@ def test_an_event_is_seen_only_by_robots_that_observe_it(tmp_path: Path, scene: 
                 assert moved == set(), (robot, event.text, moved)
                 assert _furniture(a) == _furniture(b), (robot, event.text)
             else:
-                assert moved <= {event.changed.get("object"), *(n for n, o in sim.objects.items() if o.on in touched)}, (robot, moved)
+                assert moved <= {
+                    event.changed.get("object"),
+                    *(n for n, o in sim.objects.items() if o.on in touched),
+                }, (robot, moved)
             if kind == "new_target" and robot == "bob":  # his task grows: he is told
                 assert a.targets == [*b.targets, event.changed["object"]]
             else:
@@ -92,6 +95,8 @@ def test_an_event_is_seen_only_by_robots_that_observe_it(tmp_path: Path, scene: 
             assert {o.name: o.on for o in sim.observe("david", 2).objects}.get(name) == where
         elif kind == "close":
             container = event.changed["container"]
-            assert _furniture(after["alice"])[container] is (stands["alice"] != container)  # she believes it open until she looks
+            assert _furniture(after["alice"])[container] is (
+                stands["alice"] != container
+            )  # she believes it open until she looks
             sim.knowledge.look_at("alice", container)
             assert _furniture(sim.observe("alice", 2))[container] is False

@@ -34,7 +34,9 @@ def test_the_shipped_files_are_package_data() -> None:
     data = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["package-data"]
     globs = data.get("mhrc.world", [])
     for name in SHIPPED:
-        assert any(fnmatch(f"scenarios/{name}.json", g) for g in globs), f"scenarios/{name}.json is not in package-data {globs}"
+        assert any(fnmatch(f"scenarios/{name}.json", g) for g in globs), (
+            f"scenarios/{name}.json is not in package-data {globs}"
+        )
 
 
 def test_scenarios_lists_each_with_its_events_and_hash() -> None:
@@ -71,7 +73,9 @@ def test_scenarios_of_a_file_and_of_an_unknown_name(tmp_path: Path) -> None:
     res = CliRunner().invoke(main, ["scenarios", "nope"])
     assert res.exit_code == 2
     (error,) = _errors(res.stderr)
-    assert error.startswith("Error: NAME: nope is neither a file nor a shipped scenario") and all(n in error for n in SHIPPED)
+    assert error.startswith("Error: NAME: nope is neither a file nor a shipped scenario") and all(
+        n in error for n in SHIPPED
+    )
 
 
 def test_scenarios_help_says_what_it_lists() -> None:
@@ -81,13 +85,18 @@ def test_scenarios_help_says_what_it_lists() -> None:
 
 
 @pytest.mark.parametrize("command", [["up", "--quiet"], ["world"], ["eval", "--dry-run"]])
-def test_an_events_name_that_is_neither_file_nor_shipped_is_refused(tmp_path: Path, command: list[str], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_an_events_name_that_is_neither_file_nor_shipped_is_refused(
+    tmp_path: Path, command: list[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.chdir(tmp_path)
     before = set(tmp_path.iterdir())
     res = CliRunner().invoke(main, [*command, "--events", "relocat"])
     assert res.exit_code == 2, res.output
     (error,) = _errors(res.stderr)
-    assert error.startswith("Error: --events: relocat is neither a file nor a shipped scenario") and "mhrc scenarios" in error
+    assert (
+        error.startswith("Error: --events: relocat is neither a file nor a shipped scenario")
+        and "mhrc scenarios" in error
+    )
     assert all(n in error for n in SHIPPED)
     assert set(tmp_path.iterdir()) == before  # nothing left behind
 
@@ -96,10 +105,16 @@ def test_a_shipped_name_resolves_and_an_existing_file_wins(tmp_path: Path, monke
     monkeypatch.chdir(tmp_path)
     assert resolve_scenario("relocate") == shipped_scenarios()["relocate"]
     sc = load_scenario("relocate")
-    assert sc.name == "relocate" and sc.sha256 == hashlib.sha256(shipped_scenarios()["relocate"].read_bytes()).hexdigest()
-    (tmp_path / "relocate").write_text(json.dumps([{"tick": 2, "kind": "breakdown", "robot": "eve", "ticks": 2}]), encoding="utf-8")
+    assert (
+        sc.name == "relocate" and sc.sha256 == hashlib.sha256(shipped_scenarios()["relocate"].read_bytes()).hexdigest()
+    )
+    (tmp_path / "relocate").write_text(
+        json.dumps([{"tick": 2, "kind": "breakdown", "robot": "eve", "ticks": 2}]), encoding="utf-8"
+    )
     assert resolve_scenario("relocate") == Path("relocate")
-    ok = CliRunner().invoke(main, ["eval", "--dry-run", "--events", "busy_house", "--tasks", "pack_objects", "--scenes", "kitchen"])
+    ok = CliRunner().invoke(
+        main, ["eval", "--dry-run", "--events", "busy_house", "--tasks", "pack_objects", "--scenes", "kitchen"]
+    )
     assert ok.exit_code == 0, ok.output
     bad = CliRunner().invoke(main, ["eval", "--dry-run", "--events", "relocate"])  # the local file, not the shipped one
     assert bad.exit_code == 2 and "events[0].robot: 'eve' is not a robot of this episode" in bad.stderr
@@ -108,8 +123,24 @@ def test_a_shipped_name_resolves_and_an_existing_file_wins(tmp_path: Path, monke
 @pytest.mark.slow
 def test_eval_with_a_shipped_name_records_it_and_sends_the_name_to_its_workers(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    res = CliRunner().invoke(main, ["eval", "--events", "relocate", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "4",
-                                    "--workers", "1", "--out", str(out)])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        [
+            "eval",
+            "--events",
+            "relocate",
+            "--tasks",
+            "pack_objects",
+            "--scenes",
+            "kitchen",
+            "--objects",
+            "4",
+            "--workers",
+            "1",
+            "--out",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert json.loads((out / "eval.json").read_text())["spec"]["events"] == "relocate"  # the name, not this host's path
     (row,) = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
@@ -117,4 +148,7 @@ def test_eval_with_a_shipped_name_records_it_and_sends_the_name_to_its_workers(t
     assert row["scenario"] == "relocate" and row["scenario_sha256"] == sha
     (event,) = row["recovery"]
     assert event["kind"] == "relocate" and event["tick"] == 8 and "ticks_to_recover" in event
-    assert f"scenario relocate@{sha[:12]}" in (out / "summary.md").read_text() and "recovery (steps)" in (out / "summary.md").read_text()
+    assert (
+        f"scenario relocate@{sha[:12]}" in (out / "summary.md").read_text()
+        and "recovery (steps)" in (out / "summary.md").read_text()
+    )

@@ -22,13 +22,22 @@ import pytest
 
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
-from mhrc.run.config import EpisodeConfig, ROBOTS
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import (
+    ActionResult,
+    EpisodeDone,
+    Message,
+    Observation,
+    RobotAttached,
+    RobotDetached,
+    decode_event,
+    parse_action,
+)
+from mhrc.core.trace import read_trace
+from mhrc.run.config import ROBOTS, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.run.processes import up_processes
-from mhrc.core.keys import Keys
-from mhrc.core.protocol import ActionResult, EpisodeDone, Message, Observation, RobotAttached, RobotDetached, decode_event, parse_action
 from mhrc.testing import LoopbackWorld, world_on_loopback
-from mhrc.core.trace import read_trace
 
 WAIT = 120.0  # s: generous bound on every wait, so a regression fails instead of hanging
 
@@ -44,7 +53,11 @@ def _executed(trace: Path) -> list[tuple[int, str, str, str]]:
 
 
 def _events(trace: Path, kind: str) -> list[dict[str, Any]]:
-    return [line["msg"] for line in read_trace(trace) if line["msg"] and line["key"].endswith("/world/event") and line["msg"].get("kind") == kind]
+    return [
+        line["msg"]
+        for line in read_trace(trace)
+        if line["msg"] and line["key"].endswith("/world/event") and line["msg"].get("kind") == kind
+    ]
 
 
 # --------------------------------------------------------------------------- lockstep
@@ -52,8 +65,12 @@ def _events(trace: Path, kind: str) -> list[dict[str, Any]]:
 
 @pytest.mark.slow
 async def test_lockstep_same_trace_in_one_process_or_many(tmp_path: Path) -> None:
-    a = await up_in_process(EpisodeConfig.build(seed=0, horizon=8, schedule="lockstep", trace=tmp_path / "a.jsonl").resolved())
-    b = await up_processes(EpisodeConfig.build(seed=0, horizon=8, schedule="lockstep", trace=tmp_path / "b.jsonl").resolved())
+    a = await up_in_process(
+        EpisodeConfig.build(seed=0, horizon=8, schedule="lockstep", trace=tmp_path / "a.jsonl").resolved()
+    )
+    b = await up_processes(
+        EpisodeConfig.build(seed=0, horizon=8, schedule="lockstep", trace=tmp_path / "b.jsonl").resolved()
+    )
     assert a.reason == b.reason == "horizon" and a.metrics.temporal_steps == b.metrics.temporal_steps == 8
     ta, tb = _executed(tmp_path / "a.jsonl"), _executed(tmp_path / "b.jsonl")
     # every tick's results go out together, in the fixed robot order
@@ -61,7 +78,9 @@ async def test_lockstep_same_trace_in_one_process_or_many(tmp_path: Path) -> Non
     assert ta == tb
     for name in ("a", "b"):
         assert [m["scheduler"] for m in _events(tmp_path / f"{name}.jsonl", "episode_started")] == ["lockstep"]
-        assert not any(line["key"].endswith("/turn") for line in read_trace(tmp_path / f"{name}.jsonl")), "lockstep gives no turns"
+        assert not any(line["key"].endswith("/turn") for line in read_trace(tmp_path / f"{name}.jsonl")), (
+            "lockstep gives no turns"
+        )
     assert a.metrics.model_dump(exclude={"wall_time"}) == b.metrics.model_dump(exclude={"wall_time"})
 
 
@@ -175,19 +194,28 @@ async def test_sequential_goes_on_without_a_robot_whose_agent_left(tmp_path: Pat
 
     executed = _executed(trace)
     # Alice and Bob get every turn to the end
-    assert [(t, r) for t, r, _, _ in executed if r != "david"] == [(t, r) for t in range(HORIZON) for r in ("alice", "bob")]
+    assert [(t, r) for t, r, _, _ in executed if r != "david"] == [
+        (t, r) for t in range(HORIZON) for r in ("alice", "bob")
+    ]
     # David's results: on its turn in tick K it had received its tick K-1 result (released at that
     # turn); while Alice planned, its tick K-1 action had executed but its result was still held
     # for its turn, and a detached robot's held result is dropped
     assert [t for t, r, _, _ in executed if r == "david"] == list(range(K if on_turn else K - 1))
     left = _key_index(trace, lambda line: line["msg"] and line["msg"].get("kind") == "robot_detached")
     assert len(left) == 1
-    assert all(i < left[0] for i in _key_index(trace, lambda line: line["key"].endswith("robot/david/action/result"))), (
-        "no result for David after it left"
+    assert all(
+        i < left[0] for i in _key_index(trace, lambda line: line["key"].endswith("robot/david/action/result"))
+    ), "no result for David after it left"
+    assert not [line for line in read_trace(trace)[left[0] :] if line["key"].endswith("robot/david/turn")], (
+        "no turn for David after it left"
     )
-    assert not [line for line in read_trace(trace)[left[0]:] if line["key"].endswith("robot/david/turn")], "no turn for David after it left"
     # the detach happened on a live episode: the world kept publishing ticks after it
-    assert _key_index(trace, lambda line: line["msg"] and line["msg"].get("kind") == "tick" and line["msg"]["tick"] == K)[0] > left[0]
+    assert (
+        _key_index(trace, lambda line: line["msg"] and line["msg"].get("kind") == "tick" and line["msg"]["tick"] == K)[
+            0
+        ]
+        > left[0]
+    )
 
 
 async def test_sequential_gives_turns_to_a_replacement_agent(tmp_path: Path) -> None:
@@ -213,7 +241,9 @@ async def test_sequential_gives_turns_to_a_replacement_agent(tmp_path: Path) -> 
     assert isinstance(again, RobotAttached) and again.tick == back
     assert done.reason == "horizon" and done.metrics.temporal_steps == HORIZON, done
     assert all(e is not None and e.reason == "horizon" for e in ends), ends
-    finals = [line["msg"] for line in read_trace(trace) if line["key"].endswith("/action/result") and line["msg"]["done"]]
+    finals = [
+        line["msg"] for line in read_trace(trace) if line["key"].endswith("/action/result") and line["msg"]["done"]
+    ]
     assert sorted(m["robot"] for m in finals) == sorted(ROBOTS) and all(m["tick"] == HORIZON - 1 for m in finals)
     assert done.final_results == {m["robot"]: m["goal_id"] for m in finals}
 
@@ -225,11 +255,15 @@ async def test_sequential_gives_turns_to_a_replacement_agent(tmp_path: Path) -> 
     ticks = _ticks_closed(trace)
     assert [t["tick"] for t in ticks] == list(range(HORIZON))
     with_david = [t["tick"] for t in ticks if "david" in t["actions"]]
-    assert with_david == [*range(K), *range(back, HORIZON)], "David acts before it left and in every tick from its return"
+    assert with_david == [*range(K), *range(back, HORIZON)], (
+        "David acts before it left and in every tick from its return"
+    )
 
     executed = _executed(trace)
     assert [t for t, r, _, _ in executed if r == "david"] == [*range(K), *range(back, HORIZON)]
-    assert [(t, r) for t, r, _, _ in executed if r != "david"] == [(t, r) for t in range(HORIZON) for r in ("alice", "bob")]
+    assert [(t, r) for t, r, _, _ in executed if r != "david"] == [
+        (t, r) for t in range(HORIZON) for r in ("alice", "bob")
+    ]
     # the replacement attached off its turn (Alice was planning), so it waited for a Turn, given
     # after Bob's tick K+2 action executed
     turns = [(line["msg"]["robot"], line["msg"]["tick"]) for line in read_trace(trace) if line["key"].endswith("/turn")]
@@ -285,10 +319,18 @@ async def test_a_message_reaches_the_scene_graph_with_its_delivery(schedule: str
     from mhrc.testing import ScriptedPolicy, run_episode
 
     teller, listener = _Teller(), _Listener()
-    result = await run_episode({"alice": ScriptedPolicy([]), "bob": teller, "david": listener}, seed=0, horizon=3,
-                               schedule=schedule, trace=tmp_path / "t.jsonl")  # fmt: skip
+    result = await run_episode(
+        {"alice": ScriptedPolicy([]), "bob": teller, "david": listener},
+        seed=0,
+        horizon=3,
+        schedule=schedule,
+        trace=tmp_path / "t.jsonl",
+    )
     assert teller.named is not None
-    seen = [(o.tick, [m.sender for m in o.new_messages], any(x.name == teller.named for x in o.objects)) for o in listener.observations]
+    seen = [
+        (o.tick, [m.sender for m in o.new_messages], any(x.name == teller.named for x in o.objects))
+        for o in listener.observations
+    ]
     assert seen[0] == (0, [], False), seen  # tick 0: Bob's message is on its way, David knows nothing of it
     assert seen[1] == (1, ["bob"], True), seen  # tick 1: the message and what it tells arrive together
     assert result.done.metrics.messages == 1

@@ -7,21 +7,21 @@ import asyncio
 from pathlib import Path
 
 import pytest
+from sweep import sweep
 
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
 from mhrc.core.bus import Bus
-from mhrc.run.config import ConfigError, EpisodeConfig, ROBOTS, SCHEDULES
-from mhrc.run.inprocess import up_in_process
-from mhrc.run.processes import up_processes
 from mhrc.core.protocol import ActionRequest, ActionResult, Observation, SkillOutcome, parse_action
 from mhrc.core.trace import read_trace
+from mhrc.run.config import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig
+from mhrc.run.inprocess import up_in_process
+from mhrc.run.processes import up_processes
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.schedulers import SCHEDULERS, LockstepScheduler, Scheduler, SequentialScheduler, UnknownScheduler
 from mhrc.world.service import WorldConfig, WorldService
 from mhrc.world.sim import Sim
-from sweep import sweep
 
 
 def test_registry_has_lockstep() -> None:
@@ -87,15 +87,23 @@ def test_unknown_schedule_option_is_a_usage_error() -> None:
 
 @pytest.mark.slow
 async def test_sequential_same_trace_in_one_process_or_many(tmp_path: Path) -> None:
-    a = await up_in_process(EpisodeConfig.build(seed=0, horizon=8, schedule="sequential", trace=tmp_path / "a.jsonl").resolved())
-    b = await up_processes(EpisodeConfig.build(seed=0, horizon=8, schedule="sequential", trace=tmp_path / "b.jsonl").resolved())
+    a = await up_in_process(
+        EpisodeConfig.build(seed=0, horizon=8, schedule="sequential", trace=tmp_path / "a.jsonl").resolved()
+    )
+    b = await up_processes(
+        EpisodeConfig.build(seed=0, horizon=8, schedule="sequential", trace=tmp_path / "b.jsonl").resolved()
+    )
     assert a.reason == b.reason == "horizon" and a.metrics.temporal_steps == b.metrics.temporal_steps == 8
     ta, tb = _executed(tmp_path / "a.jsonl"), _executed(tmp_path / "b.jsonl")
     # results go out one at a time, each at its robot's next turn (the last tick's together at the end)
     assert [(tick, robot) for tick, robot, _, _ in ta] == [(t, r) for t in range(8) for r in ("alice", "bob", "david")]
     assert ta == tb
     for name in ("a", "b"):
-        started = [line["msg"] for line in read_trace(tmp_path / f"{name}.jsonl") if line["msg"] and line["msg"].get("kind") == "episode_started"]
+        started = [
+            line["msg"]
+            for line in read_trace(tmp_path / f"{name}.jsonl")
+            if line["msg"] and line["msg"].get("kind") == "episode_started"
+        ]
         assert [m["scheduler"] for m in started] == ["sequential"]
     turns = [line["msg"]["robot"] for line in read_trace(tmp_path / "a.jsonl") if line["key"].endswith("/turn")]
     assert turns == ["bob", "david"]  # tick 0: Alice plans on the attach reply, the others wait for their turn
@@ -142,7 +150,10 @@ async def test_sequential_is_algorithm_1(mhrc_world, monkeypatch: pytest.MonkeyP
     async with mhrc_world(seed=0, horizon=horizon, schedule="sequential") as world:
         buses = [await world.client() for _ in ROBOTS]
         try:
-            agents = [RobotAgent(bus, _Recording(r, events, seen), run=world.config.run, robot=r) for bus, r in zip(buses, ROBOTS)]  # type: ignore[arg-type]
+            agents = [
+                RobotAgent(bus, _Recording(r, events, seen), run=world.config.run, robot=r)
+                for bus, r in zip(buses, ROBOTS)
+            ]  # type: ignore[arg-type]
             dones = await asyncio.wait_for(asyncio.gather(*(a.run() for a in agents)), 120)
             done = await world.done()
         finally:
@@ -154,26 +165,40 @@ async def test_sequential_is_algorithm_1(mhrc_world, monkeypatch: pytest.MonkeyP
         "robots must plan and act one at a time, in order, on the observation of the tick they act in"
     )
     # Alice hands objects to Bob on table_0: Bob plans that same tick on a world where they lie there
-    handed = [(int(t), call) for kind, robot, t, *rest in events if kind == "execute" and robot == "alice"
-              for call, ok in [rest] if ok == "True" and call.startswith("place(") and call.endswith(", table_0)")]  # fmt: skip
+    handed = [
+        (int(t), call)
+        for kind, robot, t, *rest in events
+        if kind == "execute" and robot == "alice"
+        for call, ok in [rest]
+        if ok == "True" and call.startswith("place(") and call.endswith(", table_0)")
+    ]
     assert handed, "the heuristic Alice places something on Bob's table within the horizon"
     for tick, call in handed:
         obj = call.removeprefix("place(").split(",")[0]
         assert any(o.name == obj and o.on == "table_0" for o in seen[("bob", tick)].objects), (tick, call)
 
 
-@pytest.mark.parametrize(("task", "scene"), sweep([(t, s) for s in sorted(LAYOUTS) for t in ("pack_objects", "sort_solids", "make_sandwich")]))
+@pytest.mark.parametrize(
+    ("task", "scene"),
+    sweep([(t, s) for s in sorted(LAYOUTS) for t in ("pack_objects", "sort_solids", "make_sandwich")]),
+)
 async def test_heuristic_team_solves_every_task_in_sequence(task: str, scene: str, tmp_path: Path) -> None:
-    cfg = EpisodeConfig.build(task=task, scene=scene, seed=0, n_objects=4, schedule="sequential", trace=tmp_path / "t.jsonl")
+    cfg = EpisodeConfig.build(
+        task=task, scene=scene, seed=0, n_objects=4, schedule="sequential", trace=tmp_path / "t.jsonl"
+    )
     done = await up_in_process(cfg.resolved())
     assert done.reason == "success" and done.metrics.success, (task, scene, done.metrics)
 
 
 async def test_sequential_skips_a_robot_that_never_attached(tmp_path: Path) -> None:
     """Alice, first in the order, is missing: Bob gets the first turn when the episode starts."""
-    cfg = EpisodeConfig.build(seed=0, horizon=3, schedule="sequential", start_timeout=2, trace=tmp_path / "t.jsonl").resolved()
+    cfg = EpisodeConfig.build(
+        seed=0, horizon=3, schedule="sequential", start_timeout=2, trace=tmp_path / "t.jsonl"
+    ).resolved()
     done = await asyncio.wait_for(up_in_process(cfg, robots=("bob", "david")), 60)
     assert done.reason == "horizon" and done.metrics.temporal_steps == 3 and set(done.final_results) == {"bob", "david"}
     lines = read_trace(tmp_path / "t.jsonl")
     assert [line["msg"]["robot"] for line in lines if line["key"].endswith("/turn")] == ["bob", "david"]
-    assert [(t, r) for t, r, _, _ in _executed(tmp_path / "t.jsonl")] == [(t, r) for t in range(3) for r in ("bob", "david")]
+    assert [(t, r) for t, r, _, _ in _executed(tmp_path / "t.jsonl")] == [
+        (t, r) for t in range(3) for r in ("bob", "david")
+    ]

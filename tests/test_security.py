@@ -14,18 +14,17 @@ import time
 from pathlib import Path
 
 import pytest
+from sweep import sweep
+from waits import served, subscribed
 
 from mhrc.core import certs, security
-from mhrc.core.bus import Bus, Sample
+from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.endpoints import BusRefused, endpoint, free_port
-from mhrc.core.bus import open_client
+from mhrc.core.keys import Keys
+from mhrc.core.protocol import ActionRequest, AttachReply, AttachRequest, RobotAttached, Wait, decode, decode_event
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.run.processes import up_processes
-from mhrc.core.keys import Keys
-from mhrc.core.protocol import ActionRequest, AttachReply, AttachRequest, RobotAttached, Wait, decode, decode_event
-from sweep import sweep
-from waits import served, subscribed
 
 ROBOTS = ("alice", "bob", "david")
 
@@ -86,7 +85,9 @@ async def test_acl_only_own_robot(tmp_path: Path) -> None:
         try:
             seen: list[str] = []
             own = asyncio.Event()
-            david.subscribe(f"{k.base}/robot/alice/**", lambda s: seen.append(s.key))  # denied: david may not read alice's keys
+            david.subscribe(
+                f"{k.base}/robot/alice/**", lambda s: seen.append(s.key)
+            )  # denied: david may not read alice's keys
             david.subscribe(k.action_ack("david"), lambda s: own.set())  # allowed, declared after the denied one
             await subscribed(alice, k.action_request("alice"))  # the world's declarations reached the robots' sessions
             await subscribed(bob, k.action_request("bob"))
@@ -151,7 +152,11 @@ async def test_expired_certificate_fails_clearly(tmp_path: Path) -> None:
 
 
 async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> None:
-    cfg = EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
+    cfg = (
+        EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "trace.jsonl")
+        .resolved()
+        .with_credentials(tmp_path / "cred")
+    )
     k = Keys(cfg.run)
     episode = asyncio.create_task(up_in_process(cfg))
     evil_goals: list[str] = []
@@ -195,7 +200,11 @@ async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> Non
 
 
 async def test_duplicate_attach_with_a_live_agents_id_is_refused(tmp_path: Path) -> None:
-    cfg = EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
+    cfg = (
+        EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "trace.jsonl")
+        .resolved()
+        .with_credentials(tmp_path / "cred")
+    )
     k = Keys(cfg.run)
     episode = asyncio.create_task(up_in_process(cfg, robots=("alice",)))  # the world waits for bob and david
     copycat = await open_client(cfg.endpoint, 30, security=cfg.participant("alice"))  # even alice's own credentials
@@ -225,7 +234,11 @@ async def test_duplicate_attach_with_a_live_agents_id_is_refused(tmp_path: Path)
 @pytest.mark.parametrize("task", sweep(["pack_objects", "sort_solids", "make_sandwich"]))
 async def test_up_processes_with_credentials(task: str, tmp_path: Path) -> None:
     """`mhrc up --processes`' way (the world and every agent a process of its own), secured as by default, finishes every task."""
-    cfg = EpisodeConfig.build(task=task, seed=0, n_objects=4, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
+    cfg = (
+        EpisodeConfig.build(task=task, seed=0, n_objects=4, trace=tmp_path / "trace.jsonl")
+        .resolved()
+        .with_credentials(tmp_path / "cred")
+    )
     assert cfg.endpoint.startswith("tls/")
     done = await up_processes(cfg)
     assert done.reason == "success"
@@ -249,9 +262,12 @@ def _open_without_login(port: int, ca: Path) -> None:
 
     conf = zenoh.Config()
     for key, value in {
-        "mode": "client", "connect/endpoints": [f"tls/127.0.0.1:{port}"], "connect/timeout_ms": 1500,
-        "scouting/multicast/enabled": False, "transport/link/tls/root_ca_certificate": str(ca),
-    }.items():  # fmt: skip
+        "mode": "client",
+        "connect/endpoints": [f"tls/127.0.0.1:{port}"],
+        "connect/timeout_ms": 1500,
+        "scouting/multicast/enabled": False,
+        "transport/link/tls/root_ca_certificate": str(ca),
+    }.items():
         conf.insert_json5(key, json.dumps(value))
     with pytest.raises(zenoh.ZError):
         zenoh.open(conf).close()
@@ -273,9 +289,22 @@ async def test_the_world_says_which_logins_it_refused(tmp_path: Path) -> None:
     err = tmp_path / "world.err"
     with err.open("wb") as sink:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "mhrc", "world", "--credentials", str(files["world"]), "--port", str(port), "--objects", "3"],
-            stdout=subprocess.DEVNULL, stderr=sink, stdin=subprocess.DEVNULL,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "mhrc",
+                "world",
+                "--credentials",
+                str(files["world"]),
+                "--port",
+                str(port),
+                "--objects",
+                "3",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=sink,
+            stdin=subprocess.DEVNULL,
+        )
         try:
             _wait_for(err, "world listening")
             ep = endpoint("127.0.0.1", port, tls=True)
@@ -310,13 +339,29 @@ def test_mhrc_credentials_issues_a_run_for_containers(tmp_path: Path) -> None:
     from cryptography import x509
 
     out = tmp_path / "creds"
-    cmd = [sys.executable, "-m", "mhrc", "credentials", "--out", str(out), "--split", "--host", "world", "--run", "dock"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "mhrc",
+        "credentials",
+        "--out",
+        str(out),
+        "--split",
+        "--host",
+        "world",
+        "--run",
+        "dock",
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert "run dock" in done.stderr and done.stdout == ""
     for user in ("world", *ROBOTS, "observer"):
         files = sorted(p.name for p in (out / user).iterdir())
-        expected = ["ca.pem", "users.txt", "world.json", "world.key", "world.pem"] if user == "world" else sorted(["ca.pem", f"{user}.json"])
+        expected = (
+            ["ca.pem", "users.txt", "world.json", "world.key", "world.pem"]
+            if user == "world"
+            else sorted(["ca.pem", f"{user}.json"])
+        )
         assert files == expected, (user, files)
         creds = security.load(out / user / f"{user}.json")
         assert (creds.run, creds.user, creds.kind) == ("dock", user, "run")
@@ -328,8 +373,12 @@ def test_mhrc_credentials_issues_a_run_for_containers(tmp_path: Path) -> None:
     before = (out / "alice" / "alice.json").read_text()
     assert subprocess.run([*cmd, "--force"], capture_output=True, text=True, timeout=60).returncode == 0
     assert (out / "alice" / "alice.json").read_text() != before  # new passwords
-    bad = subprocess.run([sys.executable, "-m", "mhrc", "credentials", "--out", str(tmp_path / "b"), "--run", "Bad Id!"],
-                         capture_output=True, text=True, timeout=60)  # fmt: skip
+    bad = subprocess.run(
+        [sys.executable, "-m", "mhrc", "credentials", "--out", str(tmp_path / "b"), "--run", "Bad Id!"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert bad.returncode == 2 and "run id" in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
 
 
@@ -345,8 +394,17 @@ def test_an_old_evaluation_login_is_refused_with_what_to_do_instead(tmp_path: Pa
 
 
 # ---------------------------------------------------------------------------------- only the world speaks for the world
-WORLD_ONLY_PUTS = ("world/event", "robot/alice/action/ack", "robot/alice/action/result", "robot/alice/turn", "robot/alice/inbox/bob",
-                   "robot/bob/action/ack", "robot/bob/action/result", "robot/bob/turn", "robot/bob/inbox/alice")  # fmt: skip
+WORLD_ONLY_PUTS = (
+    "world/event",
+    "robot/alice/action/ack",
+    "robot/alice/action/result",
+    "robot/alice/turn",
+    "robot/alice/inbox/bob",
+    "robot/bob/action/ack",
+    "robot/bob/action/result",
+    "robot/bob/turn",
+    "robot/bob/inbox/alice",
+)
 
 
 @pytest.mark.parametrize("attacker", ["bob", "observer"])
@@ -400,7 +458,9 @@ async def test_only_the_world_speaks_for_the_world(attacker: str, tmp_path: Path
                 assert sorted(key for key, p in seen[who] if p == b"genuine") == sorted(expected), who
             for who, got in seen.items():
                 assert [key for key, p in got if p == b"forged"] == [], f"{who} saw a message forged by {attacker}"
-            assert await alice.alive("mhrc/*/alive/world") == [k.alive_world]  # no phantom world, here or in another run
+            assert await alice.alive("mhrc/*/alive/world") == [
+                k.alive_world
+            ]  # no phantom world, here or in another run
             assert await recorder.alive(f"{k.base}/alive/**") == [k.alive_world]  # no liveliness token for alice either
             replies = await recorder.get(k.world_state, timeout=5)
             assert [decode(r, RobotAttached).agent_id for r in replies] == ["the-world"]  # one reply: the world's
@@ -417,17 +477,34 @@ async def test_a_forged_episode_done_cannot_end_a_secured_run(tmp_path: Path) ->
     terms, and neither the runner nor the trace ever sees the forgery."""
     from mhrc.core.protocol import EpisodeDone, EpisodeStarted, Metrics
 
-    cfg = EpisodeConfig.build(seed=1, n_objects=3, trace=tmp_path / "trace.jsonl").resolved().with_credentials(tmp_path / "cred")
+    cfg = (
+        EpisodeConfig.build(seed=1, n_objects=3, trace=tmp_path / "trace.jsonl")
+        .resolved()
+        .with_credentials(tmp_path / "cred")
+    )
     k = Keys(cfg.run)
-    forged = EpisodeDone(run=cfg.run, reason="success", metrics=Metrics(
-        success=True, partial_success=1.0, placed=99, total=99, temporal_steps=1, action_steps=1, action_steps_per_robot={}))  # fmt: skip
+    forged = EpisodeDone(
+        run=cfg.run,
+        reason="success",
+        metrics=Metrics(
+            success=True,
+            partial_success=1.0,
+            placed=99,
+            total=99,
+            temporal_steps=1,
+            action_steps=1,
+            action_steps_per_robot={},
+        ),
+    )
     episode = asyncio.create_task(up_processes(cfg))
     forgers: list[Bus] = []
     try:
         for user in ("observer", "bob"):
             forgers.append(await open_client(cfg.endpoint, 60, security=cfg.participant(user)))
         started = asyncio.Event()
-        forgers[0].subscribe(k.world_event, lambda s: started.set() if isinstance(decode_event(s.payload), EpisodeStarted) else None)
+        forgers[0].subscribe(
+            k.world_event, lambda s: started.set() if isinstance(decode_event(s.payload), EpisodeStarted) else None
+        )
         await asyncio.wait_for(started.wait(), 120)
         for bus in forgers:
             bus.put(k.world_event, forged)
@@ -454,32 +531,81 @@ def test_a_hand_started_secured_world_says_how_to_attach_and_why_not(tmp_path: P
     import sys
 
     d = tmp_path / "creds"
-    made = subprocess.run([sys.executable, "-m", "mhrc", "credentials", "--out", str(d), "--run", "hand"], capture_output=True, text=True)
+    made = subprocess.run(
+        [sys.executable, "-m", "mhrc", "credentials", "--out", str(d), "--run", "hand"], capture_output=True, text=True
+    )
     assert made.returncode == 0, made.stderr
     port = free_port()
     err, out = tmp_path / "world.err", tmp_path / "world.out"
     env = {k: v for k, v in __import__("os").environ.items() if k not in ("MHRC_CREDENTIALS", "RUST_LOG")}
     with err.open("wb") as e_sink, out.open("wb") as o_sink:
-        world = subprocess.Popen([sys.executable, "-m", "mhrc", "world", "--credentials", str(d / "world.json"), "--port", str(port),
-                                  "--objects", "3"], stdout=o_sink, stderr=e_sink, stdin=subprocess.DEVNULL, env=env)  # fmt: skip
+        world = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "mhrc",
+                "world",
+                "--credentials",
+                str(d / "world.json"),
+                "--port",
+                str(port),
+                "--objects",
+                "3",
+            ],
+            stdout=o_sink,
+            stderr=e_sink,
+            stdin=subprocess.DEVNULL,
+            env=env,
+        )
         agent = None
         try:
             text = _wait_for(err, "mhrc agent --robot david")
             printed = [line.strip() for line in text.splitlines() if line.strip().startswith("mhrc agent --robot")]
             assert printed[0].endswith(f"--credentials {d / 'alice.json'}"), printed
             agent_cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", "alice", "--attach-timeout", "300"]
-            plain = subprocess.run([*agent_cmd, "--connect", f"tcp/127.0.0.1:{port}", "--insecure"],
-                                   capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
+            plain = subprocess.run(
+                [*agent_cmd, "--connect", f"tcp/127.0.0.1:{port}", "--insecure"],
+                capture_output=True,
+                text=True,
+                timeout=120,
+                env=env,
+            )
             assert plain.returncode == 2, plain.stderr
-            assert f"is secured (it speaks TLS): connect to tls/127.0.0.1:{port}" in plain.stderr and "Traceback" not in plain.stderr
-            bare = subprocess.run([*agent_cmd, "--connect", f"tls/127.0.0.1:{port}"], capture_output=True, text=True, timeout=120, env=env)
-            assert bare.returncode == 2 and "--credentials" in bare.stderr and "open tcp bus" not in bare.stderr, bare.stderr
+            assert (
+                f"is secured (it speaks TLS): connect to tls/127.0.0.1:{port}" in plain.stderr
+                and "Traceback" not in plain.stderr
+            )
+            bare = subprocess.run(
+                [*agent_cmd, "--connect", f"tls/127.0.0.1:{port}"], capture_output=True, text=True, timeout=120, env=env
+            )
+            assert bare.returncode == 2 and "--credentials" in bare.stderr and "open tcp bus" not in bare.stderr, (
+                bare.stderr
+            )
             _wait_for(err, "a client spoke plain tcp to the secured world")
-            agent = subprocess.Popen([sys.executable, "-m", "mhrc", *shlex.split(printed[0])[1:]], stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env)  # fmt: skip
+            agent = subprocess.Popen(
+                [sys.executable, "-m", "mhrc", *shlex.split(printed[0])[1:]],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                stdin=subprocess.DEVNULL,
+                env=env,
+            )
             for _ in range(120):  # the command as printed attaches alice
-                listed = subprocess.run([sys.executable, "-m", "mhrc", "bus", "list", "--connect", f"tls/127.0.0.1:{port}",
-                                         "--credentials", str(d / "observer.json")], capture_output=True, text=True, env=env)  # fmt: skip
+                listed = subprocess.run(
+                    [
+                        sys.executable,
+                        "-m",
+                        "mhrc",
+                        "bus",
+                        "list",
+                        "--connect",
+                        f"tls/127.0.0.1:{port}",
+                        "--credentials",
+                        str(d / "observer.json"),
+                    ],
+                    capture_output=True,
+                    text=True,
+                    env=env,
+                )
                 if "robots attached: alice" in listed.stdout:
                     break
                 time.sleep(0.5)
@@ -506,7 +632,10 @@ async def test_a_certificate_that_expires_mid_run_is_named(tmp_path: Path) -> No
     files = security.make_run_credentials(cfg.run, ROBOTS, tmp_path / "cred", days=20 / 86400)
     cfg = cfg.model_copy(update={"credentials": tmp_path / "cred"})
     world = asyncio.create_task(serve_world(cfg))
-    agents = [asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint, security=security.load(files[r]), attach_timeout=30)) for r in ROBOTS]
+    agents = [
+        asyncio.create_task(run_agent(r, cfg.run, cfg.endpoint, security=security.load(files[r]), attach_timeout=30))
+        for r in ROBOTS
+    ]
     try:
         outcomes = await asyncio.wait_for(asyncio.gather(*agents, return_exceptions=True), 120)
     finally:
@@ -524,7 +653,9 @@ def test_both_ways_rustls_reads_a_plain_tcp_client_name_the_same_cause(kind: str
     prefix): the world names one cause for both, and says nothing else of it."""
     from mhrc.core import zenoh_log
 
-    line = (f"2026-11-24T20:48:44.1Z  WARN tokio ThreadId(7) zenoh_link_tls::unicast: received corrupt message of type {kind}."
-            " Hint: increase the system open file limit.")  # fmt: skip
+    line = (
+        f"2026-11-24T20:48:44.1Z  WARN tokio ThreadId(7) zenoh_link_tls::unicast: received corrupt message of type {kind}."
+        " Hint: increase the system open file limit."
+    )
     assert zenoh_log.classify(line) == zenoh_log.classify(line.replace(kind, "InvalidContentType"))
     assert "plain tcp" in (zenoh_log.classify(line) or "")

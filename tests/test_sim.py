@@ -11,9 +11,6 @@ from collections.abc import Iterator
 import numpy as np
 import pybullet as p
 import pytest
-from mhrc.world.scene import LAYOUTS
-from mhrc.world.sim import Sim, check_episode
-from mhrc.world.tasks import TASKS
 from sweep import sweep
 
 from mhrc.core.protocol import (
@@ -29,6 +26,9 @@ from mhrc.core.protocol import (
     SkillOutcome,
     Wait,
 )
+from mhrc.world.scene import LAYOUTS
+from mhrc.world.sim import Sim, check_episode
+from mhrc.world.tasks import TASKS
 
 
 def _ok(out: SkillOutcome) -> SkillOutcome:
@@ -42,7 +42,9 @@ def _obj(obs: Observation, name: str) -> ObjectView | None:
 
 def _nearest_pose(obs: Observation, furniture: str, xy: tuple[float, ...]) -> int:
     f = next(f for f in obs.furniture if f.name == furniture)
-    return min(range(len(f.stand_poses)), key=lambda i: math.hypot(f.stand_poses[i].x - xy[0], f.stand_poses[i].y - xy[1]))
+    return min(
+        range(len(f.stand_poses)), key=lambda i: math.hypot(f.stand_poses[i].x - xy[0], f.stand_poses[i].y - xy[1])
+    )
 
 
 def _bob_can_reach(obs: Observation, o: ObjectView) -> bool:
@@ -98,20 +100,31 @@ def play_by_the_rules(sim: Sim) -> None:
 
 
 # every scene x task x size; the fast tier solves one episode of each task, each in another scene
-SOLVABLE = [(scene, task, n, seed) for scene in sorted(LAYOUTS) for task in sorted(TASKS) for n, seed in [(3, 0), (4, 1), (5, 5), (6, 3)]]
+SOLVABLE = [
+    (scene, task, n, seed)
+    for scene in sorted(LAYOUTS)
+    for task in sorted(TASKS)
+    for n, seed in [(3, 0), (4, 1), (5, 5), (6, 3)]
+]
 FIRST = [("kitchen", "pack_objects", 4, 1), ("bedroom", "make_sandwich", 5, 5), ("bathroom", "sort_solids", 6, 3)]
 
 
-@pytest.mark.parametrize(("scene", "task", "n_objects", "seed"), sweep(FIRST + [c for c in SOLVABLE if c not in FIRST], fast=len(FIRST)))
+@pytest.mark.parametrize(
+    ("scene", "task", "n_objects", "seed"), sweep(FIRST + [c for c in SOLVABLE if c not in FIRST], fast=len(FIRST))
+)
 def test_every_generated_episode_is_solvable_by_the_team(scene: str, task: str, n_objects: int, seed: int) -> None:
-    with Sim(task=task, scene=scene, seed=seed, n_objects=n_objects, aids=("goal_map", "solved_move", "exact_motion")) as sim:
+    with Sim(
+        task=task, scene=scene, seed=seed, n_objects=n_objects, aids=("goal_map", "solved_move", "exact_motion")
+    ) as sim:
         result = sim.evaluate()
         assert (result.placed, result.total, result.success) == (0, n_objects, False)
         play_by_the_rules(sim)
         result = sim.evaluate()
         assert result.success and result.placed == n_objects and result.partial_success == 1.0
         status = sim.task_status()  # Bob's progress text names every target and nothing left to do
-        assert all(t in status for t in sim.targets) and not any(w in status for w in ("Not yet", "Next:", "rong")), status
+        assert all(t in status for t in sim.targets) and not any(w in status for w in ("Not yet", "Next:", "rong")), (
+            status
+        )
 
 
 @pytest.mark.slow
@@ -122,7 +135,11 @@ def test_each_episode_has_the_work_the_paper_describes() -> None:
             targets = {t: sim.objects[t] for t in sim.targets}
             near = [t for t in targets if (o := _obj(bob, t)) is not None and _bob_can_reach(bob, o)]
             far = [t for t, o in targets.items() if o.on == "table_0" and t not in near]
-            hidden = [t for t, o in targets.items() if o.inside and (f := sim.layout.get(o.on or "")) is not None and f.container is not None]
+            hidden = [
+                t
+                for t, o in targets.items()
+                if o.inside and (f := sim.layout.get(o.on or "")) is not None and f.container is not None
+            ]
             assert near and far and hidden, (seed, near, far, hidden)
             assert 1 <= len(sim.objects) - len(sim.targets) <= 2  # distractors
         with Sim(seed=seed, n_objects=6) as sim:
@@ -134,7 +151,9 @@ def test_same_seed_same_actions_same_outcomes() -> None:
     """Two worlds side by side (gymnasium style): every outcome and the final state agree."""
     with Sim(seed=2, n_objects=4) as a, Sim(seed=2, n_objects=4) as b:
         bob = a.observe("bob", 0)
-        far = next(t for t in a.targets if (o := _obj(bob, t)) is not None and o.on == "table_0" and not _bob_can_reach(bob, o))
+        far = next(
+            t for t in a.targets if (o := _obj(bob, t)) is not None and o.on == "table_0" and not _bob_can_reach(bob, o)
+        )
         assert a.execute("bob", Pick(obj=far)) == b.execute("bob", Pick(obj=far))
         for sim in (a, b):
             sim.tell("alice", "bob", f"bring {far}")
@@ -174,14 +193,27 @@ def _fails(sim: Sim, robot: str, action: object, code: OutcomeCode, *texts: str)
 def test_bad_arguments_get_failure_feedback_not_exceptions(sim: Sim) -> None:
     _fails(sim, "alice", Pick(obj="applle"), OutcomeCode.OBJECT_UNKNOWN, "'applle'", "objects you know: none")
     _fails(sim, "alice", Navigate(target="garage"), OutcomeCode.TARGET_UNKNOWN, "'garage'", "table_0")
-    _fails(sim, "alice", Navigate(target="table_0", stand_pose=7), OutcomeCode.STAND_POSE_INVALID, "3 stand pose(s)", "0 to 2")
+    _fails(
+        sim,
+        "alice",
+        Navigate(target="table_0", stand_pose=7),
+        OutcomeCode.STAND_POSE_INVALID,
+        "3 stand pose(s)",
+        "0 to 2",
+    )
     _fails(sim, "alice", Navigate(target="tray"), OutcomeCode.NOT_NAVIGABLE, "tray", "table_0")
     _fails(sim, "alice", Place(obj="apple", location="table_0"), OutcomeCode.GRIPPER_EMPTY, "empty")
     _fails(sim, "alice", Open(target="table_1"), OutcomeCode.NOT_OPENABLE, "table_1")
     _fails(sim, "alice", Open(target="wardrobe"), OutcomeCode.TARGET_UNKNOWN, "'wardrobe'")
     _fails(sim, "alice", Open(target="drawer_unit"), OutcomeCode.OUT_OF_REACH, "handle of drawer_unit")
     _fails(sim, "alice", Move(dx=3.0, dy=0.0), OutcomeCode.GOAL_INVALID, "1.0 m")
-    _fails(sim, "david", Pick(obj="apple"), OutcomeCode.NOT_CAPABLE, "David cannot pick: its skills are navigate, communicate, wait.")
+    _fails(
+        sim,
+        "david",
+        Pick(obj="apple"),
+        OutcomeCode.NOT_CAPABLE,
+        "David cannot pick: its skills are navigate, communicate, wait.",
+    )
     _fails(sim, "bob", Navigate(target="table_0"), OutcomeCode.NOT_CAPABLE, "Bob cannot navigate")
     _fails(sim, "bob", Place(obj="x", location="tray"), OutcomeCode.GRIPPER_EMPTY)
     _fails(sim, "carol", Wait(), OutcomeCode.NOT_CAPABLE, "no robot 'carol'")
@@ -205,10 +237,16 @@ def test_navigation_failures_of_a_broken_layout(monkeypatch: pytest.MonkeyPatch)
     table_1 = LAYOUTS["kitchen"].get("table_1")
     assert table_1 is not None
     bad = dataclasses.replace(table_1, stand_poses=((0.5, 0.0, 0.0),) + table_1.stand_poses)  # pose 0 in a wall
-    layout = dataclasses.replace(LAYOUTS["kitchen"], name="broken", furniture=tuple(bad if f.name == "table_1" else f for f in LAYOUTS["kitchen"].furniture))
+    layout = dataclasses.replace(
+        LAYOUTS["kitchen"],
+        name="broken",
+        furniture=tuple(bad if f.name == "table_1" else f for f in LAYOUTS["kitchen"].furniture),
+    )
     monkeypatch.setitem(LAYOUTS, "broken", layout)
     with Sim(scene="broken", seed=0, aids=("exact_motion",)) as s:
-        _fails(s, "alice", Navigate(target="table_1", stand_pose=0), OutcomeCode.GOAL_INVALID, "stand pose 0 of table_1")
+        _fails(
+            s, "alice", Navigate(target="table_1", stand_pose=0), OutcomeCode.GOAL_INVALID, "stand pose 0 of table_1"
+        )
         _ok(s.execute("alice", Navigate(target="table_1", stand_pose=1)))
         s.bots["alice"].set_base((2.5, 2.5, 0.0))  # dropped onto the table: the start is invalid
         _fails(s, "alice", Navigate(target="sofa", stand_pose=0), OutcomeCode.START_INVALID, "start pose")
@@ -221,9 +259,11 @@ def test_no_path_into_a_walled_off_pocket(monkeypatch: pytest.MonkeyPatch) -> No
     assert table_1 is not None
     pocket = dataclasses.replace(table_1, stand_poses=table_1.stand_poses + ((3.0, 1.6, 0.0),))
     layout = dataclasses.replace(
-        LAYOUTS["kitchen"], name="pocket", walls=LAYOUTS["kitchen"].walls + ring,
+        LAYOUTS["kitchen"],
+        name="pocket",
+        walls=LAYOUTS["kitchen"].walls + ring,
         furniture=tuple(pocket if f.name == "table_1" else f for f in LAYOUTS["kitchen"].furniture),
-    )  # fmt: skip
+    )
     monkeypatch.setitem(LAYOUTS, "pocket", layout)
     with Sim(scene="pocket", seed=0) as s:
         assert s.grid.free(3.0, 1.6)
@@ -233,7 +273,9 @@ def test_no_path_into_a_walled_off_pocket(monkeypatch: pytest.MonkeyPatch) -> No
 def test_drawer_opens_for_real_and_contents_wait_for_it(sim: Sim) -> None:
     inside = next(o for o in sim.objects.values() if o.inside)
     if (f := sim.layout.get(inside.on or "")) is None or f.drawer is None:  # the generator's container may have a door
-        unit = next(g for g in sim.layout.furniture if g.drawer is not None and g.drawer.max_object_height >= inside.kind.height)
+        unit = next(
+            g for g in sim.layout.furniture if g.drawer is not None and g.drawer.max_object_height >= inside.kind.height
+        )
         assert unit.drawer is not None
         inside.on, inside.local = unit.name, unit.drawer.slots[0]
         sim.world.follow_container(inside)
@@ -261,7 +303,9 @@ def test_drawer_opens_for_real_and_contents_wait_for_it(sim: Sim) -> None:
     assert held is not None and held.held_by == "alice" and held.on is None
     _fails(sim, "alice", Pick(obj=inside.name), OutcomeCode.GRIPPER_FULL, inside.name)
     _fails(sim, "alice", Place(obj="apple", location="table_0"), OutcomeCode.WRONG_OBJECT, f"You hold {inside.name}")
-    _fails(sim, "alice", Place(obj=inside.name, location="attic"), OutcomeCode.LOCATION_UNKNOWN, "'attic'", "table_0")  # the places Alice may use
+    _fails(
+        sim, "alice", Place(obj=inside.name, location="attic"), OutcomeCode.LOCATION_UNKNOWN, "'attic'", "table_0"
+    )  # the places Alice may use
     _fails(sim, "alice", Place(obj=inside.name, location=drawer), OutcomeCode.LOCATION_UNKNOWN)
     _fails(sim, "alice", Place(obj=inside.name, location="table_1"), OutcomeCode.TOO_FAR, "table_1")
 
@@ -292,7 +336,9 @@ def test_a_chest_lid_swings_up_on_its_hinge_and_shows_what_is_inside(scene: str,
 
 def test_a_far_grasp_reports_the_offsets_that_fix_it(sim: Sim) -> None:
     bob = sim.observe("bob", 0)
-    far = next(t for t in bob.targets if (o := _obj(bob, t)) is not None and o.on == "table_0" and not _bob_can_reach(bob, o))
+    far = next(
+        t for t in bob.targets if (o := _obj(bob, t)) is not None and o.on == "table_0" and not _bob_can_reach(bob, o)
+    )
     _fails(sim, "bob", Pick(obj=far), OutcomeCode.TOO_FAR, far)
     sim.tell("alice", "bob", f"I cannot reach the {far}.")
     _ok(sim.execute("alice", Navigate(target="table_0", stand_pose=0)))  # the stand pose at Bob's end
@@ -305,7 +351,11 @@ def test_a_far_grasp_reports_the_offsets_that_fix_it(sim: Sim) -> None:
 
 def test_a_planner_that_starts_in_collision_says_so(sim: Sim) -> None:
     bob = sim.bots["bob"]
-    near = next(t for t in sim.targets if (o := _obj(sim.observe("bob", 0), t)) is not None and _bob_can_reach(sim.observe("bob", 0), o))
+    near = next(
+        t
+        for t in sim.targets
+        if (o := _obj(sim.observe("bob", 0), t)) is not None and _bob_can_reach(sim.observe("bob", 0), o)
+    )
     bob.set_arm(np.array([0.0, 1.2, 0.0, -1.0, 0.0, 2.0, 0.785]))  # the hand pushed into the table top
     _fails(sim, "bob", Pick(obj=near), OutcomeCode.CONFIG_INVALID, "start configuration invalid")
 
@@ -343,7 +393,10 @@ def test_no_observation_leaks_an_unseen_object(scene: str) -> None:
         bob, alice = sim.observe("bob", 0), sim.observe("alice", 0)
         assert bob.targets == sim.targets and alice.targets == [] and sim.observe("david", 0).targets == []
         assert bob.task_status is not None and alice.task_status is None
-        assert alice.teammates == {"bob": ["pick", "place", "communicate", "wait"], "david": ["navigate", "communicate", "wait"]}
+        assert alice.teammates == {
+            "bob": ["pick", "place", "communicate", "wait"],
+            "david": ["navigate", "communicate", "wait"],
+        }
         assert bob.status.base is None and bob.status.arm_base is not None and bob.status.reach
         assert sim.observe("david", 0).status.arm_base is None and sim.observe("david", 0).status.reach is None
         # David looks at a surface: he learns what is on it, nobody else does
@@ -370,4 +423,8 @@ def test_no_observation_leaks_an_unseen_object(scene: str) -> None:
         _fails(sim, "alice", Navigate(target=secret), OutcomeCode.TARGET_UNKNOWN)
         # full ground truth stays available to observers
         furniture, objects = sim.views()
-        assert {o.name for o in objects} == set(sim.objects) and {f.name for f in furniture} >= {"table_0", "tray", container}
+        assert {o.name for o in objects} == set(sim.objects) and {f.name for f in furniture} >= {
+            "table_0",
+            "tray",
+            container,
+        }

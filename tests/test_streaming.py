@@ -35,13 +35,23 @@ HI = [{"role": "system", "content": "You are a test."}, {"role": "user", "conten
 SSE = {"Content-Type": "text/event-stream"}
 
 
-def chunk(content: str | None = None, *, reasoning: str | None = None, field: str = "reasoning_content", finish: str | None = None) -> dict[str, Any]:
+def chunk(
+    content: str | None = None,
+    *,
+    reasoning: str | None = None,
+    field: str = "reasoning_content",
+    finish: str | None = None,
+) -> dict[str, Any]:
     delta: dict[str, Any] = {}
     if content is not None:
         delta["content"] = content
     if reasoning is not None:
         delta[field] = reasoning
-    return {"id": "chatcmpl-1", "object": "chat.completion.chunk", "choices": [{"index": 0, "delta": delta, "finish_reason": finish}]}
+    return {
+        "id": "chatcmpl-1",
+        "object": "chat.completion.chunk",
+        "choices": [{"index": 0, "delta": delta, "finish_reason": finish}],
+    }
 
 
 def events(*chunks: dict[str, Any], done: bool = True) -> list[bytes]:
@@ -51,7 +61,12 @@ def events(*chunks: dict[str, Any], done: bool = True) -> list[bytes]:
 
 
 def usage(prompt: int, completion: int) -> dict[str, Any]:
-    return {"id": "chatcmpl-1", "object": "chat.completion.chunk", "choices": [], "usage": {"prompt_tokens": prompt, "completion_tokens": completion}}
+    return {
+        "id": "chatcmpl-1",
+        "object": "chat.completion.chunk",
+        "choices": [],
+        "usage": {"prompt_tokens": prompt, "completion_tokens": completion},
+    }
 
 
 @pytest.fixture
@@ -85,14 +100,22 @@ async def test_a_streamed_reply_is_put_together_from_its_chunks_with_usage_from_
 @pytest.mark.parametrize("field", ["reasoning_content", "reasoning"])
 async def test_reasoning_deltas_and_a_think_block_split_across_chunks_stay_out_of_the_answer(serve, field: str) -> None:  # type: ignore[no-untyped-def]
     stream = events(
-        chunk(reasoning="I could ", field=field), chunk(reasoning="pick(apple).", field=field),
-        chunk("<thi"), chunk("nk>Or navigate(sofa, 0)? Command: pick(x)</th"), chunk("ink>\nCommand: "), chunk("wait()", finish="stop"),
-    )  # fmt: skip
+        chunk(reasoning="I could ", field=field),
+        chunk(reasoning="pick(apple).", field=field),
+        chunk("<thi"),
+        chunk("nk>Or navigate(sofa, 0)? Command: pick(x)</th"),
+        chunk("ink>\nCommand: "),
+        chunk("wait()", finish="stop"),
+    )
     server = serve([ModelReply(headers=SSE, stream=stream)])
     async with OpenAIChatClient("m", server.url) as client:
         c = await client.complete(HI)
     assert c.text.strip() == "Command: wait()"
-    assert c.reasoning is not None and c.reasoning.startswith("I could pick(apple).") and "Or navigate(sofa, 0)?" in c.reasoning
+    assert (
+        c.reasoning is not None
+        and c.reasoning.startswith("I could pick(apple).")
+        and "Or navigate(sofa, 0)?" in c.reasoning
+    )
     assert c.reasoning_tokens > 0
 
 
@@ -110,9 +133,13 @@ async def test_a_stream_that_stalls_mid_reply_is_abandoned_after_the_idle_timeou
     """The first token came, then nothing: the idle timeout (not the first-token timeout, which
     is far longer here) ends the call; it is retried once, then reported as a stall."""
     stalled = events(chunk("Analysis: I am "), chunk("thinking"), done=False)
-    server = serve(lambda body: ModelReply(headers=SSE, stream=stalled, stall=True))  # then no more until the test is over
+    server = serve(
+        lambda body: ModelReply(headers=SSE, stream=stalled, stall=True)
+    )  # then no more until the test is over
     async with OpenAIChatClient("m", server.url, timeout=60, idle_timeout=0.3, backoff=0.01) as client:
-        with pytest.raises(LLMTimeout, match=r"the stream stalled: no chunk for 0\.3 s after 2 chunk\(s\), 2 time\(s\)") as err:
+        with pytest.raises(
+            LLMTimeout, match=r"the stream stalled: no chunk for 0\.3 s after 2 chunk\(s\), 2 time\(s\)"
+        ) as err:
             await client.complete(HI)
     assert not isinstance(err.value, LLMSilent)  # it answered: slow, not down
     assert len(server.requests) == 2
@@ -146,19 +173,32 @@ async def test_a_finished_stream_leaves_its_connection_open_for_the_next_call(se
 async def test_a_whole_json_body_or_a_mislabelled_stream_answers_a_stream_request(serve) -> None:  # type: ignore[no-untyped-def]
     """Some proxies answer `"stream": true` with a plain completion, or send events as JSON."""
     mislabelled = events(chunk("Command: "), chunk("wait()", finish="stop"), usage(7, 3))
-    server = serve([ModelReply("Command: wait()", usage={"prompt_tokens": 9, "completion_tokens": 4}),
-                    ModelReply(stream=mislabelled)])  # fmt: skip  (the server's own Content-Type: application/json)
+    server = serve(
+        [
+            ModelReply("Command: wait()", usage={"prompt_tokens": 9, "completion_tokens": 4}),
+            ModelReply(stream=mislabelled),
+        ]
+    )  # fmt: skip  (the server's own Content-Type: application/json)
     async with OpenAIChatClient("m", server.url) as client:
         whole = await client.complete(HI)
         events_as_json = await client.complete(HI)
     assert (whole.text, whole.prompt_tokens, whole.completion_tokens) == ("Command: wait()", 9, 4)
-    assert (events_as_json.text, events_as_json.prompt_tokens, events_as_json.completion_tokens) == ("Command: wait()", 7, 3)
+    assert (events_as_json.text, events_as_json.prompt_tokens, events_as_json.completion_tokens) == (
+        "Command: wait()",
+        7,
+        3,
+    )
     assert all(body["stream"] is True for body in server.requests)
 
 
 async def test_an_error_event_in_the_stream_is_retried_as_unreadable(serve) -> None:  # type: ignore[no-untyped-def]
     bad = [b'data: {"error": {"message": "the slot was lost"}}\n\n']
-    server = serve([ModelReply(headers=SSE, stream=bad), ModelReply(headers=SSE, stream=events(chunk("Command: wait()", finish="stop")))])
+    server = serve(
+        [
+            ModelReply(headers=SSE, stream=bad),
+            ModelReply(headers=SSE, stream=events(chunk("Command: wait()", finish="stop"))),
+        ]
+    )
     async with OpenAIChatClient("m", server.url, backoff=0.01) as client:
         c = await client.complete(HI)
     assert c.text == "Command: wait()" and len(server.requests) == 2
@@ -193,7 +233,9 @@ async def test_a_server_that_never_sends_a_status_line_is_silent_and_stops_a_fir
     try:
         with pytest.raises(LLMSilent, match="no status line"):
             await client.complete(HI)
-        assert client.requests == 2 and client.responses == 0 and not client.answered  # the call and one retry of its timeout
+        assert (
+            client.requests == 2 and client.responses == 0 and not client.answered
+        )  # the call and one retry of its timeout
         with pytest.raises(LLMUnreachable, match="never answered during its first step: .*no status line"):
             await LLMPolicy("alice", client).decide(_obs())
     finally:
@@ -215,17 +257,40 @@ async def test_a_server_that_answered_before_and_then_goes_mute_only_costs_steps
 @pytest.mark.slow
 async def test_up_against_a_server_that_never_answers_is_one_line_exit_2(mute: str, tmp_path: Path) -> None:
     """Before: the run went on to its horizon, "it waits" every tick, exit 0."""
-    cfg = EpisodeConfig.build(seed=0, horizon=50, llm="openai:m", base_url=mute, llm_timeout=0.5, trace=tmp_path / "t.jsonl").resolved()
+    cfg = EpisodeConfig.build(
+        seed=0, horizon=50, llm="openai:m", base_url=mute, llm_timeout=0.5, trace=tmp_path / "t.jsonl"
+    ).resolved()
     with pytest.raises(LLMUnreachable, match="never answered during its first step"):
         await up_in_process(cfg)
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}
     run = subprocess.run(
-        [sys.executable, "-m", "mhrc", "up", "--insecure", "--quiet", "--horizon", "50", "--llm", "openai:m", "--base-url", mute, "--llm-timeout", "0.5"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=240, env=env,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "mhrc",
+            "up",
+            "--insecure",
+            "--quiet",
+            "--horizon",
+            "50",
+            "--llm",
+            "openai:m",
+            "--base-url",
+            mute,
+            "--llm-timeout",
+            "0.5",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=240,
+        env=env,
+    )
     assert run.returncode == 2, (run.returncode, run.stderr[-3000:])
     errors = [line for line in run.stderr.splitlines() if line.startswith("mhrc up: ")]
-    assert len(errors) == 1 and "never answered during its first step" in errors[0] and "no status line" in errors[0], run.stderr
+    assert len(errors) == 1 and "never answered during its first step" in errors[0] and "no status line" in errors[0], (
+        run.stderr
+    )
     assert "Traceback" not in run.stderr
 
 
@@ -234,16 +299,33 @@ def test_bad_timeouts_are_refused_naming_the_option(tmp_path: Path) -> None:
 
     from mhrc.cli import main
 
-    for args in (["--llm-timeout", "0"], ["--llm-timeout", "-1"], ["--llm-idle-timeout", "0"], ["--step-deadline", "0"],
-                 ["--step-deadline", "30"], ["--step-deadline", "10", "--llm-timeout", "20"]):  # fmt: skip
+    for args in (
+        ["--llm-timeout", "0"],
+        ["--llm-timeout", "-1"],
+        ["--llm-idle-timeout", "0"],
+        ["--step-deadline", "0"],
+        ["--step-deadline", "30"],
+        ["--step-deadline", "10", "--llm-timeout", "20"],
+    ):
         for command in ("up", "agent"):
-            where = ["--trace", str(tmp_path / "t.jsonl")] if command == "up" else ["--robot", "alice", "--connect", "tcp/127.0.0.1:9", "--run", "r1", "--insecure"]
-            result = CliRunner().invoke(main, [command, "--llm", "openai:m", "--base-url", "http://127.0.0.1:9/v1", *where, *args])
+            where = (
+                ["--trace", str(tmp_path / "t.jsonl")]
+                if command == "up"
+                else ["--robot", "alice", "--connect", "tcp/127.0.0.1:9", "--run", "r1", "--insecure"]
+            )
+            result = CliRunner().invoke(
+                main, [command, "--llm", "openai:m", "--base-url", "http://127.0.0.1:9/v1", *where, *args]
+            )
             assert result.exit_code == 2 and f"{args[0]}: " in result.output, (command, args, result.output)
-        if args[0] == "--step-deadline" and args[1] != "0":  # shorter than the first-token timeout (the default 120 s, or the one given)
+        if (
+            args[0] == "--step-deadline" and args[1] != "0"
+        ):  # shorter than the first-token timeout (the default 120 s, or the one given)
             assert "shorter than the first-token timeout" in result.output, result.output
     assert not (tmp_path / "t.jsonl").exists()
-    assert EpisodeConfig.build(llm="openai:m", base_url="http://127.0.0.1:9/v1", step_deadline=120.0).step_deadline == 120.0  # as long is fine
+    assert (
+        EpisodeConfig.build(llm="openai:m", base_url="http://127.0.0.1:9/v1", step_deadline=120.0).step_deadline
+        == 120.0
+    )  # as long is fine
 
 
 async def test_a_long_call_shows_at_the_console_as_reading_then_generating_and_stays_out_of_the_trace(
@@ -258,8 +340,8 @@ async def test_a_long_call_shows_at_the_console_as_reading_then_generating_and_s
     from rich.console import Console
 
     from mhrc.agents import agent as agent_module
-    from mhrc.run.console import ProgressPrinter
     from mhrc.core.trace import read_trace
+    from mhrc.run.console import ProgressPrinter
 
     monkeypatch.setattr(agent_module, "GENERATING_EVERY", 0.2)
     words = [f"w{i} " for i in range(14)]
@@ -267,12 +349,18 @@ async def test_a_long_call_shows_at_the_console_as_reading_then_generating_and_s
     server = serve({"alice": [ModelReply(headers=SSE, stream=stream, stream_interval=0.1, latency=0.7)]})
     out = io.StringIO()
     printer = ProgressPrinter(Console(file=out, width=300, highlight=False, soft_wrap=True))
-    cfg = EpisodeConfig.build(seed=0, horizon=1, llm="alice=openai:m", base_url=server.url, trace=tmp_path / "t.jsonl").resolved()
+    cfg = EpisodeConfig.build(
+        seed=0, horizon=1, llm="alice=openai:m", base_url=server.url, trace=tmp_path / "t.jsonl"
+    ).resolved()
     await up_in_process(cfg, observe=printer.attach)
     printer.close()
     lines = out.getvalue().splitlines()
     reading = [i for i, line in enumerate(lines) if re.search(r"alice waiting for the model's first token", line)]
-    generating = [(i, int(m.group(1))) for i, line in enumerate(lines) if (m := re.search(r"alice generating \((\d+) tokens so far\)", line))]
+    generating = [
+        (i, int(m.group(1)))
+        for i, line in enumerate(lines)
+        if (m := re.search(r"alice generating \((\d+) tokens so far\)", line))
+    ]
     result = next(i for i, line in enumerate(lines) if re.match(r"tick +0 +alice wait\(\)", line))
     assert reading and generating, lines
     assert max(reading) < min(i for i, _ in generating) and max(i for i, _ in generating) < result
@@ -312,11 +400,18 @@ async def test_an_abandoned_call_frees_llama_cpps_slot_at_once_on_a_busy_server(
     prompt = [{"role": "user", "content": "Count to ten thousand:"}]
     async with LocalModelServer(gemma, slots=2, n_ctx_per_slot=2048, seed=1) as srv:
         async with httpx.AsyncClient(base_url=srv.base_url.removesuffix("/v1"), timeout=300) as admin:
-            neighbour = asyncio.create_task(_stream(admin, {"model": srv.model, "messages": prompt, "max_tokens": long, "ignore_eos": True, "stream": True}))
+            neighbour = asyncio.create_task(
+                _stream(
+                    admin,
+                    {"model": srv.model, "messages": prompt, "max_tokens": long, "ignore_eos": True, "stream": True},
+                )
+            )
             try:
                 while await _decoding(admin) < 1:
                     await asyncio.sleep(0.02)
-                async with OpenAIChatClient(srv.model, srv.base_url, max_tokens=long, timeout=300, extra_body={"ignore_eos": True}) as client:
+                async with OpenAIChatClient(
+                    srv.model, srv.base_url, max_tokens=long, timeout=300, extra_body={"ignore_eos": True}
+                ) as client:
                     call = asyncio.create_task(client.complete(prompt))
                     while await _decoding(admin) < 2:  # ours is under way too
                         await asyncio.sleep(0.02)
@@ -350,7 +445,9 @@ async def test_a_step_deadline_ends_a_long_generation_and_leaves_llama_cpp_idle(
 
     async with LocalModelServer(gemma, slots=1, n_ctx_per_slot=2048, seed=1) as srv:
         async with httpx.AsyncClient(base_url=srv.base_url.removesuffix("/v1"), timeout=300) as admin:
-            client = OpenAIChatClient(srv.model, srv.base_url, max_tokens=LONG, timeout=5, extra_body={"ignore_eos": True})
+            client = OpenAIChatClient(
+                srv.model, srv.base_url, max_tokens=LONG, timeout=5, extra_body={"ignore_eos": True}
+            )
             policy = LLMPolicy("alice", client, step_deadline=6.0)
             policy.render = lambda obs: COUNT  # type: ignore[method-assign]  (a short prompt: the deadline falls in the decoding)
             async with client:
@@ -376,8 +473,14 @@ async def test_a_retry_does_not_wait_behind_its_abandoned_predecessor(gemma: Pat
     async with LocalModelServer(gemma, slots=1, n_ctx_per_slot=2048, seed=1) as srv:
         async with httpx.AsyncClient(base_url=srv.base_url.removesuffix("/v1"), timeout=300) as admin:
             async with OpenAIChatClient(
-                srv.model, srv.base_url, max_tokens=LONG, timeout=300, idle_timeout=0.005, backoff=0.01, extra_body={"ignore_eos": True}
-            ) as client:  # fmt: skip
+                srv.model,
+                srv.base_url,
+                max_tokens=LONG,
+                timeout=300,
+                idle_timeout=0.005,
+                backoff=0.01,
+                extra_body={"ignore_eos": True},
+            ) as client:
                 with pytest.raises(LLMTimeout, match=r"the stream stalled: .* 2 time\(s\)"):
                     await client.complete(COUNT)
                 assert client.requests == 2
@@ -394,7 +497,10 @@ async def _stream(http: Any, body: dict[str, Any]) -> None:
 async def _decoding(admin: Any) -> int:
     """Slots generating tokens now."""
     slots = (await admin.get("/slots")).raise_for_status().json()
-    return sum(bool(slot.get("is_processing") and (slot.get("next_token") or [{}])[0].get("n_decoded", 0) > 0) for slot in slots)
+    return sum(
+        bool(slot.get("is_processing") and (slot.get("next_token") or [{}])[0].get("n_decoded", 0) > 0)
+        for slot in slots
+    )
 
 
 async def _tokens_decoded(admin: Any) -> int:
@@ -421,6 +527,7 @@ async def test_a_stream_that_never_ends_is_read_no_further_than_its_bound(serve)
 async def test_a_server_that_answered_an_earlier_client_is_slow_not_down(serve) -> None:  # type: ignore[no-untyped-def]
     """An evaluation's next episode has new clients: a server that answered this process before
     and is silent now costs that episode its steps, it does not stop the evaluation."""
+
     def respond(body: dict[str, Any]) -> ModelReply:  # one answer, then no status line, ever
         return ModelReply("Command: wait()") if len(server.requests) == 1 else ModelReply("too late", latency=3600.0)
 

@@ -140,14 +140,22 @@ def test_enums_are_the_names_in_the_robots_own_scene_graph(observations: list[Ob
         if "navigate" in variants:
             assert _enum(schema, "navigate", "furniture") == sorted(f.name for f in obs.furniture if f.stand_poses)
             most = max(len(f.stand_poses) for f in obs.furniture) - 1
-            assert variants["navigate"]["properties"]["stand_pose"] == {"type": "integer", "minimum": 0, "maximum": most}
+            assert variants["navigate"]["properties"]["stand_pose"] == {
+                "type": "integer",
+                "minimum": 0,
+                "maximum": most,
+            }
         if "open" in variants:
             assert _enum(schema, "open", "furniture") == sorted(f.name for f in obs.furniture if f.openable)
         if "pick" in variants:
             assert _enum(schema, "pick", "object") == sorted(o.name for o in obs.objects if o.held_by is None)
         if "place" in variants:
-            assert set(_enum(schema, "place", "object")) == known | ({obs.status.holding} if obs.status.holding else set())
-            assert set(_enum(schema, "place", "location")) <= {f.name for f in obs.furniture if f.place_pose is not None}
+            assert set(_enum(schema, "place", "object")) == known | (
+                {obs.status.holding} if obs.status.holding else set()
+            )
+            assert set(_enum(schema, "place", "location")) <= {
+                f.name for f in obs.furniture if f.place_pose is not None
+            }
         assert _enum(schema, "communicate", "to") == sorted(obs.teammates)
 
 
@@ -239,7 +247,9 @@ def test_replies_in_fences_or_among_text_still_parse() -> None:
     body = '{"analysis": "Bob needs it.", "command": {"skill": "pick", "object": "mug"}}'
     for text in (f"```json\n{body}\n```", f"  \n{body}\n\n", f"Here is my decision: {body} I hope it helps."):
         assert parse_structured(text) == (Pick(obj="mug"), "Bob needs it.")
-    spoken = '{"analysis": "", "command": {"skill": "communicate", "content": "On sofa I found nothing.", "to": " Alice "}}'
+    spoken = (
+        '{"analysis": "", "command": {"skill": "communicate", "content": "On sofa I found nothing.", "to": " Alice "}}'
+    )
     assert parse_structured(spoken)[0] == Communicate(content="On sofa I found nothing.", to="alice")
     assert parse_structured('{"command": {"skill": "WAIT"}}') == (Wait(), "")
 
@@ -257,8 +267,14 @@ def test_replies_in_fences_or_among_text_still_parse() -> None:
         ('{"analysis": "x", "command": {"skill": "fly", "to": "moon"}}', "unknown skill 'fly'"),
         ('{"analysis": "x", "command": {"skill": "place", "object": "mug"}}', "missing location"),
         ('{"analysis": "x", "command": {"skill": "pick", "object": "mug", "location": "tray"}}', "unexpected location"),
-        ('{"analysis": "x", "command": {"skill": "navigate", "furniture": "sofa", "stand_pose": -1}}', "stand_pose: Input should be greater"),
-        ('{"analysis": "x", "command": {"skill": "open", "furniture": 7}}', "furniture: Input should be a valid string"),
+        (
+            '{"analysis": "x", "command": {"skill": "navigate", "furniture": "sofa", "stand_pose": -1}}',
+            "stand_pose: Input should be greater",
+        ),
+        (
+            '{"analysis": "x", "command": {"skill": "open", "furniture": 7}}',
+            "furniture: Input should be a valid string",
+        ),
         ('{"analysis": "x", "command": {"skill": "communicate", "content": "", "to": "bob"}}', "content:"),
         ('{"analysis": "x", "command": {"skill": "move", "dx": "far", "dy": 0}}', "dx:"),
     ],
@@ -291,7 +307,11 @@ async def test_llama_cpp_server_compiles_every_robots_schema(gemma: Path, observ
     from mhrc.agents.llm.local import LocalModelServer
 
     async with LocalModelServer(gemma, slots=1, n_ctx_per_slot=2048) as srv, httpx.AsyncClient(timeout=60) as client:
-        bad = await _ask(client, srv.base_url, {"type": "object", "properties": {"a": {"type": "string", "enum": []}}, "required": ["a"]})
+        bad = await _ask(
+            client,
+            srv.base_url,
+            {"type": "object", "properties": {"a": {"type": "string", "enum": []}}, "required": ["a"]},
+        )
         assert bad.status_code >= 400 and "enum" in bad.text  # the check has teeth: an empty enum is refused
         for obs in observations:
             reply = await _ask(client, srv.base_url, decision_schema(obs))

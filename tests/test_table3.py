@@ -20,12 +20,8 @@ from typing import Any
 import numpy as np
 import pybullet as p
 import pytest
-from mhrc.agents.heuristic import heuristic_policy
-from mhrc.world import feedback as fb
-from mhrc.world.skills import navigation
-from mhrc.world.robots import KINDS
-from mhrc.world.sim import Sim
 
+from mhrc.agents.heuristic import heuristic_policy
 from mhrc.core.protocol import (
     Action,
     ActionResult,
@@ -40,6 +36,10 @@ from mhrc.core.protocol import (
     SkillOutcome,
     Wait,
 )
+from mhrc.world import feedback as fb
+from mhrc.world.robots import KINDS
+from mhrc.world.sim import Sim
+from mhrc.world.skills import navigation
 
 NAVIGATE_TO = re.compile(r"\b[Nn]avigate to (?:a stand pose of |stand pose \d+ of )?([A-Za-z0-9_]+)")
 # episodes (task, scene, n_objects, seed) tried in order until both real failures have been seen:
@@ -49,7 +49,12 @@ EPISODES = [
     ("make_sandwich", "kitchen", 4, 5),
     ("make_sandwich", "bathroom", 5, 1),
     ("make_sandwich", "kitchen", 6, 7),
-    *[("make_sandwich", scene, n, seed) for seed in range(10) for n in (6, 5) for scene in ("kitchen", "bedroom", "bathroom")],
+    *[
+        ("make_sandwich", scene, n, seed)
+        for seed in range(10)
+        for n in (6, 5)
+        for scene in ("kitchen", "bedroom", "bathroom")
+    ],
 ]
 MAX_EPISODES = 24
 
@@ -98,7 +103,11 @@ def play(sim: Sim, horizon: int = 60) -> tuple[bool, list[Step]]:
             success = sim.evaluate().success
             for (r, a), out in zip(batch, outcomes):
                 o = sim.observe(r, tick + 1).model_copy(update={"new_messages": inbox[r]})
-                policies[r].record(ActionResult(goal_id=f"{r}-{tick}", robot=r, tick=tick, action=a, outcome=out, observation=o, done=success))
+                policies[r].record(
+                    ActionResult(
+                        goal_id=f"{r}-{tick}", robot=r, tick=tick, action=a, outcome=out, observation=o, done=success
+                    )
+                )
                 obs[r] = o
             if success:
                 return True, steps
@@ -191,7 +200,10 @@ def test_a_too_far_pick_reports_distance_and_offsets_and_the_solved_move_only_as
         x, y, _ = sim.position(sim.objects[far])
         ox, oy = float(out.details["offset_x"]), float(out.details["offset_y"])
         assert (ox, oy) == pytest.approx((x - base[0], y - base[1]), abs=6e-3)  # object minus base centre, to the cm
-        assert f"x={ox:+.2f} m, y={oy:+.2f} m" in out.feedback and f"{float(out.details['distance']):.2f} m" in out.feedback
+        assert (
+            f"x={ox:+.2f} m, y={oy:+.2f} m" in out.feedback
+            and f"{float(out.details['distance']):.2f} m" in out.feedback
+        )
         if "solved_move" not in aids:
             assert "dx" not in out.details and "dx=" not in out.feedback and "Moving your base" not in out.feedback
             return
@@ -241,12 +253,18 @@ def test_alice_may_not_place_on_a_goal_fixture_and_bob_may(task: str) -> None:
         # the released object settles under physics alone: nothing else in the world moves
         before = {o.name: (sim.position(o), sim.yaw(o)) for o in sim.objects.values() if o.name != near}
         bots = {r.name: (r.base, tuple(r.q)) for r in sim.bots.values() if r.name != "bob"}
-        joints = {n: p.getJointState(sim.scene.bodies[n], sim.scene.joints[n], physicsClientId=sim.cid)[0] for n in sim.opening}
+        joints = {
+            n: p.getJointState(sim.scene.bodies[n], sim.scene.joints[n], physicsClientId=sim.cid)[0]
+            for n in sim.opening
+        }
         out = sim.execute("bob", Place(obj=near, location=goal))
         assert out.succeeded and sim.objects[near].on == goal, out.feedback
         assert {o.name: (sim.position(o), sim.yaw(o)) for o in sim.objects.values() if o.name != near} == before
         assert {r.name: (r.base, tuple(r.q)) for r in sim.bots.values() if r.name != "bob"} == bots
-        assert {n: p.getJointState(sim.scene.bodies[n], sim.scene.joints[n], physicsClientId=sim.cid)[0] for n in sim.opening} == joints
+        assert {
+            n: p.getJointState(sim.scene.bodies[n], sim.scene.joints[n], physicsClientId=sim.cid)[0]
+            for n in sim.opening
+        } == joints
 
 
 # --------------------------------------------------------------------------- advice a robot can follow
@@ -279,7 +297,9 @@ def test_no_sentence_tells_bob_to_navigate_or_anyone_to_navigate_to_a_fixture(ai
         sim.learn("alice", [near])
         for target in ("tray", near):
             out = run("alice", Navigate(target=target))
-            assert out.code == OutcomeCode.NOT_NAVIGABLE and ("Navigate to table_0 instead" in out.feedback) == bool(aids), out.feedback
+            assert out.code == OutcomeCode.NOT_NAVIGABLE and ("Navigate to table_0 instead" in out.feedback) == bool(
+                aids
+            ), out.feedback
         assert run("david", Navigate(target="tray")).code == OutcomeCode.NOT_NAVIGABLE
         out = run("david", Navigate(target=container))  # David cannot open it: he is not told to
         assert out.code in (OutcomeCode.OK, OutcomeCode.OFF_TARGET)
@@ -293,13 +313,20 @@ def test_heuristic_episodes_get_no_advice_they_cannot_follow(paper_episodes: lis
     for ep in paper_episodes:
         for s in ep.steps:
             _no_bad_advice(s.robot, s.outcome.feedback, ep.fixtures, ep.stand_furniture)
-            assert instruction(s.outcome.feedback) is None, (ep.key, s.tick, s.robot, s.outcome.feedback)  # the paper's fidelity: no advice at all
+            assert instruction(s.outcome.feedback) is None, (
+                ep.key,
+                s.tick,
+                s.robot,
+                s.outcome.feedback,
+            )  # the paper's fidelity: no advice at all
 
 
 # --------------------------------------------------------------------------- real failures
 
 
-def test_navigation_slips_and_placements_fail_in_real_episodes_and_the_team_recovers(paper_episodes: list[Episode]) -> None:
+def test_navigation_slips_and_placements_fail_in_real_episodes_and_the_team_recovers(
+    paper_episodes: list[Episode],
+) -> None:
     steps = [s for ep in paper_episodes for s in ep.steps]
     off = [s for s in steps if s.outcome.code == OutcomeCode.OFF_TARGET]
     dropped = [s for s in steps if s.outcome.code == OutcomeCode.PLACE_FAILED and "came to rest" in s.outcome.feedback]
@@ -308,7 +335,10 @@ def test_navigation_slips_and_placements_fail_in_real_episodes_and_the_team_reco
     for s in off:  # stopped where it stopped, on free floor, the distance in the sentence
         assert s.base is not None and s.free
         assert (s.base[0], s.base[1]) == pytest.approx((s.outcome.details["x"], s.outcome.details["y"]), abs=1e-3)
-        assert float(s.outcome.details["distance"]) > 0.1 and f"{float(s.outcome.details['distance']):.2f} m" in s.outcome.feedback
+        assert (
+            float(s.outcome.details["distance"]) > 0.1
+            and f"{float(s.outcome.details['distance']):.2f} m" in s.outcome.feedback
+        )
     for s in dropped:  # left where the team can pick it up again: on a table, not the floor
         assert isinstance(s.action, Place) and s.outcome.details["on"] not in ("floor", s.action.location), s.outcome
         assert f"came to rest on {s.outcome.details['on']} at" in s.outcome.feedback
@@ -327,7 +357,9 @@ def test_with_exact_motion_nothing_slips(paper_episodes: list[Episode]) -> None:
 def test_noise_is_deterministic_and_exact_motion_stops_on_the_pose() -> None:
     targets = ("sofa", "table_1", "counter", "table_2", "table_0")
 
-    def stops(aids: tuple[str, ...]) -> list[tuple[OutcomeCode, tuple[float, float, float] | None, tuple[float, float, float]]]:
+    def stops(
+        aids: tuple[str, ...],
+    ) -> list[tuple[OutcomeCode, tuple[float, float, float] | None, tuple[float, float, float]]]:
         out = []
         with Sim(seed=3, n_objects=3, aids=aids) as sim:
             for target in targets:
@@ -354,7 +386,9 @@ INSTRUCTION = re.compile(
     r"(?!\s+(?:failed|ended)\b)",
     re.IGNORECASE,
 )
-ADVICE_WORDS = re.compile(r"\b(?:first|instead(?! of)|again|before|should|must|please|make sure|need to)\b", re.IGNORECASE)
+ADVICE_WORDS = re.compile(
+    r"\b(?:first|instead(?! of)|again|before|should|must|please|make sure|need to)\b", re.IGNORECASE
+)
 
 
 def instruction(text: str) -> str | None:
@@ -378,7 +412,10 @@ def test_the_instruction_check_catches_the_old_advice() -> None:
     ]
     assert all(instruction(t) for t in old), [t for t in old if not instruction(t)]
     assert instruction("Move failed: 3.00 m is more than the 1.0 m one move may cover.") is None
-    assert instruction("Move ended off target: your base moved by dx=0.10 m, dy=0.00 m instead of dx=0.30, dy=0.00.") is None
+    assert (
+        instruction("Move ended off target: your base moved by dx=0.10 m, dy=0.00 m instead of dx=0.30, dy=0.00.")
+        is None
+    )
 
 
 # every function of world/feedback.py with sample arguments, and the advice each adds with the
@@ -422,7 +459,11 @@ SAMPLES: dict[str, tuple[tuple[Any, ...], dict[str, Any], str | None]] = {
     "not_a_surface": (("drawer_unit", ["table_0", "table_1"]), {}, " Places: table_0, table_1."),
     "no_free_spot": (("tray",), {}, None),
     "place_out_of_reach": (("table_1", 1.5), {}, " Navigate to a stand pose of table_1 first."),
-    "not_a_finisher": (("apple", "tray", "table_0", "bob"), {}, ": place apple on table_0 within Bob's reach for Bob to finish the task."),
+    "not_a_finisher": (
+        ("apple", "tray", "table_0", "bob"),
+        {},
+        ": place apple on table_0 within Bob's reach for Bob to finish the task.",
+    ),
     "place_failed": (("apple", "tray", "table_0", (1.0, 2.0, 0.8)), {}, None),
     "placed": (("apple", "tray"), {}, None),
 }
@@ -430,9 +471,13 @@ SAMPLES: dict[str, tuple[tuple[Any, ...], dict[str, Any], str | None]] = {
 
 def test_every_feedback_sentence_states_a_cause_and_gives_advice_only_with_the_aid() -> None:
     functions: dict[str, Callable[..., str]] = {
-        n: f for n, f in inspect.getmembers(fb, inspect.isfunction) if not n.startswith("_") and f.__module__ == fb.__name__
+        n: f
+        for n, f in inspect.getmembers(fb, inspect.isfunction)
+        if not n.startswith("_") and f.__module__ == fb.__name__
     }
-    assert set(functions) == set(SAMPLES), "give every feedback function a sample: " + ", ".join(set(functions) ^ set(SAMPLES))
+    assert set(functions) == set(SAMPLES), "give every feedback function a sample: " + ", ".join(
+        set(functions) ^ set(SAMPLES)
+    )
     for name, (args, kwargs, advice) in SAMPLES.items():
         f = functions[name]
         text = f(*args, **kwargs)
@@ -490,11 +535,34 @@ def table3_cases(aids: tuple[str, ...]) -> tuple[list[Case], set[str], set[str]]
         case("not capable", "bob", Navigate(target="table_0"), OutcomeCode.NOT_CAPABLE)
         case("no such robot", "carol", Wait(), OutcomeCode.NOT_CAPABLE)
         # navigate (and move: the same causes)
-        case("navigate: not in the scene graph", "alice", Navigate(target="garage"), OutcomeCode.TARGET_UNKNOWN, "; furniture: ")
-        case("navigate: a fixture", "alice", Navigate(target="tray"), OutcomeCode.NOT_NAVIGABLE, "Navigate to table_0 instead.")
+        case(
+            "navigate: not in the scene graph",
+            "alice",
+            Navigate(target="garage"),
+            OutcomeCode.TARGET_UNKNOWN,
+            "; furniture: ",
+        )
+        case(
+            "navigate: a fixture",
+            "alice",
+            Navigate(target="tray"),
+            OutcomeCode.NOT_NAVIGABLE,
+            "Navigate to table_0 instead.",
+        )
         sim.learn("alice", [near])
-        case("navigate: an object", "alice", Navigate(target=near), OutcomeCode.NOT_NAVIGABLE, "Navigate to table_0 instead.")
-        case("navigate: no such stand pose", "alice", Navigate(target="table_0", stand_pose=7), OutcomeCode.STAND_POSE_INVALID)
+        case(
+            "navigate: an object",
+            "alice",
+            Navigate(target=near),
+            OutcomeCode.NOT_NAVIGABLE,
+            "Navigate to table_0 instead.",
+        )
+        case(
+            "navigate: no such stand pose",
+            "alice",
+            Navigate(target="table_0", stand_pose=7),
+            OutcomeCode.STAND_POSE_INVALID,
+        )
         case("move: too long", "alice", Move(dx=3.0, dy=0.0), OutcomeCode.GOAL_INVALID)
         base = sim.bots["alice"].base
         assert base is not None
@@ -505,27 +573,87 @@ def table3_cases(aids: tuple[str, ...]) -> tuple[list[Case], set[str], set[str]]
         case("move: start on an obstacle", "alice", Move(dx=0.1, dy=0.0), OutcomeCode.START_INVALID)
         sim.bots["alice"].set_base(base)
         # open
-        case("open: not in the scene graph", "alice", Open(target="wardrobe"), OutcomeCode.TARGET_UNKNOWN, "; furniture: ")
+        case(
+            "open: not in the scene graph",
+            "alice",
+            Open(target="wardrobe"),
+            OutcomeCode.TARGET_UNKNOWN,
+            "; furniture: ",
+        )
         case("open: not openable", "alice", Open(target="table_1"), OutcomeCode.NOT_OPENABLE)
-        case("open: out of reach", "alice", Open(target=container), OutcomeCode.OUT_OF_REACH, f"Navigate to a stand pose of {container} first.")
+        case(
+            "open: out of reach",
+            "alice",
+            Open(target=container),
+            OutcomeCode.OUT_OF_REACH,
+            f"Navigate to a stand pose of {container} first.",
+        )
         sim.learn("alice", [hidden])
-        case("pick: in a closed container", "alice", Pick(obj=hidden), OutcomeCode.NOT_REACHABLE_CONTAINER, ": open it first.")
-        case("navigate: reached a closed container", "alice", Navigate(target=container), OutcomeCode.OK, "open it to see what is inside.")
+        case(
+            "pick: in a closed container",
+            "alice",
+            Pick(obj=hidden),
+            OutcomeCode.NOT_REACHABLE_CONTAINER,
+            ": open it first.",
+        )
+        case(
+            "navigate: reached a closed container",
+            "alice",
+            Navigate(target=container),
+            OutcomeCode.OK,
+            "open it to see what is inside.",
+        )
         assert sim.execute("alice", Open(target=container)).succeeded
         case("open: already open", "alice", Open(target=container), OutcomeCode.ALREADY_OPEN)
         assert sim.execute("alice", Pick(obj=hidden)).succeeded
         case("pick: gripper full", "alice", Pick(obj=near), OutcomeCode.GRIPPER_FULL, "; place it first.")
         shut = next(f.name for f in sim.layout.furniture if f.container is not None and not sim.is_open(f.name))
-        case("open: gripper full", "alice", Open(target=shut), OutcomeCode.GRIPPER_FULL, f"Place {hidden} before opening {shut}.")
+        case(
+            "open: gripper full",
+            "alice",
+            Open(target=shut),
+            OutcomeCode.GRIPPER_FULL,
+            f"Place {hidden} before opening {shut}.",
+        )
         # place
         case("place: not the object held", "alice", Place(obj=near, location="table_0"), OutcomeCode.WRONG_OBJECT)
-        case("place: no such place", "alice", Place(obj=hidden, location="attic"), OutcomeCode.LOCATION_UNKNOWN, "; places: ")
-        out = case("place: not a surface", "alice", Place(obj=hidden, location=container), OutcomeCode.LOCATION_UNKNOWN, " Places: ")
+        case(
+            "place: no such place",
+            "alice",
+            Place(obj=hidden, location="attic"),
+            OutcomeCode.LOCATION_UNKNOWN,
+            "; places: ",
+        )
+        out = case(
+            "place: not a surface",
+            "alice",
+            Place(obj=hidden, location=container),
+            OutcomeCode.LOCATION_UNKNOWN,
+            " Places: ",
+        )
         assert "no place pose" in out.feedback, out.feedback
-        case("place: only Bob finishes", "alice", Place(obj=hidden, location="tray"), OutcomeCode.NOT_CAPABLE, f"place {hidden} on table_0 within Bob's reach")
-        case("place: out of a mobile arm's reach", "alice", Place(obj=hidden, location="table_1"), OutcomeCode.TOO_FAR, "Navigate to a stand pose of table_1 first.")
+        case(
+            "place: only Bob finishes",
+            "alice",
+            Place(obj=hidden, location="tray"),
+            OutcomeCode.NOT_CAPABLE,
+            f"place {hidden} on table_0 within Bob's reach",
+        )
+        case(
+            "place: out of a mobile arm's reach",
+            "alice",
+            Place(obj=hidden, location="table_1"),
+            OutcomeCode.TOO_FAR,
+            "Navigate to a stand pose of table_1 first.",
+        )
         # pick
-        case("pick: not in the scene graph", "bob", Pick(obj="applle"), OutcomeCode.OBJECT_UNKNOWN, "; objects you know: ")
+        case(
+            "pick: not in the scene graph",
+            "bob",
+            Pick(obj="applle"),
+            OutcomeCode.OBJECT_UNKNOWN,
+            "; objects you know: ",
+        )
         sim.learn("bob", [hidden])
         case("pick: held by another robot", "bob", Pick(obj=hidden), OutcomeCode.OBJECT_UNKNOWN)
         case("pick: too far for a fixed arm", "bob", Pick(obj=far), OutcomeCode.TOO_FAR)
@@ -538,7 +666,11 @@ def table3_cases(aids: tuple[str, ...]) -> tuple[list[Case], set[str], set[str]]
         case("place: out of a fixed arm's reach", "bob", Place(obj=near, location="table_1"), OutcomeCode.TOO_FAR)
     # navigation off target: the first noise draw a slip (the seeded noise of a real episode, chosen)
     with Sim(seed=1, n_objects=4, aids=aids) as sim:
-        slips = [k for k in range(2000) if (d := np.random.default_rng(k).random(3))[0] < navigation.NAV_SLIP_P and d[1] > 0.5]
+        slips = [
+            k
+            for k in range(2000)
+            if (d := np.random.default_rng(k).random(3))[0] < navigation.NAV_SLIP_P and d[1] > 0.5
+        ]
         for k in slips:
             sim.rng = np.random.default_rng(k)
             out = sim.execute("david", Navigate(target="sofa"))
@@ -569,7 +701,9 @@ def test_table3_failures_state_cause_and_numbers_and_advice_only_with_the_aid() 
             assert a.outcome.feedback == text, (c.label, a.outcome.feedback)  # the aid adds nothing here
         else:
             assert c.advice not in text and c.advice in a.outcome.feedback, (c.label, text, a.outcome.feedback)
-        for key in MEASURED.get(c.outcome.code, ()):  # the measured numbers are in the sentence as they are in the details
+        for key in MEASURED.get(
+            c.outcome.code, ()
+        ):  # the measured numbers are in the sentence as they are in the details
             if key in c.outcome.details:
                 assert f"{abs(float(c.outcome.details[key])):.2f}" in text, (c.label, key, text)
     for c in paper + aided:

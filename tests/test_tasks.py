@@ -4,22 +4,21 @@ needed except where a Sim is built from a user's own layout file."""
 
 from __future__ import annotations
 
-import re
-
 import copy
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
 import pytest
-from mhrc.world.layouts import SCENES_DIR, LayoutError, get_layout, load_layout, parse_layout
-from mhrc.world.scene import LAYOUTS
-from mhrc.world.colors import PANEL_COLORS as COLORS
-from mhrc.world.briefs import Briefing, brief, detail
-from mhrc.world.tasks import MENUS, TASKS, ObjectKind, Placement, Seen, get_task
 
 from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.world.briefs import Briefing, brief, detail
+from mhrc.world.colors import PANEL_COLORS as COLORS
+from mhrc.world.layouts import SCENES_DIR, LayoutError, get_layout, load_layout, parse_layout
+from mhrc.world.scene import LAYOUTS
+from mhrc.world.tasks import MENUS, TASKS, ObjectKind, Placement, Seen, get_task
 
 GRID = [(n, seed) for n in (3, 4, 5, 6) for seed in range(10)]
 
@@ -104,11 +103,18 @@ def test_bobs_status_says_what_the_paper_says_and_nothing_more() -> None:
     solids, _ = _kinds("sort_solids", n=4)
     a, b = solids[0], solids[1]
     swapped = [Seen(a.name, a, f"{b.group}_panel"), Seen(b.name, b, f"{b.group}_panel")]
-    assert sort.status([k.name for k in solids], swapped) == f"On the panels: {a.name} on {b.group}_panel, {b.name} on {b.group}_panel."
+    assert (
+        sort.status([k.name for k in solids], swapped)
+        == f"On the panels: {a.name} on {b.group}_panel, {b.name} on {b.group}_panel."
+    )
     layers, _ = _kinds("make_sandwich", n=4, seed=2)
     stack = [Seen(layers[1].name, layers[1], "cutting_board", z=0.72)]
     assert sandwich.status([k.name for k in layers], stack) == f"On the cutting board, bottom to top: {layers[1].name}."
-    for text in (pack.status(names, seen), sort.status([k.name for k in solids], swapped), sandwich.status([k.name for k in layers], stack)):
+    for text in (
+        pack.status(names, seen),
+        sort.status([k.name for k in solids], swapped),
+        sandwich.status([k.name for k in layers], stack),
+    ):
         assert not any(w in text.lower() for w in ("not yet", "next", "wrong", "take", "reach"))
 
 
@@ -134,17 +140,41 @@ def test_each_role_is_told_its_own_task_as_the_appendix_gives_it(task_id: str) -
     keeps everything off the list out of the goal), and nothing a role cannot do."""
     task = get_task(task_id)
     targets = ["a_thing", "b_thing", "c_thing"]
-    text = {role: brief(task, role, CREW) + "\n" + detail(task, role, CREW, targets, {t: "red_panel" for t in targets}) for role in ("finisher", "fetcher", "scout")}
+    text = {
+        role: brief(task, role, CREW) + "\n" + detail(task, role, CREW, targets, {t: "red_panel" for t in targets})
+        for role in ("finisher", "fetcher", "scout")
+    }
     things = task.things
     assert f"hand Bob the {things}" in text["fetcher"] and "Explore the whole house" in text["fetcher"]
-    assert f"Ask Bob which {things} are needed" in text["fetcher"] and "put them on table_0 close to Bob" in text["fetcher"]
-    assert "When Bob asks, move" in text["fetcher"] and "do not move anything on the table unless Bob asks" in text["fetcher"]
-    assert "Search the whole house" in text["scout"] and "Do as Alice arranges" in text["scout"] and "tell Alice about each new find" in text["scout"]
-    for word in ("fetch", "pick", "bring", "hand them", "Bob"):  # David cannot fetch and, in the appendix, answers to Alice only
+    assert (
+        f"Ask Bob which {things} are needed" in text["fetcher"]
+        and "put them on table_0 close to Bob" in text["fetcher"]
+    )
+    assert (
+        "When Bob asks, move" in text["fetcher"]
+        and "do not move anything on the table unless Bob asks" in text["fetcher"]
+    )
+    assert (
+        "Search the whole house" in text["scout"]
+        and "Do as Alice arranges" in text["scout"]
+        and "tell Alice about each new find" in text["scout"]
+    )
+    for word in (
+        "fetch",
+        "pick",
+        "bring",
+        "hand them",
+        "Bob",
+    ):  # David cannot fetch and, in the appendix, answers to Alice only
         assert word not in text["scout"], word
     assert text["finisher"].count("a_thing, b_thing, c_thing") == 1
-    assert "ask Alice to move it for you" in text["finisher"] and "ask Alice to search for them and bring them" in text["finisher"]
-    assert re.search(r"Nothing that is not on the (list|menu) goes (into the tray|onto a panel|onto the board)\.$", text["finisher"])
+    assert (
+        "ask Alice to move it for you" in text["finisher"]
+        and "ask Alice to search for them and bring them" in text["finisher"]
+    )
+    assert re.search(
+        r"Nothing that is not on the (list|menu) goes (into the tray|onto a panel|onto the board)\.$", text["finisher"]
+    )
     for role in ("fetcher", "scout"):
         assert "a_thing" not in text[role]  # the list is Bob's: the others learn it by asking
 
@@ -187,7 +217,12 @@ def test_sandwich_evaluate_checks_the_order_bottom_to_top() -> None:
     stack = [Seen(k.name, k, "cutting_board", z=0.72 + 0.02 * i) for i, k in enumerate(targets)]
     assert t.evaluate(names, stack).success and "complete" in t.status(names, stack, HINTS)
     # the same pieces with the second and third swapped: only the first is right
-    wrong = [stack[0], Seen(stack[1].name, stack[1].kind, "cutting_board", z=stack[2].z), Seen(stack[2].name, stack[2].kind, "cutting_board", z=stack[1].z), stack[3]]
+    wrong = [
+        stack[0],
+        Seen(stack[1].name, stack[1].kind, "cutting_board", z=stack[2].z),
+        Seen(stack[2].name, stack[2].kind, "cutting_board", z=stack[1].z),
+        stack[3],
+    ]
     r = t.evaluate(names, wrong)
     assert (r.success, r.placed) == (False, 1) and "Wrong from" in t.status(names, wrong, HINTS)
     # a correct prefix scores partially; something extra on top spoils success
@@ -196,7 +231,11 @@ def test_sandwich_evaluate_checks_the_order_bottom_to_top() -> None:
     assert not t.evaluate(names, extra_on_top).success
     # identical ingredients may swap places: the menu names kinds, not pieces
     if targets[0].group == targets[-1].group:
-        flipped = [Seen(stack[-1].name, stack[-1].kind, "cutting_board", z=stack[0].z), *stack[1:-1], Seen(stack[0].name, stack[0].kind, "cutting_board", z=stack[-1].z)]
+        flipped = [
+            Seen(stack[-1].name, stack[-1].kind, "cutting_board", z=stack[0].z),
+            *stack[1:-1],
+            Seen(stack[0].name, stack[0].kind, "cutting_board", z=stack[-1].z),
+        ]
         assert t.evaluate(names, flipped).success
 
 
@@ -223,17 +262,42 @@ def test_every_builtin_layout_loads_from_its_file() -> None:
 @pytest.mark.parametrize(
     ("edit", "expected"),
     [
-        (lambda d: d["furniture"][2].update(size=[1.4, -0.6, 0.75]), "mine.json: furniture.2.size.1: Input should be greater than 0"),
-        (lambda d: d["furniture"][2].update(colour="red"), "mine.json: furniture.2.colour: Extra inputs are not permitted"),
-        (lambda d: d["furniture"][2].update(style="castle"), "mine.json: furniture.2.style: Input should be 'table', 'block', 'sofa', 'drawer_unit', 'chest' or 'cupboard'"),
-        (lambda d: d["furniture"][2]["stand_poses"].append({"side": "up", "at": 0}), "mine.json: furniture.2.stand_poses.1"),
-        (lambda d: d["furniture"][2]["stand_poses"].append([-3.6, 3.65, 0.0]), "furniture.2.stand_poses.1 (cabinet_0): (-3.6, 3.65) is within 0.3 m of furniture.2 (cabinet_0)"),
+        (
+            lambda d: d["furniture"][2].update(size=[1.4, -0.6, 0.75]),
+            "mine.json: furniture.2.size.1: Input should be greater than 0",
+        ),
+        (
+            lambda d: d["furniture"][2].update(colour="red"),
+            "mine.json: furniture.2.colour: Extra inputs are not permitted",
+        ),
+        (
+            lambda d: d["furniture"][2].update(style="castle"),
+            "mine.json: furniture.2.style: Input should be 'table', 'block', 'sofa', 'drawer_unit', 'chest' or 'cupboard'",
+        ),
+        (
+            lambda d: d["furniture"][2]["stand_poses"].append({"side": "up", "at": 0}),
+            "mine.json: furniture.2.stand_poses.1",
+        ),
+        (
+            lambda d: d["furniture"][2]["stand_poses"].append([-3.6, 3.65, 0.0]),
+            "furniture.2.stand_poses.1 (cabinet_0): (-3.6, 3.65) is within 0.3 m of furniture.2 (cabinet_0)",
+        ),
         (lambda d: d["starts"].update(alice=[0.5, 0.0, 0.0]), "starts.alice: (0.5, 0.0) is within 0.3 m of walls.5"),
         (lambda d: d["bob"].update(table="table_9"), "bob.table: no furniture named 'table_9'"),
-        (lambda d: d["bob"].update(goal_area=[-3.3, 0.4, 0.5, 0.4]), "bob.goal_area: [-3.3, 0.4, 0.5, 0.4] does not lie on table_0"),
-        (lambda d: d["furniture"][8]["slots"].append([9.0, 9.0]), "furniture.8: Value error, slots.3: [9.0, 9.0] is not on top of table_1"),
-        (lambda d: d.update(furniture=[f for f in d["furniture"] if f["style"] not in ("drawer_unit", "chest", "cupboard")]), "furniture: a layout "
-            "needs at least 2 closed containers a target can hide in"),
+        (
+            lambda d: d["bob"].update(goal_area=[-3.3, 0.4, 0.5, 0.4]),
+            "bob.goal_area: [-3.3, 0.4, 0.5, 0.4] does not lie on table_0",
+        ),
+        (
+            lambda d: d["furniture"][8]["slots"].append([9.0, 9.0]),
+            "furniture.8: Value error, slots.3: [9.0, 9.0] is not on top of table_1",
+        ),
+        (
+            lambda d: d.update(
+                furniture=[f for f in d["furniture"] if f["style"] not in ("drawer_unit", "chest", "cupboard")]
+            ),
+            "furniture: a layout needs at least 2 closed containers a target can hide in",
+        ),
         (lambda d: d["furniture"][8].update(name="cabinet_0"), "furniture.8.name: 'cabinet_0' is used twice"),
         (lambda d: d["furniture"][1]["drawer"].update(axis=[0.7, 0.7]), "axis must be a unit vector along x or y"),
         (lambda d: d.pop("bob"), "mine.json: bob: Field required"),

@@ -16,17 +16,19 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from sweep import sweep
 
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import EpisodeDone, RobotDetached, TickClosed, decode_event
-from mhrc.testing import world_on_loopback
 from mhrc.core.trace import read_trace
-from sweep import sweep
+from mhrc.testing import world_on_loopback
 
 WAIT = 180.0
 
 
-async def _episode(tmp_path: Path, robot: str, killed_at: int, replaced_at: int | None, horizon: int = 50) -> tuple[EpisodeDone, list[RobotDetached]]:
+async def _episode(
+    tmp_path: Path, robot: str, killed_at: int, replaced_at: int | None, horizon: int = 50
+) -> tuple[EpisodeDone, list[RobotDetached]]:
     """The heuristic team; `robot`'s agent killed when tick `killed_at` closed, a new one
     started when tick `replaced_at` closed (None: never)."""
     ticks = 0
@@ -64,7 +66,9 @@ def _acted_after(trace: Path, robot: str, tick: int) -> list[str]:
     return [
         line["msg"]["action"]["skill"]
         for line in read_trace(trace)
-        if line["key"].endswith(f"/robot/{robot}/action/result") and line["msg"]["tick"] > tick and line["msg"]["action"]["skill"] != "wait"
+        if line["key"].endswith(f"/robot/{robot}/action/result")
+        and line["msg"]["tick"] > tick
+        and line["msg"]["action"]["skill"] != "wait"
     ]
 
 
@@ -72,7 +76,9 @@ def _acted_after(trace: Path, robot: str, tick: int) -> list[str]:
     ("robot", "killed_at", "replaced_at"),
     sweep([("david", 2, 6), ("alice", 4, 7), ("david", 2, None), ("david", 8, None), ("bob", 4, 7)], fast=2),
 )
-async def test_the_team_still_succeeds_after_losing_an_agent(robot: str, killed_at: int, replaced_at: int | None, tmp_path: Path) -> None:
+async def test_the_team_still_succeeds_after_losing_an_agent(
+    robot: str, killed_at: int, replaced_at: int | None, tmp_path: Path
+) -> None:
     done, detached = await _episode(tmp_path, robot, killed_at, replaced_at)
     assert done.reason == "success" and done.metrics.success, (robot, killed_at, replaced_at, done.metrics)
     assert [d.robot for d in detached] == [robot]
@@ -82,8 +88,15 @@ async def test_the_team_still_succeeds_after_losing_an_agent(robot: str, killed_
         assert _acted_after(tmp_path / "t.jsonl", robot, replaced_at), f"the replacement {robot} never did anything"
 
 
-@pytest.mark.parametrize(("robot", "why"), sweep([("alice", "nobody attached can fetch objects from the rooms (only alice navigates and picks)"),
-                                                  ("bob", "nobody attached can finish the task (only bob places on the goal fixtures)")]))  # fmt: skip
+@pytest.mark.parametrize(
+    ("robot", "why"),
+    sweep(
+        [
+            ("alice", "nobody attached can fetch objects from the rooms (only alice navigates and picks)"),
+            ("bob", "nobody attached can finish the task (only bob places on the goal fixtures)"),
+        ]
+    ),
+)
 async def test_without_the_robot_only_it_can_replace_the_world_says_why(robot: str, why: str, tmp_path: Path) -> None:
     done, detached = await _episode(tmp_path, robot, 3, None, horizon=10)
     assert done.reason == "horizon" and not done.metrics.success

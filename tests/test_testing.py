@@ -18,8 +18,8 @@ import httpx
 import pytest
 
 from mhrc.agents.heuristic import heuristic_policy
-from mhrc.agents.llm_policy import LLMPolicy
 from mhrc.agents.llm import make_client
+from mhrc.agents.llm_policy import LLMPolicy
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import Action, EpisodeDone, Observation, OutcomeCode, SkillOutcome, Thought, decode_event
 from mhrc.core.records import ReplyFailure
@@ -66,7 +66,11 @@ def test_the_model_server_answers_from_its_script_with_latency(mhrc_model_server
         assert http.post(f"{server.url}/chat/completions", json=ask).status_code == 503
         assert http.post(f"{server.url}/chat/completions", json=ask).status_code == 500  # the script is exhausted
     assert server.requests == [ask] * 3 and server.paths == ["/v1/chat/completions"] * 3
-    assert [call.latency for call in server.calls] == [0.2, 0.0, 0.0]  # the server's, the reply's own, none for an exhausted script
+    assert [call.latency for call in server.calls] == [
+        0.2,
+        0.0,
+        0.0,
+    ]  # the server's, the reply's own, none for an exhausted script
     assert ScriptedModelServer.robot_of(ask) == "alice" and len(server.requests_of("alice")) == 3
 
 
@@ -76,7 +80,14 @@ def test_model_replies_set_usage_reasoning_and_headers(mhrc_model_server: Any) -
     server = mhrc_model_server(
         [
             "Command: wait()",
-            ModelReply("Command: wait()", usage={"prompt_tokens": 9, "completion_tokens": 30, "completion_tokens_details": {"reasoning_tokens": 21}}),
+            ModelReply(
+                "Command: wait()",
+                usage={
+                    "prompt_tokens": 9,
+                    "completion_tokens": 30,
+                    "completion_tokens_details": {"reasoning_tokens": 21},
+                },
+            ),
             ModelReply("Command: wait()", usage=False, reasoning="think", reasoning_field="reasoning"),
             ModelReply(body=b"plain", headers={"Content-Type": "text/plain", "X-Test": "1"}),
         ],
@@ -105,9 +116,14 @@ def test_the_model_server_records_which_calls_overlapped(mhrc_model_server: Any)
         return ModelReply("Command: wait()", latency=body["latency"])
 
     server = mhrc_model_server(script)
-    ask = [{"model": "m", "messages": [{"role": "system", "content": f"You are {name}, a robot."}], "latency": 0.1} for name in ("Alice", "Bob")]
+    ask = [
+        {"model": "m", "messages": [{"role": "system", "content": f"You are {name}, a robot."}], "latency": 0.1}
+        for name in ("Alice", "Bob")
+    ]
     with ThreadPoolExecutor(2) as pool:
-        assert [r.status_code for r in pool.map(lambda body: httpx.post(f"{server.url}/chat/completions", json=body), ask)] == [200, 200]
+        assert [
+            r.status_code for r in pool.map(lambda body: httpx.post(f"{server.url}/chat/completions", json=body), ask)
+        ] == [200, 200]
     with httpx.Client() as http:
         http.post(f"{server.url}/chat/completions", json={**ask[0], "latency": 0.0})
     calls = server.calls
@@ -124,6 +140,7 @@ def test_the_model_server_records_which_calls_overlapped(mhrc_model_server: Any)
 def test_an_endless_stream_is_written_until_the_client_hangs_up_or_the_server_closes() -> None:
     """A body trickled chunk by chunk for ever: the client reads what it likes and leaves; closing
     the server ends every stream and latency still running."""
+
     def stream(body: dict[str, Any]) -> ModelReply:
         return ModelReply(stream=itertools.chain([b'{"choices": ['], itertools.repeat(b" ")), stream_interval=0.01)
 
@@ -161,7 +178,10 @@ def test_an_endless_stream_is_written_until_the_client_hangs_up_or_the_server_cl
 def test_a_reply_can_stall_after_its_headers_or_drop_the_connection(mhrc_model_server: Any) -> None:
     """Two faults of a server gone bad: a stream that stops mid-reply and holds the connection
     open (silence, until the client's read timeout), and a connection closed without an answer."""
-    server = mhrc_model_server([ModelReply(stream=[b"data: first\n\n"], stall=True), ModelReply(drop=True), ModelReply(stall=True)], when_done=None)
+    server = mhrc_model_server(
+        [ModelReply(stream=[b"data: first\n\n"], stall=True), ModelReply(drop=True), ModelReply(stall=True)],
+        when_done=None,
+    )
     with httpx.Client(timeout=httpx.Timeout(30.0, read=0.5)) as http:
         with http.stream("POST", f"{server.url}/chat/completions", json={}) as resp:
             chunks = resp.iter_raw()
@@ -180,7 +200,9 @@ def test_a_reply_can_stall_after_its_headers_or_drop_the_connection(mhrc_model_s
 def test_a_content_length_that_lies_is_a_body_cut_short(mhrc_model_server: Any) -> None:
     """A length longer than the body: the body, then the connection closes (a server dying
     mid-body); the client reads a truncated message, not a hang."""
-    server = mhrc_model_server([ModelReply(body=b'{"choices": [', headers={"Content-Length": "100"}), "Command: wait()"], when_done=None)
+    server = mhrc_model_server(
+        [ModelReply(body=b'{"choices": [', headers={"Content-Length": "100"}), "Command: wait()"], when_done=None
+    )
     with httpx.Client(timeout=10.0) as http:
         with pytest.raises(httpx.RemoteProtocolError, match="incomplete|closed"):
             http.post(f"{server.url}/chat/completions", json={})
@@ -216,21 +238,31 @@ async def test_a_scripted_robot_among_heuristic_teammates(mhrc_run_episode: Any)
     assert [r.action for r in result.results("david")][:2] == ScriptedPolicy(script).actions
     assert {t.robot for t in result.thoughts()} == {"alice", "bob", "david"}
     assert {t.policy for t in result.thoughts("david")} == {"script"}
-    assert [m.kind for m in result.messages("action_result", "david")] == ["action_result"] * len(result.results("david"))
+    assert [m.kind for m in result.messages("action_result", "david")] == ["action_result"] * len(
+        result.results("david")
+    )
     assert result.trace.is_file() and result.metrics.temporal_steps == result.done.metrics.temporal_steps
 
 
-async def test_a_scripted_llm_robot_whose_bad_reply_becomes_feedback(mhrc_model_server: Any, mhrc_run_episode: Any) -> None:
+async def test_a_scripted_llm_robot_whose_bad_reply_becomes_feedback(
+    mhrc_model_server: Any, mhrc_run_episode: Any
+) -> None:
     """Bob on a model (the scripted server), Alice and David heuristic: Bob's first reply holds no
     command, so he waits and is told why; his second names an object that does not exist."""
-    server = mhrc_model_server({"bob": ["I am thinking about the tray.", "Analysis: got it.\nCommand: pick(ghost)"]}, latency=0.05)
+    server = mhrc_model_server(
+        {"bob": ["I am thinking about the tray.", "Analysis: got it.\nCommand: pick(ghost)"]}, latency=0.05
+    )
     result = await mhrc_run_episode({}, seed=0, horizon=3, llm="bob=openai:test", base_url=server.url)
     assert result.done.reason == "horizon" and result.metrics.temporal_steps == 3
     bob = result.thoughts("bob")
     assert bob[0].parse_error and "no command" in bob[0].parse_error and bob[0].action == "wait()"
-    assert "Your command could not be read, so you waited." in (bob[1].prompt or "")  # the format error came back as feedback
+    assert "Your command could not be read, so you waited." in (
+        bob[1].prompt or ""
+    )  # the format error came back as feedback
     assert bob[1].action == "pick(ghost)" and result.done.metrics.failed_actions.get("pick") == 1
-    assert all(t.policy == "llm:test" for t in bob) and len(server.requests_of("bob")) == len(bob) == len(server.requests)
+    assert all(t.policy == "llm:test" for t in bob) and len(server.requests_of("bob")) == len(bob) == len(
+        server.requests
+    )
     assert {t.policy for t in result.thoughts("alice") + result.thoughts("david")} == {"heuristic"}
     failures = [line.failure for line in result.records if isinstance(line.msg, Thought) and line.msg.robot == "bob"]
     assert failures[:2] == [ReplyFailure.UNREADABLE, None]  # the code the trace's reader derived, once
@@ -243,7 +275,10 @@ async def test_a_world_with_agents_attached_by_hand(mhrc_world: Any) -> None:
         assert world.endpoint.startswith("tcp/127.0.0.1:") and world.config.horizon == 2
         events: list[EpisodeDone] = []
         bus = await world.client()
-        bus.subscribe(Keys(world.run).world_event, lambda s: events.append(e) if isinstance(e := decode_event(s.payload), EpisodeDone) else None)
+        bus.subscribe(
+            Keys(world.run).world_event,
+            lambda s: events.append(e) if isinstance(e := decode_event(s.payload), EpisodeDone) else None,
+        )
         policies = {robot: ScriptedPolicy([]) for robot in world.config.robots}
         tasks = [await world.agent(robot, policy) for robot, policy in policies.items()]
         done = await world.done()
@@ -277,7 +312,9 @@ async def test_the_heuristic_bob_picks_then_places_and_asks_alice_for_what_is_mi
     """Bob's scripted expert, fed hand-built observations: a target on his table is picked and
     put in the tray; one he cannot see he asks Alice for."""
     harness = PolicyHarness(heuristic_policy("bob"))
-    assert (await harness.decide(observation("bob", objects={"phone": "table_0"}, targets=["phone"]))).action.call() == "pick(phone)"
+    assert (
+        await harness.decide(observation("bob", objects={"phone": "table_0"}, targets=["phone"]))
+    ).action.call() == "pick(phone)"
     harness.answer(observation=observation("bob", holding="phone", targets=["phone"], tick=1))
     assert (await harness.decide(harness.next_observation)).action.call() == "place(phone, tray)"
     harness.answer()
@@ -291,18 +328,29 @@ async def test_the_heuristic_bob_picks_then_places_and_asks_alice_for_what_is_mi
 
 async def test_the_heuristic_david_explores_what_alice_hands_him_and_reports_it() -> None:
     """A message in, a navigation out; the world function answers with what he then sees."""
+
     def world(action: Action, obs: Observation) -> tuple[SkillOutcome, Observation | None]:
         if action.skill == "navigate":  # he arrives and sees the book on table_2
-            return outcome(feedback="You arrived at table_2."), observation("david", tick=obs.tick + 1, objects={"book": "table_2"})
+            return outcome(feedback="You arrived at table_2."), observation(
+                "david", tick=obs.tick + 1, objects={"book": "table_2"}
+            )
         return outcome(), None
 
     harness = PolicyHarness(heuristic_policy("david"))
-    ask = observation("david", messages=[("alice", "David, please explore these surfaces and tell me what lies on them: table_2.")])
-    assert await harness.run(ask, 3, world) == ["navigate(table_2, 0)", "communicate('On table_2 I found: book.', alice)", "wait()"]
+    ask = observation(
+        "david", messages=[("alice", "David, please explore these surfaces and tell me what lies on them: table_2.")]
+    )
+    assert await harness.run(ask, 3, world) == [
+        "navigate(table_2, 0)",
+        "communicate('On table_2 I found: book.', alice)",
+        "wait()",
+    ]
     assert harness.steps[1].observation.objects[0].on == "table_2" and harness.steps[1].result is not None
 
 
-async def test_an_llm_policy_in_the_harness_reads_its_feedback_and_survives_a_reply_without_a_command(mhrc_model_server: Any) -> None:
+async def test_an_llm_policy_in_the_harness_reads_its_feedback_and_survives_a_reply_without_a_command(
+    mhrc_model_server: Any,
+) -> None:
     """The LLM robot against a scripted model, without a world: its prompt shows the hand-built
     observation, a failure's feedback reaches the next prompt, and an unreadable reply becomes
     a wait with the parse error."""
@@ -319,12 +367,21 @@ async def test_an_llm_policy_in_the_harness_reads_its_feedback_and_survives_a_re
     assert second.action.call() == "wait()" and second.parse_error and "no command" in second.parse_error
     prompts = [r["messages"][-1]["content"] for r in server.requests_of("bob")]
     assert "- phone: position" in prompts[0] and "The list: phone." in prompts[0]
-    assert "The phone is beyond your arm's reach." in prompts[1] and [ScriptedModelServer.step_of(r) for r in server.requests] == [0, 1]
+    assert "The phone is beyond your arm's reach." in prompts[1] and [
+        ScriptedModelServer.step_of(r) for r in server.requests
+    ] == [0, 1]
     assert harness.actions == ["pick(phone)", "wait()"] and harness.results[0].outcome.code is OutcomeCode.OUT_OF_REACH
 
 
 def test_the_harness_builds_observations_the_protocol_accepts_and_keeps_the_loop_in_order() -> None:
-    obs = observation("alice", tick=3, holding="apple", objects={"apple": "cabinet_0"}, messages=[("bob", "hi")], goals={"apple": "tray"})
+    obs = observation(
+        "alice",
+        tick=3,
+        holding="apple",
+        objects={"apple": "cabinet_0"},
+        messages=[("bob", "hi")],
+        goals={"apple": "tray"},
+    )
     assert obs.status.holding == "apple" and obs.objects[0].inside and obs.new_messages[0].sender == "bob"
     assert set(obs.teammates) == {"bob", "david"} and obs.goals == {"apple": "tray"} and obs.tick == 3
     assert Observation.model_validate_json(obs.model_dump_json()) == obs  # what the world would send

@@ -10,10 +10,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from mhrc.run.config import EpisodeConfig
-
-from mhrc.run.inprocess import up_in_process
 from mhrc.core.protocol import Snapshot
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 from mhrc.viewer.video import TraceWithoutSnapshots, UnsupportedVideoFormat, read_episode, render_video
 from mhrc.world.sim import Sim
 
@@ -42,7 +41,14 @@ def _snapshots(trace: Path) -> list[Snapshot]:
 def test_video_has_a_frame_per_step_and_shows_the_robots_moving(trace: Path, tmp_path: Path, suffix: str) -> None:
     seen: list[tuple[int, int]] = []
     out = tmp_path / f"episode{suffix}"
-    info = render_video(trace, out, width=W, height=H, frames_per_step=FRAMES_PER_STEP, progress=lambda n, total: seen.append((n, total)))
+    info = render_video(
+        trace,
+        out,
+        width=W,
+        height=H,
+        frames_per_step=FRAMES_PER_STEP,
+        progress=lambda n, total: seen.append((n, total)),
+    )
     steps = HORIZON + 1  # the start, then one batch per tick
     assert info.steps == steps and info.frames == steps * FRAMES_PER_STEP
     assert out.exists() and info.bytes == out.stat().st_size > 0
@@ -57,7 +63,9 @@ def test_video_has_a_frame_per_step_and_shows_the_robots_moving(trace: Path, tmp
 
 def test_captions_name_each_robots_action_and_outcome(trace: Path) -> None:
     started, steps, _ = read_episode(trace)
-    assert [c.robot for c in steps[0].captions] == started.robots and all(c.succeeded is None for c in steps[0].captions)
+    assert [c.robot for c in steps[0].captions] == started.robots and all(
+        c.succeeded is None for c in steps[0].captions
+    )
     acted = [c for s in steps[1:] for c in s.captions]
     assert len(acted) == HORIZON * len(started.robots)
     assert all(c.succeeded is not None and ("-> ok" in c.text or "-> FAILED" in c.text) for c in acted)
@@ -73,7 +81,9 @@ def test_apply_snapshot_puts_bodies_where_the_trace_says(trace: Path) -> None:
         robots, objects, opened = sim.poses()
     assert any((before[r].x, before[r].y) != (last.robots[r].x, last.robots[r].y) for r in robots)
     for name, rp in last.robots.items():
-        assert (robots[name].x, robots[name].y, robots[name].holding) == pytest.approx((rp.x, rp.y, rp.holding), abs=1e-3)
+        assert (robots[name].x, robots[name].y, robots[name].holding) == pytest.approx(
+            (rp.x, rp.y, rp.holding), abs=1e-3
+        )
     for name, op in last.objects.items():
         got = objects[name]
         assert (got.x, got.y, got.held_by, got.on) == pytest.approx((op.x, op.y, op.held_by, op.on), abs=2e-3)

@@ -14,9 +14,9 @@ import pytest
 from click.testing import CliRunner
 
 from mhrc.cli import main
+from mhrc.core.trace import read_trace
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
-from mhrc.core.trace import read_trace
 from mhrc.testing import ModelReply, ScriptedModelServer
 
 
@@ -40,8 +40,10 @@ def record_failed(path: Path) -> Path:
 def record_llm(path: Path) -> Path:
     """Three LLM robots against a scripted server: a navigation, a message, a failed pick."""
     replies = {
-        "alice": ["Analysis: I will look at table_1 first.\nCommand: navigate(table_1, 0)",
-                  'Analysis: Bob should know.\nCommand: communicate("I am at table_1", bob)'],
+        "alice": [
+            "Analysis: I will look at table_1 first.\nCommand: navigate(table_1, 0)",
+            'Analysis: Bob should know.\nCommand: communicate("I am at table_1", bob)',
+        ],
         "bob": ["Analysis: the ghost is near.\nCommand: pick(ghost)"],
         "david": ["Command: navigate(table_2, 0)"],
     }
@@ -49,7 +51,9 @@ def record_llm(path: Path) -> Path:
     script = {robot: [ModelReply(text, usage=usage) for text in texts] for robot, texts in replies.items()}
     server = ScriptedModelServer(script, when_done=ModelReply("Analysis: nothing to do.\nCommand: wait()", usage=usage))
     try:
-        cfg = EpisodeConfig.build(seed=0, horizon=4, llm="openai:test-model", base_url=server.url, trace=path).resolved()
+        cfg = EpisodeConfig.build(
+            seed=0, horizon=4, llm="openai:test-model", base_url=server.url, trace=path
+        ).resolved()
         asyncio.run(up_in_process(cfg))
     finally:
         server.close()
@@ -112,8 +116,11 @@ def show(*args: str) -> Any:
 @pytest.fixture(scope="module")
 def traces(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("viewer")
-    return {"heuristic": record_heuristic(d / "heuristic" / "trace.jsonl"), "llm": record_llm(d / "llm.jsonl"),
-            "failed": record_failed(d / "failed.jsonl")}
+    return {
+        "heuristic": record_heuristic(d / "heuristic" / "trace.jsonl"),
+        "llm": record_llm(d / "llm.jsonl"),
+        "failed": record_failed(d / "failed.jsonl"),
+    }
 
 
 def _self_contained(html: str) -> None:
@@ -149,7 +156,8 @@ def test_the_report_holds_every_step_and_every_snapshot(traces: dict[str, Path],
     assert sorted(str(s["data-goal"]) for s in with_result) == sorted(r["goal_id"] for r in results)
     for robot in started["robots"]:
         assert sum(1 for r in results if r["robot"] == robot) == sum(
-            1 for s in with_result if any(r["goal_id"] == s["data-goal"] and r["robot"] == robot for r in results))
+            1 for s in with_result if any(r["goal_id"] == s["data-goal"] and r["robot"] == robot for r in results)
+        )
 
     # every snapshot's data, in order
     data = json.loads(page.data_json)
@@ -157,7 +165,9 @@ def test_the_report_holds_every_step_and_every_snapshot(traces: dict[str, Path],
     assert len(data["frames"]) == len(snaps) > 1
     for frame, snap in zip(data["frames"], snaps):
         assert frame["tick"] == snap["tick"] and frame["goals"] == snap["goals"]
-        assert frame["robots"] == snap["robots"] and frame["objects"] == snap["objects"] and frame["open"] == snap["open"]
+        assert (
+            frame["robots"] == snap["robots"] and frame["objects"] == snap["objects"] and frame["open"] == snap["open"]
+        )
     assert data["framesFrom"] == "snapshots"
     # every executed step points at the frame right after it
     for s in with_result:
@@ -166,7 +176,14 @@ def test_the_report_holds_every_step_and_every_snapshot(traces: dict[str, Path],
 
     # the header: task, scene, seed, models, fidelity, scheduler, metrics, the TS lower bound
     done = next(m for m in msgs if m["kind"] == "episode_done")
-    for text in (started["task"], started["scene"], started["fidelity"], started["scheduler"], "TS lower bound", "makespan"):
+    for text in (
+        started["task"],
+        started["scene"],
+        started["fidelity"],
+        started["scheduler"],
+        "TS lower bound",
+        "makespan",
+    ):
         assert text in html
     assert f">{started['lower_bound']}<" in html and f">{done['metrics']['temporal_steps']}<" in html
 
@@ -185,7 +202,9 @@ def test_llm_steps_show_the_analysis_command_prompt_and_reply(traces: dict[str, 
     assert show(str(traces["llm"]), "--out", str(out)).exit_code == 0
     html = out.read_text(encoding="utf-8")
     page = parse(html)
-    thoughts = [r["msg"] for r in read_trace(traces["llm"]) if isinstance(r["msg"], dict) and r["msg"]["kind"] == "thought"]
+    thoughts = [
+        r["msg"] for r in read_trace(traces["llm"]) if isinstance(r["msg"], dict) and r["msg"]["kind"] == "thought"
+    ]
     assert thoughts and all(t["prompt"] for t in thoughts)
     assert page.details >= 2 * len(thoughts)  # prompt and raw reply of each step
     assert "llm:test-model" in html
@@ -220,7 +239,9 @@ def test_a_truncated_trace_renders_what_it_can_with_a_warning(traces: dict[str, 
     assert len(page.steps) == len(requests) > 0
 
 
-def test_an_older_trace_without_snapshots_shows_the_robots_from_their_observations(traces: dict[str, Path], tmp_path: Path) -> None:
+def test_an_older_trace_without_snapshots_shows_the_robots_from_their_observations(
+    traces: dict[str, Path], tmp_path: Path
+) -> None:
     old = tmp_path / "v1.jsonl"
     with old.open("w", encoding="utf-8") as f:
         for row in read_trace(traces["heuristic"]):
@@ -239,7 +260,11 @@ def test_an_older_trace_without_snapshots_shows_the_robots_from_their_observatio
     data = json.loads(page.data_json)
     assert data["framesFrom"] == "observations" and data["frames"]
     assert all(set(f["robots"]) <= {"alice", "bob", "david"} and not f["objects"] for f in data["frames"])
-    assert any(f["robots"]["alice"]["x"] != data["frames"][0]["robots"]["alice"]["x"] for f in data["frames"] if "alice" in f["robots"])
+    assert any(
+        f["robots"]["alice"]["x"] != data["frames"][0]["robots"]["alice"]["x"]
+        for f in data["frames"]
+        if "alice" in f["robots"]
+    )
     results = [r for r in read_trace(old) if isinstance(r["msg"], dict) and r["msg"]["kind"] == "action_result"]
     assert sum(1 for s in page.steps if "has-result" in str(s["class"])) == len(results)
 
@@ -267,7 +292,7 @@ def test_the_failure_panel_renders_the_diagnosis_or_a_note(traces: dict[str, Pat
     out = tmp_path / "d.html"
     assert show(str(traces["llm"]), "--out", str(out)).exit_code == 0
     html = out.read_text(encoding="utf-8")
-    section = html[html.index('<section id="failures">'):]
+    section = html[html.index('<section id="failures">') :]
     section = section[: section.index("</section>")]
     from mhrc.core.diagnostics import LABELS
 
@@ -285,8 +310,10 @@ def test_the_failure_panel_says_why_when_the_diagnosis_fails(traces: dict[str, P
     from mhrc.viewer.model import build_view
     from mhrc.viewer.page import render_page
 
-    html = render_page(build_view(load_trace(traces["llm"])), None, "the failure diagnosis failed on this trace: KeyError: 'x'")
-    section = html[html.index('<section id="failures">'):]
+    html = render_page(
+        build_view(load_trace(traces["llm"])), None, "the failure diagnosis failed on this trace: KeyError: 'x'"
+    )
+    section = html[html.index('<section id="failures">') :]
     assert "KeyError" in section[: section.index("</section>")] and 'class="note"' in section
 
 
@@ -328,7 +355,7 @@ class Rows(HTMLParser):
 
 def _targets_section(html: str) -> str:
     start = html.index('<section id="targets">')
-    return html[start: html.index("</section>", start)]
+    return html[start : html.index("</section>", start)]
 
 
 def _truth(trace: Path) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
@@ -339,11 +366,15 @@ def _truth(trace: Path) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
     return targets, last, next(m for m in msgs if m["kind"] == "episode_done")["metrics"]
 
 
-def test_a_failed_episode_names_its_targets_the_unplaced_ones_and_where_they_ended(traces: dict[str, Path], tmp_path: Path) -> None:
+def test_a_failed_episode_names_its_targets_the_unplaced_ones_and_where_they_ended(
+    traces: dict[str, Path], tmp_path: Path
+) -> None:
     html = _report(traces["failed"], tmp_path)
     targets, last, metrics = _truth(traces["failed"])
     section = _targets_section(html)
-    assert html.index('<section id="targets">') < html.index('<section id="map-section">')  # near the top, before the map
+    assert html.index('<section id="targets">') < html.index(
+        '<section id="map-section">'
+    )  # near the top, before the map
     parser = Rows()
     parser.feed(section)
     rows = {r["name"]: r for r in parser.rows}
@@ -397,7 +428,11 @@ def test_the_worlds_answer_key_comes_first(traces: dict[str, Path], tmp_path: Pa
     """The world names the task's targets, goals and order in episode_done (once nobody can use
     them): the report takes them from there, before Bob's observations."""
     targets, last, _ = _truth(traces["failed"])
-    done = next(r["msg"] for r in read_trace(traces["failed"]) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_done")
+    done = next(
+        r["msg"]
+        for r in read_trace(traces["failed"])
+        if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_done"
+    )
     assert done["targets"] == targets and done["goals"] == {t: "tray" for t in targets} and done["ordered"] is False
     named = tmp_path / "named.jsonl"
     with named.open("w", encoding="utf-8") as f:
@@ -423,12 +458,41 @@ def test_partial_success_reads_the_same_everywhere(traces: dict[str, Path], tmp_
         box = re.search(r'data-metric="partial_success"><div class="mv">(.*?)</div>', html)
         assert box and re.sub(r"<[^>]+>", "", box.group(1)) == expected
         assert f"<td>{expected}</td>" in html  # the "all metrics" table
-    row = {"key": "pack_objects/kitchen/3/0", "method": "heuristic", "ablation": "none", "fidelity": "paper", "history_cap": None,
-           "horizon": 30, "aids": [], "repeat": 0, "trial": 0, "task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3,
-           "robots": ["alice", "bob", "david"], "success": False, "partial_success": 1 / 3, "placed": 1, "total": 3,
-           "temporal_steps": 30, "action_steps": 20, "lower_bound": 9, "valid": True, "invalid_reason": None, "schedule": "lockstep",
-           "messages": 2, "llm_calls": 0, "prompt_tokens": 0, "completion_tokens": 0, "failed_actions": {}, "wall_time": 1.0,
-           "parse_failures": 0, "llm_unreachable": 0, "rejected_actions": 0}  # fmt: skip
+    row = {
+        "key": "pack_objects/kitchen/3/0",
+        "method": "heuristic",
+        "ablation": "none",
+        "fidelity": "paper",
+        "history_cap": None,
+        "horizon": 30,
+        "aids": [],
+        "repeat": 0,
+        "trial": 0,
+        "task": "pack_objects",
+        "scene": "kitchen",
+        "seed": 0,
+        "n_objects": 3,
+        "robots": ["alice", "bob", "david"],
+        "success": False,
+        "partial_success": 1 / 3,
+        "placed": 1,
+        "total": 3,
+        "temporal_steps": 30,
+        "action_steps": 20,
+        "lower_bound": 9,
+        "valid": True,
+        "invalid_reason": None,
+        "schedule": "lockstep",
+        "messages": 2,
+        "llm_calls": 0,
+        "prompt_tokens": 0,
+        "completion_tokens": 0,
+        "failed_actions": {},
+        "wall_time": 1.0,
+        "parse_failures": 0,
+        "llm_unreachable": 0,
+        "rejected_actions": 0,
+    }
     assert "<td>0.33 (1/3 placed)</td>" in html_summary([row], [None], resamples=50)
 
 
@@ -459,7 +523,13 @@ def test_paths_follow_the_planned_routes_around_walls(traces: dict[str, Path], t
     data = _data(_report(trace, tmp_path))
     walls = [list(w) for w in get_layout("kitchen").walls]
     msgs = [r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict)]
-    navigates = [m for m in msgs if m["kind"] == "action_result" and m["action"]["skill"] == "navigate" and m["outcome"]["code"] in ("ok", "off_target")]
+    navigates = [
+        m
+        for m in msgs
+        if m["kind"] == "action_result"
+        and m["action"]["skill"] == "navigate"
+        and m["outcome"]["code"] in ("ok", "off_target")
+    ]
     assert navigates and set(data["routes"]) == {m["goal_id"] for m in navigates}
     frame_of = {g: i for i, f in enumerate(data["frames"]) for g in f["goals"]}
     straight_crossings = 0
@@ -475,7 +545,9 @@ def test_paths_follow_the_planned_routes_around_walls(traces: dict[str, Path], t
     assert straight_crossings > 0  # the straight lines the map drew before went through walls
 
 
-def test_an_older_trace_without_routes_still_loads_and_draws_straight_lines(traces: dict[str, Path], tmp_path: Path) -> None:
+def test_an_older_trace_without_routes_still_loads_and_draws_straight_lines(
+    traces: dict[str, Path], tmp_path: Path
+) -> None:
     from mhrc.core.protocol import ActionResult
 
     old = tmp_path / "noroutes.jsonl"
@@ -493,7 +565,7 @@ def test_an_older_trace_without_routes_still_loads_and_draws_straight_lines(trac
 def _label_boxes(html: str) -> list[tuple[str, float, float, float, float]]:
     """The fixed labels of the map's SVG as boxes, estimated independently of the page's own
     estimate: 0.55 em a character, 1.2 em high, anchored in the middle on the baseline."""
-    svg = html[html.index('<g id="static">'): html.index('<g id="dyn">')]
+    svg = html[html.index('<g id="static">') : html.index('<g id="dyn">')]
     boxes = []
     for m in re.finditer(r"<text\b([^>]*)>([^<]*)</text>", svg):
         attrs = dict(re.findall(r'([\w-]+)="([^"]*)"', m.group(1)))
@@ -515,5 +587,5 @@ def test_no_two_map_labels_overlap_in_the_kitchen(traces: dict[str, Path], tmp_p
         assert vb
         for i, a in enumerate(boxes):
             assert a[1] >= 0 and a[2] >= 0 and a[3] <= float(vb.group(1)) and a[4] <= float(vb.group(2)), a
-            for b in boxes[i + 1:]:
+            for b in boxes[i + 1 :]:
                 assert min(a[3], b[3]) <= max(a[1], b[1]) or min(a[4], b[4]) <= max(a[2], b[2]), (a, b)

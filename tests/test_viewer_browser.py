@@ -11,9 +11,9 @@ from typing import Any
 
 import pytest
 from click.testing import CliRunner
+from test_viewer import record_failed, record_heuristic
 
 from mhrc.cli import main
-from test_viewer import record_failed, record_heuristic
 
 pytestmark = pytest.mark.slow
 
@@ -44,7 +44,13 @@ def driver(browser: tuple[Path, Path]) -> Iterator[Any]:
     chromium, chromedriver = browser
     options = webdriver.ChromeOptions()
     options.binary_location = str(chromium)
-    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu", "--window-size=1400,1800"):
+    for arg in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-dev-shm-usage",
+        "--disable-gpu",
+        "--window-size=1400,1800",
+    ):
         options.add_argument(arg)
     drv = webdriver.Chrome(service=Service(str(chromedriver)), options=options)
     try:
@@ -110,7 +116,10 @@ def test_the_report_renders_and_scrubs_in_a_browser(driver: Any, report: Path, t
     label = driver.find_element(By.ID, "tick-label")
     last = len(frames) - 1
     assert slider.is_displayed() and int(slider.get_attribute("max")) == last
-    assert label.get_attribute("data-frame") == str(last) and int(driver.execute_script("return arguments[0].value", slider)) == last
+    assert (
+        label.get_attribute("data-frame") == str(last)
+        and int(driver.execute_script("return arguments[0].value", slider)) == last
+    )
     assert _robots(driver) == {r: (p["x"], p["y"]) for r, p in frames[last]["robots"].items()}
     assert not driver.find_elements(By.CSS_SELECTOR, ".step.future")
     steps = driver.find_elements(By.CSS_SELECTOR, ".lane li.step")
@@ -134,9 +143,13 @@ def test_the_report_renders_and_scrubs_in_a_browser(driver: Any, report: Path, t
     assert driver.find_elements(By.CSS_SELECTOR, ".step.current")
 
     # the slider itself: to a frame where the robots have moved since the start
-    moved = next(i for i, f in enumerate(frames) if i > 1 and any((p["x"], p["y"]) != start[r] for r, p in f["robots"].items()))
+    moved = next(
+        i for i, f in enumerate(frames) if i > 1 and any((p["x"], p["y"]) != start[r] for r, p in f["robots"].items())
+    )
     driver.execute_script(
-        "const s = arguments[0]; s.value = arguments[1]; s.dispatchEvent(new Event('input', {bubbles: true}));", slider, moved
+        "const s = arguments[0]; s.value = arguments[1]; s.dispatchEvent(new Event('input', {bubbles: true}));",
+        slider,
+        moved,
     )
     assert label.get_attribute("data-frame") == str(moved)
     assert f"tick {frames[moved]['tick']}" in label.text
@@ -157,7 +170,8 @@ def _boxes(drv: Any, selector: str) -> list[dict[str, Any]]:
     """The rendered boxes (getBBox, SVG user units) of the map's elements matching `selector`."""
     return drv.execute_script(
         "return Array.from(document.querySelectorAll(arguments[0])).filter(e => e.textContent !== '' || e.tagName !== 'text')"
-        ".map(e => { const b = e.getBBox(); return {text: e.textContent, cls: e.getAttribute('class'), x0: b.x, y0: b.y, x1: b.x + b.width, y1: b.y + b.height}; });",
+        ".map(e => "
+        "{ const b = e.getBBox(); return {text: e.textContent, cls: e.getAttribute('class'), x0: b.x, y0: b.y, x1: b.x + b.width, y1: b.y + b.height}; });",
         selector,
     )
 
@@ -194,8 +208,14 @@ def test_a_failed_episode_shows_its_unplaced_targets_in_a_browser(driver: Any, f
         assert row.is_displayed() and row.get_attribute("data-placed") == "no"
         assert "not placed" in row.text and t in summary
         tint = row.find_element(By.CSS_SELECTOR, "td").value_of_css_property("background-color")
-        assert tint.startswith("rgb") and tint not in ("rgba(0, 0, 0, 0)", "rgb(255, 255, 255)"), tint  # the row stands out
-        where = f"held by {end[t]['held_by']}" if end[t]["held_by"] else f"{'in' if end[t]['inside'] else 'on'} {end[t]['on']}"
+        assert tint.startswith("rgb") and tint not in ("rgba(0, 0, 0, 0)", "rgb(255, 255, 255)"), (
+            tint
+        )  # the row stands out
+        where = (
+            f"held by {end[t]['held_by']}"
+            if end[t]["held_by"]
+            else f"{'in' if end[t]['inside'] else 'on'} {end[t]['on']}"
+        )
         assert where in row.text and where in summary
     for n, row in rows.items():
         if row.get_attribute("data-role") == "distractor":
@@ -208,7 +228,10 @@ def test_a_failed_episode_shows_its_unplaced_targets_in_a_browser(driver: Any, f
         role = g.get_attribute("data-role")
         assert role == ("target unplaced" if name in unplaced else "target placed" if name in targets else "distractor")
         assert bool(g.find_elements(By.CSS_SELECTOR, "circle.ring")) == (name in unplaced)
-    fills = {g.get_attribute("data-role"): g.find_element(By.CSS_SELECTOR, "circle.obj").value_of_css_property("fill") for g in drawn.values()}
+    fills = {
+        g.get_attribute("data-role"): g.find_element(By.CSS_SELECTOR, "circle.obj").value_of_css_property("fill")
+        for g in drawn.values()
+    }
     assert len(set(fills.values())) == len(fills) == 3  # three roles, three colours
 
     # the paths follow the planned routes: every route's waypoints are on its robot's path
@@ -220,7 +243,9 @@ def test_a_failed_episode_shows_its_unplaced_targets_in_a_browser(driver: Any, f
         robot = data["calls"][goal]["robot"]
         points = [tuple(map(float, p.split(","))) for p in paths[robot].get_attribute("points").split()]
         for x, y in route:
-            assert any(abs(px - (x - xmin) * scale) < 0.2 and abs(py - (ymax - y) * scale) < 0.2 for px, py in points), (goal, x, y)
+            assert any(
+                abs(px - (x - xmin) * scale) < 0.2 and abs(py - (ymax - y) * scale) < 0.2 for px, py in points
+            ), (goal, x, y)
         routed += 1
     assert routed and sum(int(p.get_attribute("data-routes")) for p in paths.values()) == routed
 
@@ -228,12 +253,13 @@ def test_a_failed_episode_shows_its_unplaced_targets_in_a_browser(driver: Any, f
     for i in [last, *range(last)]:
         driver.execute_script(
             "const s = arguments[0]; s.value = arguments[1]; s.dispatchEvent(new Event('input', {bubbles: true}));",
-            driver.find_element(By.ID, "tick-slider"), i,
+            driver.find_element(By.ID, "tick-slider"),
+            i,
         )
         labels = _boxes(driver, "#map text")
         assert len(labels) >= len(frames[i]["objects"]) + len(frames[i]["robots"]) + 1
         for k, a in enumerate(labels):
-            for b in labels[k + 1:]:
+            for b in labels[k + 1 :]:
                 assert _overlap(a, b) < 0.5, (i, a, b)
         dots = _boxes(driver, "#map g.robot circle, #map g.object circle.obj")
         for a in _boxes(driver, "#labels text"):

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+import test_viewer_browser
+from test_viewer import record_heuristic, show
 
 from mhrc.core.trace import read_trace
 from mhrc.run.config import EpisodeConfig
@@ -22,8 +24,6 @@ from mhrc.viewer.model import build_view
 from mhrc.viewer.video import read_episode
 from mhrc.world.scenario import load_scenario
 from mhrc.world.sim import Sim
-import test_viewer_browser
-from test_viewer import record_heuristic, show
 
 browser, driver = test_viewer_browser.browser, test_viewer_browser.driver  # the browser tests' fixtures, shared
 
@@ -38,7 +38,9 @@ def _record(path: Path, events: Path, horizon: int) -> Path:
 
 
 def _events(trace: Path) -> list[dict[str, Any]]:
-    return [r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "scenario_event"]
+    return [
+        r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "scenario_event"
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +48,9 @@ def busy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """seed 0 with the shipped busy_house scenario: relocate, close, breakdown, new_target, all applied."""
     trace = _record(tmp_path_factory.mktemp("busy") / "trace.jsonl", BUSY_HOUSE, HORIZON)
     fired = _events(trace)
-    assert [e["event"] for e in fired] == ["relocate", "close", "breakdown", "new_target"] and all(e["applied"] for e in fired), fired
+    assert [e["event"] for e in fired] == ["relocate", "close", "breakdown", "new_target"] and all(
+        e["applied"] for e in fired
+    ), fired
     return trace
 
 
@@ -176,7 +180,9 @@ def _page(trace: Path, out: Path) -> tuple[str, _Page]:
     return html, page
 
 
-def test_the_report_marks_every_event_on_the_timeline_in_the_lanes_and_names_the_scenario(busy: Path, tmp_path: Path) -> None:
+def test_the_report_marks_every_event_on_the_timeline_in_the_lanes_and_names_the_scenario(
+    busy: Path, tmp_path: Path
+) -> None:
     _, page = _page(busy, tmp_path / "busy.html")
     view = build_view(load_trace(busy))
     sha = load_scenario(BUSY_HOUSE).sha256
@@ -192,7 +198,12 @@ def test_the_report_marks_every_event_on_the_timeline_in_the_lanes_and_names_the
 
     # the lanes: the breakdown in david's lane, between his steps of ticks 11 and 12; the others in the world lane
     events = [(lane, a) for lane, a in page.entries if "lane-event" in a["class"]]
-    assert [(lane, a["data-event"]) for lane, a in events] == [("david", "breakdown"), ("world", "relocate"), ("world", "close"), ("world", "new_target")]
+    assert [(lane, a["data-event"]) for lane, a in events] == [
+        ("david", "breakdown"),
+        ("world", "relocate"),
+        ("world", "close"),
+        ("world", "new_target"),
+    ]
     david = [a for lane, a in page.entries if lane == "david"]
     k = next(i for i, a in enumerate(david) if "lane-event" in a["class"])
     assert int(david[k - 1]["data-tick"]) == 11 and int(david[k + 1]["data-tick"]) == 12
@@ -206,7 +217,9 @@ def test_the_report_marks_every_event_on_the_timeline_in_the_lanes_and_names_the
     ]
 
 
-def test_a_skipped_event_is_marked_skipped_with_why_and_a_static_report_has_no_event_parts(skipped: Path, static: Path, tmp_path: Path) -> None:
+def test_a_skipped_event_is_marked_skipped_with_why_and_a_static_report_has_no_event_parts(
+    skipped: Path, static: Path, tmp_path: Path
+) -> None:
     html, page = _page(skipped, tmp_path / "skipped.html")
     why = _events(skipped)[0]["skipped"]
     [marker] = page.markers
@@ -231,12 +244,15 @@ def _scrub(drv: Any, frame: int) -> None:
 
     drv.execute_script(
         "const s = arguments[0]; s.value = arguments[1]; s.dispatchEvent(new Event('input', {bubbles: true}));",
-        drv.find_element(By.ID, "tick-slider"), frame,
+        drv.find_element(By.ID, "tick-slider"),
+        frame,
     )
 
 
 def _centre(el: Any) -> tuple[float, float]:
-    b = el.parent.execute_script("const b = arguments[0].getBBox(); return [b.x + b.width / 2, b.y + b.height / 2];", el)
+    b = el.parent.execute_script(
+        "const b = arguments[0].getBBox(); return [b.x + b.width / 2, b.y + b.height / 2];", el
+    )
     return float(b[0]), float(b[1])
 
 
@@ -272,14 +288,19 @@ def test_scrubbing_to_an_event_shows_its_markers_in_a_browser(driver: Any, busy:
         if kind == "breakdown":  # on the robot, wherever it stands
             robot = frames[frame]["robots"][ev["robot"]]
             wx, wy = robot["x"], robot["y"]
-            assert "(broken down)" in driver.find_element(By.CSS_SELECTOR, f"#labels text[data-for='{ev['robot']}']").text
+            assert (
+                "(broken down)" in driver.find_element(By.CSS_SELECTOR, f"#labels text[data-for='{ev['robot']}']").text
+            )
         else:
             wx, wy = ev["at"]
         assert abs(x - (wx - xmin) * scale) < 16 and abs(y - (ymax - wy) * scale) < 16, (kind, x, y, wx, wy)
         if kind == "relocate":  # an arrow from the old place
             arrow = driver.find_element(By.CSS_SELECTOR, f"#map line.ev-arrow[data-index='{ev['index']}']")
             ox, oy = ev["origin"]
-            assert abs(float(arrow.get_attribute("x1")) - (ox - xmin) * scale) < 0.2 and abs(float(arrow.get_attribute("y1")) - (ymax - oy) * scale) < 0.2
+            assert (
+                abs(float(arrow.get_attribute("x1")) - (ox - xmin) * scale) < 0.2
+                and abs(float(arrow.get_attribute("y1")) - (ymax - oy) * scale) < 0.2
+            )
         said = driver.find_element(By.ID, "frame-events").text
         assert ev["text"] in said
 
@@ -290,7 +311,9 @@ def test_scrubbing_to_an_event_shows_its_markers_in_a_browser(driver: Any, busy:
     # later: fixed markers stay (no longer fresh); the breakdown is gone once the robot works again
     _scrub(driver, len(frames) - 1)
     kinds = sorted(g.get_attribute("data-event") for g in driver.find_elements(By.CSS_SELECTOR, "#map g.ev-mark"))
-    assert kinds == ["close", "new_target", "relocate"] and not driver.find_elements(By.CSS_SELECTOR, "#map g.ev-mark.fresh")
+    assert kinds == ["close", "new_target", "relocate"] and not driver.find_elements(
+        By.CSS_SELECTOR, "#map g.ev-mark.fresh"
+    )
 
     # a click on a timeline marker jumps to its frame
     first = data["events"][0]
@@ -340,7 +363,9 @@ def test_the_video_captions_each_event_at_the_frames_of_its_tick(busy: Path, sta
     # the title names the scenario (name and hash), a static episode's none
     sha = _events(busy)[0]["sha256"]
     assert named == f"busy_house ({sha[:8]})" and unnamed is None
-    assert _Captioner(320, 240, started, len(steps), scenario=named).title.endswith(f"/ scenario busy_house ({sha[:8]})")
+    assert _Captioner(320, 240, started, len(steps), scenario=named).title.endswith(
+        f"/ scenario busy_house ({sha[:8]})"
+    )
 
 
 def test_the_videos_own_sim_gets_the_new_target_from_its_first_snapshot(busy: Path) -> None:
@@ -352,7 +377,9 @@ def test_the_videos_own_sim_gets_the_new_target_from_its_first_snapshot(busy: Pa
     [(first, obj)] = [(i, a) for i, s in enumerate(steps) for a in s.added]
     assert obj == (added["object"], added["on"]) and added["object"] in steps[first].snapshot.objects
     assert added["object"] not in steps[first - 1].snapshot.objects
-    with Sim(task=started.task, scene=started.scene, seed=started.seed, n_objects=started.n_objects, scenario=_spawns(steps)) as sim:
+    with Sim(
+        task=started.task, scene=started.scene, seed=started.seed, n_objects=started.n_objects, scenario=_spawns(steps)
+    ) as sim:
         sim.fire_events(first - 1)
         assert added["object"] not in sim.world.objects
         sim.fire_events(first)

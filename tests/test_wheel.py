@@ -15,7 +15,6 @@ import venv
 from pathlib import Path
 
 import pytest
-
 from test_layers import ROOT, TOP, sources
 
 pytestmark = pytest.mark.slow
@@ -52,7 +51,9 @@ def test_the_wheel_installs_in_a_fresh_venv_and_every_module_imports_from_it(tmp
     wheels = tmp_path / "wheels"
     built = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(wheels), str(src)],
-        capture_output=True, text=True, timeout=300,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert built.returncode == 0, built.stderr[-3000:]
     (wheel,) = wheels.glob("mhrc-*.whl")
@@ -61,7 +62,9 @@ def test_the_wheel_installs_in_a_fresh_venv_and_every_module_imports_from_it(tmp
     python = env / "bin" / "python"
     installed = subprocess.run(
         [sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps", "--no-index", "-q", str(wheel)],
-        capture_output=True, text=True, timeout=300,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert installed.returncode == 0, installed.stderr[-3000:]
     # -I: no checkout on the path (not the working directory, not PYTHONPATH)

@@ -17,14 +17,12 @@ from collections.abc import Callable
 
 import pytest
 from structlog.testing import capture_logs
+from waits import robots_alive, served
 
 from mhrc.agents.agent import RobotAgent, WorldGone
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.endpoints import endpoint
-from mhrc.run.config import EpisodeConfig
-from mhrc.run.processes import agent_command, wait_for_port, world_command
-from mhrc.run.serve import serve_world
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import (
     Action,
@@ -48,8 +46,10 @@ from mhrc.core.protocol import (
     encode,
 )
 from mhrc.core.trace import read_trace
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.processes import agent_command, wait_for_port, world_command
+from mhrc.run.serve import serve_world
 from mhrc.world.service import WorldService
-from waits import robots_alive, served
 
 
 class ManualAgent:
@@ -62,7 +62,9 @@ class ManualAgent:
         self.started = asyncio.Event()
         self._news = asyncio.Event()
         bus.subscribe(self.keys.action_ack(robot), lambda s: self.acks.put_nowait(decode(s.payload, ActionAck)))
-        bus.subscribe(self.keys.action_result(robot), lambda s: self.results.put_nowait(decode(s.payload, ActionResult)))
+        bus.subscribe(
+            self.keys.action_result(robot), lambda s: self.results.put_nowait(decode(s.payload, ActionResult))
+        )
         bus.subscribe(self.keys.world_event, self._on_event)
         self.tick = 0
 
@@ -88,7 +90,9 @@ class ManualAgent:
 
     async def attach(self) -> AttachReply:
         await served(self.bus, self.keys.attach(self.robot))  # the world's attach queryable reached this session
-        replies = await self.bus.get(self.keys.attach(self.robot), AttachRequest(robot=self.robot, agent_id=self.agent_id))
+        replies = await self.bus.get(
+            self.keys.attach(self.robot), AttachRequest(robot=self.robot, agent_id=self.agent_id)
+        )
         assert replies, "the world did not answer the attach query"
         reply = decode(replies[0], AttachReply)
         if reply.accepted:
@@ -140,7 +144,10 @@ async def test_request_ack_result_and_bad_input(mhrc_world) -> None:  # type: ig
 
             # a malformed payload is rejected with a reason; the world goes on
             request_key = Keys(world.config.run).action_request("alice")
-            bus.put(request_key, b'{"v": 1, "goal_id": "bad1", "robot": "alice", "tick": 0, "action": {"skill": "teleport"}}')
+            bus.put(
+                request_key,
+                b'{"v": 1, "goal_id": "bad1", "robot": "alice", "tick": 0, "action": {"skill": "teleport"}}',
+            )
             bad = await asyncio.wait_for(alice.acks.get(), 10)
             assert bad.goal_id == "bad1" and not bad.accepted and "malformed" in bad.reason
             bus.put(request_key, b"\x00garbage")
@@ -189,7 +196,9 @@ async def test_message_reaches_receiver_next_tick(mhrc_world) -> None:  # type: 
             bob = ManualAgent(bus, world.config.run, "bob")
             await alice.attach()
             await bob.attach()
-            (_, ra), (_, rb) = await asyncio.gather(alice.act(Wait()), bob.act(Communicate(content="Alice, go.", to="alice")))
+            (_, ra), (_, rb) = await asyncio.gather(
+                alice.act(Wait()), bob.act(Communicate(content="Alice, go.", to="alice"))
+            )
             assert ra is not None and [m.content for m in ra.observation.new_messages] == ["Alice, go."]
             assert ra.observation.new_messages[0].sender == "bob" and ra.observation.new_messages[0].tick == 0
             (_, ra), _ = await asyncio.gather(alice.act(Wait()), bob.act(Wait()))
@@ -203,14 +212,18 @@ REFUSED_WHILE_EXECUTING = {"sequential": "tick_taken", "lockstep": "tick_taken",
 
 
 @pytest.mark.parametrize("schedule", sorted(REFUSED_WHILE_EXECUTING))
-async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(mhrc_world, monkeypatch: pytest.MonkeyPatch, schedule: str) -> None:  # type: ignore[no-untyped-def]
+async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(
+    mhrc_world, monkeypatch: pytest.MonkeyPatch, schedule: str
+) -> None:  # type: ignore[no-untyped-def]
     """Alice acts alone (Bob and David leave once the episode started). While her first goal
     executes (the simulator's thread held inside it): the same payload again is refused as a
     duplicate, however often it comes, and logged once an interval, not once a message; a second
     goal for the same tick is refused (async: busy). After the first's result the payload is
     refused again. Nothing refused reaches the simulator: it runs the first goal and the next
     one, in ticks 0 and 1, and the trace has one result and one snapshot for each."""
-    first = ActionRequest(robot="alice", agent_id="manual-alice", tick=0, action=Navigate(target="table_0", stand_pose=0))
+    first = ActionRequest(
+        robot="alice", agent_id="manual-alice", tick=0, action=Navigate(target="table_0", stand_pose=0)
+    )
     payload = encode(first)
     ran: asyncio.Queue[str] = asyncio.Queue()  # goal ids, as the simulator's thread starts each
     release = threading.Event()
@@ -250,7 +263,11 @@ async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(mhrc_world, mon
                 second = ActionRequest(robot="alice", agent_id="manual-alice", tick=0, action=Wait())
                 bus.put(alice.keys.action_request("alice"), second)
                 ack = await asyncio.wait_for(alice.acks.get(), 30)
-                assert (ack.goal_id, ack.accepted, ack.code) == (second.goal_id, False, REFUSED_WHILE_EXECUTING[schedule]), ack
+                assert (ack.goal_id, ack.accepted, ack.code) == (
+                    second.goal_id,
+                    False,
+                    REFUSED_WHILE_EXECUTING[schedule],
+                ), ack
                 assert ack.reason
 
                 release.set()
@@ -262,7 +279,9 @@ async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(mhrc_world, mon
 
                 third = ActionRequest(robot="alice", agent_id="manual-alice", tick=1, action=Wait())
                 bus.put(alice.keys.action_request("alice"), third)
-                assert (ack := await asyncio.wait_for(alice.acks.get(), 30)).accepted and ack.goal_id == third.goal_id, ack
+                assert (
+                    ack := await asyncio.wait_for(alice.acks.get(), 30)
+                ).accepted and ack.goal_id == third.goal_id, ack
                 result = await asyncio.wait_for(alice.results.get(), 60)
                 assert (result.goal_id, result.tick) == (third.goal_id, 1)
             finally:
@@ -270,17 +289,24 @@ async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(mhrc_world, mon
                 await bus.close()  # alice's token goes: the episode ends with nobody attached
             done = await world.done(60)
     assert done.reason == "no_agents" and done.metrics.action_steps == 1  # the navigation, once (waits are not counted)
-    assert [ran.get_nowait() for _ in range(ran.qsize())] == [third.goal_id], "after the first, only the third reached the simulator"
+    assert [ran.get_nowait() for _ in range(ran.qsize())] == [third.goal_id], (
+        "after the first, only the third reached the simulator"
+    )
     rows = [line["msg"] for line in read_trace(world.trace) if line["kind"] == "put" and isinstance(line["msg"], dict)]
     assert [m["goal_id"] for m in rows if m["kind"] == "action_result"] == [first.goal_id, third.goal_id]
-    assert [(m["tick"], m["goals"]) for m in rows if m["kind"] == "snapshot" and m["goals"]] == [(0, [first.goal_id]), (1, [third.goal_id])]
+    assert [(m["tick"], m["goals"]) for m in rows if m["kind"] == "snapshot" and m["goals"]] == [
+        (0, [first.goal_id]),
+        (1, [third.goal_id]),
+    ]
     lines = [entry for entry in logs if entry["event"] == "duplicate goal rejected"]
     assert 1 <= len(lines) <= 2, lines  # 11 duplicates: a line per 5 s interval, not a line a message
     assert lines[0]["code"] == "duplicate_goal" and lines[0]["goal"] == first.goal_id
 
 
 # --------------------------------------------------------------------------- a re-attach during a tick (issue 32)
-async def test_a_message_sent_while_its_receiver_reattaches_is_delivered_once_and_told(mhrc_world, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+async def test_a_message_sent_while_its_receiver_reattaches_is_delivered_once_and_told(
+    mhrc_world, monkeypatch: pytest.MonkeyPatch
+) -> None:  # type: ignore[no-untyped-def]
     """Bob tells Alice about an object only he has seen. While the simulator's thread is held
     right after his message was sent (mid-tick), Alice's agent attaches again, and the world
     handles that attach up to its observation. Released, the message reaches Alice exactly once
@@ -318,7 +344,9 @@ async def test_a_message_sent_while_its_receiver_reattaches_is_delivered_once_an
                 observing.get_nowait()  # the attaches' own observations
 
             acting = asyncio.ensure_future(
-                asyncio.gather(alice.act(Wait()), bob.act(Communicate(content=f"Alice, the {thing} is near me.", to="alice")))
+                asyncio.gather(
+                    alice.act(Wait()), bob.act(Communicate(content=f"Alice, the {thing} is near me.", to="alice"))
+                )
             )
             await asyncio.wait_for(held.get(), 30)  # the message is sent, the tick not over
             again = asyncio.ensure_future(alice.attach())
@@ -331,10 +359,16 @@ async def test_a_message_sent_while_its_receiver_reattaches_is_delivered_once_an
             carried = [m.content for obs in (reattached.observation, result.observation) for m in obs.new_messages]
             assert carried == [f"Alice, the {thing} is near me."], carried
             for obs in (reattached.observation, result.observation):
-                assert thing in {o.name for o in obs.objects}, f"Alice's observation of tick {obs.tick} does not know what Bob told"
+                assert thing in {o.name for o in obs.objects}, (
+                    f"Alice's observation of tick {obs.tick} does not know what Bob told"
+                )
             alice.tick = result.tick + 1  # the attach reply said the tick it was asked in, which has closed since
             (_, later), _ = await asyncio.gather(alice.act(Wait()), bob.act(Wait()))
-            assert later is not None and later.observation.new_messages == [] and thing in {o.name for o in later.observation.objects}
+            assert (
+                later is not None
+                and later.observation.new_messages == []
+                and thing in {o.name for o in later.observation.objects}
+            )
         finally:
             release.set()
             await bus.close()
@@ -473,10 +507,27 @@ def _stray(run: str) -> list[str]:
 def test_processes_mode_exits_cleanly(tmp_path) -> None:  # type: ignore[no-untyped-def]
     run = "clean-exit-test"
     out = subprocess.run(
-        [sys.executable, "-m", "mhrc", "up", "--processes", "--quiet", "--json", "--seed", "4", "--objects", "3",
-         "--run", run, "--trace", str(tmp_path / "t.jsonl")],
-        capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "mhrc",
+            "up",
+            "--processes",
+            "--quiet",
+            "--json",
+            "--seed",
+            "4",
+            "--objects",
+            "3",
+            "--run",
+            run,
+            "--trace",
+            str(tmp_path / "t.jsonl"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     metrics = json.loads(out.stdout.strip().splitlines()[-1])
     assert metrics["success"] is True and metrics["temporal_steps"] > 0

@@ -14,4 +14,3 @@ def test_every_action_but_communicate_runs_as_one_registered_skill() -> None:
     actions = set(get_args(get_args(Action)[0]))  # Annotated[Union[...], discriminator]
     assert Communicate in actions and len(actions) > 2
     assert set(SKILLS) == actions - {Communicate}  # communicate is the world service's
-

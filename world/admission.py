@@ -23,7 +23,7 @@ import re
 from structlog.typing import FilteringBoundLogger
 
 from mhrc.core.logs import Throttle
-from mhrc.core.protocol import ActionRequest, ProtocolError, Rejection, RejectCode, decode
+from mhrc.core.protocol import ActionRequest, ProtocolError, RejectCode, Rejection, decode
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES, loads
 from mhrc.core.protocol.exchange import GOAL_ID
 
@@ -31,7 +31,10 @@ from .roster import Roster
 from .schedulers import Scheduler
 
 LOG_INTERVAL = 5.0  # s: at most one line per robot and reject code in this time
-_WARNED = {RejectCode.MALFORMED: "malformed action request rejected", RejectCode.DUPLICATE_GOAL: "duplicate goal rejected"}  # an agent's bug
+_WARNED = {
+    RejectCode.MALFORMED: "malformed action request rejected",
+    RejectCode.DUPLICATE_GOAL: "duplicate goal rejected",
+}  # an agent's bug
 
 
 class Admission:
@@ -40,7 +43,9 @@ class Admission:
     def __init__(self, roster: Roster, scheduler: Scheduler, log: FilteringBoundLogger) -> None:
         self.roster = roster
         self.scheduler = scheduler
-        self._goals: dict[str, set[str]] = {robot: set() for robot in roster.robots}  # robot -> goal ids accepted this episode
+        self._goals: dict[str, set[str]] = {
+            robot: set() for robot in roster.robots
+        }  # robot -> goal ids accepted this episode
         self._throttle = Throttle(interval=LOG_INTERVAL)
         self._log = log
 
@@ -51,10 +56,15 @@ class Admission:
         try:
             req = decode(payload, ActionRequest, max_bytes=MAX_REQUEST_BYTES)
         except ProtocolError as exc:
-            goal_id, rejection = _goal_id_of(payload), Rejection(RejectCode.MALFORMED, f"malformed action request: {exc}")
+            goal_id, rejection = (
+                _goal_id_of(payload),
+                Rejection(RejectCode.MALFORMED, f"malformed action request: {exc}"),
+            )
         else:
             goal_id = req.goal_id
-            rejection = self.roster.check_request(robot, req, over=over) or self._repeated(req) or self.scheduler.admit(req)
+            rejection = (
+                self.roster.check_request(robot, req, over=over) or self._repeated(req) or self.scheduler.admit(req)
+            )
             if rejection is None:
                 self._goals[robot].add(goal_id)
                 return goal_id, None
@@ -77,11 +87,19 @@ class Admission:
 
     def _note(self, robot: str, goal_id: str, rejection: Rejection) -> None:
         """Log a rejection, unless one of its robot and code was logged less than LOG_INTERVAL ago."""
-        who = robot if robot in self.roster.robots else "?"  # the robot in a key is the sender's choice: keep the throttle's keys few
+        who = (
+            robot if robot in self.roster.robots else "?"
+        )  # the robot in a key is the sender's choice: keep the throttle's keys few
         log_now, held = self._throttle.due(f"{rejection.code.value}/{who}")
         if not log_now:
             return
-        fields = {"robot": robot, "goal": goal_id[:64], "reason": rejection.reason, "code": rejection.code.value, **({"and_before": held} if held else {})}
+        fields = {
+            "robot": robot,
+            "goal": goal_id[:64],
+            "reason": rejection.reason,
+            "code": rejection.code.value,
+            **({"and_before": held} if held else {}),
+        }
         warned = _WARNED.get(rejection.code)
         if warned is None:
             self._log.info("action rejected", **fields)

@@ -13,11 +13,12 @@ import threading
 from dataclasses import dataclass
 
 import numpy as np
-from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import pybullet_data
 from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
+
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from .scene import StaticBody, load_statics
 
@@ -50,6 +51,7 @@ class IKResult:
     q: np.ndarray | None
     error: float  # the best attempt's tool-tip distance from the target (m)
     collided: bool  # some attempt reached the target but collided
+
 
 @dataclass
 class PlanResult:
@@ -85,7 +87,9 @@ class ArmPlanner:
         """Mirror a live joint (an opened drawer) into the planning world."""
         p.resetJointState(self.bodies[body], joint, value, physicsClientId=self.cid)
 
-    def set_box(self, name: str, center: tuple[float, float, float], half: tuple[float, float, float], yaw: float = 0.0) -> None:
+    def set_box(
+        self, name: str, center: tuple[float, float, float], half: tuple[float, float, float], yaw: float = 0.0
+    ) -> None:
         """Create or move the obstacle box `name` (a chassis, an object)."""
         orn = p.getQuaternionFromEuler((0, 0, yaw))
         if name not in self.boxes:
@@ -113,10 +117,14 @@ class ArmPlanner:
 
     def hide_other_arm(self, name: str) -> None:
         if name in self.other_arms:
-            p.resetBasePositionAndOrientation(self.other_arms[name], (0, 0, -50), (0, 0, 0, 1), physicsClientId=self.cid)
+            p.resetBasePositionAndOrientation(
+                self.other_arms[name], (0, 0, -50), (0, 0, 0, 1), physicsClientId=self.cid
+            )
 
     def set_base(self, xyz: tuple[float, float, float], yaw: float) -> None:
-        p.resetBasePositionAndOrientation(self.arm, xyz, p.getQuaternionFromEuler((0, 0, yaw)), physicsClientId=self.cid)
+        p.resetBasePositionAndOrientation(
+            self.arm, xyz, p.getQuaternionFromEuler((0, 0, yaw)), physicsClientId=self.cid
+        )
 
     # ------------------------------------------------------------------ kinematics
     def _set(self, q: np.ndarray) -> None:
@@ -155,7 +163,13 @@ class ArmPlanner:
             for _ in range(3):
                 self._set(q)
                 sol = p.calculateInverseKinematics(
-                    self.arm, EE_LINK, target, orn, maxNumIterations=100, residualThreshold=1e-6, physicsClientId=self.cid
+                    self.arm,
+                    EE_LINK,
+                    target,
+                    orn,
+                    maxNumIterations=100,
+                    residualThreshold=1e-6,
+                    physicsClientId=self.cid,
                 )
                 q = np.clip(np.array(sol[:7]), LOWER, UPPER)
                 pos, got = self.fk(q)
@@ -170,7 +184,9 @@ class ArmPlanner:
             collided = True
         return IKResult(None, best, collided)
 
-    def ik(self, target: tuple[float, float, float], yaw: float, seed_q: np.ndarray, restarts: int = 8) -> np.ndarray | None:
+    def ik(
+        self, target: tuple[float, float, float], yaw: float, seed_q: np.ndarray, restarts: int = 8
+    ) -> np.ndarray | None:
         return self.solve(target, yaw, seed_q, restarts).q
 
     def reach_error(self, target: tuple[float, float, float], yaw: float, seed_q: np.ndarray, tries: int = 4) -> float:
@@ -179,7 +195,9 @@ class ArmPlanner:
         best = math.inf
         for k in range(tries):
             self._set(seed_q if k == 0 else self.rng.uniform(LOWER, UPPER))
-            sol = p.calculateInverseKinematics(self.arm, EE_LINK, target, orn, maxNumIterations=200, physicsClientId=self.cid)
+            sol = p.calculateInverseKinematics(
+                self.arm, EE_LINK, target, orn, maxNumIterations=200, physicsClientId=self.cid
+            )
             pos, _ = self.fk(np.clip(np.array(sol[:7]), LOWER, UPPER))
             best = min(best, float(np.linalg.norm(pos - np.array(target))))
         return best

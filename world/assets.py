@@ -130,10 +130,19 @@ def facade_boxes(depth: float, panels: tuple[Panel, ...] | list[Panel]) -> list[
         if pn.handle in ("left", "right"):
             side = -1 if pn.handle == "left" else 1
             length = min(0.5, 0.4 * pn.height)
-            boxes.append(Box((pn.u + side * (pn.width / 2 - 0.05), bar_y, pn.z), (0.025, 0.03, length), HANDLE_GREY, collide=False))
+            boxes.append(
+                Box(
+                    (pn.u + side * (pn.width / 2 - 0.05), bar_y, pn.z),
+                    (0.025, 0.03, length),
+                    HANDLE_GREY,
+                    collide=False,
+                )
+            )
         elif pn.handle == "top":
             length = min(0.4, 0.5 * pn.width)
-            boxes.append(Box((pn.u, bar_y, pn.z + pn.height / 2 - 0.05), (length, 0.03, 0.025), HANDLE_GREY, collide=False))
+            boxes.append(
+                Box((pn.u, bar_y, pn.z + pn.height / 2 - 0.05), (length, 0.03, 0.025), HANDLE_GREY, collide=False)
+            )
     return boxes
 
 
@@ -151,7 +160,9 @@ def sofa_boxes(size: Vec3, color: Color, back: float = 0.15) -> list[Box]:
     ]
 
 
-def jointed_urdf(name: str, carcass: list[Box], part: str, boxes: list[Box], joint: str, origin: Vec3, axis: Vec3, upper: float) -> str:
+def jointed_urdf(
+    name: str, carcass: list[Box], part: str, boxes: list[Box], joint: str, origin: Vec3, axis: Vec3, upper: float
+) -> str:
     """A fixed carcass and one moving part (a drawer, a lid) on a joint opening from 0 to `upper`."""
     return f"""<?xml version="1.0"?>
 <robot name="{name}">
@@ -219,7 +230,11 @@ def drawer_unit_urdf(name: str, g: DrawerGeometry, color: Color, facade: list[Bo
         Box((sx / 2 + t / 2, 0.0, wall_h / 2), (t, sy, wall_h), wood),
         Box((0.0, sy / 2 + t / 2, wall_h / 2), (sx + 2 * t, t, wall_h), wood),
         Box((0.0, -(sy / 2 + t / 2), (panel - t) / 2), (w - 0.01, t, panel + t), color),  # front panel
-        Box((0.0, g.handle[1] + (g.handle_out + 0.005) / 2, g.handle[2] - 0.01), (0.04, g.handle_out + 0.005, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle stem
+        Box(
+            (0.0, g.handle[1] + (g.handle_out + 0.005) / 2, g.handle[2] - 0.01),
+            (0.04, g.handle_out + 0.005, 0.02),
+            (0.3, 0.3, 0.3, 1.0),
+        ),  # handle stem
         Box((0.0, g.handle[1], g.handle[2] - 0.01), (0.24, 0.03, 0.02), (0.3, 0.3, 0.3, 1.0)),  # handle bar
     ]
     return jointed_urdf(name, carcass, "drawer", drawer, "prismatic", g.drawer_origin, (0.0, -1.0, 0.0), g.travel)
@@ -421,7 +436,9 @@ def chassis_boxes(length: float, width: float, height: float, color: Color) -> l
     black = (0.1, 0.1, 0.1, 1.0)
     for ix in (-1, 1):
         for iy in (-1, 1):
-            boxes.append(Box((ix * (length / 2 - 0.09), iy * (width / 2 - 0.02), 0.06), (0.14, 0.05, 0.12), black, collide=False))
+            boxes.append(
+                Box((ix * (length / 2 - 0.09), iy * (width / 2 - 0.02), 0.06), (0.14, 0.05, 0.12), black, collide=False)
+            )
     return boxes
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import heapq
 import math
-from itertools import pairwise
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -72,7 +72,16 @@ def astar(
     came: dict[tuple[int, int], tuple[int, int]] = {}
     cost = {s: 0.0}
     gi, gj = g
-    steps = [(1, 0, 1.0), (-1, 0, 1.0), (0, 1, 1.0), (0, -1, 1.0), (1, 1, SQRT2), (1, -1, SQRT2), (-1, 1, SQRT2), (-1, -1, SQRT2)]
+    steps = [
+        (1, 0, 1.0),
+        (-1, 0, 1.0),
+        (0, 1, 1.0),
+        (0, -1, 1.0),
+        (1, 1, SQRT2),
+        (1, -1, SQRT2),
+        (-1, 1, SQRT2),
+        (-1, -1, SQRT2),
+    ]
     nx, ny = blocked.shape
     while openq:
         _, c, cur = heapq.heappop(openq)

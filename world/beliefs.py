@@ -35,7 +35,9 @@ class Beliefs:
     def is_open(self, container: str) -> bool:
         return self.opened.get(container, False)
 
-    def see(self, name: str, places: Collection[str], is_open: bool | None, visible: Iterable[ObjectView], stamp: int) -> None:
+    def see(
+        self, name: str, places: Collection[str], is_open: bool | None, visible: Iterable[ObjectView], stamp: int
+    ) -> None:
         """The robot looks at furniture `name` and sees whether it is open (`is_open`, None for a
         surface) and, unless it is a closed container, `visible`: what lies on or in it, that is on
         any of `places` (`name`, and for Bob's table the fixtures on it). An object it believed
@@ -49,7 +51,9 @@ class Beliefs:
             self.objects[v.name] = Belief(v, stamp)
         for obj, b in list(self.objects.items()):
             if obj not in seen and b.view.on in places and b.view.held_by is None:
-                gone = b.view.model_copy(update={"on": None, "inside": False, "last_seen_on": b.view.on, "told_by": None})
+                gone = b.view.model_copy(
+                    update={"on": None, "inside": False, "last_seen_on": b.view.on, "told_by": None}
+                )
                 self.objects[obj] = Belief(gone, stamp)
 
     def note(self, view: ObjectView, stamp: int) -> None:

@@ -36,7 +36,9 @@ class Briefed(Protocol):
     @property
     def things(self) -> str: ...
     def finisher_brief(self) -> str: ...
-    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str: ...
+    def finisher_detail(
+        self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()
+    ) -> str: ...
 
 
 def brief(task: Briefed, role: Role, b: Briefing) -> str:
@@ -48,7 +50,14 @@ def brief(task: Briefed, role: Role, b: Briefing) -> str:
     return f"Search the whole house for the {task.things} the task needs."
 
 
-def detail(task: Briefed, role: Role, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+def detail(
+    task: Briefed,
+    role: Role,
+    b: Briefing,
+    targets: list[str],
+    goals: dict[str, str],
+    aids: frozenset[str] = frozenset(),
+) -> str:
     """A robot's detailed task: the finisher's list and whom to ask; the fetcher's and the
     scout's part in getting the list's things to the finisher (the appendix's Task sections)."""
     if role == "finisher":

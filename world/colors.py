@@ -30,4 +30,7 @@ PANEL_COLORS: dict[str, Color] = {  # the sort task: one panel per colour, in th
     "yellow": (0.95, 0.85, 0.1, 1),
     "purple": (0.5, 0.15, 0.65, 1),
 }
-NO_PANEL_COLORS: dict[str, Color] = {"orange": (0.95, 0.5, 0.05, 1), "white": (0.95, 0.95, 0.95, 1)}  # the sort task's distractors: colours without a panel
+NO_PANEL_COLORS: dict[str, Color] = {
+    "orange": (0.95, 0.5, 0.05, 1),
+    "white": (0.95, 0.95, 0.95, 1),
+}  # the sort task's distractors: colours without a panel

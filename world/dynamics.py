@@ -63,7 +63,14 @@ class Dynamics:
     """One episode's scenario, fired tick by tick on its physical world."""
 
     def __init__(
-        self, world: PhysicalWorld, task: Task, targets: list[str], goals: dict[str, str], asset_dir: AssetDir, seed: int, scenario: Scenario | None
+        self,
+        world: PhysicalWorld,
+        task: Task,
+        targets: list[str],
+        goals: dict[str, str],
+        asset_dir: AssetDir,
+        seed: int,
+        scenario: Scenario | None,
     ) -> None:
         self.world = world
         self.task = task
@@ -73,7 +80,9 @@ class Dynamics:
         self.seed = seed
         self.scenario = scenario
         self.tick = 0  # the latest tick opened
-        self.pending = sorted(range(len(scenario.events)), key=lambda i: (scenario.events[i].tick, i)) if scenario else []
+        self.pending = (
+            sorted(range(len(scenario.events)), key=lambda i: (scenario.events[i].tick, i)) if scenario else []
+        )
         self.broken: dict[str, int] = {}  # robot -> the tick its breakdown ends (exclusive)
         self.opened: list[str] = []  # containers open now, in the order they were opened
 
@@ -112,12 +121,26 @@ class Dynamics:
                 changed = self._close(ev)
             applied, skipped, text = True, None, _sentence(ev.kind, changed)
         except Skip as why:
-            applied, skipped, changed, text = False, str(why), {}, f"The {ev.kind} event of tick {ev.tick} was skipped: {why}."
-        log.info("scenario event", index=index, kind=ev.kind, tick=ev.tick, applied=applied, skipped=skipped, changed=changed)
+            applied, skipped, changed, text = (
+                False,
+                str(why),
+                {},
+                f"The {ev.kind} event of tick {ev.tick} was skipped: {why}.",
+            )
+        log.info(
+            "scenario event", index=index, kind=ev.kind, tick=ev.tick, applied=applied, skipped=skipped, changed=changed
+        )
         return ScenarioEvent(
-            scenario=self.scenario.name, sha256=self.scenario.sha256, index=index, event=ev.kind, tick=ev.tick,
-            applied=applied, skipped=skipped, changed=changed, text=text,
-        )  # fmt: skip
+            scenario=self.scenario.name,
+            sha256=self.scenario.sha256,
+            index=index,
+            event=ev.kind,
+            tick=ev.tick,
+            applied=applied,
+            skipped=skipped,
+            changed=changed,
+            text=text,
+        )
 
     def _relocate(self, ev: Relocate, rng: np.random.Generator) -> dict[str, str]:
         w = self.world
@@ -126,7 +149,11 @@ class Dynamics:
             if ev.object not in w.objects or ev.object not in self.targets:
                 raise Skip(f"{ev.object} is not a target of this episode")
             if ev.object not in movable:
-                raise Skip(f"{ev.object} is already in place" if w.objects[ev.object].held_by is None else f"{ev.object} is held by {w.objects[ev.object].held_by}")
+                raise Skip(
+                    f"{ev.object} is already in place"
+                    if w.objects[ev.object].held_by is None
+                    else f"{ev.object} is held by {w.objects[ev.object].held_by}"
+                )
             name = ev.object
         elif movable:
             name = movable[int(rng.integers(0, len(movable)))]

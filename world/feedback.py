@@ -70,7 +70,15 @@ def no_path(name: str, index: int) -> str:
     return f"Navigation failed: there is no collision-free path to stand pose {index} of {name}."
 
 
-def reached(name: str, index: int, seen: list[str] | None, *, container: bool = False, can_open: bool = True, advice: bool = False) -> str:
+def reached(
+    name: str,
+    index: int,
+    seen: list[str] | None,
+    *,
+    container: bool = False,
+    can_open: bool = True,
+    advice: bool = False,
+) -> str:
     """`seen` is None for a closed container (its inside cannot be seen): the paper says opening is
     needed to see inside; telling a robot that can open it to do so is the feedback_advice aid."""
     text = f"You reached stand pose {index} of {name}."
@@ -171,10 +179,14 @@ def in_closed_container(name: str, container: str, *, can_open: bool = True, adv
     return f"{name} is inside {container}, which is closed" + (": open it first." if can_open and advice else ".")
 
 
-def too_far(name: str, distance: float, offset: tuple[float, float] | None = None, fix: tuple[float, float] | None = None) -> str:
+def too_far(
+    name: str, distance: float, offset: tuple[float, float] | None = None, fix: tuple[float, float] | None = None
+) -> str:
     """`offset`: the object from the base centre along world x and y (mobile manipulators);
     `fix`: the solved corrective move (the solved_move aid)."""
-    text = f"The end effector cannot reach {name}: it is {distance:.2f} m away from the closest pose your arm can get to."
+    text = (
+        f"The end effector cannot reach {name}: it is {distance:.2f} m away from the closest pose your arm can get to."
+    )
     if offset is not None:
         text += f" {name} is at offset x={offset[0]:+.2f} m, y={offset[1]:+.2f} m from your base centre."
     if fix is not None:

@@ -94,7 +94,9 @@ def door_footprint(
     on the other (a door opens at most 90 degrees: its handle then stands out past the hinge)."""
     along_y = abs(door.axis[1]) > 0.5
     width, depth = (size[0], size[1]) if along_y else (size[1], size[0])
-    g = CupboardGeometry(width, depth, 1.0, door.at, door.width, door.hinge, door.floor, door.ceiling, door.angle, door.handle_out)
+    g = CupboardGeometry(
+        width, depth, 1.0, door.at, door.width, door.hinge, door.floor, door.ceiling, door.angle, door.handle_out
+    )
     radius = g.swing_radius
     behind = g.door + g.handle_out + HANDLE_CLEARANCE  # the handle, past the hinge line at 90 degrees
     hinge_u = g.hinge_point[0]
@@ -119,7 +121,9 @@ def door_sweep(
     `door_footprint`'s square."""
     along_y = abs(door.axis[1]) > 0.5
     width, depth = (size[0], size[1]) if along_y else (size[1], size[0])
-    g = CupboardGeometry(width, depth, 1.0, door.at, door.width, door.hinge, door.floor, door.ceiling, door.angle, door.handle_out)
+    g = CupboardGeometry(
+        width, depth, 1.0, door.at, door.width, door.hinge, door.floor, door.ceiling, door.angle, door.handle_out
+    )
     thick = g.door + g.handle_out + HANDLE_CLEARANCE
     hx, hy, _ = g.hinge_point
     body_yaw = axis_yaw(door.axis)
@@ -174,7 +178,10 @@ class FurnitureSpec:
         return 0.0 if facing is None else axis_yaw(facing)
 
     def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
-        return abs(x - self.center[0]) <= self.size[0] / 2 + margin and abs(y - self.center[1]) <= self.size[1] / 2 + margin
+        return (
+            abs(x - self.center[0]) <= self.size[0] / 2 + margin
+            and abs(y - self.center[1]) <= self.size[1] / 2 + margin
+        )
 
     @property
     def container(self) -> Container | None:
@@ -201,7 +208,9 @@ class FurnitureSpec:
         d = self.door
         assert d is not None, f"{self.name} has no door"
         width, depth = self.own_size()
-        return CupboardGeometry(width, depth, self.size[2], d.at, d.width, d.hinge, d.floor, d.ceiling, d.angle, d.handle_out)
+        return CupboardGeometry(
+            width, depth, self.size[2], d.at, d.width, d.hinge, d.floor, d.ceiling, d.angle, d.handle_out
+        )
 
     def chest_geometry(self) -> ChestGeometry:
         lid = self.lid
@@ -226,7 +235,9 @@ class Layout:
     bob_table: str  # the table Bob is mounted on; the task's fixtures lie on it
     bob_base: tuple[float, float, float]  # Bob's arm base on his table
     bob_yaw: float
-    goal_area: tuple[float, float, float, float]  # centre x, y and size x, y on Bob's table: the task's fixtures go here
+    goal_area: tuple[
+        float, float, float, float
+    ]  # centre x, y and size x, y on Bob's table: the task's fixtures go here
     near_slots: tuple[tuple[float, float], ...]  # on Bob's table within his reach
     far_slots: tuple[tuple[float, float], ...]  # on Bob's table beyond his reach
     starts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
@@ -263,7 +274,9 @@ def home_outline(pose: tuple[float, float, float], step: float = 0.05) -> list[V
     return _outline(pose, (back, ahead), (-wide / 2, wide / 2), step)
 
 
-def _outline(pose: tuple[float, float, float], us: tuple[float, float], vs: tuple[float, float], step: float) -> list[Vec2]:
+def _outline(
+    pose: tuple[float, float, float], us: tuple[float, float], vs: tuple[float, float], step: float
+) -> list[Vec2]:
     x, y, yaw = pose
     c, s = math.cos(yaw), math.sin(yaw)
     local: list[Vec2] = []
@@ -285,4 +298,3 @@ def inside_turned(center: Vec2, size: tuple[float, ...], yaw: float, xy: Vec2, m
 def inside(center: Vec2, size: tuple[float, ...], xy: Vec2, margin: float = 1e-9) -> bool:
     """Whether `xy` lies on an axis-aligned footprint (centre, size), grown by `margin`."""
     return abs(xy[0] - center[0]) <= size[0] / 2 + margin and abs(xy[1] - center[1]) <= size[1] / 2 + margin
-

@@ -110,11 +110,15 @@ class DoorFile(_Strict):
         if (err := _axis_error(self.axis)) is not None:
             raise ValueError(err)
         if self.ceiling <= self.floor + self.max_object_height:
-            raise ValueError(f"ceiling: the cavity from {self.floor} to {self.ceiling} m is too low for objects {self.max_object_height} m tall")
+            raise ValueError(
+                f"ceiling: the cavity from {self.floor} to {self.ceiling} m is too low for objects {self.max_object_height} m tall"
+            )
         inner = (self.width / 2 - CupboardGeometry.wall, 0.0)
         for i, (x, _) in enumerate(self.slots):
             if abs(x) > inner[0]:
-                raise ValueError(f"slots.{i}: {x} lies outside the cavity's width {self.width - 2 * CupboardGeometry.wall:.2f}")
+                raise ValueError(
+                    f"slots.{i}: {x} lies outside the cavity's width {self.width - 2 * CupboardGeometry.wall:.2f}"
+                )
         return self
 
 
@@ -185,7 +189,9 @@ class FurnitureFile(_Strict):
             container = self.drawer or self.lid or self.door
             axis = None if container is None else container.axis
             if self.style not in ("block", "drawer_unit", "chest", "cupboard"):
-                raise ValueError(f"facade: only a block, a drawer_unit, a chest or a cupboard has one, not a {self.style}")
+                raise ValueError(
+                    f"facade: only a block, a drawer_unit, a chest or a cupboard has one, not a {self.style}"
+                )
             if axis is None and self.facade.front is None:
                 raise ValueError("facade.front: a block's facade needs the side it faces, e.g. [0, -1]")
             if axis is not None and self.facade.front is not None and tuple(self.facade.front) != tuple(axis):
@@ -194,7 +200,9 @@ class FurnitureFile(_Strict):
             for i, pn in enumerate(self.facade.panels):
                 (u, z), (w, h) = pn.at, pn.size
                 if abs(u) + w / 2 > width / 2 + 1e-9 or z - h / 2 < -1e-9 or z + h / 2 > self.size[2] + 1e-9:
-                    raise ValueError(f"facade.panels.{i}: {[u, z]} size {[w, h]} does not fit on the front ({width} wide, {self.size[2]} high)")
+                    raise ValueError(
+                        f"facade.panels.{i}: {[u, z]} size {[w, h]} does not fit on the front ({width} wide, {self.size[2]} high)"
+                    )
         if (self.style == "drawer_unit") != (self.drawer is not None):
             raise ValueError("drawer: a drawer_unit needs a drawer, and only a drawer_unit may have one")
         if (self.style == "chest") != (self.lid is not None):
@@ -208,9 +216,13 @@ class FurnitureFile(_Strict):
             width, depth = (self.size[1], self.size[0]) if abs(d.axis[0]) > 0.5 else (self.size[0], self.size[1])
             wall = DrawerGeometry.wall
             if d.inner[0] + 4 * wall > width + 1e-9 or d.inner[1] + 3 * wall > depth + 1e-9:
-                raise ValueError(f"drawer.inner: a drawer {list(d.inner[:2])} inside does not fit in {self.name} ({width} wide, {depth} deep) with its walls")
+                raise ValueError(
+                    f"drawer.inner: a drawer {list(d.inner[:2])} inside does not fit in {self.name} ({width} wide, {depth} deep) with its walls"
+                )
             if d.floor + d.inner[2] + 0.02 > self.size[2] - 0.01:
-                raise ValueError(f"drawer.floor: a drawer at {d.floor} m with {d.inner[2]} m walls does not fit under the top of {self.name}")
+                raise ValueError(
+                    f"drawer.floor: a drawer at {d.floor} m with {d.inner[2]} m walls does not fit under the top of {self.name}"
+                )
             if d.max_object_height > d.inner[2] + 0.015:
                 raise ValueError(f"drawer.max_object_height: objects that tall do not fit in the drawer of {self.name}")
         if self.lid is not None:
@@ -232,7 +244,9 @@ class FurnitureFile(_Strict):
     def _check_door(self, door: DoorFile) -> None:
         width, depth = (self.size[1], self.size[0]) if abs(door.axis[0]) > 0.5 else (self.size[0], self.size[1])
         if door.at < -width / 2 - 1e-9 or door.at + door.width > width / 2 + 1e-9:
-            raise ValueError(f"door: a door from {door.at} to {door.at + door.width} across does not fit on the front of {self.name} ({width} wide)")
+            raise ValueError(
+                f"door: a door from {door.at} to {door.at + door.width} across does not fit on the front of {self.name} ({width} wide)"
+            )
         if door.ceiling > self.size[2] - 0.02:
             raise ValueError(f"door.ceiling: {door.ceiling} m leaves no top on {self.name} ({self.size[2]} high)")
         for i, (_, y) in enumerate(door.slots):
@@ -314,7 +328,10 @@ class LayoutFile(_Strict):
         if table.style != "table" or table.place_pose is None:
             raise ValueError(f"bob.table: {table.name} must be a table with a place_pose")
         gx, gy, gsx, gsy = self.bob.goal_area
-        if not (inside(table.center, table.size, (gx - gsx / 2, gy - gsy / 2)) and inside(table.center, table.size, (gx + gsx / 2, gy + gsy / 2))):
+        if not (
+            inside(table.center, table.size, (gx - gsx / 2, gy - gsy / 2))
+            and inside(table.center, table.size, (gx + gsx / 2, gy + gsy / 2))
+        ):
             raise ValueError(f"bob.goal_area: {list(self.bob.goal_area)} does not lie on {table.name}")
         for what in ("near_slots", "far_slots"):
             for i, xy in enumerate(getattr(self.bob, what)):
@@ -329,10 +346,14 @@ class LayoutFile(_Strict):
             )
         elsewhere = sum(len(f.slots) for f in self.furniture if f.name != table.name)
         if elsewhere < 5:
-            raise ValueError(f"furniture: slots away from {table.name} number {elsewhere}; 6-object episodes need at least 5")
+            raise ValueError(
+                f"furniture: slots away from {table.name} number {elsewhere}; 6-object episodes need at least 5"
+            )
         self._check_overlaps()
         obstacles = [(f"walls.{i}", (w[0], w[1]), (w[2], w[3])) for i, w in enumerate(self.walls)]
-        obstacles += [(f"furniture.{i} ({f.name})", f.center, (f.size[0], f.size[1])) for i, f in enumerate(self.furniture)]
+        obstacles += [
+            (f"furniture.{i} ({f.name})", f.center, (f.size[0], f.size[1])) for i, f in enumerate(self.furniture)
+        ]
         for i, f in enumerate(self.furniture):
             swept = f.open_drawer_footprint()
             if swept is not None:
@@ -340,11 +361,20 @@ class LayoutFile(_Strict):
         poses = [(f"starts.{r}", s) for r, s in self.starts.items()]
         for i, f in enumerate(self.furniture):
             if not f.stand_poses:
-                raise ValueError(f"furniture.{i}.stand_poses: {f.name} has none; every piece of furniture needs one (agents read furniture without one as a task fixture)")
+                raise ValueError(
+                    f"furniture.{i}.stand_poses: {f.name} has none; every piece of furniture needs one (agents read furniture without one as a task fixture)"
+                )
             poses += [(f"furniture.{i}.stand_poses.{j} ({f.name})", sp) for j, sp in enumerate(f.stand_pose_list())]
-        sweeps = [(f"furniture.{i} ({f.name}) with its door swinging open", door_sweep(f.center, f.size, _door_spec(f.door))) for i, f in enumerate(self.furniture) if f.door]
+        sweeps = [
+            (f"furniture.{i} ({f.name}) with its door swinging open", door_sweep(f.center, f.size, _door_spec(f.door)))
+            for i, f in enumerate(self.furniture)
+            if f.door
+        ]
         for what, (x, y, _yaw) in poses:
-            if not (xmin + ROBOT_CLEARANCE <= x <= xmax - ROBOT_CLEARANCE and ymin + ROBOT_CLEARANCE <= y <= ymax - ROBOT_CLEARANCE):
+            if not (
+                xmin + ROBOT_CLEARANCE <= x <= xmax - ROBOT_CLEARANCE
+                and ymin + ROBOT_CLEARANCE <= y <= ymax - ROBOT_CLEARANCE
+            ):
                 raise ValueError(f"{what}: ({x}, {y}) is off the floor or too close to its edge")
             for name, c, sz in obstacles:
                 if inside(c, sz, (x, y), margin=ROBOT_CLEARANCE - 0.01):
@@ -355,7 +385,9 @@ class LayoutFile(_Strict):
                     raise ValueError(f"{what}: a chassis at ({x}, {y}) would be within {DOOR_CLEARANCE} m of {name}")
                 c, sz, yaw = boxes[-1]  # the door open: the arm in its carry posture clears it
                 if any(inside_turned(c, sz, yaw, pt, DOOR_CLEARANCE) for pt in arm):
-                    raise ValueError(f"{what}: an arm in its carry posture at ({x}, {y}) would be within {DOOR_CLEARANCE} m of the open door of {name.split(' with ')[0]}")
+                    raise ValueError(
+                        f"{what}: an arm in its carry posture at ({x}, {y}) would be within {DOOR_CLEARANCE} m of the open door of {name.split(' with ')[0]}"
+                    )
         return self
 
     def _check_overlaps(self) -> None:
@@ -367,17 +399,29 @@ class LayoutFile(_Strict):
             for other, oc, osz in pieces[i + 1 :] + walls:
                 depth = overlap(c, sz, oc, osz)
                 if depth > OVERLAP_TOLERANCE:
-                    raise ValueError(f"{what} overlaps {other} by {depth:.2f} m: move it or shrink it (furniture may touch, not intersect)")
+                    raise ValueError(
+                        f"{what} overlaps {other} by {depth:.2f} m: move it or shrink it (furniture may touch, not intersect)"
+                    )
         # a door swinging open must not hit a wall, other furniture or another drawer or door standing open
-        swept = [(f"furniture.{i} ({f.name}) with its door swinging open", i, s) for i, f in enumerate(self.furniture) if f.door is not None and (s := f.swept_footprint()) is not None]
-        opened = [(f"furniture.{i} ({f.name}) open", i, s) for i, f in enumerate(self.furniture) if (s := f.swept_footprint()) is not None]
+        swept = [
+            (f"furniture.{i} ({f.name}) with its door swinging open", i, s)
+            for i, f in enumerate(self.furniture)
+            if f.door is not None and (s := f.swept_footprint()) is not None
+        ]
+        opened = [
+            (f"furniture.{i} ({f.name}) open", i, s)
+            for i, f in enumerate(self.furniture)
+            if (s := f.swept_footprint()) is not None
+        ]
         for what, i, (c, sz) in swept:
             others = [(o, oc, osz) for j, (o, oc, osz) in enumerate(pieces) if j != i] + walls
             others += [(o, *s) for o, j, s in opened if j != i]
             for other, oc, osz in others:
                 depth = overlap(c, sz, oc, osz)
                 if depth > OVERLAP_TOLERANCE:
-                    raise ValueError(f"{what} overlaps {other} by {depth:.2f} m: move it, narrow its door or hinge it on the other side")
+                    raise ValueError(
+                        f"{what} overlaps {other} by {depth:.2f} m: move it, narrow its door or hinge it on the other side"
+                    )
 
     def _check_reach(self, table: FurnitureFile) -> None:
         """Bob's slots and goal area against his reach (see the module docstring)."""
@@ -390,7 +434,9 @@ class LayoutFile(_Strict):
 
         for i, (x, y) in enumerate(self.bob.near_slots):
             if not 0.3 <= dist(x, y) <= ARM_REACH - 0.03:
-                raise ValueError(f"bob.near_slots.{i}: {[x, y]} is {dist(x, y):.2f} m from Bob's arm base; near slots lie 0.3 to {ARM_REACH - 0.03:.2f} m from it")
+                raise ValueError(
+                    f"bob.near_slots.{i}: {[x, y]} is {dist(x, y):.2f} m from Bob's arm base; near slots lie 0.3 to {ARM_REACH - 0.03:.2f} m from it"
+                )
         for i, (x, y) in enumerate(self.bob.far_slots):
             if dist(x, y) <= FAR_SLOT:
                 raise ValueError(
@@ -400,14 +446,20 @@ class LayoutFile(_Strict):
         gx, gy, gsx, gsy = self.bob.goal_area
         where = f"bob.goal_area: {list(self.bob.goal_area)}"
         if gsx < PANELS[0] or gsy < PANELS[1] or gsx * gsy < MIN_GOAL_AREA:
-            raise ValueError(f"{where} is too small: it needs at least {PANELS[0]} x {PANELS[1]} m and {MIN_GOAL_AREA} m^2 (six panels, a tray for six objects)")
+            raise ValueError(
+                f"{where} is too small: it needs at least {PANELS[0]} x {PANELS[1]} m and {MIN_GOAL_AREA} m^2 (six panels, a tray for six objects)"
+            )
         for sx in (-1, 1):
             for sy in (-1, 1):
                 if dist(gx + sx * gsx / 2, gy + sy * gsy / 2) > GOAL_CORNER_REACH:
-                    raise ValueError(f"{where}: its corner {[round(gx + sx * gsx / 2, 3), round(gy + sy * gsy / 2, 3)]} is beyond {GOAL_CORNER_REACH} m from Bob's arm base")
+                    raise ValueError(
+                        f"{where}: its corner {[round(gx + sx * gsx / 2, 3), round(gy + sy * gsy / 2, 3)]} is beyond {GOAL_CORNER_REACH} m from Bob's arm base"
+                    )
                 d = dist(gx + sx * PANEL_CENTRES[0], gy + sy * PANEL_CENTRES[1])
                 if not 0.3 <= d <= ARM_REACH:
-                    raise ValueError(f"{where}: its centre region (the panels' centres) is {d:.2f} m from Bob's arm base; it must lie 0.3 to {ARM_REACH} m from it")
+                    raise ValueError(
+                        f"{where}: its centre region (the panels' centres) is {d:.2f} m from Bob's arm base; it must lie 0.3 to {ARM_REACH} m from it"
+                    )
 
     def build(self, source: str = "") -> Layout:
         furniture = []
@@ -415,28 +467,63 @@ class LayoutFile(_Strict):
             d, lid, door = f.drawer, f.lid, f.door
             furniture.append(
                 FurnitureSpec(
-                    name=f.name, kind=f.kind, style=f.style, center=f.center, size=f.size,
+                    name=f.name,
+                    kind=f.kind,
+                    style=f.style,
+                    center=f.center,
+                    size=f.size,
                     color=_color(f.color),
-                    stand_poses=tuple(f.stand_pose_list()), place_pose=f.place_pose, place_radius=f.place_radius,
+                    stand_poses=tuple(f.stand_pose_list()),
+                    place_pose=f.place_pose,
+                    place_radius=f.place_radius,
                     slots=tuple(f.slots),
-                    drawer=None if d is None else DrawerSpec(d.axis, d.travel, d.inner, d.floor, tuple(d.slots), d.max_object_height, d.handle_out),
-                    lid=None if lid is None else LidSpec(lid.axis, math.radians(lid.open_deg), lid.floor, tuple(lid.slots), lid.max_object_height),
+                    drawer=None
+                    if d is None
+                    else DrawerSpec(
+                        d.axis, d.travel, d.inner, d.floor, tuple(d.slots), d.max_object_height, d.handle_out
+                    ),
+                    lid=None
+                    if lid is None
+                    else LidSpec(
+                        lid.axis, math.radians(lid.open_deg), lid.floor, tuple(lid.slots), lid.max_object_height
+                    ),
                     door=None if door is None else _door_spec(door),
-                    front=None if f.facade is None or d is not None or lid is not None or door is not None else f.facade.front,
-                    panels=() if f.facade is None else tuple(Panel(*pn.at, *pn.size, _color(pn.color), pn.handle) for pn in f.facade.panels),
+                    front=None
+                    if f.facade is None or d is not None or lid is not None or door is not None
+                    else f.facade.front,
+                    panels=()
+                    if f.facade is None
+                    else tuple(Panel(*pn.at, *pn.size, _color(pn.color), pn.handle) for pn in f.facade.panels),
                 )
-            )  # fmt: skip
+            )
         b = self.bob
         return Layout(
-            name=self.name, description=self.description, bounds=self.bounds, walls=tuple(self.walls),
-            furniture=tuple(furniture), bob_table=b.table, bob_base=b.base, bob_yaw=b.yaw, goal_area=b.goal_area,
-            near_slots=tuple(b.near_slots), far_slots=tuple(b.far_slots), starts={str(k): v for k, v in self.starts.items()}, source=source,
-        )  # fmt: skip
+            name=self.name,
+            description=self.description,
+            bounds=self.bounds,
+            walls=tuple(self.walls),
+            furniture=tuple(furniture),
+            bob_table=b.table,
+            bob_base=b.base,
+            bob_yaw=b.yaw,
+            goal_area=b.goal_area,
+            near_slots=tuple(b.near_slots),
+            far_slots=tuple(b.far_slots),
+            starts={str(k): v for k, v in self.starts.items()},
+            source=source,
+        )
 
 
 def _door_spec(door: DoorFile) -> DoorSpec:
     return DoorSpec(
-        door.axis, door.hinge, door.at, door.width, math.radians(door.open_deg), door.floor, door.ceiling,
-        tuple(door.slots), door.max_object_height, door.handle_out,
-    )  # fmt: skip
-
+        door.axis,
+        door.hinge,
+        door.at,
+        door.width,
+        math.radians(door.open_deg),
+        door.floor,
+        door.ceiling,
+        tuple(door.slots),
+        door.max_object_height,
+        door.handle_out,
+    )

@@ -147,4 +147,6 @@ def get_layout(name: str) -> Layout:
     try:
         return LAYOUTS[name]
     except KeyError:
-        raise ValueError(f"unknown scene {name!r}; known scenes: {', '.join(LAYOUTS)} (or a path to a layout .json file)") from None
+        raise ValueError(
+            f"unknown scene {name!r}; known scenes: {', '.join(LAYOUTS)} (or a path to a layout .json file)"
+        ) from None

@@ -30,8 +30,12 @@ class Mailroom:
         self._message = message
         self._lock = threading.Lock()  # held by every read or write of the three below, never while calling out
         self._inbox: dict[str, list[RobotMessage]] = {r: [] for r in self.robots}
-        self._sent: dict[str, list[Callable[[], None]]] = {r: [] for r in self.robots}  # per receiver, not yet delivered
-        self._due: list[Callable[[], None]] = []  # delivered, applied at the simulator's next use (its thread, its lock)
+        self._sent: dict[str, list[Callable[[], None]]] = {
+            r: [] for r in self.robots
+        }  # per receiver, not yet delivered
+        self._due: list[
+            Callable[[], None]
+        ] = []  # delivered, applied at the simulator's next use (its thread, its lock)
 
     def send(self, sender: str, to: str, content: str, tick: int) -> None:
         """`sender`'s message to `to` goes into `to`'s inbox; what it tells is fixed now."""

@@ -23,9 +23,9 @@ from typing import Any
 from mhrc.core.protocol import FurnitureView, ObjectPose, ObjectView, Observation, Pose2D, RobotPose, RobotStatus
 
 from .beliefs import Beliefs
+from .briefs import Briefing, brief, detail, role_of
 from .physics import ObjectState, PhysicalWorld
 from .robots import RobotBody
-from .briefs import Briefing, brief, detail, role_of
 from .tasks import Task
 
 
@@ -33,7 +33,12 @@ def object_view(world: PhysicalWorld, o: ObjectState) -> ObjectView:
     """An object as it is now."""
     x, y, z = world.position(o)
     return ObjectView(
-        name=o.name, position=(round(x, 3), round(y, 3), round(z, 3)), yaw=round(world.yaw(o), 3), on=o.on, inside=o.inside, held_by=o.held_by
+        name=o.name,
+        position=(round(x, 3), round(y, 3), round(z, 3)),
+        yaw=round(world.yaw(o), 3),
+        on=o.on,
+        inside=o.inside,
+        held_by=o.held_by,
     )
 
 
@@ -47,7 +52,7 @@ class Knowledge:
         # what each robot believes of them and of the containers; a fixed arm stands at its table for good
         self.beliefs: dict[str, Beliefs] = {
             r: Beliefs(at=None if world.bots[r].kind.mobile else world.layout.bob_table) for r in self.known
-        }  # fmt: skip
+        }
         self._stamp = 0  # the moments robots look at things, in order (see beliefs.py)
 
     def _next_stamp(self) -> int:
@@ -110,7 +115,11 @@ class Knowledge:
         stamp = self._next_stamp()
         for o in self.world.objects.values():
             mine = b.objects.get(o.name)
-            if o.held_by == robot or (mine is None and o.name in self.known[robot]) or (mine is not None and mine.view.held_by == robot):
+            if (
+                o.held_by == robot
+                or (mine is None and o.name in self.known[robot])
+                or (mine is not None and mine.view.held_by == robot)
+            ):
                 b.note(object_view(self.world, o), stamp)
                 self.known[robot].add(o.name)
 
@@ -126,8 +135,12 @@ class Knowledge:
         if receiver not in self.beliefs or sender not in self.beliefs:
             return lambda: None
         words = " ".join(re.findall(r"[a-z0-9]+", text.lower().replace("_", " ")))
-        named = [n for n in sorted(self.known_objects(sender)) if re.search(rf"\b{re.escape(n.replace('_', ' '))}\b", words)]
-        then = Beliefs(objects={n: b for n, b in self.beliefs[sender].objects.items() if n in named})  # beliefs are frozen values
+        named = [
+            n for n in sorted(self.known_objects(sender)) if re.search(rf"\b{re.escape(n.replace('_', ' '))}\b", words)
+        ]
+        then = Beliefs(
+            objects={n: b for n, b in self.beliefs[sender].objects.items() if n in named}
+        )  # beliefs are frozen values
 
         def deliver() -> None:
             self.known[receiver].update(named)
@@ -150,7 +163,11 @@ def furniture_views(world: PhysicalWorld, believed: Beliefs | None = None) -> li
                 position=(f.center[0], f.center[1], f.top),
                 yaw=round(f.yaw, 4),
                 openable=f.container is not None,
-                is_open=None if f.container is None else world.is_open(f.name) if believed is None else believed.is_open(f.name),
+                is_open=None
+                if f.container is None
+                else world.is_open(f.name)
+                if believed is None
+                else believed.is_open(f.name),
                 stand_poses=[Pose2D(x=x, y=y, yaw=round(yaw, 4)) for x, y, yaw in f.stand_poses],
                 place_pose=(f.place_pose[0], f.place_pose[1], f.top) if f.place_pose else None,
             )
@@ -158,7 +175,14 @@ def furniture_views(world: PhysicalWorld, believed: Beliefs | None = None) -> li
     for fx in world.fixtures.values():
         top = round(world.fixture_top(fx.name), 3)
         x, y = fx.center
-        out.append(FurnitureView(name=fx.name, kind=f"{fx.kind} on {world.layout.bob_table}", position=(x, y, top), place_pose=(x, y, top)))
+        out.append(
+            FurnitureView(
+                name=fx.name,
+                kind=f"{fx.kind} on {world.layout.bob_table}",
+                position=(x, y, top),
+                place_pose=(x, y, top),
+            )
+        )
     return out
 
 
@@ -176,7 +200,13 @@ def robot_status(r: RobotBody) -> RobotStatus:
 
 
 def observation(
-    world: PhysicalWorld, knowledge: Knowledge, task: Task, targets: list[str], goals: dict[str, str], robot: str, tick: int
+    world: PhysicalWorld,
+    knowledge: Knowledge,
+    task: Task,
+    targets: list[str],
+    goals: dict[str, str],
+    robot: str,
+    tick: int,
 ) -> Observation:
     """`robot`'s own partial view; new_messages is left for the world service to fill. Each
     robot gets its role's brief and detail (world/briefs.py); the robot that finishes the task is
@@ -196,7 +226,9 @@ def observation(
         tick=tick,
         status=robot_status(r),
         furniture=furniture_views(world, None if live else knowledge.beliefs[robot]),
-        objects=[object_view(world, o) if live else beliefs[o.name].view for o in world.objects.values() if o.name in known],
+        objects=[
+            object_view(world, o) if live else beliefs[o.name].view for o in world.objects.values() if o.name in known
+        ],
         task_brief=brief(task, role, crew),
         task_detail=detail(task, role, crew, targets, goals, aids),
         targets=list(targets) if finisher else [],
@@ -212,7 +244,9 @@ def briefing(world: PhysicalWorld) -> Briefing:
     (the paper's Bob and Alice; the finisher stands in for a fetcher the team lacks)."""
     bots = world.bots.values()
     finisher = next((b.name for b in bots if b.kind.finishes_task), "")
-    fetcher = next((b.name for b in bots if role_of(b.kind.finishes_task, b.kind.mobile, b.kind.has_arm) == "fetcher"), finisher)
+    fetcher = next(
+        (b.name for b in bots if role_of(b.kind.finishes_task, b.kind.mobile, b.kind.has_arm) == "fetcher"), finisher
+    )
     return Briefing(finisher=finisher.capitalize(), fetcher=fetcher.capitalize(), table=world.layout.bob_table)
 
 
@@ -230,11 +264,15 @@ def poses(world: PhysicalWorld) -> tuple[dict[str, RobotPose], dict[str, ObjectP
     objects = {}
     for o in world.objects.values():
         x, y, z = world.position(o)
-        objects[o.name] = ObjectPose(x=round(x, 4), y=round(y, 4), z=round(z, 4), on=o.on, inside=o.inside, held_by=o.held_by)
+        objects[o.name] = ObjectPose(
+            x=round(x, 4), y=round(y, 4), z=round(z, 4), on=o.on, inside=o.inside, held_by=o.held_by
+        )
     return robots, objects, {name: world.is_open(name) for name in world.opening}
 
 
-def apply_snapshot(world: PhysicalWorld, robots: Mapping[str, RobotPose], objects: Mapping[str, ObjectPose], open: Mapping[str, bool]) -> None:
+def apply_snapshot(
+    world: PhysicalWorld, robots: Mapping[str, RobotPose], objects: Mapping[str, ObjectPose], open: Mapping[str, bool]
+) -> None:
     """Teleport bodies to a `snapshot` event's poses (for videos; no physics is stepped):
     containers, mobile bases, then objects; a held object hangs under its holder's tool
     tip (the arm as it stands now). Names this episode lacks are skipped."""

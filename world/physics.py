@@ -53,7 +53,13 @@ class PhysicalWorld:
     """One episode's bodies and their live state; `Sim` builds it (robots and objects included)."""
 
     def __init__(
-        self, cid: int, layout: Layout, scene: BuiltScene, planner: ArmPlanner, fixtures: dict[str, Fixture], aids: frozenset[str]
+        self,
+        cid: int,
+        layout: Layout,
+        scene: BuiltScene,
+        planner: ArmPlanner,
+        fixtures: dict[str, Fixture],
+        aids: frozenset[str],
     ) -> None:
         self.cid = cid
         self.layout = layout
@@ -83,7 +89,9 @@ class PhysicalWorld:
     def rest(self, obj: ObjectState, x: float, y: float, surface_z: float, yaw: float = 0.0) -> None:
         """Set `obj` upright on a surface at height `surface_z`, its centre over (x, y)."""
         orn = p.getQuaternionFromEuler((0, 0, yaw))
-        p.resetBasePositionAndOrientation(obj.body, (x, y, surface_z + obj.kind.height / 2), orn, physicsClientId=self.cid)
+        p.resetBasePositionAndOrientation(
+            obj.body, (x, y, surface_z + obj.kind.height / 2), orn, physicsClientId=self.cid
+        )
 
     def container_frame(self, name: str) -> tuple[tuple[float, float, float], float]:
         """World position and yaw of where a container's contents lie: a drawer link's origin (the
@@ -133,7 +141,12 @@ class PhysicalWorld:
         f = self.layout.get(name)
         assert f is not None
         if f.lid is not None or f.door is not None:
-            st = p.getLinkState(self.scene.bodies[name], self.scene.joints[name], computeForwardKinematics=True, physicsClientId=self.cid)
+            st = p.getLinkState(
+                self.scene.bodies[name],
+                self.scene.joints[name],
+                computeForwardKinematics=True,
+                physicsClientId=self.cid,
+            )
             handle = f.chest_geometry().handle if f.lid is not None else f.cupboard_geometry().handle
             pos, _ = p.multiplyTransforms(st[4], st[5], handle, (0, 0, 0, 1))
             return (float(pos[0]), float(pos[1]), float(pos[2]))
@@ -150,7 +163,9 @@ class PhysicalWorld:
         fx = self.fixtures[name]
         top = self.table_top() + fx.thickness
         if fx.stack:
-            top += sum(o.kind.height for o in self.objects.values() if o.on == name and o.held_by is None and o is not without)
+            top += sum(
+                o.kind.height for o in self.objects.values() if o.on == name and o.held_by is None and o is not without
+            )
         return top
 
     def surface_top(self, fixture: str, without: ObjectState | None = None) -> float:
@@ -162,7 +177,11 @@ class PhysicalWorld:
             return top
         if "exact_motion" in self.aids:  # objects lie exactly as set down: the stack is the sum of their heights
             return self.fixture_top(fixture, without=without)
-        tops = [p.getAABB(o.body, physicsClientId=self.cid)[1][2] for o in self.objects.values() if o.on == fixture and o.held_by is None and o is not without]
+        tops = [
+            p.getAABB(o.body, physicsClientId=self.cid)[1][2]
+            for o in self.objects.values()
+            if o.on == fixture and o.held_by is None and o is not without
+        ]
         return max([top, *tops])
 
     def fixture_at(self, x: float, y: float) -> Fixture | None:
@@ -194,7 +213,10 @@ class PhysicalWorld:
 
     def seen(self) -> list[Seen]:
         """Every object's end state as the goal check reads it."""
-        return [Seen(o.name, o.kind, o.on if o.held_by is None else None, round(self.position(o)[2], 4)) for o in self.objects.values()]
+        return [
+            Seen(o.name, o.kind, o.on if o.held_by is None else None, round(self.position(o)[2], 4))
+            for o in self.objects.values()
+        ]
 
     # ------------------------------------------------------------------ holding and letting go
     def grasp(self, r: RobotBody, obj: ObjectState) -> None:
@@ -203,7 +225,13 @@ class PhysicalWorld:
         obj.held_by, obj.on, obj.inside, obj.local = r.name, None, False, None
 
     def release(
-        self, r: RobotBody, obj: ObjectState, spot: tuple[float, float, float], yaw: float, location: str | None = None, error: tuple[float, float] = (0.0, 0.0)
+        self,
+        r: RobotBody,
+        obj: ObjectState,
+        spot: tuple[float, float, float],
+        yaw: float,
+        location: str | None = None,
+        error: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         """Let go of `obj` over `spot` (x, y, surface z), turned to `yaw`, placing it on `location`.
 
@@ -225,7 +253,9 @@ class PhysicalWorld:
             x = min(max(x, cx - sx / 2 + hx), cx + sx / 2 - hx)
             y = min(max(y, cy - sy / 2 + hy), cy + sy / 2 - hy)
         orn = p.getQuaternionFromEuler((0, 0, yaw))
-        p.resetBasePositionAndOrientation(obj.body, (x, y, max(z, spot[2] + obj.kind.height / 2)), orn, physicsClientId=self.cid)
+        p.resetBasePositionAndOrientation(
+            obj.body, (x, y, max(z, spot[2] + obj.kind.height / 2)), orn, physicsClientId=self.cid
+        )
         self.settle(obj)
 
     def settle(self, obj: ObjectState) -> int:
@@ -242,8 +272,13 @@ class PhysicalWorld:
         # what tips over slides and rolls a little, not across the table (Bullet multiplies the two
         # bodies' friction coefficients: 1.0 against the furniture's default 0.5 makes 0.5)
         p.changeDynamics(
-            obj.body, -1, lateralFriction=1.0, rollingFriction=ROLLING_FRICTION, spinningFriction=ROLLING_FRICTION, physicsClientId=cid
-        )  # fmt: skip
+            obj.body,
+            -1,
+            lateralFriction=1.0,
+            rollingFriction=ROLLING_FRICTION,
+            spinningFriction=ROLLING_FRICTION,
+            physicsClientId=cid,
+        )
         p.resetBaseVelocity(obj.body, (0, 0, 0), (0, 0, 0), physicsClientId=cid)
         still, steps = 0, 0
         while steps < SETTLE_STEPS and still < SETTLE_STILL:

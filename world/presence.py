@@ -32,7 +32,9 @@ Detach = Callable[[str, str], None]  # (robot, why a person reads)
 class Presence:
     """The robots whose agent's token is declared now, and the deadline of each attach's token."""
 
-    def __init__(self, bus: Bus, keys: Keys, roster: Roster, *, deadline: float, detach: Detach, over: Callable[[], bool]) -> None:
+    def __init__(
+        self, bus: Bus, keys: Keys, roster: Roster, *, deadline: float, detach: Detach, over: Callable[[], bool]
+    ) -> None:
         if deadline <= 0:
             raise ValueError(f"the token deadline must be more than 0 s (got {deadline})")
         self.deadline = deadline
@@ -76,4 +78,6 @@ class Presence:
         if await self._bus.alive(key, timeout=LIVELINESS_QUERY):  # its put may have gone unseen: ask
             return
         if not self._over() and self._roster.attached.get(robot) == agent_id:
-            self._detach(robot, f"its agent declared no liveliness token ({key}) within {self.deadline:g} s of attaching")
+            self._detach(
+                robot, f"its agent declared no liveliness token ({key}) within {self.deadline:g} s of attaching"
+            )

@@ -7,6 +7,7 @@ import zlib
 from pathlib import Path
 
 import numpy as np
+
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from .sim import Sim
@@ -40,7 +41,9 @@ def render(sim: Sim, view: str, width: int = 800, height: int = 600) -> np.ndarr
     return np.reshape(np.asarray(px, dtype=np.uint8), (height, width, 4))[:, :, :3]
 
 
-def render_scene(scene: str, out_dir: Path, *, seed: int = 0, n_objects: int = 6, task: str = "pack_objects") -> list[Path]:
+def render_scene(
+    scene: str, out_dir: Path, *, seed: int = 0, n_objects: int = 6, task: str = "pack_objects"
+) -> list[Path]:
     """Top-down and perspective PNGs of `scene` with one generated episode's objects."""
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []

@@ -9,12 +9,13 @@ every run of the same actions ends in the same state).
 from __future__ import annotations
 
 import math
-from itertools import pairwise
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
-from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import pybullet_data
+
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from . import assets
 from .arm import EE_LINK, FINGERS, HOME
@@ -38,20 +39,36 @@ KINDS: dict[str, RobotKind] = {
     k.id: k
     for k in (
         RobotKind(
-            "mobile_manipulator", "mobile manipulator",
+            "mobile_manipulator",
+            "mobile manipulator",
             ("navigate", "move", "open", "pick", "place", "communicate", "wait"),
-            "box chassis with a Franka Panda arm and a suction cup", mobile=True, has_arm=True, reach=0.72, footprint=0.3,
+            "box chassis with a Franka Panda arm and a suction cup",
+            mobile=True,
+            has_arm=True,
+            reach=0.72,
+            footprint=0.3,
         ),
         RobotKind(
-            "tabletop_arm", "tabletop manipulator", ("pick", "place", "communicate", "wait"),
-            "Franka Panda arm fixed on table_0, with a suction cup", mobile=False, has_arm=True, reach=0.62, finishes_task=True,
+            "tabletop_arm",
+            "tabletop manipulator",
+            ("pick", "place", "communicate", "wait"),
+            "Franka Panda arm fixed on table_0, with a suction cup",
+            mobile=False,
+            has_arm=True,
+            reach=0.62,
+            finishes_task=True,
         ),
         RobotKind(
-            "mobile_base", "mobile robot", ("navigate", "communicate", "wait"),
-            "R2-D2 style wheeled base (pybullet_data r2d2.urdf)", mobile=True, has_arm=False, footprint=0.3,
+            "mobile_base",
+            "mobile robot",
+            ("navigate", "communicate", "wait"),
+            "R2-D2 style wheeled base (pybullet_data r2d2.urdf)",
+            mobile=True,
+            has_arm=False,
+            footprint=0.3,
         ),
     )
-}  # fmt: skip
+}
 
 TEAM: dict[str, str] = {"alice": "mobile_manipulator", "bob": "tabletop_arm", "david": "mobile_base"}
 ROBOTS = tuple(TEAM)  # the fixed execution order
@@ -150,8 +167,16 @@ class RobotBody:
         p.resetBasePositionAndOrientation(self.held_body, (x, y, z - self.held_drop), orn, physicsClientId=self.cid)
 
 
-def spawn(cid: int, name: str, kind: RobotKind, assets_dir: AssetDir, *, pose: tuple[float, float, float] | None = None,
-          arm_base: tuple[float, float, float] | None = None, arm_yaw: float = 0.0) -> RobotBody:  # fmt: skip
+def spawn(
+    cid: int,
+    name: str,
+    kind: RobotKind,
+    assets_dir: AssetDir,
+    *,
+    pose: tuple[float, float, float] | None = None,
+    arm_base: tuple[float, float, float] | None = None,
+    arm_yaw: float = 0.0,
+) -> RobotBody:
     """Load a robot's bodies: a chassis with an arm, a fixed arm, or a bare mobile base."""
     r = RobotBody(name, kind, cid, fixed_arm=arm_base, fixed_yaw=arm_yaw)
     data = pybullet_data.getDataPath()

@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 
 from structlog.typing import FilteringBoundLogger
 
-from mhrc.core.protocol import EPISODE_OVER, ActionRequest, AttachRequest, Rejection, RejectCode
+from mhrc.core.protocol import EPISODE_OVER, ActionRequest, AttachRequest, RejectCode, Rejection
 
 
 class Roster:
@@ -21,7 +21,9 @@ class Roster:
     def __init__(self, robots: Sequence[str], log: FilteringBoundLogger) -> None:
         self.robots = tuple(robots)
         self.attached: dict[str, str] = {}  # robot -> agent id
-        self._sessions: dict[str, str] = {}  # robot -> the attaching session's secret (its attach query's `session` parameter)
+        self._sessions: dict[
+            str, str
+        ] = {}  # robot -> the attaching session's secret (its attach query's `session` parameter)
         self._log = log
 
     def _no_such_robot(self, robot: str) -> str:
@@ -78,7 +80,9 @@ class Roster:
         among `finishers`, or nobody left that navigates and picks."""
         left = set(self.attached)
         if finishers and not left & finishers:
-            return f"nobody attached can finish the task (only {', '.join(sorted(finishers))} places on the goal fixtures)"
+            return (
+                f"nobody attached can finish the task (only {', '.join(sorted(finishers))} places on the goal fixtures)"
+            )
         fetchers = [r for r in self.robots if {"navigate", "pick"} <= capabilities(r)]
         if fetchers and not left & set(fetchers):
             return f"nobody attached can fetch objects from the rooms (only {', '.join(fetchers)} navigates and picks)"

@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Collection
-from importlib import resources
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
@@ -38,7 +38,9 @@ class ScenarioError(ValueError):
 class _Event(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    tick: int = Field(ge=1, description="the tick it fires at, when that tick opens (async: at tick x step_seconds of simulated time)")
+    tick: int = Field(
+        ge=1, description="the tick it fires at, when that tick opens (async: at tick x step_seconds of simulated time)"
+    )
 
 
 class Relocate(_Event):
@@ -46,7 +48,9 @@ class Relocate(_Event):
     learn it only by looking."""
 
     kind: Literal["relocate"] = "relocate"
-    object: str | None = Field(None, description="the target to move; None: one chosen with the episode's seed among the unplaced targets")
+    object: str | None = Field(
+        None, description="the target to move; None: one chosen with the episode's seed among the unplaced targets"
+    )
     to: str | None = Field(None, description="the furniture to put it on; None: one chosen with the episode's seed")
 
 
@@ -62,7 +66,10 @@ class NewTarget(_Event):
     """One more object joins the task, spawned on a surface."""
 
     kind: Literal["new_target"] = "new_target"
-    object: str | None = Field(None, description="the object to add; None: one chosen with the episode's seed among the task's objects not in the scene")
+    object: str | None = Field(
+        None,
+        description="the object to add; None: one chosen with the episode's seed among the task's objects not in the scene",
+    )
     on: str | None = Field(None, description="the furniture it appears on; None: one chosen with the episode's seed")
 
 
@@ -105,7 +112,9 @@ def resolve_scenario(arg: Path | str) -> Path:
     if str(arg) in shipped:
         return shipped[str(arg)]
     if path.exists():
-        raise ScenarioError(f"--events: {arg} is a directory; give a scenario file (a JSON list of events) or a shipped scenario's name")
+        raise ScenarioError(
+            f"--events: {arg} is a directory; give a scenario file (a JSON list of events) or a shipped scenario's name"
+        )
     raise ScenarioError(
         f"--events: {arg} is neither a file nor a shipped scenario; give a scenario file's path or one of "
         f"{', '.join(shipped) or '(none installed)'} (mhrc scenarios lists them)"
@@ -138,7 +147,11 @@ def _where(exc: ValidationError) -> str:
     index, rest = loc[0], [str(p) for p in loc[1:] if str(p) not in KINDS]
     if err["type"] == "union_tag_invalid" or (err["type"] == "union_tag_not_found" and not rest):
         rest = ["kind"]
-        msg = f"must be one of {', '.join(KINDS)}" + (f", not {err['input'].get('kind')!r}" if isinstance(err.get("input"), dict) and "kind" in err["input"] else "")
+        msg = f"must be one of {', '.join(KINDS)}" + (
+            f", not {err['input'].get('kind')!r}"
+            if isinstance(err.get("input"), dict) and "kind" in err["input"]
+            else ""
+        )
     field = ".".join(rest) or "event"
     return f"events[{index}].{field}: {msg}"
 
@@ -150,8 +163,10 @@ def describe(event: ScenarioEventSpec) -> str:
         where = event.to or "another surface (chosen with the seed)"
         return f"someone moves {what} to {where}; robots learn it only by looking"
     if isinstance(event, Breakdown):
-        return (f"{event.robot} breaks down for {event.ticks} tick(s), until tick {event.tick + event.ticks}: it can only "
-                "communicate and wait; teammates learn it only from its messages")
+        return (
+            f"{event.robot} breaks down for {event.ticks} tick(s), until tick {event.tick + event.ticks}: it can only "
+            "communicate and wait; teammates learn it only from its messages"
+        )
     if isinstance(event, NewTarget):
         what = event.object or "one more object (chosen with the seed among the task's objects not in the scene)"
         on = event.on or "a surface chosen with the seed"
@@ -181,7 +196,9 @@ def check_scenario(scenario: Scenario, facts: EpisodeFacts, *, where: str = "") 
 
     for i, ev in enumerate(scenario.events):
         if ev.tick >= facts.horizon:
-            raise bad(i, "tick", f"{ev.tick} is past the horizon ({facts.horizon} ticks: the last is {facts.horizon - 1})")
+            raise bad(
+                i, "tick", f"{ev.tick} is past the horizon ({facts.horizon} ticks: the last is {facts.horizon - 1})"
+            )
         if isinstance(ev, Breakdown) and ev.robot not in facts.robots:
             raise bad(i, "robot", f"{ev.robot!r} is not a robot of this episode ({', '.join(facts.robots)})")
         if isinstance(ev, (Relocate, NewTarget)) and ev.object is not None and ev.object not in facts.objects:

@@ -8,9 +8,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pybullet_data
 
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
-import pybullet_data
 
 from . import assets
 from .assets import AssetDir, Color
@@ -42,7 +42,9 @@ class BuiltScene:
 
     statics: list[StaticBody]
     bodies: dict[str, int]  # static name -> body id
-    joints: dict[str, int]  # container name -> the joint that opens it (a drawer's prismatic, a lid's or door's revolute)
+    joints: dict[
+        str, int
+    ]  # container name -> the joint that opens it (a drawer's prismatic, a lid's or door's revolute)
     grid: Grid
 
 
@@ -60,15 +62,22 @@ class Fixture:
     stack: bool = False  # objects go on top of each other at its centre
 
     def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
-        return abs(x - self.center[0]) <= self.size[0] / 2 + margin and abs(y - self.center[1]) <= self.size[1] / 2 + margin
+        return (
+            abs(x - self.center[0]) <= self.size[0] / 2 + margin
+            and abs(y - self.center[1]) <= self.size[1] / 2 + margin
+        )
 
 
-def scene_statics(layout: Layout, assets_dir: AssetDir, fixtures: list[Fixture] | tuple[Fixture, ...] = ()) -> list[StaticBody]:
+def scene_statics(
+    layout: Layout, assets_dir: AssetDir, fixtures: list[Fixture] | tuple[Fixture, ...] = ()
+) -> list[StaticBody]:
     """Write the layout's URDFs and list every fixed body (walls, furniture, the task's fixtures)."""
     out: list[StaticBody] = []
     wall_color = (0.9, 0.9, 0.88, 1.0)
     for i, (cx, cy, sx, sy) in enumerate(layout.walls):
-        path = assets_dir.write(f"wall_{i}", assets.link_urdf(f"wall_{i}", assets.wall_boxes((sx, sy, WALL_HEIGHT), wall_color)))
+        path = assets_dir.write(
+            f"wall_{i}", assets.link_urdf(f"wall_{i}", assets.wall_boxes((sx, sy, WALL_HEIGHT), wall_color))
+        )
         out.append(StaticBody(f"wall_{i}", path, (cx, cy, 0.0)))
     for f in layout.furniture:
         width, depth = f.own_size()
@@ -90,7 +99,11 @@ def scene_statics(layout: Layout, assets_dir: AssetDir, fixtures: list[Fixture] 
         out.append(StaticBody(f.name, assets_dir.write(f.name, urdf), (f.center[0], f.center[1], 0.0), f.yaw))
     top = _require(layout, layout.bob_table).top
     for fx in fixtures:
-        boxes = assets.tray_boxes(*fx.size, fx.color, t=fx.thickness) if fx.rim else assets.slab_boxes(*fx.size, fx.thickness, fx.color)
+        boxes = (
+            assets.tray_boxes(*fx.size, fx.color, t=fx.thickness)
+            if fx.rim
+            else assets.slab_boxes(*fx.size, fx.thickness, fx.color)
+        )
         path = assets_dir.write(fx.name, assets.link_urdf(fx.name, boxes))
         out.append(StaticBody(fx.name, path, (fx.center[0], fx.center[1], top)))
     return out
@@ -143,7 +156,9 @@ def _block_near(grid: Grid, center: tuple[float, float], size: tuple[float, floa
     grid.blocked[i0:i1, j0:j1] |= np.hypot(ox, oy) <= margin
 
 
-def build_scene(cid: int, layout: Layout, assets_dir: AssetDir, margin: float, fixtures: list[Fixture] | tuple[Fixture, ...] = ()) -> BuiltScene:
+def build_scene(
+    cid: int, layout: Layout, assets_dir: AssetDir, margin: float, fixtures: list[Fixture] | tuple[Fixture, ...] = ()
+) -> BuiltScene:
     """Floor, walls, furniture and the task's fixtures in client `cid`, and the base planners' occupancy grid."""
     p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
     p.loadURDF("plane.urdf", physicsClientId=cid)
@@ -154,9 +169,10 @@ def build_scene(cid: int, layout: Layout, assets_dir: AssetDir, margin: float, f
         if f.container is not None:
             body = bodies[f.name]
             joints[f.name] = next(
-                j for j in range(p.getNumJoints(body, physicsClientId=cid))
+                j
+                for j in range(p.getNumJoints(body, physicsClientId=cid))
                 if p.getJointInfo(body, j, physicsClientId=cid)[2] in (p.JOINT_PRISMATIC, p.JOINT_REVOLUTE)
-            )  # fmt: skip
+            )
             p.setJointMotorControl2(body, joints[f.name], p.VELOCITY_CONTROL, force=0.0, physicsClientId=cid)
     return BuiltScene(statics, bodies, joints, occupancy(layout, margin))
 

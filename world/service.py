@@ -37,9 +37,9 @@ from mhrc.core.protocol import (
     Message,
     Metrics,
     MotionNoise,
+    ObjectPose,
     ObjectView,
     Observation,
-    ObjectPose,
     OutcomeCode,
     ProtocolError,
     Rejection,
@@ -107,7 +107,9 @@ class NobodyAttached(RuntimeError):
 class WorldConfig:
     run: str
     horizon: int = 50
-    start_timeout: float | None = None  # start with the robots attached by then (NobodyAttached if none is); None: wait for all
+    start_timeout: float | None = (
+        None  # start with the robots attached by then (NobodyAttached if none is); None: wait for all
+    )
     tick_delay: float = 0.0  # pause between scheduler steps, for watching with --gui
     schedule: str = "lockstep"  # the time policy, a name in world.schedulers.SCHEDULERS
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
@@ -144,7 +146,12 @@ class WorldService:
         self._evaluation: TaskResultLike = sim.evaluate()
         self._last_results: dict[str, str] = {}  # robot -> goal id of the last result released to it
         self.presence = Presence(
-            bus, self.keys, self.roster, deadline=config.token_deadline, detach=self._detach, over=lambda: self.done is not None
+            bus,
+            self.keys,
+            self.roster,
+            deadline=config.token_deadline,
+            detach=self._detach,
+            over=lambda: self.done is not None,
         )  # which attached robots still have a live agent
         self.scheduler: Scheduler = make_scheduler(config.schedule, self, time_scale=config.time_scale)
         self.admission = Admission(self.roster, self.scheduler, self._log)  # what gets to the scheduler
@@ -212,7 +219,9 @@ class WorldService:
                 if self.attached:
                     break
                 assert self.cfg.start_timeout is not None
-                self._log.info("no robot attached within the start timeout", timeout=self.cfg.start_timeout)  # the error says it
+                self._log.info(
+                    "no robot attached within the start timeout", timeout=self.cfg.start_timeout
+                )  # the error says it
                 raise NobodyAttached(self.sim.robots, self.cfg.start_timeout)
             try:
                 await asyncio.wait_for(self._wake.wait(), timeout)
@@ -248,7 +257,9 @@ class WorldService:
         self._log.info("episode started", attached=sorted(self.attached))
         self._wake.set()
 
-    def _execute_batch(self, batch: Sequence[ActionRequest], tick: int, deliver: bool, opens: int | None) -> tuple[Executed, Snapshot, Sequence[Message]]:
+    def _execute_batch(
+        self, batch: Sequence[ActionRequest], tick: int, deliver: bool, opens: int | None
+    ) -> tuple[Executed, Snapshot, Sequence[Message]]:
         """Runs in a worker thread, holding the sim lock: the actions in order, then the evaluation and every acting
         robot's observation of tick + 1 (with `deliver`, after the batch's messages reached their receivers' scene
         graphs: lockstep delivers them with these observations; with `opens`, after that tick's scenario events)."""
@@ -274,7 +285,9 @@ class WorldService:
                 return self.sim.execute(req.robot, action)
             except Exception as exc:  # a simulator bug must not take the world down
                 self._log.exception("skill crashed", robot=req.robot, action=action.call())
-                return SkillOutcome.fail(OutcomeCode.PLAN_FAILED, f"The {action.skill} skill failed unexpectedly: {exc}.")
+                return SkillOutcome.fail(
+                    OutcomeCode.PLAN_FAILED, f"The {action.skill} skill failed unexpectedly: {exc}."
+                )
         if "communicate" not in self.sim.capabilities(req.robot):
             return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, f"{req.robot} cannot communicate.")
         if action.to not in self.sim.robots or action.to == req.robot:
@@ -308,11 +321,18 @@ class WorldService:
         )
         targets, goals, ordered = self.sim.answer_key()  # the answer key, now that no agent can use it: for reports
         self.done = EpisodeDone(
-            run=self.cfg.run, reason=reason, metrics=metrics, final_results=dict(self._last_results),  # type: ignore[arg-type]
-            targets=targets, goals=goals, ordered=ordered,
+            run=self.cfg.run,
+            reason=reason,
+            metrics=metrics,
+            final_results=dict(self._last_results),  # type: ignore[arg-type]
+            targets=targets,
+            goals=goals,
+            ordered=ordered,
         )
         self.bus.put(self.keys.world_event, self.done)
-        self._log.info("episode done", reason=reason, **metrics.model_dump(exclude={"action_steps_per_robot", "failed_actions"}))
+        self._log.info(
+            "episode done", reason=reason, **metrics.model_dump(exclude={"action_steps_per_robot", "failed_actions"})
+        )
         self._wake.set()
 
     async def agents_left(self, timeout: float) -> None:
@@ -342,7 +362,9 @@ class WorldService:
     def horizon(self) -> int:
         return self.cfg.horizon
 
-    async def execute(self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False, opens: int | None = None) -> Executed:
+    async def execute(
+        self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False, opens: int | None = None
+    ) -> Executed:
         """Run `batch` in order at `tick` in a worker thread, holding the sim lock; count it. `deliver`: the
         observations returned carry the batch's messages (lockstep); `opens`: and that tick's scenario events."""
         async with self._sim_lock:
@@ -416,7 +438,9 @@ class WorldService:
         refused = self.roster.refuse_attach(robot, req, session, over=self.done is not None)
         if refused is not None:
             return AttachReply(robot=robot, accepted=False, reason=refused)
-        if self.roster.attach(robot, req.agent_id, session):  # said now, before the await below, during which the episode may start
+        if self.roster.attach(
+            robot, req.agent_id, session
+        ):  # said now, before the await below, during which the episode may start
             self.bus.put(self.keys.world_event, RobotAttached(robot=robot, agent_id=req.agent_id, tick=self.tick))
             self._log.info("robot attached", robot=robot, agent=req.agent_id, tick=self.tick)
             self.presence.expect(robot, req.agent_id)
@@ -424,7 +448,9 @@ class WorldService:
         wait_turn = self.scheduler.on_attach(robot)
         tick = self.scheduler.tick_of(robot)
         if not wait_turn:
-            messages = self.mail.deliver(robot)  # its waiting messages come with this observation, which knows what they tell
+            messages = self.mail.deliver(
+                robot
+            )  # its waiting messages come with this observation, which knows what they tell
             try:
                 obs = await self.observe(robot, tick)
             except BaseException:
@@ -432,7 +458,9 @@ class WorldService:
                 raise
             obs = obs.model_copy(update={"new_messages": messages})
         self._wake.set()
-        return AttachReply(robot=robot, accepted=True, tick=tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn)
+        return AttachReply(
+            robot=robot, accepted=True, tick=tick, horizon=self.cfg.horizon, observation=obs, wait_turn=wait_turn
+        )
 
     def _on_request(self, sample: Sample) -> None:
         robot = self.keys.robot_of(sample.key)
@@ -455,9 +483,13 @@ class WorldService:
             self._wake.set()  # for agents_left
             return  # agents leaving after the episode: nothing to report
         stranded = self.roster.stranded(self.sim.finishers(), self.sim.capabilities)
-        self._log.warning("robot detached", robot=robot, tick=self.tick, why=why, **({"stranded": stranded} if stranded else {}))
+        self._log.warning(
+            "robot detached", robot=robot, tick=self.tick, why=why, **({"stranded": stranded} if stranded else {})
+        )
         reason = why + (f"; {stranded} unless an agent attaches again" if stranded else "")
-        self.bus.put(self.keys.world_event, RobotDetached(robot=robot, tick=self.tick, reason=reason, agent_id=agent_id))
+        self.bus.put(
+            self.keys.world_event, RobotDetached(robot=robot, tick=self.tick, reason=reason, agent_id=agent_id)
+        )
         self._wake.set()
 
     async def _on_state_query(self, key: str, params: dict[str, str], payload: bytes) -> WorldState:
@@ -480,4 +512,3 @@ class WorldService:
             placed=evaluation.placed,
             total=evaluation.total,
         )
-

@@ -131,7 +131,9 @@ class Sim:
         margin = max(KINDS[TEAM[r]].footprint for r in self.robots)
         fixtures = {fx.name: fx for fx in self.task.fixtures(lay)}
         scene = build_scene(self.cid, lay, self.assets, margin, list(fixtures.values()))
-        self.world = w = PhysicalWorld(self.cid, lay, scene, ArmPlanner(scene.statics, seed=self.seed), fixtures, self.aids)
+        self.world = w = PhysicalWorld(
+            self.cid, lay, scene, ArmPlanner(scene.statics, seed=self.seed), fixtures, self.aids
+        )
         for name in self.robots:
             kind = KINDS[TEAM[name]]
             if kind.mobile:
@@ -205,7 +207,9 @@ class Sim:
         if action.skill not in r.kind.skills:
             return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, fb.not_capable(robot, action.skill, r.kind.skills))
         if (broken := self.dynamics.broken_for(robot)) and not isinstance(action, Wait):
-            return SkillOutcome.fail(OutcomeCode.BROKEN_DOWN, fb.broken_down(action.skill, broken), ticks=broken)  # ticks: for machines
+            return SkillOutcome.fail(
+                OutcomeCode.BROKEN_DOWN, fb.broken_down(action.skill, broken), ticks=broken
+            )  # ticks: for machines
         run = SKILLS.get(type(action))
         if run is None:  # pragma: no cover - every action but communicate has a skill
             out = SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, f"Unknown skill {action.skill}.")
@@ -278,7 +282,13 @@ class Sim:
         self.skill_context.grasp(r, obj)
 
     def release(
-        self, r: RobotBody, obj: ObjectState, spot: tuple[float, float, float], yaw: float, location: str | None = None, error: tuple[float, float] = (0.0, 0.0)
+        self,
+        r: RobotBody,
+        obj: ObjectState,
+        spot: tuple[float, float, float],
+        yaw: float,
+        location: str | None = None,
+        error: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         """Let go of `obj` over `spot` (see PhysicalWorld.release)."""
         self.world.release(r, obj, spot, yaw, location, error)
@@ -340,7 +350,9 @@ class Sim:
         """Ground truth for viewers (the `snapshot` event): robots, objects, containers."""
         return observe.poses(self.world)
 
-    def apply_snapshot(self, robots: Mapping[str, RobotPose], objects: Mapping[str, ObjectPose], open: Mapping[str, bool]) -> None:
+    def apply_snapshot(
+        self, robots: Mapping[str, RobotPose], objects: Mapping[str, ObjectPose], open: Mapping[str, bool]
+    ) -> None:
         """Teleport bodies to a `snapshot` event's poses (for videos; see observe.apply_snapshot)."""
         observe.apply_snapshot(self.world, robots, objects, open)
 

@@ -83,18 +83,24 @@ class Task(Protocol):
     def target_kinds(self) -> list[ObjectKind]:
         """Every object an episode of this task can have as a target (what a new target may be)."""
         ...
+
     def object_names(self) -> set[str]:
         """Every object name an episode of this task can hold: targets (repeats numbered) and distractors."""
         ...
+
     def evaluate(self, targets: list[str], objects: list[Seen]) -> TaskResult: ...
     def status(self, targets: list[str], objects: list[Seen], aids: frozenset[str] = frozenset()) -> str:
         """Bob's task status as the paper gives it; with the `status_hints` aid, also what is
         missing, next or wrong."""
         ...
+
     def finisher_brief(self) -> str:
         """The brief of the robot that finishes the task (the appendix's Bob)."""
         ...
-    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+
+    def finisher_detail(
+        self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()
+    ) -> str:
         """The finisher's detailed task: what goes where, whom to ask, and the list."""
         ...
 
@@ -130,7 +136,9 @@ def _names(names: list[str]) -> str:
 Spot = tuple[str, tuple[float, float], bool]  # furniture, xy, inside
 
 
-def scatter(layout: Layout, rng: np.random.Generator, targets: list[ObjectKind], distractors: list[ObjectKind]) -> list[Placement]:
+def scatter(
+    layout: Layout, rng: np.random.Generator, targets: list[ObjectKind], distractors: list[ObjectKind]
+) -> list[Placement]:
     """Put targets[0] near Bob, targets[1] far on his table, one target that fits inside a closed
     container, the rest on other furniture; distractors on any spot left. `targets` keeps its order
     in the result (the first len(targets) placements)."""
@@ -145,9 +153,7 @@ def scatter(layout: Layout, rng: np.random.Generator, targets: list[ObjectKind],
     near = shuffled([(layout.bob_table, s, False) for s in layout.near_slots])
     far = shuffled([(layout.bob_table, s, False) for s in layout.far_slots])
     inside = shuffled([(container.name, s, True) for s in container.container.slots])
-    elsewhere = shuffled(
-        [(f.name, s, False) for f in layout.furniture if f.name != layout.bob_table for s in f.slots]
-    )
+    elsewhere = shuffled([(f.name, s, False) for f in layout.furniture if f.name != layout.bob_table for s in f.slots])
     n = len(targets)
     roles = ["near", "far", "inside"] + ["elsewhere"] * (n - 3)
     # the container's target is one short enough for it (the first such one, after the first two)
@@ -228,7 +234,9 @@ class PackObjects:
             return parts[0]
         missing = [t for t in targets if t not in in_tray]
         wrong = [n for n in in_tray if n not in targets]
-        parts.append(f"Not yet in the tray: {', '.join(missing)}." if missing else "Every listed object is in the tray.")
+        parts.append(
+            f"Not yet in the tray: {', '.join(missing)}." if missing else "Every listed object is in the tray."
+        )
         if wrong:
             parts.append(f"In the tray but not on the list (take it out): {', '.join(wrong)}.")
         return " ".join(parts)
@@ -236,7 +244,9 @@ class PackObjects:
     def finisher_brief(self) -> str:
         return "Put the listed objects into the tray."
 
-    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+    def finisher_detail(
+        self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()
+    ) -> str:
         return (
             f"Put every object on the list into the tray on {b.table}. {ask(b, self.things)} "
             f"The list: {', '.join(targets)}. Nothing that is not on the list goes into the tray."
@@ -280,7 +290,10 @@ class SortSolids:
         colors = [list(PANEL_COLORS)[i] for i in rng.permutation(len(PANEL_COLORS))[:n_objects]]
         targets = [solid_kind(c, shapes[int(rng.integers(0, len(shapes)))], PANEL_COLORS) for c in colors]
         n_distractors = 1 + int(rng.integers(0, 2))
-        distractors = [solid_kind(c, shapes[int(rng.integers(0, len(shapes)))], NO_PANEL_COLORS) for c in list(NO_PANEL_COLORS)[:n_distractors]]
+        distractors = [
+            solid_kind(c, shapes[int(rng.integers(0, len(shapes)))], NO_PANEL_COLORS)
+            for c in list(NO_PANEL_COLORS)[:n_distractors]
+        ]
         return scatter(layout, rng, targets, distractors)
 
     def target_kinds(self) -> list[ObjectKind]:
@@ -296,7 +309,9 @@ class SortSolids:
         for i, (name, color) in enumerate(PANEL_COLORS.items()):
             c, r = i % 3, i // 3
             center = (round(cx + (c - 1) * PANEL_PITCH, 4), round(cy + (0.5 - r) * PANEL_PITCH, 4))
-            out.append(Fixture(f"{name}_panel", f"{name} panel", center, (PANEL_SIZE, PANEL_SIZE), color, thickness=0.008))
+            out.append(
+                Fixture(f"{name}_panel", f"{name} panel", center, (PANEL_SIZE, PANEL_SIZE), color, thickness=0.008)
+            )
         return out
 
     def goal(self, kind: ObjectKind) -> str:
@@ -325,7 +340,9 @@ class SortSolids:
     def finisher_brief(self) -> str:
         return "Put each listed solid on the panel of its colour."
 
-    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+    def finisher_detail(
+        self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()
+    ) -> str:
         if "goal_map" in aids:
             listed = ", ".join(f"{t} onto {goals[t]}" for t in targets)
         else:  # the paper's: the solids and the panels; matching the colours is the finisher's job
@@ -394,7 +411,9 @@ class MakeSandwich:
             targets.append(ingredient_kind(kind, name))
         unused = [k for k in INGREDIENTS if k not in items]
         n_distractors = min(len(unused), 1 + int(rng.integers(0, 2)))
-        distractors = [ingredient_kind(unused[i], unused[i]) for i in sorted(rng.permutation(len(unused))[:n_distractors])]
+        distractors = [
+            ingredient_kind(unused[i], unused[i]) for i in sorted(rng.permutation(len(unused))[:n_distractors])
+        ]
         return scatter(layout, rng, targets, distractors)
 
     def target_kinds(self) -> list[ObjectKind]:
@@ -405,7 +424,17 @@ class MakeSandwich:
 
     def fixtures(self, layout: Layout) -> list[Fixture]:
         cx, cy, _, _ = _goal_area(layout)
-        return [Fixture("cutting_board", "cutting board", (cx, cy), (0.24, 0.2), (0.75, 0.55, 0.3, 1.0), thickness=0.02, stack=True)]
+        return [
+            Fixture(
+                "cutting_board",
+                "cutting board",
+                (cx, cy),
+                (0.24, 0.2),
+                (0.75, 0.55, 0.3, 1.0),
+                thickness=0.02,
+                stack=True,
+            )
+        ]
 
     def goal(self, kind: ObjectKind) -> str:
         return "cutting_board"
@@ -427,7 +456,9 @@ class MakeSandwich:
     def evaluate(self, targets: list[str], objects: list[Seen]) -> TaskResult:
         placed = self._correct_prefix(targets, objects)
         stack = self._stack(objects)
-        return TaskResult(success=placed == len(targets) and len(stack) == len(targets), placed=placed, total=len(targets))
+        return TaskResult(
+            success=placed == len(targets) and len(stack) == len(targets), placed=placed, total=len(targets)
+        )
 
     def status(self, targets: list[str], objects: list[Seen], aids: frozenset[str] = frozenset()) -> str:
         stack = self._stack(objects)
@@ -438,7 +469,9 @@ class MakeSandwich:
         if good < len(stack):
             parts.append(f"Wrong from {stack[good].name} up (take those off).")
         elif good < len(targets):
-            parts.append(f"Next: {targets[good]}; still to stack after it: {_names(targets[good + 1 :]) if good + 1 < len(targets) else 'nothing'}.")
+            parts.append(
+                f"Next: {targets[good]}; still to stack after it: {_names(targets[good + 1 :]) if good + 1 < len(targets) else 'nothing'}."
+            )
         else:
             parts.append("The sandwich is complete.")
         return " ".join(parts)
@@ -446,7 +479,9 @@ class MakeSandwich:
     def finisher_brief(self) -> str:
         return "Make the sandwich on the menu on the cutting board."
 
-    def finisher_detail(self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()) -> str:
+    def finisher_detail(
+        self, b: Briefing, targets: list[str], goals: dict[str, str], aids: frozenset[str] = frozenset()
+    ) -> str:
         return (
             f"Stack the menu's ingredients on the cutting board on {b.table}, bottom to top in the menu's order. {ask(b, self.things)} "
             f"The menu, bottom to top: {', '.join(targets)}. Nothing that is not on the menu goes onto the board."

@@ -38,7 +38,9 @@ def play_team_plan(sim: Sim, execute: Execute | None = None) -> None:
             run(fetcher, Navigate(target=f.name, stand_pose=0))
             run(fetcher, Open(target=f.name))
         x, y, _ = sim.position(obj)
-        pose = min(range(len(f.stand_poses)), key=lambda i: math.hypot(f.stand_poses[i][0] - x, f.stand_poses[i][1] - y))
+        pose = min(
+            range(len(f.stand_poses)), key=lambda i: math.hypot(f.stand_poses[i][0] - x, f.stand_poses[i][1] - y)
+        )
         run(fetcher, Navigate(target=f.name, stand_pose=pose))
         out = run(fetcher, Pick(obj=name))
         if out.code == OutcomeCode.TOO_FAR and "dx" in out.details:

@@ -48,7 +48,9 @@ class Completion:
     reasoning: str | None = None  # a reasoning model's thoughts, apart from the answer
     reasoning_tokens: int = 0
     truncated: bool = False  # the text was longer than MAX_REPLY_CHARS and was cut
-    ttft: float | None = None  # seconds to the first chunk of a streamed reply (prompt processing, mostly); None: not streamed
+    ttft: float | None = (
+        None  # seconds to the first chunk of a streamed reply (prompt processing, mostly); None: not streamed
+    )
 
 
 class LLMClient(Protocol):

@@ -134,7 +134,9 @@ def check_gguf(path: str | os.PathLike[str]) -> Path:
     except OSError as exc:
         raise GGUFError(f"GGUF model {str(path)!r} cannot be read: {exc.strerror or exc}") from None
     if magic != GGUF_MAGIC:
-        raise GGUFError(f"{str(path)!r} is not a GGUF file (it does not start with b'GGUF'): give a llama.cpp .gguf model")
+        raise GGUFError(
+            f"{str(path)!r} is not a GGUF file (it does not start with b'GGUF'): give a llama.cpp .gguf model"
+        )
     _import_xllamacpp()
     return file
 
@@ -338,7 +340,14 @@ class LocalModelServer:
             with contextlib.suppress(Exception):
                 await self.stop()  # loaded but not ready: free it
             raise
-        log.info("local_model_started", path=str(self.path), url=self.base_url, slots=self.slots, n_ctx_per_slot=self.n_ctx_per_slot, threads=self.threads)
+        log.info(
+            "local_model_started",
+            path=str(self.path),
+            url=self.base_url,
+            slots=self.slots,
+            n_ctx_per_slot=self.n_ctx_per_slot,
+            threads=self.threads,
+        )
         return self.base_url
 
     def _params(self, template: str | None) -> Any:
@@ -449,7 +458,9 @@ class LocalModelServer:
 
     def __del__(self) -> None:
         if getattr(self, "_server", None) is not None:
-            warnings.warn(f"LocalModelServer for {self.path} was not stopped: await stop()", ResourceWarning, stacklevel=1)
+            warnings.warn(
+                f"LocalModelServer for {self.path} was not stopped: await stop()", ResourceWarning, stacklevel=1
+            )
 
     def __repr__(self) -> str:
         where = (self._address or "stopped") if self._started else "not started"

@@ -57,12 +57,16 @@ def robot_specs(text: str, robots: Sequence[str]) -> dict[str, str | None]:
         m = ROBOT_SPEC.match(item)
         if m is None:
             if default is not None:
-                raise LLMSpecError(f"--llm {text!r} gives two default specs ({default!r}, {item!r}); name the robot of each: alice=SPEC")
+                raise LLMSpecError(
+                    f"--llm {text!r} gives two default specs ({default!r}, {item!r}); name the robot of each: alice=SPEC"
+                )
             default = item
             continue
         robot, spec = m.groups()
         if robot not in robots:
-            raise LLMSpecError(f"--llm {text!r} names robot {robot!r}, which is not in this episode (robots: {', '.join(robots)})")
+            raise LLMSpecError(
+                f"--llm {text!r} names robot {robot!r}, which is not in this episode (robots: {', '.join(robots)})"
+            )
         if robot in chosen:
             raise LLMSpecError(f"--llm {text!r} gives robot {robot!r} two specs")
         chosen[robot] = spec
@@ -107,7 +111,9 @@ def check_spec(spec: str, base_url: str | None = None, api_key_env: str | None =
     return model, base_url or default_url, api_key
 
 
-def make_client(spec: str, base_url: str | None = None, *, api_key_env: str | None = None, **options: Any) -> OpenAIChatClient:
+def make_client(
+    spec: str, base_url: str | None = None, *, api_key_env: str | None = None, **options: Any
+) -> OpenAIChatClient:
     """An OpenAI-compatible client for a model spec; raises LLMSpecError before any request if unusable.
 
     `options` go to OpenAIChatClient: timeout (to the first token), idle_timeout, stream, retries,
@@ -117,7 +123,9 @@ def make_client(spec: str, base_url: str | None = None, *, api_key_env: str | No
     if spec.startswith("replay:"):
         raise LLMSpecError(f"{spec!r} is a recorded trace: use mhrc.agents.replay.replay_clients for it")
     if spec.startswith("gguf:"):
-        raise LLMSpecError(f"{spec!r} is a local model file: serve it with mhrc.agents.llm.local.LocalModelServer first")
+        raise LLMSpecError(
+            f"{spec!r} is a local model file: serve it with mhrc.agents.llm.local.LocalModelServer first"
+        )
     provider = spec.partition(":")[0]
     return OpenAIChatClient(model, url, api_key=api_key, provider=provider if provider in PROVIDERS else "", **options)
 

@@ -30,6 +30,7 @@ from typing import Any, Self
 import httpx
 import structlog
 
+from ..progress import PROGRESS
 from .completion import (
     DEFAULT_MAX_TOKENS,
     DEFAULT_TEMPERATURE,
@@ -40,14 +41,15 @@ from .completion import (
     LLMTimeout,
     Messages,
 )
-from ..progress import PROGRESS
 from .reply import StreamedReply, Unreadable, whole_completion
 
 log = structlog.get_logger("mhrc.llm")
 
 DEFAULT_TIMEOUT = 120.0  # s to the first token (mhrc.run.config.SERVER_TIMEOUT says why)
 DEFAULT_IDLE_TIMEOUT = 30.0  # s between two chunks of a streamed reply: a decoding server sends one every few tokens
-MAX_STREAM_CHARS = 1_000_000  # a streamed reply is read no further (a server that never stops): far beyond any max_tokens
+MAX_STREAM_CHARS = (
+    1_000_000  # a streamed reply is read no further (a server that never stops): far beyond any max_tokens
+)
 MAX_STREAM_CHUNKS = 200_000  # nor past this many chunks (a server that streams empty deltas forever)
 
 _ANSWERED: set[str] = set()  # base URLs that sent this process a status line: slow from then on, never down
@@ -79,7 +81,9 @@ class OpenAIChatClient:
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
         if retries < 0 or timeout <= 0 or idle_timeout <= 0 or max_concurrency < 1 or timeout_retries < 0:
-            raise ValueError("need retries >= 0, timeout_retries >= 0, timeout > 0, idle_timeout > 0 and max_concurrency >= 1")
+            raise ValueError(
+                "need retries >= 0, timeout_retries >= 0, timeout > 0, idle_timeout > 0 and max_concurrency >= 1"
+            )
         if max_tokens is not None and max_tokens < 1:
             raise ValueError(f"max_tokens must be at least 1 (got {max_tokens})")
         self.model = model
@@ -97,7 +101,9 @@ class OpenAIChatClient:
         self.extra_body = dict(extra_body or {})
         headers = {"Authorization": f"Bearer {api_key}"} if api_key else {}
         # the deadlines of a call are this client's own (asyncio), not httpx's per-read timeout
-        self._http = httpx.AsyncClient(timeout=httpx.Timeout(None, connect=timeout), headers=headers, transport=transport, verify=_tls())
+        self._http = httpx.AsyncClient(
+            timeout=httpx.Timeout(None, connect=timeout), headers=headers, transport=transport, verify=_tls()
+        )
         self._limit = asyncio.Semaphore(max_concurrency)
         self.requests = 0  # HTTP attempts, retries included
         self.responses = 0  # status lines received: 0 means the server never answered at all
@@ -128,7 +134,9 @@ class OpenAIChatClient:
         if self.stream:
             body |= {"stream": True, "stream_options": {"include_usage": True}}
         if schema is not None:
-            from ..structured import response_format  # lazily: it loads the protocol models, which plain replies never need
+            from ..structured import (
+                response_format,  # lazily: it loads the protocol models, which plain replies never need
+            )
 
             body |= response_format(schema, self.provider)
         return body | self.extra_body
@@ -156,13 +164,23 @@ class OpenAIChatClient:
                 delay = exc.delay
             except (TimeoutError, httpx.TimeoutException) as exc:
                 silent = silent and self.responses == answered
-                last = str(exc) if isinstance(exc, _Stalled) else f"no answer within {self.timeout:g} s" + (
-                    f" ({type(exc).__name__})" if isinstance(exc, httpx.TimeoutException) else "")  # fmt: skip
+                last = (
+                    str(exc)
+                    if isinstance(exc, _Stalled)
+                    else f"no answer within {self.timeout:g} s"
+                    + (f" ({type(exc).__name__})" if isinstance(exc, httpx.TimeoutException) else "")
+                )
                 timeouts += 1
                 if timeouts > self.timeout_retries or attempt == self.retries:
                     error = LLMSilent if silent and not self.answered else LLMTimeout
-                    what = "no status line (the server accepted the connection and said nothing)" if error is LLMSilent else last
-                    raise error(f"{self.model} at {self.base_url}: {what}, {timeouts} time(s); a timeout is retried at most {self.timeout_retries} time(s)") from None
+                    what = (
+                        "no status line (the server accepted the connection and said nothing)"
+                        if error is LLMSilent
+                        else last
+                    )
+                    raise error(
+                        f"{self.model} at {self.base_url}: {what}, {timeouts} time(s); a timeout is retried at most {self.timeout_retries} time(s)"
+                    ) from None
             except httpx.TransportError as exc:
                 last = f"{type(exc).__name__}: {exc}"
             except Unreadable as exc:
@@ -174,7 +192,9 @@ class OpenAIChatClient:
                 await asyncio.sleep(delay)
         raise LLMError(f"{self.model} at {self.base_url} failed after {self.retries + 1} attempts: {last}")
 
-    async def _attempt(self, url: str, body: dict[str, Any], messages: Messages, structured: bool, delay: float) -> Completion:
+    async def _attempt(
+        self, url: str, body: dict[str, Any], messages: Messages, structured: bool, delay: float
+    ) -> Completion:
         """One HTTP attempt. Leaving this (a result, an error, a timeout or a cancellation)
         closes the response, and with a body not read to its end, the connection: the server
         sees its client go and stops decoding."""
@@ -188,7 +208,9 @@ class OpenAIChatClient:
                     _ANSWERED.add(self.base_url)
                     if resp.status_code in self.RETRY_STATUS:
                         await resp.aread()
-                        raise _Retry(f"HTTP {resp.status_code}: {resp.text[:200]}", retry_after(resp, delay, self.max_backoff))
+                        raise _Retry(
+                            f"HTTP {resp.status_code}: {resp.text[:200]}", retry_after(resp, delay, self.max_backoff)
+                        )
                     if resp.status_code >= 400:
                         await resp.aread()
                         raise self._refusal(resp, url, structured)
@@ -199,7 +221,9 @@ class OpenAIChatClient:
                         lines: AsyncIterator[str] = _lines(resp.text)  # a stream mislabelled as something else
                     else:
                         lines = resp.aiter_lines()
-                    async for line in lines:  # after [DONE] too, to the body's end: the connection then serves the next call
+                    async for (
+                        line
+                    ) in lines:  # after [DONE] too, to the body's end: the connection then serves the next call
                         if reply.add(line):
                             deadline.reschedule(loop.time() + self.idle_timeout)
                         if reply.size > MAX_STREAM_CHARS or reply.chunks > MAX_STREAM_CHUNKS:
@@ -209,7 +233,9 @@ class OpenAIChatClient:
             if reply.done:  # a server that keeps the body open after [DONE]: the reply is whole
                 return reply.completion(messages, time.perf_counter() - t0)
             if reply.chunks:
-                raise _Stalled(f"the stream stalled: no chunk for {self.idle_timeout:g} s after {reply.chunks} chunk(s)") from None
+                raise _Stalled(
+                    f"the stream stalled: no chunk for {self.idle_timeout:g} s after {reply.chunks} chunk(s)"
+                ) from None
             raise
         raise AssertionError("unreachable")  # pragma: no cover  (for mypy: the context managers could swallow)
 
@@ -219,8 +245,14 @@ class OpenAIChatClient:
         if code in (401, 403):
             return LLMFatalError(f"{url} refused the credentials (HTTP {code}): check the API key ({text})")
         if code == 404:
-            return LLMFatalError(f"{url} answered HTTP 404: no model {self.model!r} or no chat endpoint there; check the model name and --base-url ({text})")
-        if structured and code in (400, 422) and re.search(r"response_format|json_schema|schema|grammar|format", text, re.IGNORECASE):
+            return LLMFatalError(
+                f"{url} answered HTTP 404: no model {self.model!r} or no chat endpoint there; check the model name and --base-url ({text})"
+            )
+        if (
+            structured
+            and code in (400, 422)
+            and re.search(r"response_format|json_schema|schema|grammar|format", text, re.IGNORECASE)
+        ):
             return LLMFatalError(
                 f"{url} refused the JSON-schema response format that --structured sends (HTTP {code}: {text}); "
                 "run without --structured, or use a server that accepts response_format json_schema"

@@ -9,8 +9,8 @@ from typing import Any
 
 import httpx
 
-from .completion import Completion, Messages, bounded, estimate_tokens, prompt_text, split_reasoning
 from ..progress import Progress
+from .completion import Completion, Messages, bounded, estimate_tokens, prompt_text, split_reasoning
 
 
 class Unreadable(ValueError):
@@ -103,7 +103,12 @@ def whole_completion(resp: httpx.Response, messages: Messages, latency: float) -
 
 
 def make_completion(
-    text: str, reasoning: str | None, usage: dict[str, Any], finish_reason: str | None, messages: Messages, latency: float,
+    text: str,
+    reasoning: str | None,
+    usage: dict[str, Any],
+    finish_reason: str | None,
+    messages: Messages,
+    latency: float,
     ttft: float | None = None,
 ) -> Completion:
     """A Completion from a reply's text and reasoning field, whether it came whole or in chunks."""

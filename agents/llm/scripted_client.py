@@ -7,7 +7,15 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .completion import DEFAULT_TEMPERATURE, Completion, Messages, bounded, estimate_tokens, prompt_text, split_reasoning
+from .completion import (
+    DEFAULT_TEMPERATURE,
+    Completion,
+    Messages,
+    bounded,
+    estimate_tokens,
+    prompt_text,
+    split_reasoning,
+)
 
 Reply = str | BaseException
 
@@ -51,6 +59,12 @@ class ScriptedClient:
         answer, thoughts = split_reasoning(reply)
         answer, cut = bounded(answer)
         return Completion(
-            answer, estimate_tokens(prompt_text(messages)), estimate_tokens(reply), time.perf_counter() - t0,
-            finish_reason="stop", reasoning=thoughts, reasoning_tokens=estimate_tokens(thoughts) if thoughts else 0, truncated=cut,
-        )  # fmt: skip
+            answer,
+            estimate_tokens(prompt_text(messages)),
+            estimate_tokens(reply),
+            time.perf_counter() - t0,
+            finish_reason="stop",
+            reasoning=thoughts,
+            reasoning_tokens=estimate_tokens(thoughts) if thoughts else 0,
+            truncated=cut,
+        )

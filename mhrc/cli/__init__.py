@@ -34,9 +34,21 @@ def main() -> None:
 
 
 for command in (
-    participants.up, participants.world, participants.agent, viewer.scenes, viewer.render, eval_cmd.eval_, eval_cmd.report,
-    bus.schema_, bus.credentials_, bus.bus_group, bus.doctor, viewer.show, bus.router, scenarios.scenarios,
-):  # fmt: skip
+    participants.up,
+    participants.world,
+    participants.agent,
+    viewer.scenes,
+    viewer.render,
+    eval_cmd.eval_,
+    eval_cmd.report,
+    bus.schema_,
+    bus.credentials_,
+    bus.bus_group,
+    bus.doctor,
+    viewer.show,
+    bus.router,
+    scenarios.scenarios,
+):
     main.add_command(command)
 
 up, world, agent = participants.up, participants.world, participants.agent  # the commands, for callers that invoke one

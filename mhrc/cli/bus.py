@@ -15,15 +15,15 @@ from typing import Any
 
 import click
 
+from mhrc.cli.bustools import BusToolError
+from mhrc.cli.bustools import bus_echo as run_echo
+from mhrc.cli.bustools import bus_list as run_list
+from mhrc.cli.bustools import doctor as run_doctor
 from mhrc.cli.options import credentials_option
 from mhrc.cli.running import run_command
 from mhrc.core import schema as schema_mod
 from mhrc.core.bus import Bus
 from mhrc.core.endpoints import endpoint
-from mhrc.cli.bustools import BusToolError
-from mhrc.cli.bustools import bus_echo as run_echo
-from mhrc.cli.bustools import bus_list as run_list
-from mhrc.cli.bustools import doctor as run_doctor
 from mhrc.core.keys import check_id, new_run_id
 from mhrc.core.security import MIN_DAYS, SecurityError, make_run_credentials
 from mhrc.run.config import ROBOTS
@@ -44,7 +44,9 @@ def _cert_hosts(_ctx: click.Context, _param: click.Parameter, value: tuple[str, 
         if _is_ip(h):
             continue
         if not h or not h.isascii() or any(c.isspace() or c in "/:@" for c in h):
-            raise click.BadParameter(f"{h!r} is not a host name or address (a name outside ASCII goes in its xn-- form)")
+            raise click.BadParameter(
+                f"{h!r} is not a host name or address (a name outside ASCII goes in its xn-- form)"
+            )
     return value
 
 
@@ -67,8 +69,12 @@ def _first_missing(path: Path) -> Path | None:
 
 
 @click.command("schema")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Write one <Payload>.json per bus payload and index.json into this directory; default: print one JSON document.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Write one <Payload>.json per bus payload and index.json into this directory; default: print one JSON document.",
+)
 def schema_(out: Path | None) -> None:
     """The JSON Schema of every bus payload, for agents in any language (README, "Attaching your own agent")."""
     if out is None:
@@ -79,16 +85,44 @@ def schema_(out: Path | None) -> None:
 
 
 @click.command("credentials")
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="The directory to write them into (created 0700).")
-@click.option("--run", default=None, help="The run id they are for; default: a new random one (the world and agents take it from them).")
-@click.option("--host", "hosts", multiple=True, metavar="NAME",
-              callback=_cert_hosts,
-              help="A name or address the agents reach the world by, besides 127.0.0.1 and localhost (repeatable): "
-                   "e.g. world, the compose service. The world's certificate names it.")
-@click.option("--days", default=7.0, show_default=True, type=float, callback=_days,
-              help=f"How long the CA and the world's certificate stay valid from now: more than 0, at most {MAX_DAYS} (fractions allowed: 0.5 is 12 hours).")
-@click.option("--split", is_flag=True, help="One directory per participant (DIR/world/, DIR/alice/, ...), each for that participant's container only.")
-@click.option("--force", is_flag=True, help="Replace credentials already in DIR (a world running with the old ones refuses the new).")
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="The directory to write them into (created 0700).",
+)
+@click.option(
+    "--run",
+    default=None,
+    help="The run id they are for; default: a new random one (the world and agents take it from them).",
+)
+@click.option(
+    "--host",
+    "hosts",
+    multiple=True,
+    metavar="NAME",
+    callback=_cert_hosts,
+    help="A name or address the agents reach the world by, besides 127.0.0.1 and localhost (repeatable): "
+    "e.g. world, the compose service. The world's certificate names it.",
+)
+@click.option(
+    "--days",
+    default=7.0,
+    show_default=True,
+    type=float,
+    callback=_days,
+    help=f"How long the CA and the world's certificate stay valid from now: more than 0, at most {MAX_DAYS} (fractions allowed: 0.5 is 12 hours).",
+)
+@click.option(
+    "--split",
+    is_flag=True,
+    help="One directory per participant (DIR/world/, DIR/alice/, ...), each for that participant's container only.",
+)
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Replace credentials already in DIR (a world running with the old ones refuses the new).",
+)
 def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float, split: bool, force: bool) -> None:
     """Issue one run's credentials for a world and agents started by hand or in containers
     (`mhrc up` makes its own): a CA, the world's TLS certificate, one login per participant.
@@ -132,13 +166,15 @@ def _bus_tool(name: str, coro_fn: Callable[[], Coroutine[Any, Any, int]]) -> Non
 
 CREDENTIALS_OPT = credentials_option(
     "A login of a secured run, with a tls/ endpoint: the observer's (runs/RUN/credentials/observer.json, or "
-         "DIR/observer.json of mhrc credentials) reads the whole run and asks the world's state; a robot's sees only its own keys."
+    "DIR/observer.json of mhrc credentials) reads the whole run and asks the world's state; a robot's sees only its own keys."
 )
 
 
 @bus_group.command("list")
 @click.option("--connect", required=True, help="Endpoint of a world or router, e.g. tcp/127.0.0.1:7447.")
-@click.option("--json", "as_json", is_flag=True, help="One JSON object: the endpoint and every run or evaluation alive.")
+@click.option(
+    "--json", "as_json", is_flag=True, help="One JSON object: the endpoint and every run or evaluation alive."
+)
 @CREDENTIALS_OPT
 def bus_list(connect: str, as_json: bool, credentials: Path | None) -> None:
     """The runs alive (from liveliness): which have a world, which robots are attached."""
@@ -150,12 +186,24 @@ def bus_list(connect: str, as_json: bool, credentials: Path | None) -> None:
 @click.option("--connect", required=True, help="Endpoint of a world or router, e.g. tcp/127.0.0.1:7447.")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per message (a trace line: t, key, kind, msg).")
 @click.option("--count", type=click.IntRange(min=1), default=None, help="Exit after N messages.")
-@click.option("--timeout", type=click.FloatRange(min=0), default=None, help="Exit after this many seconds (exit 1 if --count was not reached).")
+@click.option(
+    "--timeout",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="Exit after this many seconds (exit 1 if --count was not reached).",
+)
 @CREDENTIALS_OPT
-def bus_echo(keyexpr: str, connect: str, as_json: bool, count: int | None, timeout: float | None, credentials: Path | None) -> None:
+def bus_echo(
+    keyexpr: str, connect: str, as_json: bool, count: int | None, timeout: float | None, credentials: Path | None
+) -> None:
     """Print every message on KEYEXPR (e.g. 'mhrc/**' or 'mhrc/RUN/robot/*/action/result'),
     decoded with the protocol, one line each: time, key, kind, summary."""
-    _bus_tool("bus echo", lambda: run_echo(connect, keyexpr, as_json=as_json, count=count, timeout=timeout, credentials=credentials, write=click.echo))
+    _bus_tool(
+        "bus echo",
+        lambda: run_echo(
+            connect, keyexpr, as_json=as_json, count=count, timeout=timeout, credentials=credentials, write=click.echo
+        ),
+    )
 
 
 @click.command()
@@ -172,6 +220,7 @@ def doctor(connect: str, credentials: Path | None) -> None:
 @click.option("--port", default=7447, show_default=True, type=int)
 def router(host: str, port: int) -> None:
     """Run a Zenoh router that worlds and agents on several hosts can all connect to."""
+
     async def serve() -> None:
         bus = await Bus.open(mode="router", listen=[endpoint(host, port)])
         try:

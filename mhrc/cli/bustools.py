@@ -29,7 +29,6 @@ import zenoh
 from pydantic import BaseModel
 
 from mhrc.core.bus import Bus, Sample, make_config
-
 from mhrc.core.endpoints import split_endpoint
 from mhrc.core.keys import ROOT, Keys
 from mhrc.core.polling import poll
@@ -56,9 +55,11 @@ from mhrc.core.protocol import (
     WorldState,
     decode,
 )
-from mhrc.core.security import OBSERVER, WORLD, why_refused, speaks_tls
+from mhrc.core.security import OBSERVER, WORLD, speaks_tls, why_refused
 
-OPEN_TIMEOUT_MS = 2000  # a zenoh handshake over loopback takes milliseconds; a silent non-zenoh listener would hold 10 s
+OPEN_TIMEOUT_MS = (
+    2000  # a zenoh handshake over loopback takes milliseconds; a silent non-zenoh listener would hold 10 s
+)
 PROBE_TIMEOUT = 2.0  # s for the plain TCP connect
 STATE_TIMEOUT = 3.0  # s for a world's state answer
 SUMMARY_CHARS = 240
@@ -137,7 +138,9 @@ class Connection:
         return "zenoh"
 
 
-async def open_connection(ep: str, *, credentials: Path | None = None, open_timeout_ms: int = OPEN_TIMEOUT_MS) -> Connection:
+async def open_connection(
+    ep: str, *, credentials: Path | None = None, open_timeout_ms: int = OPEN_TIMEOUT_MS
+) -> Connection:
     """A client session to `ep` (with `credentials`, a participant's file of a secured run:
     TLS and its login; mhrc.core.security), or BusToolError saying clearly why there is none."""
     ep = normalize_endpoint(ep)
@@ -159,7 +162,12 @@ async def open_connection(ep: str, *, credentials: Path | None = None, open_time
     try:
         session = await asyncio.to_thread(zenoh.open, conf)
     except zenoh.ZError as exc:
-        if proto == "tcp" and security is None and port is not None and not await asyncio.to_thread(speaks_tls, host, port):
+        if (
+            proto == "tcp"
+            and security is None
+            and port is not None
+            and not await asyncio.to_thread(speaks_tls, host, port)
+        ):
             raise BusToolError(
                 f"{ep}: something accepts TCP connections there, but no zenoh handshake within {open_timeout_ms / 1000:.0f} s: "
                 f"it is not zenoh (or a secured world: connect to tls/{host}:{port} with --credentials)"
@@ -233,7 +241,9 @@ async def alive_tokens(bus: Bus, patterns: list[str] | None = None, *, settle: f
     seconds while the answer is empty (a freshly connected session may not see them at once)."""
 
     async def tokens() -> list[str] | None:
-        return sorted({k for pattern in patterns or [f"{ROOT}/**"] for k in await bus.alive(pattern, timeout=1.0)}) or None
+        return (
+            sorted({k for pattern in patterns or [f"{ROOT}/**"] for k in await bus.alive(pattern, timeout=1.0)}) or None
+        )
 
     return await poll(tokens, timeout=settle, every=0.25) or []
 
@@ -290,7 +300,11 @@ def one_line(msg: BaseModel) -> str:
         return f"{msg.sender} -> {msg.to} tick {msg.tick}: {msg.content}"
     if isinstance(msg, Thought):
         what = msg.action or (f"parse error: {msg.parse_error}" if msg.parse_error else "no action")
-        tokens = f", {msg.prompt_tokens}+{msg.completion_tokens} tokens" if msg.prompt_tokens or msg.completion_tokens else ""
+        tokens = (
+            f", {msg.prompt_tokens}+{msg.completion_tokens} tokens"
+            if msg.prompt_tokens or msg.completion_tokens
+            else ""
+        )
         return f"{msg.robot} tick {msg.tick} ({msg.policy}{tokens}): {what}"
     if isinstance(msg, EpisodeStarted):
         return (
@@ -341,7 +355,12 @@ def describe_sample(sample: Sample) -> Decoded:
         msg: Any = json.loads(sample.payload)
     except (ValueError, UnicodeDecodeError):
         text = sample.payload.decode("utf-8", "replace")
-        return Decoded("not-json", f"undecodable payload ({len(sample.payload)} bytes): {_clip(repr(sample.payload), 120)}", {"raw": text}, "not JSON")
+        return Decoded(
+            "not-json",
+            f"undecodable payload ({len(sample.payload)} bytes): {_clip(repr(sample.payload), 120)}",
+            {"raw": text},
+            "not JSON",
+        )
     kind = msg.get("kind") if isinstance(msg, dict) else None
     model = MODELS.get(kind) if isinstance(kind, str) else None
     if model is None:
@@ -350,7 +369,12 @@ def describe_sample(sample: Sample) -> Decoded:
     try:
         return Decoded(str(kind), _clip(one_line(decode(sample.payload, model))), msg)
     except ProtocolError as exc:
-        return Decoded(f"invalid:{kind}", f"not a valid {kind} (protocol v{PROTOCOL_VERSION}): {_clip(str(exc), 160)}", msg, str(exc))
+        return Decoded(
+            f"invalid:{kind}",
+            f"not a valid {kind} (protocol v{PROTOCOL_VERSION}): {_clip(str(exc), 160)}",
+            msg,
+            str(exc),
+        )
     except Exception as exc:  # a summary that tripped on an odd but valid message: still one line
         return Decoded(str(kind), _clip(f"{type(exc).__name__}: {exc}"), msg)
 
@@ -393,7 +417,12 @@ async def bus_echo(
             seen += 1
             d = describe_sample(sample)
             if as_json:
-                line: dict[str, Any] = {"t": round(t - t0, 6), "key": sample.key, "kind": "put" if sample.is_put else "delete", "msg": d.msg}
+                line: dict[str, Any] = {
+                    "t": round(t - t0, 6),
+                    "key": sample.key,
+                    "kind": "put" if sample.is_put else "delete",
+                    "msg": d.msg,
+                }
                 if d.error is not None:
                     line["error"] = d.error
                 write(json.dumps(line, separators=(",", ":")))
@@ -424,7 +453,10 @@ async def world_version(bus: Bus, run: str, timeout: float = STATE_TIMEOUT) -> t
     if v is None:
         return False, f"world alive, but its state answer carries no protocol version ({ours})"
     if v not in SUPPORTED_VERSIONS:
-        return False, f"world speaks protocol v{v}, which this mhrc cannot read ({ours}): use the same mhrc version on both sides"
+        return (
+            False,
+            f"world speaks protocol v{v}, which this mhrc cannot read ({ours}): use the same mhrc version on both sides",
+        )
     try:
         state = decode(raw, WorldState)
     except ProtocolError as exc:
@@ -453,8 +485,10 @@ async def doctor(ep: str, *, credentials: Path | None = None, write: Write = pri
             write("ok   no runs alive (nothing has declared an mhrc liveliness token)")
         for g in groups:
             if g.world and conn.user is not None and conn.user not in (OBSERVER, WORLD):
-                write(f"ok   run {g.id}: world alive (its state answers only the observer's login: "
-                      f"--credentials .../observer.json, not {conn.user}'s)")
+                write(
+                    f"ok   run {g.id}: world alive (its state answers only the observer's login: "
+                    f"--credentials .../observer.json, not {conn.user}'s)"
+                )
             elif g.world:
                 ok, text = await world_version(conn.bus, g.id)
                 healthy &= ok

@@ -10,12 +10,23 @@ from typing import Any
 
 import click
 
-from mhrc.cli.options import ABLATIONS, AIDS_HELP, LOG_LEVEL, EVENTS_HELP, NOISE_HELP, SCHEDULE_HELP, TIME_SCALE_HELP, events_option, llm_options
+from mhrc.cli.options import (
+    ABLATIONS,
+    AIDS_HELP,
+    EVENTS_HELP,
+    LOG_LEVEL,
+    NOISE_HELP,
+    SCHEDULE_HELP,
+    TIME_SCALE_HELP,
+    events_option,
+    llm_options,
+)
 from mhrc.cli.running import run_command
 from mhrc.core import logs
 from mhrc.core.fidelity import NOISE
 from mhrc.core.trace import unwritable
-from mhrc.run.config import ConfigError, SCHEDULES
+from mhrc.run.config import SCHEDULES, ConfigError
+
 
 def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
     if text is None:
@@ -30,39 +41,109 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
 @llm_options
 @click.option("--tasks", default=None, help="Comma-separated task ids; default: every registered task.")
 @click.option("--scenes", default=None, help="Comma-separated layouts; default: every built-in layout.")
-@click.option("--objects", default=None, show_default="3,4,5,6", help="Comma-separated object counts (each scene runs every count).")
-@click.option("--trials", default=1, show_default=True, type=int,
-              help="Episodes per task, scene and object count in each repeat (the paper: 1).")
-@click.option("--repeats", default=1, show_default=True, type=int,
-              help="Run the grid this many times; an episode's seed is repeat x trials + trial, so repeat r of the paper grid uses seed r.")
+@click.option(
+    "--objects",
+    default=None,
+    show_default="3,4,5,6",
+    help="Comma-separated object counts (each scene runs every count).",
+)
+@click.option(
+    "--trials",
+    default=1,
+    show_default=True,
+    type=int,
+    help="Episodes per task, scene and object count in each repeat (the paper: 1).",
+)
+@click.option(
+    "--repeats",
+    default=1,
+    show_default=True,
+    type=int,
+    help="Run the grid this many times; an episode's seed is repeat x trials + trial, so repeat r of the paper grid uses seed r.",
+)
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
 @click.option("--horizon", default=50, show_default=True, type=int)
 @click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP)
-@click.option("--noise", default="on", show_default=True, type=click.Choice(list(NOISE)),
-              help=NOISE_HELP + " Rows and summaries keep --noise off apart from the default.")
-@click.option("--schedule", default="sequential", show_default=True, type=click.Choice(SCHEDULES),
-              help=SCHEDULE_HELP + " The paper's figures are shown beside sequential runs only.")
+@click.option(
+    "--noise",
+    default="on",
+    show_default=True,
+    type=click.Choice(list(NOISE)),
+    help=NOISE_HELP + " Rows and summaries keep --noise off apart from the default.",
+)
+@click.option(
+    "--schedule",
+    default="sequential",
+    show_default=True,
+    type=click.Choice(SCHEDULES),
+    help=SCHEDULE_HELP + " The paper's figures are shown beside sequential runs only.",
+)
 @click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP)
-@events_option(EVENTS_HELP + " Applied to every episode of the grid; rows record the scenario, and summaries never average different ones.")
-@click.option("--workers", default=None, type=int, show_default="the number of cores",
-              help="Local worker processes (not with --ray: the cluster's resources decide).")
-@click.option("--concurrency", default=None, type=int,
-              help="Episodes each local worker runs at once (with --ray: an LLM episode takes 1/concurrency of a CPU). Default: 1 for the "
-                   "heuristic (CPU-bound), replays and gguf: models; with a model server, enough episodes to fill its slots "
-                   "(llama.cpp's /props), else 12 for openai and vllm, 1 for ollama and lmstudio.")
-@click.option("--ray", "ray_address", default=None, metavar="ADDRESS",
-              help="Run every episode as a task on this Ray cluster: auto (a node of the cluster), HOST:PORT (the head, e.g. "
-                   "10.0.0.5:6379) or ray://HOST:10001. Needs the extra: pip install -e \".[ray]\".")
-@click.option("--shared-out", is_flag=True,
-              help="With --ray: --out is the same path on every node (a shared file system), so tasks write their traces there "
-                   "instead of sending them back through the object store.")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="Output directory; default runs/eval-<time>.")
+@events_option(
+    EVENTS_HELP
+    + " Applied to every episode of the grid; rows record the scenario, and summaries never average different ones."
+)
+@click.option(
+    "--workers",
+    default=None,
+    type=int,
+    show_default="the number of cores",
+    help="Local worker processes (not with --ray: the cluster's resources decide).",
+)
+@click.option(
+    "--concurrency",
+    default=None,
+    type=int,
+    help="Episodes each local worker runs at once (with --ray: an LLM episode takes 1/concurrency of a CPU). Default: 1 for the "
+    "heuristic (CPU-bound), replays and gguf: models; with a model server, enough episodes to fill its slots "
+    "(llama.cpp's /props), else 12 for openai and vllm, 1 for ollama and lmstudio.",
+)
+@click.option(
+    "--ray",
+    "ray_address",
+    default=None,
+    metavar="ADDRESS",
+    help="Run every episode as a task on this Ray cluster: auto (a node of the cluster), HOST:PORT (the head, e.g. "
+    '10.0.0.5:6379) or ray://HOST:10001. Needs the extra: pip install -e ".[ray]".',
+)
+@click.option(
+    "--shared-out",
+    is_flag=True,
+    help="With --ray: --out is the same path on every node (a shared file system), so tasks write their traces there "
+    "instead of sending them back through the object store.",
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Output directory; default runs/eval-<time>.",
+)
 @click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
 @LOG_LEVEL
-def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: int, repeats: int, ablation: str, horizon: int,
-          aids: str | None, noise: str, schedule: str, time_scale: float, events: str | None, workers: int | None, concurrency: int | None, ray_address: str | None,
-          shared_out: bool, out: Path | None, resume: bool, dry_run: bool, log_level: str, **llm: Any) -> None:  # fmt: skip
+def eval_(
+    tasks: str | None,
+    scenes: str | None,
+    objects: str | None,
+    trials: int,
+    repeats: int,
+    ablation: str,
+    horizon: int,
+    aids: str | None,
+    noise: str,
+    schedule: str,
+    time_scale: float,
+    events: str | None,
+    workers: int | None,
+    concurrency: int | None,
+    ray_address: str | None,
+    shared_out: bool,
+    out: Path | None,
+    resume: bool,
+    dry_run: bool,
+    log_level: str,
+    **llm: Any,
+) -> None:
     """Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl
     (every metric of every episode, its fidelity and the LLM failures that shaped it) and
     summary.md / summary.csv (tables shaped like the paper's Table I and II with 95% bootstrap
@@ -76,15 +157,21 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
     (`ray start --head` on one host, `ray start --address HEAD:6379` on the others; see
     docker/README.md). An interrupted run continues with --resume --out DIR."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
-    from mhrc.world.scene import LAYOUTS
-    from mhrc.world.tasks import TASKS
-
-    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, check_out, run
     from mhrc.core.fidelity import AidsError, parse_aids
+    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, check_out, run
     from mhrc.eval.paper import PAPER_OBJECTS
     from mhrc.eval.summaries import SUMMARY_FILES
+    from mhrc.world.scene import LAYOUTS
+    from mhrc.world.tasks import TASKS
 
     logs.configure(log_level)
     try:  # every option checked once, here: the engine and the workers take what these checks made
@@ -94,27 +181,52 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         raise click.UsageError(str(exc)) from None
     prompts = llm.pop("prompts")
     spec = EvalSpec(
-        tasks=_csv(str, tasks) or tuple(TASKS), scenes=_csv(str, scenes) or tuple(LAYOUTS),
-        objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()), trials=trials, repeats=repeats,
-        ablation=ablation, horizon=horizon, prompts=str(prompts) if prompts else None, aids=aid_names, noise=noise,
-        schedule=schedule, time_scale=time_scale, events=events, **llm,
-    )  # fmt: skip
+        tasks=_csv(str, tasks) or tuple(TASKS),
+        scenes=_csv(str, scenes) or tuple(LAYOUTS),
+        objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()),
+        trials=trials,
+        repeats=repeats,
+        ablation=ablation,
+        horizon=horizon,
+        prompts=str(prompts) if prompts else None,
+        aids=aid_names,
+        noise=noise,
+        schedule=schedule,
+        time_scale=time_scale,
+        events=events,
+        **llm,
+    )
     out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
     console = Console(stderr=True)
-    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), console=console)
+    progress = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console,
+    )
     bar = progress.add_task("episodes", total=None)
 
     def hook(t: Tally, row: dict[str, Any] | None) -> None:
         # the whole grid: with --resume, the episodes an earlier run finished count too
-        rate = f"{t.before_succeeded + t.succeeded}/{t.before + t.done} solved" + (f", {t.errors} errors" if t.errors else "")
+        rate = f"{t.before_succeeded + t.succeeded}/{t.before + t.done} solved" + (
+            f", {t.errors} errors" if t.errors else ""
+        )
         rate += f", {t.invalid} invalid" if t.invalid else ""
         if t.before:
             rate += " (all from before)" if t.total == 0 else f" ({t.before} from before)"
-        progress.update(bar, total=t.before + t.total, completed=t.before + t.done, description=f"{spec.method} [{rate}]")
+        progress.update(
+            bar, total=t.before + t.total, completed=t.before + t.done, description=f"{spec.method} [{rate}]"
+        )
         if row is not None and not row.get("valid", True):
-            progress.console.print(f"[red]invalid[/]: {row['key']} ({row.get('invalid_reason')}); left out of the summary")
+            progress.console.print(
+                f"[red]invalid[/]: {row['key']} ({row.get('invalid_reason')}); left out of the summary"
+            )
         elif row is not None and not row["success"]:
-            progress.console.print(f"[yellow]not solved[/]: {row['key']} (PS {row['partial_success']:.2f}, TS {row['temporal_steps']})")
+            progress.console.print(
+                f"[yellow]not solved[/]: {row['key']} (PS {row['partial_success']:.2f}, TS {row['temporal_steps']})"
+            )
 
     try:
         plan = spec.validate()
@@ -151,7 +263,8 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
         options = dataclasses.replace(options, concurrency=concurrency)
     where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {options.processes} worker(s)"
     console.print(
-        f"evaluating {spec.method} (ablation {ablation}, fidelity {spec.fidelity}{', noise off' if spec.noise == 'off' else ''}, {spec.mode} replies) on {n_jobs} episodes "
+        f"evaluating {spec.method} (ablation {ablation}, fidelity "
+        f"{spec.fidelity}{', noise off' if spec.noise == 'off' else ''}, {spec.mode} replies) on {n_jobs} episodes "
         f"into {out} {where}, {concurrency} episode(s) at once each"
     )
     t0 = time.perf_counter()
@@ -175,10 +288,27 @@ def eval_(tasks: str | None, scenes: str | None, objects: str | None, trials: in
 
 @click.command("report")
 @click.argument("dirs", nargs=-1, required=True, type=click.Path(file_okay=False, exists=True, path_type=Path))
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="FILE.md",
-              help="Write the markdown to FILE.md instead of stdout, FILE.csv and FILE.html beside it; the files written are named on stderr.")
-@click.option("--resamples", default=2000, show_default=True, type=click.IntRange(min=1), help="Bootstrap resamples per 95% confidence interval.")
-@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the bootstrap (the same rows and seed give the same intervals).")
+@click.option(
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    metavar="FILE.md",
+    help="Write the markdown to FILE.md instead of stdout, FILE.csv and FILE.html beside it; the files written are named on stderr.",
+)
+@click.option(
+    "--resamples",
+    default=2000,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Bootstrap resamples per 95% confidence interval.",
+)
+@click.option(
+    "--seed",
+    default=0,
+    show_default=True,
+    type=int,
+    help="Seed of the bootstrap (the same rows and seed give the same intervals).",
+)
 def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) -> None:
     """Merge `mhrc eval` directories into one comparison (markdown on stdout): Succ, PS, TS
     and AS per task with 95% bootstrap confidence intervals, grouped by method, ablation and
@@ -195,7 +325,9 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     if out is not None:
         files = [out, out.with_suffix(".csv"), out.with_suffix(".html")]
         if len(set(files)) < len(files):
-            raise click.BadParameter(f"{out} would be overwritten by the CSV or HTML beside it; name a .md file", param_hint="--out")
+            raise click.BadParameter(
+                f"{out} would be overwritten by the CSV or HTML beside it; name a .md file", param_hint="--out"
+            )
         for f in files:
             if why := unwritable(f):
                 raise click.BadParameter(why, param_hint="--out")

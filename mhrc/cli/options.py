@@ -12,7 +12,7 @@ import click
 from mhrc.core.fidelity import NOISE
 from mhrc.core.fidelity import describe as describe_aids
 from mhrc.core.security import Credentials, SecurityError, load
-from mhrc.run.config import ConfigError, EpisodeConfig, SCHEDULES
+from mhrc.run.config import SCHEDULES, ConfigError, EpisodeConfig
 from mhrc.run.lifeline import PARENT_ENV
 from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import ScenarioError, resolve_scenario
@@ -48,7 +48,7 @@ TOKEN_DEADLINE_HELP = (
 HISTORY_CAP_HELP = "Bound each LLM prompt to CHARS characters, shortening older history (for small-context models); default: whole histories, as the paper."
 LLM_HELP = (
     "Drive the robots with a model: provider:model (openai:gpt-4o, ollama:llama3.1:8b, vllm:M, lmstudio:M, llamacpp:M), "
-    "gguf:PATH (a local GGUF file served in-process by llama.cpp; needs pip install -e \".[local]\"), or per robot "
+    'gguf:PATH (a local GGUF file served in-process by llama.cpp; needs pip install -e ".[local]"), or per robot '
     "alice=SPEC,bob=SPEC,david=SPEC (a bare SPEC among them drives the rest; without one the rest play the heuristic "
     "policy); SPEC@URL names a spec's own server. Default: the heuristic policy."
 )
@@ -73,39 +73,88 @@ def llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """The model options `up`, `agent` and `eval` share, with the same meaning in each."""
     opts = [
         click.option("--llm", default=None, metavar="SPEC", help=LLM_HELP),
-        click.option("--base-url", default=None, help="OpenAI-compatible server URL for --llm specs without their own, e.g. http://127.0.0.1:8000/v1."),
-        click.option("--llm-timeout", default=None, type=float,
-                     help="Seconds to the first token of an LLM reply (the server's prompt processing included; with --no-stream, to the whole reply); "
-                          "a timeout is retried once. A reply that keeps producing tokens is not cut by it: --max-tokens and --step-deadline bound that. "
-                          "Default: 120 (3x the slowest first token measured with 3 robots on a 2-core CPU), and 600 for gguf: models."),
-        click.option("--llm-idle-timeout", default=None, type=float, metavar="SECONDS",
-                     help="Seconds a streamed LLM reply may go without a token before the call is abandoned (and retried once). Default: 30."),
-        click.option("--stream/--no-stream", default=True, show_default=True,
-                     help="Stream LLM replies; --no-stream for servers that cannot (then --llm-timeout bounds the whole reply)."),
-        click.option("--max-tokens", default=1024, show_default=True, type=int, help="Completion tokens per LLM call, sent on every request."),
-        click.option("--llm-seed", default=None, type=int, help="Sampling seed sent on every LLM request (honoured by llama.cpp, vLLM, Ollama, OpenAI)."),
-        click.option("--structured", is_flag=True,
-                     help="Ask for JSON decisions that follow a schema of each step's valid actions (response_format json_schema; Ollama's format). Not the paper's: its free text is the default."),
-        click.option("--step-deadline", default=None, type=float, metavar="SECONDS",
-                     help="Bound one robot's whole LLM step, retries included; past it the robot waits that step (and its call is abandoned). "
-                          "At least --llm-timeout. Default: none, as slow is not down: a stream that stalls ends after --llm-idle-timeout, "
-                          "one that keeps producing tokens at --max-tokens."),
-        click.option("--prompts", type=click.Path(file_okay=False, exists=True, path_type=Path), default=None,
-                     help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm."),
+        click.option(
+            "--base-url",
+            default=None,
+            help="OpenAI-compatible server URL for --llm specs without their own, e.g. http://127.0.0.1:8000/v1.",
+        ),
+        click.option(
+            "--llm-timeout",
+            default=None,
+            type=float,
+            help="Seconds to the first token of an LLM reply (the server's prompt processing included; with --no-stream, to the whole reply); "
+            "a timeout is retried once. A reply that keeps producing tokens is not cut by it: --max-tokens and --step-deadline bound that. "
+            "Default: 120 (3x the slowest first token measured with 3 robots on a 2-core CPU), and 600 for gguf: models.",
+        ),
+        click.option(
+            "--llm-idle-timeout",
+            default=None,
+            type=float,
+            metavar="SECONDS",
+            help="Seconds a streamed LLM reply may go without a token before the call is abandoned (and retried once). Default: 30.",
+        ),
+        click.option(
+            "--stream/--no-stream",
+            default=True,
+            show_default=True,
+            help="Stream LLM replies; --no-stream for servers that cannot (then --llm-timeout bounds the whole reply).",
+        ),
+        click.option(
+            "--max-tokens",
+            default=1024,
+            show_default=True,
+            type=int,
+            help="Completion tokens per LLM call, sent on every request.",
+        ),
+        click.option(
+            "--llm-seed",
+            default=None,
+            type=int,
+            help="Sampling seed sent on every LLM request (honoured by llama.cpp, vLLM, Ollama, OpenAI).",
+        ),
+        click.option(
+            "--structured",
+            is_flag=True,
+            help="Ask for JSON decisions that follow a schema of each step's valid actions (response_format "
+            "json_schema; Ollama's format). Not the paper's: its free text is the default.",
+        ),
+        click.option(
+            "--step-deadline",
+            default=None,
+            type=float,
+            metavar="SECONDS",
+            help="Bound one robot's whole LLM step, retries included; past it the robot waits that step (and its call is abandoned). "
+            "At least --llm-timeout. Default: none, as slow is not down: a stream that stalls ends after --llm-idle-timeout, "
+            "one that keeps producing tokens at --max-tokens.",
+        ),
+        click.option(
+            "--prompts",
+            type=click.Path(file_okay=False, exists=True, path_type=Path),
+            default=None,
+            help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm.",
+        ),
         click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP),
-    ]  # fmt: skip
+    ]
     for opt in reversed(opts):
         f = opt(f)
     return f
 
 
-LOG_LEVEL = click.option("--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"]))
+LOG_LEVEL = click.option(
+    "--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"])
+)
 INSECURE_HELP = "The open tcp bus: no TLS, no login, no access control (anyone can act as any robot)."
 
 
 def credentials_option(help: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """--credentials: a credentials file, default $MHRC_CREDENTIALS; `help` says whose."""
-    return click.option("--credentials", type=click.Path(dir_okay=False, path_type=Path), default=None, envvar="MHRC_CREDENTIALS", help=help)
+    return click.option(
+        "--credentials",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        envvar="MHRC_CREDENTIALS",
+        help=help,
+    )
 
 
 def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
@@ -115,23 +164,43 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--scene", default="kitchen", show_default=True, help="Scene layout."),
         click.option("--seed", default=0, show_default=True, type=int, help="Episode generator seed."),
         click.option("--objects", "n_objects", default=4, show_default=True, type=int, help="Target objects, 3-6."),
-        click.option("--horizon", default=50, show_default=True, type=int, help="Temporal steps before the episode ends."),
+        click.option(
+            "--horizon", default=50, show_default=True, type=int, help="Temporal steps before the episode ends."
+        ),
         click.option("--run", default=None, help="Run id ([a-z0-9_-]+); default: a new random one."),
         click.option("--host", default="127.0.0.1", show_default=True, help="Address the world listens on."),
         click.option("--port", default=0, type=int, help="Port the world listens on; default: a free one."),
-        click.option("--trace", type=click.Path(dir_okay=False, path_type=Path), default=None,
-                     help="JSONL trace of every bus message; default runs/RUN/trace.jsonl."),
+        click.option(
+            "--trace",
+            type=click.Path(dir_okay=False, path_type=Path),
+            default=None,
+            help="JSONL trace of every bus message; default runs/RUN/trace.jsonl.",
+        ),
         click.option("--gui", is_flag=True, help="Show the PyBullet GUI (needs a display)."),
-        click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS),
-                     help="Paper ablation: no_mobile leaves David out; no_feedback / no_history change LLM prompts."),
+        click.option(
+            "--ablation",
+            default="none",
+            show_default=True,
+            type=click.Choice(ABLATIONS),
+            help="Paper ablation: no_mobile leaves David out; no_feedback / no_history change LLM prompts.",
+        ),
         click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP),
         click.option("--noise", default="on", show_default=True, type=click.Choice(list(NOISE)), help=NOISE_HELP),
-        click.option("--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP),
+        click.option(
+            "--schedule", default="lockstep", show_default=True, type=click.Choice(SCHEDULES), help=SCHEDULE_HELP
+        ),
         click.option("--time-scale", default=0.0, show_default=True, type=float, help=TIME_SCALE_HELP),
-        click.option("--token-deadline", default=TOKEN_DEADLINE, show_default=True, type=float, metavar="SECONDS", help=TOKEN_DEADLINE_HELP),
+        click.option(
+            "--token-deadline",
+            default=TOKEN_DEADLINE,
+            show_default=True,
+            type=float,
+            metavar="SECONDS",
+            help=TOKEN_DEADLINE_HELP,
+        ),
         events_option(),
         LOG_LEVEL,
-    ]  # fmt: skip
+    ]
     for opt in reversed(opts):
         f = opt(f)
     return f
@@ -151,7 +220,9 @@ def load_credentials(path: Path | None, insecure: bool, connect: str | None = No
                 f"--credentials: {connect} is a secured world (tls/); pass this participant's credentials file "
                 "(e.g. runs/RUN/credentials/<robot>.json, or DIR/<robot>.json of mhrc credentials) or set $MHRC_CREDENTIALS"
             )
-        click.echo("no credentials (--credentials or $MHRC_CREDENTIALS): the open tcp bus, as with --insecure", err=True)
+        click.echo(
+            "no credentials (--credentials or $MHRC_CREDENTIALS): the open tcp bus, as with --insecure", err=True
+        )
         return None
     try:
         return load(path)

@@ -17,47 +17,76 @@ from typing import Any
 import click
 
 from mhrc.cli.options import (
-    ABLATIONS, AIDS_HELP, INSECURE_HELP, LOG_LEVEL, VIDEO_HELP, credentials_option, episode_config, episode_options, llm_options,
+    ABLATIONS,
+    AIDS_HELP,
+    INSECURE_HELP,
+    LOG_LEVEL,
+    VIDEO_HELP,
+    credentials_option,
+    episode_config,
+    episode_options,
+    llm_options,
     load_credentials,
-)  # fmt: skip
+)
 from mhrc.cli.running import run_command
 from mhrc.cli.viewer import render_video_to
 from mhrc.core import logs
 from mhrc.core.security import SecurityError
 from mhrc.core.trace import TraceWriteError
-from mhrc.run.config import ConfigError, EpisodeConfig, ROBOTS
+from mhrc.run.config import ROBOTS, ConfigError, EpisodeConfig
 
 
 @click.command()
 @episode_options
 @click.option("--processes", is_flag=True, help="Run the world and each agent as separate OS processes.")
-@click.option("--external", multiple=True, type=click.Choice(ROBOTS),
-              help="Do not start an agent for this robot: attach your own with `mhrc agent` (repeatable).")
+@click.option(
+    "--external",
+    multiple=True,
+    type=click.Choice(ROBOTS),
+    help="Do not start an agent for this robot: attach your own with `mhrc agent` (repeatable).",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only the final summary table (errors still go to stderr).")
-@click.option("--start-timeout", type=float, default=None,
-              help="Start with the robots attached after this many seconds (fail if none is); default: wait for all of them.")
-@click.option("--secure/--insecure", "secure", default=True, show_default=True,
-              help="--secure (the default): fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, "
-                   "access control: an agent can act only as its own robot); --insecure: the open tcp bus, for loopback experiments.")
+@click.option(
+    "--start-timeout",
+    type=float,
+    default=None,
+    help="Start with the robots attached after this many seconds (fail if none is); default: wait for all of them.",
+)
+@click.option(
+    "--secure/--insecure",
+    "secure",
+    default=True,
+    show_default=True,
+    help="--secure (the default): fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, "
+    "access control: an agent can act only as its own robot); --insecure: the open tcp bus, for loopback experiments.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
-@click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.")
+@click.option(
+    "--video",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.",
+)
 @llm_options
 def up(
-    processes: bool, external: tuple[str, ...], quiet: bool, as_json: bool, log_level: str, video: Path | None, secure: bool, **values: Any
+    processes: bool,
+    external: tuple[str, ...],
+    quiet: bool,
+    as_json: bool,
+    log_level: str,
+    video: Path | None,
+    secure: bool,
+    **values: Any,
 ) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
 
-    from mhrc.world.service import NobodyAttached
-
     from mhrc.run.config import ModelServerDown, check_model_servers
-
-    from mhrc.run.inprocess import up_in_process
-
-    from mhrc.run.processes import ProcessFailed, up_processes
     from mhrc.run.console import ProgressPrinter, summary_table
+    from mhrc.run.inprocess import up_in_process
+    from mhrc.run.processes import ProcessFailed, up_processes
+    from mhrc.world.service import NobodyAttached
 
     logs.configure(log_level)
     cfg = episode_config(**values)
@@ -76,13 +105,21 @@ def up(
         if not quiet:
             click.echo(f"credentials in {cfg.credentials} (TLS, one login per participant, access control)", err=True)
     console = Console(highlight=False, stderr=as_json, soft_wrap=True)
-    printer = None if quiet else ProgressPrinter(console, summary=False)  # the table is printed below, once the run returned
+    printer = (
+        None if quiet else ProgressPrinter(console, summary=False)
+    )  # the table is printed below, once the run returned
     if not quiet:
         console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
     if external:  # needed to go on at all: said with --quiet too, on stderr
-        click.echo("attach the external robots with: " + "; ".join(
-            f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}"
-            + (f" --credentials {cfg.credentials_file(r)}" if cfg.credentials else "") for r in external), err=quiet or as_json)
+        click.echo(
+            "attach the external robots with: "
+            + "; ".join(
+                f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}"
+                + (f" --credentials {cfg.credentials_file(r)}" if cfg.credentials else "")
+                for r in external
+            ),
+            err=quiet or as_json,
+        )
     runner = functools.partial(up_processes, quiet=quiet) if processes else up_in_process
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMError
@@ -90,7 +127,11 @@ def up(
 
     try:
         done = run_command(lambda: runner(cfg, observe=None if printer is None else printer.attach, robots=robots))
-    except (AgentError, LLMError, ReplayMismatch) as exc:  # an agent could not play (its model, its replay, the world): one line
+    except (
+        AgentError,
+        LLMError,
+        ReplayMismatch,
+    ) as exc:  # an agent could not play (its model, its replay, the world): one line
         click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(2)
     except (NobodyAttached, TraceWriteError) as exc:
@@ -120,7 +161,10 @@ def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:
         return None
     try:
         return from_trace(read_records(trace)).recovery
-    except (ValueError, OSError):  # a trace the metrics cannot read (TraceError, bad JSON): the table goes without the row
+    except (
+        ValueError,
+        OSError,
+    ):  # a trace the metrics cannot read (TraceError, bad JSON): the table goes without the row
         return None
 
 
@@ -139,9 +183,8 @@ def _lost(trace: Path | None) -> list[Any]:
 
 def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None = None) -> None:
     """`mhrc world`'s run: one line and exit 1 when no robot attached within --start-timeout."""
-    from mhrc.world.service import NobodyAttached
-
     from mhrc.run.serve import serve_world
+    from mhrc.world.service import NobodyAttached
 
     try:
         run_command(lambda: serve_world(cfg, observe=observe))
@@ -152,8 +195,12 @@ def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None 
 
 @click.command()
 @episode_options
-@click.option("--start-timeout", type=float, default=None,
-              help="Start with the robots attached after this many seconds (fail if none is); default: wait for all three.")
+@click.option(
+    "--start-timeout",
+    type=float,
+    default=None,
+    help="Start with the robots attached after this many seconds (fail if none is); default: wait for all three.",
+)
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
 @credentials_option(
@@ -161,7 +208,9 @@ def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None 
     "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control."
 )
 @click.option("--insecure", is_flag=True, help=INSECURE_HELP)
-def world(log_level: str, start_timeout: float | None, quiet: bool, credentials: Path | None, insecure: bool, **values: Any) -> None:
+def world(
+    log_level: str, start_timeout: float | None, quiet: bool, credentials: Path | None, insecure: bool, **values: Any
+) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
     from mhrc.run.console import ProgressPrinter
 
@@ -206,9 +255,16 @@ def _login_of(world: Any, user: str) -> str:
 @click.option("--run", default=None, help="Run id of the world; default: the only world alive at --connect.")
 @click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
 @llm_options
-@click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation.")
-@click.option("--aids", default=None, metavar="NAMES", help="Agent-side aids (reach_labels, prompt_hints, feedback_advice: its unreadable-reply "
-    "half); the world's aids are set on the world. " + AIDS_HELP)
+@click.option(
+    "--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation."
+)
+@click.option(
+    "--aids",
+    default=None,
+    metavar="NAMES",
+    help="Agent-side aids (reach_labels, prompt_hints, feedback_advice: its unreadable-reply "
+    "half); the world's aids are set on the world. " + AIDS_HELP,
+)
 @LOG_LEVEL
 @credentials_option(
     "This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "
@@ -216,7 +272,14 @@ def _login_of(world: Any, user: str) -> str:
 )
 @click.option("--insecure", is_flag=True, help=INSECURE_HELP)
 def agent(
-    robot: str, connect: str, run: str | None, attach_timeout: float, log_level: str, credentials: Path | None, insecure: bool, **values: Any
+    robot: str,
+    connect: str,
+    run: str | None,
+    attach_timeout: float,
+    log_level: str,
+    credentials: Path | None,
+    insecure: bool,
+    **values: Any,
 ) -> None:
     """Attach one robot's agent (heuristic or LLM policy) to a running world."""
     from mhrc.run.attach import attach_agent
@@ -229,15 +292,32 @@ def agent(
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError
 
-
     try:
-        done = run_command(lambda: attach_agent(
-            robot, connect, run, attach_timeout, spec, cfg.base_url, cfg.client_options(spec), security=creds, **options))  # fmt: skip
-    except (AgentError, LLMFatalError, SecurityError, ConfigError) as exc:  # the world, the model or the setup: one line, exit 2
+        done = run_command(
+            lambda: attach_agent(
+                robot,
+                connect,
+                run,
+                attach_timeout,
+                spec,
+                cfg.base_url,
+                cfg.client_options(spec),
+                security=creds,
+                **options,
+            )
+        )
+    except (
+        AgentError,
+        LLMFatalError,
+        SecurityError,
+        ConfigError,
+    ) as exc:  # the world, the model or the setup: one line, exit 2
         click.echo(f"mhrc agent {robot}: {exc}", err=True)
         sys.exit(2)
     except Exception as exc:  # anything else: say what happened, exit 1
         raise click.ClickException(f"{type(exc).__name__}: {exc}") from None
     if done is not None:
         m = done.metrics
-        click.echo(f"{robot}: episode {done.run} ended ({done.reason}): success={m.success} placed={m.placed}/{m.total} TS={m.temporal_steps}")
+        click.echo(
+            f"{robot}: episode {done.run} ended ({done.reason}): success={m.success} placed={m.placed}/{m.total} TS={m.temporal_steps}"
+        )

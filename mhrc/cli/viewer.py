@@ -9,18 +9,26 @@ import click
 
 from mhrc.cli.options import VIDEO_HELP
 
+
 @click.command()
 def scenes() -> None:
     """List the scene layouts (world/scenes/*.json; `--scene FILE.json` loads your own)."""
     from mhrc.world.scene import LAYOUTS
 
     for layout in LAYOUTS.values():
-        names = ", ".join(f"{f.name} ({f.kind})" if f.kind != f.name.split("_")[0] else f.name for f in layout.furniture)
+        names = ", ".join(
+            f"{f.name} ({f.kind})" if f.kind != f.name.split("_")[0] else f.name for f in layout.furniture
+        )
         click.echo(f"{layout.name}: {layout.description}\n  furniture: {names}\n  file: {layout.source}")
 
 
 @click.command()
-@click.option("--scene", "scenes_", multiple=True, help="Scene layout or layout .json file (repeatable; default: every built-in layout).")
+@click.option(
+    "--scene",
+    "scenes_",
+    multiple=True,
+    help="Scene layout or layout .json file (repeatable; default: every built-in layout).",
+)
 @click.option("--task", default="pack_objects", show_default=True, help="Task whose fixtures and objects are shown.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Episode whose objects are shown.")
 @click.option("--objects", "n_objects", default=6, show_default=True, type=int)
@@ -44,8 +52,12 @@ def render(scenes_: tuple[str, ...], task: str, seed: int, n_objects: int, out: 
 
 @click.command()
 @click.argument("run_or_trace", type=click.Path(path_type=Path))
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="The HTML file to write; default: beside the trace, with .html (with --video: only when --out is given).")
+@click.option(
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="The HTML file to write; default: beside the trace, with .html (with --video: only when --out is given).",
+)
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None, help=VIDEO_HELP)
 def show(run_or_trace: Path, out: Path | None, video: Path | None) -> None:
     """Write one self-contained HTML report of an episode (map, robot lanes, messages, failures)
@@ -78,10 +90,14 @@ def render_video_to(trace: Path, video: Path) -> Path:
 
     from mhrc.viewer.video import render_video
 
-    with Progress(TextColumn("video"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True)) as bar:
+    with Progress(
+        TextColumn("video"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True)
+    ) as bar:
         task = bar.add_task("frames", total=None)
         try:
-            info = render_video(trace, video, progress=lambda done, total: bar.update(task, completed=done, total=total))
+            info = render_video(
+                trace, video, progress=lambda done, total: bar.update(task, completed=done, total=total)
+            )
         except (ValueError, OSError) as exc:  # VideoError is a ValueError
             bar.stop()
             click.echo(f"mhrc show: {exc}", err=True)

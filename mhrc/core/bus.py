@@ -22,12 +22,11 @@ import structlog
 import zenoh
 from pydantic import BaseModel
 
-from mhrc.core.uncancelled import to_the_end
-from mhrc.core.protocol import encode
-from mhrc.core.security import Credentials, apply, why_refused
 from mhrc.core.endpoints import BusError, BusRefused, listen_error
 from mhrc.core.polling import poll
-
+from mhrc.core.protocol import encode
+from mhrc.core.security import Credentials, apply, why_refused
+from mhrc.core.uncancelled import to_the_end
 
 log = structlog.get_logger("mhrc.core.bus")
 
@@ -85,7 +84,9 @@ class Bus:
         self._entities: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._tokens: dict[str, Any] = {}  # key -> this session's liveliness token on it
-        self._tasks: set[asyncio.Task[Any]] = set()  # the handlers' tasks still running (the loop keeps only weak references)
+        self._tasks: set[asyncio.Task[Any]] = (
+            set()
+        )  # the handlers' tasks still running (the loop keeps only weak references)
         self._closed = False
         self.connected_to: tuple[str, ...] = ()  # the endpoints a client session was opened to
 
@@ -213,7 +214,9 @@ class Bus:
                 payload = query.payload.to_bytes() if query.payload is not None else b""
                 reply = await handler(str(query.key_expr), params, payload)
                 if reply is not None:
-                    query.reply(query.key_expr, encode(reply))  # the key asked, not the served pattern: ACL rules match it
+                    query.reply(
+                        query.key_expr, encode(reply)
+                    )  # the key asked, not the served pattern: ACL rules match it
             except Exception as exc:
                 log.warning("query handler failed", key=key, error=str(exc))
                 try:
@@ -241,7 +244,9 @@ class Bus:
             elif reply.err is not None:
                 log.debug("query error reply", selector=selector, error=reply.err.payload.to_string())
 
-        return await self._replies(lambda handler: self._session.get(selector, payload=data, timeout=timeout, handler=handler), keep)
+        return await self._replies(
+            lambda handler: self._session.get(selector, payload=data, timeout=timeout, handler=handler), keep
+        )
 
     async def _replies(self, ask: Callable[[Any], object], keep: Callable[[zenoh.Reply, list[Any]], None]) -> list[Any]:
         """A query's replies, kept by `keep` as zenoh's threads deliver them; returned when zenoh
@@ -281,7 +286,9 @@ class Bus:
         (`on_thread` as in `subscribe`).
 
         Tokens alive at the time of the call are reported too (history)."""
-        self._entities.append(self._session.liveliness().declare_subscriber(key_expr, self._bridge(handler, on_thread), history=True))
+        self._entities.append(
+            self._session.liveliness().declare_subscriber(key_expr, self._bridge(handler, on_thread), history=True)
+        )
 
     async def alive(self, key_expr: str, timeout: float = 2.0) -> list[str]:
         """Keys of the liveliness tokens currently matching `key_expr`."""
@@ -290,7 +297,9 @@ class Bus:
             if reply.ok is not None:
                 out.append(str(reply.ok.key_expr))
 
-        return await self._replies(lambda handler: self._session.liveliness().get(key_expr, timeout=timeout, handler=handler), keep)
+        return await self._replies(
+            lambda handler: self._session.liveliness().get(key_expr, timeout=timeout, handler=handler), keep
+        )
 
     def _run_handler(self, handler: Handler, sample: Sample) -> None:
         try:

@@ -20,7 +20,9 @@ def new_key() -> ec.EllipticCurvePrivateKey:
 
 
 def pem_key(key: ec.EllipticCurvePrivateKey) -> bytes:
-    return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
+    return key.private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+    )
 
 
 def pem_cert(cert: x509.Certificate) -> bytes:
@@ -72,7 +74,9 @@ def make_server_cert(
         except ValueError:
             names.append(x509.DNSName(h))
     now = datetime.datetime.now(datetime.timezone.utc)
-    start = not_before or now - datetime.timedelta(minutes=5)  # backdated: a peer whose clock is a little behind accepts it
+    start = not_before or now - datetime.timedelta(
+        minutes=5
+    )  # backdated: a peer whose clock is a little behind accepts it
     end = (not_before or now) + datetime.timedelta(days=days)  # what `days` says, not 5 minutes short of it
     cert = (
         x509.CertificateBuilder()

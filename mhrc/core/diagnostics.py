@@ -54,15 +54,30 @@ from pydantic import BaseModel
 
 from mhrc.core.metrics import TraceError, from_trace
 from mhrc.core.protocol import (
-    Action, ActionAck, ActionResult, EpisodeStarted, Observation, OutcomeCode, Place, RejectCode, RobotMessage, SkillOutcome, Thought, Turn,
-)  # fmt: skip
+    Action,
+    ActionAck,
+    ActionResult,
+    EpisodeStarted,
+    Observation,
+    OutcomeCode,
+    Place,
+    RejectCode,
+    RobotMessage,
+    SkillOutcome,
+    Thought,
+    Turn,
+)
 from mhrc.core.records import LineKind, Rows, as_records, messages
 from mhrc.core.upgrade import legacy_reject_code
 
 PREFIX = "diag_"
 REJECT_KINDS = ("stale_tick", "busy", "out_of_turn", "episode_over", "malformed", "not_attached", "other")
 # The world's codes for a name it does not know (the fallback when the planning observation is not in the trace)
-UNKNOWN_NAME_CODES = (OutcomeCode.TARGET_UNKNOWN.value, OutcomeCode.OBJECT_UNKNOWN.value, OutcomeCode.LOCATION_UNKNOWN.value)
+UNKNOWN_NAME_CODES = (
+    OutcomeCode.TARGET_UNKNOWN.value,
+    OutcomeCode.OBJECT_UNKNOWN.value,
+    OutcomeCode.LOCATION_UNKNOWN.value,
+)
 UNKNOWN_NAME_FEEDBACK = "There is no "  # world/feedback.py: unknown_furniture, object_unknown, location_unknown
 NAMED_ARGS = {"navigate": ("target",), "open": ("target",), "pick": ("obj",), "place": ("obj", "location")}
 
@@ -137,10 +152,18 @@ def label(key: str) -> str:
 
 
 KIND_OF_CODE = {  # RejectCode -> the kind diagnostics count it under
-    "stale_tick": "stale_tick", "tick_taken": "busy", "busy": "busy", "duplicate_goal": "busy", "not_your_turn": "out_of_turn",
-    "episode_over": "episode_over", "malformed": "malformed", "not_attached": "not_attached", "other_agent": "not_attached",
-    "wrong_key": "not_attached", "no_such_robot": "not_attached",
-}  # fmt: skip
+    "stale_tick": "stale_tick",
+    "tick_taken": "busy",
+    "busy": "busy",
+    "duplicate_goal": "busy",
+    "not_your_turn": "out_of_turn",
+    "episode_over": "episode_over",
+    "malformed": "malformed",
+    "not_attached": "not_attached",
+    "other_agent": "not_attached",
+    "wrong_key": "not_attached",
+    "no_such_robot": "not_attached",
+}
 
 
 def kind_of(code: RejectCode | None) -> str:
@@ -262,7 +285,7 @@ def row_diagnostics(row: dict[str, Any]) -> dict[str, Any] | None:
     """The diagnostics of an episodes.jsonl row (unprefixed), or None for a row written before they existed."""
     if PREFIX + "hallucinations" not in row:
         return None
-    return {k[len(PREFIX):]: v for k, v in row.items() if k.startswith(PREFIX)}
+    return {k[len(PREFIX) :]: v for k, v in row.items() if k.startswith(PREFIX)}
 
 
 def summarize_diagnostics(rows: list[dict[str, Any]]) -> dict[str, Any]:

@@ -28,12 +28,18 @@ def listen_error(listen: Sequence[str], detail: str) -> BusError:
     where = ", ".join(listen)
     port = where.rsplit(":", 1)[-1]
     if "Address already in use" in detail:
-        return ListenError(f"cannot listen on {where}: port {port} is already in use (another mhrc world, or another program): "
-                           "choose another --port, or leave --port out for a free one")  # fmt: skip
+        return ListenError(
+            f"cannot listen on {where}: port {port} is already in use (another mhrc world, or another program): "
+            "choose another --port, or leave --port out for a free one"
+        )
     if "Permission denied" in detail:
-        return ListenError(f"cannot listen on {where}: port {port} needs privileges this process lacks: choose a port above 1023")
+        return ListenError(
+            f"cannot listen on {where}: port {port} needs privileges this process lacks: choose a port above 1023"
+        )
     if "Cannot assign requested address" in detail or "Can not assign" in detail:
-        return ListenError(f"cannot listen on {where}: no network interface of this host has that address: check --host")
+        return ListenError(
+            f"cannot listen on {where}: no network interface of this host has that address: check --host"
+        )
     return ListenError(f"cannot listen on {where}: {detail.split(' at /')[0]}")
 
 
@@ -49,7 +55,13 @@ def check_listen(host: str, port: int, proto: str = "tcp") -> None:
         try:
             s.bind((host, port))
         except OSError as exc:
-            detail = "Address already in use" if exc.errno == errno.EADDRINUSE else "Permission denied" if exc.errno == errno.EACCES else str(exc)
+            detail = (
+                "Address already in use"
+                if exc.errno == errno.EADDRINUSE
+                else "Permission denied"
+                if exc.errno == errno.EACCES
+                else str(exc)
+            )
             raise listen_error([f"{proto}/{host}:{port}"], detail) from None
 
 

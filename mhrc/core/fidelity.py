@@ -49,7 +49,9 @@ def parse_aids(value: str | Iterable[str] | None) -> tuple[str, ...]:
         return tuple(sorted(AIDS))
     unknown = [n for n in names if n not in AIDS]
     if unknown:
-        raise AidsError(f"--aids: unknown aid {', '.join(map(repr, unknown))}; known aids: {', '.join(AIDS)}, or all, or none")
+        raise AidsError(
+            f"--aids: unknown aid {', '.join(map(repr, unknown))}; known aids: {', '.join(AIDS)}, or all, or none"
+        )
     return tuple(sorted(set(names)))
 
 
@@ -84,7 +86,9 @@ def parse_noise(value: str | None) -> NoiseSetting:
     if value is None:
         return "on"
     if value not in NOISE:
-        raise NoiseError(f"--noise: unknown setting {value!r}; use on (the calibrated motion noise, the default) or off (none)")
+        raise NoiseError(
+            f"--noise: unknown setting {value!r}; use on (the calibrated motion noise, the default) or off (none)"
+        )
     return cast(NoiseSetting, value)
 
 

@@ -68,8 +68,8 @@ unrecovered over the episodes that have a value (a static episode adds nothing t
 
 from __future__ import annotations
 
-import statistics
 import math
+import statistics
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from enum import StrEnum
@@ -77,11 +77,30 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from mhrc.core.protocol import ActionAck, ActionResult, EpisodeDone, EpisodeStarted, RobotDetached, ScenarioEvent, Snapshot, Thought, TickClosed
+from mhrc.core.protocol import (
+    ActionAck,
+    ActionResult,
+    EpisodeDone,
+    EpisodeStarted,
+    RobotDetached,
+    ScenarioEvent,
+    Snapshot,
+    Thought,
+    TickClosed,
+)
 from mhrc.core.records import LineKind, Rows, TraceLine, as_records, messages
 from mhrc.core.upgrade import UNRECORDED
 
-__all__ = ["UNRECORDED", "EpisodeMetrics", "Invalid", "TraceError", "from_trace", "junk_rejections", "recovery_of", "summarize"]
+__all__ = [
+    "UNRECORDED",
+    "EpisodeMetrics",
+    "Invalid",
+    "TraceError",
+    "from_trace",
+    "junk_rejections",
+    "recovery_of",
+    "summarize",
+]
 
 
 class TraceError(ValueError):
@@ -125,7 +144,9 @@ class EpisodeMetrics:
     invalid_code: Invalid | None = None
     fidelity: str = UNRECORDED
     noise: str = "on"  # the motion noise: on (the calibration) or off (--noise off, or the exact_motion aid)
-    noise_rates: dict[str, float] = field(default_factory=dict)  # its chances and error scales (mhrc.core.protocol.MotionNoise)
+    noise_rates: dict[str, float] = field(
+        default_factory=dict
+    )  # its chances and error scales (mhrc.core.protocol.MotionNoise)
     horizon: int | None = None
     scheduler: str = "lockstep"
     makespan: float = 0.0
@@ -143,7 +164,9 @@ class EpisodeMetrics:
 
 def junk_rejections(rows: Rows) -> int:
     """Rejections of malformed requests, which the recorder counts instead of copying (`junk` lines)."""
-    return sum(line.junk.count for line in as_records(rows) if line.junk is not None and line.key.endswith("/action/ack"))
+    return sum(
+        line.junk.count for line in as_records(rows) if line.junk is not None and line.key.endswith("/action/ack")
+    )
 
 
 def from_trace(rows: Rows) -> EpisodeMetrics:
@@ -225,13 +248,20 @@ def from_trace(rows: Rows) -> EpisodeMetrics:
 
 
 def _invalidity(
-    lines: list[TraceLine], done: EpisodeDone, temporal_steps: int, results: list[ActionResult], llm_steps: int, unreachable: int
+    lines: list[TraceLine],
+    done: EpisodeDone,
+    temporal_steps: int,
+    results: list[ActionResult],
+    llm_steps: int,
+    unreachable: int,
 ) -> tuple[Invalid | None, str | None]:
     """Why the episode measured the machine rather than the method (the code and a sentence), or (None, None)."""
     reason = done.reason
     if not results and not done.metrics.success and (temporal_steps == 0 or reason == "no_agents"):
         left = sorted({e.robot for e in messages(lines, RobotDetached)})
-        why = f"it ended ({reason}) at step {temporal_steps} before any robot acted" + (f"; detached: {', '.join(left)} (the trace says why)" if left else "")
+        why = f"it ended ({reason}) at step {temporal_steps} before any robot acted" + (
+            f"; detached: {', '.join(left)} (the trace says why)" if left else ""
+        )
         return Invalid.NOT_PLAYED, why
     if llm_steps and unreachable >= llm_steps:
         return Invalid.MODEL_UNREACHABLE, f"the model was unreachable for all {llm_steps} LLM steps"
@@ -257,9 +287,12 @@ def recovery_of(rows: Rows, scheduler: str, step_seconds: float, done: EpisodeDo
             since[ev.index] = later[0] + 1 - tick if later else None
     return [
         {
-            "index": ev.index, "kind": ev.event, "tick": ev.tick, "applied": ev.applied,
+            "index": ev.index,
+            "kind": ev.event,
+            "tick": ev.tick,
+            "applied": ev.applied,
             "ticks_to_recover": since.get(ev.index) if ev.applied else None,
-        }  # fmt: skip
+        }
         for ev in events
     ]
 

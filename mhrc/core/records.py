@@ -9,7 +9,8 @@ with its `RejectCode`). Lines of older traces are brought to today's shape first
 (mhrc.core.upgrade).
 
 A line that is not a trace line raises `TraceLineError` (a code, the file and the line number). A
-`put` whose message does not fit its model (anything may be published under a run's keys) is kept, with `msg` None and the reason in `problem`: a trace records the bus, junk included.
+`put` whose message does not fit its model (anything may be published under a run's keys) is kept, with `msg`
+None and the reason in `problem`: a trace records the bus, junk included.
 """
 
 from __future__ import annotations
@@ -45,9 +46,20 @@ from mhrc.core.protocol.base import loads
 from mhrc.core.upgrade import upgrade
 
 Payload = Union[
-    ActionRequest, ActionAck, ActionResult, Turn, RobotMessage, Thought,
-    EpisodeStarted, TickClosed, RobotAttached, RobotDetached, EpisodeDone, Snapshot, ScenarioEvent,
-]  # fmt: skip
+    ActionRequest,
+    ActionAck,
+    ActionResult,
+    Turn,
+    RobotMessage,
+    Thought,
+    EpisodeStarted,
+    TickClosed,
+    RobotAttached,
+    RobotDetached,
+    EpisodeDone,
+    Snapshot,
+    ScenarioEvent,
+]
 M = TypeVar("M", bound=BaseModel)
 
 
@@ -142,9 +154,22 @@ Rows = Iterable[TraceLine | Mapping[str, Any]]  # decoded trace lines, or lines 
 
 MODELS: dict[str, type[Payload]] = {  # a message's `kind` -> its model (the key it travels on says the same)
     m.model_fields["kind"].default: m
-    for m in (ActionRequest, ActionAck, ActionResult, Turn, RobotMessage, Thought,
-              EpisodeStarted, TickClosed, RobotAttached, RobotDetached, EpisodeDone, Snapshot, ScenarioEvent)
-}  # fmt: skip
+    for m in (
+        ActionRequest,
+        ActionAck,
+        ActionResult,
+        Turn,
+        RobotMessage,
+        Thought,
+        EpisodeStarted,
+        TickClosed,
+        RobotAttached,
+        RobotDetached,
+        EpisodeDone,
+        Snapshot,
+        ScenarioEvent,
+    )
+}
 
 
 def _model_of(msg: Any) -> type[Payload] | None:
@@ -265,4 +290,3 @@ def as_records(rows: Rows) -> list[TraceLine]:
 def messages(lines: Iterable[TraceLine], model: type[M]) -> list[M]:
     """The messages of type `model` published in `lines`, in trace order."""
     return [line.msg for line in lines if line.kind is LineKind.PUT and isinstance(line.msg, model)]
-

@@ -26,26 +26,47 @@ KEYS: dict[str, tuple[str, str]] = {
     "ActionAck": ("robot/<rid>/action/ack", "world -> agent (put)"),
     "ActionResult": ("robot/<rid>/action/result", "world -> agent (put)"),
     "Turn": ("robot/<rid>/turn", "world -> agent (put): sequential schedule, after an attach reply with wait_turn"),
-    "RobotMessage": ("robot/<to>/inbox/<from>", "world -> observers (put): a delivered communicate; agents read it in Observation.new_messages"),
+    "RobotMessage": (
+        "robot/<to>/inbox/<from>",
+        "world -> observers (put): a delivered communicate; agents read it in Observation.new_messages",
+    ),
     "Thought": ("agent/<rid>/thought", "agent -> observers (put), optional"),
-    "Generating": ("agent/<rid>/generating", "agent -> observers (put), optional: a long model call's progress, every few seconds; not recorded"),
+    "Generating": (
+        "agent/<rid>/generating",
+        "agent -> observers (put), optional: a long model call's progress, every few seconds; not recorded",
+    ),
     "WorldState": ("world/state", "world -> anyone: the reply to a zenoh get"),
     "WorldEvent": ("world/event", "world -> all (put): one of the event kinds, discriminated by `kind`"),
 }
-WORLD_EVENT_KINDS = ("EpisodeStarted", "TickClosed", "RobotAttached", "RobotDetached", "EpisodeDone", "Snapshot", "ScenarioEvent")
+WORLD_EVENT_KINDS = (
+    "EpisodeStarted",
+    "TickClosed",
+    "RobotAttached",
+    "RobotDetached",
+    "EpisodeDone",
+    "Snapshot",
+    "ScenarioEvent",
+)
 
 
 def message_models() -> list[type[Message]]:
     """Every top-level payload model of mhrc.core.protocol, in definition order."""
     found: list[type[Message]] = []
     for value in vars(protocol).values():
-        if isinstance(value, type) and issubclass(value, Message) and value is not Message and value.__module__.startswith(protocol.__name__ + "."):
+        if (
+            isinstance(value, type)
+            and issubclass(value, Message)
+            and value is not Message
+            and value.__module__.startswith(protocol.__name__ + ".")
+        ):
             found.append(value)
     return found
 
 
 def _schema_of(name: str, schema: dict[str, Any]) -> dict[str, Any]:
-    key, direction = KEYS.get(name) or (("world/event", "world -> all (put), as part of WorldEvent") if name in WORLD_EVENT_KINDS else ("", ""))
+    key, direction = KEYS.get(name) or (
+        ("world/event", "world -> all (put), as part of WorldEvent") if name in WORLD_EVENT_KINDS else ("", "")
+    )
     out: dict[str, Any] = {"$schema": SCHEMA_DIALECT, "$id": f"mhrc/v{PROTOCOL_VERSION}/{name}.json"}
     out.update(schema)
     out.setdefault("title", name)

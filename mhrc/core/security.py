@@ -38,8 +38,8 @@ from typing import Any
 
 from cryptography import x509
 
-from mhrc.core.endpoints import split_endpoint
 from mhrc.core.certs import make_ca, make_server_cert, pem_cert, pem_key, write_private
+from mhrc.core.endpoints import split_endpoint
 
 ENV = "MHRC_CREDENTIALS"
 WORLD = "world"
@@ -60,7 +60,9 @@ class ExposedSecret(SecurityError):
     code = "exposed_secret"
 
 
-MIN_DAYS = 1 / 1440  # a minute, mhrc credentials --days' least: certificates that expire before the world and its agents meet are a typo
+MIN_DAYS = (
+    1 / 1440
+)  # a minute, mhrc credentials --days' least: certificates that expire before the world and its agents meet are a typo
 
 
 def check_private(path: Path) -> None:
@@ -74,8 +76,10 @@ def check_private(path: Path) -> None:
     if mode & 0o077:
         raise ExposedSecret(f"{path} holds a secret but others can access it (mode {mode:04o}): run chmod 600 {path}")
     if folder & 0o022:
-        raise ExposedSecret(f"{path.parent}, which holds the secret {path.name}, is writable by others (mode {folder:04o}): "
-                            f"run chmod 700 {path.parent}")  # fmt: skip
+        raise ExposedSecret(
+            f"{path.parent}, which holds the secret {path.name}, is writable by others (mode {folder:04o}): "
+            f"run chmod 700 {path.parent}"
+        )
 
 
 # ---------------------------------------------------------------------------------- credentials
@@ -162,7 +166,13 @@ def _issue(
         if d not in with_ca:  # once per directory: all of them share it flat, each has its own split
             write_private(d / "ca.pem", pem_cert(ca), private=False)
             with_ca.add(d)
-        entry: dict[str, Any] = {"run": run, "user": u, "password": passwords[u], "ca": "ca.pem", "robots": list(robots)}
+        entry: dict[str, Any] = {
+            "run": run,
+            "user": u,
+            "password": passwords[u],
+            "ca": "ca.pem",
+            "robots": list(robots),
+        }
         if u == server:
             write_private(d / f"{u}.pem", pem_cert(cert))
             write_private(d / f"{u}.key", pem_key(key))
@@ -230,7 +240,9 @@ def _check_current(pem: Path, source: Path) -> None:
             "issue new credentials (mhrc credentials, or mhrc up makes fresh ones)"
         )
     if cert.not_valid_before_utc > now:
-        raise SecurityError(f"the certificate {pem} (of {source}) is not valid before {cert.not_valid_before_utc:%Y-%m-%d %H:%M} UTC")
+        raise SecurityError(
+            f"the certificate {pem} (of {source}) is not valid before {cert.not_valid_before_utc:%Y-%m-%d %H:%M} UTC"
+        )
 
 
 def expiry(creds: Credentials) -> datetime.datetime | None:
@@ -276,16 +288,32 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
     rules: list[dict[str, Any]] = [
         {
             "id": "world-all",
-            "messages": ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
-                         "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"],
+            "messages": [
+                "put",
+                "delete",
+                "declare_subscriber",
+                "query",
+                "reply",
+                "declare_queryable",
+                "liveliness_token",
+                "liveliness_query",
+                "declare_liveliness_subscriber",
+            ],
             "flows": ["ingress", "egress"],
             "permission": "allow",
             "key_exprs": [f"{base}/**"],
         },
         {  # what the observer receives: everything of the run, and replies to its world/state queries
             "id": "observer-receive",
-            "messages": ["put", "delete", "liveliness_token", "reply", "declare_subscriber", "declare_queryable",
-                         "declare_liveliness_subscriber"],
+            "messages": [
+                "put",
+                "delete",
+                "liveliness_token",
+                "reply",
+                "declare_subscriber",
+                "declare_queryable",
+                "declare_liveliness_subscriber",
+            ],
             "flows": ["egress"],
             "permission": "allow",
             "key_exprs": [f"{base}/**"],
@@ -327,7 +355,7 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
             "permission": "allow",
             "key_exprs": [f"{base}/**"],
         },
-    ]  # fmt: skip
+    ]
     subjects: list[dict[str, Any]] = [
         {"id": "s-world", "usernames": [WORLD]},
         {"id": "s-observer", "usernames": [OBSERVER]},
@@ -335,10 +363,23 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
     ]
     policies: list[dict[str, Any]] = [
         {"id": "p-world", "rules": ["world-all"], "subjects": ["s-world"]},
-        {"id": "p-observer", "rules": ["observer-receive", "observer-ask", "observer-query", "world-events-watch",
-                                       "world-events-receive"], "subjects": ["s-observer"]},
-        {"id": "p-visible", "rules": ["world-events-watch", "world-events-receive", "declarations-visible"], "subjects": ["s-robots"]},
-    ]  # fmt: skip
+        {
+            "id": "p-observer",
+            "rules": [
+                "observer-receive",
+                "observer-ask",
+                "observer-query",
+                "world-events-watch",
+                "world-events-receive",
+            ],
+            "subjects": ["s-observer"],
+        },
+        {
+            "id": "p-visible",
+            "rules": ["world-events-watch", "world-events-receive", "declarations-visible"],
+            "subjects": ["s-robots"],
+        },
+    ]
     for r in robots:
         k = f"{base}/robot/{r}"
         own_put, own_in, own_out = f"{r}-put", f"{r}-in", f"{r}-out"
@@ -355,17 +396,28 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
                 "messages": ["query", "liveliness_token", "declare_subscriber"],
                 "flows": ["ingress"],
                 "permission": "allow",
-                "key_exprs": [f"{k}/attach", f"{base}/alive/robot/{r}", f"{k}/action/ack", f"{k}/action/result", f"{k}/turn",
-                              f"{k}/inbox/**"],
+                "key_exprs": [
+                    f"{k}/attach",
+                    f"{base}/alive/robot/{r}",
+                    f"{k}/action/ack",
+                    f"{k}/action/result",
+                    f"{k}/turn",
+                    f"{k}/inbox/**",
+                ],
             },
             {  # what robot r may receive: its acks, results, turns, messages and attach replies
                 "id": own_out,
                 "messages": ["put", "reply", "declare_subscriber", "declare_queryable", "liveliness_token"],
                 "flows": ["egress"],
                 "permission": "allow",
-                "key_exprs": [f"{k}/**", f"{base}/agent/{r}/thought", f"{base}/agent/{r}/generating", f"{base}/alive/robot/{r}"],
+                "key_exprs": [
+                    f"{k}/**",
+                    f"{base}/agent/{r}/thought",
+                    f"{base}/agent/{r}/generating",
+                    f"{base}/alive/robot/{r}",
+                ],
             },
-        ]  # fmt: skip
+        ]
         subjects.append({"id": f"s-{r}", "usernames": [r]})
         policies.append({"id": f"p-{r}", "rules": [own_put, own_in, own_out], "subjects": [f"s-{r}"]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
@@ -415,7 +467,10 @@ def speaks_tls(host: str, port: int, timeout: float = 3.0) -> bool:
     ctx.check_hostname = False
     ctx.verify_mode = ssl.CERT_NONE
     try:
-        with socket.create_connection((host, port), timeout=timeout) as raw, ctx.wrap_socket(raw, server_hostname=host) as tls:
+        with (
+            socket.create_connection((host, port), timeout=timeout) as raw,
+            ctx.wrap_socket(raw, server_hostname=host) as tls,
+        ):
             tls.do_handshake()
             return True
     except (OSError, ssl.SSLError):
@@ -438,32 +493,51 @@ def why_refused(endpoint: str, creds: Credentials | None, timeout: float = 3.0) 
     if proto != "tls":
         if speaks_tls(host, port, timeout):
             login = "with this participant's --credentials FILE" if creds is None else "with the same --credentials"
-            return Diagnosis(f"the world at {host}:{port} is secured (it speaks TLS): connect to tls/{host}:{port} {login}", final=True)
+            return Diagnosis(
+                f"the world at {host}:{port} is secured (it speaks TLS): connect to tls/{host}:{port} {login}",
+                final=True,
+            )
         if creds is None:
-            return Diagnosis("the world refused an open connection: it probably requires credentials (--credentials or $MHRC_CREDENTIALS)")
+            return Diagnosis(
+                "the world refused an open connection: it probably requires credentials (--credentials or $MHRC_CREDENTIALS)"
+            )
         return Diagnosis(f"credentials were given but the endpoint {endpoint} is not tls/", final=True)
     if creds is None:
-        return Diagnosis("the endpoint is tls/ (a secured world) but no credentials were given: pass --credentials FILE "
-                         "(or set $MHRC_CREDENTIALS)", final=True)  # fmt: skip
+        return Diagnosis(
+            "the endpoint is tls/ (a secured world) but no credentials were given: pass --credentials FILE "
+            "(or set $MHRC_CREDENTIALS)",
+            final=True,
+        )
     ctx = ssl.create_default_context(cafile=str(creds.ca))
     try:
-        with socket.create_connection((host, port), timeout=timeout) as raw2, ctx.wrap_socket(raw2, server_hostname=host) as tls:
+        with (
+            socket.create_connection((host, port), timeout=timeout) as raw2,
+            ctx.wrap_socket(raw2, server_hostname=host) as tls,
+        ):
             tls.do_handshake()
     except ssl.SSLCertVerificationError as exc:
         why = exc.verify_message or str(exc)
         if "expired" in why:
-            return Diagnosis(f"the world's certificate has expired ({why}): issue new credentials (mhrc credentials, or a new mhrc up)", final=True)
+            return Diagnosis(
+                f"the world's certificate has expired ({why}): issue new credentials (mhrc credentials, or a new mhrc up)",
+                final=True,
+            )
         if "issuer" in why or "self-signed" in why or "self signed" in why:
             return Diagnosis(
                 f"the world's certificate is not signed by the CA of {creds.describe()} ({why}): "
-                "a foreign certificate, or a world of another run", final=True
+                "a foreign certificate, or a world of another run",
+                final=True,
             )
         return Diagnosis(f"the world's certificate was rejected: {why}", final=True)
     except ssl.SSLError as exc:
-        return Diagnosis(f"the TLS handshake failed: {exc.reason or exc} (is the world listening on plain tcp? then drop tls/ and --credentials)", final=True)
+        return Diagnosis(
+            f"the TLS handshake failed: {exc.reason or exc} (is the world listening on plain tcp? then drop tls/ and --credentials)",
+            final=True,
+        )
     except OSError as exc:
         return Diagnosis(f"the TLS handshake failed: {exc}")
     return Diagnosis(
         f"the TLS link is sound but the world refused the login of {creds.describe()}: "
-        "a wrong password, or credentials of another run", login_refused=True
+        "a wrong password, or credentials of another run",
+        login_refused=True,
     )

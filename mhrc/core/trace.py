@@ -38,11 +38,17 @@ from mhrc.core.protocol import ActionRequest, ProtocolError, decode
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES, loads
 from mhrc.core.records import read_records
 
-JUNK_INTERVAL = 1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
-REJECTIONS_IN_FULL = 5  # well-formed requests rejected per robot and interval that are copied in full; the rest are counted
+JUNK_INTERVAL = (
+    1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
+)
+REJECTIONS_IN_FULL = (
+    5  # well-formed requests rejected per robot and interval that are copied in full; the rest are counted
+)
 MAX_HELD = 20_000  # requests awaiting their ack (a flood arrives faster than the world acks); past it the oldest is written at once
 EXCERPT = 200  # characters of a malformed request's payload kept in its junk line: enough to see what it was
-MAX_REQUESTED = 100_000  # goal ids of the requests seen, remembered to tell an early ack or result from one of an old request
+MAX_REQUESTED = (
+    100_000  # goal ids of the requests seen, remembered to tell an early ack or result from one of an old request
+)
 
 
 class TraceWriteError(RuntimeError):
@@ -53,14 +59,18 @@ class TraceWriteError(RuntimeError):
     def __init__(self, path: Path, cause: OSError) -> None:
         self.path = path
         self.cause = cause
-        super().__init__(f"cannot write the trace {path}: {cause.strerror or cause}; the run was stopped and the trace is incomplete")
+        super().__init__(
+            f"cannot write the trace {path}: {cause.strerror or cause}; the run was stopped and the trace is incomplete"
+        )
 
 
 class Recorder:
     """Writes every sample of `run` to `path` (JSONL, flushed line by line). `on_error` is called
     once, on a bus thread, when a write fails (see TraceWriteError)."""
 
-    def __init__(self, bus: Bus, run: str, path: str | Path, on_error: Callable[[TraceWriteError], object] | None = None) -> None:
+    def __init__(
+        self, bus: Bus, run: str, path: str | Path, on_error: Callable[[TraceWriteError], object] | None = None
+    ) -> None:
         self.path = Path(path)
         self.error: TraceWriteError | None = None
         self._on_error = on_error
@@ -76,7 +86,9 @@ class Recorder:
         self._junk: dict[str, dict[str, Any]] = {}  # key -> counts not yet written
         self._held: dict[str, tuple[float, str, Any]] = {}  # goal id -> (t, key, msg) of a request awaiting its ack
         self._requested: dict[str, None] = {}  # goal ids whose request was seen (the newest MAX_REQUESTED, in order)
-        self._early: dict[str, list[tuple[float, Sample, Any]]] = {}  # goal id -> its ack or result, come before its request
+        self._early: dict[
+            str, list[tuple[float, Sample, Any]]
+        ] = {}  # goal id -> its ack or result, come before its request
         self._rejected: dict[str, tuple[float, int]] = {}  # ack key -> (interval start, rejections copied in it)
         self._lock = threading.RLock()  # samples arrive on zenoh's threads (the data's and the liveliness')
 
@@ -90,7 +102,12 @@ class Recorder:
         return self
 
     def _write(self, key: str, kind: str, msg: Any, t: float | None = None) -> None:
-        line = {"t": round((time.perf_counter() if t is None else t) - self._t0, 6), "key": key, "kind": kind, "msg": msg}
+        line = {
+            "t": round((time.perf_counter() if t is None else t) - self._t0, 6),
+            "key": key,
+            "kind": kind,
+            "msg": msg,
+        }
         text = json.dumps(line, separators=(",", ":")) + "\n"
         with self._lock:  # one whole line at a time, whichever thread
             if self._file is None or self._file.closed or self.error is not None:
@@ -116,7 +133,10 @@ class Recorder:
                 pass
         if self.path.is_file():
             t = round(time.perf_counter() - self._t0, 6)
-            mark = json.dumps({"t": t, "key": f"{self._keys.base}/trace", "kind": "incomplete", "msg": {"error": str(exc)}}, separators=(",", ":"))
+            mark = json.dumps(
+                {"t": t, "key": f"{self._keys.base}/trace", "kind": "incomplete", "msg": {"error": str(exc)}},
+                separators=(",", ":"),
+            )
             for end in (self._good, self._last):  # the mark in place of the last whole line if it does not fit after it
                 try:
                     os.truncate(self.path, end)
@@ -141,7 +161,12 @@ class Recorder:
             msg = {"raw": sample.payload.decode("utf-8", "replace")}
         goal = msg.get("goal_id") if isinstance(msg, dict) else None
         with self._lock:
-            if sample.is_put and isinstance(goal, str) and goal in self._early and sample.key.endswith("/action/request"):
+            if (
+                sample.is_put
+                and isinstance(goal, str)
+                and goal in self._early
+                and sample.key.endswith("/action/request")
+            ):
                 early = self._early.pop(goal)
                 self._record(sample, msg, early[0][0])  # seen after its answer, written before it, at the answer's time
                 for t, s, m in early:
@@ -150,7 +175,9 @@ class Recorder:
             self._record(sample, msg)
 
     def _record(self, sample: Sample, msg: Any, t: float | None = None) -> None:
-        if sample.is_put and (self._is_junk(sample, msg) or self._too_early(sample, msg, t) or self._held_or_counted(sample, msg, t)):
+        if sample.is_put and (
+            self._is_junk(sample, msg) or self._too_early(sample, msg, t) or self._held_or_counted(sample, msg, t)
+        ):
             return
         self._write(sample.key, "put" if sample.is_put else "delete", msg, t)
         if isinstance(msg, dict) and msg.get("kind") == "episode_done":
@@ -160,7 +187,9 @@ class Recorder:
         """The world's ack or result of a request not seen yet, held until it comes: each
         subscriber has its own thread, and the world may handle the request and answer before
         the recorder's thread is given it. True when the sample is held."""
-        if not (sample.key.endswith("/action/ack") or sample.key.endswith("/action/result")) or not isinstance(msg, dict):
+        if not (sample.key.endswith("/action/ack") or sample.key.endswith("/action/result")) or not isinstance(
+            msg, dict
+        ):
             return False
         goal = msg.get("goal_id")
         if not isinstance(goal, str) or goal in self._requested or goal in self._held:
@@ -227,7 +256,9 @@ class Recorder:
                 self._write(held[1], "put", held[2], held[0])
             return False
 
-    def _count_junk(self, key: str, reason: str, size: int, now: float, code: Any = None, excerpt: str | None = None) -> None:
+    def _count_junk(
+        self, key: str, reason: str, size: int, now: float, code: Any = None, excerpt: str | None = None
+    ) -> None:
         """Count one junk sample of `key`; `code` is the rejection's (mhrc.core.protocol.RejectCode), if it has one;
         `excerpt`, the start of a malformed payload (the interval's first is kept)."""
         code = code if isinstance(code, str) else None

@@ -67,7 +67,11 @@ def upgrade(kind: str, msg: Any) -> Any:
         return msg
     if kind == "junk":
         if msg.get("code") is None or "excerpt" not in msg:
-            return {"excerpt": None, **msg, "code": _code(msg.get("code"), str(msg.get("reason", "")).removeprefix(JUNK_REJECTED))}
+            return {
+                "excerpt": None,
+                **msg,
+                "code": _code(msg.get("code"), str(msg.get("reason", "")).removeprefix(JUNK_REJECTED)),
+            }
         return msg
     if kind != "put":
         return msg

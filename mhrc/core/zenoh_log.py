@@ -41,22 +41,30 @@ _ALERTS = {
     "BadCertificate": "the client rejected the world's certificate: it does not name the host the client connected to",
 }
 _CAUSES: tuple[tuple[re.Pattern[str], str], ...] = (
-    (re.compile(r"UsrPwd extension - Recv OpenSyn\. Invalid password"),
-     "a wrong password: the client's credentials are altered, or of another run"),
+    (
+        re.compile(r"UsrPwd extension - Recv OpenSyn\. Invalid password"),
+        "a wrong password: the client's credentials are altered, or of another run",
+    ),
     (re.compile(r"UsrPwd extension - Recv OpenSyn\. Invalid user"), "an unknown user: not a participant of this run"),
-    (re.compile(r"UsrPwd extension - Recv InitSyn\. Expected extension"),
-     "no login: a client without credentials (or with --insecure) on the secured bus"),
+    (
+        re.compile(r"UsrPwd extension - Recv InitSyn\. Expected extension"),
+        "no login: a client without credentials (or with --insecure) on the secured bus",
+    ),
     # a plain tcp client's first bytes (zenoh's length prefix, then its InitSyn) read as a TLS
     # record header: its first byte is most often no record type (InvalidContentType), but a
     # length whose low byte is 20-24 passes as one and fails on the version (UnknownProtocolVersion)
-    (re.compile(r"received corrupt message of type (InvalidContentType|UnknownProtocolVersion)"),
-     "a client spoke plain tcp to the secured world: it must connect to tls/ with its credentials"),
-)  # fmt: skip
+    (
+        re.compile(r"received corrupt message of type (InvalidContentType|UnknownProtocolVersion)"),
+        "a client spoke plain tcp to the secured world: it must connect to tls/ with its credentials",
+    ),
+)
 _ALERT = re.compile(r"received fatal alert: (\w+)")
 _NOISE = (
-    "Cannot monitor expiration", "New transport link accepted", "Accepted TLS connection",
+    "Cannot monitor expiration",
+    "New transport link accepted",
+    "Accepted TLS connection",
     "tls handshake eof",  # a client that closed before the handshake: a port probe (mhrc up's wait for the world, why_refused)
-)  # fmt: skip
+)
 # one line of zenoh's own log: time, level, thread, target, message
 _LINE = re.compile(r"^\S+\s+(TRACE|DEBUG|INFO|WARN|ERROR)\s+.*?\b(zenoh[\w:]*):\s?(.*)$")
 _HINT = re.compile(r"\s*Hint: increase the system open file limit\.?")
@@ -115,8 +123,9 @@ def watch_refusals(on_refusal: Callable[[str], None] | None = None) -> bool:
     except (OSError, AttributeError, ValueError):
         return False
     # Python writes to the real stdout from now on; only native writes to fd 1 reach the pipe
-    sys.stdout = io.TextIOWrapper(io.FileIO(real, "w", closefd=False), encoding="utf-8", errors="backslashreplace",
-                                  line_buffering=True)  # fmt: skip
+    sys.stdout = io.TextIOWrapper(
+        io.FileIO(real, "w", closefd=False), encoding="utf-8", errors="backslashreplace", line_buffering=True
+    )
     os.dup2(w, 1)
     os.close(w)
     threading.Thread(target=_pump, args=(r, real, report), name="mhrc-zenoh-log", daemon=True).start()

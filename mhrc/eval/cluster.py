@@ -28,8 +28,8 @@ from typing import Any
 
 import structlog
 
-from mhrc.run.config import ConfigError
 from mhrc.eval.episode import EpisodeResult, Job
+from mhrc.run.config import ConfigError
 
 log = structlog.get_logger("mhrc.eval")
 
@@ -62,14 +62,17 @@ def probe(address: str, timeout: float = PROBE_TIMEOUT) -> None:
     rest = address.split("://", 1)[1] if "://" in address else address
     host, colon, port = rest.rstrip("/").rpartition(":")
     if not colon or not port.isdigit() or not host:
-        raise ConfigError(f"--ray: {address!r} is not an address ray.init takes: auto, HOST:PORT (the head's GCS, e.g. 10.0.0.5:6379) or ray://HOST:10001")
+        raise ConfigError(
+            f"--ray: {address!r} is not an address ray.init takes: auto, HOST:PORT (the head's GCS, e.g. 10.0.0.5:6379) or ray://HOST:10001"
+        )
     try:
         with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
             pass
     except OSError as exc:
         why = exc.strerror or type(exc).__name__
         raise ConfigError(
-            f"--ray: nothing answers at {address} ({why}); start the head with `ray start --head` (it prints the address), or pass --ray auto on a node of the cluster"
+            f"--ray: nothing answers at {address} ({why}); start the head with `ray start --head` (it prints "
+            f"the address), or pass --ray auto on a node of the cluster"
         ) from None
 
 
@@ -107,15 +110,25 @@ class RayExecutor:
         await asyncio.to_thread(probe, self.address)
         try:
             await asyncio.to_thread(
-                ray.init, address=self.address, logging_level=logging.ERROR, log_to_driver=False, configure_logging=True,
+                ray.init,
+                address=self.address,
+                logging_level=logging.ERROR,
+                log_to_driver=False,
+                configure_logging=True,
                 namespace="mhrc-eval",
-            )  # fmt: skip
+            )
         except Exception as exc:  # a version mismatch, a refused token, a cluster that went away
             lines = [x.strip() for x in str(exc).splitlines() if x.strip()] or [type(exc).__name__]
-            first = lines[0] if len(lines) == 1 else f"{lines[0]} {lines[-1]}"  # a server's traceback: its heading and its error
-            hint = "" if has_token() else (
-                "; this driver has no Ray token: set RAY_AUTH_MODE=token and RAY_AUTH_TOKEN (or copy the head's ~/.ray/auth_token)"
-            )  # fmt: skip
+            first = (
+                lines[0] if len(lines) == 1 else f"{lines[0]} {lines[-1]}"
+            )  # a server's traceback: its heading and its error
+            hint = (
+                ""
+                if has_token()
+                else (
+                    "; this driver has no Ray token: set RAY_AUTH_MODE=token and RAY_AUTH_TOKEN (or copy the head's ~/.ray/auth_token)"
+                )
+            )
             raise ConfigError(f"--ray: could not join the Ray cluster at {self.address}: {first}{hint}") from None
         self._ray = ray
         self._task = ray.remote(max_retries=RAY_RETRIES, retry_exceptions=False)(_episode)
@@ -130,7 +143,9 @@ class RayExecutor:
 
     def submit(self, job: Job) -> None:
         dest = str(self.traces / (job.key.replace("/", "_") + ".jsonl")) if self.traces is not None else None
-        ref = self._task.options(num_cpus=self.num_cpus, name=f"mhrc-episode {job.key}").remote(job.model_dump_json(), dest)
+        ref = self._task.options(num_cpus=self.num_cpus, name=f"mhrc-episode {job.key}").remote(
+            job.model_dump_json(), dest
+        )
         self._running[asyncio.wrap_future(ref.future())] = (job, ref)
 
     def _take(self, fut: asyncio.Future[Any]) -> EpisodeResult:

@@ -46,9 +46,20 @@ from mhrc.eval.summaries import write_summaries
 from mhrc.run.config import ConfigError
 
 __all__ = [
-    "EvalAborted", "EvalSpec", "Job", "Plan", "RunOptions", "Tally", "check_out", "evaluate", "merge_runs", "run", "summary_csv",
-    "summary_markdown", "write_summaries",
-]  # fmt: skip
+    "EvalAborted",
+    "EvalSpec",
+    "Job",
+    "Plan",
+    "RunOptions",
+    "Tally",
+    "check_out",
+    "evaluate",
+    "merge_runs",
+    "run",
+    "summary_csv",
+    "summary_markdown",
+    "write_summaries",
+]
 
 log = structlog.get_logger("mhrc.eval")
 
@@ -61,14 +72,20 @@ class EvalAborted(RuntimeError):
 class RunOptions:
     """Where and how many episodes run at once, checked once, when made (ConfigError naming the option)."""
 
-    workers: int | None = None  # local worker processes; None: the number of cores (not with `ray`: its resources decide)
-    concurrency: int | None = None  # episodes each worker runs at once (Ray: an LLM episode takes 1/concurrency of a CPU); None: 1
+    workers: int | None = (
+        None  # local worker processes; None: the number of cores (not with `ray`: its resources decide)
+    )
+    concurrency: int | None = (
+        None  # episodes each worker runs at once (Ray: an LLM episode takes 1/concurrency of a CPU); None: 1
+    )
     ray: str | None = None  # a Ray cluster's address, as ray.init takes it
     shared_out: bool = False  # with `ray`: --out is the same path on every node
 
     def __post_init__(self) -> None:
         if self.ray is not None and self.workers is not None:
-            raise ConfigError("--workers: not with --ray (the Ray cluster's resources say how many episodes run at once)")
+            raise ConfigError(
+                "--workers: not with --ray (the Ray cluster's resources say how many episodes run at once)"
+            )
         if self.shared_out and self.ray is None:
             raise ConfigError("--shared-out: only with --ray (a local run writes into --out anyway)")
         if self.workers is not None and self.workers < 1:
@@ -101,7 +118,9 @@ class Tally:
 ProgressHook = Callable[[Tally, Row | None], None]
 
 
-STOP_GRACE = 2.0  # s episodes told to stop (an interrupt) have before their processes are killed: Ctrl-C exits within 3 s
+STOP_GRACE = (
+    2.0  # s episodes told to stop (an interrupt) have before their processes are killed: Ctrl-C exits within 3 s
+)
 RETRIES = 1  # an episode that fails (not fatally) is run this many more times before it is given up
 # invalid episodes whose cause is the machine's, as an error is: run again like one (RETRIES); one still so after that
 # is written as an invalid row, which every summary leaves out (mhrc.eval.report)
@@ -126,13 +145,16 @@ def check_out(out: Path, plan: Plan, resume: bool) -> None:
     manifest = out / "eval.json"
     if out.exists() and any(out.iterdir()):
         if not resume:
-            raise ConfigError(f"--out: {out} is not empty; pass --resume to continue that evaluation, or choose another --out")
+            raise ConfigError(
+                f"--out: {out} is not empty; pass --resume to continue that evaluation, or choose another --out"
+            )
         if manifest.exists():
             before = read_manifest(manifest).identity  # an older manifest's missing fields: what it ran with
             if before != plan.identity:
                 raise ConfigError(
                     f"--out: {out} holds an evaluation of {before.model_dump()}, not {plan.identity.model_dump()}; --resume needs the same --llm, "
-                    "--ablation, --horizon, --aids, --noise, --history-cap, --prompts, --structured, --max-tokens, --llm-seed, --schedule, --time-scale and --events"
+                    "--ablation, --horizon, --aids, --noise, --history-cap, --prompts, --structured, "
+                    "--max-tokens, --llm-seed, --schedule, --time-scale and --events"
                 )
 
 
@@ -165,13 +187,20 @@ async def evaluate(
     (mhrc.eval.pool). With `ray` (an address as ray.init takes it) every episode is a Ray task
     on that cluster instead (mhrc.eval.cluster); `shared_out`: DIR is the same path on every node,
     so tasks write their traces there rather than send them back."""
-    options = RunOptions(workers=None if ray is not None and workers == 1 else workers, concurrency=concurrency, ray=ray, shared_out=shared_out)
+    options = RunOptions(
+        workers=None if ray is not None and workers == 1 else workers,
+        concurrency=concurrency,
+        ray=ray,
+        shared_out=shared_out,
+    )
     plan = spec if isinstance(spec, Plan) else spec.validate()
     check_out(out, plan, resume)
     return await run(plan, out, options, resume=resume, progress=progress)
 
 
-async def run(plan: Plan, out: Path, options: RunOptions, *, resume: bool = False, progress: ProgressHook | None = None) -> list[Row]:
+async def run(
+    plan: Plan, out: Path, options: RunOptions, *, resume: bool = False, progress: ProgressHook | None = None
+) -> list[Row]:
     """Run a plan already checked (`evaluate`, or the CLI, checked the options, the grid and DIR):
     each row is computed here, from the episode's trace, and appended to DIR/episodes.jsonl as it
     arrives; an interrupt (cancellation) keeps every finished row."""
@@ -180,7 +209,9 @@ async def run(plan: Plan, out: Path, options: RunOptions, *, resume: bool = Fals
         from mhrc.eval.cluster import RayExecutor, shared
 
         traces = shared(out) if options.shared_out else None
-        executor = RayExecutor(options.ray, concurrency=options.concurrency or 1, llm=plan.spec.llm is not None, traces=traces)
+        executor = RayExecutor(
+            options.ray, concurrency=options.concurrency or 1, llm=plan.spec.llm is not None, traces=traces
+        )
     else:
         from mhrc.eval.pool import PoolExecutor
 
@@ -192,15 +223,30 @@ async def run(plan: Plan, out: Path, options: RunOptions, *, resume: bool = Fals
 def _row(plan: Plan, job: Job, res: EpisodeResult, scored: Scored, out: Path) -> EvalRow:
     """The row of a finished episode: the evaluation's settings, the metrics and the diagnostics."""
     spec = plan.spec
-    return EvalRow.model_validate({
-        "key": res.key, "method": spec.method, "ablation": spec.ablation, "repeat": job.repeat, "trial": job.trial,
-        **scored.metrics.as_dict(), "aids": list(spec.aids), "history_cap": spec.history_cap, "mode": spec.mode,
-        "max_tokens": spec.max_tokens if spec.llm else None, "llm_seed": spec.llm_seed, "schedule": spec.schedule,
-        "time_scale": spec.time_scale, "scenario": plan.scenario, "scenario_sha256": plan.scenario_sha256,
-        "prompts": spec.prompts, "base_url": spec.base_url,  # whether the paper's figures may stand beside it (mhrc.eval.paper)
-        "worker": res.worker, "trace": str(scored.path.relative_to(out)),
-        **scored.diagnostics.columns(),
-    })  # fmt: skip
+    return EvalRow.model_validate(
+        {
+            "key": res.key,
+            "method": spec.method,
+            "ablation": spec.ablation,
+            "repeat": job.repeat,
+            "trial": job.trial,
+            **scored.metrics.as_dict(),
+            "aids": list(spec.aids),
+            "history_cap": spec.history_cap,
+            "mode": spec.mode,
+            "max_tokens": spec.max_tokens if spec.llm else None,
+            "llm_seed": spec.llm_seed,
+            "schedule": spec.schedule,
+            "time_scale": spec.time_scale,
+            "scenario": plan.scenario,
+            "scenario_sha256": plan.scenario_sha256,
+            "prompts": spec.prompts,
+            "base_url": spec.base_url,  # whether the paper's figures may stand beside it (mhrc.eval.paper)
+            "worker": res.worker,
+            "trace": str(scored.path.relative_to(out)),
+            **scored.diagnostics.columns(),
+        }
+    )
 
 
 async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progress: ProgressHook | None) -> list[Row]:
@@ -233,7 +279,9 @@ async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progre
             else:
                 m = scored.metrics
                 if m.invalid_code in RETRIED and attempts[res.key] <= RETRIES:
-                    log.warning("episode invalid, running it again", key=res.key, code=m.invalid_code, reason=m.invalid_reason)
+                    log.warning(
+                        "episode invalid, running it again", key=res.key, code=m.invalid_code, reason=m.invalid_reason
+                    )
                     return job, False, None
                 write_episode_report(scored)
         if scored is None:

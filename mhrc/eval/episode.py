@@ -21,14 +21,13 @@ from typing import Any
 import structlog
 from pydantic import BaseModel, ConfigDict
 
-from mhrc.run import malloc as memory
 from mhrc.core.bus import Bus, Sample
-from mhrc.core.keys import new_run_id
+from mhrc.core.keys import Keys, new_run_id
+from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
+from mhrc.run import malloc as memory
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.run.serve import EventHook
-from mhrc.core.keys import Keys
-from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 
 log = structlog.get_logger("mhrc.eval")
 
@@ -63,7 +62,9 @@ class EpisodeResult(BaseModel):
     trace_z: bytes = b""
     trace_file: str | None = None  # written there by the worker (--shared-out): nothing to carry back
     error: str | None = None
-    error_code: WorkerFailure | None = None  # what ended the episode outside it, for programs (`error` says it for people)
+    error_code: WorkerFailure | None = (
+        None  # what ended the episode outside it, for programs (`error` says it for people)
+    )
     fatal: bool = False  # the error will recur in every episode (bad credentials, no such model): stop the evaluation
 
 
@@ -96,7 +97,9 @@ def watch_start(on_start: Any) -> EventHook:
     return observe
 
 
-async def run_job(job: Job, worker: str, *, observe: EventHook | None = None, trace_dest: Path | None = None) -> EpisodeResult:
+async def run_job(
+    job: Job, worker: str, *, observe: EventHook | None = None, trace_dest: Path | None = None
+) -> EpisodeResult:
     """Run one episode in this process; never raises but for cancellation. With `trace_dest`
     (a shared --out) the trace is written there and only its path goes back."""
     with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
@@ -118,6 +121,8 @@ async def run_job(job: Job, worker: str, *, observe: EventHook | None = None, tr
             from mhrc.agents.llm import LLMFatalError
 
             log.warning("episode failed", key=job.key, error=str(exc))
-            return EpisodeResult(key=job.key, worker=worker, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError))
+            return EpisodeResult(
+                key=job.key, worker=worker, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError)
+            )
         finally:
             memory.release()  # a worker runs hundreds of episodes: give back what this one freed

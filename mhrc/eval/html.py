@@ -28,7 +28,15 @@ from mhrc.viewer.wording import diagnostic_label, partial_success
 
 PLOTTED_DIAGNOSTICS = tuple(
     (name, diagnostic_label(name))
-    for name in ("parse_failures", "hallucinations", "not_capable", "rejected", "failed", "repeated_failures", "waits_with_pending")
+    for name in (
+        "parse_failures",
+        "hallucinations",
+        "not_capable",
+        "rejected",
+        "failed",
+        "repeated_failures",
+        "waits_with_pending",
+    )
 )  # labelled as in every report (mhrc.core.diagnostics.LABELS)
 STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 80em; padding: 0 1em; color: #222; }
@@ -59,7 +67,12 @@ def _svg(fig: Any) -> str:
 
     buf = io.StringIO()
     with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": "mhrc"}):  # text as text; stable ids
-        fig.savefig(buf, format="svg", bbox_inches="tight", metadata={"Date": None, "Creator": None, "Format": None, "Type": None})
+        fig.savefig(
+            buf,
+            format="svg",
+            bbox_inches="tight",
+            metadata={"Date": None, "Creator": None, "Format": None, "Type": None},
+        )
     text = buf.getvalue()
     return text[text.index("<svg") :]
 
@@ -105,7 +118,14 @@ def ts_against_bound(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
     fig = _figure(5.5, 4.0)
     ax = fig.add_subplot()
     for k, (setting, bucket) in enumerate(group(have, *SETTING).items()):
-        ax.scatter([r["lower_bound"] for r in bucket], [r["temporal_steps"] for r in bucket], s=18, alpha=0.7, color=f"C{k % 10}", label=_short(setting))
+        ax.scatter(
+            [r["lower_bound"] for r in bucket],
+            [r["temporal_steps"] for r in bucket],
+            s=18,
+            alpha=0.7,
+            color=f"C{k % 10}",
+            label=_short(setting),
+        )
     top = max(max(r["lower_bound"], r["temporal_steps"]) for r in have) + 1
     ax.plot([0, top], [0, top], color="#888", linewidth=1, linestyle=":", label="TS = TS*")
     ax.set(xlabel="lower bound TS*", ylabel="TS", xlim=(0, top), ylim=(0, top * 1.05))
@@ -124,9 +144,19 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
     width = 0.8 / len(stats)
     for k, (setting, d) in enumerate(stats):
         xs = [i + k * width for i in range(len(PLOTTED_DIAGNOSTICS))]
-        ax.bar(xs, [d["mean"][name] or 0.0 for name, _ in PLOTTED_DIAGNOSTICS], width=width, color=f"C{k % 10}",
-               label=f"{_short(setting)} ({d['known']} episodes)")  # fmt: skip
-    ax.set_xticks([i + 0.4 - width / 2 for i in range(len(PLOTTED_DIAGNOSTICS))], [label for _, label in PLOTTED_DIAGNOSTICS], rotation=25, ha="right")
+        ax.bar(
+            xs,
+            [d["mean"][name] or 0.0 for name, _ in PLOTTED_DIAGNOSTICS],
+            width=width,
+            color=f"C{k % 10}",
+            label=f"{_short(setting)} ({d['known']} episodes)",
+        )
+    ax.set_xticks(
+        [i + 0.4 - width / 2 for i in range(len(PLOTTED_DIAGNOSTICS))],
+        [label for _, label in PLOTTED_DIAGNOSTICS],
+        rotation=25,
+        ha="right",
+    )
     ax.set(ylabel="mean per episode")
     ax.legend(fontsize=7, loc="best")
     return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.core.diagnostics)")]
@@ -137,27 +167,47 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
 
 def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> str:
     dynamic = any(r.get("recovery") for r in rows)  # a scenario ran: each event's recovery (mhrc.core.metrics)
-    head = ["episode", "setting", "valid", "Succ", "PS", "TS", "TS*", *(["recovery (steps)"] if dynamic else []), "report"]
+    head = [
+        "episode",
+        "setting",
+        "valid",
+        "Succ",
+        "PS",
+        "TS",
+        "TS*",
+        *(["recovery (steps)"] if dynamic else []),
+        "report",
+    ]
     out = ["<table><thead><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr></thead><tbody>"]
     order = sorted(range(len(rows)), key=lambda i: (setting_label(setting_of(rows[i])), str(rows[i].get("key"))))
     for i in order:
         r, link = rows[i], links[i]
         cells = [
-            html.escape(str(r.get("key", ""))), html.escape(setting_label(setting_of(r))), "yes" if is_valid(r) else "no",
-            "1" if r.get("success") else "0", html.escape(partial_success(r.get("partial_success", 0.0), r.get("placed"), r.get("total"))),
+            html.escape(str(r.get("key", ""))),
+            html.escape(setting_label(setting_of(r))),
+            "yes" if is_valid(r) else "no",
+            "1" if r.get("success") else "0",
+            html.escape(partial_success(r.get("partial_success", 0.0), r.get("placed"), r.get("total"))),
             str(r.get("temporal_steps", "")),
             "" if r.get("lower_bound") is None else str(r["lower_bound"]),
             *([html.escape(_recovery_cell(r.get("recovery") or []))] if dynamic else []),
             f'<a href="{html.escape(link)}">{html.escape(link)}</a>' if link else "",
-        ]  # fmt: skip
+        ]
         out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     return "\n".join(out + ["</tbody></table>"])
 
 
 def _recovery_cell(recovery: list[dict[str, Any]]) -> str:
     """Each event as kind@tick and its steps to recover (- never, skipped when it did not apply)."""
+
     def one(e: dict[str, Any]) -> str:
-        steps = "skipped" if not e.get("applied") else "-" if e.get("ticks_to_recover") is None else str(e["ticks_to_recover"])
+        steps = (
+            "skipped"
+            if not e.get("applied")
+            else "-"
+            if e.get("ticks_to_recover") is None
+            else str(e["ticks_to_recover"])
+        )
         return f"{e.get('kind')}@{e.get('tick')}: {steps}"
 
     return ", ".join(one(e) for e in recovery)
@@ -184,22 +234,33 @@ def html_summary(
     return page(Summary.of(rows, resamples=resamples, seed=seed), links, title=title)
 
 
-def page(summary: Summary, links: Sequence[str | None], *, title: str = "Evaluation summary", md: str | None = None) -> str:
+def page(
+    summary: Summary, links: Sequence[str | None], *, title: str = "Evaluation summary", md: str | None = None
+) -> str:
     """The page: summary.md's tables as HTML (`md`, when the caller rendered it already), the plots,
     and the episodes with their links (`links[i]` is summary.rows[i]'s)."""
     rows, valid = summary.rows, summary.valid
     plots = success_by_objects(valid) + ts_against_bound(valid) + diagnostics_by_setting(valid) if valid else []
-    figures = "\n".join(f"<figure>{svg}<figcaption>{html.escape(caption)}</figcaption></figure>" for svg, caption in plots)
+    figures = "\n".join(
+        f"<figure>{svg}<figcaption>{html.escape(caption)}</figcaption></figure>" for svg, caption in plots
+    )
     body = markdown_html(markdown(summary) if md is None else md)
-    return "\n".join([
-        "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">', f"<title>{html.escape(title)}</title>",
-        f"<style>{STYLE}</style></head><body>",
-        body,
-        "<h2>Plots</h2>", f'<div class="plots">{figures or "<p>No valid episodes to plot.</p>"}</div>',
-        "<h2>Episodes</h2>", "<p>Each episode's report (written by <code>mhrc show</code>) is linked beside it.</p>",
-        _episode_table(rows, links),
-        "</body></html>", "",
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            "<!DOCTYPE html>",
+            '<html lang="en"><head><meta charset="utf-8">',
+            f"<title>{html.escape(title)}</title>",
+            f"<style>{STYLE}</style></head><body>",
+            body,
+            "<h2>Plots</h2>",
+            f'<div class="plots">{figures or "<p>No valid episodes to plot.</p>"}</div>',
+            "<h2>Episodes</h2>",
+            "<p>Each episode's report (written by <code>mhrc show</code>) is linked beside it.</p>",
+            _episode_table(rows, links),
+            "</body></html>",
+            "",
+        ]
+    )
 
 
 def links_of(rows: Sequence[dict[str, Any]], base: Path, page_dir: Path) -> list[str | None]:

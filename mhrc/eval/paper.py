@@ -19,7 +19,6 @@ from typing import Any
 
 from mhrc.agents.llm.model_spec import PROVIDERS, LLMSpecError, robot_specs, split_url
 
-
 PAPER_OBJECTS = (3, 4, 5, 6)  # one episode per object count per scene
 
 
@@ -70,7 +69,12 @@ PAPER_FIGURES: dict[tuple[str, str], dict[str, Figures]] = {
 }
 
 
-PAPER_ABLATION_NAMES = {"none": "", "no_feedback": "w/o feedback", "no_history": "w/o history", "no_mobile": "w/o mobile robot"}
+PAPER_ABLATION_NAMES = {
+    "none": "",
+    "no_feedback": "w/o feedback",
+    "no_history": "w/o history",
+    "no_mobile": "w/o mobile robot",
+}
 
 
 PAPER_SCHEDULE = "sequential"  # Algorithm 1; rows written before the field ran lockstep
@@ -93,7 +97,9 @@ OPENAI_MODELS: tuple[tuple[str, re.Pattern[str]], ...] = (
     ("GPT-4o", re.compile(r"gpt-4o(?:-\d{4}-\d{2}-\d{2})?")),
     ("GPT-3.5-turbo", re.compile(r"gpt-3\.5-turbo(?:-\d{4})?")),
 )
-OPEN_WEIGHTS: dict[str, tuple[str, re.Pattern[str]]] = {  # provider -> (the paper's name, the model names that pin its weights)
+OPEN_WEIGHTS: dict[
+    str, tuple[str, re.Pattern[str]]
+] = {  # provider -> (the paper's name, the model names that pin its weights)
     "vllm": ("Llama-3.1-8B", re.compile(r"meta-llama/(?:meta-)?llama-3\.1-8b-instruct", re.IGNORECASE)),
     "ollama": ("Llama-3.1-8B", re.compile(r"llama3\.1:8b-instruct-fp16")),
 }
@@ -188,7 +194,9 @@ class Mismatch:
             case Why.SCENARIO:
                 return f"scenario {self.value} (the paper's episodes are static)"
             case Why.SCHEDULE:
-                return f"the {self.value} schedule (the paper's robots act one after another: --schedule {PAPER_SCHEDULE})"
+                return (
+                    f"the {self.value} schedule (the paper's robots act one after another: --schedule {PAPER_SCHEDULE})"
+                )
             case Why.SETTING:
                 return f"{self.field} {self.value}, not the default {self.default}"
             case Why.NO_FIGURES:
@@ -318,7 +326,9 @@ def grid_problem(rows: list[dict[str, Any]]) -> str | None:
     return None
 
 
-def paper_match(setting: Mapping[str, Any], task: str, rows: list[dict[str, Any]], defaults: Mapping[str, Any]) -> PaperMatch:
+def paper_match(
+    setting: Mapping[str, Any], task: str, rows: list[dict[str, Any]], defaults: Mapping[str, Any]
+) -> PaperMatch:
     """The paper's figures for this setting (field name -> value) and task when every row's team
     and the configuration match; otherwise a PaperMatch without figures and every reason:
     the team's (the first row whose team differs from the paper's) and the setting's, then

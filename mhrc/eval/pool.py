@@ -36,7 +36,8 @@ from mhrc.run.lifeline import child_env
 
 log = structlog.get_logger("mhrc.eval")
 
-THREADS_PER_EPISODE = 6  # to_thread calls one episode may have in flight: its world's sim, its four sessions opening or closing (a query holds none: core/bus.py)
+# to_thread calls one episode may have in flight: its world's sim, its four sessions opening or closing (a query holds none: core/bus.py)
+THREADS_PER_EPISODE = 6
 STARTS_AT_ONCE = 4  # episodes of one worker building their scene and attaching their agents at the same time
 LINE_LIMIT = 1 << 30  # a result line carries a whole trace
 RESPAWNS_PER_WORKER = 3  # workers that die before the grid is done are replaced this many times per --workers
@@ -55,7 +56,9 @@ async def _serve(concurrency: int, results: IO[bytes]) -> None:
     if concurrency > 1:
         # asyncio's default pool (cores + 4 threads) is too small for several episodes starting at
         # once: each builds its scene and opens four sessions on threads
-        loop.set_default_executor(ThreadPoolExecutor(max_workers=THREADS_PER_EPISODE * concurrency + 4, thread_name_prefix="mhrc-worker"))
+        loop.set_default_executor(
+            ThreadPoolExecutor(max_workers=THREADS_PER_EPISODE * concurrency + 4, thread_name_prefix="mhrc-worker")
+        )
     reader = asyncio.StreamReader(limit=LINE_LIMIT)
     await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin)
     starting = asyncio.Semaphore(STARTS_AT_ONCE)
@@ -155,11 +158,22 @@ class PoolExecutor:
         return await self._results.get()
 
     async def _spawn(self) -> _Worker:
-        cmd = [sys.executable, "-m", "mhrc.eval.pool", "--concurrency", str(self.concurrency), "--log-level", self.log_level]
+        cmd = [
+            sys.executable,
+            "-m",
+            "mhrc.eval.pool",
+            "--concurrency",
+            str(self.concurrency),
+            "--log-level",
+            self.log_level,
+        ]
         proc = await asyncio.create_subprocess_exec(
-            *cmd, stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, limit=LINE_LIMIT,
+            *cmd,
+            stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE,
+            limit=LINE_LIMIT,
             env=child_env(dict(os.environ, PYTHONUNBUFFERED="1")),
-        )  # fmt: skip
+        )
         w = _Worker(proc)
         w.reader = asyncio.create_task(self._read(w), name=f"pool-reader-{proc.pid}")
         self._pool.append(w)
@@ -182,7 +196,9 @@ class PoolExecutor:
         self._pool.remove(w)
         for job in w.jobs.values():  # died with these unfinished
             why = f"the worker process ended (exit {code}) during the episode"
-            self._results.put_nowait(EpisodeResult(key=job.key, worker=f"pid {w.proc.pid}", error=why, error_code=WorkerFailure.WORKER_DIED))
+            self._results.put_nowait(
+                EpisodeResult(key=job.key, worker=f"pid {w.proc.pid}", error=why, error_code=WorkerFailure.WORKER_DIED)
+            )
         w.jobs.clear()
         if not self._stopping:
             await self._dispatch()
@@ -195,9 +211,13 @@ class PoolExecutor:
         """Hand queued jobs to workers with a free slot, starting workers up to `workers`."""
         while self._queue and not self._stopping:
             free = [
-                w for w in self._pool
-                if len(w.jobs) < self.concurrency and w.proc.returncode is None and w.proc.stdin is not None and not w.proc.stdin.is_closing()
-            ]  # fmt: skip
+                w
+                for w in self._pool
+                if len(w.jobs) < self.concurrency
+                and w.proc.returncode is None
+                and w.proc.stdin is not None
+                and not w.proc.stdin.is_closing()
+            ]
             if free:
                 w = min(free, key=lambda x: len(x.jobs))
             elif len(self._pool) < self.workers and self._spawned < self.workers + self._respawns:
@@ -205,7 +225,14 @@ class PoolExecutor:
             elif not self._pool:  # every worker died, again and again: give the jobs back as errors
                 while self._queue:
                     job = self._queue.popleft()
-                    self._results.put_nowait(EpisodeResult(key=job.key, worker="", error="the worker processes keep dying; see their errors above", error_code=WorkerFailure.WORKERS_KEEP_DYING))
+                    self._results.put_nowait(
+                        EpisodeResult(
+                            key=job.key,
+                            worker="",
+                            error="the worker processes keep dying; see their errors above",
+                            error_code=WorkerFailure.WORKERS_KEEP_DYING,
+                        )
+                    )
                 return
             else:
                 return

@@ -28,9 +28,15 @@ Row = dict[str, Any]  # a row as summaries take it: EvalRow.record()
 
 # what a row written before a setting field existed ran with (noise: see old_noise)
 OLD_MEANING: dict[str, Any] = {
-    "fidelity": UNRECORDED, "history_cap": None, "horizon": None, "mode": "free", "schedule": "lockstep", "scenario": None,
-    "prompts": None, "base_url": None,
-}  # fmt: skip
+    "fidelity": UNRECORDED,
+    "history_cap": None,
+    "horizon": None,
+    "mode": "free",
+    "schedule": "lockstep",
+    "scenario": None,
+    "prompts": None,
+    "base_url": None,
+}
 
 
 def old_noise(aids: Any) -> str:
@@ -198,7 +204,9 @@ def read_manifest(path: Path) -> EvalManifest:
         identity = EvalIdentity.model_validate(raw.get("identity") or {})
     except (OSError, ValueError, AttributeError) as exc:
         why = exc.errors()[0]["msg"] if isinstance(exc, ValidationError) else str(exc)
-        raise ConfigError(f"--out: {path} is not the manifest of an mhrc evaluation ({why}); choose another --out") from None
+        raise ConfigError(
+            f"--out: {path} is not the manifest of an mhrc evaluation ({why}); choose another --out"
+        ) from None
     try:
         spec = EvalSpec.model_validate(raw.get("spec"))
     except ValidationError:

@@ -29,18 +29,43 @@ import structlog
 
 from mhrc.core.metrics import summarize
 from mhrc.eval.paper import PaperMatch, paper_cell
-from mhrc.eval.rows import CI_METRICS, CI_SEED, RESAMPLES, SETTING, group, is_valid, order_key, setting_label, setting_of
+from mhrc.eval.rows import (
+    CI_METRICS,
+    CI_SEED,
+    RESAMPLES,
+    SETTING,
+    group,
+    is_valid,
+    order_key,
+    setting_label,
+    setting_of,
+)
 from mhrc.eval.summary import Summary
-
 
 log = structlog.get_logger("mhrc.eval.report")
 
 
 COLUMNS = (
-    "episodes", "succ", "ps", "ts", "ts_bound", "as_ticks", "as", "as_per_robot", "messages", "llm_calls", "prompt_tokens",
-    "completion_tokens", "parse_failures", "llm_unreachable", "rejected_actions", "failed_actions", "wall_time",
-    "recovery_ticks", "unrecovered",  # a scenario's (mhrc.core.metrics); empty for static episodes
-)  # fmt: skip
+    "episodes",
+    "succ",
+    "ps",
+    "ts",
+    "ts_bound",
+    "as_ticks",
+    "as",
+    "as_per_robot",
+    "messages",
+    "llm_calls",
+    "prompt_tokens",
+    "completion_tokens",
+    "parse_failures",
+    "llm_unreachable",
+    "rejected_actions",
+    "failed_actions",
+    "wall_time",
+    "recovery_ticks",
+    "unrecovered",  # a scenario's (mhrc.core.metrics); empty for static episodes
+)
 
 
 AS_NOTE = (
@@ -157,33 +182,56 @@ def markdown(summary: Summary) -> str:
         family = (fam[0], "*", *fam[1:])
         lines += matrix(f"Table II: ablations of {setting_label(family, ablation=False)}", [(s, s[1]) for s in mine])
 
-    lines += ["## Per setting, with 95% confidence intervals", "",
-              f"Mean [95% percentile bootstrap interval, {resamples} resamples, seed {seed}] over the valid episodes.", ""]  # fmt: skip
+    lines += [
+        "## Per setting, with 95% confidence intervals",
+        "",
+        f"Mean [95% percentile bootstrap interval, {resamples} resamples, seed {seed}] over the valid episodes.",
+        "",
+    ]
     for setting in settings:
         mine_tasks = [t for t in tasks if (setting, t) in cells]
         shown = [matches[(setting, t)] for t in mine_tasks]
         paper_col = any(m.figures is not None for m in shown)
         scenario = setting[SETTING.index("scenario")] is not None  # a recovery column only where a scenario ran
-        head = ("| task | episodes | Succ | PS | TS | AS | TS* | AS sum | AS/robot |" + (" recovery (steps) |" if scenario else "")
-                + (" paper Succ / PS / TS / AS |" if paper_col else ""))
-        lines += [f"### {setting_label(setting)}", "", *([RECOVERY_NOTE, ""] if scenario else []), head, "| --- |" + " --- |" * (head.count("|") - 2)]
+        head = (
+            "| task | episodes | Succ | PS | TS | AS | TS* | AS sum | AS/robot |"
+            + (" recovery (steps) |" if scenario else "")
+            + (" paper Succ / PS / TS / AS |" if paper_col else "")
+        )
+        lines += [
+            f"### {setting_label(setting)}",
+            "",
+            *([RECOVERY_NOTE, ""] if scenario else []),
+            head,
+            "| --- |" + " --- |" * (head.count("|") - 2),
+        ]
         for t, m in zip(mine_tasks, shown):
             s = cells[(setting, t)]
             bound = f"{s['ts_bound']:.1f}" if s.get("ts_bound") is not None else ""
-            row = (f"| {t} | {s['episodes']} | {_ci(s, 'succ', 2)} | {_ci(s, 'ps', 2)} | {_ci(s, 'ts', 1)} | {_ci(s, 'as_ticks', 1)} | {bound} | "
-                   f"{_ci(s, 'as', 1)} | {s['as_per_robot']:.1f} |" + (f" {_recovery(s)} |" if scenario else ""))
+            row = (
+                f"| {t} | {s['episodes']} | {_ci(s, 'succ', 2)} | {_ci(s, 'ps', 2)} | {_ci(s, 'ts', 1)} | {_ci(s, 'as_ticks', 1)} | {bound} | "
+                f"{_ci(s, 'as', 1)} | {s['as_per_robot']:.1f} |" + (f" {_recovery(s)} |" if scenario else "")
+            )
             if paper_col:
                 row += f" {paper_cell(m.figures)} ({m.title}, {m.table}) |" if m.figures is not None else " |"
             lines.append(row)
         team = why_no_paper(shown)
-        notes = [f"- {t}: not set beside the {m.title} figures: {m.why}" for t, m in zip(mine_tasks, shown)
-                 if m.figures is None and (team is None or all(x.per_task for x in m.mismatches))]  # fmt: skip
+        notes = [
+            f"- {t}: not set beside the {m.title} figures: {m.why}"
+            for t, m in zip(mine_tasks, shown)
+            if m.figures is None and (team is None or all(x.per_task for x in m.mismatches))
+        ]
         said = ([team] if team else []) + notes
         lines += ([""] + said if said else []) + [""]
 
     if any(r.get("llm_calls") for r in valid):
         head = "| setting | task | LLM steps | unparsed replies | unreachable steps | rejected actions | prompt tokens | completion tokens |"
-        lines += ["## LLM failures and cost (means per episode)", "", head, "| --- |" + " --- |" * (head.count("|") - 2)]
+        lines += [
+            "## LLM failures and cost (means per episode)",
+            "",
+            head,
+            "| --- |" + " --- |" * (head.count("|") - 2),
+        ]
         for (setting, t), s in cells.items():
             lines.append(
                 f"| {setting_label(setting)} | {t} | {s['llm_calls']:.1f} | {s['parse_failures']:.2f} | {s['llm_unreachable']:.2f} | "
@@ -192,22 +240,37 @@ def markdown(summary: Summary) -> str:
         lines.append("")
     lines += diagnostics_markdown(summary)
     for key, title in (("scene", "scene"), ("n_objects", "object count")):
-        lines += [f"## By {title}", "", f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS sum, AS/robot) | episodes |",
-                  "| --- | --- | --- | --- | --- | --- |"]  # fmt: skip
+        lines += [
+            f"## By {title}",
+            "",
+            f"| method | ablation | fidelity | {key} | Succ / PS / TS (TS*) / AS (AS sum, AS/robot) | episodes |",
+            "| --- | --- | --- | --- | --- | --- |",
+        ]
         for (*fields, v), bucket in group(valid, *SETTING, key).items():
             setting = tuple(fields)
             s = summarize(bucket)
             m, a, fid = (setting[SETTING.index(f)] for f in ("method", "ablation", "fidelity"))
-            extra = "".join(f" · {x}" for x in setting_label(setting).split(" · ")[3:])  # mode, schedule, cap, horizon, scenario
+            extra = "".join(
+                f" · {x}" for x in setting_label(setting).split(" · ")[3:]
+            )  # mode, schedule, cap, horizon, scenario
             lines.append(f"| {m}{extra} | {a} | {fid} | {v} | {_cell(s)} | {s['episodes']} |")
         lines.append("")
     return "\n".join(lines)
 
 
 DIAG_COLUMNS = (
-    "parse_failures", "hallucinations", "not_capable", "rejected", "failed", "repeated_failures", "waits",
-    "waits_with_pending", "messages_sent", "messages_read", "steps_above_bound",
-)  # fmt: skip
+    "parse_failures",
+    "hallucinations",
+    "not_capable",
+    "rejected",
+    "failed",
+    "repeated_failures",
+    "waits",
+    "waits_with_pending",
+    "messages_sent",
+    "messages_read",
+    "steps_above_bound",
+)
 
 
 DIAG_NOTE = (
@@ -255,8 +318,11 @@ def diagnostics_markdown(summary: Summary) -> list[str]:
                 f"{f('steps_above_bound', 1)} |"
             )
         if unknown:
-            lines += ["", f"{unknown} episode(s) of this setting were recorded before diagnostics existed: their diagnostics "
-                          "are unknown (n/a), left out of these means, not counted as zero."]  # fmt: skip
+            lines += [
+                "",
+                f"{unknown} episode(s) of this setting were recorded before diagnostics existed: their diagnostics "
+                "are unknown (n/a), left out of these means, not counted as zero.",
+            ]
         lines.append("")
     return lines
 
@@ -272,15 +338,46 @@ def csv_text(summary: Summary) -> str:
     buf = io.StringIO()
     w = csv.writer(buf)
     ci_cols = [f"{m}_{e}" for m in CI_METRICS for e in ("lo", "hi")]
-    diag_cols = ["diag_episodes", *(f"diag_{c}" for c in DIAG_COLUMNS)]  # means over the rows with diagnostics; empty: unknown
-    w.writerow([*SETTING, "task", *COLUMNS, *ci_cols, "invalid_left_out", "paper_model", "paper_succ", "paper_ps", "paper_ts", "paper_as", *diag_cols])
+    diag_cols = [
+        "diag_episodes",
+        *(f"diag_{c}" for c in DIAG_COLUMNS),
+    ]  # means over the rows with diagnostics; empty: unknown
+    w.writerow(
+        [
+            *SETTING,
+            "task",
+            *COLUMNS,
+            *ci_cols,
+            "invalid_left_out",
+            "paper_model",
+            "paper_succ",
+            "paper_ps",
+            "paper_ts",
+            "paper_as",
+            *diag_cols,
+        ]
+    )
     invalid = summary.invalid
     for setting, task in summary.cells:
         s = summary.stats[(setting, task)]
         m = summary.matches[(setting, task)]
         paper: list[Any] = [m.model, *m.figures] if m.figures is not None else ["", "", "", "", ""]
-        cis = ["" if s[f"{name}_ci"] is None else round(x, 4) for name in CI_METRICS for x in (s[f"{name}_ci"] or (0.0, 0.0))]
+        cis = [
+            "" if s[f"{name}_ci"] is None else round(x, 4)
+            for name in CI_METRICS
+            for x in (s[f"{name}_ci"] or (0.0, 0.0))
+        ]
         d = summary.diagnostics[(setting, task)]
         diag = [d["known"], *("" if d["mean"][c] is None else d["mean"][c] for c in DIAG_COLUMNS)]
-        w.writerow([*("" if x is None else x for x in setting), task, *(s[c] for c in COLUMNS), *cis, invalid[(setting, task)], *paper, *diag])
+        w.writerow(
+            [
+                *("" if x is None else x for x in setting),
+                task,
+                *(s[c] for c in COLUMNS),
+                *cis,
+                invalid[(setting, task)],
+                *paper,
+                *diag,
+            ]
+        )
     return buf.getvalue()

@@ -11,9 +11,10 @@ import numpy as np
 import structlog
 
 from mhrc.core.metrics import summarize
-from mhrc.eval.records import OLD_MEANING, old_noise
-from mhrc.eval.records import merge_runs as merge_runs, read_rows as read_rows  # where callers have always found them
 from mhrc.eval.paper import PAPER_HORIZON, PAPER_SCHEDULE
+from mhrc.eval.records import OLD_MEANING, old_noise
+from mhrc.eval.records import merge_runs as merge_runs  # where callers have always found them
+from mhrc.eval.records import read_rows as read_rows
 
 log = structlog.get_logger("mhrc.eval.rows")
 
@@ -26,7 +27,13 @@ CI_SEED = 0  # every interval is drawn with this seed: the same rows give the sa
 CI_LEVEL = 0.95
 
 
-CI_METRICS = {"succ": "success", "ps": "partial_success", "ts": "temporal_steps", "as_ticks": "active_ticks", "as": "action_steps"}
+CI_METRICS = {
+    "succ": "success",
+    "ps": "partial_success",
+    "ts": "temporal_steps",
+    "as_ticks": "active_ticks",
+    "as": "action_steps",
+}
 
 
 # noise: the world's motion noise, on (the calibration) or off (--noise off, or the exact_motion aid; mhrc.core.fidelity);
@@ -38,7 +45,9 @@ SETTING = ("method", "ablation", "fidelity", "noise", "history_cap", "horizon", 
 
 def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
     """What a row's numbers depend on besides the episode; rows written before a field existed get its old meaning."""
-    values = {k: row.get(k, OLD_MEANING.get(k)) for k in SETTING}  # rows read from a file are upgraded already (read_row)
+    values = {
+        k: row.get(k, OLD_MEANING.get(k)) for k in SETTING
+    }  # rows read from a file are upgraded already (read_row)
     if values["noise"] is None:
         values["noise"] = old_noise(row.get("aids"))
     if values["scenario"] is not None and row.get("scenario_sha256"):
@@ -56,7 +65,9 @@ def order_key(key: Iterable[Any]) -> tuple[str, ...]:
 
 def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
     method, abl, fidelity, noise, cap, horizon, mode, schedule, scenario = setting
-    parts = [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["noise off"] if noise == "off" else [])
+    parts = (
+        [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["noise off"] if noise == "off" else [])
+    )
     parts += ["structured decisions"] if mode == "structured" else []
     if schedule != PAPER_SCHEDULE:
         parts.append(f"{schedule} schedule")

@@ -101,11 +101,20 @@ class EvalSpec(BaseModel):
     def identity(self, scenario_sha256: str | None = None) -> EvalIdentity:
         """This spec's identity; `scenario_sha256` when the caller has read the scenario already."""
         return EvalIdentity(
-            method=self.method, ablation=self.ablation, horizon=self.horizon, fidelity=self.fidelity, noise=self.noise,
-            history_cap=self.history_cap, prompts=self.prompts, mode=self.mode,
-            max_tokens=self.max_tokens if self.llm else None, llm_seed=self.llm_seed, schedule=self.schedule,
-            time_scale=self.time_scale, scenario=scenario_sha256 if scenario_sha256 is not None else self.scenario()[1],
-        )  # fmt: skip
+            method=self.method,
+            ablation=self.ablation,
+            horizon=self.horizon,
+            fidelity=self.fidelity,
+            noise=self.noise,
+            history_cap=self.history_cap,
+            prompts=self.prompts,
+            mode=self.mode,
+            max_tokens=self.max_tokens if self.llm else None,
+            llm_seed=self.llm_seed,
+            schedule=self.schedule,
+            time_scale=self.time_scale,
+            scenario=scenario_sha256 if scenario_sha256 is not None else self.scenario()[1],
+        )
 
     def seed(self, repeat: int, trial: int) -> int:
         """The episode seed of a trial in a repeat: distinct for every (repeat, trial)."""
@@ -114,16 +123,29 @@ class EvalSpec(BaseModel):
     def episode_values(self, task: str, scene: str, n_objects: int) -> dict[str, object]:
         """The EpisodeConfig fields of a cell of the grid (seed 0; no run, port or trace: the process that runs it picks those)."""
         cfg: dict[str, object] = {
-            "task": task, "scene": scene, "seed": 0, "n_objects": n_objects, "horizon": self.horizon,
-            "llm": self.llm, "ablation": self.ablation, "base_url": self.base_url,
-            "llm_timeout": self.llm_timeout, "prompts": self.prompts,
-            "llm_idle_timeout": self.llm_idle_timeout, "stream": None if self.stream else False,
-            "aids": list(self.aids) or None, "noise": None if self.noise == "on" else self.noise,
+            "task": task,
+            "scene": scene,
+            "seed": 0,
+            "n_objects": n_objects,
+            "horizon": self.horizon,
+            "llm": self.llm,
+            "ablation": self.ablation,
+            "base_url": self.base_url,
+            "llm_timeout": self.llm_timeout,
+            "prompts": self.prompts,
+            "llm_idle_timeout": self.llm_idle_timeout,
+            "stream": None if self.stream else False,
+            "aids": list(self.aids) or None,
+            "noise": None if self.noise == "on" else self.noise,
             "history_cap": self.history_cap,
-            "max_tokens": self.max_tokens, "llm_seed": self.llm_seed, "structured": self.structured or None,
-            "step_deadline": self.step_deadline, "schedule": self.schedule,
-            "time_scale": self.time_scale or None, "events": self.events,
-        }  # fmt: skip
+            "max_tokens": self.max_tokens,
+            "llm_seed": self.llm_seed,
+            "structured": self.structured or None,
+            "step_deadline": self.step_deadline,
+            "schedule": self.schedule,
+            "time_scale": self.time_scale or None,
+            "events": self.events,
+        }
         return {k: v for k, v in cfg.items() if v is not None}
 
     def validate(self) -> Plan:  # type: ignore[override]  # pydantic's deprecated classmethod of the same name
@@ -143,10 +165,18 @@ class EvalSpec(BaseModel):
                         continue
                     try:
                         cells[(task, scene, n)] = EpisodeConfig.build(**self.episode_values(task, scene, n))
-                    except ConfigError as exc:  # a scenario is checked against every task and scene of the grid: say which
+                    except (
+                        ConfigError
+                    ) as exc:  # a scenario is checked against every task and scene of the grid: say which
                         raise ConfigError(f"{exc} (in {task}/{scene})" if self.events else str(exc)) from None
         scenario, sha256 = self.scenario()
-        return Plan(spec=self, jobs=tuple(self._jobs(cells)), scenario=scenario, scenario_sha256=sha256, identity=self.identity(sha256 or None))
+        return Plan(
+            spec=self,
+            jobs=tuple(self._jobs(cells)),
+            scenario=scenario,
+            scenario_sha256=sha256,
+            identity=self.identity(sha256 or None),
+        )
 
     def _jobs(self, cells: dict[tuple[str, str, int], EpisodeConfig]) -> list[Job]:
         """Repeat by repeat (a finished repeat is a whole grid), then task, scene, objects, trial."""

@@ -12,8 +12,11 @@ from mhrc.eval.report import csv_text, markdown
 from mhrc.eval.rows import CI_SEED, RESAMPLES
 from mhrc.eval.summary import Summary
 
-
-SUMMARY_FILES = ("summary.md", "summary.csv", "summary.html")  # what write_summaries writes, in the order people read them
+SUMMARY_FILES = (
+    "summary.md",
+    "summary.csv",
+    "summary.html",
+)  # what write_summaries writes, in the order people read them
 
 
 def write_summary_files(
@@ -27,10 +30,14 @@ def write_summary_files(
     return text
 
 
-def write_summaries(rows: list[dict[str, Any]], out: Path, *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str | None:
+def write_summaries(
+    rows: list[dict[str, Any]], out: Path, *, resamples: int = RESAMPLES, seed: int = CI_SEED
+) -> str | None:
     """SUMMARY_FILES in `out` (an evaluation directory, which the rows' trace paths are relative to);
     returns summary.md's text, None without rows (nothing written)."""
     if not rows:
         return None
     md, csv, html = (out / name for name in SUMMARY_FILES)
-    return write_summary_files(Summary.of(rows, resamples=resamples, seed=seed), md, csv, html, links_of(rows, out, out))
+    return write_summary_files(
+        Summary.of(rows, resamples=resamples, seed=seed), md, csv, html, links_of(rows, out, out)
+    )

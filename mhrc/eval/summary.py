@@ -42,12 +42,16 @@ class Summary:
         valid = [r for r in rows if is_valid(r)]
         cells = by_setting_task(valid)
         return cls(
-            rows=rows, valid=valid, resamples=resamples, seed=seed, cells=cells,
+            rows=rows,
+            valid=valid,
+            resamples=resamples,
+            seed=seed,
+            cells=cells,
             stats={k: cell_stats(v, resamples=resamples, seed=seed) for k, v in cells.items()},
             diagnostics={k: summarize_diagnostics(v) for k, v in cells.items()},
             matches=matches_of(cells),
             invalid=Counter((setting_of(r), r["task"]) for r in rows if not is_valid(r)),
-        )  # fmt: skip
+        )
 
     @property
     def tasks(self) -> list[str]:

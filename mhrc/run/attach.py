@@ -19,8 +19,8 @@ if TYPE_CHECKING:
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm import make_client
-from mhrc.agents.llm_policy import LLMPolicy
 from mhrc.agents.llm.local import LocalModelServer
+from mhrc.agents.llm_policy import LLMPolicy
 from mhrc.agents.replay import ReplayClient
 from mhrc.core.bus import open_client
 from mhrc.core.security import check_for
@@ -49,26 +49,33 @@ async def run_agent(
     world sees the robot vanish."""
 
     if security is not None:
-
         check_for(security, run=run, user=robot)
     async with contextlib.AsyncExitStack() as stack:
         if llm is None:
             policy = heuristic_policy(robot)
         else:
-
             if llm.startswith("replay:"):
                 policy = LLMPolicy(robot, ReplayClient(llm.removeprefix("replay:"), robot), **policy_options)  # type: ignore[assignment]
             else:
                 if llm.startswith("gguf:"):
-                    served = await stack.enter_async_context(local_models({robot: llm}, (client_options or {}).get("seed")))
+                    served = await stack.enter_async_context(
+                        local_models({robot: llm}, (client_options or {}).get("seed"))
+                    )
                     llm = served[robot] or llm  # the spec of the server now serving the file
                 client = make_client(llm, base_url=base_url, **(client_options or {}))
                 stack.push_async_callback(client.aclose)
                 policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
         bus = await open_client(connect, attach_timeout, security=security)
         try:
-            agent = RobotAgent(bus, policy, run=run, robot=robot, attach_timeout=attach_timeout, endpoint=connect,  # type: ignore[arg-type]
-                               security=security)
+            agent = RobotAgent(
+                bus,
+                policy,
+                run=run,
+                robot=robot,
+                attach_timeout=attach_timeout,
+                endpoint=connect,  # type: ignore[arg-type]
+                security=security,
+            )
             return await agent.run()
         except Exception as exc:
             if on_error is not None:
@@ -135,6 +142,13 @@ async def attach_agent(
         finally:
             await bus.close()
     return await run_agent(
-        robot, run, connect, llm=llm, base_url=base_url, client_options=client_options, attach_timeout=attach_timeout, security=security,
+        robot,
+        run,
+        connect,
+        llm=llm,
+        base_url=base_url,
+        client_options=client_options,
+        attach_timeout=attach_timeout,
+        security=security,
         **policy_options,
-    )  # fmt: skip
+    )

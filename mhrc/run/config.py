@@ -5,17 +5,23 @@ from __future__ import annotations
 
 import socket
 from collections.abc import Sequence
-from typing import Any, Literal
 from pathlib import Path
+from typing import Any, Literal
 
 import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from mhrc.agents.llm import (
+    DEFAULT_IDLE_TIMEOUT,
+    DEFAULT_MAX_TOKENS,
+    DEFAULT_TIMEOUT,
+    check_spec,
+    robot_specs,
+    split_url,
+)
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse_aids, parse_noise
 from mhrc.core.keys import check_id, new_run_id
-
-from mhrc.agents.llm import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_TOKENS, DEFAULT_TIMEOUT, check_spec, robot_specs, split_url
 from mhrc.core.security import Credentials, check_for, load, make_run_credentials
 from mhrc.core.trace import unwritable
 from mhrc.world.presence import TOKEN_DEADLINE
@@ -71,28 +77,64 @@ class EpisodeConfig(BaseModel):
     gui: bool = False
     start_timeout: float | None = Field(None, gt=0)
     tick_delay: float = Field(0.0, ge=0)
-    schedule: Literal["sequential", "lockstep", "async"] = Field("lockstep", description="the world's time policy (docs/architecture.md, \"Time\")")
-    time_scale: float = Field(0.0, ge=0, allow_inf_nan=False, description="async: simulated seconds per wall second; 0: as fast as possible")
-    token_deadline: float = Field(TOKEN_DEADLINE, gt=0, allow_inf_nan=False, description="seconds an attached agent has to show its liveliness "
-                                  "token before the world detaches it (world/presence.py)")
+    schedule: Literal["sequential", "lockstep", "async"] = Field(
+        "lockstep", description='the world\'s time policy (docs/architecture.md, "Time")'
+    )
+    time_scale: float = Field(
+        0.0, ge=0, allow_inf_nan=False, description="async: simulated seconds per wall second; 0: as fast as possible"
+    )
+    token_deadline: float = Field(
+        TOKEN_DEADLINE,
+        gt=0,
+        allow_inf_nan=False,
+        description="seconds an attached agent has to show its liveliness "
+        "token before the world detaches it (world/presence.py)",
+    )
     llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
-    llm_timeout: float | None = Field(None, gt=0, description="seconds to an LLM reply's first token, prompt processing included (the whole reply "
-                                      "when it is not streamed); a timeout is retried once; None: 120, 600 for gguf: models")
-    llm_idle_timeout: float | None = Field(None, gt=0, description="seconds a streamed LLM reply may go without a chunk; None: 30")
+    llm_timeout: float | None = Field(
+        None,
+        gt=0,
+        description="seconds to an LLM reply's first token, prompt processing included (the whole reply "
+        "when it is not streamed); a timeout is retried once; None: 120, 600 for gguf: models",
+    )
+    llm_idle_timeout: float | None = Field(
+        None, gt=0, description="seconds a streamed LLM reply may go without a chunk; None: 30"
+    )
     stream: bool = Field(True, description="stream LLM replies (False: --no-stream, for servers that cannot)")
-    max_tokens: int = Field(DEFAULT_MAX_TOKENS, ge=1, description="completion tokens per LLM call, sent on every request")
-    llm_seed: int | None = Field(None, ge=0, description="sampling seed sent on every LLM request (servers that honour one)")
-    structured: bool = Field(False, description="LLM replies follow a JSON Schema of the step's valid actions (not the paper's)")
-    step_deadline: float | None = Field(None, gt=0, description="seconds one robot's LLM step may take, retries included, at least --llm-timeout; "
-                                        "None: no bound but the call's own (a stalled stream ends after --llm-idle-timeout, one that "
-                                        "keeps producing at --max-tokens)")
-    aids: tuple[str, ...] = Field((), description="aids that make the episode easier than the paper's (mhrc.core.fidelity); none: the paper's")
-    noise: NoiseSetting = Field("on", description="the world's motion noise: on, the calibration (mhrc.core.fidelity), or off (none; recorded as a setting of its own)")
-    history_cap: int | None = Field(None, gt=0, description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper")
-    events: Path | None = Field(None, description="a scenario file: events the world applies during the episode (world/scenario.py)")
+    max_tokens: int = Field(
+        DEFAULT_MAX_TOKENS, ge=1, description="completion tokens per LLM call, sent on every request"
+    )
+    llm_seed: int | None = Field(
+        None, ge=0, description="sampling seed sent on every LLM request (servers that honour one)"
+    )
+    structured: bool = Field(
+        False, description="LLM replies follow a JSON Schema of the step's valid actions (not the paper's)"
+    )
+    step_deadline: float | None = Field(
+        None,
+        gt=0,
+        description="seconds one robot's LLM step may take, retries included, at least --llm-timeout; "
+        "None: no bound but the call's own (a stalled stream ends after --llm-idle-timeout, one that "
+        "keeps producing at --max-tokens)",
+    )
+    aids: tuple[str, ...] = Field(
+        (), description="aids that make the episode easier than the paper's (mhrc.core.fidelity); none: the paper's"
+    )
+    noise: NoiseSetting = Field(
+        "on",
+        description="the world's motion noise: on, the calibration (mhrc.core.fidelity), or off (none; recorded as a setting of its own)",
+    )
+    history_cap: int | None = Field(
+        None,
+        gt=0,
+        description="characters the LLM prompt may take (histories shortened to fit); None: whole histories, as the paper",
+    )
+    events: Path | None = Field(
+        None, description="a scenario file: events the world applies during the episode (world/scenario.py)"
+    )
     credentials: Path | None = Field(
         None,
         description="the run's credentials (mhrc.core.security): the directory of every participant's files, or one participant's "
@@ -137,7 +179,9 @@ class EpisodeConfig(BaseModel):
             if why := unwritable(cfg.trace):  # before anything starts: not a traceback from the recorder
                 raise ConfigError(f"--trace: {why}")
         if cfg.time_scale and cfg.schedule != "async":
-            raise ConfigError(f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})")
+            raise ConfigError(
+                f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})"
+            )
         from mhrc.world.sim import check_episode  # validates task and scene names without building
 
         try:
@@ -171,7 +215,9 @@ class EpisodeConfig(BaseModel):
         from mhrc.world.dynamics import episode_facts  # reads the task and layout, builds nothing
 
         scenario = load_scenario(self.events)
-        check_scenario(scenario, episode_facts(task=self.task, scene=self.scene, horizon=self.horizon, robots=self.robots))
+        check_scenario(
+            scenario, episode_facts(task=self.task, scene=self.scene, horizon=self.horizon, robots=self.robots)
+        )
         return scenario
 
     def resolved(self) -> EpisodeConfig:
@@ -241,9 +287,12 @@ class EpisodeConfig(BaseModel):
     def client_options(self, spec: str | None = None) -> dict[str, Any]:
         """OpenAIChatClient settings of a robot driven by `spec`."""
         return {
-            "timeout": self.timeout_for(spec), "idle_timeout": self.llm_idle_timeout or IDLE_TIMEOUT, "stream": self.stream,
-            "max_tokens": self.max_tokens, "seed": self.llm_seed,
-        }  # fmt: skip
+            "timeout": self.timeout_for(spec),
+            "idle_timeout": self.llm_idle_timeout or IDLE_TIMEOUT,
+            "stream": self.stream,
+            "max_tokens": self.max_tokens,
+            "seed": self.llm_seed,
+        }
 
     @property
     def fidelity(self) -> str:
@@ -256,7 +305,6 @@ def check_model_servers(cfg: EpisodeConfig, robots: Sequence[str]) -> None:
     server that does not answer the connection (a slow network, a name that does not resolve)
     is left to the agents' own retries."""
     from urllib.parse import urlsplit
-
 
     servers: dict[str, tuple[str, list[str]]] = {}  # url -> (where it came from, its robots)
     specs = cfg.robot_specs()
@@ -285,5 +333,3 @@ def check_model_servers(cfg: EpisodeConfig, robots: Sequence[str]) -> None:
             ) from None
         except (OSError, ValueError):
             continue
-
-

@@ -20,6 +20,7 @@ from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys
 from mhrc.core.printable import printable
 from mhrc.core.protocol import (
+    LLM_ERROR_PREFIX,
     ActionResult,
     Communicate,
     EpisodeDone,
@@ -28,7 +29,6 @@ from mhrc.core.protocol import (
     ProtocolError,
     RobotAttached,
     RobotDetached,
-    LLM_ERROR_PREFIX,
     RobotMessage,
     ScenarioEvent,
     Thought,
@@ -54,8 +54,12 @@ class _Tick:
     due: set[str] = field(default_factory=set)  # robots whose result of this tick has not printed yet
     messages: list[str] = field(default_factory=list)
     senders: set[str] = field(default_factory=set)  # robots whose message of this tick has come
-    unheard: set[str] = field(default_factory=set)  # robots whose message was sent (their result says so) but has not come
-    after: list[str] = field(default_factory=list)  # printed after the closed line: the scenario events of the next tick
+    unheard: set[str] = field(
+        default_factory=set
+    )  # robots whose message was sent (their result says so) but has not come
+    after: list[str] = field(
+        default_factory=list
+    )  # printed after the closed line: the scenario events of the next tick
 
 
 class ProgressPrinter:
@@ -109,7 +113,8 @@ class ProgressPrinter:
         if self._done is None:
             return
         if not self.verbose or (
-            set(self._done.final_results.values()) <= self._goals and not any(held.unheard for held in self._ticks.values())
+            set(self._done.final_results.values()) <= self._goals
+            and not any(held.unheard for held in self._ticks.values())
         ):
             self.close()
 
@@ -182,7 +187,9 @@ class ProgressPrinter:
             if not self.verbose:
                 return
             line = f"[bold yellow]tick {ev.tick:>2} event[/] {inert(ev.text)}"
-            if self._stepped and ev.tick - 1 > self._last_closed:  # it fires as its tick opens: after the previous tick's lines
+            if (
+                self._stepped and ev.tick - 1 > self._last_closed
+            ):  # it fires as its tick opens: after the previous tick's lines
                 self._tick(ev.tick - 1).after.append(line)
             else:
                 self._print(line)
@@ -247,7 +254,11 @@ class ProgressPrinter:
             return
         if g.robot in self._printed.get(g.tick, set()):
             return  # a late status of a step whose result has printed
-        what = f"generating ({g.tokens} tokens so far)" if g.tokens else "waiting for the model's first token (it reads the prompt)"
+        what = (
+            f"generating ({g.tokens} tokens so far)"
+            if g.tokens
+            else "waiting for the model's first token (it reads the prompt)"
+        )
         again = f", attempt {g.attempt}" if g.attempt > 1 else ""
         self._print(f"[dim]tick {g.tick:>2}[/] {self._robot(g.robot)} [dim]{what}, {g.elapsed:.0f} s{again}[/]")
 
@@ -270,7 +281,9 @@ class ProgressPrinter:
             self._print(line)
 
 
-def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = None, lost: list[RobotDetached] | None = None) -> Table:
+def summary_table(
+    done: EpisodeDone, recovery: list[dict[str, Any]] | None = None, lost: list[RobotDetached] | None = None
+) -> Table:
     """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics").
     `recovery`: a scenario's events as mhrc.core.metrics scores them (`--events`), one row of them;
     `lost`: the robots whose agents left mid-episode and did not come back (mhrc.run.console.lost_robots)."""
@@ -280,7 +293,9 @@ def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = Non
     t.add_row("partial success", f"{m.partial_success:.2f} ({m.placed}/{m.total} placed)")
     bound = f" (no team can need fewer than {m.lower_bound})" if m.lower_bound is not None else ""
     t.add_row("temporal steps", f"{m.temporal_steps}{bound}")
-    t.add_row("action steps", f"{m.action_steps} (" + ", ".join(f"{r} {n}" for r, n in m.action_steps_per_robot.items()) + ")")
+    t.add_row(
+        "action steps", f"{m.action_steps} (" + ", ".join(f"{r} {n}" for r, n in m.action_steps_per_robot.items()) + ")"
+    )
     t.add_row("failed actions", ", ".join(f"{k} {v}" for k, v in sorted(m.failed_actions.items())) or "none")
     t.add_row("messages", str(m.messages))
     t.add_row("makespan", f"{m.makespan:.1f} s simulated")
@@ -288,7 +303,9 @@ def summary_table(done: EpisodeDone, recovery: list[dict[str, Any]] | None = Non
     if recovery:
         t.add_row("scenario events", ", ".join(_recovered(e) for e in recovery))
     if lost:
-        t.add_row("[red]robots lost[/]", ", ".join(f"{inert(d.robot)} at tick {d.tick} ({inert(d.reason)})" for d in lost))
+        t.add_row(
+            "[red]robots lost[/]", ", ".join(f"{inert(d.robot)} at tick {d.tick} ({inert(d.reason)})" for d in lost)
+        )
     return t
 
 

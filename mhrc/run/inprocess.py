@@ -19,9 +19,9 @@ from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decod
 if TYPE_CHECKING:
     from mhrc.core.security import Credentials
 
-from mhrc.run.config import EpisodeConfig
 from mhrc.agents.llm import LLMFatalError
 from mhrc.run.attach import local_models, run_agent
+from mhrc.run.config import EpisodeConfig
 from mhrc.run.serve import EventHook, serve_world
 
 log = structlog.get_logger("mhrc.run.inprocess")
@@ -78,7 +78,9 @@ async def _run_in_process(
             for service in services:
                 service.stop()
 
-    world = asyncio.create_task(serve_world(cfg, observe=on_open, connect=connect, login=login, on_service=services.append), name="world")
+    world = asyncio.create_task(
+        serve_world(cfg, observe=on_open, connect=connect, login=login, on_service=services.append), name="world"
+    )
     ready = asyncio.create_task(listening.wait())
     await asyncio.wait({world, ready}, return_when=asyncio.FIRST_COMPLETED)
     if world.done():  # the world could not start (its port is taken, ...): say so now, no agent is left connecting
@@ -88,13 +90,20 @@ async def _run_in_process(
     agents = [
         asyncio.create_task(
             run_agent(
-                r, cfg.run, connect or cfg.endpoint, llm=specs[r], base_url=cfg.base_url, client_options=cfg.client_options(own[r]),
-                security=login or cfg.participant(r), on_error=on_agent_error, **cfg.policy_options(own[r]),
+                r,
+                cfg.run,
+                connect or cfg.endpoint,
+                llm=specs[r],
+                base_url=cfg.base_url,
+                client_options=cfg.client_options(own[r]),
+                security=login or cfg.participant(r),
+                on_error=on_agent_error,
+                **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",
         )
         for r in robots
-    ]  # fmt: skip
+    ]
     try:
         pending = {world, *agents}
         while world in pending:
@@ -117,10 +126,19 @@ async def _run_in_process(
             if not t.done():
                 t.cancel()
         results = await asyncio.gather(*agents, return_exceptions=True)
-        world_failed = world.done() and not world.cancelled() and world.exception() is not None  # said by the run's error
+        world_failed = (
+            world.done() and not world.cancelled() and world.exception() is not None
+        )  # said by the run's error
         for r, res in zip(robots, results):
-            if not world_failed and isinstance(res, BaseException) and not isinstance(res, asyncio.CancelledError) and not (failures and _is_fatal(res)):
-                log.warning("agent ended with an error", robot=r, error=str(res))  # (the run's own failure is raised, not logged)
+            if (
+                not world_failed
+                and isinstance(res, BaseException)
+                and not isinstance(res, asyncio.CancelledError)
+                and not (failures and _is_fatal(res))
+            ):
+                log.warning(
+                    "agent ended with an error", robot=r, error=str(res)
+                )  # (the run's own failure is raised, not logged)
         if not world.done():
             world.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
@@ -130,5 +148,3 @@ async def _run_in_process(
 
 def _is_fatal(exc: BaseException | None) -> bool:
     return isinstance(exc, LLMFatalError)
-
-

@@ -15,14 +15,13 @@ from typing import Any
 
 import structlog
 
-from mhrc.core.endpoints import check_listen
-from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
-
-from mhrc.run.config import EpisodeConfig
 from mhrc.core.bus import open_client
+from mhrc.core.endpoints import check_listen
 from mhrc.core.keys import Keys
+from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 from mhrc.core.records import messages, read_records
 from mhrc.run.attach import local_models
+from mhrc.run.config import EpisodeConfig
 from mhrc.run.lifeline import child_env
 from mhrc.run.serve import EventHook
 
@@ -39,7 +38,9 @@ class ProcessFailed(RuntimeError):
         self.who = who
         self.returncode = returncode
         how = f"was killed by signal {-returncode}" if returncode < 0 else f"exited with code {returncode}"
-        super().__init__(f"{who} {how} " + ("after the episode ended" if before is None else f"before the episode {before}"))
+        super().__init__(
+            f"{who} {how} " + ("after the episode ended" if before is None else f"before the episode {before}")
+        )
 
 
 def _child_env() -> dict[str, str]:
@@ -58,11 +59,34 @@ def _child_stdout() -> int | None:
 
 def world_command(cfg: EpisodeConfig) -> list[str]:
     cmd = [
-        sys.executable, "-m", "mhrc", "world",
-        "--task", cfg.task, "--scene", cfg.scene, "--seed", str(cfg.seed), "--objects", str(cfg.n_objects),
-        "--horizon", str(cfg.horizon), "--run", cfg.run, "--host", cfg.host, "--port", str(cfg.port), "--quiet",
-        "--ablation", cfg.ablation, "--schedule", cfg.schedule, "--token-deadline", str(cfg.token_deadline),
-    ]  # fmt: skip
+        sys.executable,
+        "-m",
+        "mhrc",
+        "world",
+        "--task",
+        cfg.task,
+        "--scene",
+        cfg.scene,
+        "--seed",
+        str(cfg.seed),
+        "--objects",
+        str(cfg.n_objects),
+        "--horizon",
+        str(cfg.horizon),
+        "--run",
+        cfg.run,
+        "--host",
+        cfg.host,
+        "--port",
+        str(cfg.port),
+        "--quiet",
+        "--ablation",
+        cfg.ablation,
+        "--schedule",
+        cfg.schedule,
+        "--token-deadline",
+        str(cfg.token_deadline),
+    ]
     if cfg.trace is not None:
         cmd += ["--trace", str(cfg.trace)]
     if cfg.aids:
@@ -131,19 +155,27 @@ async def up_processes(
 
 
 async def _run_processes(
-    cfg: EpisodeConfig, specs: dict[str, str | None], *, observe: EventHook | None, robots: tuple[str, ...], quiet: bool = False
+    cfg: EpisodeConfig,
+    specs: dict[str, str | None],
+    *,
+    observe: EventHook | None,
+    robots: tuple[str, ...],
+    quiet: bool = False,
 ) -> EpisodeDone:
     stdout = subprocess.DEVNULL if quiet else _child_stdout()
     procs: list[subprocess.Popen[bytes]] = []
     bus = None
     try:
-        check_listen(cfg.host, cfg.port, cfg.endpoint.split("/", 1)[0])  # a port taken is one line now, not a world process failing behind a client that waits
+        check_listen(
+            cfg.host, cfg.port, cfg.endpoint.split("/", 1)[0]
+        )  # a port taken is one line now, not a world process failing behind a client that waits
         world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=stdout)
         procs.append(world)
         await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)
         bus = await open_client(cfg.endpoint, 10.0, security=cfg.participant("observer"))
         done_fut: asyncio.Future[EpisodeDone] = asyncio.get_running_loop().create_future()
         started = asyncio.Event()
+
         def on_event(sample: object) -> None:
             try:
                 ev = decode_event(sample.payload)  # type: ignore[attr-defined]
@@ -157,7 +189,9 @@ async def _run_processes(
         bus.subscribe(Keys(cfg.run).world_event, on_event)
         if observe is not None:
             observe(bus, cfg.run)
-        exits: dict[asyncio.Future[Any], str] = {asyncio.ensure_future(asyncio.to_thread(world.wait)): "the world process"}
+        exits: dict[asyncio.Future[Any], str] = {
+            asyncio.ensure_future(asyncio.to_thread(world.wait)): "the world process"
+        }
         for r in robots:
             agent = subprocess.Popen(agent_command(r, cfg, specs[r]), env=_child_env(), stdout=stdout)
             procs.append(agent)
@@ -173,19 +207,27 @@ async def _run_processes(
                         with contextlib.suppress(TimeoutError):
                             await asyncio.wait_for(asyncio.shield(done_fut), 5.0)
                     if not done_fut.done() and code == 0 and (heard := _end_in_trace(cfg.trace)) is not None:
-                        done_fut.set_result(heard)  # this observer lost the world (it was paused): its own record of the end
+                        done_fut.set_result(
+                            heard
+                        )  # this observer lost the world (it was paused): its own record of the end
                         unheard = True
                     if not done_fut.done():
                         raise ProcessFailed(who, code, "ended")
-                if code != 0 and not started.is_set() and not done_fut.done():  # as up_in_process: its robot would be waited for forever
+                if (
+                    code != 0 and not started.is_set() and not done_fut.done()
+                ):  # as up_in_process: its robot would be waited for forever
                     raise ProcessFailed(who, code, "started")
         done = done_fut.result()
         await asyncio.to_thread(_wait_or_kill, world, 20.0)
-        if world.returncode != 0:  # it ended the episode and then failed (its trace could not be written): said on its stderr
+        if (
+            world.returncode != 0
+        ):  # it ended the episode and then failed (its trace could not be written): said on its stderr
             raise ProcessFailed("the world process", world.returncode, None)
         for p in procs:
             await asyncio.to_thread(_wait_or_kill, p, 20.0)
-        if done.reason == "no_agents" and not unheard:  # as up_in_process: every agent gone, with an error, is the run's failure
+        if (
+            done.reason == "no_agents" and not unheard
+        ):  # as up_in_process: every agent gone, with an error, is the run's failure
             # (not when this observer lost the world too: the agents gave up on a world that was paused, and its end says so)
             failed = [(r, p.returncode) for r, p in zip(robots, procs[1:]) if p.returncode != 0]
             if failed:

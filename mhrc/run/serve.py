@@ -17,10 +17,10 @@ if TYPE_CHECKING:
 
 from mhrc.core.bus import open_client
 from mhrc.core.trace import Recorder
+from mhrc.core.uncancelled import to_the_end
 from mhrc.run.config import EpisodeConfig
 from mhrc.world.service import WorldConfig, WorldService
 from mhrc.world.sim import Sim
-from mhrc.core.uncancelled import to_the_end
 
 log = structlog.get_logger("mhrc.run.serve")
 
@@ -41,30 +41,47 @@ async def serve_world(
     worker's), record, and run the episode. `on_service` gets the WorldService once it exists
     (the in-process runner stops it when an agent fails for good)."""
     sim = await asyncio.to_thread(
-        Sim, task=cfg.task, scene=cfg.scene, seed=cfg.seed, n_objects=cfg.n_objects, gui=cfg.gui, robots=cfg.robots, aids=cfg.aids,
-        scenario=cfg.scenario(), noise=cfg.noise,
-    )  # fmt: skip
+        Sim,
+        task=cfg.task,
+        scene=cfg.scene,
+        seed=cfg.seed,
+        n_objects=cfg.n_objects,
+        gui=cfg.gui,
+        robots=cfg.robots,
+        aids=cfg.aids,
+        scenario=cfg.scenario(),
+        noise=cfg.noise,
+    )
     bus = None
     recorder = None
     world: WorldService | None = None
     try:
         security = login if connect and login is not None else cfg.participant("world")
         bus = await (
-            open_client(connect, 30.0, security=security) if connect else Bus.open(mode="router", listen=[cfg.endpoint], security=security)
+            open_client(connect, 30.0, security=security)
+            if connect
+            else Bus.open(mode="router", listen=[cfg.endpoint], security=security)
         )
         trace_failed = asyncio.Event()
         if cfg.trace is not None:
             loop = asyncio.get_running_loop()
-            recorder = Recorder(bus, cfg.run, cfg.trace, on_error=lambda _e: loop.call_soon_threadsafe(trace_failed.set)).start()
+            recorder = Recorder(
+                bus, cfg.run, cfg.trace, on_error=lambda _e: loop.call_soon_threadsafe(trace_failed.set)
+            ).start()
         if observe is not None:
             observe(bus, cfg.run)
         world = WorldService(
             bus,
             sim,
             WorldConfig(
-                run=cfg.run, horizon=cfg.horizon, start_timeout=cfg.start_timeout, tick_delay=cfg.tick_delay, schedule=cfg.schedule,
-                time_scale=cfg.time_scale, token_deadline=cfg.token_deadline,
-            ),  # fmt: skip
+                run=cfg.run,
+                horizon=cfg.horizon,
+                start_timeout=cfg.start_timeout,
+                tick_delay=cfg.tick_delay,
+                schedule=cfg.schedule,
+                time_scale=cfg.time_scale,
+                token_deadline=cfg.token_deadline,
+            ),
         )
         if on_service is not None:
             on_service(world)
@@ -77,7 +94,9 @@ async def serve_world(
         finally:
             await world.agents_left(LAST_WORDS)  # the last results and the done event reached the agents
     finally:  # to its end, even when a cancellation (SIGTERM, Ctrl-C) comes in the middle of it
-        await to_the_end(_close(recorder, LAST_WORDS if world is not None and world.done is not None else 0.0, bus, sim))
+        await to_the_end(
+            _close(recorder, LAST_WORDS if world is not None and world.done is not None else 0.0, bus, sim)
+        )
         if recorder is not None and recorder.error is not None:
             raise recorder.error  # everything is closed: one line for the user, not a run that goes on unrecorded
 

@@ -159,9 +159,17 @@ class LoopbackHTTP:
 
         app = Starlette(routes=[Route("/{path:path}", self._endpoint, methods=_METHODS)])
         config = uvicorn.Config(
-            app, host="127.0.0.1", port=0, http=Counted, ws="none", lifespan="off", log_config=None,
-            access_log=False, timeout_keep_alive=3600, timeout_graceful_shutdown=5,
-        )  # fmt: skip
+            app,
+            host="127.0.0.1",
+            port=0,
+            http=Counted,
+            ws="none",
+            lifespan="off",
+            log_config=None,
+            access_log=False,
+            timeout_keep_alive=3600,
+            timeout_graceful_shutdown=5,
+        )
         self._server = _Server(config)
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
@@ -257,7 +265,9 @@ class LoopbackHTTP:
             return
         await self._write_stream(answer, declared, link, receive, send)
 
-    async def _write_stream(self, answer: Answer, declared: int | None, link: _Link | None, receive: Receive, send: Send) -> None:
+    async def _write_stream(
+        self, answer: Answer, declared: int | None, link: _Link | None, receive: Receive, send: Send
+    ) -> None:
         assert answer.stream is not None
         gone = asyncio.ensure_future(_hung_up(receive))
         if link is not None:
@@ -265,7 +275,11 @@ class LoopbackHTTP:
         sent, finished = 0, False
         try:
             for i, chunk in enumerate(answer.stream):
-                if self._stop.is_set() or gone.done() or (i and answer.interval > 0 and await self.pause(answer.interval)):
+                if (
+                    self._stop.is_set()
+                    or gone.done()
+                    or (i and answer.interval > 0 and await self.pause(answer.interval))
+                ):
                     break
                 if declared is not None:
                     chunk = chunk[: max(0, declared - sent)]

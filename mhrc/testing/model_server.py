@@ -216,7 +216,9 @@ class ScriptedModelServer:
             self.paths.append(path)
             self._seq += 1
             robot = self.robot_of(body) if isinstance(body, Mapping) else None
-            call = ModelCall(request=body, headers=headers, path=path, robot=robot, started=self._seq, connection=connection)
+            call = ModelCall(
+                request=body, headers=headers, path=path, robot=robot, started=self._seq, connection=connection
+            )
             self.calls.append(call)
             self.in_flight += 1
             self.max_in_flight = max(self.max_in_flight, self.in_flight)
@@ -250,9 +252,20 @@ class ScriptedModelServer:
             return _Answer(500, payload=b'{"error": "the script is exhausted"}')
         if isinstance(reply, str):
             reply = ModelReply(text=reply)
-        delay = reply.latency if reply.latency is not None else (self.latency(body) if callable(self.latency) else self.latency)
+        delay = (
+            reply.latency
+            if reply.latency is not None
+            else (self.latency(body) if callable(self.latency) else self.latency)
+        )
         answer = _Answer(
-            reply.status, reply.headers, stream=reply.stream, interval=reply.stream_interval, stall=reply.stall, drop=reply.drop, delay=delay, reply=reply
+            reply.status,
+            reply.headers,
+            stream=reply.stream,
+            interval=reply.stream_interval,
+            stall=reply.stall,
+            drop=reply.drop,
+            delay=delay,
+            reply=reply,
         )
         if reply.stall and reply.stream is None:
             answer.stream = ()  # the headers, then silence
@@ -276,7 +289,10 @@ class ScriptedModelServer:
         }
         if reply.usage is True:
             prompt = sum(len(str(m.get("content") or "")) for m in body.get("messages") or [])
-            completion["usage"] = {"prompt_tokens": max(1, prompt // 4), "completion_tokens": max(1, len(reply.text) // 4)}
+            completion["usage"] = {
+                "prompt_tokens": max(1, prompt // 4),
+                "completion_tokens": max(1, len(reply.text) // 4),
+            }
         elif reply.usage is not False:
             completion["usage"] = dict(reply.usage)
         answer.payload = json.dumps(completion).encode()

@@ -22,7 +22,9 @@ class ScriptedPolicy:
     `results`, every observation planned on in `observations`.
     """
 
-    def __init__(self, commands: Iterable[str], *, until: Callable[[Observation], bool] | None = None, name: str = "script") -> None:
+    def __init__(
+        self, commands: Iterable[str], *, until: Callable[[Observation], bool] | None = None, name: str = "script"
+    ) -> None:
         self.name = name
         self.commands = list(commands)
         self.actions: list[Action] = []

@@ -45,36 +45,70 @@ _MOBILE = ["navigate", "communicate", "wait"]
 _ARM = ["pick", "place", "communicate", "wait"]
 _STATUS = {  # as the world reports its three robots at the start of an episode in the kitchen
     "alice": RobotStatus(
-        name="alice", kind="mobile manipulator", skills=["navigate", "move", "open", "pick", "place", "communicate", "wait"],
-        base=Pose2D(x=-1.5, y=1.2), arm_base=(-1.3, 1.2, 0.65), reach=0.72,
-    ),  # fmt: skip
+        name="alice",
+        kind="mobile manipulator",
+        skills=["navigate", "move", "open", "pick", "place", "communicate", "wait"],
+        base=Pose2D(x=-1.5, y=1.2),
+        arm_base=(-1.3, 1.2, 0.65),
+        reach=0.72,
+    ),
     "bob": RobotStatus(name="bob", kind="tabletop manipulator", skills=_ARM, arm_base=(-3.75, 0.0, 0.7), reach=0.62),
     "david": RobotStatus(name="david", kind="mobile robot", skills=_MOBILE, base=Pose2D(x=4.3, y=0.5, yaw=3.1416)),
 }
 _BRIEFS = {
-    "alice": ("Explore the whole house and hand Bob the objects the task needs.",
-              "Ask Bob which objects are needed; then search the house for them, pick them up and put them on table_0 close to Bob."),
-    "bob": ("Put the listed objects into the tray.",
-            "Put every object on the list into the tray on table_0. When you cannot pick up one of them, ask Alice. The list: {targets}."),
-    "david": ("Search the whole house for the objects the task needs.",
-              "Do as Alice arranges: search the house and tell Alice about each new find without delay."),
-}  # fmt: skip
+    "alice": (
+        "Explore the whole house and hand Bob the objects the task needs.",
+        "Ask Bob which objects are needed; then search the house for them, pick them up and put them on table_0 close to Bob.",
+    ),
+    "bob": (
+        "Put the listed objects into the tray.",
+        "Put every object on the list into the tray on table_0. When you cannot pick up one of them, ask Alice. The list: {targets}.",
+    ),
+    "david": (
+        "Search the whole house for the objects the task needs.",
+        "Do as Alice arranges: search the house and tell Alice about each new find without delay.",
+    ),
+}
 
 
-def _furniture(name: str, kind: str, at: tuple[float, float, float], stands: Sequence[tuple[float, float, float]] = (), *,
-               openable: bool = False, place: tuple[float, float, float] | None = None) -> FurnitureView:  # fmt: skip
+def _furniture(
+    name: str,
+    kind: str,
+    at: tuple[float, float, float],
+    stands: Sequence[tuple[float, float, float]] = (),
+    *,
+    openable: bool = False,
+    place: tuple[float, float, float] | None = None,
+) -> FurnitureView:
     return FurnitureView(
-        name=name, kind=kind, position=at, openable=openable, is_open=False if openable else None,
-        stand_poses=[Pose2D(x=x, y=y, yaw=yaw) for x, y, yaw in stands], place_pose=place,
-    )  # fmt: skip
+        name=name,
+        kind=kind,
+        position=at,
+        openable=openable,
+        is_open=False if openable else None,
+        stand_poses=[Pose2D(x=x, y=y, yaw=yaw) for x, y, yaw in stands],
+        place_pose=place,
+    )
 
 
 FURNITURE: dict[str, FurnitureView] = {  # a few of the kitchen's, where the world puts them
     f.name: f
     for f in (
-        _furniture("table_0", "kitchen island", (-2.9, 0.0, 0.7), [(-2.9, 0.75, -1.57), (-2.0, 0.0, 3.14), (-2.9, -0.75, 1.57)], place=(-3.33, -0.28, 0.7)),
+        _furniture(
+            "table_0",
+            "kitchen island",
+            (-2.9, 0.0, 0.7),
+            [(-2.9, 0.75, -1.57), (-2.0, 0.0, 3.14), (-2.9, -0.75, 1.57)],
+            place=(-3.33, -0.28, 0.7),
+        ),
         _furniture("tray", "tray", (-3.4, 0.25, 0.72), place=(-3.4, 0.25, 0.72)),
-        _furniture("table_2", "dining table", (-2.3, -3.35, 0.72), [(-2.3, -2.5, -1.57), (-1.2, -3.35, 3.14)], place=(-2.3, -3.2, 0.72)),
+        _furniture(
+            "table_2",
+            "dining table",
+            (-2.3, -3.35, 0.72),
+            [(-2.3, -2.5, -1.57), (-1.2, -3.35, 3.14)],
+            place=(-2.3, -3.2, 0.72),
+        ),
         _furniture("cabinet_0", "kitchen cabinet", (-3.6, 3.65, 1.2), [(-3.6, 2.9, 1.57)], openable=True),
         _furniture("fridge", "fridge", (-4.5, 3.6, 1.8), [(-4.5, 2.8, 1.57)], openable=True),
     )
@@ -106,7 +140,9 @@ def observation(
         raise ValueError(f"no default status for robot {robot!r}: observation() knows {', '.join(_STATUS)}")
     views = [FURNITURE[f] if isinstance(f, str) else f for f in (FURNITURE if furniture is None else furniture)]
     where = {f.name: f for f in views}
-    things = [_object(name, on, where) for name, on in objects.items()] if isinstance(objects, Mapping) else list(objects)
+    things = (
+        [_object(name, on, where) for name, on in objects.items()] if isinstance(objects, Mapping) else list(objects)
+    )
     others = [r for r in _STATUS if r != robot] if teammates is None else list(teammates)
     brief, detail = _BRIEFS[robot]
     values: dict[str, Any] = {
@@ -121,7 +157,10 @@ def observation(
         "task_status": "In the tray: nothing yet." if robot == "bob" else None,
         "teammates": {r: list(_STATUS[r].skills) if r in _STATUS else [] for r in others},
         "new_messages": [
-            m if isinstance(m, RobotMessage) else RobotMessage(sender=m[0], to=robot, content=m[1], tick=max(tick - 1, 0)) for m in messages
+            m
+            if isinstance(m, RobotMessage)
+            else RobotMessage(sender=m[0], to=robot, content=m[1], tick=max(tick - 1, 0))
+            for m in messages
         ],
     }
     return Observation(**(values | fields))
@@ -129,7 +168,9 @@ def observation(
 
 def _object(name: str, on: str, where: Mapping[str, FurnitureView]) -> ObjectView:
     if on not in where:
-        raise ValueError(f"object {name!r} lies on {on!r}, which is not among the observation's furniture ({', '.join(where)})")
+        raise ValueError(
+            f"object {name!r} lies on {on!r}, which is not among the observation's furniture ({', '.join(where)})"
+        )
     f = where[on]
     x, y, z = f.place_pose or f.position
     return ObjectView(name=name, position=(x, y, z + 0.01), yaw=0.0, on=on, inside=f.openable)
@@ -199,13 +240,19 @@ class PolicyHarness:
     async def decide(self, obs: Observation) -> Decision:
         """The policy's decision on `obs`, kept as a new step."""
         if self.steps and self.steps[-1].result is None:
-            raise RuntimeError(f"the decision of step {len(self.steps) - 1} has no result yet: answer() it before deciding again")
+            raise RuntimeError(
+                f"the decision of step {len(self.steps) - 1} has no result yet: answer() it before deciding again"
+            )
         decision = await self.policy.decide(obs)
         self.steps.append(Step(obs, decision))
         return decision
 
     def answer(
-        self, result: SkillOutcome | OutcomeCode | str = OutcomeCode.OK, *, observation: Observation | None = None, done: bool = False
+        self,
+        result: SkillOutcome | OutcomeCode | str = OutcomeCode.OK,
+        *,
+        observation: Observation | None = None,
+        done: bool = False,
     ) -> ActionResult:
         """Tell the policy how its last action went: `result` (a `SkillOutcome`, or an outcome
         code for `outcome`), and `observation`, what it sees next (by default the observation it
@@ -213,17 +260,27 @@ class PolicyHarness:
         if not self.steps or self.steps[-1].result is not None:
             raise RuntimeError("no decision to answer: decide() first")
         step = self.steps[-1]
-        seen = observation or step.observation.model_copy(update={"tick": step.observation.tick + 1, "new_messages": []})
+        seen = observation or step.observation.model_copy(
+            update={"tick": step.observation.tick + 1, "new_messages": []}
+        )
         step.result = ActionResult(
-            goal_id=f"{step.observation.robot}-{next(self._goals)}", robot=step.observation.robot, tick=step.observation.tick,
-            action=step.decision.action, outcome=result if isinstance(result, SkillOutcome) else outcome(result),
-            observation=seen, done=done,
-        )  # fmt: skip
+            goal_id=f"{step.observation.robot}-{next(self._goals)}",
+            robot=step.observation.robot,
+            tick=step.observation.tick,
+            action=step.decision.action,
+            outcome=result if isinstance(result, SkillOutcome) else outcome(result),
+            observation=seen,
+            done=done,
+        )
         self.policy.record(step.result)
         return step.result
 
     async def step(
-        self, obs: Observation, result: SkillOutcome | OutcomeCode | str = OutcomeCode.OK, *, observation: Observation | None = None
+        self,
+        obs: Observation,
+        result: SkillOutcome | OutcomeCode | str = OutcomeCode.OK,
+        *,
+        observation: Observation | None = None,
     ) -> Decision:
         """`decide` on `obs`, then `answer` with `result` and `observation`."""
         decision = await self.decide(obs)

@@ -17,7 +17,17 @@ from mhrc.agents.policy import Policy
 from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.keys import Keys
 from mhrc.core.metrics import EpisodeMetrics, from_trace
-from mhrc.core.protocol import ActionResult, EpisodeDone, ProtocolError, RobotAttached, RobotDetached, Thought, WorldState, decode, decode_event
+from mhrc.core.protocol import (
+    ActionResult,
+    EpisodeDone,
+    ProtocolError,
+    RobotAttached,
+    RobotDetached,
+    Thought,
+    WorldState,
+    decode,
+    decode_event,
+)
 from mhrc.core.records import Payload, TraceLine, messages, read_records
 from mhrc.run.attach import run_agent
 from mhrc.run.config import EpisodeConfig
@@ -114,10 +124,14 @@ class LoopbackWorld:
         before acting on an attached robot. Raises TimeoutError after `timeout` seconds."""
         unknown = sorted(set(robots) - set(self.config.robots))
         if unknown:  # fails here, not as a timeout
-            raise ValueError(f"no such robot in this episode: {', '.join(unknown)} (robots: {', '.join(self.config.robots)})")
+            raise ValueError(
+                f"no such robot in this episode: {', '.join(unknown)} (robots: {', '.join(self.config.robots)})"
+            )
         await robots_attached(await self.client(timeout), self.run, set(robots), timeout)
 
-    async def agent(self, robot: str, policy: AgentSpec = None, *, attach_timeout: float = ATTACH_TIMEOUT) -> asyncio.Task[EpisodeDone | None]:
+    async def agent(
+        self, robot: str, policy: AgentSpec = None, *, attach_timeout: float = ATTACH_TIMEOUT
+    ) -> asyncio.Task[EpisodeDone | None]:
         """Start an agent for `robot` on its own session, driven by `policy` (a `Policy`,
         ``"heuristic"``, or None: as the episode's options configure the robot, heuristic or
         the model ``llm`` names). Returns its task, which ends with the episode (its result:
@@ -132,9 +146,15 @@ class LoopbackWorld:
         if policy is None:
             spec = cfg.robot_specs()[robot]
             coro: Awaitable[EpisodeDone | None] = run_agent(
-                robot, cfg.run, cfg.endpoint, llm=spec, base_url=cfg.base_url, client_options=cfg.client_options(spec),
-                attach_timeout=attach_timeout, **cfg.policy_options(spec),
-            )  # fmt: skip
+                robot,
+                cfg.run,
+                cfg.endpoint,
+                llm=spec,
+                base_url=cfg.base_url,
+                client_options=cfg.client_options(spec),
+                attach_timeout=attach_timeout,
+                **cfg.policy_options(spec),
+            )
         else:
             chosen: Policy = heuristic_policy(robot) if policy == "heuristic" else policy  # type: ignore[assignment]
             coro = self._drive(robot, chosen, attach_timeout)
@@ -214,9 +234,12 @@ class EpisodeResult:
         ``action_request``, ``episode_started``, ...), optionally of one robot, in order, as the
         protocol's models."""
         return [
-            line.msg for line in self.records
-            if line.msg is not None and line.msg.kind == kind and (robot is None or getattr(line.msg, "robot", None) == robot)
-        ]  # fmt: skip
+            line.msg
+            for line in self.records
+            if line.msg is not None
+            and line.msg.kind == kind
+            and (robot is None or getattr(line.msg, "robot", None) == robot)
+        ]
 
     def results(self, robot: str | None = None) -> list[ActionResult]:
         """Every action result in the trace (or one robot's), in order."""
@@ -244,7 +267,9 @@ async def run_episode(
     async with asyncio.timeout(timeout), world_on_loopback(**options) as world:
         unknown = sorted(set(policies) - set(world.config.robots))
         if unknown:
-            raise ValueError(f"no such robot in this episode: {', '.join(unknown)} (robots: {', '.join(world.config.robots)})")
+            raise ValueError(
+                f"no such robot in this episode: {', '.join(unknown)} (robots: {', '.join(world.config.robots)})"
+            )
         for robot in world.config.robots:
             if robot in policies and policies[robot] is None:
                 continue

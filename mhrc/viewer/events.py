@@ -53,11 +53,20 @@ class ScenarioMark:
     def as_data(self) -> dict[str, Any]:
         """What the page's script draws it from."""
         return {
-            "index": self.index, "event": self.event, "tick": self.tick, "applied": self.applied, "skipped": self.skipped,
-            "changed": self.changed, "text": self.caption, "frame": self.frame, "robot": self.robot, "until": self.until,
-            "at": list(self.at) if self.at else None, "origin": list(self.origin) if self.origin else None,
+            "index": self.index,
+            "event": self.event,
+            "tick": self.tick,
+            "applied": self.applied,
+            "skipped": self.skipped,
+            "changed": self.changed,
+            "text": self.caption,
+            "frame": self.frame,
+            "robot": self.robot,
+            "until": self.until,
+            "at": list(self.at) if self.at else None,
+            "origin": list(self.origin) if self.origin else None,
             "label": self.label,
-        }  # fmt: skip
+        }
 
     @property
     def label(self) -> str:
@@ -99,7 +108,9 @@ def _centre(scene: dict[str, Any] | None, name: str | None) -> tuple[float, floa
     return None
 
 
-def scenario_marks(trace: LoadedTrace, frames: list[dict[str, Any]], frames_from: str, scene: dict[str, Any] | None) -> list[ScenarioMark]:
+def scenario_marks(
+    trace: LoadedTrace, frames: list[dict[str, Any]], frames_from: str, scene: dict[str, Any] | None
+) -> list[ScenarioMark]:
     """Every scenario event of the trace, in trace order, with its frame and place."""
     snap_rows: list[int] = []
     found: list[tuple[int, dict[str, Any]]] = []
@@ -116,10 +127,16 @@ def scenario_marks(trace: LoadedTrace, frames: list[dict[str, Any]], frames_from
         given = msg.get("changed")
         changed: dict[str, Any] = given if isinstance(given, dict) else {}
         m = ScenarioMark(
-            index=int(msg.get("index") or 0), event=str(msg.get("event") or "?"), tick=int(msg.get("tick") or 0),
-            applied=bool(msg.get("applied")), skipped=msg.get("skipped"), changed={str(k): str(v) for k, v in changed.items()},
-            text=str(msg.get("text") or ""), scenario=str(msg.get("scenario") or ""), sha256=str(msg.get("sha256") or ""),
-        )  # fmt: skip
+            index=int(msg.get("index") or 0),
+            event=str(msg.get("event") or "?"),
+            tick=int(msg.get("tick") or 0),
+            applied=bool(msg.get("applied")),
+            skipped=msg.get("skipped"),
+            changed={str(k): str(v) for k, v in changed.items()},
+            text=str(msg.get("text") or ""),
+            scenario=str(msg.get("scenario") or ""),
+            sha256=str(msg.get("sha256") or ""),
+        )
         if frames_from == "snapshots":
             first = bisect_right(snap_rows, at)
             m.frame = first if first < len(frames) else None

@@ -83,7 +83,9 @@ def load_trace(path: str | Path) -> LoadedTrace:
         raise NotATrace(f"{p} is not an mhrc trace: no line is a JSON object with a `key` under mhrc/ and a `msg`")
     warnings = []
     if truncated:
-        warnings.append(f"the trace is truncated: its last line (line {len(lines)}) was cut off mid-line and is left out")
+        warnings.append(
+            f"the trace is truncated: its last line (line {len(lines)}) was cut off mid-line and is left out"
+        )
     if bad:
         shown = ", ".join(str(n) for n in bad[:5]) + (" ..." if len(bad) > 5 else "")
         warnings.append(f"{len(bad)} line(s) are not trace lines and are left out: line {shown}")
@@ -100,9 +102,13 @@ def from_records(path: Path, records: list[TraceLine], warnings: list[str] | Non
             trace.versions.add(msg["v"])
     newer = {v for v in trace.versions if v > PROTOCOL_VERSION}
     if newer:
-        trace.warnings.append(f"the trace has protocol version {max(newer)}, newer than this viewer's {PROTOCOL_VERSION}: some fields may be missing")
+        trace.warnings.append(
+            f"the trace has protocol version {max(newer)}, newer than this viewer's {PROTOCOL_VERSION}: some fields may be missing"
+        )
     if not trace.messages("episode_started"):
-        trace.warnings.append("the trace has no episode_started event: task, scene and seed are unknown and the house is not drawn")
+        trace.warnings.append(
+            "the trace has no episode_started event: task, scene and seed are unknown and the house is not drawn"
+        )
     if not trace.messages("snapshot"):
         old = f" (protocol version {max(trace.versions)})" if trace.versions and max(trace.versions) < 2 else ""
         trace.warnings.append(
@@ -110,5 +116,7 @@ def from_records(path: Path, records: list[TraceLine], warnings: list[str] | Non
             "and no objects"
         )
     if not trace.messages("episode_done"):
-        trace.warnings.append("the trace has no episode_done event: the episode did not finish while recording, no metrics")
+        trace.warnings.append(
+            "the trace has no episode_done event: the episode did not finish while recording, no metrics"
+        )
     return trace

@@ -13,11 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from mhrc.world.layouts import Layout, get_layout
-
 from mhrc.viewer.events import ScenarioMark, scenario_marks, scenario_name
 from mhrc.viewer.load import LoadedTrace
 from mhrc.viewer.targets import TaskView, task_view
+from mhrc.world.layouts import Layout, get_layout
 
 
 @dataclass
@@ -88,8 +87,14 @@ def scene_map(scene: str, fixtures: dict[str, tuple[float, float]], warnings: li
     furniture = []
     for f in layout.furniture:
         item: dict[str, Any] = {
-            "name": f.name, "kind": f.kind, "style": f.style, "x": f.center[0], "y": f.center[1],
-            "sx": f.size[0], "sy": f.size[1], "openable": f.container is not None,
+            "name": f.name,
+            "kind": f.kind,
+            "style": f.style,
+            "x": f.center[0],
+            "y": f.center[1],
+            "sx": f.size[0],
+            "sy": f.size[1],
+            "openable": f.container is not None,
             "color": list(f.color),
         }
         opened = f.open_drawer_footprint()
@@ -159,11 +164,24 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
             obs = msg.get("observation") or {}
             for m in obs.get("new_messages") or []:
                 for mm in messages:
-                    if mm.delivered is None and mm.sender == m.get("sender") and mm.to == m.get("to") and mm.content == m.get("content"):
+                    if (
+                        mm.delivered is None
+                        and mm.sender == m.get("sender")
+                        and mm.to == m.get("to")
+                        and mm.content == m.get("content")
+                    ):
                         mm.delivered = obs.get("tick")
                         break
         elif kind == "message":
-            messages.append(MapMessage(str(msg.get("sender")), str(msg.get("to")), str(msg.get("content", "")), int(msg.get("tick", 0)), None))
+            messages.append(
+                MapMessage(
+                    str(msg.get("sender")),
+                    str(msg.get("to")),
+                    str(msg.get("content", "")),
+                    int(msg.get("tick", 0)),
+                    None,
+                )
+            )
     # async: a message reaches its receiver when sent
     if started.get("scheduler") == "async":
         for mm in messages:
@@ -203,7 +221,11 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
                 fixtures[str(f.get("name"))] = (float(f["position"][0]), float(f["position"][1]))
             else:
                 scene_names.add(str(f.get("name")))
-    scene = scene_map(str(started["scene"]), {k: v for k, v in fixtures.items() if k not in scene_names}, warnings) if started.get("scene") else None
+    scene = (
+        scene_map(str(started["scene"]), {k: v for k, v in fixtures.items() if k not in scene_names}, warnings)
+        if started.get("scene")
+        else None
+    )
 
     marks = scenario_marks(trace, frames, frames_from, scene)
     metrics = (done or {}).get("metrics") or {}
@@ -228,9 +250,19 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
         "versions": sorted(trace.versions),
         "trace": str(trace.path),
     }
-    return EpisodeView(header=header, robots=robots, steps=out, frames=frames, frames_from=frames_from,
-                       messages=messages, scene=scene, task=task_view(trace, started, frames, frames_from, metrics),
-                       routes=_routes(out), events=marks, warnings=warnings)
+    return EpisodeView(
+        header=header,
+        robots=robots,
+        steps=out,
+        frames=frames,
+        frames_from=frames_from,
+        messages=messages,
+        scene=scene,
+        task=task_view(trace, started, frames, frames_from, metrics),
+        routes=_routes(out),
+        events=marks,
+        warnings=warnings,
+    )
 
 
 def _routes(lanes: dict[str, list[Step]]) -> dict[str, list[list[float]]]:
@@ -248,12 +280,19 @@ def _routes(lanes: dict[str, list[Step]]) -> dict[str, list[list[float]]]:
     return out
 
 
-def _frames(trace: LoadedTrace, lanes: dict[str, list[Step]], started: dict[str, Any]) -> tuple[list[dict[str, Any]], str]:
+def _frames(
+    trace: LoadedTrace, lanes: dict[str, list[Step]], started: dict[str, Any]
+) -> tuple[list[dict[str, Any]], str]:
     snaps = trace.messages("snapshot")
     if snaps:
         return [
-            {"tick": s.get("tick", 0), "goals": list(s.get("goals") or []), "robots": s.get("robots") or {},
-             "objects": s.get("objects") or {}, "open": s.get("open") or {}}
+            {
+                "tick": s.get("tick", 0),
+                "goals": list(s.get("goals") or []),
+                "robots": s.get("robots") or {},
+                "objects": s.get("objects") or {},
+                "open": s.get("open") or {},
+            }
             for s in snaps
         ], "snapshots"
     # no snapshots: each robot's base from its own observations, after each tick
@@ -273,9 +312,16 @@ def _frames(trace: LoadedTrace, lanes: dict[str, list[Step]], started: dict[str,
             base = status.get("base")
             arm = status.get("arm_base")
             if isinstance(base, dict):
-                pose[s.robot] = {"x": base.get("x", 0.0), "y": base.get("y", 0.0), "yaw": base.get("yaw", 0.0), "holding": status.get("holding")}
+                pose[s.robot] = {
+                    "x": base.get("x", 0.0),
+                    "y": base.get("y", 0.0),
+                    "yaw": base.get("yaw", 0.0),
+                    "holding": status.get("holding"),
+                }
             elif isinstance(arm, list) and len(arm) >= 2:
                 pose[s.robot] = {"x": arm[0], "y": arm[1], "yaw": 0.0, "holding": status.get("holding")}
             goals.append(s.goal_id)
-        frames.append({"tick": tick, "goals": goals, "robots": {k: dict(v) for k, v in pose.items()}, "objects": {}, "open": {}})
+        frames.append(
+            {"tick": tick, "goals": goals, "robots": {k: dict(v) for k, v in pose.items()}, "objects": {}, "open": {}}
+        )
     return frames, "observations"

@@ -26,8 +26,8 @@ from mhrc.viewer import page_events
 from mhrc.viewer.model import EpisodeView, Step
 from mhrc.viewer.placement import Box, Request, place
 from mhrc.viewer.targets import ObjectFate, TaskView
-from mhrc.viewer.wording import html_text as _e
 from mhrc.viewer.wording import diagnostic_label, partial_success
+from mhrc.viewer.wording import html_text as _e
 
 SCALE = 80.0  # SVG pixels per metre
 ROBOT_COLORS = {"alice": "#d62728", "bob": "#1f77b4", "david": "#2ca02c"}
@@ -35,7 +35,6 @@ PALETTE = ["#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"]
 # the page's style and script, inlined into every report: package data beside this module
 CSS = files("mhrc.viewer").joinpath("page.css").read_text(encoding="utf-8")
 JS = files("mhrc.viewer").joinpath("page.js").read_text(encoding="utf-8")
-
 
 
 def robot_colors(robots: list[str]) -> dict[str, str]:
@@ -75,7 +74,9 @@ def value_html(value: Any, depth: int = 0) -> str:
             for v in value:
                 cols += [k for k in v if k not in cols]
             head = "".join(f"<th>{_e(c)}</th>" for c in cols)
-            body = "".join("<tr>" + "".join(f"<td>{value_html(v.get(c), depth + 1)}</td>" for c in cols) + "</tr>" for v in value)
+            body = "".join(
+                "<tr>" + "".join(f"<td>{value_html(v.get(c), depth + 1)}</td>" for c in cols) + "</tr>" for v in value
+            )
             return f'<table class="grid"><tr>{head}</tr>{body}</table>'
         return "<ul>" + "".join(f"<li>{value_html(v, depth + 1)}</li>" for v in value) + "</ul>"
     if isinstance(value, bool):
@@ -92,10 +93,18 @@ def _header(view: EpisodeView) -> str:
     h = view.header
     models = ", ".join(f"{r}: {m}" for r, m in h["models"].items()) or "unknown"
     facts = {
-        "task": h["task"], "scene": h["scene"], "seed": h["seed"], "objects": h["n_objects"],
-        "robots": ", ".join(h["robots"]), "model(s)": models, "fidelity": h["fidelity"],
-        "aids": ", ".join(h["aids"] or []) or "none", "scheduler": h["scheduler"], "horizon": h["horizon"],
-        "TS lower bound": h["lower_bound"], "end": h["reason"] or "not recorded",
+        "task": h["task"],
+        "scene": h["scene"],
+        "seed": h["seed"],
+        "objects": h["n_objects"],
+        "robots": ", ".join(h["robots"]),
+        "model(s)": models,
+        "fidelity": h["fidelity"],
+        "aids": ", ".join(h["aids"] or []) or "none",
+        "scheduler": h["scheduler"],
+        "horizon": h["horizon"],
+        "TS lower bound": h["lower_bound"],
+        "end": h["reason"] or "not recorded",
     }
     scenario = page_events.scenario_fact(view)
     if scenario is not None:  # a dynamic episode: the scenario of events it ran with
@@ -105,7 +114,9 @@ def _header(view: EpisodeView) -> str:
         facts["step seconds"] = h["step_seconds"]
     facts["protocol version(s)"] = ", ".join(str(v) for v in h["versions"]) or "unknown"
     facts["trace"] = h["trace"]
-    fact_rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v if v is not None else 'unknown')}</td></tr>" for k, v in facts.items())
+    fact_rows = "".join(
+        f"<tr><th>{_e(k)}</th><td>{_e(v if v is not None else 'unknown')}</td></tr>" for k, v in facts.items()
+    )
     m = h["metrics"]
     if m:
         key = {"success": "Succ", "partial_success": "PS", "temporal_steps": "TS", "action_steps": "AS"}
@@ -115,7 +126,8 @@ def _header(view: EpisodeView) -> str:
         count_html = f' <span class="mvs">{_e(count)}</span>' if count else ""
         shown["partial_success"] = _e(score) + count_html
         first = "".join(
-            f'<div class="metric" data-metric="{k}"><div class="mv">{shown[k]}</div><div class="mk">{label}</div></div>' for k, label in key.items()
+            f'<div class="metric" data-metric="{k}"><div class="mv">{shown[k]}</div><div class="mk">{label}</div></div>'
+            for k, label in key.items()
         )
         lb = h["lower_bound"]
         first += f'<div class="metric"><div class="mv">{_e(lb if lb is not None else "?")}</div><div class="mk">TS lower bound</div></div>'
@@ -144,15 +156,19 @@ def _targets(task: TaskView | None) -> str:
         return ""
     notes = "".join(f'<div class="note">{_e(n)}</div>' for n in task.notes)
     if task.targets is None:
-        return (f'<section id="targets"><h2>Targets</h2>{notes}<p class="tsum">The trace does not say which objects are '
-                'targets (no observation of Bob\'s names them).</p></section>')
+        return (
+            f'<section id="targets"><h2>Targets</h2>{notes}<p class="tsum">The trace does not say which objects are '
+            "targets (no observation of Bob's names them).</p></section>"
+        )
     targets = [o for o in task.objects if o.role == "target"]
     placed = [o for o in targets if o.placed]
     unplaced = task.unplaced
     unknown = [o for o in targets if o.placed is None]
     if unplaced:
-        summary = (f'<span class="unplaced-count">{len(unplaced)} of {len(targets)} targets not placed</span> at the end: '
-                   f'{_names_where(unplaced)}.')
+        summary = (
+            f'<span class="unplaced-count">{len(unplaced)} of {len(targets)} targets not placed</span> at the end: '
+            f"{_names_where(unplaced)}."
+        )
     elif unknown:
         summary = f"{len(targets)} targets; whether they ended on their goals is not known."
     else:
@@ -160,12 +176,16 @@ def _targets(task: TaskView | None) -> str:
     if placed and unplaced:
         summary += f" Placed: {', '.join(f'<b>{_e(o.name)}</b>' for o in placed)}."
     ds = task.distractors
-    summary += (f" Distractors (not on the list): {_names_where(ds)}." if ds else " No distractors.")
+    summary += f" Distractors (not on the list): {_names_where(ds)}." if ds else " No distractors."
     rows = []
     dash = '<span class="dim">&#8212;</span>'
     for o in task.objects:
         if o.role == "target":
-            state, cls = {True: ("&#10003; placed", "placed"), False: ("&#10007; not placed", "unplaced"), None: ("unknown", "")}[o.placed]
+            state, cls = {
+                True: ("&#10003; placed", "placed"),
+                False: ("&#10007; not placed", "unplaced"),
+                None: ("unknown", ""),
+            }[o.placed]
         else:
             state, cls = dash, ""
         flag = {True: "yes", False: "no", None: ""}[o.placed]
@@ -187,7 +207,9 @@ def _targets(task: TaskView | None) -> str:
     )
 
 
-def _static_labels(view: EpisodeView, px: Callable[[float], float], py: Callable[[float], float], frame: Box) -> list[str]:
+def _static_labels(
+    view: EpisodeView, px: Callable[[float], float], py: Callable[[float], float], frame: Box
+) -> list[str]:
     """The furniture's and the goal area's labels, placed so that none covers another
     (mhrc.viewer.placement), with a leader line where a label sits away from its thing."""
     sc = view.scene
@@ -205,16 +227,20 @@ def _static_labels(view: EpisodeView, px: Callable[[float], float], py: Callable
     soft += [(Box.centred(px(x), py(y), 14, 14), 3.0) for x, y in spots]  # where objects lie: keep them visible
     stands = {(round(r["x"], 1), round(r["y"], 1)) for f in view.frames for r in f["robots"].values()}
     soft += [(Box.centred(px(x), py(y), 22, 22), 1.0) for x, y in stands]
-    requests = [Request(f["name"] + (" ▣" if f["openable"] else ""), "fname", b)
-                for f, b in sorted(furniture, key=lambda fb: (fb[1].x1 - fb[1].x0) * (fb[1].y1 - fb[1].y0))]
+    requests = [
+        Request(f["name"] + (" ▣" if f["openable"] else ""), "fname", b)
+        for f, b in sorted(furniture, key=lambda fb: (fb[1].x1 - fb[1].x0) * (fb[1].y1 - fb[1].y0))
+    ]
     requests.append(Request("goal area", "gname", goal, fonts=(10.0, 8.5), prefer_outside=True))
     out = []
     for lab in place(requests, frame, soft):
         if lab.leader is not None:
             x1, y1, x2, y2 = lab.leader
             out.append(f'<line class="leader" x1="{x1}" y1="{y1}" x2="{x2}" y2="{y2}"/>')
-        out.append(f'<text class="{lab.request.cls}" x="{round(lab.box.cx, 1)}" y="{lab.baseline}" '
-                   f'font-size="{lab.font:g}">{_e(lab.request.text)}</text>')
+        out.append(
+            f'<text class="{lab.request.cls}" x="{round(lab.box.cx, 1)}" y="{lab.baseline}" '
+            f'font-size="{lab.font:g}">{_e(lab.request.text)}</text>'
+        )
     return out
 
 
@@ -229,8 +255,10 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
         return round((ymax - y) * SCALE, 1)
 
     def rect(cx: float, cy: float, sx: float, sy: float, cls: str, extra: str = "") -> str:
-        return (f'<rect class="{cls}" x="{px(cx - sx / 2)}" y="{py(cy + sy / 2)}" width="{round(sx * SCALE, 1)}" '
-                f'height="{round(sy * SCALE, 1)}"{extra}/>')
+        return (
+            f'<rect class="{cls}" x="{px(cx - sx / 2)}" y="{py(cy + sy / 2)}" width="{round(sx * SCALE, 1)}" '
+            f'height="{round(sy * SCALE, 1)}"{extra}/>'
+        )
 
     parts: list[str] = []
     sc = view.scene
@@ -244,19 +272,35 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
         for f in sc["furniture"]:
             r, g, bl = (int(255 * c) for c in f["color"][:3])
             cls = "furniture container" if f["openable"] else "furniture"
-            parts.append(rect(f["x"], f["y"], f["sx"], f["sy"], cls,
-                              f' data-name="{_e(f["name"])}" style="fill:rgb({r},{g},{bl})"><title>{_e(f["name"])}: {_e(f["kind"])}</title></rect'))
+            parts.append(
+                rect(
+                    f["x"],
+                    f["y"],
+                    f["sx"],
+                    f["sy"],
+                    cls,
+                    f' data-name="{_e(f["name"])}" style="fill:rgb({r},{g},{bl})"><title>{_e(f["name"])}: {_e(f["kind"])}</title></rect',
+                )
+            )
         gx, gy, gsx, gsy = sc["goal_area"]
-        parts.append(rect(gx, gy, gsx, gsy, "goal-area", '><title>goal area</title></rect'))
+        parts.append(rect(gx, gy, gsx, gsy, "goal-area", "><title>goal area</title></rect"))
         for fx in sc["fixtures"]:
-            parts.append(rect(fx["x"], fx["y"], 0.16, 0.12, "fixture", f'><title>{_e(fx["name"])}</title></rect'))
+            parts.append(rect(fx["x"], fx["y"], 0.16, 0.12, "fixture", f"><title>{_e(fx['name'])}</title></rect"))
         for wx, wy, wsx, wsy in sc["walls"]:
             parts.append(rect(wx, wy, wsx, wsy, "wall"))
         parts += _static_labels(view, px, py, Box(0.0, 0.0, w, hgt))
-    legend = "".join(f'<span class="li"><span class="chip" style="background:{c}"></span>{_e(r)}</span> ' for r, c in colors.items())
-    legend += "<br>" + " ".join(f'<span class="li"><span class="odot {cls}"></span>{text}</span>' for cls, text in (
-        ("target unplaced", "target, not on its goal"), ("target placed", "target on its goal"), ("distractor", "distractor"),
-        ("ring", "target not placed at the end")))
+    legend = "".join(
+        f'<span class="li"><span class="chip" style="background:{c}"></span>{_e(r)}</span> ' for r, c in colors.items()
+    )
+    legend += "<br>" + " ".join(
+        f'<span class="li"><span class="odot {cls}"></span>{text}</span>'
+        for cls, text in (
+            ("target unplaced", "target, not on its goal"),
+            ("target placed", "target on its goal"),
+            ("distractor", "distractor"),
+            ("ring", "target not placed at the end"),
+        )
+    )
     if view.events:
         legend += page_events.legend(view)
     n = len(view.frames)
@@ -267,23 +311,26 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
     else:
         note = '<div class="warning">&#9888; nothing to animate: the trace has no snapshots and no action results</div>'
     disabled = " disabled" if n == 0 else ""
-    slider = (f'<input type="range" id="tick-slider" min="0" max="{max(n - 1, 0)}" value="{max(n - 1, 0)}" step="1"{disabled} '
-              'aria-label="frame">')
+    slider = (
+        f'<input type="range" id="tick-slider" min="0" max="{max(n - 1, 0)}" value="{max(n - 1, 0)}" step="1"{disabled} '
+        'aria-label="frame">'
+    )
     if view.events:  # the scenario's events on a track under the slider
         slider = f'<div class="timeline">{slider}{page_events.timeline(view)}</div>'
     frame_events = '<div id="frame-events"></div>' if view.events else ""
+    tick_label = f"tick {view.frames[-1]['tick']} (the end)" if n else "no frames"
     return f"""
 <section id="map-section"><h2>House map</h2>{note}
 <div class="controls">
   <button id="prev" type="button"{disabled}>&#9664;</button>
   {slider}
   <button id="next" type="button"{disabled}>&#9654;</button>
-  <span id="tick-label">{f'tick {view.frames[-1]["tick"]} (the end)' if n else 'no frames'}</span>
+  <span id="tick-label">{tick_label}</span>
   <span class="dim">(frames: {n}; use the slider, the &#8592; &#8594; keys, Home or End)</span>
 </div>
 <div class="map-wrap">
 <svg id="map" viewBox="0 0 {round(w, 1)} {round(hgt, 1)}" data-xmin="{xmin}" data-ymax="{ymax}" data-scale="{SCALE}" role="img" aria-label="top-down map">
-<g id="static">{''.join(parts)}</g>
+<g id="static">{"".join(parts)}</g>
 <g id="dyn"></g>
 </svg>
 <div id="frame-info"><div class="legend">{legend}</div>{frame_events}<div id="frame-steps"></div><div id="frame-objects"></div></div>
@@ -318,18 +365,25 @@ def _step_html(s: Step) -> str:
         f' <span class="badge {cls}">{_e(status)}</span></div>',
     ]
     if ack is not None:
-        parts.append(f'<div class="ack">ack: {"accepted" if ack.get("accepted", True) else "rejected"}'
-                     f'{": " + _e(ack.get("reason")) if ack.get("reason") else ""}</div>')
+        parts.append(
+            f'<div class="ack">ack: {"accepted" if ack.get("accepted", True) else "rejected"}'
+            f"{': ' + _e(ack.get('reason')) if ack.get('reason') else ''}</div>"
+        )
     if out:
         parts.append(f'<div class="feedback">{_e(out.get("feedback"))}</div>')
         if res.get("started") is not None:
-            parts.append(f'<div class="dim">sim {res["started"]:.1f}–{(res.get("ended") or res["started"]):.1f} s</div>')
+            parts.append(
+                f'<div class="dim">sim {res["started"]:.1f}–{(res.get("ended") or res["started"]):.1f} s</div>'
+            )
     t = s.thought
     if t:
         if t.get("prompt") is not None or t.get("reply") is not None:
             analysis = _reply_analysis(t.get("reply"))
             if t.get("reasoning"):
-                parts.append(f'<details class="reasoning"><summary>reasoning ({_e(t.get("reasoning_tokens", 0))} tokens)</summary><pre>{_e(t["reasoning"])}</pre></details>')
+                parts.append(
+                    f'<details class="reasoning"><summary>reasoning ({_e(t.get("reasoning_tokens", 0))} '
+                    f"tokens)</summary><pre>{_e(t['reasoning'])}</pre></details>"
+                )
             if analysis:
                 parts.append(f'<div class="analysis">{_e(analysis)}</div>')
             parts.append(f'<div class="command">command: <code>{_e(t.get("action"))}</code></div>')
@@ -337,10 +391,12 @@ def _step_html(s: Step) -> str:
                 parts.append(f'<div class="perr">parse error: {_e(t["parse_error"])}</div>')
             parts.append(
                 f'<div class="dim">{_e(t.get("policy"))} · {_e(t.get("prompt_tokens", 0))} prompt + {_e(t.get("completion_tokens", 0))} completion tokens'
-                f' · {float(t.get("latency") or 0):.2f} s{" · finish " + _e(t["finish_reason"]) if t.get("finish_reason") else ""}</div>'
+                f" · {float(t.get('latency') or 0):.2f} s{' · finish ' + _e(t['finish_reason']) if t.get('finish_reason') else ''}</div>"
             )
             parts.append(f'<details class="prompt"><summary>prompt</summary><pre>{_e(t.get("prompt"))}</pre></details>')
-            parts.append(f'<details class="reply"><summary>raw reply</summary><pre>{_e(t.get("reply"))}</pre></details>')
+            parts.append(
+                f'<details class="reply"><summary>raw reply</summary><pre>{_e(t.get("reply"))}</pre></details>'
+            )
         elif t.get("parse_error"):
             parts.append(f'<div class="perr">{_e(t["parse_error"])}</div>')
     parts.append("</li>")
@@ -351,7 +407,9 @@ def _lanes(view: EpisodeView, colors: dict[str, str]) -> str:
     lanes = []
     for r in view.robots:
         steps = view.steps.get(r, [])
-        items = page_events.merge(steps, [m for m in view.events if page_events.robot_of(m) == r], [_step_html(s) for s in steps])
+        items = page_events.merge(
+            steps, [m for m in view.events if page_events.robot_of(m) == r], [_step_html(s) for s in steps]
+        )
         lanes.append(
             f'<div class="lane" data-robot="{_e(r)}"><h3 style="border-color:{colors[r]}">{_e(r)} '
             f'<span class="dim">{_e(view.header["models"].get(r))} · {len(steps)} steps</span></h3><ol>{items}</ol></div>'
@@ -372,22 +430,32 @@ def _messages(view: EpisodeView, colors: dict[str, str]) -> str:
             f'<b style="color:{c2}">{_e(m.to)}</b></td><td>{_e(m.delivered if m.delivered is not None else "not seen")}</td>'
             f'<td class="content">{_e(m.content)}</td></tr>'
         )
-    return ('<section id="messages"><h2>Messages</h2><table class="grid"><tr><th>sent at tick</th><th>from &#8594; to</th>'
-            f'<th>delivered at tick</th><th>content</th></tr>{"".join(rows)}</table></section>')
+    return (
+        '<section id="messages"><h2>Messages</h2><table class="grid"><tr><th>sent at tick</th><th>from &#8594; to</th>'
+        f"<th>delivered at tick</th><th>content</th></tr>{''.join(rows)}</table></section>"
+    )
 
 
-LABELLED_KEYS = ("rejected_by_reason", "failed_by_code")  # breakdowns by kind or outcome code; the others are by name or skill
+LABELLED_KEYS = (
+    "rejected_by_reason",
+    "failed_by_code",
+)  # breakdowns by kind or outcome code; the others are by name or skill
 
 
 def _diagnostic_value(key: str, value: Any) -> str:
     """A diagnostics value: a breakdown's kinds and outcome codes labelled, object names and skills as they are."""
     if isinstance(value, dict) and value:
+
         def name(k: str) -> str:
-            return f'<span title="{_e(k)}">{_e(diagnostic_label(k))}</span>' if key in LABELLED_KEYS else f"<code>{_e(k)}</code>"
+            return (
+                f'<span title="{_e(k)}">{_e(diagnostic_label(k))}</span>'
+                if key in LABELLED_KEYS
+                else f"<code>{_e(k)}</code>"
+            )
 
         def inner(v: Any) -> str:
             if isinstance(v, dict):  # failed_by_skill: skill -> outcome code -> count
-                return ", ".join(f'{_e(diagnostic_label(c))} &#215;{_e(n)}' for c, n in v.items())
+                return ", ".join(f"{_e(diagnostic_label(c))} &#215;{_e(n)}" for c, n in v.items())
             return _e(v)
 
         return "".join(f"<div>{name(str(k))}: {inner(v)}</div>" for k, v in value.items())
@@ -408,15 +476,27 @@ def _failures(diagnostics: dict[str, Any] | None, note: str | None) -> str:
 
 
 def _data(view: EpisodeView, colors: dict[str, str]) -> str:
-    calls = {s.goal_id: {"robot": s.robot, "call": s.call, "ok": bool((s.result or {}).get("outcome", {}).get("succeeded"))}
-             for lane in view.steps.values() for s in lane}
+    calls = {
+        s.goal_id: {"robot": s.robot, "call": s.call, "ok": bool((s.result or {}).get("outcome", {}).get("succeeded"))}
+        for lane in view.steps.values()
+        for s in lane
+    }
     data = {
         "robots": view.robots,
         "colors": colors,
         "frames": view.frames,
         "framesFrom": view.frames_from,
-        "messages": [{"sender": m.sender, "to": m.to, "content": m.content, "sent": m.sent, "delivered": m.delivered, "frame": m.frame}
-                     for m in view.messages],
+        "messages": [
+            {
+                "sender": m.sender,
+                "to": m.to,
+                "content": m.content,
+                "sent": m.sent,
+                "delivered": m.delivered,
+                "frame": m.frame,
+            }
+            for m in view.messages
+        ],
         "calls": calls,
         "routes": view.routes,
         "roles": view.task.roles() if view.task else {},
@@ -430,7 +510,9 @@ def _data(view: EpisodeView, colors: dict[str, str]) -> str:
     return text.replace("<", "\\u003c").replace("\u2028", "\\u2028").replace("\u2029", "\\u2029")
 
 
-def render_page(view: EpisodeView, diagnostics: dict[str, Any] | None = None, diagnostics_note: str | None = None) -> str:
+def render_page(
+    view: EpisodeView, diagnostics: dict[str, Any] | None = None, diagnostics_note: str | None = None
+) -> str:
     colors = robot_colors(view.robots)
     title = f"mhrc {view.header.get('task') or ''} {view.header.get('scene') or ''} seed {view.header.get('seed')}"
     return f"""<!DOCTYPE html>

@@ -61,8 +61,15 @@ def timeline(view: EpisodeView) -> str:
 def legend(view: EpisodeView) -> str:
     """The event kinds this episode has, for the map's legend."""
     kinds = [k for k in KINDS if any(m.event == k for m in view.events)]
-    names = {"relocate": "object moved", "new_target": "target added", "close": "container closed", "breakdown": "robot broken down"}
-    items = " ".join(f'<span class="li"><span class="ev-glyph ev-{k}">{GLYPHS[k]}</span>{names[k]}</span>' for k in kinds)
+    names = {
+        "relocate": "object moved",
+        "new_target": "target added",
+        "close": "container closed",
+        "breakdown": "robot broken down",
+    }
+    items = " ".join(
+        f'<span class="li"><span class="ev-glyph ev-{k}">{GLYPHS[k]}</span>{names[k]}</span>' for k in kinds
+    )
     if any(not m.applied for m in view.events):
         items += f' <span class="li"><span class="ev-glyph skipped">{GLYPHS["relocate"]}</span>skipped event</span>'
     return f"<br>{items}"
@@ -103,5 +110,7 @@ def world_lane(view: EpisodeView) -> str:
     if not marks:
         return ""
     fact = scenario_fact(view) or ""
-    return (f'<div class="lane world-lane" data-lane="world"><h3 style="border-color:#555">world '
-            f'<span class="dim">scenario {_e(fact)} · {len(marks)} events</span></h3><ol>{"".join(entry(m) for m in marks)}</ol></div>')
+    return (
+        f'<div class="lane world-lane" data-lane="world"><h3 style="border-color:#555">world '
+        f'<span class="dim">scenario {_e(fact)} · {len(marks)} events</span></h3><ol>{"".join(entry(m) for m in marks)}</ol></div>'
+    )

@@ -113,11 +113,15 @@ def _spots(a: Box, w: float, h: float, prefer_outside: bool) -> list[tuple[float
     aw, ah = a.x1 - a.x0, a.y1 - a.y0
     inside = [(a.cx, a.cy), (a.cx, a.y0 + h / 2 + GAP), (a.cx, a.y1 - h / 2 - GAP)]
     near = [
-        (a.cx, a.y1 + h / 2 + GAP), (a.cx, a.y0 - h / 2 - GAP),
-        (a.x1 + w / 2 + GAP, a.cy), (a.x0 - w / 2 - GAP, a.cy),
-        (a.x1 - w / 2, a.y1 + h / 2 + GAP), (a.x0 + w / 2, a.y1 + h / 2 + GAP),
-        (a.x1 - w / 2, a.y0 - h / 2 - GAP), (a.x0 + w / 2, a.y0 - h / 2 - GAP),
-    ]  # fmt: skip
+        (a.cx, a.y1 + h / 2 + GAP),
+        (a.cx, a.y0 - h / 2 - GAP),
+        (a.x1 + w / 2 + GAP, a.cy),
+        (a.x0 - w / 2 - GAP, a.cy),
+        (a.x1 - w / 2, a.y1 + h / 2 + GAP),
+        (a.x0 + w / 2, a.y1 + h / 2 + GAP),
+        (a.x1 - w / 2, a.y0 - h / 2 - GAP),
+        (a.x0 + w / 2, a.y0 - h / 2 - GAP),
+    ]
     rings = []
     for d in (8.0, 18.0, 30.0, 45.0, 65.0, 90.0):
         for k in range(16):

@@ -23,10 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from mhrc.viewer.load import LoadedTrace
 from mhrc.world.layouts import get_layout
 from mhrc.world.tasks import get_task
-
-from mhrc.viewer.load import LoadedTrace
 
 
 @dataclass
@@ -98,15 +97,20 @@ def _where(pose: dict[str, Any]) -> str:
     return "on the floor"
 
 
-def task_view(trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str, Any]], frames_from: str,
-              metrics: dict[str, Any]) -> TaskView:
+def task_view(
+    trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str, Any]], frames_from: str, metrics: dict[str, Any]
+) -> TaskView:
     """The task's objects, their roles, goals and ends, from the trace (see the module docstring)."""
     observations = _observations(trace)
     notes: list[str] = []
     done = next(iter(trace.messages("episode_done")[-1:]), {})
     if done.get("targets"):  # the world's answer key, sent once the episode is over
-        started = {**started, "targets": done["targets"], "goals": done.get("goals") or started.get("goals"),
-                   "ordered": done.get("ordered", False)}  # fmt: skip
+        started = {
+            **started,
+            "targets": done["targets"],
+            "goals": done.get("goals") or started.get("goals"),
+            "ordered": done.get("ordered", False),
+        }
 
     targets: list[str] | None = None
     targets_from = ""
@@ -126,7 +130,10 @@ def task_view(trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str
     else:
         for obs in observations:
             if obs.get("goals"):
-                goals, goals_from = {str(k): str(v) for k, v in obs["goals"].items()}, f"{obs.get('robot', 'bob')}'s observations"
+                goals, goals_from = (
+                    {str(k): str(v) for k, v in obs["goals"].items()},
+                    f"{obs.get('robot', 'bob')}'s observations",
+                )
                 break
 
     generated: dict[str, tuple[bool, str | None]] = {}
@@ -136,10 +143,14 @@ def task_view(trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str
         if targets is None and gen_targets:
             targets, targets_from = gen_targets, "the task's generator (the trace does not name them)"
         elif targets is not None and generated and set(gen_targets) != set(targets):
-            notes.append("the task's generator gives other targets than the trace (another version?): the goals are not known")
+            notes.append(
+                "the task's generator gives other targets than the trace (another version?): the goals are not known"
+            )
             generated = {}
         if why and targets is None:
-            notes.append(f"the targets are not known: the trace does not name them and the task's generator failed ({why})")
+            notes.append(
+                f"the targets are not known: the trace does not name them and the task's generator failed ({why})"
+            )
         if not goals and generated:
             goals = {n: g for n, (t, g) in generated.items() if t and g}
             goals_from = "the task's goal for each target"
@@ -165,7 +176,11 @@ def task_view(trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str
     names += sorted(others - set(names))
     objects: list[ObjectFate] = []
     for name in names:
-        role = "target" if targets is not None and name in targets else ("distractor" if targets is not None else "unknown")
+        role = (
+            "target"
+            if targets is not None and name in targets
+            else ("distractor" if targets is not None else "unknown")
+        )
         fate = ObjectFate(name=name, role=role, goal=goals.get(name))
         pose = ends.get(name)
         if pose is not None:
@@ -179,10 +194,18 @@ def task_view(trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str
         objects.append(fate)
 
     placed, total = metrics.get("placed"), metrics.get("total")
-    view = TaskView(targets=targets, targets_from=targets_from, goals=goals, goals_from=goals_from, end_from=end_from,
-                    objects=objects, ordered=ordered,
-                    placed_by_world=placed if isinstance(placed, int) else None,
-                    total_by_world=total if isinstance(total, int) else None, notes=notes)
+    view = TaskView(
+        targets=targets,
+        targets_from=targets_from,
+        goals=goals,
+        goals_from=goals_from,
+        end_from=end_from,
+        objects=objects,
+        ordered=ordered,
+        placed_by_world=placed if isinstance(placed, int) else None,
+        total_by_world=total if isinstance(total, int) else None,
+        notes=notes,
+    )
     mine = sum(1 for o in objects if o.role == "target" and o.placed)
     known = all(o.placed is not None for o in objects if o.role == "target")
     if view.placed_by_world is not None and known and targets and mine != view.placed_by_world:

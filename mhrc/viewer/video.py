@@ -30,7 +30,6 @@ from typing import Any
 import imageio.v2 as iio2
 import imageio.v3 as iio3
 import numpy as np
-from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 import structlog
 from PIL import Image, ImageDraw, ImageFont
 
@@ -38,6 +37,7 @@ from mhrc.core.protocol import ActionResult, EpisodeStarted, ObjectPose, RobotPo
 from mhrc.core.records import read_records
 from mhrc.viewer.events import caption as event_caption
 from mhrc.viewer.events import captions_by_snapshot, scenario_label
+from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 from mhrc.world.render import VIEWS, render
 from mhrc.world.scenario import NewTarget, Scenario
 from mhrc.world.sim import Sim
@@ -122,8 +122,14 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step], str | None]:
     added: list[tuple[int, str, str]] = []  # each new target's (line, object, furniture)
     for n, line in enumerate(read_records(trace)):
         msg = line.msg
-        if line.problem is not None and isinstance(line.raw, dict) and line.raw.get("kind") in ("episode_started", "snapshot", "scenario_event"):
-            raise VideoError(f"{trace}: a {line.raw['kind']} event does not match this version of mhrc ({line.problem})")
+        if (
+            line.problem is not None
+            and isinstance(line.raw, dict)
+            and line.raw.get("kind") in ("episode_started", "snapshot", "scenario_event")
+        ):
+            raise VideoError(
+                f"{trace}: a {line.raw['kind']} event does not match this version of mhrc ({line.problem})"
+            )
         if isinstance(msg, EpisodeStarted) and started is None:
             started = msg
         elif isinstance(msg, Snapshot):
@@ -131,7 +137,9 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step], str | None]:
             positions.append((n, msg.tick))
         elif isinstance(msg, ScenarioEvent):
             scenario = scenario or scenario_label(msg.scenario, msg.sha256)
-            skipped = f" (skipped: {msg.skipped})" if not msg.applied and msg.skipped and msg.skipped not in msg.text else ""
+            skipped = (
+                f" (skipped: {msg.skipped})" if not msg.applied and msg.skipped and msg.skipped not in msg.text else ""
+            )
             events.append((n, msg.tick, event_caption(msg.tick, msg.text) + skipped))
             if msg.applied and msg.event == "new_target" and msg.changed.get("object") and msg.changed.get("on"):
                 added.append((n, msg.changed["object"], msg.changed["on"]))
@@ -141,7 +149,8 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step], str | None]:
         raise VideoError(f"{trace}: no episode_started event; is it an mhrc trace (runs/<run>/trace.jsonl)?")
     if not snapshots:
         raise TraceWithoutSnapshots(
-            f"{trace}: the trace has no snapshot events: it predates snapshots (world poses after every step); record the episode again with this version of mhrc"
+            f"{trace}: the trace has no snapshot events: it predates snapshots (world poses after every step); "
+            f"record the episode again with this version of mhrc"
         )
     robots = list(started.robots)
     steps = []
@@ -192,7 +201,10 @@ def _between(a: Snapshot, b: Snapshot, s: float) -> tuple[dict[str, RobotPose], 
     for name, rb in b.robots.items():
         ra = a.robots.get(name, rb)
         robots[name] = RobotPose(
-            x=ra.x + s * (rb.x - ra.x), y=ra.y + s * (rb.y - ra.y), yaw=_lerp_angle(ra.yaw, rb.yaw, s), holding=ra.holding if ra.holding == rb.holding else None
+            x=ra.x + s * (rb.x - ra.x),
+            y=ra.y + s * (rb.y - ra.y),
+            yaw=_lerp_angle(ra.yaw, rb.yaw, s),
+            holding=ra.holding if ra.holding == rb.holding else None,
         )
     objects = {}
     for name, ob in b.objects.items():
@@ -201,12 +213,19 @@ def _between(a: Snapshot, b: Snapshot, s: float) -> tuple[dict[str, RobotPose], 
             objects[name] = ob
         else:
             objects[name] = ObjectPose(
-                x=oa.x + s * (ob.x - oa.x), y=oa.y + s * (ob.y - oa.y), z=oa.z + s * (ob.z - oa.z), on=oa.on, inside=oa.inside and ob.inside, held_by=None
+                x=oa.x + s * (ob.x - oa.x),
+                y=oa.y + s * (ob.y - oa.y),
+                z=oa.z + s * (ob.z - oa.z),
+                on=oa.on,
+                inside=oa.inside and ob.inside,
+                held_by=None,
             )
     return robots, objects, a.open
 
 
-def _poses(steps: list[Step], frames_per_step: int) -> Iterator[tuple[int, tuple[dict[str, RobotPose], dict[str, ObjectPose], dict[str, bool]]]]:
+def _poses(
+    steps: list[Step], frames_per_step: int
+) -> Iterator[tuple[int, tuple[dict[str, RobotPose], dict[str, ObjectPose], dict[str, bool]]]]:
     """(step index, poses) for every frame, in order."""
     first = steps[0].snapshot
     for _ in range(frames_per_step):
@@ -240,14 +259,25 @@ class _Captioner:
     """Draws the caption band under the picture: a header line, one line per robot, and for a
     dynamic episode (`events`) a line for the scenario events the step shows."""
 
-    def __init__(self, width: int, height: int, started: EpisodeStarted, n_steps: int, *, events: bool = False, scenario: str | None = None) -> None:
+    def __init__(
+        self,
+        width: int,
+        height: int,
+        started: EpisodeStarted,
+        n_steps: int,
+        *,
+        events: bool = False,
+        scenario: str | None = None,
+    ) -> None:
         self.size = max(9, round(min(width / 48, height / 30)))
         self.font = ImageFont.load_default(size=self.size)
         self.line = self.size + max(2, self.size // 4)
         self.events = events
         self.band = self.line * (1 + len(started.robots) + int(events)) + self.line // 2 + BAR
         if self.band > height // 2:
-            raise VideoError(f"a {width}x{height} frame leaves no room for the picture above the captions; make it larger")
+            raise VideoError(
+                f"a {width}x{height} frame leaves no room for the picture above the captions; make it larger"
+            )
         self.width, self.height = width, height
         self.title = f"{started.scene} / {started.task} / seed {started.seed} / {started.n_objects} objects / {started.scheduler}"
         if scenario:
@@ -273,7 +303,12 @@ class _Captioner:
             colour = DIM if c.succeeded is None else OK if c.succeeded else FAILED
             draw.text((pad + name_w, y), self._fit(c.text, self.width - 2 * pad - name_w), font=self.font, fill=colour)
         if self.events and step.events:
-            draw.text((pad, y + self.line), self._fit("; ".join(step.events), self.width - 2 * pad), font=self.font, fill=EVENT)
+            draw.text(
+                (pad, y + self.line),
+                self._fit("; ".join(step.events), self.width - 2 * pad),
+                font=self.font,
+                fill=EVENT,
+            )
         return np.asarray(img)
 
     def _fit(self, text: str, room: float) -> str:
@@ -296,7 +331,16 @@ class _Writer:
         self._mp4: Any = None
         self._gif: list[np.ndarray] = []
         if self.suffix == ".mp4":
-            self._mp4 = iio2.get_writer(out, format="FFMPEG", mode="I", fps=fps, codec="libx264", pixelformat="yuv420p", quality=6, macro_block_size=2)
+            self._mp4 = iio2.get_writer(
+                out,
+                format="FFMPEG",
+                mode="I",
+                fps=fps,
+                codec="libx264",
+                pixelformat="yuv420p",
+                quality=6,
+                macro_block_size=2,
+            )
 
     def append(self, frame: np.ndarray) -> None:
         if self._mp4 is not None:
@@ -308,7 +352,14 @@ class _Writer:
         if self._mp4 is not None:
             self._mp4.close()
         elif self._gif:
-            iio3.imwrite(self.out, np.stack(self._gif), plugin="pillow", extension=".gif", duration=round(1000 / self.fps), loop=0)
+            iio3.imwrite(
+                self.out,
+                np.stack(self._gif),
+                plugin="pillow",
+                extension=".gif",
+                duration=round(1000 / self.fps),
+                loop=0,
+            )
 
 
 def render_video(
@@ -330,7 +381,9 @@ def render_video(
     t0 = time.perf_counter()
     trace, out = Path(trace), Path(out)
     if out.suffix.lower() not in SUFFIXES:
-        raise UnsupportedVideoFormat(f"{out}: cannot write a {out.suffix or 'suffix-less'} video; use one of {', '.join(SUFFIXES)}")
+        raise UnsupportedVideoFormat(
+            f"{out}: cannot write a {out.suffix or 'suffix-less'} video; use one of {', '.join(SUFFIXES)}"
+        )
     if view != OVERVIEW and view not in VIEWS:
         raise VideoError(f"unknown view {view!r}; use one of {', '.join([OVERVIEW, *VIEWS])}")
     if frames_per_step < 1 or fps <= 0:
@@ -342,8 +395,15 @@ def render_video(
     total = len(steps) * frames_per_step
     out.parent.mkdir(parents=True, exist_ok=True)
     rendering = 0.0
-    with Sim(task=started.task, scene=started.scene, seed=started.seed, n_objects=started.n_objects, robots=tuple(started.robots),
-             aids=tuple(started.aids), scenario=_spawns(steps)) as sim:
+    with Sim(
+        task=started.task,
+        scene=started.scene,
+        seed=started.seed,
+        n_objects=started.n_objects,
+        robots=tuple(started.robots),
+        aids=tuple(started.aids),
+        scenario=_spawns(steps),
+    ) as sim:
         writer = _Writer(out, fps)
         try:
             for n, (i, (robots, objects, opened)) in enumerate(_poses(steps, frames_per_step), start=1):
@@ -357,6 +417,15 @@ def render_video(
                     progress(n, total)
         finally:
             writer.close()
-    info = VideoInfo(out, total, len(steps), width, height, fps, time.perf_counter() - t0, rendering, out.stat().st_size)
-    log.info("video written", path=str(out), frames=info.frames, steps=info.steps, seconds=round(info.seconds, 2), bytes=info.bytes)
+    info = VideoInfo(
+        out, total, len(steps), width, height, fps, time.perf_counter() - t0, rendering, out.stat().st_size
+    )
+    log.info(
+        "video written",
+        path=str(out),
+        frames=info.frames,
+        steps=info.steps,
+        seconds=round(info.seconds, 2),
+        bytes=info.bytes,
+    )
     return info

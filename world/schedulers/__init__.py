@@ -8,7 +8,11 @@ from .base import Executed, Scheduler, SchedulerOptionError, TaskResultLike, Wor
 from .lockstep import LockstepScheduler
 from .sequential import SequentialScheduler
 
-SCHEDULERS: dict[str, type[Scheduler]] = {"sequential": SequentialScheduler, "lockstep": LockstepScheduler, "async": AsyncScheduler}
+SCHEDULERS: dict[str, type[Scheduler]] = {
+    "sequential": SequentialScheduler,
+    "lockstep": LockstepScheduler,
+    "async": AsyncScheduler,
+}
 
 
 class UnknownScheduler(ValueError):
@@ -26,6 +30,16 @@ def make_scheduler(name: str, world: World, *, time_scale: float = 0.0) -> Sched
 
 
 __all__ = [
-    "SCHEDULERS", "STEP_SECONDS", "AsyncScheduler", "Executed", "SchedulerOptionError", "LockstepScheduler", "Scheduler", "SequentialScheduler",
-    "TaskResultLike", "UnknownScheduler", "World", "make_scheduler",
+    "SCHEDULERS",
+    "STEP_SECONDS",
+    "AsyncScheduler",
+    "Executed",
+    "SchedulerOptionError",
+    "LockstepScheduler",
+    "Scheduler",
+    "SequentialScheduler",
+    "TaskResultLike",
+    "UnknownScheduler",
+    "World",
+    "make_scheduler",
 ]

@@ -33,7 +33,15 @@ from dataclasses import dataclass
 
 import structlog
 
-from mhrc.core.protocol import ActionRequest, ActionResult, Observation, Rejection, RejectCode, RobotMessage, SkillOutcome
+from mhrc.core.protocol import (
+    ActionRequest,
+    ActionResult,
+    Observation,
+    RejectCode,
+    Rejection,
+    RobotMessage,
+    SkillOutcome,
+)
 
 from .base import Scheduler, SchedulerOptionError, World, duration
 
@@ -64,7 +72,9 @@ class AsyncScheduler(Scheduler):
     def __init__(self, world: World, *, time_scale: float = 0.0, step_seconds: float = STEP_SECONDS) -> None:
         super().__init__(world)
         if not math.isfinite(time_scale) or time_scale < 0:
-            raise SchedulerOptionError(f"--time-scale must be 0 (as fast as possible) or a positive number, not {time_scale}")
+            raise SchedulerOptionError(
+                f"--time-scale must be 0 (as fast as possible) or a positive number, not {time_scale}"
+            )
         if step_seconds <= 0:
             raise SchedulerOptionError(f"step_seconds must be positive, not {step_seconds}")
         self.time_scale = time_scale
@@ -114,9 +124,14 @@ class AsyncScheduler(Scheduler):
         robot = req.robot
         busy = next((q for q in self._unanswered() if q.robot == robot), None)
         if busy is not None:
-            return Rejection(RejectCode.BUSY, f"{robot} is still busy with {busy.action.call()}: send the next action after its result")
+            return Rejection(
+                RejectCode.BUSY,
+                f"{robot} is still busy with {busy.action.call()}: send the next action after its result",
+            )
         if req.tick != self.steps[robot]:
-            return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but {robot} is at tick {self.steps[robot]}")
+            return Rejection(
+                RejectCode.STALE_TICK, f"the request is for tick {req.tick} but {robot} is at tick {self.steps[robot]}"
+            )
         self.queue.append(req)
         return None
 
@@ -191,7 +206,14 @@ class AsyncScheduler(Scheduler):
         self._advance(end if self.time_scale == 0 else start)
         if done.evaluation.success:
             self.success_at = end
-        self._log.debug("action executed", robot=robot, tick=tick, action=req.action.call(), start=round(start, 2), end=round(end, 2))
+        self._log.debug(
+            "action executed",
+            robot=robot,
+            tick=tick,
+            action=req.action.call(),
+            start=round(start, 2),
+            end=round(end, 2),
+        )
 
     async def _release_due(self) -> None:
         for run in sorted(self.running.values(), key=lambda r: r.ended):
@@ -210,9 +232,16 @@ class AsyncScheduler(Scheduler):
         self.world.release(
             [
                 ActionResult(
-                    goal_id=run.req.goal_id, robot=robot, tick=run.tick, action=run.req.action, outcome=run.outcome, observation=obs,
-                    done=done, started=round(run.started, 6), ended=round(run.ended, 6),
-                )  # fmt: skip
+                    goal_id=run.req.goal_id,
+                    robot=robot,
+                    tick=run.tick,
+                    action=run.req.action,
+                    outcome=run.outcome,
+                    observation=obs,
+                    done=done,
+                    started=round(run.started, 6),
+                    ended=round(run.ended, 6),
+                )
             ]
         )
         if self.running.get(robot) is run:  # not forgotten meanwhile (nor, after a re-attach, another run)

@@ -14,7 +14,17 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
-from mhrc.core.protocol import ActionRequest, ActionResult, Message, Observation, Rejection, RobotMessage, SkillOutcome, Turn, Wait
+from mhrc.core.protocol import (
+    ActionRequest,
+    ActionResult,
+    Message,
+    Observation,
+    Rejection,
+    RobotMessage,
+    SkillOutcome,
+    Turn,
+    Wait,
+)
 
 # How long an action takes on the world's clock (simulated seconds). Skills measure their own
 # time (navigation by path length and base speed, arm motions by trajectory and joint speeds);
@@ -66,33 +76,44 @@ class World(Protocol):
     @property
     def robots(self) -> tuple[str, ...]:
         """Every robot of the episode, in the fixed robot order."""
+
     @property
     def attached(self) -> Mapping[str, str]:
         """robot -> agent id, for the robots attached now."""
+
     @property
     def horizon(self) -> int: ...
 
-    async def execute(self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False, opens: int | None = None) -> Executed:
+    async def execute(
+        self, batch: Sequence[ActionRequest], tick: int, *, deliver: bool = False, opens: int | None = None
+    ) -> Executed:
         """Run the actions in order in the simulator, at `tick`, and count them for the metrics;
         with `deliver`, the observations returned already know what the batch's messages tell
         (a schedule that hands the messages over with them); with `opens`, tick `opens` opens
         after the actions: the evaluation and observations come after its scenario events."""
+
     async def open_tick(self, tick: int) -> None:
         """Tick `tick` opens: the scenario's events due by then fire (--events; world/dynamics.py),
         before any observation of it goes out."""
+
     async def observe(self, robot: str, tick: int) -> Observation:
         """`robot`'s observation of the world as it is now, labelled `tick` (no messages attached)."""
+
     def deliver_messages(self) -> dict[str, list[RobotMessage]]:
         """Publish the messages not yet in any observation on their inbox keys and hand them
         over, per robot (every robot a key), to go into the receivers' observations."""
+
     def hold_messages(self, robot: str, messages: Sequence[RobotMessage]) -> None:
         """Put back messages no observation carried: they go out (again) with the next delivery
         and reach `robot` with its next observation (an attach reply included)."""
+
     def release(self, results: Sequence[ActionResult]) -> None:
         """Publish results that go out together; the episode's end names each robot's last
         released result, so an agent that sees `episode_done` first still waits for its own."""
+
     def give_turn(self, turn: Turn) -> None:
         """Publish `turn` on its robot's turn key (to a robot that attached with wait_turn)."""
+
     def publish_event(self, event: Message) -> None: ...
     def finish(self, reason: str) -> None:
         """End the episode (`success`, `horizon`, ...); later calls do nothing."""

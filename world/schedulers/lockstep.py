@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import structlog
 
-from mhrc.core.protocol import ActionRequest, ActionResult, Rejection, RejectCode, TickClosed
+from mhrc.core.protocol import ActionRequest, ActionResult, RejectCode, Rejection, TickClosed
 
 from .base import Scheduler, World, duration
 
@@ -25,13 +25,19 @@ class LockstepScheduler(Scheduler):
         super().__init__(world)
         self.tick = 0
         self.pending: dict[str, ActionRequest] = {}
-        self.closing: frozenset[str] = frozenset()  # the robots whose actions of `tick` execute now (off `pending`, no result yet)
+        self.closing: frozenset[str] = (
+            frozenset()
+        )  # the robots whose actions of `tick` execute now (off `pending`, no result yet)
         self._log = log.bind(run=world.run_id)
 
     def admit(self, req: ActionRequest) -> Rejection | None:
         if req.tick != self.tick:
-            return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but the world is at tick {self.tick}")
-        if req.robot in self.pending or req.robot in self.closing:  # one action per robot per tick, executing ones included
+            return Rejection(
+                RejectCode.STALE_TICK, f"the request is for tick {req.tick} but the world is at tick {self.tick}"
+            )
+        if (
+            req.robot in self.pending or req.robot in self.closing
+        ):  # one action per robot per tick, executing ones included
             return Rejection(RejectCode.TICK_TAKEN, f"{req.robot} already submitted an action for tick {self.tick}")
         self.pending[req.robot] = req
         return None
@@ -50,7 +56,9 @@ class LockstepScheduler(Scheduler):
         self.pending.clear()
         self.closing = frozenset(req.robot for req in batch)
         try:
-            done = await world.execute(batch, tick, deliver=True, opens=tick + 1)  # tick + 1's scenario events before its observations
+            done = await world.execute(
+                batch, tick, deliver=True, opens=tick + 1
+            )  # tick + 1's scenario events before its observations
         finally:
             self.closing = frozenset()  # from here to the results' release nothing awaits, and the tick moves on
         began = self.makespan
@@ -66,9 +74,16 @@ class LockstepScheduler(Scheduler):
             delivered[req.robot] = []
             results.append(
                 ActionResult(
-                    goal_id=req.goal_id, robot=req.robot, tick=tick, action=req.action, outcome=outcome, observation=obs, done=finished,
-                    started=round(began, 6), ended=round(began + seconds, 6),
-                )  # fmt: skip
+                    goal_id=req.goal_id,
+                    robot=req.robot,
+                    tick=tick,
+                    action=req.action,
+                    outcome=outcome,
+                    observation=obs,
+                    done=finished,
+                    started=round(began, 6),
+                    ended=round(began + seconds, 6),
+                )
             )
         world.release(results)
         # messages for robots that had no action this tick wait for their next observation

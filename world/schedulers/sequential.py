@@ -27,7 +27,17 @@ from dataclasses import dataclass
 
 import structlog
 
-from mhrc.core.protocol import ActionRequest, ActionResult, Observation, Rejection, RejectCode, RobotMessage, SkillOutcome, TickClosed, Turn
+from mhrc.core.protocol import (
+    ActionRequest,
+    ActionResult,
+    Observation,
+    RejectCode,
+    Rejection,
+    RobotMessage,
+    SkillOutcome,
+    TickClosed,
+    Turn,
+)
 
 from .base import Scheduler, TaskResultLike, World, duration
 
@@ -56,7 +66,9 @@ class SequentialScheduler(Scheduler):
         self.turn: str | None = world.robots[0] if world.robots else None  # the robot asked now
         self.given = False  # whether the robot on turn has its observation
         self.pending: ActionRequest | None = None  # the admitted request of the robot on turn
-        self.executing: ActionRequest | None = None  # that request while the simulator runs it (off `pending`, turn not yet passed)
+        self.executing: ActionRequest | None = (
+            None  # that request while the simulator runs it (off `pending`, turn not yet passed)
+        )
         self.held: dict[str, _Held] = {}
         self.mail: dict[str, list[RobotMessage]] = {}  # messages of closed ticks, for the receiver's next turn
         self._executed: list[tuple[ActionRequest, SkillOutcome]] = []  # this tick's, in order
@@ -72,9 +84,13 @@ class SequentialScheduler(Scheduler):
 
     def admit(self, req: ActionRequest) -> Rejection | None:
         if req.tick != self.tick:
-            return Rejection(RejectCode.STALE_TICK, f"the request is for tick {req.tick} but the world is at tick {self.tick}")
+            return Rejection(
+                RejectCode.STALE_TICK, f"the request is for tick {req.tick} but the world is at tick {self.tick}"
+            )
         if req.robot != self.turn or not self.given:
-            return Rejection(RejectCode.NOT_YOUR_TURN, f"it is {self.turn}'s turn in tick {self.tick}: {req.robot} waits for its own")
+            return Rejection(
+                RejectCode.NOT_YOUR_TURN, f"it is {self.turn}'s turn in tick {self.tick}: {req.robot} waits for its own"
+            )
         if self.pending is not None or self.executing is not None:  # one action per turn, the executing one included
             return Rejection(RejectCode.TICK_TAKEN, f"{req.robot} already submitted an action for tick {self.tick}")
         self.pending = req
@@ -174,6 +190,13 @@ class SequentialScheduler(Scheduler):
     def _result(held: _Held, obs: Observation, *, done: bool) -> ActionResult:
         req = held.req
         return ActionResult(
-            goal_id=req.goal_id, robot=req.robot, tick=held.tick, action=req.action, outcome=held.outcome, observation=obs, done=done,
-            started=round(held.started, 6), ended=round(held.ended, 6),
-        )  # fmt: skip
+            goal_id=req.goal_id,
+            robot=req.robot,
+            tick=held.tick,
+            action=req.action,
+            outcome=held.outcome,
+            observation=obs,
+            done=done,
+            started=round(held.started, 6),
+            ended=round(held.ended, 6),
+        )

@@ -13,7 +13,17 @@ from ..arm import HOME, LOWER, UPPER, ArmPlanner, straight
 from ..furniture import FurnitureSpec
 from ..robots import MAX_ARM_RANGE, RobotBody
 from .context import SkillContext
-from .reaching import APPROACH, JOINT_SPEED, SUCTION_TIME, TIP_CLEARANCE, cartesian_descent, horizontal, planner_for, reach_point, retract
+from .reaching import (
+    APPROACH,
+    JOINT_SPEED,
+    SUCTION_TIME,
+    TIP_CLEARANCE,
+    cartesian_descent,
+    horizontal,
+    planner_for,
+    reach_point,
+    retract,
+)
 from .registry import skill
 
 PULL_STEPS = 16  # IK waypoints along a drawer's travel or a lid's swing
@@ -27,7 +37,9 @@ def open_(ctx: SkillContext, r: RobotBody, a: Open) -> SkillOutcome:
     if f is None:
         if a.target in ctx.world.fixtures or a.target in ctx.knowledge.known_objects(r.name):
             return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(a.target))
-        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, ctx.world.furniture_names(), advice=ctx.advice))
+        return SkillOutcome.fail(
+            OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, ctx.world.furniture_names(), advice=ctx.advice)
+        )
     if f.container is None:
         return SkillOutcome.fail(OutcomeCode.NOT_OPENABLE, fb.not_openable(f.name))
     if ctx.world.is_open(f.name):
@@ -45,9 +57,13 @@ def open_(ctx: SkillContext, r: RobotBody, a: Open) -> SkillOutcome:
         return reach.failure
     if reach.path is None or reach.descent is None:
         return SkillOutcome.fail(
-            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills, advice=ctx.advice),
-            distance=round(reach.distance, 3), horizontal_distance=round(horizontal(ab, handle), 3),
-        )  # fmt: skip
+            OutcomeCode.OUT_OF_REACH,
+            fb.handle_out_of_reach(
+                f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills, advice=ctx.advice
+            ),
+            distance=round(reach.distance, 3),
+            horizontal_distance=round(horizontal(ab, handle), 3),
+        )
     q0 = r.q.copy()
     t = r.run(reach.path + reach.descent, JOINT_SPEED)
     # move the handle along the joint's path (a drawer's line, a lid's arc), the arm following IK waypoints
@@ -71,7 +87,9 @@ def open_(ctx: SkillContext, r: RobotBody, a: Open) -> SkillOutcome:
     return _opened(ctx, r, f, pl, yaw, t, pulled)
 
 
-def _opened(ctx: SkillContext, r: RobotBody, f: FurnitureSpec, pl: ArmPlanner, yaw: float, t: float, travel: float) -> SkillOutcome:
+def _opened(
+    ctx: SkillContext, r: RobotBody, f: FurnitureSpec, pl: ArmPlanner, yaw: float, t: float, travel: float
+) -> SkillOutcome:
     """Let go of the handle of an opened container: lift, retract, look inside."""
     lift = pl.ik((r.tip()[0], r.tip()[1], r.tip()[2] + 0.08), yaw, r.q, restarts=2)
     if lift is not None:
@@ -91,7 +109,9 @@ def _swing(f: FurnitureSpec) -> tuple[float, float, float]:
     return f.door.angle, TIP_CLEARANCE, -f.cupboard_geometry().side
 
 
-def _lid_arc(ctx: SkillContext, pl: ArmPlanner, f: FurnitureSpec, values: np.ndarray, seed: np.ndarray, yaw: float) -> list[np.ndarray]:
+def _lid_arc(
+    ctx: SkillContext, pl: ArmPlanner, f: FurnitureSpec, values: np.ndarray, seed: np.ndarray, yaw: float
+) -> list[np.ndarray]:
     """Joint waypoints that keep the tool on the handle while the lid or door passes through
     `values` (rad, in either order), starting from an IK solution seeded by `seed`, as far as IK
     follows without a jump. The lid or door is left shut again."""
@@ -122,9 +142,12 @@ def _open_lid(ctx: SkillContext, r: RobotBody, f: FurnitureSpec) -> SkillOutcome
     above = (hx, hy, handle[2] + APPROACH)
     if horizontal(ab, handle) > MAX_ARM_RANGE:
         return SkillOutcome.fail(
-            OutcomeCode.OUT_OF_REACH, fb.handle_out_of_reach(f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills, advice=ctx.advice),
+            OutcomeCode.OUT_OF_REACH,
+            fb.handle_out_of_reach(
+                f.name, horizontal(ab, handle), mobile="navigate" in r.kind.skills, advice=ctx.advice
+            ),
             horizontal_distance=round(horizontal(ab, handle), 3),
-        )  # fmt: skip
+        )
     values = np.linspace(0.0, angle, PULL_STEPS + 1)
     followed, grasped = 0, False
     for k in range(LID_GRASP_TRIES):
@@ -152,5 +175,11 @@ def _open_lid(ctx: SkillContext, r: RobotBody, f: FurnitureSpec) -> SkillOutcome
             t += r.run([r.q, q], JOINT_SPEED)
         return _opened(ctx, r, f, pl, yaw + _swing(f)[2] * angle, t, angle)
     if not grasped:  # within range, yet no arm configuration grips the handle from this base pose
-        return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.no_grip(f.name, horizontal(ab, handle)), horizontal_distance=round(horizontal(ab, handle), 3))
-    return SkillOutcome.fail(OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), pulled=round(followed * angle / PULL_STEPS, 3))
+        return SkillOutcome.fail(
+            OutcomeCode.OUT_OF_REACH,
+            fb.no_grip(f.name, horizontal(ab, handle)),
+            horizontal_distance=round(horizontal(ab, handle), 3),
+        )
+    return SkillOutcome.fail(
+        OutcomeCode.OUT_OF_REACH, fb.pull_failed(f.name), pulled=round(followed * angle / PULL_STEPS, 3)
+    )

@@ -45,7 +45,10 @@ def pick(ctx: SkillContext, r: RobotBody, a: Pick) -> SkillOutcome:
         return SkillOutcome.fail(OutcomeCode.OBJECT_UNKNOWN, fb.held_by_other(obj.name, obj.held_by))
     if obj.inside and obj.on is not None and not ctx.world.is_open(obj.on):
         can_open = "open" in r.kind.skills
-        return SkillOutcome.fail(OutcomeCode.NOT_REACHABLE_CONTAINER, fb.in_closed_container(obj.name, obj.on, can_open=can_open, advice=ctx.advice))
+        return SkillOutcome.fail(
+            OutcomeCode.NOT_REACHABLE_CONTAINER,
+            fb.in_closed_container(obj.name, obj.on, can_open=can_open, advice=ctx.advice),
+        )
     x, y, z = ctx.world.position(obj)
     top = (x, y, z + obj.kind.height / 2 + TIP_CLEARANCE)
     reach = reach_point(ctx, r, top, obj.name, any_yaw=True)  # a suction cup grips at any turn of the tool
@@ -60,7 +63,9 @@ def pick(ctx: SkillContext, r: RobotBody, a: Pick) -> SkillOutcome:
     return SkillOutcome.ok(fb.picked(obj.name), sim_time=t + SUCTION_TIME)
 
 
-def free_spots(ctx: SkillContext, location: str, held: ObjectState) -> tuple[list[tuple[float, float, float]], float] | None:
+def free_spots(
+    ctx: SkillContext, location: str, held: ObjectState
+) -> tuple[list[tuple[float, float, float]], float] | None:
     """Spots (x, y, yaw) at `location` where `held` fits without touching anything, best first, and the surface z."""
     lay = ctx.world.layout
     fx = ctx.world.fixtures.get(location)
@@ -154,20 +159,31 @@ def place(ctx: SkillContext, r: RobotBody, a: Place) -> SkillOutcome:
     if a.location in ctx.world.fixtures and not r.kind.finishes_task:  # the paper: only Bob finishes the task
         fin = ctx.world.finisher()
         finisher = fin.name if fin is not None else "the robot that finishes the task"
-        return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, fb.not_a_finisher(held.name, a.location, ctx.world.layout.bob_table, finisher, advice=ctx.advice))
+        return SkillOutcome.fail(
+            OutcomeCode.NOT_CAPABLE,
+            fb.not_a_finisher(held.name, a.location, ctx.world.layout.bob_table, finisher, advice=ctx.advice),
+        )
     places = [n for n in ctx.world.place_names() if r.kind.finishes_task or n not in ctx.world.fixtures]
     f = ctx.world.layout.get(a.location)
     if f is not None and f.place_pose is None:
         return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.not_a_surface(f.name, places, advice=ctx.advice))
     spots = free_spots(ctx, a.location, held)
     if spots is None:
-        return SkillOutcome.fail(OutcomeCode.LOCATION_UNKNOWN, fb.location_unknown(a.location, places, advice=ctx.advice))
+        return SkillOutcome.fail(
+            OutcomeCode.LOCATION_UNKNOWN, fb.location_unknown(a.location, places, advice=ctx.advice)
+        )
     cands, top = spots
     if a.location == ctx.world.layout.bob_table:
         cands = [c for c in cands if ctx.world.within_handover(c)] or cands
-        if ctx.noise.release_slip > 0 and not r.kind.finishes_task:  # a slip as it is let go must not carry it out of the finisher's reach
-            cands = [c for c in cands if _handover_margin(ctx, c) >= RELEASE_SLIP[1] + 3 * ctx.noise.release_sigma] or cands
-        if r.kind.mobile:  # not under where this arm's hand will hover once it has retracted: Bob could not reach past it
+        if (
+            ctx.noise.release_slip > 0 and not r.kind.finishes_task
+        ):  # a slip as it is let go must not carry it out of the finisher's reach
+            cands = [
+                c for c in cands if _handover_margin(ctx, c) >= RELEASE_SLIP[1] + 3 * ctx.noise.release_sigma
+            ] or cands
+        if (
+            r.kind.mobile
+        ):  # not under where this arm's hand will hover once it has retracted: Bob could not reach past it
             hand = r.tip()
             cands = [c for c in cands if horizontal(c, hand) >= HANDOVER_CLEARANCE] or cands
     if not cands:
@@ -178,7 +194,11 @@ def place(ctx: SkillContext, r: RobotBody, a: Place) -> SkillOutcome:
     reachable = [c for c in cands if horizontal(ab, c) <= MAX_ARM_RANGE - 0.1]
     if not reachable:
         nearest = min(horizontal(ab, c) for c in cands)
-        return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest, mobile=can_go, advice=ctx.advice), distance=round(nearest, 3))
+        return SkillOutcome.fail(
+            OutcomeCode.TOO_FAR,
+            fb.place_out_of_reach(a.location, nearest, mobile=can_go, advice=ctx.advice),
+            distance=round(nearest, 3),
+        )
     failure: SkillOutcome | None = None
     tries = 0
     for x, y, yaw in reachable:
@@ -198,11 +218,20 @@ def place(ctx: SkillContext, r: RobotBody, a: Place) -> SkillOutcome:
         if not ctx.world.settled_at(held, a.location):
             pos = ctx.world.position(held)
             return SkillOutcome.fail(
-                OutcomeCode.PLACE_FAILED, fb.place_failed(held.name, a.location, held.on, pos), sim_time=t + SUCTION_TIME,
-                on=held.on or "floor", x=round(pos[0], 3), y=round(pos[1], 3), z=round(pos[2], 3),
-            )  # fmt: skip
+                OutcomeCode.PLACE_FAILED,
+                fb.place_failed(held.name, a.location, held.on, pos),
+                sim_time=t + SUCTION_TIME,
+                on=held.on or "floor",
+                x=round(pos[0], 3),
+                y=round(pos[1], 3),
+                z=round(pos[2], 3),
+            )
         return SkillOutcome.ok(fb.placed(held.name, a.location), sim_time=t + SUCTION_TIME)
     if failure is not None:
         return failure
     nearest = min(horizontal(ab, c) for c in reachable)
-    return SkillOutcome.fail(OutcomeCode.TOO_FAR, fb.place_out_of_reach(a.location, nearest, mobile=can_go, advice=ctx.advice), distance=round(nearest, 3))
+    return SkillOutcome.fail(
+        OutcomeCode.TOO_FAR,
+        fb.place_out_of_reach(a.location, nearest, mobile=can_go, advice=ctx.advice),
+        distance=round(nearest, 3),
+    )

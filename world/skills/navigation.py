@@ -24,7 +24,9 @@ MAX_MOVE = 1.0  # m, the longest `move`
 # motion noise (off with --noise off or the exact_motion aid), drawn from the context's rng: where a base stops is
 # its goal plus an error of Rayleigh-distributed length (most stops within a few cm) or, now and then, a slip; the
 # rates are the episode's (SkillContext.noise, recorded in its trace), by default the calibration
-NAV_SIGMA = CALIBRATION.navigation_sigma  # m: the Rayleigh scale of an ordinary stop's error (mean 1.9 cm; over 5 cm 0.4%)
+NAV_SIGMA = (
+    CALIBRATION.navigation_sigma
+)  # m: the Rayleigh scale of an ordinary stop's error (mean 1.9 cm; over 5 cm 0.4%)
 NAV_SLIP_P = CALIBRATION.navigation_slip  # the chance that a base slips (3%)
 NAV_SLIP = (0.11, 0.3)  # m: how far a slip takes it from its goal (then pulled back onto free floor)
 OFF_TARGET = 0.1  # m: navigate and move fail when the base stops farther than this from the goal
@@ -69,19 +71,27 @@ def navigate(ctx: SkillContext, r: RobotBody, a: Navigate) -> SkillOutcome:
     f = ctx.world.layout.get(a.target)
     if f is None:
         if a.target in ctx.world.fixtures:
-            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, ctx.world.layout.bob_table, advice=ctx.advice))
+            return SkillOutcome.fail(
+                OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, ctx.world.layout.bob_table, advice=ctx.advice)
+            )
         belief = ctx.knowledge.belief(r.name, a.target)
         if belief is not None:  # an object: point to where the robot believes it lies, not where it is
             on = belief.on
             where = ctx.world.layout.get(ctx.world.layout.bob_table if ctx.world.on_bob_table(on) else on or "")
             where_name = where.name if where is not None and where.stand_poses else None
-            return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, where_name, advice=ctx.advice))
+            return SkillOutcome.fail(
+                OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(a.target, where_name, advice=ctx.advice)
+            )
         navigable = [g.name for g in ctx.world.layout.furniture if g.stand_poses]
-        return SkillOutcome.fail(OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, navigable, advice=ctx.advice))
+        return SkillOutcome.fail(
+            OutcomeCode.TARGET_UNKNOWN, fb.unknown_furniture(a.target, navigable, advice=ctx.advice)
+        )
     if not f.stand_poses:
         return SkillOutcome.fail(OutcomeCode.NOT_NAVIGABLE, fb.not_navigable(f.name, None))
     if a.stand_pose >= len(f.stand_poses):
-        return SkillOutcome.fail(OutcomeCode.STAND_POSE_INVALID, fb.stand_pose_invalid(f.name, len(f.stand_poses), a.stand_pose))
+        return SkillOutcome.fail(
+            OutcomeCode.STAND_POSE_INVALID, fb.stand_pose_invalid(f.name, len(f.stand_poses), a.stand_pose)
+        )
     assert r.base is not None
     goal = f.stand_poses[a.stand_pose]
     if not ctx.world.grid.free(r.base[0], r.base[1]):
@@ -101,11 +111,23 @@ def navigate(ctx: SkillContext, r: RobotBody, a: Navigate) -> SkillOutcome:
     drawn = route(path, (sx, sy))
     if off > OFF_TARGET:
         return SkillOutcome.fail(
-            OutcomeCode.OFF_TARGET, fb.off_target(f.name, a.stand_pose, off, (sx, sy), advice=ctx.advice),
-            sim_time=length / NAV_SPEED, distance=round(off, 3), x=round(sx, 3), y=round(sy, 3), path_length=round(length, 3),
-        ).model_copy(update={"path": drawn})  # fmt: skip
+            OutcomeCode.OFF_TARGET,
+            fb.off_target(f.name, a.stand_pose, off, (sx, sy), advice=ctx.advice),
+            sim_time=length / NAV_SPEED,
+            distance=round(off, 3),
+            x=round(sx, 3),
+            y=round(sy, 3),
+            path_length=round(length, 3),
+        ).model_copy(update={"path": drawn})
     seen = None if f.container is not None and not ctx.world.is_open(f.name) else ctx.world.objects_on(f.name)
-    text = fb.reached(f.name, a.stand_pose, seen, container=f.container is not None, can_open="open" in r.kind.skills, advice=ctx.advice)
+    text = fb.reached(
+        f.name,
+        a.stand_pose,
+        seen,
+        container=f.container is not None,
+        can_open="open" in r.kind.skills,
+        advice=ctx.advice,
+    )
     out = SkillOutcome.ok(text, sim_time=length / NAV_SPEED, path_length=round(length, 3), distance=round(off, 3))
     return out.model_copy(update={"path": drawn})
 
@@ -132,5 +154,18 @@ def move(ctx: SkillContext, r: RobotBody, a: Move) -> SkillOutcome:
     moved = (sx - x, sy - y)
     t = (d + off) / NAV_SPEED
     if off > OFF_TARGET:
-        return SkillOutcome.fail(OutcomeCode.OFF_TARGET, fb.move_off_target(a.dx, a.dy, off, moved), sim_time=t, distance=round(off, 3), dx=round(moved[0], 3), dy=round(moved[1], 3))
-    return SkillOutcome.ok(fb.moved(*moved), sim_time=t, distance=round(math.hypot(*moved), 3), dx=round(moved[0], 3), dy=round(moved[1], 3))
+        return SkillOutcome.fail(
+            OutcomeCode.OFF_TARGET,
+            fb.move_off_target(a.dx, a.dy, off, moved),
+            sim_time=t,
+            distance=round(off, 3),
+            dx=round(moved[0], 3),
+            dy=round(moved[1], 3),
+        )
+    return SkillOutcome.ok(
+        fb.moved(*moved),
+        sim_time=t,
+        distance=round(math.hypot(*moved), 3),
+        dx=round(moved[0], 3),
+        dy=round(moved[1], 3),
+    )

@@ -70,7 +70,12 @@ def horizontal(a: tuple[float, ...], b: tuple[float, ...]) -> float:
 
 
 def _solve_above_and_at(
-    pl: ArmPlanner, above: tuple[float, float, float], point: tuple[float, float, float], yaw: float, seed: np.ndarray, restarts: int = 8
+    pl: ArmPlanner,
+    above: tuple[float, float, float],
+    point: tuple[float, float, float],
+    yaw: float,
+    seed: np.ndarray,
+    restarts: int = 8,
 ) -> tuple[IKResult, IKResult]:
     """Verified IK for the pose above `point`, then for `point` seeded by it (the pose above's
     result twice when it has none)."""
@@ -80,7 +85,13 @@ def _solve_above_and_at(
 
 
 def reach_point(
-    ctx: SkillContext, r: RobotBody, point: tuple[float, float, float], what: str, tool_yaw: float | None = None, *, any_yaw: bool = False
+    ctx: SkillContext,
+    r: RobotBody,
+    point: tuple[float, float, float],
+    what: str,
+    tool_yaw: float | None = None,
+    *,
+    any_yaw: bool = False,
 ) -> Reach:
     """IK (verified) for `point` and a point above it, then BIT* from r's arm to the one above.
 
@@ -111,7 +122,9 @@ def reach_point(
         if sol_at.collided:  # the pose exists, but every solution found collides
             return Reach(failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.config_invalid(what, "goal")))
         if sol_at.error < IK_SLACK:  # "0.00 m away" would be no distance the robot could act on
-            return Reach(failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.no_goal_configuration(what, sol_at.error)))
+            return Reach(
+                failure=SkillOutcome.fail(OutcomeCode.CONFIG_INVALID, fb.no_goal_configuration(what, sol_at.error))
+            )
         return Reach(distance=sol_at.error)
     descent = cartesian_descent(pl, above, point, yaw, q_above, q_at)
     if not all(pl.valid(q) for q in descent[1:-1]):
@@ -126,7 +139,13 @@ def reach_point(
 
 
 def cartesian_descent(
-    pl: ArmPlanner, above: tuple[float, float, float], point: tuple[float, float, float], yaw: float, q_above: np.ndarray, q_at: np.ndarray, steps: int = 8
+    pl: ArmPlanner,
+    above: tuple[float, float, float],
+    point: tuple[float, float, float],
+    yaw: float,
+    q_above: np.ndarray,
+    q_at: np.ndarray,
+    steps: int = 8,
 ) -> list[np.ndarray]:
     """Joint waypoints that keep the tool on the vertical line from `above` down to `point`,
     each IK solution seeded by the one before (a joint-space straight line can swing the
@@ -176,7 +195,9 @@ def corrective_move(ctx: SkillContext, r: RobotBody, point: tuple[float, float, 
     return None
 
 
-def too_far(ctx: SkillContext, r: RobotBody, point: tuple[float, float, float], name: str, distance: float) -> SkillOutcome:
+def too_far(
+    ctx: SkillContext, r: RobotBody, point: tuple[float, float, float], name: str, distance: float
+) -> SkillOutcome:
     """The paper's too-far pick: the end effector's distance and, for a mobile manipulator, the
     object's offsets from the base centre along x and y; the solved move only with its aid."""
     distance = round(distance, 2)  # centimetres, in the sentence and the details alike
@@ -189,7 +210,9 @@ def too_far(ctx: SkillContext, r: RobotBody, point: tuple[float, float, float], 
             fix = corrective_move(ctx, r, point)
     if fix is not None:
         details.update(dx=round(fix[0], 3), dy=round(fix[1], 3))
-    return SkillOutcome(succeeded=False, code=OutcomeCode.TOO_FAR, feedback=fb.too_far(name, distance, offset, fix), details=details)
+    return SkillOutcome(
+        succeeded=False, code=OutcomeCode.TOO_FAR, feedback=fb.too_far(name, distance, offset, fix), details=details
+    )
 
 
 def wrap(a: float) -> float:

@@ -19,12 +19,20 @@ Skill = Callable[[SkillContext, RobotBody, Any], SkillOutcome]
 SKILLS: dict[type[BaseModel], Skill] = {}
 
 
-def skill(action: type[A]) -> Callable[[Callable[[SkillContext, RobotBody, A], SkillOutcome]], Callable[[SkillContext, RobotBody, A], SkillOutcome]]:
+def skill(
+    action: type[A],
+) -> Callable[
+    [Callable[[SkillContext, RobotBody, A], SkillOutcome]], Callable[[SkillContext, RobotBody, A], SkillOutcome]
+]:
     """Class of action -> decorator that registers the function running it (once per action type)."""
 
-    def register(run: Callable[[SkillContext, RobotBody, A], SkillOutcome]) -> Callable[[SkillContext, RobotBody, A], SkillOutcome]:
+    def register(
+        run: Callable[[SkillContext, RobotBody, A], SkillOutcome],
+    ) -> Callable[[SkillContext, RobotBody, A], SkillOutcome]:
         if action in SKILLS:
-            raise ValueError(f"{action.__name__} already runs as {SKILLS[action].__qualname__}: register one skill per action type")
+            raise ValueError(
+                f"{action.__name__} already runs as {SKILLS[action].__qualname__}: register one skill per action type"
+            )
         SKILLS[action] = run
         return run
 

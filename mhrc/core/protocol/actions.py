@@ -72,9 +72,7 @@ class Wait(_Model):
         return "wait()"
 
 
-Action = Annotated[
-    Union[Navigate, Move, Open, Pick, Place, Communicate, Wait], Field(discriminator="skill")
-]
+Action = Annotated[Union[Navigate, Move, Open, Pick, Place, Communicate, Wait], Field(discriminator="skill")]
 ACTION_ADAPTER: TypeAdapter[Action] = TypeAdapter(Action)
 SKILLS = ("navigate", "move", "open", "pick", "place", "communicate", "wait")
 
@@ -121,7 +119,8 @@ class SkillOutcome(_Model):
     details: dict[str, float | str] = Field(default_factory=dict)
     sim_time: float = Field(0.0, ge=0.0, description="simulated seconds the skill took")
     path: list[tuple[float, float]] | None = Field(
-        None, description="navigate: the base's planned route in metres, start to stop (a few dozen points at most), for viewers"
+        None,
+        description="navigate: the base's planned route in metres, start to stop (a few dozen points at most), for viewers",
     )
 
     @classmethod

@@ -17,8 +17,12 @@ MAX_NAME = 64  # characters of a name (robot, furniture, object, recipient) and 
 MAX_AGENT_ID = 128  # characters of an agent id: room for a prefix and a whole uuid, twice
 MAX_INT = 2**31 - 1  # ticks and stand-pose indices: a horizon is at most 1000; fits a 32-bit int in any language
 MAX_MOVE = 100.0  # metres a move may ask along each axis: ten times any house's span (a longer one could only fail), and printable
-MAX_REQUEST_BYTES = 64 * 1024  # an action or attach request: the longest well-formed one (a 4,000-character message, every character escaped) is under 50 kB
-_MAX_MSG = 200  # characters of each error in a ProtocolError's reason: pydantic quotes the input in some (a union's tag)
+MAX_REQUEST_BYTES = (
+    64 * 1024
+)  # an action or attach request: the longest well-formed one (a 4,000-character message, every character escaped) is under 50 kB
+_MAX_MSG = (
+    200  # characters of each error in a ProtocolError's reason: pydantic quotes the input in some (a union's tag)
+)
 
 
 class ProtocolError(ValueError):

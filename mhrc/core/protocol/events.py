@@ -27,7 +27,9 @@ class Metrics(_Model):
     wall_time: float = 0.0
     sim_time: float = 0.0
     lower_bound: int | None = Field(None, description="a lower bound on TS for this episode (mhrc/world/bound.py)")
-    makespan: float = Field(0.0, ge=0.0, description="simulated seconds from the start to the end of the episode on the world's clock")
+    makespan: float = Field(
+        0.0, ge=0.0, description="simulated seconds from the start to the end of the episode on the world's clock"
+    )
 
 
 class MotionNoise(_Model):
@@ -36,12 +38,24 @@ class MotionNoise(_Model):
     target and placements that fail, but no rates. The defaults are the calibration (`--noise
     on`); `--noise off` and the exact_motion aid draw none (all zero)."""
 
-    setting: Literal["on", "off"] = Field("on", description="`on`: the calibration; `off`: no noise (--noise off, or the exact_motion aid)")
-    navigation_slip: float = Field(
-        0.03, ge=0.0, le=1.0, description="the chance that a navigate or move slips 0.11-0.3 m off its goal (beyond 0.1 m it fails off target)"
+    setting: Literal["on", "off"] = Field(
+        "on", description="`on`: the calibration; `off`: no noise (--noise off, or the exact_motion aid)"
     )
-    navigation_sigma: float = Field(0.015, ge=0.0, description="m: the Rayleigh scale of an ordinary stop's error (mean 1.9 cm)")
-    release_slip: float = Field(0.1, ge=0.0, le=1.0, description="the chance that a released object slips 2-4 cm on the suction cup as it is let go")
+    navigation_slip: float = Field(
+        0.03,
+        ge=0.0,
+        le=1.0,
+        description="the chance that a navigate or move slips 0.11-0.3 m off its goal (beyond 0.1 m it fails off target)",
+    )
+    navigation_sigma: float = Field(
+        0.015, ge=0.0, description="m: the Rayleigh scale of an ordinary stop's error (mean 1.9 cm)"
+    )
+    release_slip: float = Field(
+        0.1,
+        ge=0.0,
+        le=1.0,
+        description="the chance that a released object slips 2-4 cm on the suction cup as it is let go",
+    )
     release_sigma: float = Field(0.003, ge=0.0, description="m: the Rayleigh scale of an ordinary release's error")
 
 
@@ -55,12 +69,18 @@ class EpisodeStarted(Message):
     robots: list[str]
     horizon: int
     scheduler: Literal["sequential", "lockstep", "async"] = "lockstep"
-    time_scale: float | None = Field(None, ge=0.0, description="async: simulated seconds per wall second, 0 as fast as possible")
+    time_scale: float | None = Field(
+        None, ge=0.0, description="async: simulated seconds per wall second, 0 as fast as possible"
+    )
     step_seconds: float | None = Field(
-        None, gt=0.0, description="async: the simulated seconds one step stands for: the horizon is horizon x step_seconds, TS is makespan / step_seconds rounded up"
+        None,
+        gt=0.0,
+        description="async: the simulated seconds one step stands for: the horizon is horizon x step_seconds, TS is makespan / step_seconds rounded up",
     )
     lower_bound: int | None = None
-    fidelity: str = Field("paper", description="`paper`, or `aids:` and the aids this episode ran with (mhrc.core.fidelity)")
+    fidelity: str = Field(
+        "paper", description="`paper`, or `aids:` and the aids this episode ran with (mhrc.core.fidelity)"
+    )
     aids: list[str] = Field(default_factory=list)
     noise: MotionNoise = Field(
         default_factory=MotionNoise,
@@ -103,9 +123,12 @@ class EpisodeDone(Message):
         "results travel on other keys, so an agent that sees this event first still waits for that result",
     )
     targets: list[str] = Field(
-        default_factory=list, description="the task's target objects, in task order: said only once the episode is over (for reports)"
+        default_factory=list,
+        description="the task's target objects, in task order: said only once the episode is over (for reports)",
     )
-    goals: dict[str, str] = Field(default_factory=dict, description="target -> the fixture it had to end on (for reports)")
+    goals: dict[str, str] = Field(
+        default_factory=dict, description="target -> the fixture it had to end on (for reports)"
+    )
     ordered: bool = Field(False, description="whether the targets had to reach their goals in order (a sandwich)")
 
 
@@ -134,7 +157,10 @@ class Snapshot(Message):
 
     kind: Literal["snapshot"] = "snapshot"
     tick: int = Field(description="the tick the actions were executed at (async: the acting robot's own tick)")
-    goals: list[str] = Field(default_factory=list, description="goal ids of the actions just executed, in order; their results say who did what")
+    goals: list[str] = Field(
+        default_factory=list,
+        description="goal ids of the actions just executed, in order; their results say who did what",
+    )
     robots: dict[str, RobotPose]
     objects: dict[str, ObjectPose]
     open: dict[str, bool] = Field(default_factory=dict, description="openable furniture -> open")
@@ -154,7 +180,8 @@ class ScenarioEvent(Message):
     applied: bool
     skipped: str | None = Field(None, description="why it could not apply (None when applied)")
     changed: dict[str, str] = Field(
-        default_factory=dict, description="what exactly changed, e.g. object, from, to (relocate); robot, until (breakdown); object, on, total (new_target); container (close)"
+        default_factory=dict,
+        description="what exactly changed, e.g. object, from, to (relocate); robot, until (breakdown); object, on, total (new_target); container (close)",
     )
     text: str = Field("", description="the same in one sentence, for people")
 

@@ -47,10 +47,14 @@ class RejectCode(str, Enum):
     TICK_TAKEN = "tick_taken"  # the robot already submitted an action for this tick
     NOT_YOUR_TURN = "not_your_turn"  # sequential: another robot's turn
     BUSY = "busy"  # async: the robot's previous action has not finished
-    DUPLICATE_GOAL = "duplicate_goal"  # the robot sent this goal id before in this episode: each goal executes at most once
+    DUPLICATE_GOAL = (
+        "duplicate_goal"  # the robot sent this goal id before in this episode: each goal executes at most once
+    )
 
 
-OUT_OF_STEP = frozenset({RejectCode.STALE_TICK, RejectCode.TICK_TAKEN, RejectCode.NOT_YOUR_TURN})  # attach again for the current tick
+OUT_OF_STEP = frozenset(
+    {RejectCode.STALE_TICK, RejectCode.TICK_TAKEN, RejectCode.NOT_YOUR_TURN}
+)  # attach again for the current tick
 
 
 class Rejection(NamedTuple):
@@ -66,7 +70,9 @@ class ActionAck(Message):
     robot: str
     accepted: bool
     reason: str = ""
-    code: RejectCode | None = Field(None, description="why the request was rejected, for programs (None when accepted); `reason` says it for people")
+    code: RejectCode | None = Field(
+        None, description="why the request was rejected, for programs (None when accepted); `reason` says it for people"
+    )
 
 
 class ActionResult(Message):
@@ -78,8 +84,14 @@ class ActionResult(Message):
     outcome: SkillOutcome
     observation: Observation
     done: bool = False
-    started: float | None = Field(None, ge=0.0, description="simulated seconds on the world's clock when the action began (docs/architecture.md, \"Time\")")
-    ended: float | None = Field(None, ge=0.0, description="simulated seconds on the world's clock when it ended: `started` plus its duration")
+    started: float | None = Field(
+        None,
+        ge=0.0,
+        description='simulated seconds on the world\'s clock when the action began (docs/architecture.md, "Time")',
+    )
+    ended: float | None = Field(
+        None, ge=0.0, description="simulated seconds on the world's clock when it ended: `started` plus its duration"
+    )
 
 
 # --------------------------------------------------------------------------- attach

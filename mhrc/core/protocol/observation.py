@@ -34,7 +34,10 @@ class ObjectView(_Model):
 
     name: str
     position: tuple[float, float, float]
-    yaw: float | None = Field(None, description="its orientation about the vertical axis (radians) when seen; None in traces before it was sent")
+    yaw: float | None = Field(
+        None,
+        description="its orientation about the vertical axis (radians) when seen; None in traces before it was sent",
+    )
     on: str | None = Field(None, description="furniture (or receptacle) the object lies on or in")
     inside: bool = Field(False, description="inside a container rather than on a surface")
     held_by: str | None = None
@@ -77,8 +80,15 @@ class Observation(_Model):
     task_brief: str
     task_detail: str
     targets: list[str] = Field(default_factory=list, description="the task's object list (Bob only)")
-    goals: dict[str, str] = Field(default_factory=dict, description="target -> where it must end: tray, panel, board (Bob only)")
-    ordered: bool = Field(False, description="whether the targets must reach their goals in the listed order (a sandwich)")
+    goals: dict[str, str] = Field(
+        default_factory=dict, description="target -> where it must end: tray, panel, board (Bob only)"
+    )
+    ordered: bool = Field(
+        False, description="whether the targets must reach their goals in the listed order (a sandwich)"
+    )
     task_status: str | None = Field(None, description="progress text (Bob only)")
-    teammates: dict[str, list[str]] = Field(default_factory=dict, description="robot -> its skills, for the teammates attached now (one whose agent left is not listed)")
+    teammates: dict[str, list[str]] = Field(
+        default_factory=dict,
+        description="robot -> its skills, for the teammates attached now (one whose agent left is not listed)",
+    )
     new_messages: list[RobotMessage] = Field(default_factory=list)

@@ -28,11 +28,17 @@ class Thought(Message):
     prompt_tokens: int = 0
     completion_tokens: int = 0
     latency: float = 0.0
-    reasoning: str | None = Field(None, description="a reasoning model's thoughts (reasoning field or <think> block), apart from the reply")
+    reasoning: str | None = Field(
+        None, description="a reasoning model's thoughts (reasoning field or <think> block), apart from the reply"
+    )
     reasoning_tokens: int = 0
     finish_reason: str | None = Field(None, description="the server's: stop, length (cut at max_tokens), ...")
-    schema_hash: str | None = Field(None, description="with --structured: hash of the JSON Schema the reply had to follow")
-    ttft: float | None = Field(None, description="seconds to the reply's first token (prompt processing, mostly), where it was streamed")
+    schema_hash: str | None = Field(
+        None, description="with --structured: hash of the JSON Schema the reply had to follow"
+    )
+    ttft: float | None = Field(
+        None, description="seconds to the reply's first token (prompt processing, mostly), where it was streamed"
+    )
 
 
 class Generating(Message):
@@ -43,5 +49,7 @@ class Generating(Message):
     robot: str
     tick: int
     elapsed: float = Field(description="seconds since the call began, retries included")
-    tokens: int = Field(0, description="tokens streamed so far in this attempt (0: the server is still reading the prompt)")
+    tokens: int = Field(
+        0, description="tokens streamed so far in this attempt (0: the server is still reading the prompt)"
+    )
     attempt: int = Field(1, description="HTTP attempt of this call (retries included)")
