@@ -9,6 +9,7 @@ import io
 from typing import Any
 
 import pytest
+from test_metrics import _complete  # the protocol's required fields a hand-built message leaves out
 
 from mhrc.core.metrics import from_trace, summarize
 from mhrc.eval.report import summary_csv, summary_markdown
@@ -19,35 +20,6 @@ STEP = 8.0  # async step_seconds of these traces
 
 def _put(kind: str, **msg: Any) -> dict[str, Any]:
     return {"t": 0.0, "key": f"mhrc/r/{kind}", "kind": "put", "msg": {"v": 2, "kind": kind, **_complete(kind, msg)}}
-
-
-# What a message of each kind must hold (the protocol's required fields) that a test's message leaves out
-REQUIRED: dict[str, dict[str, Any]] = {
-    "action_result": {
-        "goal_id": "g",
-        "observation": {
-            "robot": "r",
-            "tick": 0,
-            "status": {"name": "r", "kind": "k", "skills": []},
-            "furniture": [],
-            "objects": [],
-            "task_brief": "",
-            "task_detail": "",
-        },
-    },
-    "tick": {"actions": {}, "outcomes": {}, "placed": 0, "total": 3},
-}
-METRICS = {"temporal_steps": 0, "action_steps": 0, "action_steps_per_robot": {}}
-
-
-def _complete(kind: str, msg: dict[str, Any]) -> dict[str, Any]:
-    """`msg` with the protocol's required fields it lacks filled in (the trace reader decodes every message)."""
-    full = {**REQUIRED.get(kind, {}), **msg}
-    if isinstance(full.get("outcome"), dict):
-        full["outcome"] = {"feedback": "", **full["outcome"]}
-    if isinstance(full.get("metrics"), dict):
-        full["metrics"] = {**METRICS, **full["metrics"]}
-    return full
 
 
 def _event(index: int, tick: int, kind: str = "relocate", applied: bool = True) -> dict[str, Any]:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from test_metrics import _put  # a hand-built trace line, with the protocol's required fields
 from test_table3 import play
 
 from mhrc.core.fidelity import CALIBRATION, NOISELESS, recorded_noise
@@ -199,7 +200,9 @@ def test_a_trace_or_row_from_before_the_field_reads_as_the_calibration() -> None
         "reason": "horizon",
         "metrics": {"success": False, "placed": 0, "total": 3, "partial_success": 0.0},
     }
-    m = from_trace([{"kind": "put", "msg": old}, {"kind": "put", "msg": done}])
+    line = {k: v for k, v in old.items() if k != "kind"}
+    end = {k: v for k, v in done.items() if k != "kind"}
+    m = from_trace([_put("episode_started", **line), _put("episode_done", **end)])
     assert (m.noise, m.noise_rates) == ("on", RATES)
     row = {"method": "heuristic", "ablation": "none", "fidelity": "paper", "aids": [], "schedule": "sequential"}
     assert (
