@@ -243,6 +243,11 @@ class Layout:
     starts: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     source: str = ""  # the file it came from
 
+    @property
+    def arm_mounts(self) -> tuple[tuple[tuple[float, float, float], float], ...]:
+        """Where a fixed arm can be mounted, (base, yaw) each: one today, on Bob's table."""
+        return ((self.bob_base, self.bob_yaw),)
+
     def get(self, name: str) -> FurnitureSpec | None:
         return next((f for f in self.furniture if f.name == name), None)
 

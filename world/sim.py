@@ -35,6 +35,7 @@ from mhrc.core.protocol import (
     SkillOutcome,
     Wait,
 )
+from mhrc.core.team import PAPER_TEAM, RobotSpec, TeamError, TeamProblem, TeamSpec
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from . import assets, observe
@@ -46,11 +47,12 @@ from .bound import lower_bound, symbolic_episode
 from .dynamics import Dynamics
 from .observe import Knowledge
 from .physics import ObjectState, PhysicalWorld
-from .robots import KINDS, ROBOTS, TEAM, RobotBody, RobotKind, spawn
+from .robots import KINDS, RobotBody, spawn
 from .scenario import Scenario
 from .scene import BuiltScene, Fixture, Layout, build_scene, get_layout
 from .skills import SKILLS, SkillContext
 from .tasks import Seen, TaskResult, get_task
+from .teams import check_team
 
 log = structlog.get_logger("mhrc.world.sim")
 
@@ -65,24 +67,6 @@ def check_episode(*, task: str, scene: str, n_objects: int) -> None:
         raise ValueError(f"n_objects must be between {N_OBJECTS[0]} and {N_OBJECTS[1]}, not {n_objects}")
 
 
-def _fetches(kind: RobotKind) -> bool:
-    return {"navigate", "pick"} <= set(kind.skills)
-
-
-def check_team(robots: Iterable[str]) -> None:
-    """Raise ValueError unless `robots` are known robots and include one that finishes the task
-    and one that fetches (navigates and picks): robots known by what they can do, not by name."""
-    robots = tuple(robots)
-    kinds = [KINDS[TEAM[r]] for r in robots if r in TEAM]
-    if len(kinds) < len(robots) or not any(k.finishes_task for k in kinds) or not any(_fetches(k) for k in kinds):
-        finishers = " or ".join(r for r, k in TEAM.items() if KINDS[k].finishes_task)
-        fetchers = " or ".join(r for r, k in TEAM.items() if _fetches(KINDS[k]))
-        raise ValueError(
-            f"robots must come from {', '.join(ROBOTS)} and include one that finishes the task ({finishers}) "
-            f"and one that fetches ({fetchers}), not {robots}"
-        )
-
-
 class Sim:
     """The PyBullet world of one episode (p.DIRECT unless gui=True)."""
 
@@ -94,7 +78,8 @@ class Sim:
         seed: int = 0,
         n_objects: int = 4,
         gui: bool = False,
-        robots: tuple[str, ...] = ROBOTS,
+        team: TeamSpec = PAPER_TEAM,
+        robots: Iterable[str] | None = None,
         aids: tuple[str, ...] | frozenset[str] = (),
         scenario: Scenario | None = None,
         noise: str = "on",
@@ -107,11 +92,17 @@ class Sim:
         self.noise: MotionNoise = motion_noise(noise, self.aids)
         # motion noise: its own stream, apart from the generator's, and different for every episode of a seed
         rng = np.random.default_rng([seed, zlib.crc32(f"{task}/{scene}/{n_objects}".encode()), 0x4D485243])
-        check_team(robots)
-        self.robots: tuple[str, ...] = tuple(r for r in ROBOTS if r in robots)
+        if robots is not None:  # an ablation's subset of the team (no_mobile: the paper's team without David)
+            unknown = set(robots) - set(team.names)
+            if unknown:
+                raise ValueError(f"robots {sorted(unknown)} are not in the team {team.name} ({', '.join(team.names)})")
+            team = team.without(set(team.names) - set(robots))
         self.task_id, self.scene_id, self.seed, self.n_objects = task, scene, seed, n_objects
         self.task = get_task(task)
         self.layout: Layout = get_layout(scene)
+        check_team(team, self.layout)
+        self.team = team
+        self.robots: tuple[str, ...] = team.names  # the execution order
         self._scenario = scenario
         self.cid = p.connect(p.GUI if gui else p.DIRECT)
         self.assets = AssetDir()
@@ -128,18 +119,20 @@ class Sim:
     # ------------------------------------------------------------------ building
     def _build(self, rng: np.random.Generator) -> None:
         lay = self.layout
-        margin = max(KINDS[TEAM[r]].footprint for r in self.robots)
+        margin = max(KINDS[r.kind].footprint for r in self.team.robots)
         fixtures = {fx.name: fx for fx in self.task.fixtures(lay)}
         scene = build_scene(self.cid, lay, self.assets, margin, list(fixtures.values()))
         self.world = w = PhysicalWorld(
             self.cid, lay, scene, ArmPlanner(scene.statics, seed=self.seed), fixtures, self.aids
         )
-        for name in self.robots:
-            kind = KINDS[TEAM[name]]
+        mounts = iter(lay.arm_mounts)
+        for spec in self.team.robots:
+            kind = KINDS[spec.kind]
             if kind.mobile:
-                w.bots[name] = spawn(self.cid, name, kind, self.assets, pose=lay.starts[name])
+                w.bots[spec.name] = spawn(self.cid, spec.name, kind, self.assets, pose=self._start(spec))
             else:
-                w.bots[name] = spawn(self.cid, name, kind, self.assets, arm_base=lay.bob_base, arm_yaw=lay.bob_yaw)
+                base, yaw = next(mounts)  # check_team: no more fixed arms than mounts
+                w.bots[spec.name] = spawn(self.cid, spec.name, kind, self.assets, arm_base=base, arm_yaw=yaw)
         self.targets: list[str] = []
         self.goals: dict[str, str] = {}  # target -> the fixture it must end on
         self.knowledge = Knowledge(w, self.robots, self.aids)
@@ -161,6 +154,18 @@ class Sim:
         self.skill_context = SkillContext(w, self.knowledge, rng, self.noise)  # what the skills act through
         self.dynamics = Dynamics(w, self.task, self.targets, self.goals, self.assets, self.seed, self._scenario)
         log.debug("episode built", task=self.task_id, scene=self.scene_id, seed=self.seed, objects=list(w.objects))
+
+    def _start(self, spec: RobotSpec) -> tuple[float, float, float]:
+        """A mobile robot's start pose: the team's, else the layout's for that name."""
+        if spec.start is not None:
+            return spec.start
+        if spec.name in self.layout.starts:
+            return self.layout.starts[spec.name]
+        raise TeamError(
+            TeamProblem.NO_ROOM,
+            f"--team {self.team.name}: the {self.layout.name} layout has no start pose for {spec.name} "
+            f"(it has {', '.join(self.layout.starts)}); give one in the team file (start = [x, y, yaw])",
+        )
 
     def close(self) -> None:
         """Disconnect every PyBullet client and remove the generated assets (idempotent)."""
@@ -190,7 +195,7 @@ class Sim:
         self.skill_context = replace(self.skill_context, rng=value)
 
     def capabilities(self, robot: str) -> frozenset[str]:
-        return frozenset(KINDS[TEAM[robot]].skills) if robot in self.bots else frozenset()
+        return frozenset(self.bots[robot].kind.skills) if robot in self.bots else frozenset()
 
     def finishers(self) -> frozenset[str]:
         """The robots that may place on the task's goal fixtures (the paper: Bob)."""

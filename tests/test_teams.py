@@ -1,0 +1,111 @@
+"""Teams as data (issue 33): the spec's parsing and every bad input, the shipped teams, and the
+world's check of a team against its kinds and a layout."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from mhrc.core.team import PAPER_TEAM, TeamError, TeamProblem, TeamSpec, load_team_file, parse_inline
+from mhrc.world.robots import KINDS
+from mhrc.world.scene import get_layout
+from mhrc.world.teams import SHIPPED, check_team
+
+
+def test_the_paper_team_is_alice_bob_david_in_the_papers_order() -> None:
+    assert PAPER_TEAM.kinds == {"alice": "mobile_manipulator", "bob": "tabletop_arm", "david": "mobile_base"}
+    assert PAPER_TEAM.names == ("alice", "bob", "david") and SHIPPED["paper"] is PAPER_TEAM
+
+
+def test_inline_robots_keep_their_order() -> None:
+    team = parse_inline("alice=mobile_manipulator, bob=tabletop_arm,lucy=drone")
+    assert team.names == ("alice", "bob", "lucy") and team.kinds["lucy"] == "drone" and team.name == "custom"
+
+
+@pytest.mark.parametrize(
+    ("inline", "code", "named"),
+    [
+        ("alice=mobile_manipulator", TeamProblem.SIZE, "not 1"),
+        (",".join(f"r{i}=mobile_base" for i in range(9)), TeamProblem.SIZE, "not 9"),
+        ("alice=mobile_manipulator,alice=tabletop_arm", TeamProblem.DUPLICATE_NAME, "'alice' appears twice"),
+        ("Alice=mobile_manipulator,bob=tabletop_arm", TeamProblem.BAD_NAME, "'Alice'"),
+        ("al-ice=mobile_manipulator,bob=tabletop_arm", TeamProblem.BAD_NAME, "'al-ice'"),
+        ("alice=mobile_manipulator,bob", TeamProblem.UNKNOWN_TEAM, "'bob' is not name=kind"),
+    ],
+)
+def test_a_bad_inline_team_is_one_line_with_its_code(inline: str, code: TeamProblem, named: str) -> None:
+    with pytest.raises(TeamError) as err:
+        parse_inline(inline)
+    assert err.value.code is code and named in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_team_file_in_toml_or_json(tmp_path: Path) -> None:
+    toml = tmp_path / "duo.toml"
+    toml.write_text(
+        'purpose = "two robots"\n'
+        '[[robots]]\nname = "alice"\nkind = "mobile_manipulator"\nstart = [1.0, 2.0, 0.5]\nllm = "openai:gpt-4o"\n'
+        '[[robots]]\nname = "bob"\nkind = "tabletop_arm"\n'
+    )
+    team = load_team_file(toml)
+    assert team.name == "duo" and team.purpose == "two robots"
+    assert team.robot("alice").start == (1.0, 2.0, 0.5) and team.robot("alice").llm == "openai:gpt-4o"
+    js = tmp_path / "same.json"
+    js.write_text(json.dumps({"robots": [r.model_dump(exclude_none=True) for r in team.robots]}))
+    assert load_team_file(js).digest() == team.digest()  # the digest is what the team is, not its name
+
+
+@pytest.mark.parametrize(
+    ("text", "named"),
+    [
+        ("robots = 3", "robots must be a list"),
+        (
+            '[[robots]]\nname = "alice"\nkind = "mobile_manipulator"\nwheels = 4\n[[robots]]\nname="b"\nkind="x"',
+            "wheels",
+        ),
+        (
+            '[[robots]]\nname = "alice"\nkind = "mobile_manipulator"\nstart = [1]\n[[robots]]\nname="b"\nkind="x"',
+            "start",
+        ),
+        ("not toml [", "--team"),
+    ],
+)
+def test_a_bad_team_file_names_the_field(tmp_path: Path, text: str, named: str) -> None:
+    path = tmp_path / "t.toml"
+    path.write_text(text)
+    with pytest.raises(TeamError) as err:
+        load_team_file(path)
+    assert err.value.code is TeamProblem.BAD_FILE and named in str(err.value) and str(path) in str(err.value)
+
+
+def test_the_shipped_teams_are_at_least_six_each_with_a_purpose() -> None:
+    assert len(SHIPPED) >= 6 and {"paper", "no_mobile", "two_fetchers", "drone_scout", "large"} <= set(SHIPPED)
+    for name, team in SHIPPED.items():
+        assert team.name == name and team.purpose and "\n" not in team.purpose
+    large = SHIPPED["large"].kinds
+    assert sorted(large.values()) == sorted(
+        ["mobile_manipulator"] * 2 + ["mobile_base"] * 2 + ["drone", "tabletop_arm"]
+    )
+    assert max(len(t.robots) for t in SHIPPED.values()) == 8
+
+
+def test_the_world_refuses_a_team_it_cannot_run() -> None:
+    kitchen = get_layout("kitchen")
+    check_team(PAPER_TEAM, kitchen)
+    cases = [
+        ("alice=mobile_manipulator,david=mobile_base", TeamProblem.NO_FINISHER, "tabletop_arm"),
+        ("bob=tabletop_arm,david=mobile_base", TeamProblem.NO_FETCHER, "mobile_manipulator"),
+        ("alice=mobile_manipulator,bob=tabletop_arm,rex=tank", TeamProblem.UNKNOWN_KIND, ", ".join(KINDS)),
+        ("alice=mobile_manipulator,bob=tabletop_arm,ann=tabletop_arm", TeamProblem.TOO_MANY_ARMS, "1 arm mount"),
+    ]
+    for inline, code, named in cases:
+        with pytest.raises(TeamError) as err:
+            check_team(parse_inline(inline), kitchen)
+        assert err.value.code is code and named in str(err.value), inline
+
+
+def test_a_team_spec_is_frozen_and_checked_when_built_in_code() -> None:
+    with pytest.raises(ValueError, match="appears twice"):
+        TeamSpec(robots=PAPER_TEAM.robots + PAPER_TEAM.robots[:1])
+    assert PAPER_TEAM.without({"david"}).names == ("alice", "bob")
