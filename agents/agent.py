@@ -252,7 +252,8 @@ class RobotAgent:
         if self.security is not None and self.endpoint is not None:
             import datetime
 
-            from mhrc.core.security import expiry, why_refused
+            from mhrc.core.refusal import why_refused
+            from mhrc.core.security import expiry
 
             why = await asyncio.to_thread(why_refused, self.endpoint, self.security)
             if why.final:

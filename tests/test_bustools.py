@@ -17,7 +17,8 @@ from typing import Any
 import pytest
 from waits import robots_alive, subscribed
 
-from mhrc.cli.bustools import MODELS, bus_echo, describe_sample, group_tokens, split_endpoint
+from mhrc.cli.bustools import bus_echo, group_tokens, split_endpoint
+from mhrc.cli.message_lines import MODELS, describe_sample
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.endpoints import free_port
 from mhrc.core.protocol import PROTOCOL_VERSION

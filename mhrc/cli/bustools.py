@@ -8,7 +8,7 @@ but it is not zenoh" are told apart in one clear line each (`BusToolError`), nev
 - presence comes from liveliness tokens (docs/architecture.md, "The bus"): `mhrc/<run>/alive/world` and
   `mhrc/<run>/alive/robot/<rid>`;
 - every message `echo` shows is decoded with `mhrc.core.protocol` by its `kind`; a payload that is
-  not JSON or not a valid message is shown as such;
+  not JSON or not a valid message is shown as such (mhrc.cli.message_lines);
 - the protocol version a world speaks is the `v` field of its `world/state` answer (every
   message carries one).
 """
@@ -26,43 +26,22 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
-from pydantic import BaseModel
 
+from mhrc.cli.message_lines import clip, describe_sample
 from mhrc.core.bus import Bus, Sample, make_config
 from mhrc.core.endpoints import split_endpoint
 from mhrc.core.keys import ROOT, Keys
 from mhrc.core.polling import poll
 from mhrc.core.printable import printable
-from mhrc.core.protocol import (
-    PROTOCOL_VERSION,
-    SUPPORTED_VERSIONS,
-    ActionAck,
-    ActionRequest,
-    ActionResult,
-    AttachReply,
-    AttachRequest,
-    EpisodeDone,
-    EpisodeStarted,
-    Message,
-    ProtocolError,
-    RobotAttached,
-    RobotDetached,
-    RobotMessage,
-    Snapshot,
-    Thought,
-    TickClosed,
-    Turn,
-    WorldState,
-    decode,
-)
-from mhrc.core.security import OBSERVER, WORLD, speaks_tls, why_refused
+from mhrc.core.protocol import PROTOCOL_VERSION, SUPPORTED_VERSIONS, ProtocolError, WorldState, decode
+from mhrc.core.refusal import speaks_tls, why_refused
+from mhrc.core.security import OBSERVER, WORLD
 
 OPEN_TIMEOUT_MS = (
     2000  # a zenoh handshake over loopback takes milliseconds; a silent non-zenoh listener would hold 10 s
 )
 PROBE_TIMEOUT = 2.0  # s for the plain TCP connect
 STATE_TIMEOUT = 3.0  # s for a world's state answer
-SUMMARY_CHARS = 240
 
 Write = Callable[[str], None]
 
@@ -265,120 +244,6 @@ async def bus_list(ep: str, *, as_json: bool = False, credentials: Path | None =
 # --------------------------------------------------------------------------- echo
 
 
-def _message_models() -> dict[str, type[Message]]:
-    """kind -> model, for every protocol message that has a `kind` (new ones included)."""
-    models: dict[str, type[Message]] = {}
-    todo: list[type[Message]] = [Message]
-    while todo:
-        cls = todo.pop()
-        todo.extend(cls.__subclasses__())
-        kind = cls.model_fields.get("kind")
-        if kind is not None and isinstance(kind.default, str):
-            models.setdefault(kind.default, cls)
-    return models
-
-
-MODELS = _message_models()
-
-
-def _clip(text: str, n: int = SUMMARY_CHARS) -> str:
-    text = " ".join(printable(text).split())  # a participant's text: no escape sequence reaches the terminal
-    return text if len(text) <= n else text[: n - 1] + "…"
-
-
-def one_line(msg: BaseModel) -> str:
-    """One line about a protocol message: who, what, how it went."""
-    if isinstance(msg, ActionRequest):
-        return f"{msg.robot} {msg.action.call()} tick {msg.tick} goal {msg.goal_id}"
-    if isinstance(msg, ActionAck):
-        return f"{msg.robot} goal {msg.goal_id} " + ("accepted" if msg.accepted else f"rejected: {msg.reason}")
-    if isinstance(msg, ActionResult):
-        o = msg.outcome
-        how = "succeeded" if o.succeeded else f"failed ({o.code.value})"
-        return f"{msg.robot} {msg.action.call()} {how} tick {msg.tick}{' done' if msg.done else ''}: {o.feedback}"
-    if isinstance(msg, RobotMessage):
-        return f"{msg.sender} -> {msg.to} tick {msg.tick}: {msg.content}"
-    if isinstance(msg, Thought):
-        what = msg.action or (f"parse error: {msg.parse_error}" if msg.parse_error else "no action")
-        tokens = (
-            f", {msg.prompt_tokens}+{msg.completion_tokens} tokens"
-            if msg.prompt_tokens or msg.completion_tokens
-            else ""
-        )
-        return f"{msg.robot} tick {msg.tick} ({msg.policy}{tokens}): {what}"
-    if isinstance(msg, EpisodeStarted):
-        return (
-            f"{msg.run}: {msg.task} in {msg.scene}, seed {msg.seed}, {msg.n_objects} objects, robots {', '.join(msg.robots)}, "
-            f"{msg.scheduler}, horizon {msg.horizon}, fidelity {msg.fidelity}"
-        )
-    if isinstance(msg, TickClosed):
-        acts = ", ".join(f"{r} {a}{'' if msg.outcomes.get(r, True) else ' (failed)'}" for r, a in msg.actions.items())
-        return f"tick {msg.tick}: {acts}; placed {msg.placed}/{msg.total}"
-    if isinstance(msg, RobotAttached):
-        return f"{msg.robot} attached (agent {msg.agent_id}) at tick {msg.tick}"
-    if isinstance(msg, RobotDetached):
-        return f"{msg.robot} detached at tick {msg.tick}: {msg.reason}"
-    if isinstance(msg, EpisodeDone):
-        m = msg.metrics
-        return f"{msg.run} ended ({msg.reason}): success={m.success} placed {m.placed}/{m.total} TS {m.temporal_steps} AS {m.action_steps}"
-    if isinstance(msg, Snapshot):
-        return f"tick {msg.tick}: {len(msg.robots)} robots, {len(msg.objects)} objects, goals {', '.join(msg.goals) or 'none'}"
-    if isinstance(msg, WorldState):
-        return (
-            f"{msg.run}: {msg.task} in {msg.scene}, tick {msg.tick}/{msg.horizon}, placed {msg.placed}/{msg.total}, "
-            f"attached {', '.join(msg.attached) or 'none'}"
-        )
-    if isinstance(msg, AttachRequest):
-        return f"{msg.robot} (agent {msg.agent_id})"
-    if isinstance(msg, AttachReply):
-        return f"{msg.robot} " + ("accepted" if msg.accepted else f"refused: {msg.reason}") + f" at tick {msg.tick}"
-    if isinstance(msg, Turn):
-        return f"{msg.robot} tick {msg.tick}"
-    return _clip(msg.model_dump_json())
-
-
-@dataclass(frozen=True)
-class Decoded:
-    """One sample as echo shows it."""
-
-    kind: str  # the message kind, or `delete`, `not-json`, `json`, `invalid:<kind>`
-    summary: str
-    msg: Any  # the payload's JSON (or {"raw": text}); None for a delete
-    error: str | None = None
-
-
-def describe_sample(sample: Sample) -> Decoded:
-    """Decode one sample with the protocol; never raises."""
-    if not sample.is_put:
-        return Decoded("delete", "", None)
-    try:
-        msg: Any = json.loads(sample.payload)
-    except (ValueError, UnicodeDecodeError):
-        text = sample.payload.decode("utf-8", "replace")
-        return Decoded(
-            "not-json",
-            f"undecodable payload ({len(sample.payload)} bytes): {_clip(repr(sample.payload), 120)}",
-            {"raw": text},
-            "not JSON",
-        )
-    kind = msg.get("kind") if isinstance(msg, dict) else None
-    model = MODELS.get(kind) if isinstance(kind, str) else None
-    if model is None:
-        what = f"unknown kind {kind!r}" if kind is not None else "JSON without a protocol kind"
-        return Decoded("json", f"{what}: {_clip(json.dumps(msg), 160)}", msg)
-    try:
-        return Decoded(str(kind), _clip(one_line(decode(sample.payload, model))), msg)
-    except ProtocolError as exc:
-        return Decoded(
-            f"invalid:{kind}",
-            f"not a valid {kind} (protocol v{PROTOCOL_VERSION}): {_clip(str(exc), 160)}",
-            msg,
-            str(exc),
-        )
-    except Exception as exc:  # a summary that tripped on an odd but valid message: still one line
-        return Decoded(str(kind), _clip(f"{type(exc).__name__}: {exc}"), msg)
-
-
 def _clock(t: float) -> str:
     return time.strftime("%H:%M:%S", time.localtime(t)) + f".{int((t % 1) * 1000):03d}"
 
@@ -460,7 +325,7 @@ async def world_version(bus: Bus, run: str, timeout: float = STATE_TIMEOUT) -> t
     try:
         state = decode(raw, WorldState)
     except ProtocolError as exc:
-        return False, f"world speaks protocol v{v}, but its state answer is not valid here: {_clip(str(exc), 160)}"
+        return False, f"world speaks protocol v{v}, but its state answer is not valid here: {clip(str(exc), 160)}"
     phase = "done" if state.done else "running" if state.started else "waiting for robots"
     attached = ", ".join(r for r in state.robots if r in state.attached) or "none"  # in the episode's robot order
     return True, (

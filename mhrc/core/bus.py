@@ -25,7 +25,8 @@ from pydantic import BaseModel
 from mhrc.core.endpoints import BusError, BusRefused, listen_error
 from mhrc.core.polling import poll
 from mhrc.core.protocol import encode
-from mhrc.core.security import Credentials, apply, why_refused
+from mhrc.core.refusal import why_refused
+from mhrc.core.security import Credentials, apply
 from mhrc.core.uncancelled import to_the_end
 
 log = structlog.get_logger("mhrc.core.bus")

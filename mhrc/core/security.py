@@ -21,6 +21,8 @@ authenticates every client against the dictionary (`transport/auth/usrpwd/dictio
 and enforces `access_control` (default deny): a robot's user may publish only its own
 robot's request, thought and generating keys, query its own attach key, declare its own liveliness token
 and subscribe to what an agent needs. A denied message is dropped by the router.
+
+Why a client session was refused (`why_refused`) is told by mhrc.core.refusal.
 """
 
 from __future__ import annotations
@@ -29,8 +31,6 @@ import datetime
 import json
 import os
 import secrets
-import socket
-import ssl
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +39,6 @@ from typing import Any
 from cryptography import x509
 
 from mhrc.core.certs import make_ca, make_server_cert, pem_cert, pem_key, write_private
-from mhrc.core.endpoints import split_endpoint
 
 ENV = "MHRC_CREDENTIALS"
 WORLD = "world"
@@ -443,101 +442,3 @@ def apply(conf: Any, creds: Credentials, *, router: bool) -> None:
     else:
         put("transport/auth/usrpwd/user", creds.user)
         put("transport/auth/usrpwd/password", creds.password)
-
-
-# ---------------------------------------------------------------------------------- diagnosis
-@dataclass(frozen=True)
-class Diagnosis:
-    """Why a client session could not open (`cause`, one phrase for a person) and whether
-    trying again can help (`final` False: nothing listens yet, or a login a world still
-    starting may refuse for a moment)."""
-
-    cause: str
-    final: bool = False
-    login_refused: bool = False  # the TLS link is sound and the world refused this login
-
-    def __str__(self) -> str:
-        return self.cause
-
-
-def speaks_tls(host: str, port: int, timeout: float = 3.0) -> bool:
-    """Whether the server at host:port completes a TLS handshake (a secured world), checked
-    without trusting or verifying anything: only to tell a plain-tcp client what is wrong."""
-    ctx = ssl.create_default_context()
-    ctx.check_hostname = False
-    ctx.verify_mode = ssl.CERT_NONE
-    try:
-        with (
-            socket.create_connection((host, port), timeout=timeout) as raw,
-            ctx.wrap_socket(raw, server_hostname=host) as tls,
-        ):
-            tls.do_handshake()
-            return True
-    except (OSError, ssl.SSLError):
-        return False
-
-
-def why_refused(endpoint: str, creds: Credentials | None, timeout: float = 3.0) -> Diagnosis:
-    """Why a client session to `endpoint` could not open, as far as a plain TLS handshake with
-    the run's CA can tell: nothing listening, a secured world reached on plain tcp (or the
-    reverse), an expired or foreign certificate, or (the handshake succeeding) credentials the
-    world refused."""
-    proto, host, port = split_endpoint(endpoint)
-    if port is None:
-        return Diagnosis(f"bad endpoint {endpoint!r}", final=True)
-    try:
-        raw = socket.create_connection((host, port), timeout=timeout)
-    except OSError as exc:
-        return Diagnosis(f"nothing accepts connections on {host}:{port} ({exc.strerror or exc})")
-    raw.close()
-    if proto != "tls":
-        if speaks_tls(host, port, timeout):
-            login = "with this participant's --credentials FILE" if creds is None else "with the same --credentials"
-            return Diagnosis(
-                f"the world at {host}:{port} is secured (it speaks TLS): connect to tls/{host}:{port} {login}",
-                final=True,
-            )
-        if creds is None:
-            return Diagnosis(
-                "the world refused an open connection: it probably requires credentials (--credentials or $MHRC_CREDENTIALS)"
-            )
-        return Diagnosis(f"credentials were given but the endpoint {endpoint} is not tls/", final=True)
-    if creds is None:
-        return Diagnosis(
-            "the endpoint is tls/ (a secured world) but no credentials were given: pass --credentials FILE "
-            "(or set $MHRC_CREDENTIALS)",
-            final=True,
-        )
-    ctx = ssl.create_default_context(cafile=str(creds.ca))
-    try:
-        with (
-            socket.create_connection((host, port), timeout=timeout) as raw2,
-            ctx.wrap_socket(raw2, server_hostname=host) as tls,
-        ):
-            tls.do_handshake()
-    except ssl.SSLCertVerificationError as exc:
-        why = exc.verify_message or str(exc)
-        if "expired" in why:
-            return Diagnosis(
-                f"the world's certificate has expired ({why}): issue new credentials (mhrc credentials, or a new mhrc up)",
-                final=True,
-            )
-        if "issuer" in why or "self-signed" in why or "self signed" in why:
-            return Diagnosis(
-                f"the world's certificate is not signed by the CA of {creds.describe()} ({why}): "
-                "a foreign certificate, or a world of another run",
-                final=True,
-            )
-        return Diagnosis(f"the world's certificate was rejected: {why}", final=True)
-    except ssl.SSLError as exc:
-        return Diagnosis(
-            f"the TLS handshake failed: {exc.reason or exc} (is the world listening on plain tcp? then drop tls/ and --credentials)",
-            final=True,
-        )
-    except OSError as exc:
-        return Diagnosis(f"the TLS handshake failed: {exc}")
-    return Diagnosis(
-        f"the TLS link is sound but the world refused the login of {creds.describe()}: "
-        "a wrong password, or credentials of another run",
-        login_refused=True,
-    )

@@ -4,7 +4,7 @@ A login refused by the world's router (a wrong password, an unknown user, a clie
 credentials) or a TLS handshake the client gave up (it does not trust the world's certificate)
 happens inside zenoh's transport, where no Python code of ours runs: zenoh says so only in its
 Rust log, which writes straight to file descriptor 1 (tracing's default, stdout). The agent's side learns the cause from
-`mhrc.core.security.why_refused`; this module gives the world's side the same, as one warning per cause
+`mhrc.core.refusal.why_refused`; this module gives the world's side the same, as one warning per cause
 (throttled, so a flood of bad logins costs a count per interval, not a line per attempt):
 
     refused a login  cause='a wrong password: the client's credentials are altered, or of another run'
