@@ -1,11 +1,11 @@
 """The episode report: one self-contained HTML file (CSS, JS and data inline, nothing fetched).
 
 The static parts (header, the task's targets and which of them ended unplaced, house map's
-furniture, robot lanes, messages, failure panel) are HTML written here, readable without
-JavaScript; the map's moving parts (robots, paths, objects, open containers, messages in flight)
-are drawn by a small script from the frames embedded as JSON in
-`<script type="application/json" id="mhrc-data">`, one frame per world snapshot, scrubbed with a
-range slider or the arrow keys (Home and End jump). The page opens on the last frame, the state
+furniture, robot lanes, messages, failure panel) are HTML written here (the lanes and the
+messages in mhrc.viewer.page_lanes), readable without JavaScript; the map's moving parts
+(robots, paths, objects, open containers, messages in flight) are drawn by a small script from
+the frames embedded as JSON in `<script type="application/json" id="mhrc-data">`, one frame
+per world snapshot, scrubbed with a range slider or the arrow keys (Home and End jump). The page opens on the last frame, the state
 the episode was judged on. A robot's path follows each navigate's planned route where its result
 carries one (older traces: straight lines between stops). Labels never cover one another: the
 fixed ones are placed here (mhrc.viewer.placement), the moving ones by the script, which
@@ -23,7 +23,8 @@ from importlib.resources import files
 from typing import Any
 
 from mhrc.viewer import page_events
-from mhrc.viewer.model import EpisodeView, Step
+from mhrc.viewer.model import EpisodeView
+from mhrc.viewer.page_lanes import lanes_section, messages_section
 from mhrc.viewer.placement import Box, Request, place
 from mhrc.viewer.targets import ObjectFate, TaskView
 from mhrc.viewer.wording import diagnostic_label, partial_success
@@ -338,104 +339,6 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
 </section>"""
 
 
-def _reply_analysis(reply: str | None) -> str:
-    if not reply:
-        return ""
-    lines = [ln for ln in reply.splitlines() if not ln.strip().lower().startswith("command")]
-    return "\n".join(lines).strip()
-
-
-def _step_html(s: Step) -> str:
-    res = s.result or {}
-    out = res.get("outcome") or {}
-    ack = s.ack
-    if ack is not None and not ack.get("accepted", True):
-        status, cls = f"rejected: {ack.get('reason') or 'no reason given'}", "rejected"
-    elif res:
-        status, cls = ("ok", "ok") if out.get("succeeded") else (f"failed: {out.get('code', '?')}", "failed")
-    elif ack is not None:
-        status, cls = "accepted, no result recorded", "pending"
-    else:
-        status, cls = "no ack or result recorded", "pending"
-    has_result = " has-result" if res else ""
-    frame = "" if s.frame is None else f' data-frame="{s.frame}"'
-    parts = [
-        f'<li class="step {cls}{has_result}" data-goal="{_e(s.goal_id)}" data-tick="{_e(s.tick)}"{frame}>',
-        f'<div class="shead"><span class="tick">t{_e(s.tick)}</span> <code class="call">{_e(s.call or "?")}</code>'
-        f' <span class="badge {cls}">{_e(status)}</span></div>',
-    ]
-    if ack is not None:
-        parts.append(
-            f'<div class="ack">ack: {"accepted" if ack.get("accepted", True) else "rejected"}'
-            f"{': ' + _e(ack.get('reason')) if ack.get('reason') else ''}</div>"
-        )
-    if out:
-        parts.append(f'<div class="feedback">{_e(out.get("feedback"))}</div>')
-        if res.get("started") is not None:
-            parts.append(
-                f'<div class="dim">sim {res["started"]:.1f}–{(res.get("ended") or res["started"]):.1f} s</div>'
-            )
-    t = s.thought
-    if t:
-        if t.get("prompt") is not None or t.get("reply") is not None:
-            analysis = _reply_analysis(t.get("reply"))
-            if t.get("reasoning"):
-                parts.append(
-                    f'<details class="reasoning"><summary>reasoning ({_e(t.get("reasoning_tokens", 0))} '
-                    f"tokens)</summary><pre>{_e(t['reasoning'])}</pre></details>"
-                )
-            if analysis:
-                parts.append(f'<div class="analysis">{_e(analysis)}</div>')
-            parts.append(f'<div class="command">command: <code>{_e(t.get("action"))}</code></div>')
-            if t.get("parse_error"):
-                parts.append(f'<div class="perr">parse error: {_e(t["parse_error"])}</div>')
-            parts.append(
-                f'<div class="dim">{_e(t.get("policy"))} · {_e(t.get("prompt_tokens", 0))} prompt + {_e(t.get("completion_tokens", 0))} completion tokens'
-                f" · {float(t.get('latency') or 0):.2f} s{' · finish ' + _e(t['finish_reason']) if t.get('finish_reason') else ''}</div>"
-            )
-            parts.append(f'<details class="prompt"><summary>prompt</summary><pre>{_e(t.get("prompt"))}</pre></details>')
-            parts.append(
-                f'<details class="reply"><summary>raw reply</summary><pre>{_e(t.get("reply"))}</pre></details>'
-            )
-        elif t.get("parse_error"):
-            parts.append(f'<div class="perr">{_e(t["parse_error"])}</div>')
-    parts.append("</li>")
-    return "".join(parts)
-
-
-def _lanes(view: EpisodeView, colors: dict[str, str]) -> str:
-    lanes = []
-    for r in view.robots:
-        steps = view.steps.get(r, [])
-        items = page_events.merge(
-            steps, [m for m in view.events if page_events.robot_of(m) == r], [_step_html(s) for s in steps]
-        )
-        lanes.append(
-            f'<div class="lane" data-robot="{_e(r)}"><h3 style="border-color:{colors[r]}">{_e(r)} '
-            f'<span class="dim">{_e(view.header["models"].get(r))} · {len(steps)} steps</span></h3><ol>{items}</ol></div>'
-        )
-    lanes.append(page_events.world_lane(view))
-    return f'<section id="lanes-section"><h2>Robots</h2><div id="lanes">{"".join(lanes)}</div></section>'
-
-
-def _messages(view: EpisodeView, colors: dict[str, str]) -> str:
-    if not view.messages:
-        return '<section id="messages"><h2>Messages</h2><p class="dim">no messages between robots</p></section>'
-    rows = []
-    for i, m in enumerate(view.messages):
-        frame = "" if m.frame is None else f' data-frame="{m.frame}"'
-        c1, c2 = colors.get(m.sender, "#555"), colors.get(m.to, "#555")
-        rows.append(
-            f'<tr class="msg" data-i="{i}"{frame}><td>{m.sent}</td><td><b style="color:{c1}">{_e(m.sender)}</b> &#8594; '
-            f'<b style="color:{c2}">{_e(m.to)}</b></td><td>{_e(m.delivered if m.delivered is not None else "not seen")}</td>'
-            f'<td class="content">{_e(m.content)}</td></tr>'
-        )
-    return (
-        '<section id="messages"><h2>Messages</h2><table class="grid"><tr><th>sent at tick</th><th>from &#8594; to</th>'
-        f"<th>delivered at tick</th><th>content</th></tr>{''.join(rows)}</table></section>"
-    )
-
-
 LABELLED_KEYS = (
     "rejected_by_reason",
     "failed_by_code",
@@ -522,8 +425,8 @@ def render_page(
 {_header(view)}
 {_targets(view.task)}
 {_map(view, colors)}
-{_lanes(view, colors)}
-{_messages(view, colors)}
+{lanes_section(view, colors)}
+{messages_section(view, colors)}
 {_failures(diagnostics, diagnostics_note)}
 <script type="application/json" id="mhrc-data">{_data(view, colors)}</script>
 <script>{JS}</script>

@@ -1,0 +1,110 @@
+"""The report's robot lanes and messages table, in HTML: one lane per robot with an entry per
+step (the call, its ack and result, and the thought behind it: the model's analysis, reasoning,
+prompt and raw reply, folded), the scenario's events merged in where they happened
+(mhrc.viewer.page_events), and the messages the robots sent one another, each row tied to its
+frame for the page's script. mhrc.viewer.page puts them into the page.
+"""
+
+from __future__ import annotations
+
+from mhrc.viewer import page_events
+from mhrc.viewer.model import EpisodeView, Step
+from mhrc.viewer.wording import html_text as _e
+
+
+def _reply_analysis(reply: str | None) -> str:
+    if not reply:
+        return ""
+    lines = [ln for ln in reply.splitlines() if not ln.strip().lower().startswith("command")]
+    return "\n".join(lines).strip()
+
+
+def _step_html(s: Step) -> str:
+    res = s.result or {}
+    out = res.get("outcome") or {}
+    ack = s.ack
+    if ack is not None and not ack.get("accepted", True):
+        status, cls = f"rejected: {ack.get('reason') or 'no reason given'}", "rejected"
+    elif res:
+        status, cls = ("ok", "ok") if out.get("succeeded") else (f"failed: {out.get('code', '?')}", "failed")
+    elif ack is not None:
+        status, cls = "accepted, no result recorded", "pending"
+    else:
+        status, cls = "no ack or result recorded", "pending"
+    has_result = " has-result" if res else ""
+    frame = "" if s.frame is None else f' data-frame="{s.frame}"'
+    parts = [
+        f'<li class="step {cls}{has_result}" data-goal="{_e(s.goal_id)}" data-tick="{_e(s.tick)}"{frame}>',
+        f'<div class="shead"><span class="tick">t{_e(s.tick)}</span> <code class="call">{_e(s.call or "?")}</code>'
+        f' <span class="badge {cls}">{_e(status)}</span></div>',
+    ]
+    if ack is not None:
+        parts.append(
+            f'<div class="ack">ack: {"accepted" if ack.get("accepted", True) else "rejected"}'
+            f"{': ' + _e(ack.get('reason')) if ack.get('reason') else ''}</div>"
+        )
+    if out:
+        parts.append(f'<div class="feedback">{_e(out.get("feedback"))}</div>')
+        if res.get("started") is not None:
+            parts.append(
+                f'<div class="dim">sim {res["started"]:.1f}–{(res.get("ended") or res["started"]):.1f} s</div>'
+            )
+    t = s.thought
+    if t:
+        if t.get("prompt") is not None or t.get("reply") is not None:
+            analysis = _reply_analysis(t.get("reply"))
+            if t.get("reasoning"):
+                parts.append(
+                    f'<details class="reasoning"><summary>reasoning ({_e(t.get("reasoning_tokens", 0))} '
+                    f"tokens)</summary><pre>{_e(t['reasoning'])}</pre></details>"
+                )
+            if analysis:
+                parts.append(f'<div class="analysis">{_e(analysis)}</div>')
+            parts.append(f'<div class="command">command: <code>{_e(t.get("action"))}</code></div>')
+            if t.get("parse_error"):
+                parts.append(f'<div class="perr">parse error: {_e(t["parse_error"])}</div>')
+            parts.append(
+                f'<div class="dim">{_e(t.get("policy"))} · {_e(t.get("prompt_tokens", 0))} prompt + {_e(t.get("completion_tokens", 0))} completion tokens'
+                f" · {float(t.get('latency') or 0):.2f} s{' · finish ' + _e(t['finish_reason']) if t.get('finish_reason') else ''}</div>"
+            )
+            parts.append(f'<details class="prompt"><summary>prompt</summary><pre>{_e(t.get("prompt"))}</pre></details>')
+            parts.append(
+                f'<details class="reply"><summary>raw reply</summary><pre>{_e(t.get("reply"))}</pre></details>'
+            )
+        elif t.get("parse_error"):
+            parts.append(f'<div class="perr">{_e(t["parse_error"])}</div>')
+    parts.append("</li>")
+    return "".join(parts)
+
+
+def lanes_section(view: EpisodeView, colors: dict[str, str]) -> str:
+    lanes = []
+    for r in view.robots:
+        steps = view.steps.get(r, [])
+        items = page_events.merge(
+            steps, [m for m in view.events if page_events.robot_of(m) == r], [_step_html(s) for s in steps]
+        )
+        lanes.append(
+            f'<div class="lane" data-robot="{_e(r)}"><h3 style="border-color:{colors[r]}">{_e(r)} '
+            f'<span class="dim">{_e(view.header["models"].get(r))} · {len(steps)} steps</span></h3><ol>{items}</ol></div>'
+        )
+    lanes.append(page_events.world_lane(view))
+    return f'<section id="lanes-section"><h2>Robots</h2><div id="lanes">{"".join(lanes)}</div></section>'
+
+
+def messages_section(view: EpisodeView, colors: dict[str, str]) -> str:
+    if not view.messages:
+        return '<section id="messages"><h2>Messages</h2><p class="dim">no messages between robots</p></section>'
+    rows = []
+    for i, m in enumerate(view.messages):
+        frame = "" if m.frame is None else f' data-frame="{m.frame}"'
+        c1, c2 = colors.get(m.sender, "#555"), colors.get(m.to, "#555")
+        rows.append(
+            f'<tr class="msg" data-i="{i}"{frame}><td>{m.sent}</td><td><b style="color:{c1}">{_e(m.sender)}</b> &#8594; '
+            f'<b style="color:{c2}">{_e(m.to)}</b></td><td>{_e(m.delivered if m.delivered is not None else "not seen")}</td>'
+            f'<td class="content">{_e(m.content)}</td></tr>'
+        )
+    return (
+        '<section id="messages"><h2>Messages</h2><table class="grid"><tr><th>sent at tick</th><th>from &#8594; to</th>'
+        f"<th>delivered at tick</th><th>content</th></tr>{''.join(rows)}</table></section>"
+    )
