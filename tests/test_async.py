@@ -27,7 +27,8 @@ from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer, ScriptedPolicy, run_episode, world_on_loopback
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.schedulers import SCHEDULERS, STEP_SECONDS, AsyncScheduler, SchedulerOptionError
-from mhrc.world.service import WorldConfig, WorldService
+from mhrc.world.service import WorldService
+from mhrc.world.service_config import WorldConfig
 from mhrc.world.sim import Sim
 
 WAIT = 180.0  # s: a bound on every wait, so that a regression fails instead of hanging

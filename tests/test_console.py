@@ -370,7 +370,7 @@ async def test_scenario_events_print_as_their_tick_opens_and_the_table_says_how_
 
 
 async def test_a_world_nobody_attaches_to_ends_at_the_start_timeout(tmp_path: Path) -> None:
-    from mhrc.world.service import NobodyAttached
+    from mhrc.world.service_config import NobodyAttached
 
     async with world_on_loopback(seed=0, start_timeout=0.5, trace=tmp_path / "t.jsonl") as world:
         with pytest.raises(NobodyAttached) as err:

@@ -20,7 +20,8 @@ from mhrc.run.inprocess import up_in_process
 from mhrc.run.processes import up_processes
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.schedulers import SCHEDULERS, LockstepScheduler, Scheduler, SequentialScheduler, UnknownScheduler
-from mhrc.world.service import WorldConfig, WorldService
+from mhrc.world.service import WorldService
+from mhrc.world.service_config import WorldConfig
 from mhrc.world.sim import Sim
 
 

@@ -60,8 +60,9 @@ swing's radius beside its hinge), as they keep clear of walls and furniture; a d
 must not cross a wall, other furniture or another open drawer or door. Every layout has at
 least MIN_CONTAINERS closed containers a target can hide in.
 
-This module loads layouts; the schema and its checks are in layout_schema.py, the specs the
-simulator uses and their floor geometry in furniture.py.
+This module loads layouts; the schema and its checks are in layout_schema.py (a whole layout)
+and furniture_schema.py (one piece of furniture), the specs the simulator uses and their floor
+geometry in furniture.py.
 """
 
 from __future__ import annotations
@@ -73,7 +74,8 @@ from typing import Any
 from pydantic import ValidationError
 
 from .furniture import CHASSIS_FOOTPRINT, HOME_FOOTPRINT, DrawerSpec, FurnitureSpec, Layout, door_sweep
-from .layout_schema import ARM_REACH, FAR_SLOT, MIN_CONTAINERS, STAND_OFFSET, LayoutFile
+from .furniture_schema import STAND_OFFSET
+from .layout_schema import ARM_REACH, FAR_SLOT, MIN_CONTAINERS, LayoutFile
 
 __all__ = [
     "ARM_REACH",

@@ -5,7 +5,8 @@ When actions run and results go out is the time policy's (`WorldConfig.schedule`
 world.schedulers.SCHEDULERS; docs/architecture.md, "Time"); this module keeps the episode's lifecycle and
 the bus plumbing. Who may drive which robot is the roster's (roster.py); which requests get in,
 admission's (admission.py: each goal at most once); the robots' messages wait in the mailroom
-until delivered (mail.py).
+until delivered (mail.py). What the service is set up with (its WorldConfig, the simulator it
+drives) is service_config.py's.
 """
 
 from __future__ import annotations
@@ -14,9 +15,8 @@ import asyncio
 import contextlib
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import structlog
 
@@ -24,7 +24,6 @@ from mhrc.core.bus import Bus, Sample
 from mhrc.core.fidelity import label as fidelity_label
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import (
-    Action,
     ActionAck,
     ActionRequest,
     ActionResult,
@@ -33,12 +32,8 @@ from mhrc.core.protocol import (
     Communicate,
     EpisodeDone,
     EpisodeStarted,
-    FurnitureView,
     Message,
     Metrics,
-    MotionNoise,
-    ObjectPose,
-    ObjectView,
     Observation,
     OutcomeCode,
     ProtocolError,
@@ -46,7 +41,6 @@ from mhrc.core.protocol import (
     RobotAttached,
     RobotDetached,
     RobotMessage,
-    RobotPose,
     SkillOutcome,
     Snapshot,
     Turn,
@@ -58,62 +52,12 @@ from mhrc.core.protocol.base import MAX_REQUEST_BYTES
 
 from .admission import Admission
 from .mail import Mailroom
-from .presence import TOKEN_DEADLINE, Presence
+from .presence import Presence
 from .roster import Roster
 from .schedulers import Executed, Scheduler, TaskResultLike, make_scheduler
+from .service_config import NobodyAttached, SimLike, WorldConfig
 
 log = structlog.get_logger("mhrc.world")
-
-
-class SimLike(Protocol):
-    """What the service needs of a simulator (world.sim.Sim provides it)."""
-
-    robots: tuple[str, ...]
-    task_id: str
-    scene_id: str
-    seed: int
-    n_objects: int
-    aids: frozenset[str]
-    noise: MotionNoise
-
-    def capabilities(self, robot: str) -> frozenset[str]: ...
-    def finishers(self) -> frozenset[str]: ...
-    def execute(self, robot: str, action: Action) -> SkillOutcome: ...
-    def observe(self, robot: str, tick: int) -> Observation: ...
-    def tell(self, receiver: str, sender: str, text: str) -> None: ...
-    def message(self, receiver: str, sender: str, text: str) -> Callable[[], None]: ...
-    def evaluate(self) -> TaskResultLike: ...
-    def views(self) -> tuple[list[FurnitureView], list[ObjectView]]: ...
-    def poses(self) -> tuple[dict[str, RobotPose], dict[str, ObjectPose], dict[str, bool]]: ...
-    def lower_bound(self) -> int: ...
-    def answer_key(self) -> tuple[list[str], dict[str, str], bool]: ...
-    def fire_events(self, tick: int) -> Sequence[Message]: ...
-
-
-class NobodyAttached(RuntimeError):
-    """No robot attached within the start timeout: the episode cannot start, and waiting longer
-    was not asked for."""
-
-    def __init__(self, missing: Sequence[str], timeout: float) -> None:
-        self.missing = tuple(missing)
-        self.timeout = timeout
-        super().__init__(
-            f"no robot attached within --start-timeout {timeout:g} s ({', '.join(self.missing)} never attached): "
-            "start their agents (mhrc agent --robot ROBOT ...), or give them longer with --start-timeout"
-        )
-
-
-@dataclass
-class WorldConfig:
-    run: str
-    horizon: int = 50
-    start_timeout: float | None = (
-        None  # start with the robots attached by then (NobodyAttached if none is); None: wait for all
-    )
-    tick_delay: float = 0.0  # pause between scheduler steps, for watching with --gui
-    schedule: str = "lockstep"  # the time policy, a name in world.schedulers.SCHEDULERS
-    time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
-    token_deadline: float = TOKEN_DEADLINE  # s an attached agent has to show its liveliness token (presence.py)
 
 
 @dataclass

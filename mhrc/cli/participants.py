@@ -27,13 +27,14 @@ from mhrc.cli.options import (
     episode_options,
     llm_options,
     load_credentials,
+    team_option,
 )
 from mhrc.cli.running import run_command
 from mhrc.cli.viewer import render_video_to
 from mhrc.core import logs
 from mhrc.core.security import SecurityError
 from mhrc.core.trace import TraceWriteError
-from mhrc.run.config import ROBOTS, ConfigError, EpisodeConfig
+from mhrc.run.config import ConfigError, EpisodeConfig
 
 
 @click.command()
@@ -42,8 +43,8 @@ from mhrc.run.config import ROBOTS, ConfigError, EpisodeConfig
 @click.option(
     "--external",
     multiple=True,
-    type=click.Choice(ROBOTS),
-    help="Do not start an agent for this robot: attach your own with `mhrc agent` (repeatable).",
+    metavar="ROBOT",
+    help="Do not start an agent for this robot (a robot of --team): attach your own with `mhrc agent` (repeatable).",
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only the final summary table (errors still go to stderr).")
 @click.option(
@@ -86,10 +87,15 @@ def up(
     from mhrc.run.console import ProgressPrinter, summary_table
     from mhrc.run.inprocess import up_in_process
     from mhrc.run.processes import ProcessFailed, up_processes
-    from mhrc.world.service import NobodyAttached
+    from mhrc.world.service_config import NobodyAttached
 
     logs.configure(log_level)
     cfg = episode_config(**values)
+    if unknown := [r for r in external if r not in cfg.robots]:
+        raise click.BadParameter(
+            f"{', '.join(unknown)} not in this episode's team (robots: {', '.join(cfg.robots)})",
+            param_hint="--external",
+        )
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
         raise click.BadParameter(f"{video.name}: the video must be a .mp4 or .gif file", param_hint="--video")
     robots = tuple(r for r in cfg.robots if r not in external)
@@ -184,7 +190,7 @@ def _lost(trace: Path | None) -> list[Any]:
 def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None = None) -> None:
     """`mhrc world`'s run: one line and exit 1 when no robot attached within --start-timeout."""
     from mhrc.run.serve import serve_world
-    from mhrc.world.service import NobodyAttached
+    from mhrc.world.service_config import NobodyAttached
 
     try:
         run_command(lambda: serve_world(cfg, observe=observe))
@@ -230,7 +236,7 @@ def world(
 
     def listening(bus: Any, run: str) -> None:  # said once the world listens, not before
         click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
-        for r in ROBOTS:
+        for r in cfg.robots:
             login = "" if creds is None else f" --credentials {_login_of(creds, r)}"
             click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}{login}", err=True)
         printer.attach(bus, run)
@@ -250,7 +256,9 @@ def _login_of(world: Any, user: str) -> str:
 
 
 @click.command()
-@click.option("--robot", required=True, type=click.Choice(ROBOTS), help="The robot this agent drives.")
+@click.option(
+    "--robot", required=True, help="The robot this agent drives (a robot of --team; the paper's alice, bob, david)."
+)
 @click.option("--connect", required=True, help="The world's endpoint, e.g. tcp/127.0.0.1:7447.")
 @click.option("--run", default=None, help="Run id of the world; default: the only world alive at --connect.")
 @click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
@@ -258,6 +266,7 @@ def _login_of(world: Any, user: str) -> str:
 @click.option(
     "--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation."
 )
+@team_option
 @click.option(
     "--aids",
     default=None,
@@ -287,7 +296,12 @@ def agent(
     logs.configure(log_level)
     creds = load_credentials(credentials, insecure, connect)
     cfg = episode_config(**values)
-    spec = cfg.robot_specs().get(robot) if cfg.llm else None
+    if robot not in cfg.robots:
+        raise click.BadParameter(
+            f"{robot!r} is not in this episode's team (robots: {', '.join(cfg.robots)}; --team names the team)",
+            param_hint="--robot",
+        )
+    spec = cfg.robot_specs().get(robot)
     options = cfg.policy_options(spec)
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError

@@ -19,7 +19,8 @@ from mhrc.core.bus import open_client
 from mhrc.core.trace import Recorder
 from mhrc.core.uncancelled import to_the_end
 from mhrc.run.config import EpisodeConfig
-from mhrc.world.service import WorldConfig, WorldService
+from mhrc.world.service import WorldService
+from mhrc.world.service_config import WorldConfig
 from mhrc.world.sim import Sim
 
 log = structlog.get_logger("mhrc.run.serve")
@@ -47,6 +48,7 @@ async def serve_world(
         seed=cfg.seed,
         n_objects=cfg.n_objects,
         gui=cfg.gui,
+        team=cfg.team,
         robots=cfg.robots,
         aids=cfg.aids,
         scenario=cfg.scenario(),
