@@ -13,7 +13,7 @@ from mhrc.core.team import PAPER_TEAM, RobotSpec, TeamError, TeamProblem, TeamSp
 from .furniture import Layout
 from .robots import KINDS, RobotKind
 
-__all__ = ["SHIPPED", "check_team", "fetches", "kind_of"]
+__all__ = ["SHIPPED", "check_team", "fetches", "kind_of", "scouts"]
 
 
 def _team(name: str, purpose: str, *robots: tuple[str, str]) -> TeamSpec:
@@ -123,3 +123,10 @@ def check_team(team: TeamSpec, layout: Layout | None = None) -> None:
                 f"--team {team.name}: {len(arms)} fixed arms ({', '.join(arms)}) but the {layout.name} layout "
                 f"has {len(layout.arm_mounts)} arm mount(s)",
             )
+
+
+def scouts(team: TeamSpec) -> frozenset[str]:
+    """The robots that only navigate (no arm): what the paper's no_mobile ablation leaves out."""
+    return frozenset(
+        r.name for r in team.robots if r.kind in KINDS and KINDS[r.kind].mobile and not KINDS[r.kind].has_arm
+    )

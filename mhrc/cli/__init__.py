@@ -4,6 +4,7 @@
 - `eval`: `eval`, `report`
 - `viewer`: `scenes`, `render`, `show`
 - `scenarios`: `scenarios` (the shipped scenarios of `--events`)
+- `teams`: `teams` (the shipped teams of `--team`, the robot kinds)
 - `bus`: `credentials`, `bus list|echo`, `doctor`, `router`, `schema`
 - `options` (shared options, declared once), `running` (signals and Ctrl-C)
 """
@@ -14,7 +15,7 @@ import os
 
 import click
 
-from mhrc.cli import bus, participants, scenarios, viewer
+from mhrc.cli import bus, participants, scenarios, teams, viewer
 from mhrc.cli import eval as eval_cmd
 from mhrc.core import logs
 
@@ -48,6 +49,7 @@ for command in (
     viewer.show,
     bus.router,
     scenarios.scenarios,
+    teams.teams,
 ):
     main.add_command(command)
 

@@ -19,14 +19,14 @@ from mhrc.cli.bustools import BusToolError
 from mhrc.cli.bustools import bus_echo as run_echo
 from mhrc.cli.bustools import bus_list as run_list
 from mhrc.cli.bustools import doctor as run_doctor
-from mhrc.cli.options import credentials_option
+from mhrc.cli.options import credentials_option, team_option
 from mhrc.cli.running import run_command
 from mhrc.core import schema as schema_mod
 from mhrc.core.bus import Bus
 from mhrc.core.endpoints import endpoint
 from mhrc.core.keys import check_id, new_run_id
 from mhrc.core.security import MIN_DAYS, SecurityError, make_run_credentials
-from mhrc.run.config import ROBOTS
+from mhrc.core.team import PAPER_TEAM, TeamSpec
 
 MAX_DAYS = 36500  # a certificate's end date must be a date: 100 years is plenty and far from datetime's year 9999
 
@@ -123,7 +123,10 @@ def schema_(out: Path | None) -> None:
     is_flag=True,
     help="Replace credentials already in DIR (a world running with the old ones refuses the new).",
 )
-def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float, split: bool, force: bool) -> None:
+@team_option
+def credentials_(
+    out: Path, run: str | None, hosts: tuple[str, ...], days: float, split: bool, force: bool, team: TeamSpec | None
+) -> None:
     """Issue one run's credentials for a world and agents started by hand or in containers
     (`mhrc up` makes its own): a CA, the world's TLS certificate, one login per participant.
     Start the world with --credentials DIR/world.json and each agent with its own file."""
@@ -137,7 +140,7 @@ def credentials_(out: Path, run: str | None, hosts: tuple[str, ...], days: float
         raise click.BadParameter(str(exc), param_hint="--run") from None
     created = _first_missing(out)
     try:
-        files = make_run_credentials(run, ROBOTS, out, days=days, hosts=hosts, split=split)
+        files = make_run_credentials(run, (team or PAPER_TEAM).names, out, days=days, hosts=hosts, split=split)
     except (SecurityError, ValueError, OSError) as exc:
         if created is not None:  # nothing left behind: what this command created goes again
             shutil.rmtree(created, ignore_errors=True)

@@ -157,6 +157,30 @@ def credentials_option(help: str) -> Callable[[Callable[..., Any]], Callable[...
     )
 
 
+TEAM_HELP = (
+    "The robots: a shipped team's name (mhrc teams), a TOML or JSON file (robots with name, kind, optional "
+    "start and llm; docs/teams.md), or inline: alice=mobile_manipulator,bob=tabletop_arm,lucy=drone. "
+    "Default: paper (Alice, Bob and David)."
+)
+
+
+def _team(ctx: click.Context, param: click.Parameter, value: str | None) -> Any:
+    """--team read into a TeamSpec before anything starts; a bad one is one line naming the problem."""
+    if value is None:
+        return None
+    from mhrc.core.team import TeamError
+    from mhrc.run.teams import resolve_team
+
+    try:
+        return resolve_team(value)
+    except TeamError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def team_option(f: Callable[..., Any]) -> Callable[..., Any]:
+    return click.option("--team", default=None, metavar="TEAM", callback=_team, help=TEAM_HELP)(f)
+
+
 def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """The episode options `up` and `world` share (task, scene, seed, horizon, schedule, ...)."""
     opts: list[Callable[[Callable[..., Any]], Callable[..., Any]]] = [
@@ -182,8 +206,10 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
             default="none",
             show_default=True,
             type=click.Choice(ABLATIONS),
-            help="Paper ablation: no_mobile leaves David out; no_feedback / no_history change LLM prompts.",
+            help="Paper ablation: no_mobile leaves out the robots that only navigate (the paper's David); "
+            "no_feedback / no_history change LLM prompts.",
         ),
+        team_option,
         click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP),
         click.option("--noise", default="on", show_default=True, type=click.Choice(list(NOISE)), help=NOISE_HELP),
         click.option(

@@ -33,6 +33,7 @@ __all__ = [
     "TeamError",
     "TeamProblem",
     "TeamSpec",
+    "checked",
     "load_team_file",
     "parse_inline",
 ]
@@ -133,7 +134,7 @@ class TeamSpec(BaseModel):
         return self.model_copy(update={"robots": tuple(r for r in self.robots if r.name not in names)})
 
 
-def _checked(data: dict[str, object], where: str) -> TeamSpec:
+def checked(data: dict[str, object], where: str) -> TeamSpec:
     """Build a TeamSpec from `data`, refusing with one TeamError line (and its code) what this
     module can check: the robots' count, names and duplicates, then the shape of each field."""
     robots = data.get("robots")
@@ -169,7 +170,7 @@ def parse_inline(text: str) -> TeamSpec:
         if not sep or not name.strip() or not kind.strip():
             raise TeamError(TeamProblem.UNKNOWN_TEAM, f"--team: {part!r} is not name=kind")
         robots.append({"name": name.strip(), "kind": kind.strip()})
-    return _checked({"name": "custom", "robots": robots}, "--team")
+    return checked({"name": "custom", "robots": robots}, "--team")
 
 
 def load_team_file(path: Path) -> TeamSpec:
@@ -182,7 +183,7 @@ def load_team_file(path: Path) -> TeamSpec:
         raise TeamError(TeamProblem.BAD_FILE, f"--team {path}: {exc}") from None
     if not isinstance(data, dict):
         raise TeamError(TeamProblem.BAD_FILE, f"--team {path}: not a table with robots")
-    return _checked({"name": path.stem, **data}, f"--team {path}")
+    return checked({"name": path.stem, **data}, f"--team {path}")
 
 
 PAPER_TEAM = TeamSpec(

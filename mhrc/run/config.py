@@ -23,6 +23,7 @@ from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse_aids, parse_noise
 from mhrc.core.keys import check_id, new_run_id
 from mhrc.core.security import Credentials, check_for, load, make_run_credentials
+from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.core.trace import unwritable
 from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import Scenario, check_scenario, load_scenario
@@ -31,7 +32,7 @@ from mhrc.world.schedulers import SCHEDULERS
 log = structlog.get_logger("mhrc.run.config")
 
 
-ROBOTS = ("alice", "bob", "david")
+ROBOTS = PAPER_TEAM.names  # the paper's team, the default (--team chooses another)
 SCHEDULES = tuple(SCHEDULERS)  # the world's registry, in its order: sequential (the paper's), lockstep, async
 
 
@@ -92,6 +93,10 @@ class EpisodeConfig(BaseModel):
     )
     llm: str | None = Field(None, description="model spec (provider:model); None: the heuristic policy")
     ablation: Literal["none", "no_feedback", "no_history", "no_mobile"] = "none"
+    team: TeamSpec = Field(
+        default_factory=lambda: PAPER_TEAM,
+        description="the robots, their kinds and order (mhrc.core.team; --team); the paper's Alice, Bob and David by default",
+    )
     prompts: Path | None = Field(None, description="directory of the user's own prompt templates")
     base_url: str | None = None
     llm_timeout: float | None = Field(
@@ -182,12 +187,15 @@ class EpisodeConfig(BaseModel):
             raise ConfigError(
                 f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})"
             )
+        from mhrc.world.scene import get_layout
         from mhrc.world.sim import check_episode  # validates task and scene names without building
+        from mhrc.world.teams import check_team
 
         try:
             check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
+            check_team(cfg.team, get_layout(cfg.scene))
             cfg.scenario()
-            if cfg.llm is not None:
+            if any(cfg.robot_specs().values()):
                 from mhrc.agents.llm import check_spec
                 from mhrc.agents.llm_policy import load_template
 
@@ -247,19 +255,26 @@ class EpisodeConfig(BaseModel):
     def with_credentials(self, directory: Path | None = None) -> EpisodeConfig:
         """A copy with fresh credentials for this run (default: next to the trace, runs/RUN/credentials)."""
         where = directory or ((self.trace.parent if self.trace else Path("runs") / self.run) / "credentials")
-        make_run_credentials(self.run, ROBOTS, where)
+        make_run_credentials(self.run, self.team.names, where)
         return self.model_copy(update={"credentials": where})
 
     @property
     def robots(self) -> tuple[str, ...]:
-        """The robots in this episode (no_mobile leaves David out)."""
-        return tuple(r for r in ROBOTS if not (r == "david" and self.ablation == "no_mobile"))
+        """The robots in this episode, in execution order: the team's (no_mobile leaves out the
+        robots that only navigate, the paper's David)."""
+        if self.ablation != "no_mobile":
+            return self.team.names
+        from mhrc.world.teams import scouts
+
+        left_out = scouts(self.team)
+        return tuple(r for r in self.team.names if r not in left_out)
 
     def robot_specs(self) -> dict[str, str | None]:
-        """Each robot's model spec (None: the heuristic policy); see mhrc.agents.llm.robot_specs."""
-        if self.llm is None:
-            return dict.fromkeys(self.robots)
-        return robot_specs(self.llm, self.robots)
+        """Each robot's model spec (None: the heuristic policy): `--llm` for every robot it
+        covers (mhrc.agents.llm.robot_specs), the team file's `llm` for a robot it leaves out."""
+        chosen = dict.fromkeys(self.robots) if self.llm is None else robot_specs(self.llm, self.robots)
+        own = {r.name: r.llm for r in self.team.robots}
+        return {r: spec if spec is not None else own.get(r) for r, spec in chosen.items()}
 
     def timeout_for(self, spec: str | None) -> float:
         """Seconds per LLM request for a robot driven by `spec` (its own spec, before gguf: is served)."""
@@ -273,7 +288,7 @@ class EpisodeConfig(BaseModel):
         return {
             "feedback": self.ablation != "no_feedback",
             "history": self.ablation != "no_history",
-            "teammates_absent": tuple(r for r in ROBOTS if r not in self.robots),
+            "teammates_absent": tuple(r for r in self.team.names if r not in self.robots),
             "prompts_dir": self.prompts,
             "prompt_cap_chars": self.history_cap,
             "reach_labels": "reach_labels" in self.aids,

@@ -20,10 +20,12 @@ from mhrc.core.endpoints import check_listen
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 from mhrc.core.records import messages, read_records
+from mhrc.core.team import PAPER_TEAM
 from mhrc.run.attach import local_models
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.lifeline import child_env
 from mhrc.run.serve import EventHook
+from mhrc.run.teams import team_argument
 
 log = structlog.get_logger("mhrc.run.processes")
 
@@ -55,6 +57,11 @@ def _child_stdout() -> int | None:
         return sys.stderr.fileno()
     except (AttributeError, OSError, ValueError):
         return None
+
+
+def team_args(cfg: EpisodeConfig) -> list[str]:
+    """`--team` for a child process; nothing for the paper's team (its argv as it always was)."""
+    return [] if cfg.team == PAPER_TEAM else ["--team", team_argument(cfg.team)]
 
 
 def world_command(cfg: EpisodeConfig) -> list[str]:
@@ -89,6 +96,7 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
     ]
     if cfg.trace is not None:
         cmd += ["--trace", str(cfg.trace)]
+    cmd += team_args(cfg)
     if cfg.aids:
         cmd += ["--aids", ",".join(cfg.aids)]
     if cfg.noise != "on":
@@ -111,6 +119,7 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
 def agent_command(robot: str, cfg: EpisodeConfig, spec: str | None = None) -> list[str]:
     """`mhrc agent` for `robot`, driven by `spec` (its model, already resolved: no gguf) or the heuristic policy."""
     cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
+    cmd += team_args(cfg)
     if cfg.credentials is not None:
         cmd += ["--credentials", str(cfg.credentials_file(robot))]
     else:  # said, so that a $MHRC_CREDENTIALS of another run is not picked up
