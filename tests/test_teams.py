@@ -109,3 +109,61 @@ def test_a_team_spec_is_frozen_and_checked_when_built_in_code() -> None:
     with pytest.raises(ValueError, match="appears twice"):
         TeamSpec(robots=PAPER_TEAM.robots + PAPER_TEAM.robots[:1])
     assert PAPER_TEAM.without({"david"}).names == ("alice", "bob")
+
+
+# ------------------------------------------------------------------------- the command line
+BAD_TEAMS = [
+    ("alice=mobile_manipulator,david=mobile_base", "nobody can finish the task"),
+    ("alice=mobile_manipulator,alice=tabletop_arm", "'alice' appears twice"),
+    ("alice=mobile_manipulator,bob=tabletop_arm,rex=tank", "the kinds are mobile_manipulator, tabletop_arm"),
+    ("alice=mobile_manipulator,bob=tabletop_arm,ann=tabletop_arm", "arm mount"),
+    ("alice=mobile_manipulator,Bob=tabletop_arm", "not a lowercase identifier"),
+    ("nosuchteam", "not a shipped team (paper, no_mobile"),
+]
+
+
+@pytest.mark.parametrize(("team", "named"), BAD_TEAMS)
+def test_a_team_that_cannot_run_is_refused_before_anything_starts(tmp_path: Path, team: str, named: str) -> None:
+    from test_bad_input import _mhrc, _refused
+
+    line = _refused(_mhrc("up", "--team", team, cwd=tmp_path), "--team")
+    assert named in line
+    assert list(tmp_path.iterdir()) == []  # no run directory, no trace
+
+
+def test_mhrc_teams_lists_every_shipped_team_with_its_purpose(tmp_path: Path) -> None:
+    from test_bad_input import _mhrc
+
+    done = _mhrc("teams", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    for name, team in SHIPPED.items():
+        assert f"{name} " in done.stdout and team.purpose in done.stdout
+    kinds = _mhrc("teams", "--kinds", cwd=tmp_path)
+    assert all(k in kinds.stdout for k in KINDS)
+
+
+def test_an_agent_for_a_robot_outside_the_team_is_refused(tmp_path: Path) -> None:
+    from test_bad_input import _mhrc, _refused
+
+    done = _mhrc("agent", "--robot", "carol", "--connect", "tcp/127.0.0.1:9", "--insecure", cwd=tmp_path)
+    assert "not in this episode's team" in _refused(done, "--robot")
+
+
+def test_the_paper_teams_child_processes_get_the_argv_they_always_had() -> None:
+    from mhrc.run.config import EpisodeConfig
+    from mhrc.run.processes import agent_command, world_command
+
+    paper = EpisodeConfig.build(run="r1", port=7447)
+    assert "--team" not in world_command(paper) and "--team" not in agent_command("alice", paper)
+    duo = EpisodeConfig.build(run="r1", port=7447, team=parse_inline("ann=mobile_manipulator,bob=tabletop_arm"))
+    argv = world_command(duo)
+    from mhrc.run.teams import resolve_team
+
+    assert resolve_team(argv[argv.index("--team") + 1]) == duo.team
+    assert duo.robots == ("ann", "bob") and EpisodeConfig.build(
+        team=SHIPPED["two_fetchers"], ablation="no_mobile"
+    ).robots == (
+        "alice",
+        "bob",
+        "carol",
+    )
