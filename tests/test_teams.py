@@ -167,3 +167,19 @@ def test_the_paper_teams_child_processes_get_the_argv_they_always_had() -> None:
         "bob",
         "carol",
     )
+
+
+def test_every_robot_of_a_team_of_eight_has_a_colour_of_its_own() -> None:
+    from rich.console import Console
+
+    from mhrc.run.console import ProgressPrinter
+    from mhrc.viewer.page import ROBOT_COLORS, distinct, robot_colors
+    from mhrc.viewer.video import PALETTE as VIDEO
+    from mhrc.viewer.video import ROBOT_COLORS as VIDEO_NAMED
+
+    for names in (list(SHIPPED["full_house"].names), [f"r{i}" for i in range(8)]):
+        assert len(set(robot_colors(names).values())) == 8
+        assert len(set(distinct(names, VIDEO_NAMED, VIDEO).values())) == 8
+        printer = ProgressPrinter(Console(file=None, record=True), verbose=False)
+        assert len({printer._robot(n).split("]")[0] for n in names}) == 8
+    assert robot_colors(["alice", "bob", "david"]) == ROBOT_COLORS  # the paper's team as before

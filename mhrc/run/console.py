@@ -39,6 +39,8 @@ from mhrc.core.protocol import (
 from mhrc.core.records import ReplyFailure, Rows, as_records, messages, reply_failure
 
 COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
+# the other robots of a team, in the order they first appear: none used twice while these last
+PALETTE = ["yellow", "blue", "red", "bright_magenta", "bright_cyan", "bright_green", "bright_yellow", "bright_blue"]
 
 
 def inert(text: object) -> str:
@@ -83,6 +85,7 @@ class ProgressPrinter:
         self._goals: set[str] = set()  # goal ids of the results printed
         self._done: EpisodeDone | None = None  # with `summary`: the end, its table held until its final results printed
         self._closed = False
+        self._colors: dict[str, str] = {}  # robot -> its colour, the paper's own or the next free one
 
     def attach(self, bus: Bus, run: str) -> None:
         k = Keys(run)
@@ -123,7 +126,11 @@ class ProgressPrinter:
             self.console.print(line)
 
     def _robot(self, name: str) -> str:
-        return f"[{COLORS.get(name, 'white')}]{inert(f'{name:>5}')}[/]"
+        if name not in self._colors:
+            taken = set(self._colors.values())
+            free = [c for c in PALETTE if c not in taken]
+            self._colors[name] = COLORS.get(name) or (free[0] if free else "white")
+        return f"[{self._colors[name]}]{inert(f'{name:>5}')}[/]"
 
     def _tick(self, tick: int) -> _Tick:
         return self._ticks.setdefault(tick, _Tick())

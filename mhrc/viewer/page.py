@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from importlib.resources import files
-from typing import Any
+from typing import Any, TypeVar
 
 from mhrc.viewer import page_events
 from mhrc.viewer.model import EpisodeView
@@ -30,20 +30,27 @@ from mhrc.viewer.targets import ObjectFate, TaskView
 from mhrc.viewer.wording import diagnostic_label, partial_success
 from mhrc.viewer.wording import html_text as _e
 
+T = TypeVar("T")
 SCALE = 80.0  # SVG pixels per metre
 ROBOT_COLORS = {"alice": "#d62728", "bob": "#1f77b4", "david": "#2ca02c"}
-PALETTE = ["#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"]
+# the other robots of a team, in order: eight distinct colours, so a team of eight never repeats one
+PALETTE = ["#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f", "#393b79"]
 # the page's style and script, inlined into every report: package data beside this module
 CSS = files("mhrc.viewer").joinpath("page.css").read_text(encoding="utf-8")
 JS = files("mhrc.viewer").joinpath("page.js").read_text(encoding="utf-8")
 
 
 def robot_colors(robots: list[str]) -> dict[str, str]:
-    out: dict[str, str] = {}
-    extra = iter(PALETTE * 4)
-    for r in robots:
-        out[r] = ROBOT_COLORS.get(r) or next(extra)
-    return out
+    """A colour per robot: the paper's three their own, the others the palette's in order (none
+    used twice while the palette lasts)."""
+    return distinct(robots, ROBOT_COLORS, PALETTE)
+
+
+def distinct(robots: list[str], named: dict[str, T], palette: list[T]) -> dict[str, T]:
+    """`named` colours for the robots that have one, the palette's unused ones, in order, for the rest."""
+    used = {named[r] for r in robots if r in named}
+    extra = iter([c for c in palette if c not in used] * (1 + len(robots) // max(1, len(palette))))
+    return {r: named[r] if r in named else next(extra) for r in robots}
 
 
 def _bounds(view: EpisodeView) -> tuple[float, float, float, float]:

@@ -37,6 +37,7 @@ from mhrc.core.protocol import ActionResult, EpisodeStarted, ObjectPose, RobotPo
 from mhrc.core.records import read_records
 from mhrc.viewer.events import caption as event_caption
 from mhrc.viewer.events import captions_by_snapshot, scenario_label
+from mhrc.viewer.page import distinct
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 from mhrc.world.render import VIEWS, render
 from mhrc.world.scenario import NewTarget, Scenario
@@ -57,6 +58,17 @@ FAILED = (240, 110, 100)
 EVENT = (250, 215, 90)  # a scenario event's caption
 BAR = 3  # height of the progress bar under the captions
 ROBOT_COLORS = {"alice": (200, 140, 230), "bob": (240, 190, 90), "david": (120, 170, 250)}
+# the other robots of a team, in order (page.distinct): light enough to read on the dark caption band
+PALETTE = [
+    (250, 150, 120),
+    (150, 220, 150),
+    (240, 140, 190),
+    (120, 220, 220),
+    (220, 220, 120),
+    (190, 190, 190),
+    (170, 160, 250),
+    (250, 200, 160),
+]
 
 Progress = Callable[[int, int], None]
 
@@ -283,6 +295,7 @@ class _Captioner:
         if scenario:
             self.title += f" / scenario {scenario}"
         self.n_steps = n_steps
+        self.colors = distinct(list(started.robots), ROBOT_COLORS, PALETTE)
 
     def compose(self, picture: np.ndarray, index: int, step: Step, done: float) -> np.ndarray:
         """The frame: `picture` above, captions of step `index` below, a bar `done` (0..1) long at the bottom."""
@@ -299,7 +312,7 @@ class _Captioner:
         name_w = max(self.font.getlength(f"{c.robot}:") for c in step.captions) + pad
         for c in step.captions:
             y += self.line
-            draw.text((pad, y), f"{c.robot}:", font=self.font, fill=ROBOT_COLORS.get(c.robot, TEXT))
+            draw.text((pad, y), f"{c.robot}:", font=self.font, fill=self.colors.get(c.robot, TEXT))
             colour = DIM if c.succeeded is None else OK if c.succeeded else FAILED
             draw.text((pad + name_w, y), self._fit(c.text, self.width - 2 * pad - name_w), font=self.font, fill=colour)
         if self.events and step.events:
