@@ -130,6 +130,7 @@ def up(
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMError
     from mhrc.agents.replay import ReplayMismatch
+    from mhrc.core.team import TeamError
 
     try:
         done = run_command(lambda: runner(cfg, observe=None if printer is None else printer.attach, robots=robots))
@@ -137,7 +138,8 @@ def up(
         AgentError,
         LLMError,
         ReplayMismatch,
-    ) as exc:  # an agent could not play (its model, its replay, the world): one line
+        TeamError,
+    ) as exc:  # an agent could not play (its model, its replay, the world), or the layout cannot place the team
         click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(2)
     except (NobodyAttached, TraceWriteError) as exc:
