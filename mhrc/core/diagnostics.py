@@ -52,7 +52,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from mhrc.core.metrics import TraceError, from_trace
+from mhrc.core.metrics import EpisodeMetrics, TraceError, from_trace
 from mhrc.core.protocol import (
     Action,
     ActionAck,
@@ -189,8 +189,9 @@ def _world_says_unknown(outcome: SkillOutcome) -> bool:
     return outcome.code.value in UNKNOWN_NAME_CODES and outcome.feedback.startswith(UNKNOWN_NAME_FEEDBACK)
 
 
-def diagnose(rows: Rows) -> Diagnostics:
-    """The failure diagnostics of one episode from its trace (`mhrc.core.records.read_records`, or the rows of `read_trace`)."""
+def diagnose(rows: Rows, metrics: EpisodeMetrics | None = None) -> Diagnostics:
+    """The failure diagnostics of one episode from its trace (`mhrc.core.records.read_records`, or the rows of
+    `read_trace`); `metrics`: the trace's metrics when the caller has them already (computed from it otherwise)."""
     lines = as_records(rows)
     d = Diagnostics()
     # what each robot planned on: (robot, tick) -> the last observation of that tick, and every message it delivered
@@ -275,7 +276,7 @@ def diagnose(rows: Rows) -> Diagnostics:
     bound = started[0].lower_bound if started else None
     if bound is not None:
         try:
-            d.steps_above_bound = from_trace(lines).temporal_steps - bound
+            d.steps_above_bound = (metrics or from_trace(lines)).temporal_steps - bound
         except TraceError:
             d.steps_above_bound = None
     return d

@@ -1,5 +1,5 @@
 """One finished episode as the driver scores it: its trace read once, its metrics
-(`mhrc.core.metrics`) and failure diagnostics (`mhrc.core.diagnostics`) computed once, and its
+(`mhrc.core.metrics`) and failure diagnostics (`mhrc.core.diagnostics`, given those metrics) computed once, and its
 HTML report drawn from the same lines and the same diagnostics."""
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ def score(path: Path) -> Scored:
     """Read the trace at `path` and score it. Raises OSError or ValueError (mhrc.core.metrics.TraceError
     for a trace without what the metrics need)."""
     lines = read_episode_trace(path)
-    return Scored(path=path, lines=lines, metrics=from_trace(lines), diagnostics=diagnose(lines))
+    metrics = from_trace(lines)
+    return Scored(path=path, lines=lines, metrics=metrics, diagnostics=diagnose(lines, metrics))
 
 
 def write_episode_report(scored: Scored) -> None:
