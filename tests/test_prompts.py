@@ -264,7 +264,7 @@ def check_golden(name: str, text: str) -> None:
 
 
 ROBOTS = ("alice", "bob", "david")
-# Text of the prompt_hints aid that the observation adds (the rest is <robot>_hints.txt)
+# Text of the prompt_hints aid that the observation adds (the rest is the kind's <kind>_hints.txt)
 DYNAMIC_HINTS = (
     "m from your arm base",
     "m from you",
