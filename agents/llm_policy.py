@@ -14,26 +14,36 @@ With `structured=True` each request carries a JSON Schema built from the robot's
 and scene graph (mhrc.agents.structured), the prompt ends with the JSON instructions instead of
 "Command: ...", and the reply is parsed as JSON; the default is the paper's free text.
 
-Templates are `string.Template` files `<robot>_system.txt` and `<robot>_user.txt`, from the
-package `mhrc.prompts` or from a directory of your own (`prompts_dir`). The default set carries
-the paper's appendix (role, background, profile, constraints, skills, response format; scene
-graph, status, task, histories) and nothing more. Placeholders (* required):
+Templates are `string.Template` files, one set per robot kind: `<kind>_system.txt`,
+`<kind>_user.txt` and (the prompt_hints aid's) `<kind>_hints.txt` in the package `mhrc.prompts`,
+the kind's `KindPrompt.template` naming them (mhrc.agents.crew: the kinds, their parts, who
+talks to whom). A directory of your own (`prompts_dir`, `--prompts DIR`) may hold
+`<robot>_<part>.txt` for one robot and `<kind>_<part>.txt` for every robot of a kind: for each
+part the robot's own file wins over its kind's, and its kind's over the package's. The
+default set carries the paper's appendix (role, background, profile, constraints, skills,
+response format; scene graph, status, task, histories) and nothing more: the paper's Alice, Bob
+and David are the mobile_manipulator, tabletop_arm and mobile_base templates filled for the
+paper's team. Placeholders (* required):
 
-system  $robot      the robot's name, capitalized (Alice)
+any     $robot      the robot's name, capitalized (Alice)
+        $finisher, $fetchers, $scouts, $contacts and their forms _or, _s, _they, _them, _are, _can
+                    the robot's teammates by part and the ones it talks to, named (mhrc.agents.crew);
+                    a line using a group the team leaves empty is left out. Filled once, at load.
+system
         $teammates  one line per teammate present: name and skill signatures (the default
                     templates give the appendix's background instead; the prompt_hints aid
                     adds this table to its advice)
         $absent     a note naming the teammates left out of this episode, or nothing
         $skills*    one line per skill of this robot: signature and what it does
-        $hints      the prompt_hints aid's advice (`<robot>_hints.txt`), or nothing; a system
+        $hints      the prompt_hints aid's advice (`<kind>_hints.txt`), or nothing; a system
                     template without it gets the advice at its end when the aid is on
 user    $step       the current step (tick); the default templates do not show it (the appendix does not)
         $scene_graph*  furniture (position, yaw, open/closed, stand poses, place pose) and known objects
         $status*    position, orientation, gripper
-        $task*      brief and detailed task of the robot's role (Bob's holds the object list)
-        $progress   the latest task progress status as a titled section (Bob's, required in
-                    his; empty for the others, and under the no_feedback ablation: Table III
-                    counts it as feedback)
+        $task*      brief and detailed task of the robot's role (the finisher's holds the object list)
+        $progress   the latest task progress status as a titled section (the finisher's,
+                    required in its template; empty for the others, and under the no_feedback
+                    ablation: Table III counts it as feedback)
         $feedback*, $messages*, $actions*
                     each history as a titled section, older entries first and the newest tagged
                     "(latest)"; empty where an ablation removes it
@@ -53,9 +63,11 @@ from string import Template
 import structlog
 
 from mhrc.core.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
+from mhrc.core.team import TeamSpec
 
 from . import observation as describe
 from . import structured as json_mode
+from .crew import STATIC, Crew, Role, crew_of
 from .llm.completion import (
     DEFAULT_TEMPERATURE,
     LLMClient,
@@ -82,21 +94,33 @@ MEANINGS = {
     "communicate": "send content to that robot",
     "wait": "do nothing this step",
 }
-ROLE_MEANINGS = {  # the appendix words some skills differently for Bob and David
-    "bob": {
+ROLE_MEANINGS: dict[Role, dict[str, str]] = {  # the appendix words some skills differently for Bob and David
+    "finisher": {
         "communicate": "send content to that robot; when objects are missing and you need help, sum up how things stand in it"
     },
-    "david": {
+    "scout": {
         "navigate": "go to the stand pose with that id of that piece of furniture, both taken from your scene graph",
         "communicate": "send content to that robot; when you discover new objects, send one too, summing up what you did and how things stand",
     },
 }
-PLACEHOLDERS = {
-    "system": frozenset({"robot", "teammates", "absent", "skills", "hints"}),
-    "user": frozenset({"step", "scene_graph", "status", "task", "progress", *HISTORIES}),
+KIND_MEANINGS = {  # and a kind's own, over its part's
+    "drone": {
+        "navigate": "fly to the stand pose with that id of that piece of furniture, both taken from your scene graph, and look at it from above"
+    }
 }
-REQUIRED = {"system": frozenset({"skills"}), "user": frozenset({"scene_graph", "status", "task", *HISTORIES})}
-REQUIRED_FOR = {("bob", "user"): frozenset({"progress"})}  # the appendix gives Bob his task progress
+PLACEHOLDERS = {
+    "system": frozenset({"teammates", "absent", "skills", "hints"}) | STATIC,
+    "user": frozenset({"step", "scene_graph", "status", "task", "progress", *HISTORIES}) | STATIC,
+    "hints": STATIC,
+}
+REQUIRED = {
+    "system": frozenset({"skills"}),
+    "user": frozenset({"scene_graph", "status", "task", *HISTORIES}),
+    "hints": frozenset(),
+}
+REQUIRED_FOR: dict[tuple[Role, str], frozenset[str]] = {
+    ("finisher", "user"): frozenset({"progress"})  # the appendix gives Bob his task progress
+}
 SMALL_CONTEXT_CAP = 12_000  # ~3,000 tokens: a --history-cap that fits a 4k-context local model with room for the reply
 UNREADABLE = "Your command could not be read, so you waited."  # the paper's: that it failed, no format advice
 # with the feedback_advice aid: the reason and how to answer
@@ -105,9 +129,9 @@ JSON_FORMAT_ERROR = (
     "Your reply could not be executed ({reason}), so you waited. Answer with one JSON object: analysis, then command."
 )
 CUT_REPLY = "your reply was cut at the token limit before it gave a command; think more briefly"
-# The appendix's first feedback of the robot that finishes the task: before any action, talk to Alice.
-FIRST_STEP = {
-    "bob": "This is the first step of the task: do nothing else now; communicate with Alice and share what you know so far."
+# The appendix's first feedback of the robot that finishes the task: before any action, talk to the fetchers.
+FIRST_STEP: dict[Role, str] = {
+    "finisher": "This is the first step of the task: do nothing else now; communicate with $fetchers and share what you know so far."
 }
 MODEL_DOWN = "Your planner could not reach its model ({reason}), so you waited."
 UNREADABLE_TAG, MODEL_DOWN_TAG = (
@@ -129,47 +153,67 @@ class TemplateError(ValueError):
     """A prompt template that is missing or uses a placeholder mhrc does not fill."""
 
 
-def load_template(robot: str, part: str, prompts_dir: str | Path | None = None) -> Template:
-    """`<robot>_<part>.txt` from `prompts_dir`, else from the package's prompts; placeholders
-    checked (none unknown, none required missing). Errors about `prompts_dir` name --prompts."""
-    name = f"{robot}_{part}.txt"
-    opt = "--prompts: " if prompts_dir is not None else ""
+def template_source(
+    robot: str, part: str, prompts_dir: str | Path | None = None, *, team: TeamSpec | None = None
+) -> tuple[str, str] | None:
+    """The text of `robot`'s `part` template and where it came from: `<robot>_<part>.txt` in
+    `prompts_dir`, else `<kind>_<part>.txt` there, else the package's `<kind>_<part>.txt`
+    (`team`: the robot's team, the paper's by default); None when there is none."""
+    stem = crew_of(robot, team).prompt.template
     if prompts_dir is not None:
-        path = Path(prompts_dir) / name
-        if not path.is_file():
-            raise TemplateError(f"{opt}prompt template {path} is missing (expected {name} in {prompts_dir})")
-        text, where = path.read_text(encoding="utf-8"), str(path)
-    else:
-        res = resources.files("mhrc.prompts").joinpath(name)
-        if not res.is_file():
-            raise TemplateError(f"no built-in prompt template {name}: robots with prompts are alice, bob, david")
-        text, where = res.read_text(encoding="utf-8"), f"mhrc.prompts/{name}"
+        for name in (f"{robot}_{part}.txt", f"{stem}_{part}.txt"):
+            path = Path(prompts_dir) / name
+            if path.is_file():
+                return path.read_text(encoding="utf-8"), str(path)
+    res = resources.files("mhrc.prompts").joinpath(f"{stem}_{part}.txt")
+    return (res.read_text(encoding="utf-8"), f"mhrc.prompts/{stem}_{part}.txt") if res.is_file() else None
+
+
+def load_template(
+    robot: str, part: str, prompts_dir: str | Path | None = None, *, team: TeamSpec | None = None
+) -> Template:
+    """`robot`'s `part` template (`template_source`), its placeholders checked (none unknown,
+    none required missing), not yet filled. Errors about a file of `prompts_dir` name --prompts."""
+    crew = crew_of(robot, team)
+    found = template_source(robot, part, prompts_dir, team=team)
+    if found is None:
+        raise TemplateError(
+            f"no prompt template for {robot}'s {part} prompt: neither {robot}_{part}.txt nor "
+            f"{crew.prompt.template}_{part}.txt in {prompts_dir or 'mhrc.prompts'}, nor a built-in one for kind {crew.kind}"
+        )
+    text, where = found
+    opt = "--prompts: " if prompts_dir is not None and not where.startswith("mhrc.prompts/") else ""
     template = Template(text)
     if not template.is_valid():
         raise TemplateError(f"{opt}{where}: a '$' that starts no placeholder; write '$$' for a dollar sign")
     used = set(template.get_identifiers())
     unknown = used - PLACEHOLDERS[part]
     if unknown:
+        allowed = ", ".join("$" + p for p in sorted(PLACEHOLDERS[part] - STATIC))
         raise TemplateError(
             f"{opt}{where}: unknown placeholder(s) {', '.join(sorted('$' + u for u in unknown))}; "
-            f"{part} templates may use {', '.join(sorted('$' + p for p in PLACEHOLDERS[part]))}"
+            f"{part} templates may use {allowed + ', ' if allowed else ''}$robot and the team's words "
+            "($finisher, $fetchers, $scouts, $contacts and their forms: see mhrc.agents.crew)"
         )
-    missing = (REQUIRED[part] | REQUIRED_FOR.get((robot, part), frozenset())) - used
+    required = REQUIRED[part] | REQUIRED_FOR.get((crew.role, part), frozenset())
+    missing = required - used
     if missing:
         raise TemplateError(
             f"{opt}{where}: required placeholder(s) {', '.join(sorted('$' + m for m in missing))} missing; "
-            f"a {robot} {part} template must use {', '.join(sorted('$' + p for p in REQUIRED[part] | REQUIRED_FOR.get((robot, part), frozenset())))}"
+            f"{robot}'s {part} template (a {crew.kind}, the team's {crew.role}) must use "
+            f"{', '.join(sorted('$' + p for p in required))}"
         )
     return template
 
 
-def load_hints(robot: str, prompts_dir: str | Path | None = None) -> str:
-    """The prompt_hints aid's advice for `robot`: `<robot>_hints.txt` from `prompts_dir` if it
-    holds one, else the package's (plain text, no placeholders); "" for a robot without any."""
-    if prompts_dir is not None and (path := Path(prompts_dir) / f"{robot}_hints.txt").is_file():
-        return path.read_text(encoding="utf-8").strip()
-    res = resources.files("mhrc.prompts").joinpath(f"{robot}_hints.txt")
-    return res.read_text(encoding="utf-8").strip() if res.is_file() else ""
+def load_hints(robot: str, prompts_dir: str | Path | None = None, *, team: TeamSpec | None = None) -> str:
+    """The prompt_hints aid's advice for `robot`, filled for its team: `<robot>_hints.txt` or
+    `<kind>_hints.txt` from `prompts_dir`, else its kind's from the package (placeholders: the
+    team's words only); "" for a robot without any."""
+    if template_source(robot, "hints", prompts_dir, team=team) is None:
+        return ""
+    template = load_template(robot, "hints", prompts_dir, team=team)
+    return Template(crew_of(robot, team).fill(template.template)).substitute().strip()
 
 
 def _tidy(text: str) -> str:
@@ -186,13 +230,15 @@ class LLMPolicy:
     prompt_cap_chars bounds the whole prompt (system + user); None (the default, as the paper)
     keeps every history whole. reach_labels (an aid, not the paper's) says for each object
     whether it lies within the robot's arm reach. prompt_hints (an aid, not the paper's) adds the
-    role's advice (`<robot>_hints.txt`) and the teammates' skills to the system prompt, and
+    kind's advice (`<kind>_hints.txt`) and the teammates' skills to the system prompt, and
     where objects lie, distances, the step, the stand pose, reach and the arm base to the scene
     graph and status. feedback_advice (an aid, the agent's half of the world's) puts the reason
     an unreadable reply failed, and how to answer, into its feedback. structured asks for a JSON decision that
     follows a schema of this step's valid actions, its analysis short enough that the command
     fits within the client's max_tokens. step_deadline bounds one step's model call,
-    every retry included: past it the robot waits that step.
+    every retry included: past it the robot waits that step. team is the robot's team (the
+    paper's by default): the robot's kind picks its templates, its teammates' names and kinds
+    fill them (mhrc.agents.crew).
     """
 
     def __init__(
@@ -212,10 +258,12 @@ class LLMPolicy:
         structured: bool = False,
         step_deadline: float | None = None,
         max_tokens: int | None = None,
+        team: TeamSpec | None = None,
     ) -> None:
         if step_deadline is not None and step_deadline <= 0:
             raise ValueError(f"step_deadline must be positive (got {step_deadline})")
         self.robot = robot
+        self.crew: Crew = crew_of(robot, team)
         self.structured = structured
         self.max_analysis = json_mode.analysis_bound(max_tokens)
         self.step_deadline = step_deadline
@@ -231,15 +279,22 @@ class LLMPolicy:
         self.cap = prompt_cap_chars
         self.absent = tuple(teammates_absent)
         self.memory = Memory()
-        if feedback and robot in FIRST_STEP:  # the appendix's first feedback, before any action
-            self.memory.add("feedback", 0, FIRST_STEP[robot], tag="first step")
-        self.system_t = load_template(robot, "system", prompts_dir)
-        self.user_t = load_template(robot, "user", prompts_dir)
-        self.hints = load_hints(robot, prompts_dir) if prompt_hints else ""
+        role = self.crew.role
+        if feedback and role in FIRST_STEP:  # the appendix's first feedback, before any action
+            self.memory.add("feedback", 0, self.crew.fill(FIRST_STEP[role]), tag="first step")
+        # the kind's templates (or --prompts' own), the team's words filled in once
+        self.system_t, self.user_t = (
+            Template(self.crew.fill(load_template(robot, part, prompts_dir, team=team).template))
+            for part in ("system", "user")
+        )
+        self.hints = load_hints(robot, prompts_dir, team=team) if prompt_hints else ""
         if isinstance(
             client, ReplayClient
         ):  # a trace recorded with other prompts is refused now, not at its first step
-            client.check_templates({f"{robot}_system.txt": self.system_t, f"{robot}_user.txt": self.user_t})
+            where = [
+                (template_source(robot, part, prompts_dir, team=team) or ("", part))[1] for part in ("system", "user")
+            ]
+            client.check_templates({where[0]: self.system_t, where[1]: self.user_t})
         self._pending: tuple[int, str, str] | None = None  # (tick, why this step's reply gave no action, its tag)
         self._log = log.bind(robot=robot, model=client.model)
 
@@ -264,7 +319,7 @@ class LLMPolicy:
 
     def render(self, obs: Observation) -> Messages:
         """The system and user messages for this observation and the memory so far."""
-        meanings = MEANINGS | ROLE_MEANINGS.get(self.robot, {})
+        meanings = MEANINGS | ROLE_MEANINGS.get(self.crew.role, {}) | KIND_MEANINGS.get(self.crew.kind, {})
         teammates = describe.teammates(obs, self.absent)
         hints = self.hints
         if self.prompt_hints and "teammates" not in self.system_t.get_identifiers():

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import re
-from importlib import resources
 from pathlib import Path
 
 import pytest
 from test_llm_policy import obs
 
 from mhrc.agents.llm import ScriptedClient
-from mhrc.agents.llm_policy import LLMPolicy
+from mhrc.agents.llm_policy import LLMPolicy, load_hints
 from mhrc.core.fidelity import AIDS, label, parse_aids
 from mhrc.core.protocol import ActionResult, SkillOutcome, Wait
 from mhrc.core.trace import read_trace
@@ -68,7 +67,7 @@ def test_reach_labels_are_an_aid_of_the_prompt() -> None:
 
 def test_alices_prompt_gives_the_simulators_real_picking_distances() -> None:
     # the paper's prompt says 1 m or less; the simulator's figures are the prompt_hints aid's
-    text = resources.files("mhrc.prompts").joinpath("alice_hints.txt").read_text(encoding="utf-8")
+    text = load_hints("alice")
     assert "about 1 m" not in text
     ahead = re.search(r"arm base sits ([0-9.]+) m ahead", text)
     good = re.search(r"object ([0-9.]+) to ([0-9.]+) m \(horizontally\) from your arm base", text)

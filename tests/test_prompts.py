@@ -25,7 +25,7 @@ from typing import Any
 import pytest
 
 from mhrc.agents.llm import ScriptedClient
-from mhrc.agents.llm_policy import LLMPolicy, TemplateError, load_hints, load_template
+from mhrc.agents.llm_policy import LLMPolicy, TemplateError, load_hints, load_template, template_source
 from mhrc.agents.replay import ReplayClient, ReplayMismatch
 from mhrc.core.protocol import (
     ActionResult,
@@ -264,7 +264,7 @@ def check_golden(name: str, text: str) -> None:
 
 
 ROBOTS = ("alice", "bob", "david")
-# Text of the prompt_hints aid that the observation adds (the rest is <robot>_hints.txt)
+# Text of the prompt_hints aid that the observation adds (the rest is the kind's <kind>_hints.txt)
 DYNAMIC_HINTS = (
     "m from your arm base",
     "m from you",
@@ -589,8 +589,9 @@ def test_custom_templates_are_checked_when_loaded(tmp_path: Path) -> None:
     (tmp_path / "bob_user.txt").write_text(USER_OK, encoding="utf-8")
     with pytest.raises(TemplateError, match=r"--prompts: .*bob_system.txt: unknown placeholder\(s\) \$colour"):
         load_template("bob", "system", tmp_path)
-    with pytest.raises(TemplateError, match=r"--prompts: prompt template .*alice_user.txt is missing"):
-        load_template("alice", "user", tmp_path)
+    # a part the directory has no file for (neither alice_user.txt nor mobile_manipulator_user.txt): the built-in one
+    assert template_source("alice", "user", tmp_path) == template_source("alice", "user")
+    assert (template_source("alice", "user", tmp_path) or ("", ""))[1] == "mhrc.prompts/mobile_manipulator_user.txt"
     (tmp_path / "bob_user.txt").write_text(
         "$scene_graph\n$status\n$task\n$feedback\n$messages\nCommand?", encoding="utf-8"
     )
@@ -665,14 +666,16 @@ def test_up_refuses_prompts_missing_a_placeholder_before_anything_starts(tmp_pat
     assert "--prompts" in errors[0] and "alice_user.txt" in errors[0] and "$messages" in errors[0], errors[0]
     assert list(work.iterdir()) == []  # nothing left behind
 
+    # without david_system.txt, David's kind's file in the directory is his (and it is checked as well)
     (prompts / "david_system.txt").unlink()
+    (prompts / "mobile_base_system.txt").write_text(SYSTEM_OK + "\n$colour", encoding="utf-8")
     out = _mhrc("up", "--insecure", "-q", "--llm", f"david=replay:{trace}", "--prompts", str(prompts), cwd=work)
     errors = [line for line in out.stderr.splitlines() if line.startswith("Error:")]
     assert (
         out.returncode == 2
         and len(errors) == 1
         and "--prompts" in errors[0]
-        and "david_system.txt is missing" in errors[0]
+        and "mobile_base_system.txt: unknown placeholder(s) $colour" in errors[0]
     ), out.stderr[-3000:]
     assert list(work.iterdir()) == []
 
@@ -688,7 +691,7 @@ def test_a_trace_recorded_with_the_old_prompts_is_refused_with_the_reason(tmp_pa
     client = ReplayClient(trace, "alice")
     with pytest.raises(
         ReplayMismatch,
-        match=r"recorded with other prompts than the ones alice is given now: .*lacks 'You are Alice, a smart robot .*alice_system.txt",
+        match=r"recorded with other prompts than the ones alice is given now: .*lacks 'You are Alice, a smart robot .*/mobile_manipulator_system.txt",
     ):
         LLMPolicy("alice", client)
 

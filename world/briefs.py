@@ -6,6 +6,7 @@ words are ours; the content is the appendix's, nothing more.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -15,11 +16,19 @@ Role = Literal["finisher", "fetcher", "scout"]
 @dataclass(frozen=True)
 class Briefing:
     """Who a robot's task text names: the robot that finishes the task (the paper's Bob), the
-    one that fetches for it (Alice), and the finisher's table."""
+    one that fetches for it (Alice; a team's several fetchers as one of them, `either`: "Alice
+    or Carol"), and the finisher's table."""
 
     finisher: str
     fetcher: str
     table: str
+
+
+def either(names: Sequence[str]) -> str:
+    """`Alice`, `Alice or Carol`, `Alice, Carol or Frank`: whom the task texts send a robot to
+    when any of several will do."""
+    names = list(names)
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
 
 
 def role_of(finishes_task: bool, mobile: bool, has_arm: bool) -> Role:

@@ -23,7 +23,7 @@ from typing import Any
 from mhrc.core.protocol import FurnitureView, ObjectPose, ObjectView, Observation, Pose2D, RobotPose, RobotStatus
 
 from .beliefs import Beliefs
-from .briefs import Briefing, brief, detail, role_of
+from .briefs import Briefing, brief, detail, either, role_of
 from .physics import ObjectState, PhysicalWorld
 from .robots import RobotBody
 from .tasks import Task
@@ -240,14 +240,17 @@ def observation(
 
 
 def briefing(world: PhysicalWorld) -> Briefing:
-    """Whom the task texts name: the finisher and the fetcher of this episode's team, by kind
-    (the paper's Bob and Alice; the finisher stands in for a fetcher the team lacks)."""
+    """Whom the task texts name: the finisher and the fetchers of this episode's team, by kind
+    (the paper's Bob and Alice; several fetchers as "Alice or Carol", in the team's order; the
+    finisher stands in for a fetcher the team lacks)."""
     bots = world.bots.values()
     finisher = next((b.name for b in bots if b.kind.finishes_task), "")
-    fetcher = next(
-        (b.name for b in bots if role_of(b.kind.finishes_task, b.kind.mobile, b.kind.has_arm) == "fetcher"), finisher
+    fetchers = [b.name for b in bots if role_of(b.kind.finishes_task, b.kind.mobile, b.kind.has_arm) == "fetcher"]
+    return Briefing(
+        finisher=finisher.capitalize(),
+        fetcher=either([f.capitalize() for f in fetchers or [finisher]]),
+        table=world.layout.bob_table,
     )
-    return Briefing(finisher=finisher.capitalize(), fetcher=fetcher.capitalize(), table=world.layout.bob_table)
 
 
 def views(world: PhysicalWorld) -> tuple[list[FurnitureView], list[ObjectView]]:
