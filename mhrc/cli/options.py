@@ -131,7 +131,9 @@ def llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
             "--prompts",
             type=click.Path(file_okay=False, exists=True, path_type=Path),
             default=None,
-            help="Directory of your own prompt templates (ROBOT_system.txt, ROBOT_user.txt) for --llm.",
+            help="Directory of your own prompt templates for --llm: ROBOT_system.txt, ROBOT_user.txt (one robot) "
+            "or KIND_system.txt, KIND_user.txt (every robot of a kind); a missing file falls back to the shipped one "
+            "(docs/llm.md).",
         ),
         click.option("--history-cap", type=int, default=None, metavar="CHARS", help=HISTORY_CAP_HELP),
     ]

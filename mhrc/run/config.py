@@ -210,7 +210,7 @@ class EpisodeConfig(BaseModel):
                             "give a longer --step-deadline or a shorter --llm-timeout"
                         )
                     for part in ("system", "user"):
-                        load_template(robot, part, cfg.prompts)
+                        load_template(robot, part, cfg.prompts, team=cfg.team)
         except (ValueError, FileNotFoundError) as exc:
             raise ConfigError(str(exc)) from None
         return cfg
@@ -290,6 +290,7 @@ class EpisodeConfig(BaseModel):
             "history": self.ablation != "no_history",
             "teammates_absent": tuple(r for r in self.team.names if r not in self.robots),
             "prompts_dir": self.prompts,
+            "team": self.team,
             "prompt_cap_chars": self.history_cap,
             "reach_labels": "reach_labels" in self.aids,
             "prompt_hints": "prompt_hints" in self.aids,
