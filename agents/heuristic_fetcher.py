@@ -22,7 +22,6 @@ from mhrc.core.protocol import (
     OutcomeCode,
     Pick,
     Place,
-    Pose2D,
     Wait,
 )
 
@@ -48,11 +47,6 @@ from .heuristic_base import (
 from .heuristic_claims import Claims
 from .policy import Decision
 
-
-def _xy(p: Pose2D) -> tuple[float, float]:
-    return p.x, p.y
-
-
 ON_POSE = 0.03  # m: a navigation that succeeded stops this close to its stand pose (one that counts as there within AT_POSE_TOL may not)
 SHARE = 2  # a search round's surfaces: the lead takes SHARE parts to each working scout's one (2/3 beside one scout):
 # she looks on arriving, a scout also has to report each
@@ -73,7 +67,8 @@ class AliceHeuristic(Claims):
     scouts_here: set[str] = field(default_factory=set)
     scout_todo: dict[str, set[str]] = field(default_factory=dict)  # surfaces handed to a scout it has not reported on
     was_lead: bool = False
-    deliver_shift: int = 0  # beside other fetchers: how many places at table_0 failed (each moves her one pose on)
+    deliver_after: int = 0  # beside other fetchers: the tick to deliver again after a failed place (_make_way)
+    aside: int = 0  # the stand pose of table_0 to wait at until then
     mine: list[str] = field(default_factory=list)  # surfaces the lead searches herself in the current round
     late: set[str] = field(default_factory=set)  # asked for after Bob's first request
     searched_for: set[str] = field(default_factory=set)  # what earlier search rounds looked for
@@ -276,17 +271,28 @@ class AliceHeuristic(Claims):
         goal = table.place_pose or table.position
         idx = _nearest_stand_pose(table, goal)
         others = self._fetchers(obs)
-        if others:  # beside other fetchers: each its own stand pose, by name order, the nearest to the goal first
-            order = sorted(range(len(table.stand_poses)), key=lambda i: _dist2(_xy(table.stand_poses[i]), goal))
-            if self._last_failed("place"):
-                self.deliver_shift += 1
-            rank = sorted([obs.robot, *others]).index(obs.robot)
-            idx = order[(rank + self.deliver_shift) % len(order)]
-        elif self._last_failed("place"):
+        if others and (aside := self._make_way(obs, table, idx, others)) is not None:
+            return aside
+        if not others and self._last_failed("place"):
             idx = (idx + 1) % len(table.stand_poses)
         if not _at_stand_pose(obs, table, idx):
             return self._decision(Navigate(target=HANDOVER, stand_pose=idx))
         return self._decision(Place(obj=holding, location=HANDOVER))
+
+    def _make_way(self, obs: Observation, table: FurnitureView, idx: int, others: list[str]) -> Decision | None:
+        """Beside other fetchers, a place at table_0 that failed may be two fetchers at its one
+        good stand pose (the others are too far from the goal): the first by name tries again at
+        once, the others stand aside at another pose and come back 3 steps apart each."""
+        if self._last_failed("place"):
+            rank = sorted([obs.robot, *others]).index(obs.robot)
+            self.deliver_after = obs.tick + 1 + 3 * rank
+            poses = [i for i in range(len(table.stand_poses)) if i != idx]
+            self.aside = poses[rank % len(poses)] if poses and rank else idx
+        if obs.tick >= self.deliver_after:
+            return None
+        if not _at_stand_pose(obs, table, self.aside):
+            return self._decision(Navigate(target=HANDOVER, stand_pose=self.aside))
+        return self._decision(Wait())
 
     def _next_exploration(self, obs: Observation) -> Decision | None:
         """The lead's: open the closed containers nobody has looked into yet (nearest first); then
