@@ -1,49 +1,90 @@
-"""Scripted expert policies, one per role, for every task (pack, sort, sandwich).
+"""Scripted expert policies, one per role, for every task (pack, sort, sandwich) and any team.
 
 Each sees only its own robot's observation (its partial scene graph, status, new messages and
 the feedback of its last action) and coordinates through `communicate` messages, as the
-paper's roles do:
+paper's roles do. A robot's role follows from the skills its first observation reports, never
+from its name (`role_of`): the **finisher** picks and places without moving (the tabletop arm
+at the goal: the paper's Bob), a **fetcher** navigates and picks (a mobile manipulator: Alice),
+a **scout** does neither or only navigates (a mobile base, a drone: David). Teammates and their
+roles come from `Observation.teammates` (the attached ones, with their skills); messages go to
+them by name. In the paper's team every decision is the one the per-name roles made.
 
-- Bob asks Alice for every target he cannot pick himself, then puts what is in his reach on
-  its goal (the tray, its colour's panel, the cutting board); for an ordered task (a sandwich)
-  only the next target in the list, waiting for it if need be. Which panel a solid goes on he
-  reads from its colour (the paper's task text does not say). A target that joins the task
-  (his task list grows) he asks for like the others; one he saw within his reach that is gone
-  from his table without his picking it he asks for again; one brought to his table that lies
-  just beyond his reach (a crowded table, seen with a seventh target) he tries to pick anyway.
-- Alice hands the open surfaces to David, explores the closed containers herself, fetches what
-  Bob asked for and puts it on table_0 near him. A grasp that fails for distance is fixed with a
-  `move(dx, dy)` she works out from the base-to-object offsets in the feedback (the solved move
-  is an aid she uses only when the world gives it); other grasp failures try the next stand pose.
-  A container she finds closed again she opens again. When every container and surface has
-  been seen and something Bob asked for is still nowhere (not seen, or gone from where it was:
-  moved or added while the team worked), she starts a search round: every surface again, the
-  nearer two thirds herself, the rest handed to David. While David is broken down she looks
-  at the surfaces he has not reported on herself.
-- David explores the surfaces Alice hands him (again, if she hands them over again) and reports
-  what lies on each, or that he could not reach one.
-- Any robot whose action fails with `broken_down` tells each teammate once that it broke down
-  and until which tick, then waits until then (heuristic_base.py); a breakdown's failures are
-  not counted as failed picks or unreachable poses.
+- The finisher asks every fetcher for every target he cannot pick himself (each fetcher hears
+  the whole list, one message a step, in name order), then puts what is in his reach on its
+  goal (the tray, its colour's panel, the cutting board); for an ordered task (a sandwich) only
+  the next target in the list, waiting for it if need be. Which panel a solid goes on he reads
+  from its colour (the paper's task text does not say). A target that joins the task (his task
+  list grows) he asks for like the others; one he saw within his reach that is gone from his
+  table without his picking it he asks for again; one brought to his table that lies just
+  beyond his reach (a crowded table, seen with a seventh target) he tries to pick anyway. A
+  fetcher that attaches (or is replaced) hears the list again.
+- The **lead fetcher** (the first by name of the fetchers attached; alone, the only one) hands
+  the open surfaces to the scouts, one contiguous share each, explores closed containers,
+  fetches what the finisher asked for and puts it on table_0 near him. A grasp that fails for
+  distance is fixed with a `move(dx, dy)` worked out from the base-to-object offsets in the
+  feedback (the solved move is an aid used only when the world gives it); other grasp failures
+  try the next stand pose. A container found closed again is opened again. When every
+  container and surface has been seen (and every place another fetcher claimed was reported)
+  and something asked for is still nowhere (not seen, or gone from where it was: moved or added
+  while the team worked), she starts a search round: every surface again, the nearer part
+  herself (2/3 beside one scout), the rest split among the working scouts. While a scout is
+  absent or broken down she looks at the surfaces it has not reported on herself; a new scout
+  (or a fetcher that becomes the lead) has the unexplored surfaces handed over again.
+- **Several fetchers** split the work by claims over messages (heuristic_claims.py): before
+  fetching an object, or exploring a container, not claimed yet, a fetcher tells every other
+  fetcher ("Carol, I am fetching these: mug, toy_duck." -- every object to fetch it knows on
+  that furniture, since two fetchers at one piece of furniture get in each other's way;
+  "Carol, I am exploring fridge."), and each skips what an attached teammate claimed; two
+  claims that cross are settled by name order (the first keeps it), each fetcher deciding
+  alone. Claims lapse with their fetcher's attachment, an object's when the finisher asks for
+  it again. A fetcher that does not lead explores only containers nobody claimed (surfaces too
+  in a team without scouts), reports each to the lead in a scout's words with its claim of what
+  it will fetch from there ("On fridge I found: apple. I am fetching these: apple."), and does
+  no search rounds. The lead hands what it knows and will not fetch next (objects on another
+  piece of furniture than its own) to the other working fetchers in turn ("Carol, I leave these
+  to you to fetch: fork."; the message also tells where it lies). A place at table_0 that fails
+  beside other fetchers (two at its one good stand pose) is tried again at once by the first by
+  name; the others stand aside at another pose and come back 3 steps apart each.
+- A scout explores the surfaces a fetcher hands it (again, if handed over again) and reports
+  to that fetcher what lies on each, or that it could not reach one; when that fetcher has left,
+  to the lead fetcher.
+- Any robot whose action fails with `broken_down` tells each teammate it has seen attached
+  once that it broke down and until which tick, then waits until then (heuristic_base.py); a
+  breakdown's failures are not counted as failed picks or unreachable poses.
 
 Messages are plain sentences with a fixed shape, so any other agent (an LLM) can read them too.
-Alice's role lives in heuristic_alice.py, what the roles share in heuristic_base.py.
+The fetcher's role lives in heuristic_fetcher.py and heuristic_claims.py, what the roles share
+in heuristic_base.py.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import Communicate, Navigate, ObjectView, Observation, OutcomeCode, Pick, Place, Wait
+from mhrc.core.protocol import (
+    ActionResult,
+    Communicate,
+    Navigate,
+    ObjectView,
+    Observation,
+    OutcomeCode,
+    Pick,
+    Place,
+    Wait,
+)
 
-from .heuristic_alice import AliceHeuristic
 from .heuristic_base import (
     BREAKDOWN_RE,
+    CLAIM_RE,
     EXPLORE_RE,
+    EXPLORING_RE,
+    HANDOFF_RE,
     HANDOVER,
     REPORT_RE,
     REQUEST_RE,
     UNREACHABLE_RE,
+    Role,
     _dist2,
     _furniture,
     _gone,
@@ -54,14 +95,21 @@ from .heuristic_base import (
     corrective_move,
     failed,
     goal_of,
+    report_sentence,
+    request_sentence,
+    role_of,
 )
+from .heuristic_fetcher import AliceHeuristic
 from .policy import Decision
 
 STRETCH = 0.1  # m beyond Bob's (conservative) reach he still tries for a target brought to his table
 
 __all__ = [
     "BREAKDOWN_RE",
+    "CLAIM_RE",
     "EXPLORE_RE",
+    "EXPLORING_RE",
+    "HANDOFF_RE",
     "HANDOVER",
     "REPORT_RE",
     "REQUEST_RE",
@@ -70,10 +118,15 @@ __all__ = [
     "AliceHeuristic",
     "BobHeuristic",
     "DavidHeuristic",
+    "FetcherHeuristic",
+    "FinisherHeuristic",
+    "Heuristic",
+    "ScoutHeuristic",
     "breakdown_sentence",
     "corrective_move",
     "goal_of",
     "heuristic_policy",
+    "role_of",
 ]
 
 
@@ -82,21 +135,25 @@ __all__ = [
 
 @dataclass
 class BobHeuristic(_RoleBase):
-    """Packs the targets within his reach; asks Alice for the rest."""
+    """The finisher: packs the targets within his reach; asks every fetcher for the rest."""
 
-    requested: set[str] = field(default_factory=set)
+    requested: dict[str, set[str]] = field(default_factory=dict)  # fetcher -> what it was asked for
     pick_failures: dict[str, int] = field(default_factory=dict)
     gone: set[str] = field(default_factory=set)  # targets seen in his reach, gone since (asked for again once)
     at_start: set[str] | None = None  # what lay on his table at his first step
-    alice_here: bool = False
+    fetchers_here: set[str] = field(default_factory=set)
 
     async def decide(self, obs: Observation) -> Decision:
+        self._meet(obs)
         if self.at_start is None:
             self.at_start = {o.name for o in obs.objects if o.on == HANDOVER}
         if (broken := self._broken_down(obs)) is not None:
             return broken
-        if self._arrived(obs, "alice"):
-            self.requested.clear()  # a new Alice has not heard what I need: ask again
+        fetchers = self._with_role(obs, "fetcher")
+        for f in fetchers:
+            if f not in self.fetchers_here and self.last is not None:
+                self.requested.pop(f, None)  # a new fetcher has not heard what I need: ask it
+        self.fetchers_here = set(fetchers)
         if self._last_failed("pick") and isinstance(self.last.action, Pick):  # type: ignore[union-attr]
             name = self.last.action.obj  # type: ignore[union-attr]
             self.pick_failures[name] = self.pick_failures.get(name, 0) + 1
@@ -113,16 +170,14 @@ class BobHeuristic(_RoleBase):
         reachable = [t for t in tryable if self._in_reach(obs, t)] or [t for t in tryable if self._brought_near(obs, t)]
         if reachable:
             return self._decision(Pick(obj=reachable[0]))
-        ask = [t for t in todo if t not in self.requested or (self.pick_failures.get(t, 0) >= 2 and _object(obs, t))]
-        if ask and "alice" in obs.teammates:
-            self.requested.update(ask)
-            for t in ask:
-                self.pick_failures.pop(t, None)
-            return self._decision(
-                Communicate(
-                    to="alice", content=f"Alice, please bring these to table_0 within my reach: {', '.join(ask)}."
-                )
-            )
+        for f in fetchers:  # each hears the whole list; they split it among themselves (heuristic_claims.py)
+            asked = self.requested.setdefault(f, set())
+            ask = [t for t in todo if t not in asked or (self.pick_failures.get(t, 0) >= 2 and _object(obs, t))]
+            if ask:
+                asked.update(ask)
+                for t in ask:
+                    self.pick_failures.pop(t, None)
+                return self._decision(Communicate(to=f, content=request_sentence(ask, f)))
         return self._decision(Wait())
 
     def _notice_gone(self, obs: Observation, todo: list[str]) -> None:
@@ -134,7 +189,8 @@ class BobHeuristic(_RoleBase):
                 self.gone.discard(t)
             elif t not in self.gone:
                 self.gone.add(t)
-                self.requested.discard(t)
+                for asked in self.requested.values():
+                    asked.discard(t)
 
     def _brought_near(self, obs: Observation, name: str) -> bool:
         """Brought to his table since the start (by Alice) and just beyond his reach, as a crowded
@@ -165,15 +221,16 @@ def _within_reach(obs: Observation, o: ObjectView, margin: float = 0.0) -> bool:
 
 @dataclass
 class DavidHeuristic(_RoleBase):
-    """Explores the surfaces Alice hands over and reports what lies on each."""
+    """A scout: explores the surfaces a fetcher hands over and reports to it what lies on each."""
 
     assigned: list[str] = field(default_factory=list)
     visited: set[str] = field(default_factory=set)
     pose_try: dict[str, int] = field(default_factory=dict)
-    report_to: str = "alice"
+    report_to: str = ""  # the fetcher that handed the surfaces over
     slips: int = 0
 
     async def decide(self, obs: Observation) -> Decision:
+        self._meet(obs)
         for m in obs.new_messages:
             if (hit := EXPLORE_RE.search(m.content)) is not None:
                 self.report_to = m.sender
@@ -186,13 +243,15 @@ class DavidHeuristic(_RoleBase):
                         self.assigned.append(name)
         if (broken := self._broken_down(obs)) is not None:
             return broken
+        fetchers = self._with_role(obs, "fetcher")
+        if self.report_to not in obs.teammates and fetchers:
+            self.report_to = fetchers[0]  # whoever asked has left: the lead fetcher hears instead
         last = self.last
         if last is not None and isinstance(last.action, Navigate) and last.outcome.succeeded:
             target = last.action.target
             self.visited.add(target)
             found = sorted(o.name for o in obs.objects if o.on == target)
-            text = f"On {target} I found: {', '.join(found)}." if found else f"On {target} I found nothing."
-            return self._decision(Communicate(to=self.report_to, content=text))
+            return self._decision(Communicate(to=self.report_to, content=report_sentence(target, found)))
         if last is not None and isinstance(last.action, Navigate) and failed(last):
             target = last.action.target
             f = _furniture(obs, target)
@@ -215,12 +274,35 @@ class DavidHeuristic(_RoleBase):
         return self._decision(Wait())
 
 
-ROLES = {"alice": AliceHeuristic, "bob": BobHeuristic, "david": DavidHeuristic}
+FinisherHeuristic, FetcherHeuristic, ScoutHeuristic = BobHeuristic, AliceHeuristic, DavidHeuristic
+ROLES: dict[Role, type[_RoleBase]] = {"finisher": BobHeuristic, "fetcher": AliceHeuristic, "scout": DavidHeuristic}
 
 
-def heuristic_policy(robot: str) -> _RoleBase:
-    """The scripted expert for `robot` (alice, bob or david)."""
-    try:
-        return ROLES[robot]()
-    except KeyError:
-        raise ValueError(f"no heuristic policy for robot {robot!r}; known roles: {', '.join(ROLES)}") from None
+@dataclass
+class Heuristic:
+    """The scripted expert for one robot of any name: its role (ROLES) is chosen from the skills
+    its first observation reports (or the skills given), and every step is that role's."""
+
+    robot: str
+    skills: tuple[str, ...] | None = None
+    role: _RoleBase | None = None
+    name: str = "heuristic"
+
+    def __post_init__(self) -> None:
+        if self.skills is not None:
+            self.role = ROLES[role_of(self.skills)]()
+
+    async def decide(self, obs: Observation) -> Decision:
+        if self.role is None:
+            self.role = ROLES[role_of(obs.status.skills)]()
+        return await self.role.decide(obs)
+
+    def record(self, result: ActionResult) -> None:
+        if self.role is not None:
+            self.role.record(result)
+
+
+def heuristic_policy(robot: str, skills: Iterable[str] | None = None) -> Heuristic:
+    """The scripted expert for `robot`, of any name: the finisher, a fetcher or a scout by the
+    skills its observation reports (or `skills`, when given)."""
+    return Heuristic(robot, None if skills is None else tuple(skills))

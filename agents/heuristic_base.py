@@ -1,6 +1,7 @@
-"""What the scripted roles (heuristic.py) share: the fixed shapes of their messages, geometry
-read from an observation, and the routine of a robot that has broken down (it tells each
-teammate once, in a fixed sentence, then waits until it works again).
+"""What the scripted roles (heuristic.py) share: a robot's role from its skills, the fixed
+shapes of their messages, geometry read from an observation, who of the team is attached and
+working, and the routine of a robot that has broken down (it tells each teammate once, in a
+fixed sentence, then waits until it works again).
 
 A broken-down robot's failed actions (outcome `broken_down`) say nothing about the world, so
 no role counts them as a failed pick, an unreachable stand pose or a lost object.
@@ -10,7 +11,9 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Literal
 
 from mhrc.core.protocol import (
     Action,
@@ -26,13 +29,15 @@ from mhrc.core.protocol import (
 from .policy import Decision
 
 HANDOVER = "table_0"  # Bob's table: where fetched objects go
-ORDER = ("alice", "bob", "david")  # whom a broken-down robot tells first
 _NAMES = r"([A-Za-z0-9_]+(?:\s*,\s*[A-Za-z0-9_]+)*)"
 REQUEST_RE = re.compile(r"bring these to table_0 within my reach:\s*" + _NAMES)
 EXPLORE_RE = re.compile(r"explore these surfaces and tell me what lies on them:\s*" + _NAMES)
 REPORT_RE = re.compile(r"On ([A-Za-z0-9_]+) I found")
 UNREACHABLE_RE = re.compile(r"I could not reach ([A-Za-z0-9_]+)")
 BREAKDOWN_RE = re.compile(r"I broke down: I can only communicate and wait until tick (\d+)")
+CLAIM_RE = re.compile(r"I am fetching these:\s*" + _NAMES)
+EXPLORING_RE = re.compile(r"I am exploring ([A-Za-z0-9_]+)")
+HANDOFF_RE = re.compile(r"I leave these to you to fetch:\s*" + _NAMES)
 MAX_GRASP_TRIES = 4
 ARM_FORWARD = 0.2  # Alice's arm base sits this far ahead of her base centre (her system prompt says so)
 GOOD_PICK = 0.45  # m from the arm base: the middle of the good picking range her prompt gives
@@ -40,14 +45,65 @@ MAX_MOVE = 1.0
 AT_POSE_TOL = 0.15  # m: counts as standing at a stand pose (navigation may stop a little off)
 
 
-def explore_sentence(surfaces: list[str]) -> str:
-    """What Alice asks David (EXPLORE_RE reads it back)."""
-    return f"David, please explore these surfaces and tell me what lies on them: {', '.join(surfaces)}."
+Role = Literal["finisher", "fetcher", "scout"]
+
+
+def role_of(skills: Iterable[str]) -> Role:
+    """A robot's part in the team from what it can do: a fetcher navigates and picks (a mobile
+    manipulator, the paper's Alice), the finisher picks and places without moving (the tabletop
+    arm at the goal, Bob), a scout does neither or only navigates (a mobile base, a drone: David)."""
+    s = set(skills)
+    if {"navigate", "pick"} <= s:
+        return "fetcher"
+    if {"pick", "place"} <= s:
+        return "finisher"
+    return "scout"
+
+
+def title(name: str) -> str:
+    """A robot's name as a sentence addresses it (alice -> Alice)."""
+    return name[:1].upper() + name[1:]
+
+
+def explore_sentence(surfaces: list[str], to: str = "david") -> str:
+    """What a fetcher asks a scout (EXPLORE_RE reads it back)."""
+    return f"{title(to)}, please explore these surfaces and tell me what lies on them: {', '.join(surfaces)}."
+
+
+def request_sentence(targets: list[str], to: str = "alice") -> str:
+    """What the finisher asks a fetcher (REQUEST_RE reads it back)."""
+    return f"{title(to)}, please bring these to table_0 within my reach: {', '.join(targets)}."
+
+
+def report_sentence(place: str, found: list[str]) -> str:
+    """What a scout (or a fetcher that explored a place it claimed) reports (REPORT_RE reads it back)."""
+    return f"On {place} I found: {', '.join(found)}." if found else f"On {place} I found nothing."
+
+
+def claim_sentence(objs: list[str], to: str = "") -> str:
+    """A fetcher tells another that it fetches `objs` (CLAIM_RE reads it back): the other skips them."""
+    return (f"{title(to)}, " if to else "") + f"I am fetching these: {', '.join(objs)}."
+
+
+def exploring_sentence(place: str, to: str) -> str:
+    """A fetcher tells another that it explores `place` (EXPLORING_RE reads it back): the other skips it."""
+    return f"{title(to)}, I am exploring {place}."
+
+
+def handoff_sentence(objs: list[str], to: str) -> str:
+    """The lead fetcher hands objects it knows the place of to another fetcher (HANDOFF_RE)."""
+    return f"{title(to)}, I leave these to you to fetch: {', '.join(objs)}."
 
 
 def breakdown_sentence(until: int) -> str:
     """What a broken-down robot tells its teammates (BREAKDOWN_RE reads it back)."""
     return f"I broke down: I can only communicate and wait until tick {until}."
+
+
+def split(items: list[str], parts: int) -> list[list[str]]:
+    """`items` cut into `parts` contiguous shares, in order, as even as can be."""
+    n = len(items)
+    return [items[i * n // parts : (i + 1) * n // parts] for i in range(parts)]
 
 
 def _names(text: str) -> list[str]:
@@ -134,6 +190,9 @@ class _RoleBase:
     last: ActionResult | None = None
     broken_until: int = 0  # the tick this robot works again after a breakdown
     to_tell: list[str] = field(default_factory=list)  # teammates not yet told of the breakdown
+    team: list[str] = field(default_factory=list)  # every teammate seen attached, in the order first seen
+    down_until: dict[str, int] = field(default_factory=dict)  # a teammate -> the tick it works again (its message)
+    outbox: list[Communicate] = field(default_factory=list)  # messages decided on, sent one a step
 
     async def decide(self, obs: Observation) -> Decision:
         raise NotImplementedError  # each role decides its own way
@@ -146,7 +205,7 @@ class _RoleBase:
                 int(ticks) if isinstance(ticks, (int, float)) else 1
             )  # without the count: try again next tick
             if self.broken_until <= result.tick:  # a new breakdown: everyone is to hear of it
-                self.to_tell = list(ORDER)
+                self.to_tell = list(self.team)
             self.broken_until = max(self.broken_until, until)
 
     def _broken_down(self, obs: Observation) -> Decision | None:
@@ -162,13 +221,38 @@ class _RoleBase:
     def _decision(self, action: Action) -> Decision:
         return Decision(action=action)
 
-    def _arrived(self, obs: Observation, teammate: str) -> bool:
-        """Whether `teammate` is present now and was not at this robot's previous step (it
-        joined, or its agent was replaced); tracks presence in `<teammate>_here`."""
-        here = teammate in obs.teammates
-        before = getattr(self, f"{teammate}_here")
-        setattr(self, f"{teammate}_here", here)
-        return here and not before and self.last is not None
+    # ---- the team, as this robot's observations and messages show it
+    def _meet(self, obs: Observation) -> None:
+        """Note the teammates attached now (in the world's order: the team's execution order) and
+        the breakdowns they told of."""
+        for name in obs.teammates:
+            if name not in self.team:
+                self.team.append(name)
+        for m in obs.new_messages:
+            if (hit := BREAKDOWN_RE.search(m.content)) is not None:
+                self.down_until[m.sender] = int(hit.group(1))
+
+    @staticmethod
+    def _with_role(obs: Observation, role: Role) -> list[str]:
+        """The attached teammates of `role`, in name order (the team's tie-break)."""
+        return sorted(n for n, skills in obs.teammates.items() if role_of(skills) == role)
+
+    def _works(self, obs: Observation, name: str) -> bool:
+        """`name` is attached and not broken down (as far as its messages say)."""
+        return name in obs.teammates and obs.tick >= self.down_until.get(name, 0)
+
+    def _send(self, obs: Observation, messages: list[Communicate]) -> Decision | None:
+        """Send the first of `messages` now, the rest at the next steps (one action a step)."""
+        self.outbox.extend(messages)
+        return self._flush(obs)
+
+    def _flush(self, obs: Observation) -> Decision | None:
+        """The next message decided on earlier, if any (one to a robot no longer attached is dropped)."""
+        while self.outbox:
+            message = self.outbox.pop(0)
+            if message.to in obs.teammates:
+                return self._decision(message)
+        return None
 
     def _last_failed(self, skill: str) -> bool:
         return failed(self.last) and self.last is not None and self.last.action.skill == skill

@@ -1,7 +1,10 @@
-"""Alice's scripted role (heuristic.py states every role's behaviour): explore the closed
-containers, hand the open surfaces to David, fetch what Bob asks for, and search again for what
-nobody knows the place of once everything has been looked at (a target moved or added while the
-team worked)."""
+"""A fetcher's scripted role, the paper's Alice (heuristic.py states every role's behaviour and
+the team protocol): explore the closed containers, hand the open surfaces to the scouts, fetch
+what the finisher asks for, and search again for what nobody knows the place of once everything
+has been looked at (a target moved or added while the team worked). With other fetchers, what
+each fetches or explores is claimed over messages first (heuristic_claims.py); the lead fetcher
+(the first by name) alone hands surfaces to the scouts, hears their reports, hands objects on
+and starts search rounds."""
 
 from __future__ import annotations
 
@@ -23,7 +26,6 @@ from mhrc.core.protocol import (
 )
 
 from .heuristic_base import (
-    BREAKDOWN_RE,
     HANDOVER,
     MAX_GRASP_TRIES,
     REPORT_RE,
@@ -37,20 +39,23 @@ from .heuristic_base import (
     _nearest_stand_pose,
     _object,
     _on_fixture,
-    _RoleBase,
     corrective_move,
     explore_sentence,
     failed,
+    split,
 )
+from .heuristic_claims import Claims
 from .policy import Decision
 
 ON_POSE = 0.03  # m: a navigation that succeeded stops this close to its stand pose (one that counts as there within AT_POSE_TOL may not)
-ALICE_SHARE = 2 / 3  # of a search round's surfaces: she looks on arriving, David also has to report each
+SHARE = 2  # a search round's surfaces: the lead takes SHARE parts to each working scout's one (2/3 beside one scout):
+# she looks on arriving, a scout also has to report each
 
 
 @dataclass
-class AliceHeuristic(_RoleBase):
-    """Explores containers, delegates surfaces to David, fetches what Bob needs, searches again."""
+class AliceHeuristic(Claims):
+    """A fetcher: explores containers, delegates surfaces to the scouts, fetches what the finisher
+    needs, searches again."""
 
     needed: list[str] = field(default_factory=list)
     delivered: set[str] = field(default_factory=set)
@@ -59,36 +64,54 @@ class AliceHeuristic(_RoleBase):
     grasp_tries: dict[str, int] = field(default_factory=dict)
     given_up: set[str] = field(default_factory=set)
     pose_choice: dict[str, int] = field(default_factory=dict)  # object -> stand pose to use
-    david_here: bool = False
-    david_todo: set[str] = field(default_factory=set)  # surfaces handed to David he has not reported on
-    david_broken_until: int = 0  # from David's breakdown message
-    mine: list[str] = field(default_factory=list)  # surfaces Alice searches herself in the current round
+    scouts_here: set[str] = field(default_factory=set)
+    scout_todo: dict[str, set[str]] = field(default_factory=dict)  # surfaces handed to a scout it has not reported on
+    was_lead: bool = False
+    deliver_after: int = 0  # beside other fetchers: the tick to deliver again after a failed place (_make_way)
+    aside: int = 0  # the stand pose of table_0 to wait at until then
+    mine: list[str] = field(default_factory=list)  # surfaces the lead searches herself in the current round
     late: set[str] = field(default_factory=set)  # asked for after Bob's first request
     searched_for: set[str] = field(default_factory=set)  # what earlier search rounds looked for
 
     async def decide(self, obs: Observation) -> Decision:
+        self._meet(obs)
         self._read_messages(obs)
         if (broken := self._broken_down(obs)) is not None:
             return broken
         self._learn_from_last(obs)
-        if self._arrived(obs, "david"):
-            self.delegated = False  # a new David knows nothing of his surfaces: hand them over again
+        lead = self._lead(obs)
+        scouts = self._with_role(obs, "scout")
+        if (set(scouts) - self.scouts_here and self.last is not None) or (lead and not self.was_lead):
+            self.delegated = False  # a new scout knows nothing of its surfaces (or I now lead): hand them over
+        self.scouts_here, self.was_lead = set(scouts), lead
+        if not lead and (report := self._report_explored(obs)) is not None:
+            return report
+        self.just_explored = None
+        if (queued := self._flush(obs)) is not None:
+            return queued
+        if lead and (handoff := self._handoff(obs)) is not None:
+            return handoff
         holding = obs.status.holding
         if holding:
             return self._deliver(obs, holding)
-        if not self.delegated and "david" in obs.teammates:
-            surfaces = [f for f in self._open_surfaces(obs) if f not in self.explored]
+        if lead and not self.delegated and scouts:
+            surfaces = [f for f in self._open_surfaces(obs) if f not in self.explored and not self._place_taken(obs, f)]
             self.delegated = True
-            if surfaces:
-                self.david_todo = set(surfaces)
-                return self._decision(Communicate(to="david", content=explore_sentence(surfaces)))
+            if surfaces and (handed := self._hand_to_scouts(obs, surfaces, scouts)) is not None:
+                return handed
         target = self._next_target(obs)
         if target is not None:
-            return self._fetch(obs, target)
-        explore = self._next_exploration(obs)
+            return self._claim(obs, target) or self._fetch(obs, target)
+        explore = self._next_exploration(obs) if lead else self._next_place(obs, bool(scouts))
         if explore is not None:
             return explore
         return self._decision(Wait())
+
+    def _hand_to_scouts(self, obs: Observation, surfaces: list[str], scouts: list[str]) -> Decision | None:
+        """Split `surfaces` among `scouts` (in order, one contiguous share each) and tell each its share."""
+        shares = [(s, share) for s, share in zip(scouts, split(surfaces, len(scouts)), strict=True) if share]
+        self.scout_todo = {s: set(share) for s, share in shares}
+        return self._send(obs, [Communicate(to=s, content=explore_sentence(share, s)) for s, share in shares])
 
     # ---- knowledge
     def _read_messages(self, obs: Observation) -> None:
@@ -100,16 +123,21 @@ class AliceHeuristic(_RoleBase):
                         if not first:
                             self.late.add(name)  # not in Bob's first list: it joined the task
                         self.needed.append(name)
+                    else:
+                        self.objects.pop(name, None)  # asked for again: whoever claimed it, it is anyone's
                     self.delivered.discard(name)
                     self.given_up.discard(name)
                     self.grasp_tries.pop(name, None)
             for hit in REPORT_RE.finditer(m.content):
                 self.explored.add(hit.group(1))
-                self.david_todo.discard(hit.group(1))
+                self._reported(hit.group(1))
             for hit in UNREACHABLE_RE.finditer(m.content):
-                self.david_todo.discard(hit.group(1))  # left for Alice's own search
-            if m.sender == "david" and (hit := BREAKDOWN_RE.search(m.content)) is not None:
-                self.david_broken_until = int(hit.group(1))
+                self._reported(hit.group(1))  # left for the lead's own search
+        self._read_claims(obs)
+
+    def _reported(self, surface: str) -> None:
+        for todo in self.scout_todo.values():
+            todo.discard(surface)
 
     def _learn_from_last(self, obs: Observation) -> None:
         last = self.last
@@ -119,9 +147,9 @@ class AliceHeuristic(_RoleBase):
         if isinstance(a, Navigate) and last.outcome.succeeded:
             f = _furniture(obs, a.target)
             if f is not None and not (f.openable and not f.is_open):
-                self.explored.add(a.target)
+                self._saw(a.target)
         if isinstance(a, Open) and (last.outcome.succeeded or last.outcome.code == OutcomeCode.ALREADY_OPEN):
-            self.explored.add(a.target)
+            self._saw(a.target)
         if isinstance(a, Place) and last.outcome.succeeded and a.location == HANDOVER:
             self.delivered.add(a.obj)
         if isinstance(a, Pick) and not last.outcome.succeeded:
@@ -148,9 +176,16 @@ class AliceHeuristic(_RoleBase):
             if not f.openable and f.stand_poses and f.name != HANDOVER and f.place_pose is not None
         ]
 
-    def _david_works(self, obs: Observation) -> bool:
-        """David is attached and not broken down (as far as his messages say)."""
-        return "david" in obs.teammates and obs.tick >= self.david_broken_until
+    def _scout_todo(self, obs: Observation, working: bool) -> list[str]:
+        """The surfaces handed to scouts that work (or, `working` False, that do not: absent or
+        broken down) they have not reported on."""
+        return [
+            s
+            for scout, todo in self.scout_todo.items()
+            if self._works(obs, scout) == working
+            for s in sorted(todo)
+            if s not in self.explored
+        ]
 
     def _moved(self, obs: Observation) -> list[str]:
         """What Bob asked for that was seen gone from where it was, or that he asked for late
@@ -166,16 +201,22 @@ class AliceHeuristic(_RoleBase):
         """What Bob asked for that Alice has no place for: never seen, or gone from where it was."""
         return [n for n in self.needed if n not in self.delivered and n not in self.given_up and _gone(_object(obs, n))]
 
+    def _fetchable(self, obs: Observation, o: ObjectView) -> bool:
+        """Asked for, not delivered nor given up, where this robot knows, not on a goal fixture,
+        not held by another, not claimed by another fetcher."""
+        return (
+            o.name in self.needed
+            and o.name not in self.delivered
+            and o.name not in self.given_up
+            and not _gone(o)
+            and not _on_fixture(obs, o)
+            and o.held_by in (None, obs.robot)
+            and not self._taken(obs, o.name)
+        )
+
     def _next_target(self, obs: Observation) -> ObjectView | None:
         here = obs.status.base
-        candidates = []
-        for name in self.needed:
-            if name in self.delivered or name in self.given_up:
-                continue
-            o = _object(obs, name)
-            if o is None or _gone(o) or _on_fixture(obs, o) or o.held_by not in (None, obs.robot):
-                continue
-            candidates.append(o)
+        candidates = [o for name in self.needed if (o := _object(obs, name)) is not None and self._fetchable(obs, o)]
         if not candidates:
             return None
         if here is None:
@@ -229,57 +270,104 @@ class AliceHeuristic(_RoleBase):
             return self._decision(Wait())
         goal = table.place_pose or table.position
         idx = _nearest_stand_pose(table, goal)
-        if self._last_failed("place"):
+        others = self._fetchers(obs)
+        if others and (aside := self._make_way(obs, table, idx, others)) is not None:
+            return aside
+        if not others and self._last_failed("place"):
             idx = (idx + 1) % len(table.stand_poses)
         if not _at_stand_pose(obs, table, idx):
             return self._decision(Navigate(target=HANDOVER, stand_pose=idx))
         return self._decision(Place(obj=holding, location=HANDOVER))
 
+    def _make_way(self, obs: Observation, table: FurnitureView, idx: int, others: list[str]) -> Decision | None:
+        """Beside other fetchers, a place at table_0 that failed may be two fetchers at its one
+        good stand pose (the others are too far from the goal): the first by name tries again at
+        once, the others stand aside at another pose and come back 3 steps apart each."""
+        if self._last_failed("place"):
+            rank = sorted([obs.robot, *others]).index(obs.robot)
+            self.deliver_after = obs.tick + 1 + 3 * rank
+            poses = [i for i in range(len(table.stand_poses)) if i != idx]
+            self.aside = poses[rank % len(poses)] if poses and rank else idx
+        if obs.tick >= self.deliver_after:
+            return None
+        if not _at_stand_pose(obs, table, self.aside):
+            return self._decision(Navigate(target=HANDOVER, stand_pose=self.aside))
+        return self._decision(Wait())
+
     def _next_exploration(self, obs: Observation) -> Decision | None:
-        """Open the closed containers nobody has looked into yet (nearest first); then the
-        surfaces David cannot cover (he is absent or broken down) or that are hers in a search
-        round. A search round starts once every surface was seen and a target is still nowhere;
-        before the containers if it moved or joined the task late (what moves or appears while
-        the team works lands on a surface)."""
+        """The lead's: open the closed containers nobody has looked into yet (nearest first); then
+        the surfaces no working scout covers (the scouts are absent or broken down) or that are
+        hers in a search round. A search round starts once every surface was seen (and every
+        place another fetcher claimed was reported) and a target is still nowhere; before the
+        containers if it moved or joined the task late (what moves or appears while the team
+        works lands on a surface)."""
         here = obs.status.base
         containers = [
-            f for f in obs.furniture if f.openable and not f.is_open and f.name not in self.explored and f.stand_poses
+            f
+            for f in obs.furniture
+            if f.openable
+            and not f.is_open
+            and f.name not in self.explored
+            and f.stand_poses
+            and not self._place_taken(obs, f.name)
         ]
         if not self.needed and not containers:
             return None
         moved = set(self._moved(obs))
         early = bool(moved - self.searched_for)  # worth a round before the containers: not searched for yet
         names = [s for s in self.mine if s not in self.explored]
+        down = self._scout_todo(obs, working=False)
         if not names:
-            david = [s for s in self.david_todo if s not in self.explored]
-            if david and self._david_works(obs):
+            if self._scout_todo(obs, working=True) and not down:
                 if not containers:
-                    return None  # David has not reported everything yet
+                    return None  # the scouts have not reported everything yet
             else:
-                names = david or [s for s in self._open_surfaces(obs) if s not in self.explored]
-                if not names and (early or (not containers and self._lost(obs))):
+                names = down or [
+                    s for s in self._open_surfaces(obs) if s not in self.explored and not self._place_taken(obs, s)
+                ]
+                if not names and not self._others_exploring(obs) and (early or (not containers and self._lost(obs))):
                     self.searched_for |= moved
                     return self._search_round(obs)
         todo = [f for f in obs.furniture if f.name in names] if names and (moved or not containers) else containers
-        if todo is containers and not self._david_works(
-            obs
-        ):  # David is down: his surfaces count as much as the containers
-            todo = containers + [f for f in obs.furniture if f.name in self.david_todo and f.name not in self.explored]
+        if todo is containers and down:  # a scout is down: its surfaces count as much as the containers
+            todo = containers + [f for f in obs.furniture if f.name in down]
         if here is not None:
             todo.sort(key=lambda f: _dist2(f.position, (here.x, here.y)))
+        return self._explore_first(obs, todo)
+
+    def _next_place(self, obs: Observation, scouted: bool) -> Decision | None:
+        """A fetcher that does not lead: the closed containers nobody else claimed (nearest first),
+        and, in a team without scouts, the open surfaces too."""
+        if not self.needed:
+            return None
+        here = obs.status.base
+        todo = [
+            f
+            for f in obs.furniture
+            if f.name not in self.explored
+            and f.stand_poses
+            and not self._place_taken(obs, f.name)
+            and ((f.openable and not f.is_open) or (not scouted and f.name in self._open_surfaces(obs)))
+        ]
+        if here is not None:
+            todo.sort(key=lambda f: _dist2(f.position, (here.x, here.y)))
+        return self._explore_first(obs, todo)
+
+    def _explore_first(self, obs: Observation, todo: list[FurnitureView]) -> Decision | None:
+        """Go and look at the first of `todo` not seen yet (claimed first, beside other fetchers)."""
         for f in todo:
             if f.openable:
-                return self._open(obs, f)
+                return self._claim_place(obs, f.name) or self._open(obs, f)
             idx = _nearest_stand_pose(f, f.position)
             if not _at_stand_pose(obs, f, idx):
-                return self._decision(Navigate(target=f.name, stand_pose=idx))
+                return self._claim_place(obs, f.name) or self._decision(Navigate(target=f.name, stand_pose=idx))
             self.explored.add(f.name)  # standing there already: seen
         return None
 
     def _search_round(self, obs: Observation) -> Decision | None:
-        """Every container and surface has been seen and a target Bob asked for is still
-        nowhere (moved or added while the team worked): look at every surface again, Alice the
-        nearer ones, David (if he works) the rest."""
+        """Every container and surface has been seen and a target the finisher asked for is still
+        nowhere (moved or added while the team worked): look at every surface again, the lead
+        the nearer ones, the working scouts (if any) the rest, split among them."""
         surfaces = self._open_surfaces(obs)
         if not surfaces:
             return None
@@ -287,15 +375,15 @@ class AliceHeuristic(_RoleBase):
         here = obs.status.base
         if here is not None:
             surfaces.sort(key=lambda s: _dist2(_furniture(obs, s).position, (here.x, here.y)))  # type: ignore[union-attr]
-        if not self._david_works(obs):
+        scouts = [s for s in self._with_role(obs, "scout") if self._works(obs, s)]
+        if not scouts:
             self.mine = surfaces
             return self._next_exploration(obs)
-        cut = max(1, math.ceil(len(surfaces) * ALICE_SHARE))
+        cut = max(1, math.ceil(len(surfaces) * (SHARE / (SHARE + len(scouts)))))
         self.mine, rest = surfaces[:cut], surfaces[cut:]
         if not rest:
             return self._next_exploration(obs)
-        self.david_todo = set(rest)
-        return self._decision(Communicate(to="david", content=explore_sentence(rest)))
+        return self._hand_to_scouts(obs, rest, scouts[: len(rest)])
 
     def _open(self, obs: Observation, f: FurnitureView) -> Decision:
         """Open `f` from a stand pose. After a failed open (the arm could not follow the handle
