@@ -268,8 +268,8 @@ def test_a_real_grid_of_two_teams(tmp_path: Path) -> None:
     )
     for r in rows.values():
         assert (
-            r["success"] and sum(r["moves_per_robot"].values()) == 2 * r["total"]
-        )  # each target picked and placed once at least
+            r["success"] and sum(r["moves_per_robot"].values()) >= 2 * r["total"]
+        )  # each target picked and placed at least once
         assert r["communication_steps"] <= r["action_steps"] and set(r["messages_per_robot"]) == set(r["robots"])
     assert paper["moves_per_robot"]["david"] == 0  # the scout moves nothing
     out = tmp_path / "ev"
