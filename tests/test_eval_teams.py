@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 
+from mhrc.core.metrics import from_trace
 from mhrc.core.team import PAPER_TEAM
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.html import against_team_size, page
@@ -277,6 +278,20 @@ def test_a_real_grid_of_two_teams(tmp_path: Path) -> None:
     assert "## Team comparison" in md and "| no_mobile | alice (mobile_manipulator), bob (tabletop_arm) |" in md
     assert "against team size" in (out / "summary.html").read_text()
     assert (out / "traces" / "no_mobile_pack_objects_kitchen_3_0.jsonl").exists()
+    # a trace older than the team field (the field taken out) scores exactly as the world's record of the paper's
+    # team; for no_mobile only the team's name differs (its robots are the paper's without David, so its digest is the
+    # ablated paper team's): the paper's metrics never read the team
+    for key, r in rows.items():
+        lines = [json.loads(line) for line in (out / r["trace"]).read_text().splitlines() if line.strip()]
+        old = [
+            {**x, "msg": {k: v for k, v in x["msg"].items() if k != "team"}}
+            if isinstance(x.get("msg"), dict) and x["msg"].get("kind") == "episode_started"
+            else x
+            for x in lines
+        ]
+        now, before = from_trace(lines).as_dict(), from_trace(old).as_dict()
+        changed = {k for k in now if now[k] != before[k]}
+        assert changed == (set() if key == "pack_objects/kitchen/3/0" else {"team"}), changed
     # --resume with other teams is another evaluation
     with pytest.raises(ConfigError, match="--resume needs the same"):
         asyncio.run(evaluate(EvalSpec(**TINY), out, resume=True))  # type: ignore[arg-type]

@@ -152,11 +152,23 @@ def test_per_robot_messages_moves_and_communication_steps() -> None:
     ("results", "redundant"),
     [
         pytest.param(
-            (nav("david", 0, "cabinet"), nav("alice", 1, "cabinet"), nav("alice", 2, "fridge")), 1, id="looked-again"
+            (
+                nav("david", 0, "cabinet"),
+                nav("alice", 1, "cabinet"),
+                nav("alice", 2, "fridge"),
+                pick("alice", 3, "pear"),
+            ),
+            1,
+            id="looked-again",
         ),
         pytest.param((nav("david", 0, "cabinet"), nav("alice", 1, "cabinet")), 1, id="looked-again-then-the-end"),
         pytest.param(
-            (nav("david", 0, "cabinet"), nav("alice", 1, "cabinet"), _result("alice", 2, "move", dx=1.0, dy=0.0)),
+            (
+                nav("david", 0, "cabinet"),
+                nav("alice", 1, "cabinet"),
+                _result("alice", 2, "move", dx=1.0, dy=0.0),
+                pick("alice", 3, "apple"),  # picked elsewhere: the look at the cabinet was still for nothing
+            ),
             1,
             id="looked-again-then-moved-away",
         ),

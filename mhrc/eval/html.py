@@ -191,6 +191,7 @@ def against_team_size(summary: Summary) -> list[tuple[str, str]]:
                 for x, y, name in points:
                     ax.annotate(name, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
             ax.set(title=title, xlabel="robots in the team")
+            ax.margins(x=0.15)  # room for the teams' names
             ax.set_xticks(sorted({c.size for c in mine}))
         axes.flat[0].set_ylim(-0.05, 1.05)
         axes.flat[0].legend(fontsize=7, loc="best")
