@@ -43,6 +43,7 @@ from mhrc.core.protocol import (
     RobotMessage,
     SkillOutcome,
     Snapshot,
+    TeamRecord,
     Turn,
     Wait,
     WorldState,
@@ -193,6 +194,7 @@ class WorldService:
                 fidelity=fidelity_label(self.sim.aids),
                 aids=sorted(self.sim.aids),
                 noise=self.sim.noise,
+                team=TeamRecord(name=self.sim.team.name, digest=self.sim.team.digest(), kinds=self.sim.team.kinds),
                 scheduler=self.scheduler.name,  # type: ignore[arg-type]
                 **self.scheduler.started_fields(),  # type: ignore[arg-type]
             ),

@@ -21,6 +21,7 @@ from mhrc.core.protocol import (
     RobotPose,
     SkillOutcome,
 )
+from mhrc.core.team import TeamSpec
 
 from .presence import TOKEN_DEADLINE
 from .schedulers import TaskResultLike
@@ -36,6 +37,7 @@ class SimLike(Protocol):
     n_objects: int
     aids: frozenset[str]
     noise: MotionNoise
+    team: TeamSpec
 
     def capabilities(self, robot: str) -> frozenset[str]: ...
     def finishers(self) -> frozenset[str]: ...

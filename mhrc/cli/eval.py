@@ -17,6 +17,7 @@ from mhrc.cli.options import (
     LOG_LEVEL,
     NOISE_HELP,
     SCHEDULE_HELP,
+    TEAM_HELP,
     TIME_SCALE_HELP,
     events_option,
     llm_options,
@@ -35,6 +36,17 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
         return tuple(kind(x.strip()) for x in text.split(",") if x.strip())
     except ValueError:
         raise click.BadParameter(f"expected a comma-separated list, got {text!r}") from None
+
+
+def _teams(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> Any:
+    """Each --team read into a TeamSpec before anything starts; a bad one is one line naming it."""
+    from mhrc.core.team import TeamError
+    from mhrc.run.teams import resolve_team
+
+    try:
+        return tuple(resolve_team(v) for v in value)
+    except TeamError as exc:
+        raise click.UsageError(str(exc)) from None
 
 
 @click.command("eval")
@@ -60,6 +72,16 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
     show_default=True,
     type=int,
     help="Run the grid this many times; an episode's seed is repeat x trials + trial, so repeat r of the paper grid uses seed r.",
+)
+@click.option(
+    "--team",
+    "teams",
+    multiple=True,
+    metavar="TEAM",
+    callback=_teams,
+    help=TEAM_HELP.removesuffix("Default: paper (Alice, Bob and David).")
+    + "Repeat it to compare teams: the team is an axis of the grid, like the task and the scene; summaries never "
+    "average across teams. Default: paper (Alice, Bob and David) only.",
 )
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
 @click.option("--horizon", default=50, show_default=True, type=int)
@@ -127,6 +149,7 @@ def eval_(
     objects: str | None,
     trials: int,
     repeats: int,
+    teams: tuple[Any, ...],
     ablation: str,
     horizon: int,
     aids: str | None,
@@ -152,7 +175,7 @@ def eval_(
 
     The default grid is the paper's: per task, 3 scenes x one episode each with 3, 4, 5 and 6
     objects (12 per task, 36 in all); --repeats N runs it N times with other seeds, --objects and
-    --trials build larger grids. Without --llm the heuristic policy plays. Episodes run in
+    --trials build larger grids, and --team (repeatable) runs the grid for each team. Without --llm the heuristic policy plays. Episodes run in
     --workers processes of this machine, or with --ray ADDRESS as tasks on a Ray cluster
     (`ray start --head` on one host, `ray start --address HEAD:6379` on the others; see
     docker/README.md). An interrupted run continues with --resume --out DIR."""
@@ -194,6 +217,7 @@ def eval_(
         schedule=schedule,
         time_scale=time_scale,
         events=events,
+        **({"teams": teams} if teams else {}),
         **llm,
     )
     out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
@@ -264,7 +288,8 @@ def eval_(
     where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {options.processes} worker(s)"
     console.print(
         f"evaluating {spec.method} (ablation {ablation}, fidelity "
-        f"{spec.fidelity}{', noise off' if spec.noise == 'off' else ''}, {spec.mode} replies) on {n_jobs} episodes "
+        f"{spec.fidelity}{', noise off' if spec.noise == 'off' else ''}, {spec.mode} replies"
+        f"{'' if not teams else ', teams ' + ', '.join(t.name for t in spec.teams)}) on {n_jobs} episodes "
         f"into {out} {where}, {concurrency} episode(s) at once each"
     )
     t0 = time.perf_counter()

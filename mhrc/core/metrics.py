@@ -62,6 +62,13 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
   the applied events that have one (None when none has); unrecovered: the applied events after
   which progress never resumed (both None in an episode without scenario events).
 
+- team, team_digest, team_kinds: the team the episode ran (`episode_started`'s `team`: its name,
+  mhrc.core.team.TeamSpec.digest() and each robot's kind in execution order; a trace older than the
+  field ran the paper's team, mhrc.core.upgrade.paper_team);
+- the team's work (mhrc.core.teamwork defines each): messages_per_robot, moves_per_robot (successful
+  picks and places), communication_steps (communicate actions, beside the other action steps),
+  redundant_navigations, redundant_picks and redundant_per_robot.
+
 Over episodes, `summarize` takes means (Succ is then the success rate); recovery_ticks and
 unrecovered over the episodes that have a value (a static episode adds nothing to them).
 """
@@ -89,7 +96,8 @@ from mhrc.core.protocol import (
     TickClosed,
 )
 from mhrc.core.records import LineKind, Rows, TraceLine, as_records, messages
-from mhrc.core.upgrade import UNRECORDED
+from mhrc.core.teamwork import teamwork
+from mhrc.core.upgrade import UNRECORDED, paper_team
 
 __all__ = [
     "UNRECORDED",
@@ -157,6 +165,15 @@ class EpisodeMetrics:
     recovery: list[dict[str, Any]] = field(default_factory=list)  # per scenario event (module docstring)
     recovery_ticks: float | None = None  # mean ticks_to_recover of the applied events that recovered
     unrecovered: int | None = None  # applied events after which progress never resumed (None: no scenario events)
+    team: str = "paper"  # the team's name, digest and robots' kinds (module docstring)
+    team_digest: str = ""
+    team_kinds: dict[str, str] = field(default_factory=dict)
+    messages_per_robot: dict[str, int] = field(default_factory=dict)  # mhrc.core.teamwork defines these
+    moves_per_robot: dict[str, int] = field(default_factory=dict)
+    communication_steps: int = 0
+    redundant_navigations: int = 0
+    redundant_picks: int = 0
+    redundant_per_robot: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -204,6 +221,8 @@ def from_trace(rows: Rows) -> EpisodeMetrics:
     recovery = recovery_of(lines, scheduler, s.step_seconds or 0.0, d)
     invalid, why = _invalidity(lines, d, temporal_steps, results, len(thoughts), unreachable)
     recovered = [int(e["ticks_to_recover"]) for e in recovery if e["applied"] and e["ticks_to_recover"] is not None]
+    team = s.team or paper_team(s.robots)
+    work = teamwork(results, s.robots)
     return EpisodeMetrics(
         task=s.task,
         scene=s.scene,
@@ -244,6 +263,15 @@ def from_trace(rows: Rows) -> EpisodeMetrics:
         recovery=recovery,
         recovery_ticks=round(statistics.fmean(recovered), 3) if recovered else None,
         unrecovered=sum(1 for e in recovery if e["applied"] and e["ticks_to_recover"] is None) if recovery else None,
+        team=team.name,
+        team_digest=team.digest,
+        team_kinds=dict(team.kinds),
+        messages_per_robot=work.messages_per_robot,
+        moves_per_robot=work.moves_per_robot,
+        communication_steps=work.communication_steps,
+        redundant_navigations=work.redundant_navigations,
+        redundant_picks=work.redundant_picks,
+        redundant_per_robot=work.redundant_per_robot,
     )
 
 
@@ -355,6 +383,39 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         # scenario episodes only (a static episode, or a row written before the fields, adds nothing)
         "recovery_ticks": _mean_of_known(rows, "recovery_ticks"),
         "unrecovered": _mean_of_known(rows, "unrecovered"),
+        # the team's work (mhrc.core.teamwork); None when a row predates the fields
+        **_teamwork_means(rows),
+    }
+
+
+TEAMWORK_FIELDS = ("communication_steps", "redundant_navigations", "redundant_picks", "moves_per_robot")
+
+
+def _teamwork_means(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """comm_steps and other_steps (the rest of AS sum), redundant (navigations and picks, and each),
+    moves (successful picks and places) per episode, and each robot's share of the moves: its moves
+    over all robots' moves in these rows (an empty share when nothing was moved)."""
+    if any(r.get(f) is None for r in rows for f in TEAMWORK_FIELDS):
+        return dict.fromkeys(
+            ("comm_steps", "other_steps", "redundant", "redundant_navigations", "redundant_picks", "moves", "share")
+        )
+    moves: Counter[str] = Counter()
+    for r in rows:
+        moves.update(r["moves_per_robot"])
+    robots = list(dict.fromkeys(name for r in rows for name in r["robots"]))
+    total = sum(moves.values())
+
+    def mean(f: Any) -> float:
+        return round(statistics.fmean(float(f(r)) for r in rows), 3)
+
+    return {
+        "comm_steps": mean(lambda r: r["communication_steps"]),
+        "other_steps": mean(lambda r: r["action_steps"] - r["communication_steps"]),
+        "redundant": mean(lambda r: r["redundant_navigations"] + r["redundant_picks"]),
+        "redundant_navigations": mean(lambda r: r["redundant_navigations"]),
+        "redundant_picks": mean(lambda r: r["redundant_picks"]),
+        "moves": mean(lambda r: sum(r["moves_per_robot"].values())),
+        "share": {name: round(moves.get(name, 0) / total, 4) for name in robots} if total else {},
     }
 
 

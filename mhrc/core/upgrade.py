@@ -11,7 +11,10 @@ removed (every field added later has a default). What older traces lack, and wha
 - an `episode_started` without `fidelity` (before fidelity was recorded): UNRECORDED, not the
   model's default `paper`;
 - an `episode_started` without `noise` (before the motion noise was recorded): the calibration, or
-  none under the exact_motion aid (mhrc.core.fidelity.recorded_noise).
+  none under the exact_motion aid (mhrc.core.fidelity.recorded_noise);
+- an `episode_started` without `team` (before teams were data, issue 33): the paper's team, those of
+  Alice, Bob and David the episode ran (`paper_team`: the no_mobile ablation ran Alice and Bob), which
+  is what today's world records for the same episode.
 """
 
 from __future__ import annotations
@@ -19,10 +22,20 @@ from __future__ import annotations
 from typing import Any
 
 from mhrc.core.fidelity import recorded_noise
-from mhrc.core.protocol import EPISODE_OVER, RejectCode
+from mhrc.core.protocol import EPISODE_OVER, RejectCode, TeamRecord
+from mhrc.core.team import PAPER_TEAM
 
 UNRECORDED = "unrecorded"  # the fidelity of a trace written before episodes recorded it
 JUNK_REJECTED = "rejected: "  # how the recorder's junk lines start the reason of a counted rejection
+
+
+def paper_team(robots: Any) -> TeamRecord:
+    """The paper's team as an episode of `robots` ran it (the no_mobile ablation leaves David out):
+    what an episode recorded before teams were data ran, and what today's world records for the
+    paper's team. Names that are not the paper's robots are left out (no such episode existed)."""
+    names = set(robots) if isinstance(robots, (list, tuple)) else set(PAPER_TEAM.names)
+    team = PAPER_TEAM.without(set(PAPER_TEAM.names) - names)
+    return TeamRecord(name=team.name, digest=team.digest(), kinds=team.kinds)
 
 
 def legacy_reject_code(reason: str) -> RejectCode | None:
@@ -79,5 +92,7 @@ def upgrade(kind: str, msg: Any) -> Any:
     if what == "action_ack" and msg.get("accepted") is False and msg.get("code") is None:
         return {**msg, "code": _code(None, str(msg.get("reason", "")))}
     if what == "episode_started" and ("fidelity" not in msg or not isinstance(msg.get("noise"), dict)):
-        return {**msg, "fidelity": msg.get("fidelity") or UNRECORDED, "noise": recorded_noise(msg).model_dump()}
+        msg = {**msg, "fidelity": msg.get("fidelity") or UNRECORDED, "noise": recorded_noise(msg).model_dump()}
+    if what == "episode_started" and msg.get("team") is None:
+        return {**msg, "team": paper_team(msg.get("robots")).model_dump()}
     return msg

@@ -24,6 +24,7 @@ from mhrc.core.metrics import summarize
 from mhrc.eval.report import markdown
 from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, group, is_valid, setting_label, setting_of
 from mhrc.eval.summary import Summary
+from mhrc.eval.teams import team_cells, team_count, without_team
 from mhrc.viewer.wording import diagnostic_label, partial_success
 
 PLOTTED_DIAGNOSTICS = tuple(
@@ -162,6 +163,44 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
     return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.core.diagnostics)")]
 
 
+TEAM_PLOTTED = (("succ", "Succ"), ("ts", "TS"), ("as_ticks", "AS"), ("comm_steps", "communication steps"))
+
+
+def against_team_size(summary: Summary) -> list[tuple[str, str]]:
+    """Per task, when the teams differ in size: Succ, TS, AS and communication steps against the
+    number of robots, one point per team (labelled with its name), one line per setting."""
+    cells = team_cells(summary)
+    if team_count(summary) < 2 or len({c.size for c in cells}) < 2:
+        return []
+    plots = []
+    for task in dict.fromkeys(c.task for c in cells):
+        fig = _figure(9.0, 6.0)
+        axes = fig.subplots(2, 2)
+        mine = [c for c in cells if c.task == task]
+        series = list(dict.fromkeys(without_team(c.setting) for c in mine))
+        for ax, (metric, title) in zip(axes.flat, TEAM_PLOTTED):
+            for k, setting in enumerate(series):
+                points = sorted(
+                    (c.size, c.stats[metric], c.name)
+                    for c in mine
+                    if without_team(c.setting) == setting and c.stats.get(metric) is not None
+                )
+                if not points:
+                    continue
+                ax.plot([p[0] for p in points], [p[1] for p in points], "o-", color=f"C{k % 10}", label=_short(setting))
+                for x, y, name in points:
+                    ax.annotate(name, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+            ax.set(title=title, xlabel="robots in the team")
+            ax.margins(x=0.15)  # room for the teams' names
+            ax.set_xticks(sorted({c.size for c in mine}))
+        axes.flat[0].set_ylim(-0.05, 1.05)
+        axes.flat[0].legend(fontsize=7, loc="best")
+        fig.suptitle(task)
+        fig.tight_layout()
+        plots.append((_svg(fig), f"{task}: Succ, TS, AS and communication steps against team size, one point per team"))
+    return plots
+
+
 # --------------------------------------------------------------------------- the page
 
 
@@ -240,7 +279,11 @@ def page(
     """The page: summary.md's tables as HTML (`md`, when the caller rendered it already), the plots,
     and the episodes with their links (`links[i]` is summary.rows[i]'s)."""
     rows, valid = summary.rows, summary.valid
-    plots = success_by_objects(valid) + ts_against_bound(valid) + diagnostics_by_setting(valid) if valid else []
+    plots = (
+        success_by_objects(valid) + ts_against_bound(valid) + diagnostics_by_setting(valid) + against_team_size(summary)
+        if valid
+        else []
+    )
     figures = "\n".join(
         f"<figure>{svg}<figcaption>{html.escape(caption)}</figcaption></figure>" for svg, caption in plots
     )

@@ -124,6 +124,7 @@ class Why(Enum):
     HORIZON = "horizon"
     SCENARIO = "scenario"
     SCHEDULE = "schedule"
+    TEAM = "team"  # a team other than the paper's Alice, Bob and David
     SETTING = "setting"  # another field of the setting (a world setting) not at its default
     NO_FIGURES = "no_figures"  # the paper reports no figures for this model, ablation and task
     GRID = "grid"  # not the paper's grid of scenes and object counts
@@ -142,6 +143,7 @@ PAPER_SETTING: dict[str, tuple[Any, Why]] = {
     "horizon": (PAPER_HORIZON, Why.HORIZON),
     "scenario": (None, Why.SCENARIO),
     "schedule": (PAPER_SCHEDULE, Why.SCHEDULE),
+    "team": (None, Why.TEAM),
 }
 TEAM_FIELDS = frozenset({"method", "ablation"})
 
@@ -197,6 +199,8 @@ class Mismatch:
                 return (
                     f"the {self.value} schedule (the paper's robots act one after another: --schedule {PAPER_SCHEDULE})"
                 )
+            case Why.TEAM:
+                return f"the team {self.value}, not the paper's Alice, Bob and David"
             case Why.SETTING:
                 return f"{self.field} {self.value}, not the default {self.default}"
             case Why.NO_FIGURES:

@@ -3,8 +3,10 @@
 upgrades what older versions of mhrc wrote.
 
 A field added to a row or to the identity after rows were written has, as its default, the
-meaning a file without it had (`OLD_MEANING`, `EvalIdentity`'s defaults): `read_row` fills it in
-once, on read, so summaries never guess. A row's diagnostics (`diag_*`) are the exception: a row
+meaning a file without it had (`OLD_MEANING`, `EvalIdentity`'s defaults; a row without a team ran
+the paper's, as many of Alice, Bob and David as its `robots`): `read_row` fills it in once, on
+read, so summaries never guess. The team's work (mhrc.core.teamwork: per-robot messages and
+moves, communication steps, redundant actions) is, like the diagnostics, unknown in older rows. A row's diagnostics (`diag_*`) are the exception: a row
 written before them does not know them, and stays without them (unknown, never zero). In
 memory, summaries take a row as its `record()`, the JSON object the file holds, upgraded.
 """
@@ -19,6 +21,7 @@ import structlog
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from mhrc.core.metrics import UNRECORDED
+from mhrc.core.upgrade import paper_team
 from mhrc.eval.spec import EvalIdentity, EvalSpec
 from mhrc.run.config import ConfigError
 
@@ -97,6 +100,15 @@ class EvalRow(BaseModel):
     recovery: list[dict[str, Any]] = []
     recovery_ticks: float | None = None
     unrecovered: int | None = None
+    team: str = "paper"  # the team: its name, TeamSpec.digest() and each robot's kind (upgrade_row: the paper's)
+    team_digest: str = ""
+    team_kinds: dict[str, str] = {}
+    messages_per_robot: dict[str, int] = {}  # the team's work (mhrc.core.teamwork); absent: unknown
+    moves_per_robot: dict[str, int] = {}
+    communication_steps: int = 0
+    redundant_navigations: int = 0
+    redundant_picks: int = 0
+    redundant_per_robot: dict[str, int] = {}
     # the evaluation's settings
     aids: list[str] = []
     history_cap: int | None = None
@@ -149,6 +161,9 @@ def upgrade_row(raw: dict[str, Any]) -> EvalRow:
         values.setdefault(name, old)
     if values.get("noise") is None:  # older than the field
         values["noise"] = old_noise(values.get("aids"))
+    if values.get("team") is None:  # older than teams: the paper's, as many of its robots as the row ran
+        team = paper_team(values.get("robots"))
+        values.update(team=team.name, team_digest=team.digest, team_kinds=dict(team.kinds))
     return EvalRow.model_validate(values)
 
 

@@ -41,6 +41,7 @@ from mhrc.eval.rows import (
     setting_of,
 )
 from mhrc.eval.summary import Summary
+from mhrc.eval.teams import TEAM, team_comparison
 
 log = structlog.get_logger("mhrc.eval.report")
 
@@ -182,6 +183,7 @@ def markdown(summary: Summary) -> str:
         family = (fam[0], "*", *fam[1:])
         lines += matrix(f"Table II: ablations of {setting_label(family, ablation=False)}", [(s, s[1]) for s in mine])
 
+    lines += team_comparison(summary)  # only where the rows hold more than one team
     lines += [
         "## Per setting, with 95% confidence intervals",
         "",
@@ -342,9 +344,12 @@ def csv_text(summary: Summary) -> str:
         "diag_episodes",
         *(f"diag_{c}" for c in DIAG_COLUMNS),
     ]  # means over the rows with diagnostics; empty: unknown
+    # the team column only where a team other than the paper's ran: a paper-only summary reads as it always did
+    teams = any(setting[TEAM] is not None for setting, _ in summary.cells)
+    fields = [i for i in range(len(SETTING)) if teams or i != TEAM]
     w.writerow(
         [
-            *SETTING,
+            *(SETTING[i] for i in fields),
             "task",
             *COLUMNS,
             *ci_cols,
@@ -371,7 +376,7 @@ def csv_text(summary: Summary) -> str:
         diag = [d["known"], *("" if d["mean"][c] is None else d["mean"][c] for c in DIAG_COLUMNS)]
         w.writerow(
             [
-                *("" if x is None else x for x in setting),
+                *("" if setting[i] is None else setting[i] for i in fields),
                 task,
                 *(s[c] for c in COLUMNS),
                 *cis,

@@ -11,6 +11,7 @@ import numpy as np
 import structlog
 
 from mhrc.core.metrics import summarize
+from mhrc.core.upgrade import paper_team
 from mhrc.eval.paper import PAPER_HORIZON, PAPER_SCHEDULE
 from mhrc.eval.records import OLD_MEANING, old_noise
 from mhrc.eval.records import merge_runs as merge_runs  # where callers have always found them
@@ -38,9 +39,23 @@ CI_METRICS = {
 
 # noise: the world's motion noise, on (the calibration) or off (--noise off, or the exact_motion aid; mhrc.core.fidelity);
 # mode: free (the paper's) or structured replies; schedule: the world's time policy (world/schedulers);
+# team: None for the paper's team (or as much of it as an ablation runs), else NAME@DIGEST (the team's name and
+# TeamSpec.digest(): two teams of one name are two settings); the summaries never average across teams;
 # scenario: the --events scenario as NAME@SHA12 (its name and the first 12 hex digits of the file's sha256, as
 # `mhrc scenarios` lists it: two files of one name are two settings), None for a static episode
-SETTING = ("method", "ablation", "fidelity", "noise", "history_cap", "horizon", "mode", "schedule", "scenario")
+SETTING = ("method", "ablation", "fidelity", "noise", "history_cap", "horizon", "mode", "schedule", "team", "scenario")
+
+
+def team_setting(row: dict[str, Any]) -> str | None:
+    """A row's team as its setting holds it: None for the paper's (a row without a team ran it),
+    else NAME@DIGEST."""
+    name = row.get("team")
+    if name is None:
+        return None
+    digest = str(row.get("team_digest") or "")
+    if name == "paper" and digest == paper_team(row.get("robots")).digest:
+        return None
+    return f"{name}@{digest}"
 
 
 def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
@@ -48,6 +63,7 @@ def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
     values = {
         k: row.get(k, OLD_MEANING.get(k)) for k in SETTING
     }  # rows read from a file are upgraded already (read_row)
+    values["team"] = team_setting(row)
     if values["noise"] is None:
         values["noise"] = old_noise(row.get("aids"))
     if values["scenario"] is not None and row.get("scenario_sha256"):
@@ -64,7 +80,7 @@ def order_key(key: Iterable[Any]) -> tuple[str, ...]:
 
 
 def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
-    method, abl, fidelity, noise, cap, horizon, mode, schedule, scenario = setting
+    method, abl, fidelity, noise, cap, horizon, mode, schedule, team, scenario = setting
     parts = (
         [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["noise off"] if noise == "off" else [])
     )
@@ -75,6 +91,8 @@ def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
         parts.append(f"history cap {cap}")
     if horizon is not None and horizon != PAPER_HORIZON:
         parts.append(f"horizon {horizon}")
+    if team is not None:
+        parts.append(f"team {team}")
     if scenario is not None:
         parts.append(f"scenario {scenario}")
     return " · ".join(parts)

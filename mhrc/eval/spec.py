@@ -2,26 +2,44 @@
 as the CLI or a caller gives it), its `EvalIdentity` (what `--resume` must find unchanged) and
 the `Plan` that `EvalSpec.validate` returns, every episode's `EpisodeConfig` already built.
 
-The spec is checked in one place (`validate`): each cell of the grid (task, scene, object
-count) is built once with `EpisodeConfig.build`, the full check (task, scene, scenario, model
-specs, prompt templates); the episodes of a cell differ only in their seed. Workers receive
+The spec is checked in one place (`validate`): each cell of the grid (team, task, scene, object
+count) is built once with `EpisodeConfig.build`, the full check (the team against the world's
+kinds and the scene's layout, task, scene, scenario, model specs, prompt templates); the episodes
+of a cell differ only in their seed. The team is an axis of the grid like the task and the scene:
+the paper's team (the default) keys its episodes `task/scene/objects/seed` as always, any other
+team `TEAM/task/scene/objects/seed`. Workers receive
 those configs inside their `Job` and run them as they are.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from pydantic import BaseModel, ConfigDict
 
 from mhrc.agents.llm import DEFAULT_MAX_TOKENS
 from mhrc.core.fidelity import label
+from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.eval.episode import Job
 from mhrc.eval.paper import PAPER_OBJECTS
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.world.scenario import load_scenario
 
-__all__ = ["EvalIdentity", "EvalSpec", "Plan"]
+__all__ = ["EvalIdentity", "EvalSpec", "Plan", "is_paper_team", "team_identity"]
+
+TEAM_KEY = re.compile(r"[A-Za-z0-9_-]{1,64}")  # a team's name as the first part of its episodes' keys
+
+
+def is_paper_team(team: TeamSpec) -> bool:
+    """The paper's Alice, Bob and David, under the paper's name (its episodes keep their keys)."""
+    return team.name == PAPER_TEAM.name and team.digest() == PAPER_TEAM.digest()
+
+
+def team_identity(team: TeamSpec) -> str:
+    """What --resume compares of a team: NAME@DIGEST, and the models a team file gives its robots."""
+    models = ", ".join(f"{r.name}={r.llm}" for r in team.robots if r.llm)
+    return f"{team.name}@{team.digest()}" + (f" ({models})" if models else "")
 
 
 class EvalIdentity(BaseModel):
@@ -44,6 +62,7 @@ class EvalIdentity(BaseModel):
     schedule: str = "lockstep"
     time_scale: float = 0.0
     scenario: str | None = None  # the scenario file's sha256
+    teams: tuple[str, ...] = (team_identity(PAPER_TEAM),)  # team_identity of each team, sorted
 
 
 class EvalSpec(BaseModel):
@@ -77,6 +96,7 @@ class EvalSpec(BaseModel):
     # a scenario (world/scenario.py), applied to every episode: a file's path, or a shipped scenario's name, which
     # travels to the workers as the name so that each (a Ray node too) reads the copy installed with its own package
     events: str | None = None
+    teams: tuple[TeamSpec, ...] = (PAPER_TEAM,)  # a grid axis (--team, repeatable); the paper's team by default
 
     def scenario(self) -> tuple[str, str] | tuple[None, None]:
         """The scenario's short name and sha256 (None, None without one): what rows record of it."""
@@ -114,15 +134,17 @@ class EvalSpec(BaseModel):
             schedule=self.schedule,
             time_scale=self.time_scale,
             scenario=scenario_sha256 if scenario_sha256 is not None else self.scenario()[1],
+            teams=tuple(sorted(team_identity(t) for t in self.teams)),
         )
 
     def seed(self, repeat: int, trial: int) -> int:
         """The episode seed of a trial in a repeat: distinct for every (repeat, trial)."""
         return repeat * self.trials + trial
 
-    def episode_values(self, task: str, scene: str, n_objects: int) -> dict[str, object]:
+    def episode_values(self, task: str, scene: str, n_objects: int, team: TeamSpec = PAPER_TEAM) -> dict[str, object]:
         """The EpisodeConfig fields of a cell of the grid (seed 0; no run, port or trace: the process that runs it picks those)."""
         cfg: dict[str, object] = {
+            "team": None if team == PAPER_TEAM else team,
             "task": task,
             "scene": scene,
             "seed": 0,
@@ -155,20 +177,24 @@ class EvalSpec(BaseModel):
             raise ConfigError(f"--repeats: must be at least 1 (got {self.repeats})")
         if self.trials < 1:
             raise ConfigError(f"--trials: must be at least 1 (got {self.trials})")
-        if not (self.tasks and self.scenes and self.objects):
-            raise ConfigError("--tasks, --scenes and --objects must each name at least one value")
-        cells: dict[tuple[str, str, int], EpisodeConfig] = {}
-        for task in self.tasks:
-            for scene in self.scenes:
-                for n in self.objects:
-                    if (task, scene, n) in cells:
-                        continue
-                    try:
-                        cells[(task, scene, n)] = EpisodeConfig.build(**self.episode_values(task, scene, n))
-                    except (
-                        ConfigError
-                    ) as exc:  # a scenario is checked against every task and scene of the grid: say which
-                        raise ConfigError(f"{exc} (in {task}/{scene})" if self.events else str(exc)) from None
+        if not (self.tasks and self.scenes and self.objects and self.teams):
+            raise ConfigError("--tasks, --scenes, --objects and --team must each name at least one value")
+        self._check_teams()
+        cells: dict[tuple[str, str, str, int], EpisodeConfig] = {}
+        for team in self.teams:
+            for task in self.tasks:
+                for scene in self.scenes:
+                    for n in self.objects:
+                        if (team.name, task, scene, n) in cells:
+                            continue
+                        try:
+                            cells[(team.name, task, scene, n)] = EpisodeConfig.build(
+                                **self.episode_values(task, scene, n, team)
+                            )
+                        except (
+                            ConfigError
+                        ) as exc:  # a scenario is checked against every task and scene of the grid: say which
+                            raise ConfigError(f"{exc} (in {task}/{scene})" if self.events else str(exc)) from None
         scenario, sha256 = self.scenario()
         return Plan(
             spec=self,
@@ -178,17 +204,39 @@ class EvalSpec(BaseModel):
             identity=self.identity(sha256 or None),
         )
 
-    def _jobs(self, cells: dict[tuple[str, str, int], EpisodeConfig]) -> list[Job]:
-        """Repeat by repeat (a finished repeat is a whole grid), then task, scene, objects, trial."""
+    def _check_teams(self) -> None:
+        """Each team's name keys its episodes: a name fit for a key, and no two teams of one name."""
+        seen: set[str] = set()
+        for team in self.teams:
+            if not TEAM_KEY.fullmatch(team.name):
+                raise ConfigError(
+                    f"--team: a team's name keys its episodes: {team.name!r} must be letters, digits, _ or - "
+                    "(rename the file, or give the team a name)"
+                )
+            if team.name in seen:
+                raise ConfigError(
+                    f"--team: two teams are named {team.name!r}; each team of the grid needs its own name"
+                )
+            if team.name == PAPER_TEAM.name and not is_paper_team(team):
+                raise ConfigError(
+                    f"--team: a team named {PAPER_TEAM.name!r} must be the paper's Alice, Bob and David; name yours otherwise"
+                )
+            seen.add(team.name)
+
+    def _jobs(self, cells: dict[tuple[str, str, str, int], EpisodeConfig]) -> list[Job]:
+        """Repeat by repeat (a finished repeat is a whole grid), then team, task, scene, objects, trial."""
         out = []
         for repeat in range(self.repeats):
-            for task in self.tasks:
-                for scene in self.scenes:
-                    for n in self.objects:
-                        for trial in range(self.trials):
-                            seed = self.seed(repeat, trial)
-                            config = cells[(task, scene, n)].model_copy(update={"seed": seed})
-                            out.append(Job(key=f"{task}/{scene}/{n}/{seed}", config=config, repeat=repeat, trial=trial))
+            for team in self.teams:
+                prefix = "" if is_paper_team(team) else f"{team.name}/"
+                for task in self.tasks:
+                    for scene in self.scenes:
+                        for n in self.objects:
+                            for trial in range(self.trials):
+                                seed = self.seed(repeat, trial)
+                                config = cells[(team.name, task, scene, n)].model_copy(update={"seed": seed})
+                                key = f"{prefix}{task}/{scene}/{n}/{seed}"
+                                out.append(Job(key=key, config=config, repeat=repeat, trial=trial))
         return out
 
     def jobs(self) -> list[Job]:

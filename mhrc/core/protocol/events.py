@@ -59,6 +59,14 @@ class MotionNoise(_Model):
     release_sigma: float = Field(0.003, ge=0.0, description="m: the Rayleigh scale of an ordinary release's error")
 
 
+class TeamRecord(_Model):
+    """The team an episode ran (mhrc.core.team.TeamSpec), as traces and rows record it."""
+
+    name: str = Field(description="the team's name: a shipped configuration's (mhrc teams), a file's stem, or custom")
+    digest: str = Field(description="TeamSpec.digest(): a short hash of the robots' names, kinds and start poses")
+    kinds: dict[str, str] = Field(description="robot -> its kind, in execution order")
+
+
 class EpisodeStarted(Message):
     kind: Literal["episode_started"] = "episode_started"
     run: str
@@ -85,6 +93,10 @@ class EpisodeStarted(Message):
     noise: MotionNoise = Field(
         default_factory=MotionNoise,
         description="the motion noise this episode's world drew from (an event without it: the calibration, the defaults)",
+    )
+    team: TeamRecord | None = Field(
+        None,
+        description="the team this episode ran (an event without it: the paper's Alice, Bob and David, those of them in `robots`)",
     )
 
 
