@@ -98,6 +98,9 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
             )  # type: ignore[arg-type]
     # mhrc report merges directories into one table
     merged = merge_runs([a, b])
+    # the intervals do not depend on the order the rows come in (the order workers finished in)
+    spread = [dict(merged[0], key=f"pack_objects/kitchen/4/{i}", temporal_steps=10 + i * i) for i in range(12)]
+    assert summary_markdown(spread) == summary_markdown(spread[::-1])
     assert (
         len(merged) == 4
         and "| heuristic | none | paper | kitchen |" in summary_markdown(merged)

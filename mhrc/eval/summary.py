@@ -39,6 +39,9 @@ class Summary:
 
     @classmethod
     def of(cls, rows: list[Row], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> Summary:
+        # in key order, not the order workers finished in: the bootstrap resamples by position, so the same
+        # rows give the same intervals however the episodes were scheduled
+        rows = sorted(rows, key=lambda r: (str(r.get("key", "")), r.get("repeat", 0)))
         valid = [r for r in rows if is_valid(r)]
         cells = by_setting_task(valid)
         return cls(
