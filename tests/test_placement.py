@@ -11,6 +11,7 @@ import pytest
 
 from mhrc.core.protocol import Navigate, OutcomeCode
 from mhrc.core.team import RobotSpec, TeamError, TeamProblem, TeamSpec
+from mhrc.world.bound import lower_bound, symbolic_episode
 from mhrc.world.layout_schema import LayoutFile
 from mhrc.world.placement import STAND_CLEARANCE, START_GAP, place_team, reachable
 from mhrc.world.robots import KINDS
@@ -132,3 +133,13 @@ def test_a_drone_hovers_above_a_ground_robot_but_not_beside_another_drone() -> N
         out = _one_lockstep_tick(sim, {"alice": goal, "lucy": goal, "mia": goal})
         assert out["alice"].succeeded and out["lucy"].succeeded  # the floor and the air above it
         assert out["mia"].code is OutcomeCode.OCCUPIED and out["mia"].details["occupant"] == "lucy"
+
+
+def test_the_lower_bound_shares_the_fetching_among_fetchers() -> None:
+    """world/bound.py: a second fetcher can only lower the bound; the paper's team keeps its own."""
+    for seed in range(3):
+        with Sim(seed=seed, n_objects=6) as paper, Sim(seed=seed, n_objects=6, team=SHIPPED["two_fetchers"]) as two:
+            ep = symbolic_episode(paper.world, paper.targets)
+            assert (ep.fetchers, ep.arms) == (1, 2) and paper.lower_bound() == lower_bound(ep)
+            assert 0 < two.lower_bound() <= paper.lower_bound()
+            assert symbolic_episode(two.world, two.targets).fetchers == 2
