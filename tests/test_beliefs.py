@@ -173,6 +173,7 @@ def test_a_container_is_open_only_for_those_who_saw_it_open() -> None:
         )
         _ok(sim.execute("david", Navigate(target=c.other, stand_pose=0)))
         assert _is_open(sim.observe("david", 2), c.box) is False  # elsewhere: still as he last knew it
+        _ok(sim.execute("alice", Navigate(target="table_0", stand_pose=0)))  # one robot per stand pose: she leaves
         _ok(sim.execute("david", Navigate(target=c.box, stand_pose=0)))
         david = sim.observe("david", 3)
         assert _is_open(david, c.box) is True and _obj(david, c.hidden) == hidden  # he sees it open, and what is in it

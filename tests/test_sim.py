@@ -47,6 +47,22 @@ def _nearest_pose(obs: Observation, furniture: str, xy: tuple[float, ...]) -> in
     )
 
 
+def _make_room(sim: Sim, robot: str, furniture: str, pose: int) -> None:
+    """`robot` leaves stand pose `pose` of `furniture` for the free stand pose farthest from it."""
+    spec = sim.layout.get(furniture)
+    assert spec is not None
+    x, y, _ = spec.stand_poses[pose]
+    spots = [
+        (f.name, i, math.hypot(sx - x, sy - y))
+        for f in sim.layout.furniture
+        for i, (sx, sy, _) in enumerate(f.stand_poses)
+    ]
+    for name, i, _ in sorted(spots, key=lambda s: -s[2]):
+        if (out := sim.execute(robot, Navigate(target=name, stand_pose=i))).code != OutcomeCode.OCCUPIED:
+            _ok(out)
+            return
+
+
 def _bob_can_reach(obs: Observation, o: ObjectView) -> bool:
     ab, reach = obs.status.arm_base, obs.status.reach
     assert ab is not None and reach is not None
@@ -58,7 +74,12 @@ def _fetch(sim: Sim, name: str) -> None:
     alice = sim.observe("alice", 0)
     o = _obj(alice, name)
     assert o is not None and o.on is not None, f"Alice does not know where {name} is"
-    _ok(sim.execute("alice", Navigate(target=o.on, stand_pose=_nearest_pose(alice, o.on, o.position))))
+    pose = _nearest_pose(alice, o.on, o.position)
+    out = sim.execute("alice", Navigate(target=o.on, stand_pose=pose))
+    if out.code == OutcomeCode.OCCUPIED:  # one robot per stand pose: the occupant makes room, then Alice goes
+        _make_room(sim, str(out.details["occupant"]), o.on, pose)
+        out = sim.execute("alice", Navigate(target=o.on, stand_pose=pose))
+    _ok(out)
     out = sim.execute("alice", Pick(obj=name))
     if out.code == OutcomeCode.TOO_FAR and "dx" in out.details:  # the paper's recovery: move by the offsets
         _ok(sim.execute("alice", Move(dx=float(out.details["dx"]), dy=float(out.details["dy"]))))

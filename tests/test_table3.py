@@ -431,6 +431,7 @@ SAMPLES: dict[str, tuple[tuple[Any, ...], dict[str, Any], str | None]] = {
     "start_invalid": ((), {}, None),
     "goal_invalid": (("table_1", 0), {}, None),
     "no_path": (("table_1", 2), {}, None),
+    "occupied": (("sofa", 0, "david"), {}, " Try another stand pose of sofa, or wait until David leaves."),
     "reached": (("drawer_unit", 0, None), {"container": True}, "open it to see what is inside."),
     "off_target": (("sofa", 0, 0.21, (1.0, 2.0)), {}, " Navigate to stand pose 0 of sofa again."),
     "move_off_target": ((0.3, 0.0, 0.2, (0.1, 0.0)), {}, None),
@@ -563,6 +564,17 @@ def table3_cases(aids: tuple[str, ...]) -> tuple[list[Case], set[str], set[str]]
             Navigate(target="table_0", stand_pose=7),
             OutcomeCode.STAND_POSE_INVALID,
         )
+        sofa, david = sim.layout.get("sofa"), sim.bots["david"].base
+        assert sofa is not None and david is not None
+        sim.bots["david"].set_base(sofa.stand_poses[0])  # one robot per stand pose
+        case(
+            "navigate: stand pose occupied",
+            "alice",
+            Navigate(target="sofa", stand_pose=0),
+            OutcomeCode.OCCUPIED,
+            "Try another stand pose of sofa",
+        )
+        sim.bots["david"].set_base(david)
         case("move: too long", "alice", Move(dx=3.0, dy=0.0), OutcomeCode.GOAL_INVALID)
         base = sim.bots["alice"].base
         assert base is not None

@@ -1,5 +1,5 @@
 """Procedural URDFs built from primitives (walls, furniture, drawer units, the tray, objects,
-Alice's chassis), written to a temporary directory that lives as long as its `AssetDir`.
+Alice's chassis, the drone), written to a temporary directory that lives as long as its `AssetDir`.
 
 Every body's origin is on the floor (or, for objects, at the body's centre), axis-aligned, so
 the scene can place it with a plain position and yaw.
@@ -439,6 +439,23 @@ def chassis_boxes(length: float, width: float, height: float, color: Color) -> l
             boxes.append(
                 Box((ix * (length / 2 - 0.09), iy * (width / 2 - 0.02), 0.06), (0.14, 0.05, 0.12), black, collide=False)
             )
+    return boxes
+
+
+def drone_boxes(color: Color) -> list[Box]:
+    """A quadrotor seen as boxes, its origin at its centre: a body, two crossed arms, four rotor
+    discs at their tips and a camera under the nose. Nothing collides (it flies above what
+    the simulation steps)."""
+    dark = (0.15, 0.15, 0.15, 1.0)
+    span = 0.32  # arm tip to arm tip
+    boxes = [
+        Box((0.0, 0.0, 0.0), (0.16, 0.16, 0.06), color, collide=False),
+        Box((0.0, 0.0, 0.0), (span, 0.03, 0.02), dark, collide=False),
+        Box((0.0, 0.0, 0.0), (0.03, span, 0.02), dark, collide=False),
+        Box((0.07, 0.0, -0.045), (0.04, 0.04, 0.03), dark, collide=False),
+    ]
+    for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        boxes.append(Box((dx * span / 2, dy * span / 2, 0.025), (0.14, 0.14, 0.008), (0.7, 0.7, 0.75, 0.8), False))
     return boxes
 
 

@@ -17,6 +17,12 @@ team and the world:
 Alice's steps happen one per tick, so their sum bounds the makespan; so does half the steps of
 both arms together. The bound is the larger of the two, and ignoring order (a sandwich's stack)
 only loosens it. It is never above what a real team achieves (tests check the heuristic team).
+
+A team with several fetchers (robots that navigate and pick) shares the fetching work: their
+steps together, divided among them, bound the makespan, and so does the longest chain one
+fetcher must walk alone for one object (its navigate, pick, navigate back and place, after an
+open); the arms' steps are divided among every arm of the team. With the paper's team (one
+fetcher, two arms) this is the bound above.
 """
 
 from __future__ import annotations
@@ -40,6 +46,8 @@ class SymbolicObject:
 @dataclass(frozen=True)
 class SymbolicEpisode:
     objects: tuple[SymbolicObject, ...]  # the targets
+    fetchers: int = 1  # robots that navigate and pick (the paper's Alice)
+    arms: int = 2  # robots with an arm, fetchers included (Alice and Bob)
 
 
 def lower_bound(ep: SymbolicEpisode) -> int:
@@ -48,9 +56,10 @@ def lower_bound(ep: SymbolicEpisode) -> int:
     far = [o for o in ep.objects if o.on_bob_table and not o.bob_can_reach]
     near = [o for o in ep.objects if o.on_bob_table and o.bob_can_reach]
     opens = len({o.source for o in away if o.inside})
-    alice = 4 * len(away) + 2 * len(far) + opens + (1 if far and not away else 0)
+    alice = 4 * len(away) + 2 * len(far) + opens + (1 if far and not away else 0)  # every fetcher's steps
     arms = alice + 2 * len(near)
-    return max(alice, math.ceil(arms / 2))
+    chain = max([4 + (1 if o.inside else 0) for o in away] + [2 + (0 if away else 1) for o in far] + [0])
+    return max(math.ceil(alice / ep.fetchers), chain, math.ceil(arms / ep.arms))
 
 
 def symbolic_episode(world: PhysicalWorld, targets: list[str]) -> SymbolicEpisode:
@@ -64,4 +73,6 @@ def symbolic_episode(world: PhysicalWorld, targets: list[str]) -> SymbolicEpisod
         on_table = world.on_bob_table(o.on)
         reach = base is not None and on_table and math.hypot(x - base[0], y - base[1]) <= MAX_ARM_RANGE
         objs.append(SymbolicObject(name, o.on or "", o.inside, on_table, reach))
-    return SymbolicEpisode(tuple(objs))
+    fetchers = sum(1 for b in world.bots.values() if b.kind.mobile and {"navigate", "pick"} <= set(b.kind.skills))
+    arms = sum(1 for b in world.bots.values() if b.kind.has_arm)
+    return SymbolicEpisode(tuple(objs), max(fetchers, 1), max(arms, 1))

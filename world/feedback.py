@@ -66,6 +66,13 @@ def goal_invalid(name: str, index: int) -> str:
     return f"Navigation failed: stand pose {index} of {name} is on an obstacle or off the map."
 
 
+def occupied(name: str, index: int, occupant: str, *, advice: bool = False) -> str:
+    """One robot per stand pose: another robot (`occupant`) stands at the goal, an obstacle on it."""
+    who = occupant.capitalize()
+    text = f"Navigation failed: stand pose {index} of {name} is occupied by {who}."
+    return text + (f" Try another stand pose of {name}, or wait until {who} leaves." if advice else "")
+
+
 def no_path(name: str, index: int) -> str:
     return f"Navigation failed: there is no collision-free path to stand pose {index} of {name}."
 

@@ -60,7 +60,7 @@ class LayoutFile(Strict):
     bounds: tuple[float, float, float, float]
     walls: list[Rect] = Field(default_factory=list)
     bob: BobFile
-    starts: dict[Literal["alice", "david"], Pose]
+    starts: dict[Name, Pose]  # any robot's name; a team's robot without one starts where the seed puts it
     furniture: list[FurnitureFile] = Field(min_length=2)
 
     @model_validator(mode="after")

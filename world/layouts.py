@@ -16,7 +16,9 @@ The file format (every field is checked on load; an error names the file and the
                               (tray, panels, cutting board), all within his reach,
                               near_slots / far_slots: [[x, y], ...] object spots on his table
                               within / beyond his reach}
-    starts                   {alice: [x, y, yaw], david: [x, y, yaw]}
+    starts                   {robot name: [x, y, yaw], ...}: where robots of these names start (a
+                              robot a layout does not name starts on free floor chosen from the
+                              seed: placement.py)
     furniture                [{name, kind (how robots are told of it), style (table | block | sofa
                               | drawer_unit | chest | cupboard: how it is built), center [x, y], size [sx, sy, top z],
                               color (a name from colors.FURNITURE_COLORS or [r, g, b, a]),

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from .arm import ArmPlanner
+from .astar import Grid
 from .furniture import Layout
 from .robots import RobotBody
 from .scene import BuiltScene, Fixture
@@ -73,6 +74,24 @@ class PhysicalWorld:
         self.objects: dict[str, ObjectState] = {}
 
     # ------------------------------------------------------------------ robots
+    def grid_for(self, r: RobotBody) -> Grid:
+        """The grid `r` plans on: the air's (walls only) for a flier, the floor's for a ground base."""
+        if r.kind.flies:
+            assert self.scene.air is not None, "the scene was built without the air's grid"
+            return self.scene.air
+        return self.grid
+
+    def occupant(self, r: RobotBody, xy: tuple[float, float], within: float) -> str | None:
+        """The robot other than `r` whose base is within `within` of `xy` on r's level: fliers
+        share the air with fliers, ground bases the floor with ground bases (a drone hovers above
+        a robot standing below it). None when the spot is free."""
+        for other in self.bots.values():
+            if other is r or other.base is None or other.kind.flies != r.kind.flies:
+                continue
+            if math.hypot(other.base[0] - xy[0], other.base[1] - xy[1]) <= within:
+                return other.name
+        return None
+
     def finisher(self) -> RobotBody | None:
         """The robot that places on the task's goal fixtures (robots.RobotKind.finishes_task; the paper's Bob)."""
         return next((b for b in self.bots.values() if b.kind.finishes_task), None)

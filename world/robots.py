@@ -1,7 +1,8 @@
 """Robot kinds as data (skills, model, reach) and their kinematic PyBullet bodies.
 
 A new robot kind is a new `RobotKind` entry, not a new code path: the skills check
-`has_arm` / `mobile` / `finishes_task` and the capability set. Bases and arms are moved by setting poses and
+`has_arm` / `mobile` / `flies` / `finishes_task` and the capability set; a base's speed and a
+flier's altitude are the kind's numbers. Bases and arms are moved by setting poses and
 joint states; an object held by suction follows the tool tip (a kinematic attachment, so
 every run of the same actions ends in the same state).
 """
@@ -33,6 +34,9 @@ class RobotKind:
     reach: float | None = None  # conservative horizontal reach of the arm (m): picks within it usually succeed
     footprint: float = 0.0  # radius the occupancy grid is inflated by
     finishes_task: bool = False  # may place on the task's goal fixtures (the paper: only Bob finishes the task)
+    speed: float = 0.5  # m/s along a navigate's path: the simulated time of base motions
+    flies: bool = False  # plans in the air: walls block it, furniture does not (PhysicalWorld.grid_for)
+    altitude: float = 0.0  # m: a flier's lowest cruise height (flight_altitude raises it over tall furniture)
 
 
 KINDS: dict[str, RobotKind] = {
@@ -67,6 +71,18 @@ KINDS: dict[str, RobotKind] = {
             has_arm=False,
             footprint=0.3,
         ),
+        RobotKind(
+            "drone",
+            "drone",
+            ("navigate", "communicate", "wait"),
+            "small quadrotor built from boxes, hovering at flight altitude",
+            mobile=True,
+            has_arm=False,
+            footprint=0.25,  # rotor tip to rotor tip 0.46 m
+            speed=1.5,
+            flies=True,
+            altitude=2.0,  # above a mobile manipulator's arm at full stretch (about 1.7 m)
+        ),
     )
 }
 
@@ -78,6 +94,14 @@ ARM_FORWARD = 0.2  # arm base ahead of the chassis centre
 MAX_ARM_RANGE = 0.9  # no top-down pose of a Panda exists beyond this horizontal distance from its arm base
 CHASSIS_COLOR = (0.55, 0.25, 0.6, 1.0)
 PANDA = "franka_panda/panda.urdf"
+DRONE_COLOR = (0.95, 0.55, 0.1, 1.0)
+AIR_CLEARANCE = 0.4  # m: a flier cruises at least this high above the tallest furniture of its layout
+
+
+def flight_altitude(kind: RobotKind, tallest: float) -> float:
+    """Where a flier cruises and hovers: its kind's altitude, or higher over furniture as tall as
+    `tallest` (m), so that it passes over every piece, never through one."""
+    return round(max(kind.altitude, tallest + AIR_CLEARANCE), 3)
 
 
 @dataclass
@@ -97,6 +121,7 @@ class RobotBody:
     held_body: int = -1
     held_drop: float = 0.0  # how far the held object's centre hangs below the tool tip
     held_yaw: float = 0.0  # the held object's yaw relative to the tool's
+    altitude: float = 0.0  # a flier's height above the floor (flight_altitude)
 
     # ---------------------------------------------------------------- geometry
     def arm_base(self) -> tuple[float, float, float] | None:
@@ -131,6 +156,9 @@ class RobotBody:
             assert ab is not None
             p.resetBasePositionAndOrientation(self.arm, ab, orn, physicsClientId=self.cid)
             self._carry()
+        elif self.kind.flies:  # hovering: the body's origin is its centre
+            orn = p.getQuaternionFromEuler((0, 0, yaw))
+            p.resetBasePositionAndOrientation(self.body, (x, y, self.altitude), orn, physicsClientId=self.cid)
         else:  # r2d2.urdf faces its own +y
             orn = p.getQuaternionFromEuler((0, 0, yaw - math.pi / 2))
             p.resetBasePositionAndOrientation(self.body, (x, y, 0.38), orn, physicsClientId=self.cid)
@@ -176,9 +204,11 @@ def spawn(
     pose: tuple[float, float, float] | None = None,
     arm_base: tuple[float, float, float] | None = None,
     arm_yaw: float = 0.0,
+    altitude: float = 0.0,
 ) -> RobotBody:
-    """Load a robot's bodies: a chassis with an arm, a fixed arm, or a bare mobile base."""
-    r = RobotBody(name, kind, cid, fixed_arm=arm_base, fixed_yaw=arm_yaw)
+    """Load a robot's bodies: a chassis with an arm, a fixed arm, a bare mobile base or a drone
+    (hovering at `altitude`)."""
+    r = RobotBody(name, kind, cid, fixed_arm=arm_base, fixed_yaw=arm_yaw, altitude=altitude)
     data = pybullet_data.getDataPath()
     if kind.has_arm:
         if kind.mobile:
@@ -191,6 +221,9 @@ def spawn(
             r.arm = p.loadURDF(f"{data}/{PANDA}", arm_base, orn, useFixedBase=True, physicsClientId=cid)
         for f in FINGERS:  # closed fingers around the suction cup
             p.resetJointState(r.arm, f, 0.0, physicsClientId=cid)
+    elif kind.flies:
+        urdf = assets.link_urdf(f"{name}_drone", assets.drone_boxes(DRONE_COLOR))
+        r.body = p.loadURDF(assets_dir.write(f"{name}_drone", urdf), useFixedBase=True, physicsClientId=cid)
     else:
         r.body = p.loadURDF(f"{data}/r2d2.urdf", globalScaling=0.8, physicsClientId=cid)
     if kind.mobile:

@@ -46,6 +46,7 @@ class BuiltScene:
         str, int
     ]  # container name -> the joint that opens it (a drawer's prismatic, a lid's or door's revolute)
     grid: Grid
+    air: Grid | None = None  # fliers' grid: walls only (built when the team has a flier)
 
 
 @dataclass(frozen=True)
@@ -117,13 +118,15 @@ def load_statics(cid: int, statics: list[StaticBody]) -> dict[str, int]:
     return bodies
 
 
-def occupancy(layout: Layout, margin: float, res: float = 0.05) -> Grid:
-    """Walls and furniture footprints (open drawers and the floor doors sweep included) grown by `margin`."""
+def occupancy(layout: Layout, margin: float, res: float = 0.05, *, furniture: bool = True) -> Grid:
+    """Walls and furniture footprints (open drawers and the floor doors sweep included) grown by
+    `margin`. Without `furniture`, the walls alone: the air a flier plans in (it passes over
+    furniture; walls reach the ceiling)."""
     xmin, xmax, ymin, ymax = layout.bounds
     grid = Grid.empty(xmin, xmax, ymin, ymax, res)
     for cx, cy, sx, sy in layout.walls:
         grid.add_box(cx, cy, sx, sy, margin=margin)
-    for f in layout.furniture:
+    for f in layout.furniture if furniture else ():
         extra = 0.15 if f.style == "sofa" else 0.0  # the backrest
         grid.add_box(f.center[0] + extra / 2, f.center[1], f.size[0] + extra, f.size[1], margin=margin)
         footprint = f.open_drawer_footprint()
@@ -157,9 +160,15 @@ def _block_near(grid: Grid, center: tuple[float, float], size: tuple[float, floa
 
 
 def build_scene(
-    cid: int, layout: Layout, assets_dir: AssetDir, margin: float, fixtures: list[Fixture] | tuple[Fixture, ...] = ()
+    cid: int,
+    layout: Layout,
+    assets_dir: AssetDir,
+    margin: float,
+    fixtures: list[Fixture] | tuple[Fixture, ...] = (),
+    air_margin: float | None = None,
 ) -> BuiltScene:
-    """Floor, walls, furniture and the task's fixtures in client `cid`, and the base planners' occupancy grid."""
+    """Floor, walls, furniture and the task's fixtures in client `cid`, the ground bases' occupancy
+    grid (grown by `margin`) and, given `air_margin`, the fliers' (walls only, grown by it)."""
     p.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
     p.loadURDF("plane.urdf", physicsClientId=cid)
     statics = scene_statics(layout, assets_dir, fixtures)
@@ -174,7 +183,8 @@ def build_scene(
                 if p.getJointInfo(body, j, physicsClientId=cid)[2] in (p.JOINT_PRISMATIC, p.JOINT_REVOLUTE)
             )
             p.setJointMotorControl2(body, joints[f.name], p.VELOCITY_CONTROL, force=0.0, physicsClientId=cid)
-    return BuiltScene(statics, bodies, joints, occupancy(layout, margin))
+    air = None if air_margin is None else occupancy(layout, air_margin, furniture=False)
+    return BuiltScene(statics, bodies, joints, occupancy(layout, margin), air)
 
 
 def _require(layout: Layout, name: str) -> FurnitureSpec:

@@ -35,7 +35,7 @@ from mhrc.core.protocol import (
     SkillOutcome,
     Wait,
 )
-from mhrc.core.team import PAPER_TEAM, RobotSpec, TeamError, TeamProblem, TeamSpec
+from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from . import assets, observe
@@ -47,7 +47,8 @@ from .bound import lower_bound, symbolic_episode
 from .dynamics import Dynamics
 from .observe import Knowledge
 from .physics import ObjectState, PhysicalWorld
-from .robots import KINDS, RobotBody, spawn
+from .placement import place_team
+from .robots import KINDS, RobotBody, flight_altitude, spawn
 from .scenario import Scenario
 from .scene import BuiltScene, Fixture, Layout, build_scene, get_layout
 from .skills import SKILLS, SkillContext
@@ -119,17 +120,26 @@ class Sim:
     # ------------------------------------------------------------------ building
     def _build(self, rng: np.random.Generator) -> None:
         lay = self.layout
-        margin = max(KINDS[r.kind].footprint for r in self.team.robots)
+        kinds = [KINDS[r.kind] for r in self.team.robots]
+        margin = max(k.footprint for k in kinds if not k.flies)  # the floor's grid: ground bases
+        fliers = [k.footprint for k in kinds if k.flies]
         fixtures = {fx.name: fx for fx in self.task.fixtures(lay)}
-        scene = build_scene(self.cid, lay, self.assets, margin, list(fixtures.values()))
+        scene = build_scene(
+            self.cid, lay, self.assets, margin, list(fixtures.values()), max(fliers) if fliers else None
+        )
         self.world = w = PhysicalWorld(
             self.cid, lay, scene, ArmPlanner(scene.statics, seed=self.seed), fixtures, self.aids
         )
         mounts = iter(lay.arm_mounts)
+        starts = place_team(lay, self.team, self.seed, scene.grid)  # TeamError NO_ROOM when it cannot
+        tallest = max(f.size[2] for f in lay.furniture)
         for spec in self.team.robots:
             kind = KINDS[spec.kind]
             if kind.mobile:
-                w.bots[spec.name] = spawn(self.cid, spec.name, kind, self.assets, pose=self._start(spec))
+                altitude = flight_altitude(kind, tallest) if kind.flies else 0.0
+                w.bots[spec.name] = spawn(
+                    self.cid, spec.name, kind, self.assets, pose=starts[spec.name], altitude=altitude
+                )
             else:
                 base, yaw = next(mounts)  # check_team: no more fixed arms than mounts
                 w.bots[spec.name] = spawn(self.cid, spec.name, kind, self.assets, arm_base=base, arm_yaw=yaw)
@@ -154,18 +164,6 @@ class Sim:
         self.skill_context = SkillContext(w, self.knowledge, rng, self.noise)  # what the skills act through
         self.dynamics = Dynamics(w, self.task, self.targets, self.goals, self.assets, self.seed, self._scenario)
         log.debug("episode built", task=self.task_id, scene=self.scene_id, seed=self.seed, objects=list(w.objects))
-
-    def _start(self, spec: RobotSpec) -> tuple[float, float, float]:
-        """A mobile robot's start pose: the team's, else the layout's for that name."""
-        if spec.start is not None:
-            return spec.start
-        if spec.name in self.layout.starts:
-            return self.layout.starts[spec.name]
-        raise TeamError(
-            TeamProblem.NO_ROOM,
-            f"--team {self.team.name}: the {self.layout.name} layout has no start pose for {spec.name} "
-            f"(it has {', '.join(self.layout.starts)}); give one in the team file (start = [x, y, yaw])",
-        )
 
     def close(self) -> None:
         """Disconnect every PyBullet client and remove the generated assets (idempotent)."""

@@ -1,5 +1,11 @@
 """Base skills: navigate to a stand pose along an A* path, move the base by a short offset.
 
+A ground base plans on the floor's grid (walls and furniture); a flier (the drone) on the air's
+(walls only: it passes over furniture) and goes to a stand pose's viewpoint, the stand pose's
+x, y at its flight altitude, where it sees what a ground scout sees there. Each travels at its
+kind's speed. One robot per stand pose: navigate fails, naming the occupant, when another robot
+on the same level (floor or air) stands within OFF_TARGET of the goal.
+
 By default a base stops where seeded noise puts it (`base_error`), off target now and then:
 the skill then fails and says where the robot stopped, as the paper's Table III has it. The
 rates are mhrc's calibration, not the paper's (mhrc.core.fidelity); `--noise off` and the
@@ -14,12 +20,12 @@ from mhrc.core.fidelity import CALIBRATION
 from mhrc.core.protocol import Move, Navigate, OutcomeCode, SkillOutcome
 
 from .. import feedback as fb
-from ..astar import astar, line_free, path_length
+from ..astar import Grid, astar, line_free, path_length
 from ..robots import RobotBody
 from .context import SkillContext
 from .registry import skill
 
-NAV_SPEED = 0.5  # m/s: simulated time of base motions
+NAV_SPEED = 0.5  # m/s: a ground base's speed (RobotKind.speed; a drone's is its own)
 MAX_MOVE = 1.0  # m, the longest `move`
 # motion noise (off with --noise off or the exact_motion aid), drawn from the context's rng: where a base stops is
 # its goal plus an error of Rayleigh-distributed length (most stops within a few cm) or, now and then, a slip; the
@@ -38,13 +44,14 @@ def base_error(ctx: SkillContext) -> tuple[float, float]:
     return ctx.motion_error(ctx.noise.navigation_slip, NAV_SLIP, ctx.noise.navigation_sigma)
 
 
-def stop_near(ctx: SkillContext, goal: tuple[float, float], error: tuple[float, float]) -> tuple[float, float]:
-    """The base's real stop: `goal` plus `error`, drawn back toward the goal until the stop is on
-    free floor and reachable from the goal in a straight line (never inside furniture)."""
+def stop_near(grid: Grid, goal: tuple[float, float], error: tuple[float, float]) -> tuple[float, float]:
+    """The base's real stop: `goal` plus `error`, drawn back toward the goal until the stop is
+    free on `grid` and reachable from the goal in a straight line (never inside furniture, for a
+    ground base)."""
     for k in range(20):
         s = 1.0 - k / 20
         x, y = goal[0] + s * error[0], goal[1] + s * error[1]
-        if ctx.world.grid.free(x, y) and line_free(ctx.world.grid, goal, (x, y)):
+        if grid.free(x, y) and line_free(grid, goal, (x, y)):
             return x, y
     return goal
 
@@ -94,26 +101,32 @@ def navigate(ctx: SkillContext, r: RobotBody, a: Navigate) -> SkillOutcome:
         )
     assert r.base is not None
     goal = f.stand_poses[a.stand_pose]
-    if not ctx.world.grid.free(r.base[0], r.base[1]):
+    grid = ctx.world.grid_for(r)
+    if not grid.free(r.base[0], r.base[1]):
         return SkillOutcome.fail(OutcomeCode.START_INVALID, fb.start_invalid())
-    if not ctx.world.grid.free(goal[0], goal[1]):
+    if not grid.free(goal[0], goal[1]):
         return SkillOutcome.fail(OutcomeCode.GOAL_INVALID, fb.goal_invalid(f.name, a.stand_pose))
-    path = astar(ctx.world.grid, (r.base[0], r.base[1]), (goal[0], goal[1]))
+    if (occupant := ctx.world.occupant(r, (goal[0], goal[1]), OFF_TARGET)) is not None:
+        return SkillOutcome.fail(
+            OutcomeCode.OCCUPIED, fb.occupied(f.name, a.stand_pose, occupant, advice=ctx.advice), occupant=occupant
+        )
+    path = astar(grid, (r.base[0], r.base[1]), (goal[0], goal[1]))
     if path is None:
         return SkillOutcome.fail(OutcomeCode.NO_PATH, fb.no_path(f.name, a.stand_pose))
     for x, y in path[1:-1]:  # kinematic: the base visits the waypoints, heading along the path
         r.set_base((x, y, r.base[2]))
-    sx, sy = stop_near(ctx, (goal[0], goal[1]), error)
+    sx, sy = stop_near(grid, (goal[0], goal[1]), error)
     r.set_base((sx, sy, goal[2]))
     off = math.hypot(sx - goal[0], sy - goal[1])
     length = path_length(path) + off
+    speed = r.kind.speed
     ctx.knowledge.look_at(r.name, f.name)  # on target or not, the robot stands by f and sees it
     drawn = route(path, (sx, sy))
     if off > OFF_TARGET:
         return SkillOutcome.fail(
             OutcomeCode.OFF_TARGET,
             fb.off_target(f.name, a.stand_pose, off, (sx, sy), advice=ctx.advice),
-            sim_time=length / NAV_SPEED,
+            sim_time=length / speed,
             distance=round(off, 3),
             x=round(sx, 3),
             y=round(sy, 3),
@@ -128,12 +141,12 @@ def navigate(ctx: SkillContext, r: RobotBody, a: Navigate) -> SkillOutcome:
         can_open="open" in r.kind.skills,
         advice=ctx.advice,
     )
-    out = SkillOutcome.ok(text, sim_time=length / NAV_SPEED, path_length=round(length, 3), distance=round(off, 3))
+    out = SkillOutcome.ok(text, sim_time=length / speed, path_length=round(length, 3), distance=round(off, 3))
     return out.model_copy(update={"path": drawn})
 
 
 def move_blocked(ctx: SkillContext, x: float, y: float, dx: float, dy: float) -> bool:
-    return not (ctx.world.grid.free(x, y) and line_free(ctx.world.grid, (x, y), (x + dx, y + dy)))
+    return not (ctx.world.grid.free(x, y) and line_free(ctx.world.grid, (x, y), (x + dx, y + dy)))  # ground bases
 
 
 @skill(Move)
@@ -148,11 +161,11 @@ def move(ctx: SkillContext, r: RobotBody, a: Move) -> SkillOutcome:
         return SkillOutcome.fail(OutcomeCode.START_INVALID, fb.start_invalid())
     if move_blocked(ctx, x, y, a.dx, a.dy):
         return SkillOutcome.fail(OutcomeCode.GOAL_INVALID, fb.move_blocked(a.dx, a.dy))
-    sx, sy = stop_near(ctx, (x + a.dx, y + a.dy), error)
+    sx, sy = stop_near(ctx.world.grid, (x + a.dx, y + a.dy), error)
     r.set_base((sx, sy, yaw))
     off = math.hypot(sx - x - a.dx, sy - y - a.dy)
     moved = (sx - x, sy - y)
-    t = (d + off) / NAV_SPEED
+    t = (d + off) / r.kind.speed
     if off > OFF_TARGET:
         return SkillOutcome.fail(
             OutcomeCode.OFF_TARGET,

@@ -92,6 +92,7 @@ class OutcomeCode(str, Enum):
     GOAL_INVALID = "goal_invalid"  # goal pose on an obstacle or off the map
     NO_PATH = "no_path"
     OFF_TARGET = "off_target"  # final pose too far from the goal
+    OCCUPIED = "occupied"  # another robot stands at the goal stand pose (one robot per stand pose)
     ALREADY_OPEN = "already_open"
     NOT_OPENABLE = "not_openable"
     OUT_OF_REACH = "out_of_reach"  # furniture or object beyond the arm's reach
