@@ -10,7 +10,6 @@ Errors are ValueErrors naming the field; layouts.parse_layout adds the file.
 from __future__ import annotations
 
 import math
-from typing import Literal
 
 from pydantic import Field, model_validator
 

@@ -69,6 +69,7 @@ class PhysicalWorld:
         self.planner = planner  # the arms' shadow planning client, kept in step with containers
         self.fixtures = fixtures
         self.aids = aids
+        self.one_per_stand_pose = True  # Sim sets it by the team (off for the paper's)
         self.opening: dict[str, float] = {name: 0.0 for name in scene.joints}  # container -> joint value
         self.bots: dict[str, RobotBody] = {}
         self.objects: dict[str, ObjectState] = {}
@@ -84,7 +85,10 @@ class PhysicalWorld:
     def occupant(self, r: RobotBody, xy: tuple[float, float], within: float) -> str | None:
         """The robot other than `r` whose base is within `within` of `xy` on r's level: fliers
         share the air with fliers, ground bases the floor with ground bases (a drone hovers above
-        a robot standing below it). None when the spot is free."""
+        a robot standing below it). None when the spot is free, and always without the rule
+        (`one_per_stand_pose` off: the paper's team, whose robots may share a stand pose)."""
+        if not self.one_per_stand_pose:
+            return None
         for other in self.bots.values():
             if other is r or other.base is None or other.kind.flies != r.kind.flies:
                 continue

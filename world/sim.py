@@ -84,15 +84,22 @@ class Sim:
         aids: tuple[str, ...] | frozenset[str] = (),
         scenario: Scenario | None = None,
         noise: str = "on",
+        one_per_stand_pose: bool | None = None,
     ) -> None:
         """`scenario`: the events fired during the episode (`fire_events`; dynamics.py); `noise`: on
-        (the calibrated motion noise) or off (none: bases stop exactly, releases do not slip)."""
+        (the calibrated motion noise) or off (none: bases stop exactly, releases do not slip).
+        `one_per_stand_pose`: a robot cannot navigate to a stand pose another robot stands at (per
+        level: floor or air); None: so for any team but the paper's, whose world (like the
+        paper's) lets robots share a stand pose, so that it scores as it always did."""
         check_episode(task=task, scene=scene, n_objects=n_objects)
         self.aids: frozenset[str] = frozenset(parse_aids(aids))
         # the motion noise's rates (`noise`: on, the calibration, or off); none with the exact_motion aid either
         self.noise: MotionNoise = motion_noise(noise, self.aids)
         # motion noise: its own stream, apart from the generator's, and different for every episode of a seed
         rng = np.random.default_rng([seed, zlib.crc32(f"{task}/{scene}/{n_objects}".encode()), 0x4D485243])
+        if one_per_stand_pose is None:  # by the team as given, before an ablation leaves robots out
+            one_per_stand_pose = team.digest() != PAPER_TEAM.digest()
+        self.one_per_stand_pose = one_per_stand_pose
         if robots is not None:  # an ablation's subset of the team (no_mobile: the paper's team without David)
             unknown = set(robots) - set(team.names)
             if unknown:
@@ -130,6 +137,7 @@ class Sim:
         self.world = w = PhysicalWorld(
             self.cid, lay, scene, ArmPlanner(scene.statics, seed=self.seed), fixtures, self.aids
         )
+        w.one_per_stand_pose = self.one_per_stand_pose
         mounts = iter(lay.arm_mounts)
         starts = place_team(lay, self.team, self.seed, scene.grid)  # TeamError NO_ROOM when it cannot
         tallest = max(f.size[2] for f in lay.furniture)
