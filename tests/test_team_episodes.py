@@ -1,0 +1,79 @@
+"""Teams in whole episodes (issue 33): eight robots as separate processes on the secured bus, and
+partial observability for every kind of robot in a team of eight."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mhrc.core.protocol import Navigate, OutcomeCode
+from mhrc.core.records import read_records
+from mhrc.world.sim import Sim
+from mhrc.world.teams import SHIPPED
+
+FULL_HOUSE = SHIPPED["full_house"]
+
+
+@pytest.mark.slow
+def test_eight_robots_as_separate_processes_on_the_secured_bus(tmp_path: Path) -> None:
+    """`mhrc up --processes` with the team of eight: the world and eight agent processes, each
+    logged in as its own robot (the default bus is secured), every robot attached and acting."""
+    done = subprocess.run(
+        [sys.executable, "-m", "mhrc", "up", "--team", "full_house", "--processes", "--horizon", "4", "--json"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "credentials in" in done.stderr and "insecure" not in done.stderr
+    metrics = json.loads(done.stdout.strip().splitlines()[-1])
+    assert set(metrics["action_steps_per_robot"]) == set(FULL_HOUSE.names)
+    (run,) = (tmp_path / "runs").iterdir()
+    logins = {p.stem for p in (run / "credentials").glob("*.json")}
+    assert set(FULL_HOUSE.names) <= logins  # one login per robot
+    records = read_records(run / "trace.jsonl")
+    attached = {r.msg.robot for r in records if r.msg is not None and getattr(r.msg, "kind", "") == "robot_attached"}
+    assert attached == set(FULL_HOUSE.names)
+    acted = {r.msg.robot for r in records if r.msg is not None and getattr(r.msg, "kind", "") == "action_result"}
+    assert acted == set(FULL_HOUSE.names)  # each agent's requests reached the world as its own robot's
+    started = next(r.msg for r in records if getattr(r.msg, "kind", "") == "episode_started")
+    assert started.team is not None and started.team.kinds == FULL_HOUSE.kinds  # the team in the trace
+
+
+def test_every_kind_sees_only_what_it_has_seen() -> None:
+    """A team of eight, four kinds: at the start only the arm sees anything (its table); a robot
+    of each mobile kind that looks at a surface learns what lies there, and nobody else does; a
+    closed container hides its contents from a robot of any kind standing at it."""
+    with Sim(team=FULL_HOUSE, seed=2, n_objects=6, aids=("exact_motion",)) as sim:
+        table_0 = {o.name for o in sim.objects.values() if o.on in ("table_0", "tray")}
+        assert {o.name for o in sim.observe("bob", 0).objects} == table_0
+        for robot in FULL_HOUSE.names:
+            obs = sim.observe(robot, 0)
+            assert set(obs.teammates) == set(FULL_HOUSE.names) - {robot}
+            if robot != "bob":
+                assert obs.objects == [] and obs.targets == [] and obs.task_status is None
+        surfaces = sorted(
+            {o.on for o in sim.objects.values() if o.on and not o.inside and o.on not in ("table_0", "tray")}
+        )
+        lookers = [r for r in ("alice", "david", "lucy") if surfaces]  # a mobile manipulator, a mobile base, a drone
+        for tick, (robot, surface) in enumerate(zip(lookers, surfaces, strict=False), start=1):
+            out = sim.execute(robot, Navigate(target=surface, stand_pose=0))
+            assert out.succeeded, (robot, out.feedback)
+            there = {o.name for o in sim.objects.values() if o.on == surface and not o.inside}
+            assert there <= {o.name for o in sim.observe(robot, tick).objects}
+            for other in FULL_HOUSE.names:
+                if other not in (robot, "bob") and other not in lookers[: lookers.index(robot)]:
+                    assert not there & {o.name for o in sim.observe(other, tick).objects}, (other, surface)
+        hidden = {o.name for o in sim.objects.values() if o.inside}
+        container = next(o.on for o in sim.objects.values() if o.inside)
+        assert container is not None
+        for robot in ("carol", "erin", "mia"):
+            out = sim.execute(robot, Navigate(target=container, stand_pose=0))
+            if out.code is OutcomeCode.OCCUPIED:
+                continue  # another robot of its level holds the pose: nothing to see from here
+            assert not hidden & {o.name for o in sim.observe(robot, 9).objects}, robot
