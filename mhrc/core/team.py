@@ -34,6 +34,7 @@ __all__ = [
     "TeamProblem",
     "TeamSpec",
     "checked",
+    "from_kinds",
     "load_team_file",
     "parse_inline",
 ]
@@ -195,3 +196,11 @@ PAPER_TEAM = TeamSpec(
         RobotSpec(name="david", kind="mobile_base"),
     ),
 )
+
+
+def from_kinds(name: str, kinds: dict[str, str]) -> TeamSpec:
+    """The team a trace records (its name and each robot's kind, in order; mhrc.core.protocol
+    TeamRecord), as a TeamSpec without start poses or models: enough to build its world again."""
+    if name == PAPER_TEAM.name and kinds == PAPER_TEAM.kinds:
+        return PAPER_TEAM
+    return TeamSpec(name=name, robots=tuple(RobotSpec(name=n, kind=k) for n, k in kinds.items()))

@@ -35,6 +35,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from mhrc.core.protocol import ActionResult, EpisodeStarted, ObjectPose, RobotPose, ScenarioEvent, Snapshot
 from mhrc.core.records import read_records
+from mhrc.core.team import PAPER_TEAM, from_kinds
 from mhrc.viewer.events import caption as event_caption
 from mhrc.viewer.events import captions_by_snapshot, scenario_label
 from mhrc.viewer.page import distinct
@@ -413,6 +414,7 @@ def render_video(
         scene=started.scene,
         seed=started.seed,
         n_objects=started.n_objects,
+        team=PAPER_TEAM if started.team is None else from_kinds(started.team.name, started.team.kinds),
         robots=tuple(started.robots),
         aids=tuple(started.aids),
         scenario=_spawns(steps),
