@@ -1,4 +1,5 @@
-"""Teams in whole episodes (issue 33): eight robots as separate processes on the secured bus, and
+"""Teams in whole episodes (issue 33): eight robots as separate processes on the secured bus (and
+their video), and
 partial observability for every kind of robot in a team of eight."""
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ def test_eight_robots_as_separate_processes_on_the_secured_bus(tmp_path: Path) -
     """`mhrc up --processes` with the team of eight: the world and eight agent processes, each
     logged in as its own robot (the default bus is secured), every robot attached and acting."""
     done = subprocess.run(
-        [sys.executable, "-m", "mhrc", "up", "--team", "full_house", "--processes", "--horizon", "4", "--json"],
+        [sys.executable, "-m", "mhrc", "up", "--team", "full_house", "--processes", "--horizon", "4", "--json"]
+        + ["--video", "v.gif"],
         cwd=tmp_path,
         capture_output=True,
         text=True,
@@ -31,6 +33,7 @@ def test_eight_robots_as_separate_processes_on_the_secured_bus(tmp_path: Path) -
     )
     assert done.returncode == 0, done.stderr[-3000:]
     assert "credentials in" in done.stderr and "insecure" not in done.stderr
+    assert (tmp_path / "v.gif").stat().st_size > 0  # the video rebuilds the team's world, not the paper's
     metrics = json.loads(done.stdout.strip().splitlines()[-1])
     assert set(metrics["action_steps_per_robot"]) == set(FULL_HOUSE.names)
     (run,) = (tmp_path / "runs").iterdir()
