@@ -19,7 +19,7 @@ from mhrc.core.keys import Keys
 from mhrc.core.protocol import AttachReply, AttachRequest, EpisodeDone, RobotDetached, decode, decode_event
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec
-from mhrc.eval.episode import EpisodeResult, Job, run_job, worker_name
+from mhrc.eval.episode import Job, WorkerResult, run_job, worker_name
 from mhrc.testing import world_on_loopback
 
 DEADLINE = 1.0  # s: the world's token deadline in these tests (30 by default)
@@ -73,16 +73,16 @@ class _Stalling:
     def submit(self, job: Job) -> None:
         self._jobs.append(job)
 
-    async def next(self) -> EpisodeResult:
+    async def next(self) -> WorkerResult:
         job = self._jobs.popleft()
         self.attempts[job.key] += 1
         if self.attempts[job.key] > self.stall.get(job.key, 0):
             return await run_job(job, worker_name())
         trace = self.tmp / f"{job.key.replace('/', '_')}-{self.attempts[job.key]}.jsonl"
         await _stalled_episode(job.config.model_dump(exclude={"run"}, exclude_defaults=True), trace)
-        return EpisodeResult(key=job.key, worker="stalled", trace_z=zlib.compress(trace.read_bytes()))
+        return WorkerResult(key=job.key, worker="stalled", trace_z=zlib.compress(trace.read_bytes()))
 
-    async def stop(self, grace: float) -> list[EpisodeResult]:
+    async def stop(self, grace: float) -> list[WorkerResult]:
         return []
 
 

@@ -2,7 +2,7 @@
 runs (`ray start` by hand, KubeRay, Slurm), with Ray's retries, resources and dashboard.
 
 A task runs one episode whole in its Ray worker process (world and agents, as a local pool
-worker does: mhrc.eval.episode) and returns its `EpisodeResult` through the object store, the
+worker does: mhrc.eval.episode) and returns its `WorkerResult` through the object store, the
 trace zlib-compressed; with a shared --out (`--shared-out`: the same path on every node) it
 writes the trace there and returns only the path. A task whose worker process or node dies is
 run again by Ray (`max_retries=RAY_RETRIES`). Resources: one CPU per heuristic episode (it is
@@ -28,7 +28,7 @@ from typing import Any
 
 import structlog
 
-from mhrc.eval.episode import EpisodeResult, Job
+from mhrc.eval.episode import Job, WorkerResult
 from mhrc.run.config import ConfigError
 
 log = structlog.get_logger("mhrc.eval")
@@ -148,19 +148,19 @@ class RayExecutor:
         )
         self._running[asyncio.wrap_future(ref.future())] = (job, ref)
 
-    def _take(self, fut: asyncio.Future[Any]) -> EpisodeResult:
+    def _take(self, fut: asyncio.Future[Any]) -> WorkerResult:
         job, _ref = self._running.pop(fut)
         try:
-            return EpisodeResult.model_validate(fut.result())
+            return WorkerResult.model_validate(fut.result())
         except Exception as exc:  # the task failed past its retries: its worker or node kept dying
             first = (str(exc).strip().splitlines() or [""])[0]
-            return EpisodeResult(key=job.key, worker="ray", error=f"{type(exc).__name__}: {first}")
+            return WorkerResult(key=job.key, worker="ray", error=f"{type(exc).__name__}: {first}")
 
-    async def next(self) -> EpisodeResult:
+    async def next(self) -> WorkerResult:
         done, _ = await asyncio.wait(set(self._running), return_when=asyncio.FIRST_COMPLETED)
         return self._take(next(iter(done)))
 
-    async def stop(self, grace: float) -> list[EpisodeResult]:
+    async def stop(self, grace: float) -> list[WorkerResult]:
         """Cancel the tasks still running (their worker processes are killed) and return the
         results that had arrived: finished episodes are never lost."""
         out = [self._take(f) for f in [f for f in self._running if f.done()]]

@@ -36,7 +36,7 @@ import structlog
 
 from mhrc.core.metrics import Invalid
 from mhrc.core.trace import unwritable
-from mhrc.eval.episode import EpisodeResult, Job
+from mhrc.eval.episode import Job, WorkerResult
 from mhrc.eval.records import EvalManifest, EvalRow, Row, read_manifest, read_rows
 from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import merge_runs
@@ -133,8 +133,8 @@ class Executor(Protocol):
     async def __aenter__(self) -> Executor: ...
     async def __aexit__(self, *exc: object) -> None: ...
     def submit(self, job: Job) -> None: ...
-    async def next(self) -> EpisodeResult: ...
-    async def stop(self, grace: float) -> list[EpisodeResult]: ...
+    async def next(self) -> WorkerResult: ...
+    async def stop(self, grace: float) -> list[WorkerResult]: ...
 
 
 def check_out(out: Path, plan: Plan, resume: bool) -> None:
@@ -220,7 +220,7 @@ async def run(
         return await _drive(plan, out, resume, executor, progress)
 
 
-def _row(plan: Plan, job: Job, res: EpisodeResult, scored: Scored, out: Path) -> EvalRow:
+def _row(plan: Plan, job: Job, res: WorkerResult, scored: Scored, out: Path) -> EvalRow:
     """The row of a finished episode: the evaluation's settings, the metrics and the diagnostics."""
     spec = plan.spec
     return EvalRow.model_validate(
@@ -260,7 +260,7 @@ async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progre
     attempts: dict[str, int] = defaultdict(int)
     aborted: list[str] = []
 
-    def take(res: EpisodeResult) -> tuple[Job | None, bool, Row | None]:
+    def take(res: WorkerResult) -> tuple[Job | None, bool, Row | None]:
         """Write the row of a finished episode (or count a given-up one): the job to run again, if any,
         whether the episode was counted, and its row. Blocking (trace, metrics, HTML): off the loop."""
         job = jobs[res.key]

@@ -44,13 +44,13 @@ class Job(BaseModel):
 
 
 class WorkerFailure(StrEnum):
-    """An episode lost to its worker rather than to itself (EpisodeResult.error_code)."""
+    """An episode lost to its worker rather than to itself (WorkerResult.error_code)."""
 
     WORKER_DIED = "worker_died"  # the worker process ended during the episode
     WORKERS_KEEP_DYING = "workers_keep_dying"  # every worker died, again and again: the job was never run
 
 
-class EpisodeResult(BaseModel):
+class WorkerResult(BaseModel):
     """What comes back of a job: the trace (zlib of the JSONL), or where it was written
     (a shared --out), or the error that ended the episode. Its JSON carries the trace in base64
     (a pool worker's pipe)."""
@@ -99,7 +99,7 @@ def watch_start(on_start: Any) -> EventHook:
 
 async def run_job(
     job: Job, worker: str, *, observe: EventHook | None = None, trace_dest: Path | None = None
-) -> EpisodeResult:
+) -> WorkerResult:
     """Run one episode in this process; never raises but for cancellation. With `trace_dest`
     (a shared --out) the trace is written there and only its path goes back."""
     with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
@@ -112,16 +112,16 @@ async def run_job(
                 part = trace_dest.with_name(f".{trace_dest.name}.{os.getpid()}")
                 await asyncio.to_thread(lambda: part.write_bytes(trace.read_bytes()))
                 os.replace(part, trace_dest)  # a retried attempt on another host never leaves half a file
-                return EpisodeResult(key=job.key, worker=worker, trace_file=str(trace_dest))
+                return WorkerResult(key=job.key, worker=worker, trace_file=str(trace_dest))
             data = await asyncio.to_thread(lambda: zlib.compress(trace.read_bytes(), 6))  # zlib lets go of the GIL
-            return EpisodeResult(key=job.key, worker=worker, trace_z=data)
+            return WorkerResult(key=job.key, worker=worker, trace_z=data)
         except asyncio.CancelledError:
             raise
         except Exception as exc:
             from mhrc.agents.llm import LLMFatalError
 
             log.warning("episode failed", key=job.key, error=str(exc))
-            return EpisodeResult(
+            return WorkerResult(
                 key=job.key, worker=worker, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError)
             )
         finally:

@@ -3,7 +3,7 @@ between them.
 
 Each worker is `python -m mhrc.eval.pool --concurrency N`, a child that dies with the driver
 (mhrc.run.lifeline). The driver writes jobs (`Job`, one JSON line each) to its stdin and reads
-results (`EpisodeResult`, one JSON line each, the trace in base64) from its stdout; a worker
+results (`WorkerResult`, one JSON line each, the trace in base64) from its stdout; a worker
 holds at most N jobs, so a free slot is the only thing that brings it another. Inside the
 worker an episode runs whole (mhrc.eval.episode); up to N at once (LLM episodes mostly wait
 on the model), at most STARTS_AT_ONCE of them building their scene and attaching their agents
@@ -31,7 +31,7 @@ from typing import IO
 import structlog
 from pydantic import ValidationError
 
-from mhrc.eval.episode import EpisodeResult, Job, WorkerFailure, run_job, watch_start, worker_name
+from mhrc.eval.episode import Job, WorkerFailure, WorkerResult, run_job, watch_start, worker_name
 from mhrc.run.lifeline import child_env
 
 log = structlog.get_logger("mhrc.eval")
@@ -138,7 +138,7 @@ class PoolExecutor:
         self.log_level = log_level
         self._queue: deque[Job] = deque()
         self._pool: list[_Worker] = []
-        self._results: asyncio.Queue[EpisodeResult] = asyncio.Queue()
+        self._results: asyncio.Queue[WorkerResult] = asyncio.Queue()
         self._respawns = RESPAWNS_PER_WORKER * workers
         self._spawned = 0
         self._stopping = False
@@ -153,7 +153,7 @@ class PoolExecutor:
     def submit(self, job: Job) -> None:
         self._queue.append(job)
 
-    async def next(self) -> EpisodeResult:
+    async def next(self) -> WorkerResult:
         await self._dispatch()
         return await self._results.get()
 
@@ -184,7 +184,7 @@ class PoolExecutor:
         assert w.proc.stdout is not None
         while line := await w.proc.stdout.readline():
             try:
-                res = EpisodeResult.model_validate_json(line)
+                res = WorkerResult.model_validate_json(line)
             except ValidationError:  # not a result (something wrote to stdout before the worker moved it aside)
                 log.warning("not a result line from a pool worker", pid=w.proc.pid, line=line[:200])
                 continue
@@ -197,7 +197,7 @@ class PoolExecutor:
         for job in w.jobs.values():  # died with these unfinished
             why = f"the worker process ended (exit {code}) during the episode"
             self._results.put_nowait(
-                EpisodeResult(key=job.key, worker=f"pid {w.proc.pid}", error=why, error_code=WorkerFailure.WORKER_DIED)
+                WorkerResult(key=job.key, worker=f"pid {w.proc.pid}", error=why, error_code=WorkerFailure.WORKER_DIED)
             )
         w.jobs.clear()
         if not self._stopping:
@@ -226,7 +226,7 @@ class PoolExecutor:
                 while self._queue:
                     job = self._queue.popleft()
                     self._results.put_nowait(
-                        EpisodeResult(
+                        WorkerResult(
                             key=job.key,
                             worker="",
                             error="the worker processes keep dying; see their errors above",
@@ -247,7 +247,7 @@ class PoolExecutor:
                 if not w.jobs and w.proc.stdin is not None and not w.proc.stdin.is_closing():
                     w.proc.stdin.close()
 
-    async def stop(self, grace: float) -> list[EpisodeResult]:
+    async def stop(self, grace: float) -> list[WorkerResult]:
         """End every worker: those with nothing left end by themselves (stdin closed); with
         episodes running (an interrupt), SIGTERM cancels them. Returns the results not yet taken."""
         self._stopping = True
