@@ -18,8 +18,8 @@ from typing import Any
 
 from report import emit
 
+from mhrc.analysis.metrics import summarize
 from mhrc.core.fidelity import parse_aids
-from mhrc.core.metrics import summarize
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.world.scene import LAYOUTS

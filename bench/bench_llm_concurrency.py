@@ -28,7 +28,7 @@ from typing import Any
 
 from report import emit
 
-from mhrc.core.metrics import from_trace
+from mhrc.analysis.metrics import from_trace
 from mhrc.core.trace import read_trace
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process

@@ -25,7 +25,7 @@ from typing import Any
 
 from report import emit
 
-from mhrc.core.metrics import summarize
+from mhrc.analysis.metrics import summarize
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.world.scenario import load_scenario, shipped_scenarios

@@ -38,8 +38,8 @@ from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm import OpenAIChatClient
 from mhrc.agents.llm_policy import LLMPolicy
 from mhrc.agents.policy import Decision
+from mhrc.analysis.metrics import from_trace
 from mhrc.core.bus import Bus, open_client
-from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import ActionResult, EpisodeDone, Observation
 from mhrc.core.trace import read_trace
 from mhrc.run.config import EpisodeConfig

@@ -21,9 +21,9 @@ from typing import Any
 
 from report import emit, percentile
 
+from mhrc.analysis.metrics import summarize
 from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.keys import Keys
-from mhrc.core.metrics import summarize
 from mhrc.core.protocol import ActionRequest, ActionResult, AttachReply, AttachRequest, Wait, decode
 from mhrc.core.team import TeamSpec
 from mhrc.eval.engine import EvalSpec, evaluate

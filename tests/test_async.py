@@ -16,10 +16,10 @@ from sweep import sweep
 
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.parse import parse_command
+from mhrc.analysis.metrics import from_trace
 from mhrc.cli import main
 from mhrc.core.bus import Bus
 from mhrc.core.keys import Keys
-from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import ActionAck, ActionRequest, ActionResult, Wait, decode
 from mhrc.core.trace import read_trace
 from mhrc.run.config import ConfigError, EpisodeConfig

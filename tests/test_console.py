@@ -156,7 +156,7 @@ def _table_rows(text: str) -> dict[str, str]:
 
 @pytest.mark.parametrize("processes", sweep([False, True], ids=["in-process", "processes"]))
 def test_quiet_prints_only_the_summary_table_with_the_reports_makespan(processes: bool, tmp_path: Path) -> None:
-    from mhrc.core.metrics import from_trace
+    from mhrc.analysis.metrics import from_trace
     from mhrc.core.trace import read_trace
 
     trace = tmp_path / "t.jsonl"
@@ -325,7 +325,7 @@ async def test_scenario_events_print_as_their_tick_opens_and_the_table_says_how_
     """A dynamic episode (issue 25) at the console: each scenario event's line comes right after
     the closed line of the tick before it (it fires as its tick opens) and before that tick's
     results; the table ends with each event's recovery as the metrics score it."""
-    from mhrc.core.metrics import from_trace
+    from mhrc.analysis.metrics import from_trace
     from mhrc.core.trace import read_trace
     from mhrc.run.config import EpisodeConfig
     from mhrc.run.console import ProgressPrinter, summary_table

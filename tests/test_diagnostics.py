@@ -1,4 +1,4 @@
-"""Failure diagnostics (mhrc.core.diagnostics) over a hand-built trace and over real recorded episodes
+"""Failure diagnostics (mhrc.analysis.diagnostics) over a hand-built trace and over real recorded episodes
 (the heuristic team, and LLM agents against a scripted OpenAI-compatible server on loopback),
 and the evaluation summaries that carry them: summary.md's table and summary.html."""
 
@@ -15,8 +15,8 @@ from typing import Any
 import pytest
 from test_metrics import _complete  # the protocol's required fields a hand-built message leaves out
 
-from mhrc.core.diagnostics import diagnose, reject_kind, row_diagnostics, summarize_diagnostics
-from mhrc.core.metrics import from_trace
+from mhrc.analysis.diagnostics import diagnose, reject_kind, row_diagnostics, summarize_diagnostics
+from mhrc.analysis.metrics import from_trace
 from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec, evaluate
@@ -268,7 +268,7 @@ def test_rejections_recorded_without_a_code_are_grouped_by_their_text(reason: st
     ],
 )
 def test_a_rejections_code_decides_its_kind_whatever_its_text(code: str, kind: str) -> None:
-    from mhrc.core.diagnostics import KIND_OF_CODE
+    from mhrc.analysis.diagnostics import KIND_OF_CODE
     from mhrc.core.protocol import RejectCode
 
     assert set(KIND_OF_CODE) == {c.value for c in RejectCode}  # every code the world sends has its kind

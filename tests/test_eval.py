@@ -268,7 +268,7 @@ def _put(kind: str, **msg: Any) -> dict[str, Any]:
 
 def test_llm_failures_and_validity_are_counted_from_the_trace() -> None:
     from mhrc.agents.replay import LLM_ERROR_PREFIX
-    from mhrc.core.metrics import from_trace
+    from mhrc.analysis.metrics import from_trace
 
     def trace(*thoughts: str | None, fidelity: str | None = "aids:goal_map") -> list[dict[str, Any]]:
         started: dict[str, Any] = {

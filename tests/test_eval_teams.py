@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from mhrc.core.metrics import from_trace
+from mhrc.analysis.metrics import from_trace
 from mhrc.core.team import PAPER_TEAM
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.html import against_team_size, page

@@ -226,10 +226,10 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
 
     import structlog
 
+    from mhrc.analysis.metrics import from_trace
     from mhrc.core import logs
     from mhrc.core.bus import Bus
     from mhrc.core.keys import Keys
-    from mhrc.core.metrics import from_trace
     from mhrc.core.trace import read_trace
     from mhrc.run.config import EpisodeConfig
     from mhrc.run.inprocess import up_in_process
@@ -285,10 +285,10 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
     """2,000 well-formed requests on Alice's key from an agent the world does not know: each is
     rejected; the trace copies the first few (request and ack) and counts the rest as `junk`,
     and the metrics and diagnostics still count every rejection, by reason."""
+    from mhrc.analysis.diagnostics import diagnose
+    from mhrc.analysis.metrics import from_trace
     from mhrc.core.bus import Bus
-    from mhrc.core.diagnostics import diagnose
     from mhrc.core.keys import Keys
-    from mhrc.core.metrics import from_trace
     from mhrc.core.protocol import ActionRequest, Wait
     from mhrc.core.trace import REJECTIONS_IN_FULL, read_trace
     from mhrc.run.config import EpisodeConfig

@@ -90,7 +90,7 @@ async def test_a_team_without_tokens_is_let_go_at_the_deadline_and_its_episode_i
     """The world detaches each tokenless robot at its configured deadline, with its agent's id; the
     episode ends at tick 0 (no_agents), and its metrics (an eval row's) say invalid, with the typed
     cause not_played, instead of a TS-0 failure that pulls a setting's mean down."""
-    from mhrc.core.metrics import Invalid, from_trace
+    from mhrc.analysis.metrics import Invalid, from_trace
 
     config = {"task": "pack_objects", "scene": "kitchen", "seed": 0, "n_objects": 3, "schedule": "sequential"}
     detached, done = await _stalled_episode(config, tmp_path / "t.jsonl")

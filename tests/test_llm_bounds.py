@@ -17,8 +17,8 @@ from click.testing import CliRunner
 
 from mhrc.agents.llm import MAX_REPLY_CHARS, LLMFatalError, OpenAIChatClient, robot_specs, split_reasoning
 from mhrc.agents.llm_policy import LLMUnreachable
+from mhrc.analysis.metrics import from_trace
 from mhrc.cli import main
-from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import EpisodeDone
 from mhrc.core.trace import read_trace
 from mhrc.run.config import ConfigError, EpisodeConfig

@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 from sweep import sweep
 
-from mhrc.core.metrics import TraceError, from_trace, summarize
+from mhrc.analysis.metrics import TraceError, from_trace, summarize
 from mhrc.core.trace import read_trace
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process

@@ -1,4 +1,4 @@
-"""Recovery scoring (issue 25, `mhrc.core.metrics`): per scenario event, the steps until the team
+"""Recovery scoring (issue 25, `mhrc.analysis.metrics`): per scenario event, the steps until the team
 has one more target in place than when the event fired, on hand-built traces of each schedule;
 and how `summarize` and the eval report carry it."""
 
@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from test_metrics import _complete  # the protocol's required fields a hand-built message leaves out
 
-from mhrc.core.metrics import from_trace, summarize
+from mhrc.analysis.metrics import from_trace, summarize
 from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import setting_of
 

@@ -1,4 +1,4 @@
-"""The metrics of a team's work (mhrc.core.teamwork, through mhrc.core.metrics.from_trace) on
+"""The metrics of a team's work (mhrc.analysis.teamwork, through mhrc.analysis.metrics.from_trace) on
 hand-built traces, the team recorded in a trace (and read from one older than the field), and
 summaries of them: each metric is asserted where a wrong definition would give another number."""
 
@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 from test_metrics import _put, _result
 
-from mhrc.core.metrics import from_trace, summarize
+from mhrc.analysis.metrics import from_trace, summarize
 from mhrc.core.protocol import EpisodeStarted
 from mhrc.core.records import as_records, messages
 from mhrc.core.team import PAPER_TEAM

@@ -18,8 +18,8 @@ import pytest
 from test_metrics import _put  # a hand-built trace line, with the protocol's required fields
 from test_table3 import play
 
+from mhrc.analysis.metrics import from_trace
 from mhrc.core.fidelity import CALIBRATION, NOISELESS, recorded_noise
-from mhrc.core.metrics import from_trace
 from mhrc.core.protocol import EpisodeStarted, Move, Navigate, OutcomeCode, decode_event
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec, evaluate

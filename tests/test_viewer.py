@@ -294,7 +294,7 @@ def test_the_failure_panel_renders_the_diagnosis_or_a_note(traces: dict[str, Pat
     html = out.read_text(encoding="utf-8")
     section = html[html.index('<section id="failures">') :]
     section = section[: section.index("</section>")]
-    from mhrc.core.diagnostics import LABELS
+    from mhrc.analysis.diagnostics import LABELS
 
     diag, note = diagnostics_for(read_trace(traces["llm"]))
     assert diag is not None, note

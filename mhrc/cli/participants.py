@@ -161,8 +161,8 @@ def up(
 
 
 def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:
-    """A scenario's events as the metrics score them (mhrc.core.metrics), read back from the trace."""
-    from mhrc.core.metrics import from_trace
+    """A scenario's events as the metrics score them (mhrc.analysis.metrics), read back from the trace."""
+    from mhrc.analysis.metrics import from_trace
     from mhrc.core.records import read_records
 
     if trace is None or not trace.exists():

@@ -8,7 +8,7 @@ extra), with Ray's retries for a worker or node that dies. Either way an episode
 one process (its world and its agents, mhrc.eval.episode) and only its trace comes back.
 
 Each episode's metrics and failure diagnostics (`diag_*` columns) are computed here, by the
-driver, from the trace (`mhrc.core.metrics`, `mhrc.core.diagnostics`), so a row means the same thing
+driver, from the trace (`mhrc.analysis.metrics`, `mhrc.analysis.diagnostics`), so a row means the same thing
 whichever process or host ran it. Rows are appended to DIR/episodes.jsonl as they arrive;
 `--resume` skips the keys already there. Summaries (tables, confidence intervals, the paper's
 figures; summary.md, .csv and .html) are `mhrc.eval.report`'s.
@@ -34,7 +34,7 @@ from typing import Any, Protocol
 
 import structlog
 
-from mhrc.core.metrics import Invalid
+from mhrc.analysis.metrics import Invalid
 from mhrc.core.trace import unwritable
 from mhrc.eval.episode import Job, WorkerResult
 from mhrc.eval.records import EvalManifest, EvalRow, Row, read_manifest, read_rows

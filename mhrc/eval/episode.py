@@ -3,8 +3,8 @@ worker): the job it gets, the result it sends back, and the run itself.
 
 An episode runs whole in the process that takes it: its world (a router on a free loopback
 port) and its agents as asyncio tasks, with a trace in a temporary directory. Only the
-trace goes back (zlib-compressed); the driver computes the row from it (`mhrc.core.metrics`,
-`mhrc.core.diagnostics`), so a row means the same thing whichever process or host ran it.
+trace goes back (zlib-compressed); the driver computes the row from it (`mhrc.analysis.metrics`,
+`mhrc.analysis.diagnostics`), so a row means the same thing whichever process or host ran it.
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 summary.md, plots of them, and a link per episode to its report.
 
 The tables are summary.md's own (`mhrc.eval.report.markdown` of the same `mhrc.eval.summary.Summary`),
-rendered as HTML by markdown-it-py; the plots draw `mhrc.core.metrics.summarize` over
-`mhrc.eval.report.group`'s buckets and `mhrc.core.diagnostics.summarize_diagnostics`. Plots are inline
+rendered as HTML by markdown-it-py; the plots draw `mhrc.analysis.metrics.summarize` over
+`mhrc.eval.report.group`'s buckets and `mhrc.analysis.diagnostics.summarize_diagnostics`. Plots are inline
 SVG drawn with matplotlib's object API (no pyplot state, no display), so the page needs no
 network and no other file. Each episode links to `traces/<trace file stem>.html` next to the
 evaluation's episodes.jsonl, the page `mhrc show` writes; the link is there whether or not that
@@ -19,8 +19,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from mhrc.core.diagnostics import summarize_diagnostics
-from mhrc.core.metrics import summarize
+from mhrc.analysis.diagnostics import summarize_diagnostics
+from mhrc.analysis.metrics import summarize
 from mhrc.eval.report import markdown
 from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, group, is_valid, setting_label, setting_of
 from mhrc.eval.summary import Summary
@@ -38,7 +38,7 @@ PLOTTED_DIAGNOSTICS = tuple(
         "repeated_failures",
         "waits_with_pending",
     )
-)  # labelled as in every report (mhrc.core.diagnostics.LABELS)
+)  # labelled as in every report (mhrc.analysis.diagnostics.LABELS)
 STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 80em; padding: 0 1em; color: #222; }
 table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.9em; }
@@ -160,7 +160,7 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
     )
     ax.set(ylabel="mean per episode")
     ax.legend(fontsize=7, loc="best")
-    return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.core.diagnostics)")]
+    return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.analysis.diagnostics)")]
 
 
 TEAM_PLOTTED = (("succ", "Succ"), ("ts", "TS"), ("as_ticks", "AS"), ("comm_steps", "communication steps"))
@@ -205,7 +205,7 @@ def against_team_size(summary: Summary) -> list[tuple[str, str]]:
 
 
 def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> str:
-    dynamic = any(r.get("recovery") for r in rows)  # a scenario ran: each event's recovery (mhrc.core.metrics)
+    dynamic = any(r.get("recovery") for r in rows)  # a scenario ran: each event's recovery (mhrc.analysis.metrics)
     head = [
         "episode",
         "setting",

@@ -5,7 +5,7 @@ upgrades what older versions of mhrc wrote.
 A field added to a row or to the identity after rows were written has, as its default, the
 meaning a file without it had (`OLD_MEANING`, `EvalIdentity`'s defaults; a row without a team ran
 the paper's, as many of Alice, Bob and David as its `robots`): `read_row` fills it in once, on
-read, so summaries never guess. The team's work (mhrc.core.teamwork: per-robot messages and
+read, so summaries never guess. The team's work (mhrc.analysis.teamwork: per-robot messages and
 moves, communication steps, redundant actions) is, like the diagnostics, unknown in older rows. A row's diagnostics (`diag_*`) are the exception: a row
 written before them does not know them, and stays without them (unknown, never zero). In
 memory, summaries take a row as its `record()`, the JSON object the file holds, upgraded.
@@ -20,7 +20,7 @@ from typing import Any
 import structlog
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from mhrc.core.metrics import UNRECORDED
+from mhrc.analysis.metrics import UNRECORDED
 from mhrc.core.upgrade import paper_team
 from mhrc.eval.spec import EvalIdentity, EvalSpec
 from mhrc.run.config import ConfigError
@@ -49,8 +49,8 @@ def old_noise(aids: Any) -> str:
 
 class EvalRow(BaseModel):
     """One episode's row: the evaluation's settings, the episode's metrics
-    (`mhrc.core.metrics.EpisodeMetrics`), where it ran, and its diagnostics
-    (`mhrc.core.diagnostics.Diagnostics`, prefixed `diag_`; None: written before they existed).
+    (`mhrc.analysis.metrics.EpisodeMetrics`), where it ran, and its diagnostics
+    (`mhrc.analysis.diagnostics.Diagnostics`, prefixed `diag_`; None: written before they existed).
     Fields a newer mhrc adds are kept as they are."""
 
     model_config = ConfigDict(extra="allow")
@@ -103,7 +103,7 @@ class EvalRow(BaseModel):
     team: str = "paper"  # the team: its name, TeamSpec.digest() and each robot's kind (upgrade_row: the paper's)
     team_digest: str = ""
     team_kinds: dict[str, str] = {}
-    messages_per_robot: dict[str, int] = {}  # the team's work (mhrc.core.teamwork); absent: unknown
+    messages_per_robot: dict[str, int] = {}  # the team's work (mhrc.analysis.teamwork); absent: unknown
     moves_per_robot: dict[str, int] = {}
     communication_steps: int = 0
     redundant_navigations: int = 0

@@ -2,7 +2,7 @@
 intervals, and the paper's own figures beside mhrc's where the configuration matches.
 
 Rows are the `episodes.jsonl` rows of one or several evaluation directories. Only valid rows
-(`mhrc.core.metrics`: not every LLM step lost to an unreachable model) enter a table; the summary
+(`mhrc.analysis.metrics`: not every LLM step lost to an unreachable model) enter a table; the summary
 says how many were left out and which. Rows are grouped by their *setting*: method, ablation,
 fidelity, history cap and horizon, so that a paper-fidelity number is never averaged with an
 aided one (nor a capped prompt with a whole one).
@@ -15,7 +15,7 @@ episode per object count 3, 4, 5 and 6, or the same number of them per cell with
 and an ablation the paper reports. Where a setting has no paper cells, its section says why in
 one line.
 
-Beside the metrics, a "Failure diagnostics" table per setting (`mhrc.core.diagnostics`: the rows'
+Beside the metrics, a "Failure diagnostics" table per setting (`mhrc.analysis.diagnostics`: the rows'
 `diag_*` columns); rows written before those columns existed are unknown there, never zero.
 `write_summaries` writes summary.md, summary.csv and summary.html (`mhrc.eval.html`)."""
 
@@ -27,7 +27,7 @@ from typing import Any
 
 import structlog
 
-from mhrc.core.metrics import summarize
+from mhrc.analysis.metrics import summarize
 from mhrc.eval.paper import PaperMatch, paper_cell
 from mhrc.eval.rows import (
     CI_METRICS,
@@ -65,7 +65,7 @@ COLUMNS = (
     "failed_actions",
     "wall_time",
     "recovery_ticks",
-    "unrecovered",  # a scenario's (mhrc.core.metrics); empty for static episodes
+    "unrecovered",  # a scenario's (mhrc.analysis.metrics); empty for static episodes
 )
 
 
@@ -86,7 +86,7 @@ def _cell(s: dict[str, Any]) -> str:
 
 RECOVERY_NOTE = (
     "Recovery: the mean number of steps from a scenario event to the first moment the team has one more target in place "
-    "than it had when the event fired (mhrc.core.metrics), over the episodes where some event was followed by progress; "
+    "than it had when the event fired (mhrc.analysis.metrics), over the episodes where some event was followed by progress; "
     "beside it, the events per episode after which progress never resumed."
 )
 
@@ -276,7 +276,7 @@ DIAG_COLUMNS = (
 
 
 DIAG_NOTE = (
-    "Means per episode (mhrc.core.diagnostics defines each count). A name is hallucinated when the command names an object "
+    "Means per episode (mhrc.analysis.diagnostics defines each count). A name is hallucinated when the command names an object "
     "or furniture the robot's own scene graph (or its task list) did not hold; waits w/ pending are waits chosen while "
     "a teammate's message was unanswered; messages read were delivered into the receiver's observation; steps above TS* "
     "is TS minus the lower bound."

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import structlog
 
-from mhrc.core.metrics import summarize
+from mhrc.analysis.metrics import summarize
 from mhrc.core.upgrade import paper_team
 from mhrc.eval.paper import PAPER_HORIZON, PAPER_SCHEDULE
 from mhrc.eval.records import OLD_MEANING, old_noise

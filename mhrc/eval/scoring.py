@@ -1,5 +1,5 @@
 """One finished episode as the driver scores it: its trace read once, its metrics
-(`mhrc.core.metrics`) and failure diagnostics (`mhrc.core.diagnostics`, given those metrics) computed once, and its
+(`mhrc.analysis.metrics`) and failure diagnostics (`mhrc.analysis.diagnostics`, given those metrics) computed once, and its
 HTML report drawn from the same lines and the same diagnostics."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from pathlib import Path
 
 import structlog
 
-from mhrc.core.diagnostics import Diagnostics, diagnose
-from mhrc.core.metrics import EpisodeMetrics, from_trace
+from mhrc.analysis.diagnostics import Diagnostics, diagnose
+from mhrc.analysis.metrics import EpisodeMetrics, from_trace
 from mhrc.core.records import TraceLine, read_records
 
 log = structlog.get_logger("mhrc.eval")
@@ -33,7 +33,7 @@ class Scored:
 
 
 def score(path: Path) -> Scored:
-    """Read the trace at `path` and score it. Raises OSError or ValueError (mhrc.core.metrics.TraceError
+    """Read the trace at `path` and score it. Raises OSError or ValueError (mhrc.analysis.metrics.TraceError
     for a trace without what the metrics need)."""
     lines = read_episode_trace(path)
     metrics = from_trace(lines)

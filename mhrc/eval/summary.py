@@ -9,7 +9,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-from mhrc.core.diagnostics import summarize_diagnostics
+from mhrc.analysis.diagnostics import summarize_diagnostics
 from mhrc.eval.paper import PaperMatch, paper_match
 from mhrc.eval.records import Row
 from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, by_setting_task, cell_stats, is_valid, order_key, setting_of
@@ -33,7 +33,7 @@ class Summary:
     seed: int
     cells: dict[Cell, list[Row]]  # the valid rows by setting and task, in the order every table lists them
     stats: dict[Cell, dict[str, Any]]  # means and intervals (mhrc.eval.rows.cell_stats)
-    diagnostics: dict[Cell, dict[str, Any]]  # mhrc.core.diagnostics.summarize_diagnostics
+    diagnostics: dict[Cell, dict[str, Any]]  # mhrc.analysis.diagnostics.summarize_diagnostics
     matches: dict[Cell, PaperMatch]  # the paper's figures, or why not
     invalid: Counter[Cell]  # invalid rows left out, by setting and task
 

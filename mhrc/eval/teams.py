@@ -1,7 +1,7 @@
 """The team comparison of a summary (issue 33): when the rows hold more than one team, summary.md
 (and the page that shows it) gains a table of each team beside the others, per task and setting,
 with the paper's Succ, TS and AS, DynaHMRC's communication steps beside the other action steps,
-the redundant actions and each robot's share of the moves (mhrc.core.teamwork); summary.html
+the redundant actions and each robot's share of the moves (mhrc.analysis.teamwork); summary.html
 plots them against team size when the teams differ in size (mhrc.eval.html). Read from the one
 `mhrc.eval.summary.Summary`: no statistic is computed again."""
 
@@ -23,7 +23,7 @@ TEAM_NOTE = (
     "other steps every other non-wait action (together AS sum), DynaHMRC's two cost figures; redundant counts a "
     "navigate to furniture a teammate had reached before, after which the robot neither picked nor placed, and a "
     "pick of an object a teammate held; share is each robot's part of the successful picks and places "
-    "(mhrc.core.teamwork). Means per episode; '-' where rows were written before these metrics."
+    "(mhrc.analysis.teamwork). Means per episode; '-' where rows were written before these metrics."
 )
 
 

@@ -292,7 +292,7 @@ def summary_table(
     done: EpisodeDone, recovery: list[dict[str, Any]] | None = None, lost: list[RobotDetached] | None = None
 ) -> Table:
     """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics").
-    `recovery`: a scenario's events as mhrc.core.metrics scores them (`--events`), one row of them;
+    `recovery`: a scenario's events as mhrc.analysis.metrics scores them (`--events`), one row of them;
     `lost`: the robots whose agents left mid-episode and did not come back (mhrc.run.console.lost_robots)."""
     m = done.metrics
     t = Table(title=f"episode {inert(done.run)}: {inert(done.reason)}", show_header=False)

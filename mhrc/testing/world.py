@@ -14,9 +14,9 @@ from typing import Any, Literal, TypeAlias
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Policy
+from mhrc.analysis.metrics import EpisodeMetrics, from_trace
 from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.keys import Keys
-from mhrc.core.metrics import EpisodeMetrics, from_trace
 from mhrc.core.protocol import (
     ActionResult,
     EpisodeDone,

@@ -375,7 +375,7 @@ def _diagnostic_value(key: str, value: Any) -> str:
 
 
 def _failures(diagnostics: dict[str, Any] | None, note: str | None) -> str:
-    """mhrc.core.diagnostics' findings with the labels people read (mhrc.core.diagnostics.LABELS); the key in each row's title."""
+    """mhrc.analysis.diagnostics' findings with the labels people read (mhrc.analysis.diagnostics.LABELS); the key in each row's title."""
     if diagnostics is None:
         return f'<section id="failures"><h2>Failures</h2><p class="note">{_e(note)}</p></section>'
     rows = "".join(

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from mhrc.core.diagnostics import diagnose
+from mhrc.analysis.diagnostics import diagnose
 from mhrc.core.records import Rows
 from mhrc.viewer.load import LoadedTrace, load_trace, resolve
 from mhrc.viewer.model import build_view
@@ -13,7 +13,7 @@ from mhrc.viewer.page import render_page
 
 
 def diagnostics_for(rows: Rows) -> tuple[dict[str, Any] | None, str | None]:
-    """mhrc.core.diagnostics' findings for the failure panel, or why there are none."""
+    """mhrc.analysis.diagnostics' findings for the failure panel, or why there are none."""
     try:
         result = diagnose(rows).as_dict()
     except Exception as exc:  # a diagnosis that fails must not cost the user the report

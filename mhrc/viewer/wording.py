@@ -1,5 +1,5 @@
 """How the reports word a figure, the same on every page: partial success with its count,
-diagnostics keys as people read them (the labels live beside the keys, in mhrc.core.diagnostics),
+diagnostics keys as people read them (the labels live beside the keys, in mhrc.analysis.diagnostics),
 and any value as HTML text."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 from html import escape
 from typing import Any
 
-from mhrc.core.diagnostics import label as diagnostic_label
+from mhrc.analysis.diagnostics import label as diagnostic_label
 
 __all__ = ["diagnostic_label", "html_text", "partial_success"]
 

@@ -13,7 +13,7 @@ from mhrc.core.protocol.observation import FurnitureView, ObjectView
 
 
 class Metrics(_Model):
-    """Per-episode metrics, as the paper defines them (see mhrc.core.metrics)."""
+    """Per-episode metrics, as the paper defines them (see mhrc.analysis.metrics)."""
 
     success: bool
     partial_success: float = Field(ge=0.0, le=1.0)

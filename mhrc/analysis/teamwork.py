@@ -1,16 +1,16 @@
 """The metrics of a team's work (issue 33), computed from an episode's action results: who did how
-much of it, what was done twice, and what talking cost. `mhrc.core.metrics.from_trace` adds them to
+much of it, what was done twice, and what talking cost. `mhrc.analysis.metrics.from_trace` adds them to
 every episode's metrics; none of the paper's metrics (Succ, PS, TS, AS) reads them.
 
 Per robot:
 
 - actions: `action_steps_per_robot` (wait excluded) and `actions_per_robot` (wait included), as
-  mhrc.core.metrics has always counted them;
+  mhrc.analysis.metrics has always counted them;
 - messages_per_robot: its communicate actions that were delivered (what `messages` sums);
 - moves_per_robot: its successful picks and its successful places, one each (a pick and the place
   that puts the object down are two moves): the objects it moved, its share of the work as PARTNR's
   human-AI study reports it. A robot's share of a set of episodes is its moves over all robots'
-  moves in them (mhrc.core.metrics.summarize); a robot that only looks has share 0.
+  moves in them (mhrc.analysis.metrics.summarize); a robot that only looks has share 0.
 
 Communication beside action, DynaHMRC's two cost figures: `communication_steps` are the
 communicate actions executed (delivered or not, as AS counts failed actions); the other action

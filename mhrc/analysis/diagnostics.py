@@ -1,6 +1,6 @@
 """Failure diagnostics: why an episode went the way it did, counted from its trace alone.
 
-`mhrc.core.metrics` says how well an episode went; this module says what went wrong, per episode
+`mhrc.analysis.metrics` says how well an episode went; this module says what went wrong, per episode
 (`diagnose`) and over episodes (`summarize_diagnostics`). Every count comes from the bus
 messages of one trace (`mhrc.core.records.read_records`); nothing is re-simulated. Definitions:
 
@@ -32,10 +32,10 @@ messages of one trace (`mhrc.core.records.read_records`); nothing is re-simulate
   the observation that delivered it (new_messages of an observation the robot planned on)
   until the robot does anything but wait (acting on it or replying). The trace cannot tell a
   request from a report, so every teammate message counts.
-- messages_sent: communicate actions that succeeded (as `mhrc.core.metrics`'s messages);
+- messages_sent: communicate actions that succeeded (as `mhrc.analysis.metrics`'s messages);
   messages_read: distinct messages delivered into their receiver's observation new_messages
   (a message sent in the last tick may never be).
-- steps_above_bound: TS (`mhrc.core.metrics.from_trace`'s temporal_steps, as the row's TS) minus the
+- steps_above_bound: TS (`mhrc.analysis.metrics.from_trace`'s temporal_steps, as the row's TS) minus the
   episode's lower bound (`episode_started`); None when either is unknown. Negative only when the
   horizon is below the bound (the episode was cut off before it could finish).
 
@@ -52,7 +52,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from mhrc.core.metrics import EpisodeMetrics, TraceError, from_trace
+from mhrc.analysis.metrics import EpisodeMetrics, TraceError, from_trace
 from mhrc.core.protocol import (
     Action,
     ActionAck,

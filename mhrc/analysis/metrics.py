@@ -65,7 +65,7 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
 - team, team_digest, team_kinds: the team the episode ran (`episode_started`'s `team`: its name,
   mhrc.core.team.TeamSpec.digest() and each robot's kind in execution order; a trace older than the
   field ran the paper's team, mhrc.core.upgrade.paper_team);
-- the team's work (mhrc.core.teamwork defines each): messages_per_robot, moves_per_robot (successful
+- the team's work (mhrc.analysis.teamwork defines each): messages_per_robot, moves_per_robot (successful
   picks and places), communication_steps (communicate actions, beside the other action steps),
   redundant_navigations, redundant_picks and redundant_per_robot.
 
@@ -84,6 +84,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from mhrc.analysis.teamwork import teamwork
 from mhrc.core.protocol import (
     ActionAck,
     ActionResult,
@@ -96,7 +97,6 @@ from mhrc.core.protocol import (
     TickClosed,
 )
 from mhrc.core.records import LineKind, Rows, TraceLine, as_records, messages
-from mhrc.core.teamwork import teamwork
 from mhrc.core.upgrade import UNRECORDED, paper_team
 
 __all__ = [
@@ -168,7 +168,7 @@ class EpisodeMetrics:
     team: str = "paper"  # the team's name, digest and robots' kinds (module docstring)
     team_digest: str = ""
     team_kinds: dict[str, str] = field(default_factory=dict)
-    messages_per_robot: dict[str, int] = field(default_factory=dict)  # mhrc.core.teamwork defines these
+    messages_per_robot: dict[str, int] = field(default_factory=dict)  # mhrc.analysis.teamwork defines these
     moves_per_robot: dict[str, int] = field(default_factory=dict)
     communication_steps: int = 0
     redundant_navigations: int = 0
@@ -383,7 +383,7 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         # scenario episodes only (a static episode, or a row written before the fields, adds nothing)
         "recovery_ticks": _mean_of_known(rows, "recovery_ticks"),
         "unrecovered": _mean_of_known(rows, "unrecovered"),
-        # the team's work (mhrc.core.teamwork); None when a row predates the fields
+        # the team's work (mhrc.analysis.teamwork); None when a row predates the fields
         **_teamwork_means(rows),
     }
 
