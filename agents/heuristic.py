@@ -100,6 +100,7 @@ from .heuristic_base import (
     role_of,
 )
 from .heuristic_fetcher import AliceHeuristic
+from .heuristic_room import MAKE_ROOM_RE, Room, make_room_sentence
 from .policy import Decision
 
 STRETCH = 0.1  # m beyond Bob's (conservative) reach he still tries for a target brought to his table
@@ -111,6 +112,7 @@ __all__ = [
     "EXPLORING_RE",
     "HANDOFF_RE",
     "HANDOVER",
+    "MAKE_ROOM_RE",
     "REPORT_RE",
     "REQUEST_RE",
     "ROLES",
@@ -126,6 +128,7 @@ __all__ = [
     "corrective_move",
     "goal_of",
     "heuristic_policy",
+    "make_room_sentence",
     "role_of",
 ]
 
@@ -287,6 +290,7 @@ class Heuristic:
     skills: tuple[str, ...] | None = None
     role: _RoleBase | None = None
     name: str = "heuristic"
+    room: Room = field(default_factory=Room)  # making room at stand poses (heuristic_room.py)
 
     def __post_init__(self) -> None:
         if self.skills is not None:
@@ -295,11 +299,16 @@ class Heuristic:
     async def decide(self, obs: Observation) -> Decision:
         if self.role is None:
             self.role = ROLES[role_of(obs.status.skills)]()
-        return await self.role.decide(obs)
+        self.room.hear(obs)
+        if (instead := self.room.instead(obs)) is not None:
+            self.room.hold(obs)
+            return instead
+        decision = await self.role.decide(self.room.release(obs))
+        return self.room.check(obs, decision, can_move=obs.tick >= self.role.broken_until)
 
     def record(self, result: ActionResult) -> None:
-        if self.role is not None:
-            self.role.record(result)
+        if self.role is not None and (heard := self.room.record(result)) is not None:
+            self.role.record(heard)
 
 
 def heuristic_policy(robot: str, skills: Iterable[str] | None = None) -> Heuristic:
