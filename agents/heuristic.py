@@ -42,9 +42,9 @@ them by name. In the paper's team every decision is the one the per-name roles m
   it will fetch from there ("On fridge I found: apple. I am fetching these: apple."), and does
   no search rounds. The lead hands what it knows and will not fetch next (objects on another
   piece of furniture than its own) to the other working fetchers in turn ("Carol, I leave these
-  to you to fetch: fork."; the message also tells where it lies). A place at table_0 that fails
-  beside other fetchers (two at its one good stand pose) is tried again at once by the first by
-  name; the others stand aside at another pose and come back 3 steps apart each.
+  to you to fetch: fork."; the message also tells where it lies). Fetchers take turns at table_0's
+  stand pose nearest the goal (one robot per stand pose: heuristic_room.py); one whose place
+  there fails (a crowded table) delivers from the next nearest stand pose until a place succeeds.
 - A scout explores the surfaces a fetcher hands it (again, if handed over again) and reports
   to that fetcher what lies on each, or that it could not reach one; when that fetcher has left,
   to the lead fetcher.
