@@ -304,7 +304,9 @@ class Heuristic:
             self.room.hold(obs)
             return instead
         decision = await self.role.decide(self.room.release(obs))
-        return self.room.check(obs, decision, can_move=obs.tick >= self.role.broken_until)
+        fetchers = [n for n, skills in obs.teammates.items() if role_of(skills) == "fetcher"]
+        turns = bool(fetchers) and role_of(obs.status.skills) == "fetcher"  # they take turns at table_0
+        return self.room.check(obs, decision, can_move=obs.tick >= self.role.broken_until, turns=turns)
 
     def record(self, result: ActionResult) -> None:
         if self.role is not None and (heard := self.room.record(result)) is not None:

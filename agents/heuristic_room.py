@@ -17,14 +17,17 @@ counted as an unreachable stand pose or a failed fetch.
 
 A robot asked to make room at the stand pose it stands at leaves it as soon as it is idle (its
 role would `wait`), or while it itself waits for room elsewhere (two robots that each stand
-where the other must go): it navigates to a stand pose nobody is likely to need -- one of a
+where the other must go). A fetcher beside other fetchers leaves table_0 as soon as it is idle,
+unasked: the fetchers take turns at its stand pose nearest the goal, and a base stopped a little
+off its stand pose (which does not make the pose occupied) is still in the way of the next
+fetcher's arm there. Leaving, it navigates to a stand pose nobody is likely to need -- one of a
 piece of furniture with nothing known on it (those it has stood at first, then the nearest),
 never Bob's table, a container or the furniture it was asked to leave -- and tries the next such
 pose if that one is taken. The request holds while it stands there; its role, which decided to
 wait, hears that it waited. A request for a stand pose it does not stand at is dropped.
 
-In the paper's team nobody is ever refused (its world lets robots share a stand pose), so none of
-this acts and every decision is the role's own."""
+In the paper's team nobody is ever refused (its world lets robots share a stand pose) and Alice
+is the only fetcher, so none of this acts and every decision is the role's own."""
 
 from __future__ import annotations
 
@@ -49,6 +52,7 @@ from .policy import Decision
 
 MAKE_ROOM_RE = re.compile(r"please make room at ([A-Za-z0-9_]+) stand pose (\d+)")
 MAX_REFUSALS = 6  # refusals of one stand pose before the role hears of it (and tries another)
+NEAR_HANDOVER = 0.5  # m: an idle fetcher this close to a stand pose of table_0 leaves it to the others
 ASK_TOL = 0.15  # m: standing this close to a stand pose one was asked to leave (the world's rule: 0.1)
 
 Step = Literal["role", "ask", "wait", "retry", "park", "park_aside"]
@@ -127,15 +131,28 @@ class Room:
         held, self.held = self.held, []
         return obs.model_copy(update={"new_messages": [*held, *obs.new_messages]})
 
-    def check(self, obs: Observation, decision: Decision, *, can_move: bool = True) -> Decision:
-        """The role's decision, unless it would wait where it was asked to make room (and can
-        move, not broken down): then leave."""
+    def check(self, obs: Observation, decision: Decision, *, can_move: bool = True, turns: bool = False) -> Decision:
+        """The role's decision, unless it would wait where it was asked to make room, or (`turns`:
+        a fetcher beside other fetchers) by Bob's table, and can move (not broken down): then leave."""
         self.step = "role"
-        if isinstance(decision.action, Wait) and self.asked_of_me and can_move:
+        if not (isinstance(decision.action, Wait) and can_move):
+            return decision
+        if self.asked_of_me or (turns and self._by_handover(obs)):
             park = self._park(obs, "park")
             if park is not None:
                 return park
         return decision
+
+    @staticmethod
+    def _by_handover(obs: Observation) -> bool:
+        """Standing at, or near, one of table_0's stand poses (a base stopped a little off its
+        stand pose does not make it occupied, but its body is in the way of the next arm there)."""
+        table, base = _furniture(obs, HANDOVER), obs.status.base
+        return (
+            table is not None
+            and base is not None
+            and any(math.hypot(sp.x - base.x, sp.y - base.y) <= NEAR_HANDOVER for sp in table.stand_poses)
+        )
 
     def _park(self, obs: Observation, step: Step) -> Decision | None:
         """Navigate to a stand pose nobody is likely to need: of furniture with nothing known on
