@@ -20,7 +20,8 @@ role would `wait`), or while it itself waits for room elsewhere (two robots that
 where the other must go). A fetcher beside other fetchers leaves table_0 as soon as it is idle,
 unasked: the fetchers take turns at its stand pose nearest the goal, and a base stopped a little
 off its stand pose (which does not make the pose occupied) is still in the way of the next
-fetcher's arm there. Leaving, it navigates to a stand pose nobody is likely to need -- one of a
+fetcher's arm there; it first backs straight away from the table (`move`, BACK_OFF), and
+navigates elsewhere only if that fails or leaves it still by the table. Leaving, it navigates to a stand pose nobody is likely to need -- one of a
 piece of furniture with nothing known on it (those it has stood at first, then the nearest),
 never Bob's table, a container or the furniture it was asked to leave -- and tries the next such
 pose if that one is taken. The request holds while it stands there; its role, which decided to
@@ -39,6 +40,7 @@ from typing import Literal
 from mhrc.core.protocol import (
     ActionResult,
     Communicate,
+    Move,
     Navigate,
     Observation,
     OutcomeCode,
@@ -53,9 +55,10 @@ from .policy import Decision
 MAKE_ROOM_RE = re.compile(r"please make room at ([A-Za-z0-9_]+) stand pose (\d+)")
 MAX_REFUSALS = 6  # refusals of one stand pose before the role hears of it (and tries another)
 NEAR_HANDOVER = 0.5  # m: an idle fetcher this close to a stand pose of table_0 leaves it to the others
+BACK_OFF = 0.7  # m: how far it backs away from table_0 (a `move`), before it would navigate elsewhere
 ASK_TOL = 0.15  # m: standing this close to a stand pose one was asked to leave (the world's rule: 0.1)
 
-Step = Literal["role", "ask", "wait", "retry", "park", "park_aside"]
+Step = Literal["role", "ask", "wait", "retry", "park", "park_aside", "back"]
 
 
 def make_room_sentence(place: str, pose: int, to: str) -> str:
@@ -84,6 +87,7 @@ class Room:
     step: Step = "role"  # whose the last decision was: the role's, or one of this layer's
     parked_out: set[tuple[str, int]] = field(default_factory=set)  # park poses that failed
     stood_at: set[str] = field(default_factory=set)  # furniture this robot reached
+    backed: bool = False  # backed away from table_0 since the role last navigated
 
     # ---- hearing
     def hear(self, obs: Observation) -> None:
@@ -137,11 +141,28 @@ class Room:
         self.step = "role"
         if not (isinstance(decision.action, Wait) and can_move):
             return decision
+        if (
+            turns
+            and not self.asked_of_me
+            and not self.backed
+            and "move" in obs.status.skills
+            and self._by_handover(obs)
+        ):
+            return self._back_off(obs)
         if self.asked_of_me or (turns and self._by_handover(obs)):
             park = self._park(obs, "park")
             if park is not None:
                 return park
         return decision
+
+    def _back_off(self, obs: Observation) -> Decision:
+        """Back straight away from the table it faces (a `move`: no second look anywhere); if
+        that fails, or leaves it still by table_0, it navigates elsewhere next."""
+        base = obs.status.base
+        assert base is not None
+        self.backed, self.step = True, "back"
+        dx, dy = -BACK_OFF * math.cos(base.yaw), -BACK_OFF * math.sin(base.yaw)
+        return Decision(action=Move(dx=round(dx, 2), dy=round(dy, 2)))
 
     @staticmethod
     def _by_handover(obs: Observation) -> bool:
@@ -185,6 +206,7 @@ class Room:
         a, outcome = result.action, result.outcome
         if isinstance(a, Navigate) and outcome.succeeded:
             self.stood_at.add(a.target)
+            self.backed = False
         if outcome.code == OutcomeCode.BROKEN_DOWN:
             self.pending = None  # the role hears of it (only a navigation fails so), waits it out, decides afresh
             return result
@@ -213,7 +235,7 @@ class Room:
         if step in ("park", "park_aside") and isinstance(a, Navigate) and not outcome.succeeded:
             if outcome.code != OutcomeCode.OFF_TARGET:
                 self.parked_out.add((a.target, a.stand_pose))
-        return _waited(result) if step == "park" else None
+        return _waited(result) if step in ("park", "back") else None
 
 
 def _waited(result: ActionResult) -> ActionResult:
