@@ -257,3 +257,38 @@ def _at(obs: Observation, place: str, pose: int) -> RobotStatus:
     f = next(f for f in obs.furniture if f.name == place)
     sp = f.stand_poses[pose]
     return obs.status.model_copy(update={"base": Pose2D(x=sp.x, y=sp.y, yaw=sp.yaw)})
+
+
+TRIO = _team(
+    "trio",
+    [
+        RobotSpec(name="alice", kind="mobile_manipulator"),
+        RobotSpec(name="bob", kind="tabletop_arm"),
+        RobotSpec(name="dave", kind="mobile_base"),
+    ],
+)  # the paper's kinds under another scout's name: one robot per stand pose holds for it
+
+
+async def test_a_scout_parked_where_the_fetcher_must_pick_makes_room_and_the_episode_succeeds() -> None:
+    """Dave reports bread_slice_2 on table_2 and stays at its stand pose 0, the one Alice can pick
+    it from: she is refused, asks him to make room, he leaves, she gets there and picks it (before
+    the heuristic made room, she tried stand pose 1, could not reach it and the episode failed)."""
+    ep = await run_episode(
+        team=TRIO, task="make_sandwich", scene="bedroom", seed=0, n_objects=4, horizon=40, schedule="sequential"
+    )
+    assert ep.done.reason == "success" and ep.done.metrics.success, ep.done.metrics
+    results = list(ep.results())
+    refused = [
+        i
+        for i, r in enumerate(results)
+        if r.robot == "alice" and r.outcome.code == OutcomeCode.OCCUPIED and r.outcome.details.get("occupant") == "dave"
+    ]
+    assert refused, "the scenario no longer arises: Dave is never in Alice's way"
+    after = results[refused[0] + 1 :]
+    asked = next(r for r in after if r.robot == "alice" and isinstance(r.action, Communicate))
+    assert asked.action == Communicate(to="dave", content="Dave, please make room at table_2 stand pose 0.")
+    left = next(r for r in after if r.robot == "dave" and isinstance(r.action, Navigate))
+    assert left.outcome.succeeded and left.action.target != "table_2"
+    there = next(r for r in after if r.robot == "alice" and isinstance(r.action, Navigate))
+    assert there.action == Navigate(target="table_2", stand_pose=0) and there.outcome.succeeded
+    assert any(r.robot == "alice" and r.action == Pick(obj="bread_slice_2") and r.outcome.succeeded for r in after)
