@@ -42,9 +42,9 @@ them by name. In the paper's team every decision is the one the per-name roles m
   it will fetch from there ("On fridge I found: apple. I am fetching these: apple."), and does
   no search rounds. The lead hands what it knows and will not fetch next (objects on another
   piece of furniture than its own) to the other working fetchers in turn ("Carol, I leave these
-  to you to fetch: fork."; the message also tells where it lies). A place at table_0 that fails
-  beside other fetchers (two at its one good stand pose) is tried again at once by the first by
-  name; the others stand aside at another pose and come back 3 steps apart each.
+  to you to fetch: fork."; the message also tells where it lies). Fetchers take turns at table_0's
+  stand pose nearest the goal (one robot per stand pose: heuristic_room.py); one whose place
+  there fails (a crowded table) delivers from the next nearest stand pose until a place succeeds.
 - A scout explores the surfaces a fetcher hands it (again, if handed over again) and reports
   to that fetcher what lies on each, or that it could not reach one; when that fetcher has left,
   to the lead fetcher.
@@ -100,6 +100,7 @@ from .heuristic_base import (
     role_of,
 )
 from .heuristic_fetcher import AliceHeuristic
+from .heuristic_room import MAKE_ROOM_RE, Room, make_room_sentence
 from .policy import Decision
 
 STRETCH = 0.1  # m beyond Bob's (conservative) reach he still tries for a target brought to his table
@@ -111,6 +112,7 @@ __all__ = [
     "EXPLORING_RE",
     "HANDOFF_RE",
     "HANDOVER",
+    "MAKE_ROOM_RE",
     "REPORT_RE",
     "REQUEST_RE",
     "ROLES",
@@ -126,6 +128,7 @@ __all__ = [
     "corrective_move",
     "goal_of",
     "heuristic_policy",
+    "make_room_sentence",
     "role_of",
 ]
 
@@ -287,6 +290,7 @@ class Heuristic:
     skills: tuple[str, ...] | None = None
     role: _RoleBase | None = None
     name: str = "heuristic"
+    room: Room = field(default_factory=Room)  # making room at stand poses (heuristic_room.py)
 
     def __post_init__(self) -> None:
         if self.skills is not None:
@@ -295,11 +299,18 @@ class Heuristic:
     async def decide(self, obs: Observation) -> Decision:
         if self.role is None:
             self.role = ROLES[role_of(obs.status.skills)]()
-        return await self.role.decide(obs)
+        self.room.hear(obs)
+        if (instead := self.room.instead(obs)) is not None:
+            self.room.hold(obs)
+            return instead
+        decision = await self.role.decide(self.room.release(obs))
+        fetchers = [n for n, skills in obs.teammates.items() if role_of(skills) == "fetcher"]
+        turns = bool(fetchers) and role_of(obs.status.skills) == "fetcher"  # they take turns at table_0
+        return self.room.check(obs, decision, can_move=obs.tick >= self.role.broken_until, turns=turns)
 
     def record(self, result: ActionResult) -> None:
-        if self.role is not None:
-            self.role.record(result)
+        if self.role is not None and (heard := self.room.record(result)) is not None:
+            self.role.record(heard)
 
 
 def heuristic_policy(robot: str, skills: Iterable[str] | None = None) -> Heuristic:

@@ -11,9 +11,10 @@ asks for it again. A fetcher that does not lead reports each place it claimed an
 the lead, in a scout's words ("On fridge I found: apple, milk."), with its claim of what it
 will fetch from there in the same message ("... I am fetching apple."), so the lead knows the
 place is done. The lead hands an object it knows the place of and will not fetch next to
-another fetcher ("Carol, please fetch apple, I leave it to you."; the message also tells Carol
+another fetcher ("Carol, I leave these to you to fetch: apple."; the message also tells Carol
 where it lies): one it knows beside the one it fetches or holds, in turn to each working
-fetcher. Alone (the paper's team) a fetcher claims and reports nothing."""
+fetcher; the fetcher handed them claims them to the other fetchers ("Frank, I am fetching
+these: apple."), so that nobody fetches again what it has brought to table_0. Alone (the paper's team) a fetcher claims and reports nothing."""
 
 from __future__ import annotations
 
@@ -77,10 +78,15 @@ class Claims(_RoleBase):
             for hit in EXPLORING_RE.finditer(m.content):
                 self._heard(obs, self.places, hit.group(1), m.sender)
             for hit in HANDOFF_RE.finditer(m.content):
-                for name in _names(hit.group(1)):
+                given = _names(hit.group(1))
+                for name in given:
                     self.objects[name] = obs.robot
                     if name not in self.needed:
                         self.needed.append(name)
+                # the other fetchers hear the claim too: else one of them, seeing it lie on table_0
+                # once this one has brought it, fetches it again
+                others = [f for f in self._fetchers(obs) if f != m.sender]
+                self.outbox.extend(Communicate(to=o, content=claim_sentence(given, o)) for o in others)
 
     @staticmethod
     def _heard(obs: Observation, table: dict[str, str], item: str, sender: str) -> None:

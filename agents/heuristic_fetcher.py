@@ -67,8 +67,7 @@ class AliceHeuristic(Claims):
     scouts_here: set[str] = field(default_factory=set)
     scout_todo: dict[str, set[str]] = field(default_factory=dict)  # surfaces handed to a scout it has not reported on
     was_lead: bool = False
-    deliver_after: int = 0  # beside other fetchers: the tick to deliver again after a failed place (_make_way)
-    aside: int = 0  # the stand pose of table_0 to wait at until then
+    place_shift: int = 0  # beside other fetchers: failed places at table_0 since the last that succeeded (_place_pose)
     mine: list[str] = field(default_factory=list)  # surfaces the lead searches herself in the current round
     late: set[str] = field(default_factory=set)  # asked for after Bob's first request
     searched_for: set[str] = field(default_factory=set)  # what earlier search rounds looked for
@@ -152,6 +151,9 @@ class AliceHeuristic(Claims):
             self._saw(a.target)
         if isinstance(a, Place) and last.outcome.succeeded and a.location == HANDOVER:
             self.delivered.add(a.obj)
+            self.place_shift = 0
+        if isinstance(a, Place) and not last.outcome.succeeded and a.location == HANDOVER:
+            self.place_shift += 1
         if isinstance(a, Pick) and not last.outcome.succeeded:
             self._count_try(a.obj)
         if isinstance(a, Navigate) and not last.outcome.succeeded and last.outcome.code != OutcomeCode.OFF_TARGET:
@@ -270,29 +272,23 @@ class AliceHeuristic(Claims):
             return self._decision(Wait())
         goal = table.place_pose or table.position
         idx = _nearest_stand_pose(table, goal)
-        others = self._fetchers(obs)
-        if others and (aside := self._make_way(obs, table, idx, others)) is not None:
-            return aside
-        if not others and self._last_failed("place"):
+        if self._fetchers(obs):
+            idx = self._place_pose(table, goal)
+        elif self._last_failed("place"):
             idx = (idx + 1) % len(table.stand_poses)
         if not _at_stand_pose(obs, table, idx):
             return self._decision(Navigate(target=HANDOVER, stand_pose=idx))
         return self._decision(Place(obj=holding, location=HANDOVER))
 
-    def _make_way(self, obs: Observation, table: FurnitureView, idx: int, others: list[str]) -> Decision | None:
-        """Beside other fetchers, a place at table_0 that failed may be two fetchers at its one
-        good stand pose (the others are too far from the goal): the first by name tries again at
-        once, the others stand aside at another pose and come back 3 steps apart each."""
-        if self._last_failed("place"):
-            rank = sorted([obs.robot, *others]).index(obs.robot)
-            self.deliver_after = obs.tick + 1 + 3 * rank
-            poses = [i for i in range(len(table.stand_poses)) if i != idx]
-            self.aside = poses[rank % len(poses)] if poses and rank else idx
-        if obs.tick >= self.deliver_after:
-            return None
-        if not _at_stand_pose(obs, table, self.aside):
-            return self._decision(Navigate(target=HANDOVER, stand_pose=self.aside))
-        return self._decision(Wait())
+    def _place_pose(self, table: FurnitureView, goal: tuple[float, ...]) -> int:
+        """Beside other fetchers (a world of one robot per stand pose: they take turns at table_0,
+        heuristic_room.py): the stand pose nearest the goal, or, after a place failed from it
+        (a crowded table: no spot the arm can reach from there), the next nearest, kept until a
+        place succeeds."""
+        order = sorted(
+            range(len(table.stand_poses)), key=lambda i: _dist2((table.stand_poses[i].x, table.stand_poses[i].y), goal)
+        )
+        return order[self.place_shift % len(order)]
 
     def _next_exploration(self, obs: Observation) -> Decision | None:
         """The lead's: open the closed containers nobody has looked into yet (nearest first); then

@@ -12,10 +12,23 @@ from collections import defaultdict
 
 import pytest
 
-from mhrc.agents.heuristic import CLAIM_RE, EXPLORE_RE, REPORT_RE, Heuristic, heuristic_policy
-from mhrc.core.protocol import ActionResult, Communicate, Navigate, Observation, Open, Pick, Place, RobotStatus
+from mhrc.agents.heuristic import CLAIM_RE, EXPLORE_RE, MAKE_ROOM_RE, REPORT_RE, Heuristic, heuristic_policy
+from mhrc.core.protocol import (
+    ActionResult,
+    Communicate,
+    Navigate,
+    Observation,
+    Open,
+    OutcomeCode,
+    Pick,
+    Place,
+    Pose2D,
+    RobotStatus,
+    SkillOutcome,
+    Wait,
+)
 from mhrc.core.team import RobotSpec, TeamSpec
-from mhrc.testing import PolicyHarness, observation, run_episode
+from mhrc.testing import PolicyHarness, observation, outcome, run_episode
 from mhrc.testing.policy_harness import FURNITURE
 from mhrc.world.teams import SHIPPED
 
@@ -184,3 +197,98 @@ async def test_a_bigger_team_solves_pack_objects_with_every_robot_working_and_no
     claims = [r for r in results if isinstance(r.action, Communicate) and CLAIM_RE.search(r.action.content)]
     assert claims  # the fetchers did claim, over messages
     assert not any(isinstance(r.action, Place) and r.robot in scouts for r in results)
+
+
+# --------------------------------------------------------------------------- one robot per stand pose
+
+
+def _refused(occupant: str, place: str = "table_2", pose: int = 0) -> SkillOutcome:
+    return outcome(
+        OutcomeCode.OCCUPIED,
+        f"Navigation failed: stand pose {pose} of {place} is occupied by {occupant.capitalize()}.",
+        occupant=occupant,
+    )
+
+
+async def test_a_fetcher_refused_a_stand_pose_asks_the_occupant_to_make_room_and_comes_back() -> None:
+    """Alice must pick at table_2's stand pose 0, where David stands: she asks him by name, waits
+    a step, and navigates there again (not to another stand pose, from which she could not reach)."""
+    team = ["bob", "david"]
+    request = ("bob", "Alice, please bring these to table_0 within my reach: apple.")
+    alice = PolicyHarness(heuristic_policy("alice"))
+    obs = observation("alice", objects={"apple": "table_2"}, messages=[request], teammates=team)
+    handed = await alice.step(obs)  # the open surfaces to the scout first
+    assert isinstance(handed.action, Communicate) and EXPLORE_RE.search(handed.action.content)
+    go = await alice.step(alice.next_observation, _refused("david"))
+    assert go.action == Navigate(target="table_2", stand_pose=0)
+    after = [await alice.step(alice.next_observation) for _ in range(2)]
+    assert [d.action for d in after] == [
+        Communicate(to="david", content="David, please make room at table_2 stand pose 0."),
+        Wait(),
+    ]
+    assert MAKE_ROOM_RE.search(after[0].action.content)  # type: ignore[union-attr]
+    again = await alice.decide(alice.next_observation)
+    assert again.action == Navigate(target="table_2", stand_pose=0)  # the same stand pose, not another
+    there = observation("alice", objects={"apple": "table_2"}, teammates=team, tick=5, status=_at(obs, "table_2", 0))
+    alice.answer(observation=there)
+    assert (await alice.decide(alice.next_observation)).action == Pick(obj="apple")
+
+
+async def test_an_idle_scout_asked_to_make_room_leaves_for_a_stand_pose_nobody_needs() -> None:
+    """David has reported table_2 and has nothing to do; asked to make room there, he navigates
+    to table_1 (nothing known on it), not to Bob's table nor a container; not asked, he waits."""
+    table_1 = FURNITURE["table_2"].model_copy(update={"name": "table_1", "position": (2.5, 2.5, 0.72)})
+    table_1 = table_1.model_copy(update={"stand_poses": [Pose2D(x=2.5, y=1.7, yaw=1.57)]})
+    room = [*FURNITURE.values(), table_1]
+    base = observation("david", furniture=room, objects={"apple": "table_2"})
+    here = _at(base, "table_2", 0)
+    david = PolicyHarness(heuristic_policy("david"))
+    idle = await david.step(base.model_copy(update={"status": here}))
+    assert idle.action == Wait()
+    ask = ("alice", "David, please make room at table_2 stand pose 0.")
+    asked = observation("david", furniture=room, objects={"apple": "table_2"}, messages=[ask], tick=1)
+    leave = await david.step(asked.model_copy(update={"status": here}))
+    assert leave.action == Navigate(target="table_1", stand_pose=0)
+    elsewhere = observation("david", furniture=room, objects={"apple": "table_2"}, messages=[ask], tick=2)
+    assert (await david.decide(elsewhere)).action == Wait()  # asked where it does not stand: nothing to do
+
+
+def _at(obs: Observation, place: str, pose: int) -> RobotStatus:
+    f = next(f for f in obs.furniture if f.name == place)
+    sp = f.stand_poses[pose]
+    return obs.status.model_copy(update={"base": Pose2D(x=sp.x, y=sp.y, yaw=sp.yaw)})
+
+
+TRIO = _team(
+    "trio",
+    [
+        RobotSpec(name="alice", kind="mobile_manipulator"),
+        RobotSpec(name="bob", kind="tabletop_arm"),
+        RobotSpec(name="dave", kind="mobile_base"),
+    ],
+)  # the paper's kinds under another scout's name: one robot per stand pose holds for it
+
+
+async def test_a_scout_parked_where_the_fetcher_must_pick_makes_room_and_the_episode_succeeds() -> None:
+    """Dave reports bread_slice_2 on table_2 and stays at its stand pose 0, the one Alice can pick
+    it from: she is refused, asks him to make room, he leaves, she gets there and picks it (before
+    the heuristic made room, she tried stand pose 1, could not reach it and the episode failed)."""
+    ep = await run_episode(
+        team=TRIO, task="make_sandwich", scene="bedroom", seed=0, n_objects=4, horizon=40, schedule="sequential"
+    )
+    assert ep.done.reason == "success" and ep.done.metrics.success, ep.done.metrics
+    results = list(ep.results())
+    refused = [
+        i
+        for i, r in enumerate(results)
+        if r.robot == "alice" and r.outcome.code == OutcomeCode.OCCUPIED and r.outcome.details.get("occupant") == "dave"
+    ]
+    assert refused, "the scenario no longer arises: Dave is never in Alice's way"
+    after = results[refused[0] + 1 :]
+    asked = next(r for r in after if r.robot == "alice" and isinstance(r.action, Communicate))
+    assert asked.action == Communicate(to="dave", content="Dave, please make room at table_2 stand pose 0.")
+    left = next(r for r in after if r.robot == "dave" and isinstance(r.action, Navigate))
+    assert left.outcome.succeeded and left.action.target != "table_2"
+    there = next(r for r in after if r.robot == "alice" and isinstance(r.action, Navigate))
+    assert there.action == Navigate(target="table_2", stand_pose=0) and there.outcome.succeeded
+    assert any(r.robot == "alice" and r.action == Pick(obj="bread_slice_2") and r.outcome.succeeded for r in after)
