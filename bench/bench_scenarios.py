@@ -4,7 +4,7 @@ seeds 0-9, static and with each shipped scenario (world/scenarios/*.json), all i
 Per scenario: Succ, PS, TS and its difference from the static episode over the same episodes
 (same task, scene, object count and seed), how many of its events applied, were skipped (and
 why) or never fired (the episode ended first), and per event kind the ticks the team took to
-resume progress (the rows' `recovery`, mhrc/core/metrics.py). `per_kind` is the figure: the TS
+resume progress (the rows' `recovery`, mhrc/analysis/metrics.py). `per_kind` is the figure: the TS
 cost of each event kind, from the scenario that has only that kind, over all episodes and over
 those where the event applied.
 
@@ -154,7 +154,7 @@ def main() -> None:
         "runs": {},
         "note": "ts_delta: TS minus the static TS of the same episode (task, scene, objects, seed), averaged; "
         "per_kind.ts_cost_applied: the same over the episodes where that kind's event applied; recovery_ticks: ticks "
-        "until progress resumed (mhrc/core/metrics.py), over applied events; not_fired: the episode ended before the tick",
+        "until progress resumed (mhrc/analysis/metrics.py), over applied events; not_fired: the episode ended before the tick",
     }
     static: dict[tuple[str, str, int, int], dict[str, Any]] = {}
     table = []

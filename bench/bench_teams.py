@@ -44,12 +44,12 @@ def _team_row(rows: list[dict[str, Any]], wall: float) -> dict[str, Any]:
     total = sum(moved.values())
     return {
         "episodes": len(rows),
-        "succ": round(sum(r["success"] for r in rows) / len(rows), 3),
-        "ts": s.get("temporal_steps"),
-        "ts_bound": round(statistics.mean(r["lower_bound"] for r in rows if r.get("lower_bound") is not None), 2)
-        if any(r.get("lower_bound") is not None for r in rows)
-        else None,
-        "as": s.get("action_steps"),
+        "succ": s.get("succ"),
+        "ts": s.get("ts"),
+        "ts_bound": s.get("ts_bound"),
+        "as": s.get("as"),
+        "as_per_robot": s.get("as_per_robot"),
+        "makespan_s": s.get("makespan"),
         "messages": round(statistics.mean(r.get("messages", 0) for r in rows), 2),
         "communication_steps": round(statistics.mean(r.get("communication_steps", 0) or 0 for r in rows), 2),
         "redundant": round(
@@ -152,7 +152,7 @@ def main() -> None:
             "grid": f"{len(TASKS)} tasks x {len(LAYOUTS)} scenes x objects {PAPER_OBJECTS} x {args.trials} trial(s), "
             "horizon 50, schedule sequential (mhrc eval's defaults)",
             "note": "ts_bound: world/bound.py's lower bound on TS; redundant: redundant navigations + picks per "
-            "episode (mhrc/core/teamwork.py); share: each robot's part of the objects picked and placed",
+            "episode (mhrc/analysis/teamwork.py); share: each robot's part of the objects picked and placed",
             "teams": asyncio.run(grid(teams, args.trials, args.workers, tmp)),
             "round_trip": {
                 "paper": asyncio.run(round_trips(SHIPPED["paper"], args.n, tmp)),
