@@ -13,6 +13,8 @@ import pytest
 
 from mhrc.core.protocol import Navigate, OutcomeCode
 from mhrc.core.records import read_records
+from mhrc.core.team import RobotSpec, TeamSpec
+from mhrc.testing import run_episode
 from mhrc.world.sim import Sim
 from mhrc.world.teams import SHIPPED
 
@@ -80,3 +82,45 @@ def test_every_kind_sees_only_what_it_has_seen() -> None:
             if out.code is OutcomeCode.OCCUPIED:
                 continue  # another robot of its level holds the pose: nothing to see from here
             assert not hidden & {o.name for o in sim.observe(robot, 9).objects}, robot
+
+
+FIVE = TeamSpec(
+    name="five",
+    robots=tuple(
+        RobotSpec(name=n, kind=k)
+        for n, k in (
+            ("alice", "mobile_manipulator"),
+            ("bob", "tabletop_arm"),
+            ("carol", "mobile_manipulator"),
+            ("david", "mobile_base"),
+            ("lucy", "drone"),
+        )
+    ),
+)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("team", "task"),
+    [(SHIPPED["scout_and_drone"], t) for t in ("pack_objects", "sort_solids", "make_sandwich")]
+    + [(FIVE, t) for t in ("sort_solids", "make_sandwich")],  # pack_objects: tests/test_heuristic_teams.py
+    ids=lambda v: getattr(v, "name", v),
+)
+async def test_a_team_with_a_drone_solves_every_task_with_every_robot_working(team: TeamSpec, task: str) -> None:
+    """The heuristic team of four with a drone, and of five (two fetchers, a ground scout and a
+    drone), each solves an episode of every task; every robot does real work: the finisher
+    places, each fetcher picks and places, each scout (the drone too) navigates and reports."""
+    ep = await run_episode(team=team, task=task, scene="kitchen", seed=0, n_objects=5, horizon=60, schedule="lockstep")
+    assert ep.done.metrics.success, (ep.done.reason, ep.done.metrics)
+    did: dict[str, set[str]] = {r: set() for r in team.names}
+    for r in ep.results():
+        if r.outcome.succeeded:
+            did[r.robot].add(r.action.skill)
+    for spec in team.robots:
+        want = {
+            "tabletop_arm": {"place"},
+            "mobile_manipulator": {"pick", "place"},
+            "mobile_base": {"navigate", "communicate"},
+            "drone": {"navigate", "communicate"},
+        }[spec.kind]
+        assert want <= did[spec.name], (spec.name, did[spec.name])
