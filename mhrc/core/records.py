@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, TypeVar, Union
+from typing import Any, TypeVar, Union, get_args
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
@@ -153,22 +153,7 @@ Rows = Iterable[TraceLine | Mapping[str, Any]]  # decoded trace lines, or lines 
 
 
 MODELS: dict[str, type[Payload]] = {  # a message's `kind` -> its model (the key it travels on says the same)
-    m.model_fields["kind"].default: m
-    for m in (
-        ActionRequest,
-        ActionAck,
-        ActionResult,
-        Turn,
-        RobotMessage,
-        Thought,
-        EpisodeStarted,
-        TickClosed,
-        RobotAttached,
-        RobotDetached,
-        EpisodeDone,
-        Snapshot,
-        ScenarioEvent,
-    )
+    m.model_fields["kind"].default: m for m in get_args(Payload)
 }
 
 
