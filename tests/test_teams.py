@@ -183,3 +183,19 @@ def test_every_robot_of_a_team_of_eight_has_a_colour_of_its_own() -> None:
         printer = ProgressPrinter(Console(file=None, record=True), verbose=False)
         assert len({printer._robot(n).split("]")[0] for n in names}) == 8
     assert robot_colors(["alice", "bob", "david"]) == ROBOT_COLORS  # the paper's team as before
+
+
+def test_a_team_the_layout_cannot_place_is_refused_before_anything_starts(tmp_path: Path) -> None:
+    """Two robots a team file starts on one spot: `mhrc up` refuses it in one line, exit 2, with no
+    run directory written (the placement is checked with the config, without building the world)."""
+    from test_bad_input import _mhrc, _refused
+
+    team = tmp_path / "crowded.toml"
+    team.write_text(
+        '[[robots]]\nname = "alice"\nkind = "mobile_manipulator"\nstart = [-1.0, 0.0, 0.0]\n'
+        '[[robots]]\nname = "bob"\nkind = "tabletop_arm"\n'
+        '[[robots]]\nname = "carol"\nkind = "mobile_manipulator"\nstart = [-1.0, 0.0, 0.0]\n'
+    )
+    line = _refused(_mhrc("up", "--team", str(team), cwd=tmp_path), "--team")
+    assert "carol" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["crowded.toml"]

@@ -28,7 +28,7 @@ from .furniture import Layout
 from .robots import KINDS, RobotKind
 from .scene import occupancy
 
-__all__ = ["START_GAP", "STAND_CLEARANCE", "place_team", "reachable"]
+__all__ = ["START_GAP", "STAND_CLEARANCE", "check_placement", "floor_margin", "place_team", "reachable"]
 
 Pose = tuple[float, float, float]
 
@@ -119,3 +119,15 @@ def place_team(layout: Layout, team: TeamSpec, seed: int, grid: Grid) -> dict[st
             yaw = float(rng.integers(8)) * math.pi / 4 - math.pi
             placed.append((r.name, kind, (round(x, 3), round(y, 3), round(yaw, 4))))
     return {name: pose for name, _, pose in placed}
+
+
+def floor_margin(team: TeamSpec) -> float:
+    """How far the floor's grid grows every obstacle: the widest ground robot's footprint."""
+    return max(KINDS[r.kind].footprint for r in team.robots if not KINDS[r.kind].flies)
+
+
+def check_placement(layout: Layout, team: TeamSpec, seed: int) -> None:
+    """TeamError NO_ROOM unless `team` can start on `layout` with `seed`: the placement the world
+    makes, without building anything (the floor's grid is geometry alone), so that a team the
+    layout cannot place is refused before anything starts."""
+    place_team(layout, team, seed, occupancy(layout, floor_margin(team)))

@@ -47,7 +47,7 @@ from .bound import lower_bound, symbolic_episode
 from .dynamics import Dynamics
 from .observe import Knowledge
 from .physics import ObjectState, PhysicalWorld
-from .placement import place_team
+from .placement import floor_margin, place_team
 from .robots import KINDS, RobotBody, flight_altitude, spawn
 from .scenario import Scenario
 from .scene import BuiltScene, Fixture, Layout, build_scene, get_layout
@@ -128,7 +128,7 @@ class Sim:
     def _build(self, rng: np.random.Generator) -> None:
         lay = self.layout
         kinds = [KINDS[r.kind] for r in self.team.robots]
-        margin = max(k.footprint for k in kinds if not k.flies)  # the floor's grid: ground bases
+        margin = floor_margin(self.team)  # the floor's grid: ground bases
         fliers = [k.footprint for k in kinds if k.flies]
         fixtures = {fx.name: fx for fx in self.task.fixtures(lay)}
         scene = build_scene(

@@ -187,6 +187,7 @@ class EpisodeConfig(BaseModel):
             raise ConfigError(
                 f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})"
             )
+        from mhrc.world.placement import check_placement
         from mhrc.world.scene import get_layout
         from mhrc.world.sim import check_episode  # validates task and scene names without building
         from mhrc.world.teams import check_team
@@ -194,6 +195,7 @@ class EpisodeConfig(BaseModel):
         try:
             check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
             check_team(cfg.team, get_layout(cfg.scene))
+            check_placement(get_layout(cfg.scene), cfg.team, cfg.seed)  # room for every robot, before anything starts
             cfg.scenario()
             if any(cfg.robot_specs().values()):
                 from mhrc.agents.llm import check_spec
