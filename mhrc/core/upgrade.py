@@ -38,6 +38,19 @@ def paper_team(robots: Any) -> TeamRecord:
     return TeamRecord(name=team.name, digest=team.digest(), kinds=team.kinds)
 
 
+# what the world's rejection sentences of the time said, in the order they were told apart
+LEGACY_REASONS: tuple[tuple[str, RejectCode], ...] = (
+    ("the request is for tick", RejectCode.STALE_TICK),
+    ("already submitted", RejectCode.TICK_TAKEN),
+    ("still busy", RejectCode.BUSY),
+    ("'s turn", RejectCode.NOT_YOUR_TURN),
+    ("not attached", RejectCode.NOT_ATTACHED),
+    ("attached to another agent", RejectCode.OTHER_AGENT),
+    ("sent on the key of", RejectCode.WRONG_KEY),
+    ("there is no robot", RejectCode.NO_SUCH_ROBOT),
+)
+
+
 def legacy_reject_code(reason: str) -> RejectCode | None:
     """The code of a rejection recorded before acks carried one, from the world's sentence of that
     time (world/admission.py), or None where no code says it."""
@@ -46,23 +59,7 @@ def legacy_reject_code(reason: str) -> RejectCode | None:
         return RejectCode.EPISODE_OVER
     if r.startswith("malformed"):
         return RejectCode.MALFORMED
-    if "the request is for tick" in r:
-        return RejectCode.STALE_TICK
-    if "already submitted" in r:
-        return RejectCode.TICK_TAKEN
-    if "still busy" in r:
-        return RejectCode.BUSY
-    if "'s turn" in r:
-        return RejectCode.NOT_YOUR_TURN
-    if "not attached" in r:
-        return RejectCode.NOT_ATTACHED
-    if "attached to another agent" in r:
-        return RejectCode.OTHER_AGENT
-    if "sent on the key of" in r:
-        return RejectCode.WRONG_KEY
-    if "there is no robot" in r:
-        return RejectCode.NO_SUCH_ROBOT
-    return None
+    return next((code for words, code in LEGACY_REASONS if words in r), None)
 
 
 def _code(value: Any, reason: str) -> str | None:
