@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 from test_faults import HANG, _kill_group, _no_strays
+from waits import until_sync
 
 FULL = Path("/dev/full")
 
@@ -317,7 +318,6 @@ def test_a_world_paused_until_its_agents_give_up_reports_its_own_end(tmp_path: P
     that end with its metrics and exit 0. Before: "the world process exited with code 0 before the
     episode ended", exit 1, no metrics (its observer session had lost the world too)."""
     import signal
-    import time
 
     from test_faults import _start, _until
 
@@ -330,12 +330,12 @@ def test_a_world_paused_until_its_agents_give_up_reports_its_own_end(tmp_path: P
         assert world is not None and None not in agents, (world, agents)
         os.kill(world, signal.SIGSTOP)
         try:
-            deadline = time.monotonic() + HANG
-            while any(
-                _alive(pid) for pid in agents if pid is not None
-            ):  # the agents give up on a world that does not answer
-                assert time.monotonic() < deadline, "the agents never gave up on the paused world"
-                time.sleep(0.2)
+            until_sync(  # the agents give up on a world that does not answer
+                lambda: not any(_alive(pid) for pid in agents if pid is not None),
+                "the agents giving up on the paused world",
+                timeout=HANG,
+                every=0.2,
+            )
         finally:
             os.kill(world, signal.SIGCONT)
         code = proc.wait(timeout=HANG)

@@ -23,7 +23,7 @@ from typing import Any
 import pytest
 from cryptography import x509
 from structlog.testing import capture_logs
-from waits import served
+from waits import served, until
 
 from mhrc.core import security
 from mhrc.core.bus import Bus, open_client
@@ -204,11 +204,13 @@ class Mallory:
         takes alice's puts in the order sent, so it has handled every one before it."""
         sentinel = Thought(robot="alice", tick=0, policy="sentinel", action=new_goal_id())
         self.bus.put(self.keys.thought("alice"), sentinel)
-        for _ in range(600):  # the file, not a sleep standing in for it
-            if str(sentinel.action) in self.world.trace.read_text():
-                return
-            await asyncio.sleep(0.05)
-        raise AssertionError("the recorder never wrote the thought put last")
+        # the file, not a sleep standing in for it
+        await until(
+            lambda: str(sentinel.action) in self.world.trace.read_text(),
+            "the recorder writing the thought put last",
+            timeout=30,
+            every=0.05,
+        )
 
 
 @contextlib.asynccontextmanager
