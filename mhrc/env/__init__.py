@@ -6,13 +6,25 @@ Needs the `env` extra (`pip install -e ".[env]"`: pettingzoo and gymnasium)."""
 
 from __future__ import annotations
 
+import importlib.util
 from typing import Any
 
-from .aec import MhrcAECEnv
-from .demos import Demonstration, write_demonstrations
-from .parallel import MhrcParallelEnv
+if importlib.util.find_spec("pettingzoo") is None or importlib.util.find_spec("gymnasium") is None:
+    raise ImportError('mhrc.env needs pettingzoo and gymnasium: pip install -e ".[env]" (or "mhrc[env]")')
 
-__all__ = ["Demonstration", "MhrcAECEnv", "MhrcParallelEnv", "env", "parallel_env", "write_demonstrations"]
+from .aec import MhrcAECEnv  # noqa: E402
+from .demos import Demonstration, Demonstrations, write_demonstrations  # noqa: E402
+from .parallel import MhrcParallelEnv  # noqa: E402
+
+__all__ = [
+    "Demonstration",
+    "Demonstrations",
+    "MhrcAECEnv",
+    "MhrcParallelEnv",
+    "env",
+    "parallel_env",
+    "write_demonstrations",
+]
 
 
 def parallel_env(*, render_mode: str | None = None, expert: bool = False, **options: Any) -> MhrcParallelEnv:

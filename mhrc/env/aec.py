@@ -64,7 +64,6 @@ class MhrcAECEnv(AECEnv[str, Obs, str]):
             self._was_dead_step(action)
             return
         self._cumulative_rewards[agent] = 0.0
-        self.core.clear_news()
         self.core.act(agent, action)
         reward = self.core.reward()
         self.rewards = dict.fromkeys(self.agents, reward)

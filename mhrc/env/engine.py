@@ -16,7 +16,6 @@ import numpy as np
 
 from mhrc.core.protocol import ActionResult, EpisodeDone, Message
 from mhrc.run.config import EpisodeConfig
-from mhrc.viewer.video import OVERVIEW, camera
 from mhrc.world.sim import Sim
 
 from .seats import Seat
@@ -74,7 +73,7 @@ class EnvCore:
         rejection = world.submit(robot, action)
         if rejection is not None:  # the APIs hand over only what the world accepts: a bug, said plainly
             raise RuntimeError(f"the world refused {robot}'s action ({rejection.code.value}): {rejection.reason}")
-        self.news[robot] = {"unreadable": unreadable} if unreadable is not None else {}
+        self.news[robot] = {"unreadable": unreadable} if unreadable is not None else {}  # its earlier news was read
         for result in world.results:
             self._deliver(result)
         for turn in world.turns:
@@ -141,13 +140,12 @@ class EnvCore:
             info["metrics"] = world.done.metrics.model_dump(mode="json")
         return info
 
-    def clear_news(self) -> None:
-        self.news = {r: {} for r in self.robots}
-
     def render(self) -> np.ndarray | None:
         """The video's frame of the world as it is now (mhrc.viewer.video, its default view)."""
         if self.render_mode is None or self.sim is None:
             return None
+        from mhrc.viewer.video import OVERVIEW, camera  # here: the video's imports (imageio, PIL) only for frames
+
         height, width = FRAME
         return camera(self.sim, OVERVIEW, width, height)
 

@@ -66,7 +66,6 @@ class MhrcParallelEnv(ParallelEnv[str, Obs, str]):
         if not self.agents:
             return {}, {}, {}, {}, {}
         live = list(self.agents)
-        self.core.clear_news()
         for agent in live:  # the world runs the tick when the last of them has submitted
             self.core.act(agent, actions[agent])
         reward = self.core.reward()

@@ -15,6 +15,8 @@ is smaller still), MAX_COMMAND for a command (a message may carry 4,000 characte
 
 from __future__ import annotations
 
+import copy
+import functools
 import re
 
 from gymnasium import spaces
@@ -31,17 +33,23 @@ _OUTSIDE = re.compile("[^\t\n\r\x20-\x7e\xa0-\ud7ff\ue000-\ufffd]")  # a charact
 EMPTY = {"text": "", "structured": ""}  # a robot's observation before the world gave it one
 
 
+@functools.cache
+def _text(max_length: int) -> spaces.Text:
+    return spaces.Text(max_length, min_length=0, charset=CHARSET)
+
+
+def text_space(max_length: int) -> spaces.Text:
+    """A Text space over CHARSET: a copy of one built once (building one sorts and indexes the
+    63,000 characters), with a random generator of its own once seeded."""
+    return copy.copy(_text(max_length))
+
+
 def observation_space() -> spaces.Dict:
-    return spaces.Dict(
-        {
-            "text": spaces.Text(MAX_TEXT, min_length=0, charset=CHARSET),
-            "structured": spaces.Text(MAX_TEXT, min_length=0, charset=CHARSET),
-        }
-    )
+    return spaces.Dict({"text": text_space(MAX_TEXT), "structured": text_space(MAX_TEXT)})
 
 
 def action_space() -> spaces.Text:
-    return spaces.Text(MAX_COMMAND, min_length=0, charset=CHARSET)
+    return text_space(MAX_COMMAND)
 
 
 def is_command(x: object) -> bool:
