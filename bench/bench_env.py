@@ -24,7 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from report import emit, percentile
+from report import emit, int_range, percentile
 
 import mhrc.env as mhrc_env
 from mhrc.core import logs
@@ -48,14 +48,6 @@ def _time_skills() -> None:
             SKILL_SECONDS[0] += time.perf_counter() - t
 
     Sim.execute = timed  # type: ignore[method-assign]
-
-
-def _range(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        out += list(range(int(lo), int(hi or lo) + 1))
-    return out
 
 
 def env_episode(task: str, seed: int, objects: int) -> dict[str, Any]:
@@ -125,7 +117,7 @@ def main() -> None:
     args = ap.parse_args()
     logs.configure()  # warnings only: no debug line per skill in either mode
     _time_skills()
-    tasks, seeds = args.tasks.split(","), _range(args.seeds)
+    tasks, seeds = args.tasks.split(","), int_range(args.seeds)
     rows: dict[str, list[dict[str, Any]]] = {"env": [], "bus": []}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:

@@ -6,18 +6,14 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-from gymnasium import spaces
 from pettingzoo import AECEnv
 
-from .engine import EnvCore
-from .options import check_render_mode, episode_config
-from .spaces import action_space, observation_space
+from .making import Made
 
 Obs = dict[str, str]
 
 
-class MhrcAECEnv(AECEnv[str, Obs, str]):
+class MhrcAECEnv(Made, AECEnv[str, Obs, str]):
     """One mhrc episode at a time, the robots taking turns (the sequential schedule).
 
     Options as `MhrcParallelEnv`'s. A robot's observation is the one the world last gave it: its
@@ -28,19 +24,7 @@ class MhrcAECEnv(AECEnv[str, Obs, str]):
 
     def __init__(self, *, render_mode: str | None = None, expert: bool = False, **options: Any) -> None:
         super().__init__()
-        cfg = episode_config(options)
-        self.render_mode = check_render_mode(render_mode)
-        self.core = EnvCore(cfg, schedule="sequential", expert=expert, render_mode=self.render_mode)
-        self.possible_agents: list[str] = list(cfg.robots)
-        self.agents: list[str] = []
-        self.observation_spaces = {a: observation_space() for a in self.possible_agents}
-        self.action_spaces = {a: action_space() for a in self.possible_agents}
-
-    def observation_space(self, agent: str) -> spaces.Space[Any]:
-        return self.observation_spaces[agent]
-
-    def action_space(self, agent: str) -> spaces.Space[Any]:
-        return self.action_spaces[agent]
+        self._make("sequential", render_mode, expert, options)
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         self.core.reset(seed)
@@ -78,9 +62,3 @@ class MhrcAECEnv(AECEnv[str, Obs, str]):
             assert turn is not None
             self.agent_selection = turn
         self._accumulate_rewards()
-
-    def render(self) -> np.ndarray | None:  # type: ignore[override]
-        return self.core.render()
-
-    def close(self) -> None:
-        self.core.close()

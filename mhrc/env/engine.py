@@ -16,6 +16,7 @@ import numpy as np
 
 from mhrc.core.protocol import ActionResult, EpisodeDone, Message
 from mhrc.run.config import EpisodeConfig
+from mhrc.run.serve import sim_of
 from mhrc.world.sim import Sim
 
 from .seats import Seat
@@ -47,17 +48,7 @@ class EnvCore:
             raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
         self.close()
         cfg = self.cfg
-        self.sim = Sim(
-            task=cfg.task,
-            scene=cfg.scene,
-            seed=cfg.seed if seed is None else int(seed),
-            n_objects=cfg.n_objects,
-            team=cfg.team,
-            robots=cfg.robots,
-            aids=cfg.aids,
-            scenario=cfg.scenario(),
-            noise=cfg.noise,
-        )
+        self.sim = sim_of(cfg, None if seed is None else int(seed))
         self.world = DirectWorld(self.sim, schedule=self.schedule, horizon=cfg.horizon)
         self.seats = {r: Seat.make(r, cfg, expert=self.expert) for r in self.robots}
         self.news = {r: {} for r in self.robots}

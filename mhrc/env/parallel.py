@@ -6,18 +6,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
-from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .engine import EnvCore
-from .options import check_render_mode, episode_config
-from .spaces import action_space, observation_space
+from .making import Made
 
 Obs = dict[str, str]
 
 
-class MhrcParallelEnv(ParallelEnv[str, Obs, str]):
+class MhrcParallelEnv(Made, ParallelEnv[str, Obs, str]):
     """One mhrc episode at a time, every robot acting in every step (the lockstep schedule).
 
     Made with `mhrc up`'s episode options (`task`, `scene`, `objects`, `seed`, `horizon`, `team`,
@@ -27,19 +23,7 @@ class MhrcParallelEnv(ParallelEnv[str, Obs, str]):
     metadata = {"name": "mhrc_parallel_v0", "render_modes": ["rgb_array"], "is_parallelizable": True}
 
     def __init__(self, *, render_mode: str | None = None, expert: bool = False, **options: Any) -> None:
-        cfg = episode_config(options)
-        self.render_mode = check_render_mode(render_mode)
-        self.core = EnvCore(cfg, schedule="lockstep", expert=expert, render_mode=self.render_mode)
-        self.possible_agents: list[str] = list(cfg.robots)
-        self.agents: list[str] = []
-        self.observation_spaces = {a: observation_space() for a in self.possible_agents}
-        self.action_spaces = {a: action_space() for a in self.possible_agents}
-
-    def observation_space(self, agent: str) -> spaces.Space[Any]:
-        return self.observation_spaces[agent]
-
-    def action_space(self, agent: str) -> spaces.Space[Any]:
-        return self.action_spaces[agent]
+        self._make("lockstep", render_mode, expert, options)
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
@@ -81,9 +65,3 @@ class MhrcParallelEnv(ParallelEnv[str, Obs, str]):
             dict.fromkeys(live, truncated),
             infos,
         )
-
-    def render(self) -> np.ndarray | None:  # type: ignore[override]
-        return self.core.render()
-
-    def close(self) -> None:
-        self.core.close()
