@@ -1,6 +1,7 @@
 """Teams in whole episodes (issue 33): eight robots as separate processes on the secured bus (and
-their video), and
-partial observability for every kind of robot in a team of eight."""
+their video), and partial observability for every kind of robot in a team of eight, in the
+simulator and over the whole trace of every multi-robot episode here
+(mhrc.analysis.observability)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from mhrc.analysis.observability import check
 from mhrc.core.protocol import Navigate, OutcomeCode
 from mhrc.core.records import read_records
 from mhrc.core.team import RobotSpec, TeamSpec
@@ -48,6 +50,8 @@ def test_eight_robots_as_separate_processes_on_the_secured_bus(tmp_path: Path) -
     assert acted == set(FULL_HOUSE.names)  # each agent's requests reached the world as its own robot's
     started = next(r.msg for r in records if getattr(r.msg, "kind", "") == "episode_started")
     assert started.team is not None and started.team.kinds == FULL_HOUSE.kinds  # the team in the trace
+    seen = check(records)  # partial observability over the eight robots' whole trace
+    assert seen.leaks == [] and seen.observations >= 8
 
 
 def test_every_kind_sees_only_what_it_has_seen() -> None:
@@ -112,6 +116,8 @@ async def test_a_team_with_a_drone_solves_every_task_with_every_robot_working(te
     places, each fetcher picks and places, each scout (the drone too) navigates and reports."""
     ep = await run_episode(team=team, task=task, scene="kitchen", seed=0, n_objects=5, horizon=60, schedule="lockstep")
     assert ep.done.metrics.success, (ep.done.reason, ep.done.metrics)
+    seen = check(ep.records)  # no robot's observation names an object it had no way to know
+    assert seen.unchecked is None and seen.leaks == []
     did: dict[str, set[str]] = {r: set() for r in team.names}
     for r in ep.results():
         if r.outcome.succeeded:

@@ -3,6 +3,7 @@ by selenium): the map, the lanes and the slider render, and scrubbing moves the 
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 from collections.abc import Iterator
@@ -14,6 +15,8 @@ from click.testing import CliRunner
 from test_viewer import record_failed, record_heuristic
 
 from mhrc.cli import main
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
 
 pytestmark = pytest.mark.slow
 
@@ -265,3 +268,30 @@ def test_a_failed_episode_shows_its_unplaced_targets_in_a_browser(driver: Any, f
         for a in _boxes(driver, "#labels text"):
             for d in dots:
                 assert _overlap(a, d) < 1.0, (i, a, d)
+
+
+def test_a_drone_is_drawn_flying_at_its_altitude(driver: Any, tmp_path: Path) -> None:
+    """A team with a drone: the map draws it with its rotors (a dashed ring), its altitude in
+    the house it flew in on its label and on hover; the ground robots are drawn as ever."""
+    from selenium.webdriver.common.by import By
+
+    from mhrc.world.robots import KINDS, flight_altitude
+    from mhrc.world.scene import get_layout
+    from mhrc.world.teams import SHIPPED
+
+    trace = tmp_path / "trace.jsonl"
+    asyncio.run(
+        up_in_process(EpisodeConfig.build(team=SHIPPED["drone_scout"], seed=0, horizon=6, trace=trace).resolved())
+    )
+    driver.get(_show(trace).as_uri())
+    want = flight_altitude(KINDS["drone"], max(f.size[2] for f in get_layout("kitchen").furniture))
+    (drone,) = driver.find_elements(By.CSS_SELECTOR, "#map g.robot.flying")
+    assert drone.get_attribute("data-robot") == "lucy" and float(drone.get_attribute("data-altitude")) == want
+    assert drone.find_elements(By.CSS_SELECTOR, "circle.rotors")
+    labels = [t.text for t in driver.find_elements(By.CSS_SELECTOR, "#map text") if t.text.startswith("lucy")]
+    assert labels == [f"lucy ({want:.1f} m up)"], labels
+    assert {g.get_attribute("data-robot") for g in driver.find_elements(By.CSS_SELECTOR, "#map g.robot")} == {
+        "alice",
+        "bob",
+        "lucy",
+    }

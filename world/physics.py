@@ -28,6 +28,7 @@ SPOT_GAP = 0.02  # clearance between placed objects' footprints
 SETTLE_STEPS = 480  # at most 2 s of PyBullet time (240 Hz) for a released object to come to rest
 SETTLE_STILL = 12  # steps in a row nearly still that count as at rest
 GRAVITY = 9.81
+STACK_TOUCH = 0.003  # m: how near a released piece must lie to a piece of the stack to rest on it
 ROLLING_FRICTION = 0.005  # m: what stops a tipped disc or a ball rolling (PyBullet's default is none)
 
 
@@ -325,6 +326,25 @@ class PhysicalWorld:
             p.resetJointState(self.scene.bodies[name], self.scene.joints[name], value, physicsClientId=cid)
         return steps
 
+    def _leans_on_stack(self, obj: ObjectState, fixture: str) -> bool:
+        """Whether `obj` rests on a stacking fixture's stack though its lowest point is below the
+        stack's top: tilted across a narrow piece (a bacon strip) onto the layer under it, or lying
+        on such a tilted piece. It counts as it lies when it touches a piece of the stack that lies
+        lower than itself (it is borne by the stack, not standing beside it on the board) and its
+        centre is above every piece's (it reads as the stack's new top, not a piece beside the top)."""
+        if not self.fixtures[fixture].stack or "exact_motion" in self.aids:
+            return False
+        cid = self.cid
+        (_, _, bottom), _ = p.getAABB(obj.body, physicsClientId=cid)
+        pieces = [o for o in self.objects.values() if o.on == fixture and o.held_by is None and o is not obj]
+        if any(self.position(o)[2] >= self.position(obj)[2] - 0.001 for o in pieces):
+            return False
+        return any(
+            p.getAABB(o.body, physicsClientId=cid)[0][2] < bottom - 0.002
+            and p.getClosestPoints(obj.body, o.body, STACK_TOUCH, physicsClientId=cid)
+            for o in pieces
+        )
+
     def settled_at(self, obj: ObjectState, location: str) -> bool:
         """Read where the released object really lies and record it; True if that is `location`.
 
@@ -337,7 +357,9 @@ class PhysicalWorld:
         (_, _, bottom), _ = p.getAABB(obj.body, physicsClientId=self.cid)
         obj.on, obj.inside = None, False
         fx = self.fixture_at(x, y)
-        if fx is not None and abs(bottom - self.surface_top(fx.name, without=obj)) < 0.008:
+        if fx is not None and (
+            abs(bottom - self.surface_top(fx.name, without=obj)) < 0.008 or self._leans_on_stack(obj, fx.name)
+        ):
             obj.on = fx.name
         else:
             for f in lay.furniture:

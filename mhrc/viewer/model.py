@@ -17,6 +17,7 @@ from mhrc.viewer.events import ScenarioMark, scenario_marks, scenario_name
 from mhrc.viewer.load import LoadedTrace
 from mhrc.viewer.targets import TaskView, task_view
 from mhrc.world.layouts import Layout, get_layout
+from mhrc.world.robots import KINDS, flight_altitude
 
 
 @dataclass
@@ -111,7 +112,20 @@ def scene_map(scene: str, fixtures: dict[str, tuple[float, float]], warnings: li
         "bob_base": list(layout.bob_base[:2]),
         "goal_area": list(layout.goal_area),
         "fixtures": [{"name": n, "x": x, "y": y} for n, (x, y) in sorted(fixtures.items())],
+        "tallest": max((f.size[2] for f in layout.furniture), default=0.0),
     }
+
+
+def fliers(started: dict[str, Any], scene: dict[str, Any] | None) -> dict[str, float]:
+    """The robots of the recorded team that fly, and the altitude they fly at in that house (m),
+    as the world set it (world/robots.py flight_altitude)."""
+    kinds = (started.get("team") or {}).get("kinds") or {}
+    out = {}
+    for robot, kind in kinds.items():
+        spec = KINDS.get(kind)
+        if spec is not None and spec.flies:
+            out[robot] = flight_altitude(spec, scene["tallest"] if scene else 0.0)
+    return out
 
 
 def build_view(trace: LoadedTrace) -> EpisodeView:
@@ -236,6 +250,7 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
         "seed": started.get("seed"),
         "n_objects": started.get("n_objects"),
         "robots": robots,
+        "fliers": fliers(started, scene),
         "models": {r: policies.get(r, "unknown") for r in robots},
         "horizon": started.get("horizon"),
         "scheduler": started.get("scheduler"),

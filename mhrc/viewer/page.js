@@ -175,11 +175,13 @@
       if (!p) continue;
       const c = data.colors[r], x = px(p.x), y = py(p.y), yaw = p.yaw || 0;
       const hx = (parseFloat(x) + Math.cos(yaw) * 16).toFixed(1), hy = (parseFloat(y) - Math.sin(yaw) * 16).toFixed(1);
-      out += '<g class="robot" data-robot="' + esc(r) + '" data-x="' + p.x + '" data-y="' + p.y + '">'
+      const alt = (data.fliers || {})[r];  // a drone: a dashed ring for its rotors, its altitude on hover
+      out += '<g class="robot' + (alt !== undefined ? ' flying' : '') + '" data-robot="' + esc(r) + '" data-x="' + p.x + '" data-y="' + p.y + '"' + (alt !== undefined ? ' data-altitude="' + alt + '"' : '') + '>'
+        + (alt !== undefined ? '<title>' + esc(r + ' flies at ' + alt.toFixed(2) + ' m') + '</title><circle class="rotors" r="15" cx="' + x + '" cy="' + y + '" fill="none" stroke="' + c + '" stroke-width="2" stroke-dasharray="4 3"/>' : '')
         + '<circle r="10" cx="' + x + '" cy="' + y + '" fill="' + c + '" fill-opacity=".85" stroke="#000"/>'
         + '<line x1="' + x + '" y1="' + y + '" x2="' + hx + '" y2="' + hy + '" stroke="#000" stroke-width="2.5"/></g>';
       if (broken[r]) out += broken[r];
-      labels.push({text: r + (p.holding ? ' [' + p.holding + ']' : '') + (broken[r] ? ' (broken down)' : ''), cls: 'rname', fill: c, x: parseFloat(x), y: parseFloat(y), r: broken[r] ? 20 : 11, name: r, order: 0});
+      labels.push({text: r + (alt !== undefined ? ' (' + alt.toFixed(1) + ' m up)' : '') + (p.holding ? ' [' + p.holding + ']' : '') + (broken[r] ? ' (broken down)' : ''), cls: 'rname', fill: c, x: parseFloat(x), y: parseFloat(y), r: broken[r] ? 20 : 11, name: r, order: 0});
     }
     dyn.innerHTML = out + '<g id="labels"></g>';
     labels.sort((a, b) => a.order - b.order);

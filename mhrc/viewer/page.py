@@ -393,6 +393,7 @@ def _data(view: EpisodeView, colors: dict[str, str]) -> str:
     }
     data = {
         "robots": view.robots,
+        "fliers": view.header.get("fliers") or {},
         "colors": colors,
         "frames": view.frames,
         "framesFrom": view.frames_from,
