@@ -16,7 +16,15 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, see
 
 import mhrc.env as mhrc_env
 from mhrc.agents.parse import parse_command
-from mhrc.core.protocol import ActionResult, EpisodeDone, Message, Observation, Snapshot, TickClosed
+from mhrc.core.protocol import (
+    ActionResult,
+    EpisodeDone,
+    Message,
+    Observation,
+    ScenarioEvent,
+    Snapshot,
+    TickClosed,
+)
 from mhrc.core.records import messages, read_records
 from mhrc.env import Demonstration, write_demonstrations
 from mhrc.run.config import EpisodeConfig
@@ -62,6 +70,24 @@ def test_the_expert_solves_every_task_through_the_env_and_its_steps_are_demonstr
         parse_command(line.command)  # raises on a command the robot's parser cannot read
         assert line.task == task and "Your actions so far" in line.prompt and line.system.startswith("You are")
     assert any(line.command.startswith("communicate(") for line in lines)
+
+
+@pytest.mark.slow
+def test_another_team_and_a_scenario_play_through_the_env() -> None:
+    """`mhrc up`'s --team and --events: the agents are the team's robots (a drone among them), the
+    scenario's event fires in the world, and the expert still finishes."""
+    env = mhrc_env.parallel_env(
+        objects=3, expert=True, team="drone_scout", events=Path(__file__).parents[1] / "world/scenarios/close.json"
+    )
+    observations, infos = env.reset(seed=0)
+    assert env.possible_agents == ["alice", "bob", "lucy"]
+    assert Observation.model_validate_json(observations["lucy"]["structured"]).status.kind == "drone"
+    while env.agents:
+        observations, _, _, _, infos = env.step({a: infos[a]["expert_action"] for a in env.agents})
+    assert infos["lucy"]["reason"] == "success"
+    (event,) = [e for e in env.core.events if isinstance(e, ScenarioEvent)]
+    assert event.applied and event.event == "close"
+    env.close()
 
 
 # --------------------------------------------------------------------------- random and bad input
