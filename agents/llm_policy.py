@@ -62,7 +62,7 @@ from string import Template
 
 import structlog
 
-from mhrc.core.protocol import LLM_ERROR_PREFIX, ActionResult, Observation, Wait
+from mhrc.core.protocol import LLM_ERROR_PREFIX, Action, ActionResult, Observation, Wait
 from mhrc.core.team import TeamSpec
 
 from . import observation as describe
@@ -363,11 +363,30 @@ class LLMPolicy:
         return note
 
     # ------------------------------------------------------------------ deciding
-    async def decide(self, obs: Observation) -> Decision:
+    def prepare(self, obs: Observation) -> Messages:
+        """What this robot's model is asked on `obs`: the earlier step's pending feedback and the
+        messages delivered with `obs` go into the memory, then the prompts are rendered (`decide`'s
+        first half; an environment that takes its commands from elsewhere calls it alone)."""
         self._flush_pending()
         for m in obs.new_messages:
             self.memory.add("messages", m.tick, f"from {m.sender.capitalize()}: {m.content}", tag=f"from {m.sender}")
-        messages = self.render(obs)
+        return self.render(obs)
+
+    def interpret(self, text: str, tick: int, finish_reason: str | None = None) -> tuple[Action, str | None]:
+        """The action a reply commands, and None; or `wait` and why the reply could not be read, which
+        becomes the robot's feedback for this step (`decide`'s second half)."""
+        try:
+            action = json_mode.parse_structured(text)[0] if self.structured else parse_command(text)
+            return action, None
+        except ReplyFormatError as exc:
+            reason = CUT_REPLY if finish_reason == "length" else _short(str(exc))
+            self._log.info("unparseable reply, waiting", tick=tick, reason=reason)
+            advice = JSON_FORMAT_ERROR if self.structured else FORMAT_ERROR
+            self._pending = (tick, advice.format(reason=reason) if self.feedback_advice else UNREADABLE, UNREADABLE_TAG)
+            return Wait(), reason
+
+    async def decide(self, obs: Observation) -> Decision:
+        messages = self.prepare(obs)
         prompt = prompt_text(messages)
         schema = json_mode.decision_schema(obs, max_analysis=self.max_analysis) if self.structured else None
         digest = json_mode.schema_hash(schema) if schema is not None else None
@@ -390,19 +409,7 @@ class LLMPolicy:
                 action=Wait(), prompt=prompt, parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000), schema_hash=digest
             )
         self._answered = True
-        try:
-            action = json_mode.parse_structured(c.text)[0] if self.structured else parse_command(c.text)
-            error = None
-        except ReplyFormatError as exc:
-            reason = CUT_REPLY if c.finish_reason == "length" else _short(str(exc))
-            self._log.info("unparseable reply, waiting", tick=obs.tick, reason=reason)
-            action, error = Wait(), reason
-            advice = JSON_FORMAT_ERROR if self.structured else FORMAT_ERROR
-            self._pending = (
-                obs.tick,
-                advice.format(reason=reason) if self.feedback_advice else UNREADABLE,
-                UNREADABLE_TAG,
-            )
+        action, error = self.interpret(c.text, obs.tick, c.finish_reason)
         return Decision(
             action,
             prompt,

@@ -19,6 +19,8 @@ from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
+from report import int_range
+
 from mhrc.core.protocol import EpisodeDone, Metrics
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
@@ -28,14 +30,6 @@ RUNNERS: dict[str, Callable[[EpisodeConfig], Coroutine[Any, Any, EpisodeDone]]] 
     "in_process": lambda cfg: up_in_process(cfg),
     "processes": lambda cfg: up_processes(cfg),
 }
-
-
-def _range(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        out += list(range(int(lo), int(hi or lo) + 1))
-    return out
 
 
 def summarize(rows: list[Metrics]) -> dict[str, float]:
@@ -62,8 +56,8 @@ def main() -> None:
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for mode in modes:
-            for n in _range(args.objects):
-                for seed in _range(args.seeds):
+            for n in int_range(args.objects):
+                for seed in int_range(args.seeds):
                     cfg = EpisodeConfig.build(
                         seed=seed, n_objects=n, trace=Path(tmp) / f"{mode}-{n}-{seed}.jsonl"
                     ).resolved()
@@ -82,7 +76,7 @@ def main() -> None:
         "total_wall_s": round(time.perf_counter() - t_start, 1),
         "summary": {mode: summarize(list(eps.values())) for mode, eps in episodes.items()},
         "per_objects": {
-            mode: {n: summarize([m for k, m in eps.items() if k.startswith(f"{n}-")]) for n in _range(args.objects)}
+            mode: {n: summarize([m for k, m in eps.items() if k.startswith(f"{n}-")]) for n in int_range(args.objects)}
             for mode, eps in episodes.items()
         },
         "failures": {mode: [k for k, m in eps.items() if not m.success] for mode, eps in episodes.items()},

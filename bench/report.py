@@ -13,6 +13,15 @@ def percentile(xs: list[float], q: float) -> float:
     return xs[int(q * (len(xs) - 1))]
 
 
+def int_range(text: str) -> list[int]:
+    """The integers a --seeds style argument names: "0-9", "3,4,5", "0-2,7"."""
+    out: list[int] = []
+    for part in text.split(","):
+        lo, _, hi = part.partition("-")
+        out += list(range(int(lo), int(hi or lo) + 1))
+    return out
+
+
 def emit(report: dict[str, Any], out: Path | None) -> None:
     """Print the report as JSON and, with --out, write it to that file too."""
     text = json.dumps(report, indent=2)

@@ -14,14 +14,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import replace
 
 import structlog
 
 from mhrc.core.bus import Bus, Sample
-from mhrc.core.fidelity import label as fidelity_label
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import (
     ActionAck,
@@ -29,13 +27,9 @@ from mhrc.core.protocol import (
     ActionResult,
     AttachReply,
     AttachRequest,
-    Communicate,
     EpisodeDone,
-    EpisodeStarted,
     Message,
-    Metrics,
     Observation,
-    OutcomeCode,
     ProtocolError,
     Rejection,
     RobotAttached,
@@ -43,30 +37,20 @@ from mhrc.core.protocol import (
     RobotMessage,
     SkillOutcome,
     Snapshot,
-    TeamRecord,
     Turn,
-    Wait,
     WorldState,
     decode,
 )
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES
 
 from .admission import Admission
-from .mail import Mailroom
+from .episode import EpisodeCore
 from .presence import Presence
 from .roster import Roster
-from .schedulers import Executed, Scheduler, TaskResultLike, make_scheduler
+from .schedulers import Executed, Scheduler, make_scheduler
 from .service_config import NobodyAttached, SimLike, WorldConfig
 
 log = structlog.get_logger("mhrc.world")
-
-
-@dataclass
-class _Tally:
-    actions: Counter[str] = field(default_factory=Counter)
-    failed: Counter[str] = field(default_factory=Counter)
-    messages: int = 0
-    sim_time: float = 0.0
 
 
 class WorldService:
@@ -82,14 +66,12 @@ class WorldService:
         self.done: EpisodeDone | None = None
         self._log = log.bind(run=config.run)
         self.roster = Roster(sim.robots, self._log)  # which agent drives which robot
-        self.mail = Mailroom(sim.robots, sim.message)  # the robots' messages, held until delivered
-        self._tally = _Tally()
-        self._bound = sim.lower_bound()
+        # how actions run, what they count, the mailroom: the episode's own rules (episode.py, shared with mhrc.env)
+        self.core = EpisodeCore(sim, config.run, config.horizon, self._log)
+        self.mail = self.core.mail  # the robots' messages, held until delivered
         self._sim_lock = asyncio.Lock()
         self._wake = asyncio.Event()
         self._t0 = 0.0
-        self._evaluation: TaskResultLike = sim.evaluate()
-        self._last_results: dict[str, str] = {}  # robot -> goal id of the last result released to it
         self.presence = Presence(
             bus,
             self.keys,
@@ -180,101 +162,28 @@ class WorldService:
         self.started = True
         self._t0 = time.perf_counter()
         self.scheduler.start()
-        self.bus.put(
-            self.keys.world_event,
-            EpisodeStarted(
-                run=self.cfg.run,
-                task=self.sim.task_id,
-                scene=self.sim.scene_id,
-                seed=self.sim.seed,
-                n_objects=self.sim.n_objects,
-                robots=list(self.sim.robots),
-                horizon=self.cfg.horizon,
-                lower_bound=self._bound,
-                fidelity=fidelity_label(self.sim.aids),
-                aids=sorted(self.sim.aids),
-                noise=self.sim.noise,
-                team=TeamRecord(name=self.sim.team.name, digest=self.sim.team.digest(), kinds=self.sim.team.kinds),
-                scheduler=self.scheduler.name,  # type: ignore[arg-type]
-                **self.scheduler.started_fields(),  # type: ignore[arg-type]
-            ),
-        )
-        self.bus.put(self.keys.world_event, self._snapshot(0, []))  # where everything starts (nothing has run yet)
+        self.bus.put(self.keys.world_event, self.core.started(self.scheduler))
+        self.bus.put(self.keys.world_event, self.core.snapshot(0, []))  # where everything starts (nothing has run yet)
         self._log.info("episode started", attached=sorted(self.attached))
         self._wake.set()
 
     def _execute_batch(
         self, batch: Sequence[ActionRequest], tick: int, deliver: bool, opens: int | None
     ) -> tuple[Executed, Snapshot, Sequence[Message]]:
-        """Runs in a worker thread, holding the sim lock: the actions in order, then the evaluation and every acting
-        robot's observation of tick + 1 (with `deliver`, after the batch's messages reached their receivers' scene
-        graphs: lockstep delivers them with these observations; with `opens`, after that tick's scenario events)."""
-        self.mail.learn()
-        outcomes = [self._execute(req, tick) for req in batch]
-        if deliver:
-            self.mail.delivered(self.sim.robots)
-            self.mail.learn()
-        fired = self.sim.fire_events(opens) if opens is not None and not self.sim.evaluate().success else []
-        evaluation = self.sim.evaluate()
-        observations = {req.robot: self._present(self.sim.observe(req.robot, tick + 1)) for req in batch}
-        return Executed(outcomes, evaluation, observations), self._snapshot(tick, [req.goal_id for req in batch]), fired
-
-    def _snapshot(self, tick: int, goals: list[str]) -> Snapshot:
-        """The ground truth for viewers, taken where the simulator is idle (its thread, or the start)."""
-        robots, objects, opened = self.sim.poses()
-        return Snapshot(tick=tick, goals=goals, robots=robots, objects=objects, open=opened)
+        """Runs in a worker thread, holding the sim lock: the batch (EpisodeCore.execute_batch, each action
+        through `_execute`), its observations with the teammates attached now."""
+        done, snapshot, fired = self.core.execute_batch(batch, tick, deliver, opens, self._execute)
+        return replace(done, observations={r: self._present(o) for r, o in done.observations.items()}), snapshot, fired
 
     def _execute(self, req: ActionRequest, tick: int) -> SkillOutcome:
-        action = req.action
-        if not isinstance(action, Communicate):
-            try:
-                return self.sim.execute(req.robot, action)
-            except Exception as exc:  # a simulator bug must not take the world down
-                self._log.exception("skill crashed", robot=req.robot, action=action.call())
-                return SkillOutcome.fail(
-                    OutcomeCode.PLAN_FAILED, f"The {action.skill} skill failed unexpectedly: {exc}."
-                )
-        if "communicate" not in self.sim.capabilities(req.robot):
-            return SkillOutcome.fail(OutcomeCode.NOT_CAPABLE, f"{req.robot} cannot communicate.")
-        if action.to not in self.sim.robots or action.to == req.robot:
-            others = ", ".join(r for r in self.sim.robots if r != req.robot)
-            return SkillOutcome.fail(
-                OutcomeCode.RECIPIENT_UNKNOWN, f"There is no teammate called {action.to!r}; you can message {others}."
-            )
-        self.mail.send(req.robot, action.to, action.content, tick)
-        self._tally.messages += 1
-        return SkillOutcome.ok(f"Your message to {action.to} was sent.")
+        return self.core.execute_one(req, tick)
 
     def finish(self, reason: str) -> None:
         if self.done is not None:
             return
-        evaluation = self._evaluation
-        t = self._tally
-        metrics = Metrics(
-            success=evaluation.success,
-            partial_success=evaluation.partial_success,
-            placed=evaluation.placed,
-            total=evaluation.total,
-            temporal_steps=self.tick,
-            action_steps=sum(t.actions.values()),
-            action_steps_per_robot={r: t.actions.get(r, 0) for r in self.sim.robots},
-            failed_actions=dict(t.failed),
-            messages=t.messages,
-            wall_time=time.perf_counter() - self._t0 if self._t0 else 0.0,
-            sim_time=t.sim_time,
-            lower_bound=self._bound,
-            makespan=round(self.scheduler.makespan, 6),
-        )
-        targets, goals, ordered = self.sim.answer_key()  # the answer key, now that no agent can use it: for reports
-        self.done = EpisodeDone(
-            run=self.cfg.run,
-            reason=reason,
-            metrics=metrics,
-            final_results=dict(self._last_results),  # type: ignore[arg-type]
-            targets=targets,
-            goals=goals,
-            ordered=ordered,
-        )
+        wall_time = time.perf_counter() - self._t0 if self._t0 else 0.0
+        metrics = self.core.metrics(self.tick, self.scheduler.makespan, wall_time)
+        self.done = self.core.done(reason, metrics)
         self.bus.put(self.keys.world_event, self.done)
         self._log.info(
             "episode done", reason=reason, **metrics.model_dump(exclude={"action_steps_per_robot", "failed_actions"})
@@ -317,19 +226,13 @@ class WorldService:
             done, snapshot, fired = await asyncio.to_thread(self._execute_batch, batch, tick, deliver, opens)
         for event in [*fired, snapshot]:
             self.bus.put(self.keys.world_event, event)
-        self._evaluation = done.evaluation
-        for req, outcome in zip(batch, done.outcomes):
-            self._tally.sim_time += outcome.sim_time
-            if not isinstance(req.action, Wait):
-                self._tally.actions[req.robot] += 1
-            if not outcome.succeeded:
-                self._tally.failed[req.action.skill] += 1
+        self.core.count(batch, done)
         return done
 
     async def open_tick(self, tick: int) -> None:
         """Tick `tick` opens: the scenario's events due by then fire, each published on world/event."""
         async with self._sim_lock:
-            fired, self._evaluation = await asyncio.to_thread(lambda: (self.sim.fire_events(tick), self.sim.evaluate()))
+            fired, self.core.evaluation = await asyncio.to_thread(self.core.open_tick, tick)
         for event in fired:
             self.bus.put(self.keys.world_event, event)
 
@@ -339,8 +242,7 @@ class WorldService:
             return self._present(await asyncio.to_thread(self._observe, robot, tick))
 
     def _observe(self, robot: str, tick: int) -> Observation:
-        self.mail.learn()
-        return self.sim.observe(robot, tick)
+        return self.core.observe(robot, tick)
 
     def _present(self, obs: Observation) -> Observation:
         """The observation with the teammates attached now: a teammate whose agent left is not
@@ -363,7 +265,7 @@ class WorldService:
         self.mail.hold(robot, messages)
 
     def release(self, results: Sequence[ActionResult]) -> None:
-        self._last_results.update((r.robot, r.goal_id) for r in results)
+        self.core.last_results.update((r.robot, r.goal_id) for r in results)
         for result in results:
             self.bus.put(self.keys.action_result(result.robot), result)
 
@@ -441,7 +343,7 @@ class WorldService:
     async def _on_state_query(self, key: str, params: dict[str, str], payload: bytes) -> WorldState:
         async with self._sim_lock:
             furniture, objects = await asyncio.to_thread(self.sim.views)
-        evaluation = self._evaluation
+        evaluation = self.core.evaluation
         return WorldState(
             run=self.cfg.run,
             task=self.sim.task_id,

@@ -29,6 +29,23 @@ EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
 LAST_WORDS = 2.0  # s the world waits, once the episode is over, for its agents to leave and its trace to record the end
 
 
+def sim_of(cfg: EpisodeConfig, seed: int | None = None) -> Sim:
+    """The world `cfg` describes, built (with `seed`, another seed than the config's): the world's
+    side of `mhrc up` and the environment (mhrc.env) build it here, so both build the same one."""
+    return Sim(
+        task=cfg.task,
+        scene=cfg.scene,
+        seed=cfg.seed if seed is None else seed,
+        n_objects=cfg.n_objects,
+        gui=cfg.gui,
+        team=cfg.team,
+        robots=cfg.robots,
+        aids=cfg.aids,
+        scenario=cfg.scenario(),
+        noise=cfg.noise,
+    )
+
+
 async def serve_world(
     cfg: EpisodeConfig,
     *,
@@ -41,19 +58,7 @@ async def serve_world(
     client of a router that already exists, logged in with `login` if given: an evaluation
     worker's), record, and run the episode. `on_service` gets the WorldService once it exists
     (the in-process runner stops it when an agent fails for good)."""
-    sim = await asyncio.to_thread(
-        Sim,
-        task=cfg.task,
-        scene=cfg.scene,
-        seed=cfg.seed,
-        n_objects=cfg.n_objects,
-        gui=cfg.gui,
-        team=cfg.team,
-        robots=cfg.robots,
-        aids=cfg.aids,
-        scenario=cfg.scenario(),
-        noise=cfg.noise,
-    )
+    sim = await asyncio.to_thread(sim_of, cfg)
     bus = None
     recorder = None
     world: WorldService | None = None

@@ -252,8 +252,9 @@ def _poses(
 # --------------------------------------------------------------------------- pictures
 
 
-def _camera(sim: Sim, view: str, width: int, height: int) -> np.ndarray:
-    """An RGB picture of the scene (TinyRenderer): `overview`, or one of world/render.py's views."""
+def camera(sim: Sim, view: str, width: int, height: int) -> np.ndarray:
+    """An RGB picture of the scene (TinyRenderer): `overview`, or one of world/render.py's views (also
+    the environment's rgb_array frame, mhrc.env)."""
     if view != OVERVIEW:
         return render(sim, view, width, height)
     x0, x1, y0, y1 = sim.layout.bounds
@@ -425,7 +426,7 @@ def render_video(
                 t = time.perf_counter()
                 sim.fire_events(i)  # a new target joins from its first snapshot on (_spawns)
                 sim.apply_snapshot(robots, objects, opened)
-                frame = captioner.compose(_camera(sim, view, width, height - captioner.band), i, steps[i], n / total)
+                frame = captioner.compose(camera(sim, view, width, height - captioner.band), i, steps[i], n / total)
                 rendering += time.perf_counter() - t
                 writer.append(frame)
                 if progress is not None:

@@ -1,0 +1,59 @@
+"""The options an environment is made with: a subset of `mhrc up`'s episode options, checked by
+the same `EpisodeConfig` before anything is built; a bad one is a ValueError naming it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from mhrc.core.team import TeamSpec
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.teams import resolve_team
+
+# env option -> EpisodeConfig field (the CLI's --objects is n_objects there)
+OPTIONS = {
+    "task": "task",
+    "scene": "scene",
+    "objects": "n_objects",
+    "seed": "seed",
+    "horizon": "horizon",
+    "team": "team",
+    "aids": "aids",
+    "noise": "noise",
+    "events": "events",
+    "ablation": "ablation",
+    "history_cap": "history_cap",
+    "prompts": "prompts",
+    "structured": "structured",
+}
+RENDER_MODES = ("rgb_array",)
+
+
+class EnvOptionError(ValueError):
+    """An option the environment cannot be made with; the message names it."""
+
+
+def episode_config(options: dict[str, Any]) -> EpisodeConfig:
+    """The episode the options describe (EnvOptionError naming a bad or unknown one)."""
+    unknown = sorted(set(options) - set(OPTIONS))
+    if unknown:
+        raise EnvOptionError(
+            f"unknown option(s) {', '.join(map(repr, unknown))}: the environment takes {', '.join(OPTIONS)}"
+        )
+    values = {OPTIONS[k]: v for k, v in options.items()}
+    team = values.get("team")
+    if team is not None and not isinstance(team, TeamSpec):
+        values["team"] = resolve_team(str(team))  # a shipped team's name, a file, or robots inline
+    for path in ("events", "prompts"):
+        if values.get(path) is not None:
+            values[path] = Path(values[path])
+    try:
+        return EpisodeConfig.build(run="env", **values)
+    except ValueError as exc:
+        raise EnvOptionError(str(exc)) from None
+
+
+def check_render_mode(mode: str | None) -> str | None:
+    if mode is not None and mode not in RENDER_MODES:
+        raise EnvOptionError(f"render_mode {mode!r}: the environment renders {', '.join(RENDER_MODES)} or nothing")
+    return mode
