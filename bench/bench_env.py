@@ -151,9 +151,8 @@ def main() -> None:
             f"The env's step takes {step_over_skill}x the simulator's own skill time (the rest: observing, "
             "rendering the prompts, the expert's decision, admission and scheduling); the same episodes over the "
             f"bus step at {bus_s['steps_per_s']} ticks/s against the env's {env_s['steps_per_s']}. Same metrics "
-            f"in both modes in {same} of {len(rows['env'])} episodes: the arm planner's budget is wall time "
-            "(world/arm.py, 1.5 s), so on a loaded machine a hard plan can end differently in two runs of one "
-            "episode, over the bus as in the env (tests/test_env.py gives both the same actions)."
+            f"in both modes in {same} of {len(rows['env'])} episodes (the arm planner's budget is counted in "
+            "collision checks, world/arm.py, so a plan does not depend on the machine's load)."
         ),
     }
     emit(report, args.out)

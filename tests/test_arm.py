@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -17,7 +18,7 @@ BASE = (0.0, 0.0, 0.7)
 
 @pytest.fixture
 def planner() -> Iterator[ArmPlanner]:
-    pl = ArmPlanner([], seed=0, budget=1.0)
+    pl = ArmPlanner([], seed=0, budget=12_000)
     pl.set_base(BASE, 0.0)
     yield pl
     pl.close()
@@ -106,3 +107,29 @@ def test_the_shadow_world_holds_the_scene() -> None:
             pl.close()
     finally:
         assets.close()
+
+
+def test_a_slow_machine_plans_what_a_fast_one_does(planner: ArmPlanner) -> None:
+    """The budget is counted in collision checks, not seconds: the same plan on a machine made
+    slow (every check takes longer, as on two cores shared by an eval, a bench and tests) is the
+    same path, where a budget in seconds ran out and failed it."""
+    start = planner.ik((0.45, -0.35, 0.85), 0.0, HOME)
+    goal = planner.ik((0.45, 0.35, 0.85), 0.0, HOME)
+    assert start is not None and goal is not None
+    planner.set_box("wall", (0.45, 0.0, 0.9), (0.2, 0.02, 0.2))
+    fast = planner.plan(start, goal)
+    assert fast.path is not None and fast.checks > 50
+    check = planner.valid
+    pause = 2.0 / fast.checks  # the whole plan now takes over 2 s, above the old 1.5 s budget
+
+    def slow(q: np.ndarray) -> bool:
+        time.sleep(pause)
+        return check(q)
+
+    planner.valid = slow  # type: ignore[method-assign]
+    try:
+        slowed = planner.plan(start, goal)
+    finally:
+        del planner.valid
+    assert slowed.path is not None and slowed.checks == fast.checks
+    assert all(np.array_equal(a, b) for a, b in zip(fast.path, slowed.path))

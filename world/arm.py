@@ -30,6 +30,13 @@ UPPER = np.array([2.9671, 1.8326, 2.9671, 0.0, 2.9671, 3.8223, 2.9671])
 HOME = np.array([0.0, -1.2, 0.0, -2.9, 0.0, 1.9, 0.785])  # tucked carry posture: hand over the base
 DOWN = (math.pi, 0.0)  # roll, pitch of a top-down tool (z axis pointing down)
 OMPL_SEED = 20240917
+# A plan's budget is counted in collision checks, not seconds, so that a loaded machine plans what
+# a quiet one does: a wall-clock budget (1.5 s, before) made the same episode end differently when
+# two cores were shared by more work (an eval with workers, a bench beside tests). The heuristic
+# team's plans on the default grid take at most ~5,000 checks; 20,000 is about 1.5 s on a quiet
+# core. The wall limit is only a guard against a machine so slow that it would plan for minutes.
+PLAN_CHECKS = 20_000
+PLAN_WALL_LIMIT = 30.0  # s
 
 # OMPL's RNG is process-wide. Re-seeding it before each plan restarts its seed sequence, so a
 # plan depends only on its inputs, not on how many plans ran before (same seed, same outcome).
@@ -63,10 +70,17 @@ class PlanResult:
 class ArmPlanner:
     """IK and collision-free joint-space plans for a Panda whose base can be anywhere."""
 
-    def __init__(self, statics: list[StaticBody], *, seed: int = 0, budget: float = 1.5) -> None:
+    def __init__(
+        self,
+        statics: list[StaticBody],
+        *,
+        seed: int = 0,
+        budget: int = PLAN_CHECKS,
+        wall_limit: float = PLAN_WALL_LIMIT,
+    ) -> None:
         self.cid = p.connect(p.DIRECT)
         self.rng = np.random.default_rng(seed)
-        self.budget = budget
+        self.budget, self.wall_limit = budget, wall_limit
         self.arm = p.loadURDF(
             pybullet_data.getDataPath() + "/franka_panda/panda.urdf", useFixedBase=True, physicsClientId=self.cid
         )
@@ -233,7 +247,11 @@ class ArmPlanner:
         planner = og.BITstar(si)
         planner.setStopOnSolnImprovement(True)
         ss.setPlanner(planner)
-        status = ss.solve(self.budget)
+        start_checks = self.checks
+        enough = ob.PlannerTerminationCondition(lambda: self.checks - start_checks >= self.budget)
+        status = ss.solve(
+            ob.plannerOrTerminationCondition(enough, ob.timedPlannerTerminationCondition(self.wall_limit))
+        )
         out: list[np.ndarray] | None = None
         if status.getStatus() == ob.PlannerStatus.EXACT_SOLUTION:
             path = ss.getSolutionPath()
