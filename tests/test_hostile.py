@@ -1,0 +1,93 @@
+"""What issue 38 (and two items of 37) left after tests/test_bad_day.py and tests/test_bad_input.py:
+a port taken is said before anything is announced, credentials are never picked up by git nor
+written into /dev, an agent's thought cannot fill the trace, and every printer shows a
+participant's text inert.
+
+Commands are real `mhrc` subprocesses in an empty directory; the wire tests use alice's login on a
+secured world on loopback (tests/test_bad_input.py's Mallory)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+
+def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=120
+    )
+
+
+# --------------------------------------------------------------------------- a port taken (issue 37)
+
+
+@pytest.mark.parametrize("secure", [True, False])
+def test_a_taken_port_is_one_line_before_the_world_is_announced(secure: bool, tmp_path: Path) -> None:
+    """`mhrc up --port P` with P taken by a listener: one line, exit 2, and neither "world on
+    tcp/...:P" (it was printed first, then the run failed) nor credentials nor a run directory."""
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen()
+        port = holder.getsockname()[1]
+        out = _mhrc("up", "--port", str(port), "--horizon", "2", *([] if secure else ["--insecure"]), cwd=tmp_path)
+    assert out.returncode == 2, out.stderr[-2000:]
+    assert "Traceback" not in out.stderr, out.stderr[-2000:]
+    said = [line for line in out.stderr.splitlines() if line.startswith("mhrc")]
+    assert len(said) == 1 and f"port {port} is already in use" in said[0], out.stderr
+    assert "world on" not in out.stdout and "credentials in" not in out.stderr, (out.stdout, out.stderr)
+    assert list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- credentials and git (issue 37)
+
+
+def _git(*args: str, cwd: Path) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, check=True).stdout
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_credentials_written_in_a_checkout_are_never_picked_up_by_git(split: bool, tmp_path: Path) -> None:
+    """`mhrc credentials --out creds` (as docs/security.md once showed) inside a git checkout, then
+    `git add -A`: nothing of it is staged (before: the world's private key and every password were)."""
+    _git("init", "-q", cwd=tmp_path)
+    (tmp_path / "README").write_text("a checkout\n")
+    made = _mhrc("credentials", "--out", "creds", "--days", "1", *(["--split"] if split else []), cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    assert any((tmp_path / "creds").rglob("world.key"))
+    _git("add", "-A", cwd=tmp_path)
+    staged = _git("diff", "--cached", "--name-only", cwd=tmp_path).split()
+    assert staged == ["README"], staged
+    assert _git("status", "--porcelain", "--ignored", cwd=tmp_path).count("creds/") == 1  # ignored, whole
+
+
+def test_a_secured_run_with_a_trace_on_a_device_keeps_its_credentials_in_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`--trace /dev/null` (or /dev/full) with credentials: they go to runs/RUN/credentials, not
+    next to the trace (as root, mhrc wrote /dev/credentials)."""
+    from mhrc.run.config import EpisodeConfig
+
+    monkeypatch.chdir(tmp_path)
+    before = Path("/dev/credentials").exists()
+    try:
+        cfg = EpisodeConfig(run="devtrace", trace=Path("/dev/null")).resolved().with_credentials()
+        assert cfg.credentials == Path("runs/devtrace/credentials")
+        assert (tmp_path / "runs" / "devtrace" / "credentials" / "world.key").is_file()
+        assert Path("/dev/credentials").exists() == before
+    finally:
+        if not before and Path("/dev/credentials").is_dir():  # what the old code left in /dev
+            for f in Path("/dev/credentials").iterdir():
+                f.unlink()
+            Path("/dev/credentials").rmdir()
+
+
+# --------------------------------------------------------------------------- helpers for the wire tests
+
+
+def _lines(trace: Path) -> list[dict[str, object]]:
+    return [json.loads(line) for line in trace.read_text().splitlines()]
