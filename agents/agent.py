@@ -37,6 +37,7 @@ from mhrc.core.protocol import (
     decode,
     decode_event,
 )
+from mhrc.core.protocol.thoughts import MAX_LINE, fit
 
 from .policy import Decision, Policy
 from .progress import PROGRESS, Progress
@@ -457,18 +458,18 @@ class RobotAgent:
             Thought(
                 robot=self.robot,
                 tick=obs.tick,
-                policy=self.policy.name,
-                prompt=d.prompt,
-                reply=d.reply,
-                action=d.action.call(),
-                parse_error=d.parse_error,
+                policy=fit(self.policy.name, MAX_LINE) or "",
+                prompt=fit(d.prompt),
+                reply=fit(d.reply),
+                action=fit(d.action.call(), MAX_LINE),
+                parse_error=fit(d.parse_error, MAX_LINE),
                 prompt_tokens=d.prompt_tokens,
                 completion_tokens=d.completion_tokens,
                 latency=d.latency,
-                reasoning=d.reasoning,
+                reasoning=fit(d.reasoning),
                 reasoning_tokens=d.reasoning_tokens,
-                finish_reason=d.finish_reason,
-                schema_hash=d.schema_hash,
+                finish_reason=fit(d.finish_reason, MAX_LINE),
+                schema_hash=fit(d.schema_hash, MAX_LINE),
                 ttft=d.ttft,
             ),
         )

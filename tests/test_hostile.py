@@ -18,9 +18,7 @@ import pytest
 
 
 def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=120
-    )
+    return subprocess.run([sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=120)
 
 
 # --------------------------------------------------------------------------- a port taken (issue 37)
@@ -91,3 +89,50 @@ def test_a_secured_run_with_a_trace_on_a_device_keeps_its_credentials_in_runs(
 
 def _lines(trace: Path) -> list[dict[str, object]]:
     return [json.loads(line) for line in trace.read_text().splitlines()]
+
+
+# --------------------------------------------------------------------------- an agent's thoughts (issue 38)
+
+
+async def test_thoughts_out_of_bounds_are_counted_not_copied(tmp_path: Path) -> None:
+    """Alice's login puts on her thought key: 10 thoughts with a 3 MB reply, 10 with a 1 MB policy
+    name, 10 payloads of 3 MB that are not JSON, one with a negative latency (~100 MB in all). The trace keeps a count
+    and a 200-character excerpt of each kind, never a copy (before: each was copied whole), and
+    the well-formed thought put last is recorded as sent."""
+    from test_bad_input import _junk, _mallory
+
+    from mhrc.core.protocol import Thought
+
+    def thought(**fields: object) -> bytes:
+        return json.dumps({"v": 2, "kind": "thought", "robot": "alice", "tick": 0, "policy": "p"} | fields).encode()
+
+    async with _mallory(tmp_path) as mallory:
+        key = mallory.keys.thought("alice")
+        for _ in range(10):
+            mallory.bus.put(key, thought(reply="r" * 3_000_000))
+            mallory.bus.put(key, thought(policy="p" * 1_000_000))
+            mallory.bus.put(key, b"\x1b[2J" + b"x" * 3_000_000)
+        mallory.bus.put(key, thought(latency=-1.0))
+        await mallory.recorded()
+    trace = mallory.world.trace
+    size = trace.stat().st_size
+    longest = max(len(line) for line in trace.read_text().splitlines())
+    assert size < 200_000 and longest < 64 * 1024, (size, longest)
+    junk = _junk(trace, "/agent/alice/thought")
+    assert sum(j["count"] for j in junk) == 31, junk
+    assert all(j["code"] == "malformed" and 0 < len(j["excerpt"]) <= 200 for j in junk), junk
+    recorded = [
+        Thought.model_validate(line["msg"])
+        for line in _lines(trace)
+        if str(line["key"]).endswith("/thought") and line["kind"] == "put"
+    ]
+    assert [t.policy for t in recorded] == ["sentinel"], recorded
+
+
+def test_an_honest_thought_is_never_cut_below_the_bounds() -> None:
+    """The agent's side fits its texts to the bounds: a reply at the bound is kept whole, one past it cut to it."""
+    from mhrc.core.protocol.thoughts import MAX_TEXT, fit
+
+    assert fit("a" * MAX_TEXT) == "a" * MAX_TEXT
+    assert fit("a" * (MAX_TEXT + 5)) == "a" * MAX_TEXT
+    assert fit(None) is None
