@@ -136,3 +136,59 @@ def test_an_honest_thought_is_never_cut_below_the_bounds() -> None:
     assert fit("a" * MAX_TEXT) == "a" * MAX_TEXT
     assert fit("a" * (MAX_TEXT + 5)) == "a" * MAX_TEXT
     assert fit(None) is None
+
+
+# --------------------------------------------------------------------------- a participant's text in the logs (issue 38)
+
+EVIL = "\x1b]0;pwned\x07\x1b[2J"
+
+
+@pytest.mark.slow
+async def test_a_participants_text_reaches_the_worlds_log_inert(tmp_path: Path) -> None:
+    """`mhrc world --log-level info`, a client attaching alice with an agent id full of terminal
+    escapes and sending a request whose skill is one: the world's log lines (stderr) name them
+    with their control characters gone (before: the escapes reached the operator's terminal raw,
+    structlog prints a plain string as it is)."""
+    import signal
+
+    from waits import served, until
+
+    from mhrc.core.bus import open_client
+    from mhrc.core.endpoints import free_port
+    from mhrc.core.keys import Keys
+    from mhrc.core.protocol import ActionAck, AttachReply, AttachRequest, decode
+
+    port = free_port()
+    err = (tmp_path / "stderr.txt").open("w")
+    world = subprocess.Popen(
+        [sys.executable, "-m", "mhrc", "world", "--insecure", "--port", str(port), "--run", "evil"]
+        + ["--objects", "3", "--log-level", "info", "--start-timeout", "60"],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=err,
+    )
+    keys = Keys("evil")
+    acks: list[ActionAck] = []
+    try:
+        from mhrc.run.processes import wait_for_port
+
+        wait_for_port("127.0.0.1", port, 60.0, world)  # type: ignore[arg-type]
+        bus = await open_client(f"tcp/127.0.0.1:{port}", 30)
+        try:
+            bus.subscribe(keys.action_ack("alice"), lambda s: acks.append(decode(s.payload, ActionAck)))
+            await served(bus, keys.attach("alice"))
+            replies = await bus.get(keys.attach("alice"), AttachRequest(robot="alice", agent_id=EVIL + "[/]"))
+            assert replies and decode(replies[0], AttachReply).accepted
+            request = {"v": 2, "kind": "action_request", "goal_id": "g1", "robot": "alice", "agent_id": EVIL}
+            bus.put(keys.action_request("alice"), json.dumps(request | {"tick": 0, "action": {"skill": EVIL}}).encode())
+            await until(lambda: bool(acks), "the world's ack")
+        finally:
+            await bus.close()
+    finally:
+        world.send_signal(signal.SIGTERM)
+        world.wait(timeout=60)
+        err.close()
+    log = (tmp_path / "stderr.txt").read_text()
+    assert acks[0].code == "malformed" and "\x1b" in acks[0].reason  # the wire keeps what was sent, for programs
+    assert "attached" in log and "malformed action request rejected" in log, log
+    assert "]0;pwned[2J" in log and "\x1b" not in log and "\x07" not in log, repr(log[-2000:])
