@@ -24,7 +24,7 @@ def _mhrc(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 # --------------------------------------------------------------------------- a port taken (issue 37)
 
 
-@pytest.mark.parametrize("secure", [True, False])
+@pytest.mark.parametrize("secure", [True, pytest.param(False, marks=pytest.mark.slow)])
 def test_a_taken_port_is_one_line_before_the_world_is_announced(secure: bool, tmp_path: Path) -> None:
     """`mhrc up --port P` with P taken by a listener: one line, exit 2, and neither "world on
     tcp/...:P" (it was printed first, then the run failed) nor credentials nor a run directory."""
