@@ -132,6 +132,7 @@ class RobotAgent:
         self._results: dict[str, asyncio.Future[ActionResult]] = {}
         self._done = asyncio.Event()
         self._world_gone = asyncio.Event()
+        self._playing = False  # attached once: a world that vanishes from now on is news
         self._over = False  # the world said the episode is over
         self._turn: asyncio.Future[Turn] | None = None  # set while attaching, for a world that says wait_turn
         self._clock = asyncio.Event()  # set on every tick the world closes (the stepped schedules)
@@ -177,8 +178,8 @@ class RobotAgent:
 
     def _on_world_liveliness(self, sample: Sample) -> None:
         if not sample.is_put:
-            if not self._done.is_set():  # after the episode's end the world leaves as it should
-                self._log.warning("world vanished")
+            if self._playing and not self._done.is_set():  # after the end the world leaves as it should; before
+                self._log.warning("world vanished")  # the first attach, the attach says why it failed
             self._world_gone.set()
 
     # ------------------------------------------------------------------ running
@@ -197,6 +198,7 @@ class RobotAgent:
         except AttachRejected:  # another agent may drive this robot: this token must not stand for it
             self.bus.undeclare_token(k.alive_robot(self.robot))
             raise
+        self._playing = True
         while attached is not None and not self._done.is_set():
             obs = attached
             decision = await self._decide(obs)

@@ -62,6 +62,7 @@ def test_a_trace_on_a_full_disk_stops_the_run_in_one_line(processes: bool, tmp_p
     assert out.returncode != 0, out.stderr[-3000:]
     assert "Traceback" not in out.stderr, out.stderr[-3000:]
     assert len(said) == 1 and str(FULL) in said[0] and "No space left on device" in said[0], out.stderr[-3000:]
+    assert "[warning" not in out.stderr, out.stderr[-3000:]  # nor an agent's "world vanished" before it attached
     assert "episode" not in out.stdout.split("trace /dev/full", 1)[-1], (
         out.stdout
     )  # no metrics table for a run unrecorded
