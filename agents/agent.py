@@ -37,6 +37,7 @@ from mhrc.core.protocol import (
     decode,
     decode_event,
 )
+from mhrc.core.protocol.thoughts import MAX_LINE, fit
 
 from .policy import Decision, Policy
 from .progress import PROGRESS, Progress
@@ -131,6 +132,7 @@ class RobotAgent:
         self._results: dict[str, asyncio.Future[ActionResult]] = {}
         self._done = asyncio.Event()
         self._world_gone = asyncio.Event()
+        self._playing = False  # attached once: a world that vanishes from now on is news
         self._over = False  # the world said the episode is over
         self._turn: asyncio.Future[Turn] | None = None  # set while attaching, for a world that says wait_turn
         self._clock = asyncio.Event()  # set on every tick the world closes (the stepped schedules)
@@ -176,8 +178,8 @@ class RobotAgent:
 
     def _on_world_liveliness(self, sample: Sample) -> None:
         if not sample.is_put:
-            if not self._done.is_set():  # after the episode's end the world leaves as it should
-                self._log.warning("world vanished")
+            if self._playing and not self._done.is_set():  # after the end the world leaves as it should; before
+                self._log.warning("world vanished")  # the first attach, the attach says why it failed
             self._world_gone.set()
 
     # ------------------------------------------------------------------ running
@@ -196,6 +198,7 @@ class RobotAgent:
         except AttachRejected:  # another agent may drive this robot: this token must not stand for it
             self.bus.undeclare_token(k.alive_robot(self.robot))
             raise
+        self._playing = True
         while attached is not None and not self._done.is_set():
             obs = attached
             decision = await self._decide(obs)
@@ -457,18 +460,18 @@ class RobotAgent:
             Thought(
                 robot=self.robot,
                 tick=obs.tick,
-                policy=self.policy.name,
-                prompt=d.prompt,
-                reply=d.reply,
-                action=d.action.call(),
-                parse_error=d.parse_error,
+                policy=fit(self.policy.name, MAX_LINE) or "",
+                prompt=fit(d.prompt),
+                reply=fit(d.reply),
+                action=fit(d.action.call(), MAX_LINE),
+                parse_error=fit(d.parse_error, MAX_LINE),
                 prompt_tokens=d.prompt_tokens,
                 completion_tokens=d.completion_tokens,
                 latency=d.latency,
-                reasoning=d.reasoning,
+                reasoning=fit(d.reasoning),
                 reasoning_tokens=d.reasoning_tokens,
-                finish_reason=d.finish_reason,
-                schema_hash=d.schema_hash,
+                finish_reason=fit(d.finish_reason, MAX_LINE),
+                schema_hash=fit(d.schema_hash, MAX_LINE),
                 ttft=d.ttft,
             ),
         )

@@ -50,12 +50,19 @@ def _mhrc(args: list[str], cwd: Path, **kwargs: object) -> subprocess.CompletedP
 def test_a_trace_on_a_full_disk_stops_the_run_in_one_line(processes: bool, tmp_path: Path) -> None:
     """`--trace /dev/full`: every write fails with ENOSPC. The run stops, says so in one line
     naming the path and the cause, exits non-zero and leaves nothing running (it hung forever
-    in-process, with a traceback per bus message; under --processes it exited 0)."""
-    out = _mhrc(["up", "--insecure", "--trace", str(FULL), *(["--processes"] if processes else [])], tmp_path)
+    in-process, with a traceback per bus message; under --processes it exited 0). In-process the
+    run is secured: its credentials go to runs/RUN/credentials, never next to the trace into /dev."""
+    dev_credentials = FULL.parent / "credentials"
+    had = dev_credentials.exists()
+    out = _mhrc(["up", "--trace", str(FULL), *(["--processes", "--insecure"] if processes else [])], tmp_path)
+    assert dev_credentials.exists() == had, "credentials written into /dev"
+    if not processes:
+        assert [p.name for p in (tmp_path / "runs").glob("*/credentials")], list(tmp_path.rglob("*"))
     said = [line for line in out.stderr.splitlines() if line.startswith("mhrc")]
     assert out.returncode != 0, out.stderr[-3000:]
     assert "Traceback" not in out.stderr, out.stderr[-3000:]
     assert len(said) == 1 and str(FULL) in said[0] and "No space left on device" in said[0], out.stderr[-3000:]
+    assert "[warning" not in out.stderr, out.stderr[-3000:]  # nor an agent's "world vanished" before it attached
     assert "episode" not in out.stdout.split("trace /dev/full", 1)[-1], (
         out.stdout
     )  # no metrics table for a run unrecorded

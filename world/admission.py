@@ -24,7 +24,7 @@ from structlog.typing import FilteringBoundLogger
 
 from mhrc.core.logs import Throttle
 from mhrc.core.protocol import ActionRequest, ProtocolError, RejectCode, Rejection, decode
-from mhrc.core.protocol.base import MAX_REQUEST_BYTES, loads
+from mhrc.core.protocol.base import MAX_NAME, MAX_REQUEST_BYTES, loads
 from mhrc.core.protocol.exchange import GOAL_ID
 
 from .roster import Roster
@@ -94,8 +94,8 @@ class Admission:
         if not log_now:
             return
         fields = {
-            "robot": robot,
-            "goal": goal_id[:64],
+            "robot": robot[:MAX_NAME],  # a key chunk of the sender's choice, on the open bus
+            "goal": goal_id[:MAX_NAME],
             "reason": rejection.reason,
             "code": rejection.code.value,
             **({"and_before": held} if held else {}),

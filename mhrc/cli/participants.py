@@ -83,6 +83,7 @@ def up(
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
 
+    from mhrc.core.endpoints import ListenError, check_listen
     from mhrc.run.config import ModelServerDown, check_model_servers
     from mhrc.run.console import ProgressPrinter, summary_table
     from mhrc.run.inprocess import up_in_process
@@ -103,6 +104,11 @@ def up(
         check_model_servers(cfg, robots)  # before anything is written or started
     except ModelServerDown as exc:
         click.echo(f"mhrc up: {exc}", err=True)
+        sys.exit(2)
+    try:  # a port taken is one line before anything is announced or written (credentials included)
+        check_listen(cfg.host, cfg.port, "tls" if secure else "tcp")
+    except ListenError as exc:
+        click.echo(f"mhrc: {exc}", err=True)
         sys.exit(2)
     if not secure:
         click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)

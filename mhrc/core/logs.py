@@ -7,6 +7,9 @@ import sys
 import time
 
 import structlog
+from structlog.typing import EventDict, WrappedLogger
+
+from mhrc.core.printable import printable
 
 LEVELS = ("debug", "info", "warning", "error")
 
@@ -20,6 +23,7 @@ def configure(level: str = "warning") -> None:
             structlog.contextvars.merge_contextvars,
             structlog.processors.add_log_level,
             structlog.processors.TimeStamper(fmt="%H:%M:%S", utc=False),
+            inert_values,  # before the traceback is formatted: its line breaks stay
             structlog.processors.format_exc_info,
             structlog.dev.ConsoleRenderer(colors=False),
         ],
@@ -27,6 +31,12 @@ def configure(level: str = "warning") -> None:
         logger_factory=structlog.PrintLoggerFactory(file=sys.stderr),
         cache_logger_on_first_use=False,
     )
+
+
+def inert_values(logger: WrappedLogger, name: str, event: EventDict) -> EventDict:
+    """Every text of a log line without control characters (mhrc.core.printable): a participant's
+    agent id, goal or a reason quoting its payload cannot drive the operator's terminal."""
+    return {k: printable(v) if isinstance(v, str) else v for k, v in event.items()}
 
 
 class Throttle:

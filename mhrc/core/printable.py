@@ -4,7 +4,7 @@ A message's content, an object's name, an agent id or a model's reply can hold c
 characters: an ANSI escape recolours the terminal, sets its window title or clears the screen,
 a bidi override reorders what the operator reads. `printable()` removes them (a line break or a
 tab becomes a space, so one record stays one line); the console also escapes Rich markup on
-top (mhrc.run.console)."""
+top (mhrc.run.console), and every log line's texts go through it (mhrc.core.logs)."""
 
 from __future__ import annotations
 

@@ -10,7 +10,8 @@ refuses a key or password file others can read, or in a folder others can write 
   `hosts` the agents reach it by, e.g. a compose service name);
 - `users.txt`: the zenoh user/password dictionary (`user:password` per line), the world's only;
 - `<user>.json` per participant (`world`, each robot, `observer`): its run, user name,
-  password and the files it may read. Each participant gets only its own.
+  password and the files it may read. Each participant gets only its own;
+- `.gitignore` (`*`): a credentials directory written inside a checkout is never committed.
 
 With `split`, each participant's files go to a directory of its own (`mhrc credentials --split`,
 for containers: each mounts only its own). `mhrc up` calls this for every secured run;
@@ -43,6 +44,7 @@ from mhrc.core.certs import make_ca, make_server_cert, pem_cert, pem_key, write_
 ENV = "MHRC_CREDENTIALS"
 WORLD = "world"
 OBSERVER = "observer"  # subscribes to everything of the run, publishes nothing (the recorder of `mhrc up --processes`)
+GITIGNORE = "# written by mhrc: credentials are secrets, never to be committed\n*\n"  # in every credentials directory
 RUN = "run"  # the only kind of credentials: one run's participants (an evaluation's job queue, kind "eval", is gone: mhrc eval --ray)
 
 
@@ -145,6 +147,7 @@ def _issue(
     files go to `directory`, or to a directory of its own with `split`."""
     directory.mkdir(parents=True, exist_ok=True)
     os.chmod(directory, 0o700)
+    write_private(directory / ".gitignore", GITIGNORE)  # `git add -A` in a checkout must never take a private key
     ca, ca_key = make_ca(run, days=days)
     cert, key = make_server_cert(ca, ca_key, days=days, hosts=hosts)
     server = users[0]

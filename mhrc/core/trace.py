@@ -3,9 +3,9 @@
 It subscribes to `mhrc/<run>/**` and to the run's liveliness tokens, so it sees every request,
 ack, result, message, thought and world event, whichever process sent them. Each line is
 `{"t": seconds since recording started, "key": ..., "kind": "put"|"delete"|"alive"|"gone"|"junk",
-"msg": the decoded JSON payload}`; a payload that is not JSON is kept as `{"raw": text}`.
-Malformed action requests (too long, too deep, out of bounds: docs/protocol.md, "Limits") and the
-world's rejections of them are not copied: a `junk` line per key and second holds their count,
+"msg": the decoded JSON payload}`; a payload that is not JSON is kept as `{"raw": its first EXCERPT
+characters}`. Malformed action requests and thoughts (too long, too deep, out of bounds: docs/protocol.md,
+"Limits"; checked before they are parsed whole) and the world's rejections of them are not copied: a `junk` line per key and second holds their count,
 bytes, first reason and the first one's start (EXCERPT characters). So are well-formed requests the
 world rejects, past the first REJECTIONS_IN_FULL per robot and interval (a robot flooding its own key
 must not fill the disk either): the recorder holds each well-formed request until its ack, then
@@ -34,8 +34,9 @@ from typing import IO, Any
 
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import ActionRequest, ProtocolError, decode
-from mhrc.core.protocol.base import MAX_REQUEST_BYTES, loads
+from mhrc.core.protocol import ActionRequest, ProtocolError, Thought, decode
+from mhrc.core.protocol.base import MAX_REQUEST_BYTES, Message, loads
+from mhrc.core.protocol.thoughts import MAX_THOUGHT_BYTES
 from mhrc.core.records import read_records
 
 JUNK_INTERVAL = (
@@ -46,6 +47,10 @@ REJECTIONS_IN_FULL = (
 )
 MAX_HELD = 20_000  # requests awaiting their ack (a flood arrives faster than the world acks); past it the oldest is written at once
 EXCERPT = 200  # characters of a malformed request's payload kept in its junk line: enough to see what it was
+AGENTS_SAY: dict[tuple[str, ...], tuple[type[Message], int]] = {  # an agent's key, robot left out -> model, byte bound
+    ("robot", "action", "request"): (ActionRequest, MAX_REQUEST_BYTES),
+    ("agent", "thought"): (Thought, MAX_THOUGHT_BYTES),
+}
 MAX_REQUESTED = (
     100_000  # goal ids of the requests seen, remembered to tell an early ack or result from one of an old request
 )
@@ -155,10 +160,12 @@ class Recorder:
     def _on_sample(self, sample: Sample) -> None:
         if sample.key.endswith("/generating"):
             return  # an agent's live status of a long model call: its thought records the call
+        if sample.is_put and self._is_malformed(sample):
+            return  # an agent's request or thought that is none: counted, never parsed whole nor copied
         try:
             msg: Any = loads(sample.payload)
         except ProtocolError:
-            msg = {"raw": sample.payload.decode("utf-8", "replace")}
+            msg = {"raw": _excerpt(sample.payload)}
         goal = msg.get("goal_id") if isinstance(msg, dict) else None
         with self._lock:
             if (
@@ -200,24 +207,38 @@ class Recorder:
                 self._write(s.key, "put", m, t_old)
         return True
 
-    def _is_junk(self, sample: Sample, msg: Any) -> bool:
-        """A malformed action request, or the world's rejection of one: counted, not copied
-        (a flood of junk must not fill the disk). Lines of kind `junk` carry, per key and
-        interval, the count, the bytes, the first reason and (a request) the first one's start."""
-        reason = excerpt = None
-        if sample.key.endswith("/action/request"):
-            try:
-                decode(sample.payload, ActionRequest, max_bytes=MAX_REQUEST_BYTES)
-            except ProtocolError as exc:
-                reason, excerpt = str(exc), sample.payload[: EXCERPT * 4].decode("utf-8", "replace")[:EXCERPT]
-        elif sample.key.endswith("/action/ack") and isinstance(msg, dict) and msg.get("accepted") is False:
-            if msg.get("code") == "malformed":
-                reason = str(msg.get("reason", ""))
-        if reason is None:
+    def _is_malformed(self, sample: Sample) -> bool:
+        """An action request or a thought that is not one (too long, too deep, out of bounds:
+        docs/protocol.md, "Limits"): counted, not copied (a flood of junk must not fill the disk).
+        Lines of kind `junk` carry, per key and interval, the count, the bytes, the first reason
+        and the first one's start."""
+        below = sample.key.removeprefix(self._keys.base + "/").split(
+            "/"
+        )  # robot/<rid>/action/request, agent/<rid>/thought
+        model, limit = AGENTS_SAY.get((below[0], *below[2:]), (None, 0)) if len(below) > 2 else (None, 0)
+        if model is None:
             return False
-        now = time.perf_counter()
+        try:
+            decode(sample.payload, model, max_bytes=limit)
+            return False
+        except ProtocolError as exc:
+            reason = str(exc)
         with self._lock:
-            self._count_junk(sample.key, reason, len(sample.payload), now, "malformed", excerpt)
+            self._count_junk(
+                sample.key, reason, len(sample.payload), time.perf_counter(), "malformed", _excerpt(sample.payload)
+            )
+        return True
+
+    def _is_junk(self, sample: Sample, msg: Any) -> bool:
+        """The world's rejection of a malformed request: counted with the request, not copied."""
+        if not (sample.key.endswith("/action/ack") and isinstance(msg, dict) and msg.get("accepted") is False):
+            return False
+        if msg.get("code") != "malformed":
+            return False
+        with self._lock:
+            self._count_junk(
+                sample.key, str(msg.get("reason", "")), len(sample.payload), time.perf_counter(), "malformed"
+            )
         return True
 
     def _held_or_counted(self, sample: Sample, msg: Any, t: float | None = None) -> bool:
@@ -298,6 +319,11 @@ class Recorder:
                     self._file.close()
                 except OSError as exc:
                     self._fail(exc)
+
+
+def _excerpt(payload: bytes) -> str:
+    """The start of a payload recorded by excerpt (EXCERPT characters)."""
+    return payload[: EXCERPT * 4].decode("utf-8", "replace")[:EXCERPT]
 
 
 def unwritable(path: Path, *, directory: bool = False) -> str | None:

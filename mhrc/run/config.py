@@ -255,8 +255,10 @@ class EpisodeConfig(BaseModel):
         return creds
 
     def with_credentials(self, directory: Path | None = None) -> EpisodeConfig:
-        """A copy with fresh credentials for this run (default: next to the trace, runs/RUN/credentials)."""
-        where = directory or ((self.trace.parent if self.trace else Path("runs") / self.run) / "credentials")
+        """A copy with fresh credentials for this run (default: next to the trace, runs/RUN/credentials;
+        also runs/RUN/credentials for a trace that is a device, such as /dev/null or /dev/full: never into /dev)."""
+        trace = self.trace if self.trace is not None and (self.trace.is_file() or not self.trace.exists()) else None
+        where = directory or ((trace.parent if trace is not None else Path("runs") / self.run) / "credentials")
         make_run_credentials(self.run, self.team.names, where)
         return self.model_copy(update={"credentials": where})
 

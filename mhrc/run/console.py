@@ -36,6 +36,8 @@ from mhrc.core.protocol import (
     decode,
     decode_event,
 )
+from mhrc.core.protocol.base import MAX_REQUEST_BYTES
+from mhrc.core.protocol.thoughts import MAX_THOUGHT_BYTES
 from mhrc.core.records import ReplyFailure, Rows, as_records, messages, reply_failure
 
 COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
@@ -233,7 +235,7 @@ class ProgressPrinter:
     def _on_thought(self, sample: Sample) -> None:
         """A reply that gave no action is said so, before the wait it turned into."""
         try:
-            t = decode(sample.payload, Thought)
+            t = decode(sample.payload, Thought, max_bytes=MAX_THOUGHT_BYTES)  # not parsed whole past its bound
         except ProtocolError:
             return
         if t.parse_error is None or not self.verbose:
@@ -256,7 +258,7 @@ class ProgressPrinter:
         if not self.verbose or self._closed:
             return
         try:
-            g = decode(sample.payload, Generating)
+            g = decode(sample.payload, Generating, max_bytes=MAX_REQUEST_BYTES)
         except ProtocolError:
             return
         if g.robot in self._printed.get(g.tick, set()):

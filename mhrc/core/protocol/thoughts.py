@@ -6,7 +6,13 @@ from typing import Literal
 
 from pydantic import Field
 
-from mhrc.core.protocol.base import Message
+from mhrc.core.protocol.base import MAX_INT, MAX_NAME, Message
+
+# Bounds on what an agent says about its mind (docs/protocol.md, "Limits"): far above any honest
+# thought, so that one login cannot make the recorder write megabytes a message.
+MAX_TEXT = 1_000_000  # characters of a prompt, a reply or a reasoning: the model client reads no more of a reply
+MAX_LINE = 20_000  # characters of the short fields (policy, action, parse_error, ...): a communicate's call, escaped
+MAX_THOUGHT_BYTES = 8 * 1024 * 1024  # a thought's payload, checked before it is parsed (three texts, escaped)
 
 # --------------------------------------------------------------------------- thoughts
 
@@ -14,30 +20,42 @@ from mhrc.core.protocol.base import Message
 LLM_ERROR_PREFIX = "llm error: "  # a Thought.parse_error that starts so: the model was unreachable, not misunderstood
 
 
+def fit(text: str | None, limit: int = MAX_TEXT) -> str | None:
+    """`text` cut to `limit` characters, for an agent building its Thought (the bound is never met in practice)."""
+    return text if text is None or len(text) <= limit else text[:limit]
+
+
 class Thought(Message):
     """What an agent considered before acting: for observers and the recorder."""
 
     kind: Literal["thought"] = "thought"
-    robot: str
-    tick: int
-    policy: str
-    prompt: str | None = None
-    reply: str | None = None
-    action: str | None = None
-    parse_error: str | None = None
-    prompt_tokens: int = 0
-    completion_tokens: int = 0
-    latency: float = 0.0
+    robot: str = Field(max_length=MAX_NAME)
+    tick: int = Field(ge=0, le=MAX_INT)
+    policy: str = Field(max_length=MAX_LINE)
+    prompt: str | None = Field(None, max_length=MAX_TEXT)
+    reply: str | None = Field(None, max_length=MAX_TEXT)
+    action: str | None = Field(None, max_length=MAX_LINE)
+    parse_error: str | None = Field(None, max_length=MAX_LINE)
+    prompt_tokens: int = Field(0, ge=0, le=MAX_INT)
+    completion_tokens: int = Field(0, ge=0, le=MAX_INT)
+    latency: float = Field(0.0, ge=0.0, allow_inf_nan=False)
     reasoning: str | None = Field(
-        None, description="a reasoning model's thoughts (reasoning field or <think> block), apart from the reply"
+        None,
+        max_length=MAX_TEXT,
+        description="a reasoning model's thoughts (reasoning field or <think> block), apart from the reply",
     )
-    reasoning_tokens: int = 0
-    finish_reason: str | None = Field(None, description="the server's: stop, length (cut at max_tokens), ...")
+    reasoning_tokens: int = Field(0, ge=0, le=MAX_INT)
+    finish_reason: str | None = Field(
+        None, max_length=MAX_LINE, description="the server's: stop, length (cut at max_tokens), ..."
+    )
     schema_hash: str | None = Field(
-        None, description="with --structured: hash of the JSON Schema the reply had to follow"
+        None, max_length=MAX_LINE, description="with --structured: hash of the JSON Schema the reply had to follow"
     )
     ttft: float | None = Field(
-        None, description="seconds to the reply's first token (prompt processing, mostly), where it was streamed"
+        None,
+        ge=0.0,
+        allow_inf_nan=False,
+        description="seconds to the reply's first token (prompt processing, mostly), where it was streamed",
     )
 
 
@@ -46,10 +64,13 @@ class Generating(Message):
     status for the console (`mhrc up`), sent every few seconds of a long call; not recorded."""
 
     kind: Literal["generating"] = "generating"
-    robot: str
-    tick: int
-    elapsed: float = Field(description="seconds since the call began, retries included")
+    robot: str = Field(max_length=MAX_NAME)
+    tick: int = Field(ge=0, le=MAX_INT)
+    elapsed: float = Field(ge=0.0, allow_inf_nan=False, description="seconds since the call began, retries included")
     tokens: int = Field(
-        0, description="tokens streamed so far in this attempt (0: the server is still reading the prompt)"
+        0,
+        ge=0,
+        le=MAX_INT,
+        description="tokens streamed so far in this attempt (0: the server is still reading the prompt)",
     )
-    attempt: int = Field(1, description="HTTP attempt of this call (retries included)")
+    attempt: int = Field(1, ge=0, le=MAX_INT, description="HTTP attempt of this call (retries included)")
