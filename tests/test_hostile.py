@@ -129,6 +129,45 @@ async def test_thoughts_out_of_bounds_are_counted_not_copied(tmp_path: Path) -> 
     assert [t.policy for t in recorded] == ["sentinel"], recorded
 
 
+async def test_a_flood_of_well_formed_thoughts_is_counted_not_copied(tmp_path: Path) -> None:
+    """Alice's login puts 300 thoughts, each within the bounds (a 100 kB reply, 30 MB in all), and
+    no action request, then one request. An agent thinks once per action, so the trace keeps the
+    first THOUGHTS_AHEAD of them and counts the rest as junk (`thoughts_ahead`); before, every one
+    was copied whole."""
+    from test_bad_input import _junk, _mallory, _request
+    from waits import until
+
+    from mhrc.core.trace import THOUGHTS_AHEAD
+
+    async with _mallory(tmp_path) as mallory:
+        key = mallory.keys.thought("alice")
+        for i in range(300):
+            mallory.bus.put(
+                key,
+                json.dumps(
+                    {
+                        "v": 2,
+                        "kind": "thought",
+                        "robot": "alice",
+                        "tick": 0,
+                        "policy": f"flood-{i}",
+                        "reply": "r" * 100_000,
+                    }
+                ).encode(),
+            )
+        mallory.put(json.dumps(_request("after-the-flood")).encode())
+        assert (await mallory.answered(["after-the-flood"]))["after-the-flood"].accepted
+        trace = mallory.world.trace
+        await until(lambda: "after-the-flood" in trace.read_text(), "the request after the flood recorded", timeout=30)
+    recorded = [line for line in _lines(trace) if str(line["key"]).endswith("/agent/alice/thought")]
+    assert [line["msg"]["policy"] for line in recorded if line["kind"] == "put"] == [  # type: ignore[index]
+        f"flood-{i}" for i in range(THOUGHTS_AHEAD)
+    ]
+    junk = _junk(trace, "/agent/alice/thought")
+    assert sum(j["count"] for j in junk) == 300 - THOUGHTS_AHEAD and {j["code"] for j in junk} == {"thoughts_ahead"}
+    assert trace.stat().st_size < (THOUGHTS_AHEAD + 2) * 100_000
+
+
 def test_an_honest_thought_is_never_cut_below_the_bounds() -> None:
     """The agent's side fits its texts to the bounds: a reply at the bound is kept whole, one past it cut to it."""
     from mhrc.core.protocol.thoughts import MAX_TEXT, fit

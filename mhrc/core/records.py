@@ -100,6 +100,13 @@ def reply_failure(thought: Thought) -> ReplyFailure | None:
     return ReplyFailure.UNREADABLE
 
 
+class NotCopied(StrEnum):
+    """Why the recorder counted well-formed payloads instead of copying them (beside the world's
+    RejectCode for requests it rejected)."""
+
+    THOUGHTS_AHEAD = "thoughts_ahead"  # a robot's thoughts far beyond its action requests (mhrc.core.trace)
+
+
 class JunkCount(BaseModel):
     """A `junk` line: the malformed requests (or rejections past the ones copied in full) of one key
     and interval, counted by the recorder."""
@@ -109,7 +116,7 @@ class JunkCount(BaseModel):
     count: int
     bytes: int
     reason: str
-    code: RejectCode | None = None  # the rejection's code (malformed for a malformed request)
+    code: RejectCode | NotCopied | None = None  # the rejection's code (malformed for a malformed request), or NotCopied
     excerpt: str | None = None  # the start of the first malformed payload
 
 

@@ -28,6 +28,7 @@ import json
 import os
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
@@ -37,7 +38,7 @@ from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionRequest, ProtocolError, Thought, decode
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES, Message, loads
 from mhrc.core.protocol.thoughts import MAX_THOUGHT_BYTES
-from mhrc.core.records import read_records
+from mhrc.core.records import NotCopied, read_records
 
 JUNK_INTERVAL = (
     1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
@@ -51,6 +52,7 @@ AGENTS_SAY: dict[tuple[str, ...], tuple[type[Message], int]] = {  # an agent's k
     ("robot", "action", "request"): (ActionRequest, MAX_REQUEST_BYTES),
     ("agent", "thought"): (Thought, MAX_THOUGHT_BYTES),
 }
+THOUGHTS_AHEAD = 8  # a robot's thoughts recorded beyond its action requests: an agent thinks once per action
 MAX_REQUESTED = (
     100_000  # goal ids of the requests seen, remembered to tell an early ack or result from one of an old request
 )
@@ -95,6 +97,8 @@ class Recorder:
             str, list[tuple[float, Sample, Any]]
         ] = {}  # goal id -> its ack or result, come before its request
         self._rejected: dict[str, tuple[float, int]] = {}  # ack key -> (interval start, rejections copied in it)
+        self._asked: Counter[str] = Counter()  # robot -> its well-formed action requests seen
+        self._thought: Counter[str] = Counter()  # robot -> its thoughts recorded
         self._lock = threading.RLock()  # samples arrive on zenoh's threads (the data's and the liveliness')
 
     def start(self) -> Recorder:
@@ -183,12 +187,39 @@ class Recorder:
 
     def _record(self, sample: Sample, msg: Any, t: float | None = None) -> None:
         if sample.is_put and (
-            self._is_junk(sample, msg) or self._too_early(sample, msg, t) or self._held_or_counted(sample, msg, t)
+            self._is_junk(sample, msg)
+            or self._thinks_ahead(sample)
+            or self._too_early(sample, msg, t)
+            or self._held_or_counted(sample, msg, t)
         ):
             return
         self._write(sample.key, "put" if sample.is_put else "delete", msg, t)
         if isinstance(msg, dict) and msg.get("kind") == "episode_done":
             self._ended.set()
+
+    def _thinks_ahead(self, sample: Sample) -> bool:
+        """A thought of a robot that has thought more than THOUGHTS_AHEAD times beyond its action
+        requests: counted, not copied. An agent publishes one thought per decision and one
+        request per decision, so an honest agent never gets there; a login putting well-formed
+        thoughts in a loop (each within the bounds, a few MB) would otherwise fill the disk."""
+        below = sample.key.removeprefix(self._keys.base + "/").split("/")  # robot/<rid>/action/request
+        if below[0] == "robot" and below[2:] == ["action", "request"]:
+            self._asked[below[1]] += 1
+            return False
+        if not (len(below) == 3 and below[0] == "agent" and below[2] == "thought"):  # agent/<rid>/thought
+            return False
+        robot = below[1]
+        if self._thought[robot] >= self._asked[robot] + THOUGHTS_AHEAD:
+            self._count_junk(
+                sample.key,
+                f"more than {THOUGHTS_AHEAD} thoughts beyond the robot's action requests",
+                len(sample.payload),
+                time.perf_counter(),
+                NotCopied.THOUGHTS_AHEAD.value,
+            )
+            return True
+        self._thought[robot] += 1
+        return False
 
     def _too_early(self, sample: Sample, msg: Any, t: float | None) -> bool:
         """The world's ack or result of a request not seen yet, held until it comes: each
