@@ -60,9 +60,9 @@ def keep_serving(stream: Stream) -> None:
     """A served recording stays up for the person looking at it until Ctrl-C (or SIGTERM); a file needs nothing."""
     if stream.viewer is None:
         return
-    click.echo(f"rerun: serving {stream.address} until Ctrl-C", err=True)
     stop = threading.Event()
     before = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    click.echo(f"rerun: serving {stream.address} until Ctrl-C", err=True)
     try:
         while not stop.is_set() and stream.viewer.poll() is None:
             stop.wait(0.5)
@@ -87,7 +87,8 @@ def show_rerun(trace: Path, target: Target) -> None:
         sys.exit(1)
     if written.warnings:
         click.echo("mhrc show: warning: " + "; ".join(written.warnings), err=True)
-    click.echo(str(target.path) if target.path is not None else f"rerun: {written.address}")
+    click.echo(str(target.path) if target.path is not None else f"rerun: {written.stream.address}")
+    keep_serving(written.stream)
 
 
 def eval_recordings(traces: Iterable[Path], directory: Path, root: Path) -> list[Path]:

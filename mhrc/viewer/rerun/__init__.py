@@ -9,7 +9,6 @@ analytics belong to its viewer, never to a recording written by the SDK; a viewe
 
 from __future__ import annotations
 
-import importlib.util
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
@@ -49,9 +48,12 @@ class Target:
 
 
 def require() -> None:
-    """RerunError (MISSING, with the install line) when rerun-sdk is not importable."""
-    if importlib.util.find_spec("rerun") is None:
-        raise RerunError(RerunProblem.MISSING, f"--rerun needs rerun-sdk: {INSTALL}")
+    """RerunError (MISSING, with the install line) when rerun-sdk cannot be imported."""
+    try:
+        import rerun  # noqa: F401
+        import rerun_cli  # noqa: F401
+    except ImportError:
+        raise RerunError(RerunProblem.MISSING, f"--rerun needs rerun-sdk: {INSTALL}") from None
 
 
 def parse_target(value: str, *, directory: bool = False) -> Target:

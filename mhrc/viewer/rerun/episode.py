@@ -147,6 +147,11 @@ class EpisodeLogger:
             self.warnings.append(f"scene {msg.scene!r} could not be loaded ({exc}): the house is not drawn")
         if self._layout is not None:
             log_house(self.rec, self._layout)
+        for robot in self._robots:  # attached before the start said its kind: drawn again as what it is
+            self._robots[robot] = _Robot(
+                self._kinds.get(robot, "?"), body_of(self._kinds.get(robot, "?"), self._layout)
+            )
+            log_body(self.rec, robot, self._robots[robot].body)
         for robot in msg.robots:
             self._robot(robot)
         self.rec.log(
@@ -241,11 +246,11 @@ class EpisodeLogger:
             ),
         )
         if self._snapshots == 0:  # a trace of protocol version 1: the poses from the robots' own observations
-            status = obs.status
-            if status.base is not None:
-                self._pose(msg.robot, status.base.x, status.base.y, status.base.yaw)
-            elif status.arm_base is not None:
-                self._pose(msg.robot, status.arm_base[0], status.arm_base[1], 0.0)
+            body = obs.status
+            if body.base is not None:
+                self._pose(msg.robot, body.base.x, body.base.y, body.base.yaw)
+            elif body.arm_base is not None:
+                self._pose(msg.robot, body.arm_base[0], body.arm_base[1], 0.0)
 
     def _done(self, msg: EpisodeDone) -> None:
         m = msg.metrics
@@ -266,7 +271,7 @@ class EpisodeLogger:
         self.rec.log("progress/placed", rr.Scalars([float(placed)]))
         self.rec.log("progress/ps", rr.Scalars([placed / total if total else 0.0]))
 
-    def _text(self, robot: str, what: str, text: str, level: str = INFO) -> None:
+    def _text(self, robot: str, what: str, text: str, level: rr.TextLogLevel = INFO) -> None:
         self.rec.log(f"agents/{robot}/{what}", rr.TextLog(text, level=level))
 
     def _send_blueprint(self) -> None:

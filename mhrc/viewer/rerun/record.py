@@ -22,7 +22,7 @@ class Written:
     target: Target
     records: int
     warnings: list[str]
-    address: str | None = None
+    stream: Stream  # closed; a viewer mhrc started (serve, spawn) still up: Stream.stop_viewer
 
 
 def log_trace(trace: LoadedTrace, stream: Stream) -> list[str]:
@@ -43,7 +43,7 @@ def write_recording(path: str | Path, target: Target, recording_id: str | None =
         warnings = log_trace(trace, stream)
     finally:
         stream.close()
-    return Written(target, len(trace.records), warnings, stream.address)
+    return Written(target, len(trace.records), warnings, stream)
 
 
 def rrd_beside(trace: Path, directory: Path, root: Path) -> Target:

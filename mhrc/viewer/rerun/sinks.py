@@ -5,7 +5,10 @@ and with Rerun's usage analytics off (they belong to the viewer: the SDK writing
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -18,6 +21,7 @@ import rerun as rr
 import rerun_cli
 
 from mhrc.core.endpoints import free_port
+from mhrc.run.lifeline import PR_SET_PDEATHSIG
 from mhrc.viewer.rerun import Mode, Target
 
 APPLICATION = "mhrc"
@@ -37,7 +41,15 @@ def quiet_env() -> dict[str, str]:
     env = dict(os.environ)
     env.pop("FORCE_RERUN_ANALYTICS", None)
     env["CI"] = env.get("CI") or "1"
+    env.setdefault("RUST_LOG", "warn")  # its own lines: warnings and errors only
     return env
+
+
+def _die_with_us() -> None:
+    """In the viewer's process, before it runs: SIGTERM when mhrc dies (Linux), so no viewer is left behind."""
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
 
 
 @dataclass
@@ -94,7 +106,9 @@ def open_stream(target: Target, recording_id: str) -> Stream:
         args = ["--serve-web", "--bind", HOST, "--port", str(grpc), "--web-viewer-port", str(web)]
     else:
         args = ["--bind", HOST, "--port", str(grpc), "--expect-data-soon", "--hide-welcome-screen"]
-    viewer = subprocess.Popen([str(rerun_binary()), *args], env=quiet_env(), stdout=subprocess.DEVNULL)
+    viewer = subprocess.Popen(
+        [str(rerun_binary()), *args], env=quiet_env(), stdout=subprocess.DEVNULL, preexec_fn=_die_with_us
+    )
     _wait_port(grpc, viewer)
     url = f"rerun+http://{HOST}:{grpc}/proxy"
     rec.connect_grpc(url)
