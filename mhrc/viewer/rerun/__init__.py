@@ -9,6 +9,8 @@ analytics belong to its viewer, never to a recording written by the SDK; a viewe
 
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
@@ -23,6 +25,7 @@ class RerunProblem(StrEnum):
     MISSING = "missing"  # rerun-sdk is not installed
     UNWRITABLE = "unwritable"  # the recording's file cannot be written
     NOT_RRD = "not_rrd"  # a file that does not end in .rrd
+    NO_DISPLAY = "no_display"  # spawn: the native viewer needs a display
 
 
 class RerunError(ValueError):
@@ -60,6 +63,12 @@ def parse_target(value: str, *, directory: bool = False) -> Target:
     """`serve`, `spawn` or a path (with `directory`: a directory for one recording per episode), checked
     before anything starts: rerun-sdk installed, the path writable."""
     require()
+    if not directory and value == Mode.SPAWN.value and sys.platform.startswith("linux"):
+        if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise RerunError(
+                RerunProblem.NO_DISPLAY,
+                "--rerun spawn: the native viewer needs a display (DISPLAY is not set); use --rerun serve or OUT.rrd",
+            )
     if not directory and value in (Mode.SERVE.value, Mode.SPAWN.value):
         return Target(Mode(value))
     path = Path(value)
