@@ -168,7 +168,7 @@ def up(
     if as_json:
         click.echo(json.dumps(done.metrics.model_dump()))
     if live is not None:
-        keep_serving(live.stream)
+        keep_serving(live.viewer)
 
 
 def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:

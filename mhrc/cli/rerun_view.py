@@ -15,7 +15,7 @@ import click
 if TYPE_CHECKING:
     from mhrc.viewer.rerun import Target
     from mhrc.viewer.rerun.live import LiveRecording
-    from mhrc.viewer.rerun.sinks import Stream
+    from mhrc.viewer.rerun.sinks import Viewer
 
 
 def start_live(target: Target, run: str, command: str) -> LiveRecording:
@@ -48,28 +48,28 @@ def both(*hooks: Callable[[Any, str], None] | None) -> Callable[[Any, str], None
 def close_live(live: LiveRecording, command: str) -> None:
     """Close the live recording and say where it is and what it holds."""
     stats = live.close()
-    where = live.stream.target.path or live.address
+    where = live.target.path or live.address
     said = f"rerun: {where} ({stats.logged} records"
-    said += f", {stats.dropped} dropped: the queue was full)" if stats.dropped else ")"
+    said += f", {stats.dropped} dropped)" if stats.dropped else ")"
     click.echo(said, err=True)
-    for warning in live.warnings:
+    for warning in stats.warnings:
         click.echo(f"mhrc {command}: rerun: warning: {warning}", err=True)
 
 
-def keep_serving(stream: Stream) -> None:
+def keep_serving(viewer: Viewer | None) -> None:
     """A served recording stays up for the person looking at it until Ctrl-C (or SIGTERM); a file needs nothing."""
-    if stream.viewer is None:
+    if viewer is None:
         return
     stop = threading.Event()
     before = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
-    click.echo(f"rerun: serving {stream.address} until Ctrl-C", err=True)
+    click.echo(f"rerun: serving {viewer.address} until Ctrl-C", err=True)
     try:
-        while not stop.is_set() and stream.viewer.poll() is None:
+        while not stop.is_set() and viewer.process.poll() is None:
             stop.wait(0.5)
     finally:
         for sig, handler in before.items():
             signal.signal(sig, handler)
-        stream.stop_viewer()
+        viewer.stop()
 
 
 def show_rerun(trace: Path, target: Target) -> None:
@@ -87,8 +87,8 @@ def show_rerun(trace: Path, target: Target) -> None:
         sys.exit(1)
     if written.warnings:
         click.echo("mhrc show: warning: " + "; ".join(written.warnings), err=True)
-    click.echo(str(target.path) if target.path is not None else f"rerun: {written.stream.address}")
-    keep_serving(written.stream)
+    click.echo(str(target.path) if written.viewer is None else f"rerun: {written.viewer.address}")
+    keep_serving(written.viewer)
 
 
 def eval_recordings(traces: Iterable[Path], directory: Path, root: Path) -> list[Path]:

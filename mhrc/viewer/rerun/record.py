@@ -1,4 +1,4 @@
-"""A recording from a trace: `mhrc show TRACE --rerun OUT.rrd` and `mhrc eval --rerun DIR`.
+"""A recording from a trace: `mhrc show TRACE --rerun` and `mhrc eval --rerun DIR`.
 
 The trace is read as the HTML report reads it (mhrc.viewer.load): a truncated trace, or one of an
 older protocol version, gives a recording of what could be read, with the same warnings.
@@ -9,25 +9,28 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import rerun as rr
+
 from mhrc.viewer.load import LoadedTrace, load_trace
 from mhrc.viewer.rerun import Mode, Target
 from mhrc.viewer.rerun.episode import EpisodeLogger
-from mhrc.viewer.rerun.sinks import Stream, open_stream
+from mhrc.viewer.rerun.sinks import Viewer, close_stream, open_stream, start_viewer
 
 
 @dataclass(frozen=True)
 class Written:
-    """A recording made from a trace: where it went, the records fed, and the warnings about the trace."""
+    """A recording made from a trace: where it went, the records fed, the warnings about the trace, and the
+    viewer mhrc started for it (serve, spawn: still up, `Viewer.stop` ends it)."""
 
     target: Target
     records: int
     warnings: list[str]
-    stream: Stream  # closed; a viewer mhrc started (serve, spawn) still up: Stream.stop_viewer
+    viewer: Viewer | None = None
 
 
-def log_trace(trace: LoadedTrace, stream: Stream) -> list[str]:
-    """Feed every record of `trace` into `stream`, then its blueprint; returns the warnings (the trace's and the drawing's)."""
-    logger = EpisodeLogger(stream.rec)
+def log_trace(trace: LoadedTrace, rec: rr.RecordingStream) -> list[str]:
+    """Feed every record of `trace` into `rec`, then its blueprint; returns the warnings (the trace's and the drawing's)."""
+    logger = EpisodeLogger(rec)
     for line in trace.records:
         logger.feed(line)
     logger.finish()
@@ -36,14 +39,16 @@ def log_trace(trace: LoadedTrace, stream: Stream) -> list[str]:
 
 def write_recording(path: str | Path, target: Target, recording_id: str | None = None) -> Written:
     """Read the trace at `path` (a file or a run directory) and send it to `target`. Raises
-    mhrc.viewer.load.NotATrace for a file that is no trace, OSError for one that cannot be read."""
+    mhrc.viewer.load.NotATrace for a file that is no trace, OSError for one that cannot be read,
+    RuntimeError for a viewer that does not start."""
     trace = load_trace(path)
-    stream = open_stream(target, recording_id or _run_of(trace))
+    viewer = start_viewer(target)
+    rec = open_stream(recording_id or _run_of(trace), target.path, viewer.url if viewer is not None else None)
     try:
-        warnings = log_trace(trace, stream)
+        warnings = log_trace(trace, rec)
     finally:
-        stream.close()
-    return Written(target, len(trace.records), warnings, stream)
+        close_stream(rec)
+    return Written(target, len(trace.records), warnings, viewer)
 
 
 def rrd_beside(trace: Path, directory: Path, root: Path) -> Target:
