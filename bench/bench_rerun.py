@@ -1,11 +1,12 @@
 """What a live Rerun recording costs an episode (`mhrc up --rerun OUT.rrd`, mhrc.viewer.rerun.live).
 
 Runs the same heuristic episode in-process again and again, alternating without and with a live
-recording to an .rrd file, and reports each side's median wall time (the episode, from the start to
-its end event), the overhead, the time the recording then takes to close (logging what is still
-queued, writing the file), the samples the recording logged and dropped and the deepest its queue
-got. Then the same trace turned into a recording afterwards (`mhrc show --rerun`), for comparison.
-Both sides are measured in the same run. Prints JSON (and writes it with --out).
+recording to an .rrd file, and reports for each side the median of: the whole run's wall time
+(scene built to everything closed), the episode's own (`wall_time` of its metrics: start to end),
+and the CPU time of the episode's process (the world, the agents and, with a recording, the
+hand-over of each sample to the logging process); then the time the recording takes to close once
+the episode is over, the samples it logged and dropped, and the deepest its queue got. Last, the
+same trace made into a recording afterwards (`mhrc show --rerun`), for comparison. Both sides are measured in the same run. Prints JSON (and writes it with --out).
 
     python bench/bench_rerun.py [--repeats 7] [--objects 6] [--out bench/results/rerun.json]
 """
@@ -23,6 +24,7 @@ from typing import Any
 
 from report import emit
 
+from mhrc.core import logs
 from mhrc.core.team import PAPER_TEAM
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.teams import resolve_team
@@ -36,10 +38,15 @@ def one(cfg: EpisodeConfig, out: Path | None) -> dict[str, Any]:
     from mhrc.run.inprocess import up_in_process
 
     live = LiveRecording(Target(Mode.FILE, out), cfg.run) if out is not None else None
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     done = asyncio.run(up_in_process(cfg, observe=None if live is None else live.observe))
-    wall = time.perf_counter() - t0
-    row: dict[str, Any] = {"wall_s": wall, "temporal_steps": done.metrics.temporal_steps}
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    row: dict[str, Any] = {
+        "cpu_s": cpu,
+        "wall_s": wall,
+        "episode_s": done.metrics.wall_time,
+        "temporal_steps": done.metrics.temporal_steps,
+    }
     if live is not None:
         t1 = time.perf_counter()
         stats = live.close()
@@ -69,6 +76,8 @@ def team_case(name: str, team: str, args: argparse.Namespace, tmp: Path) -> dict
     from_trace_s = time.perf_counter() - t0
     base = statistics.median(r["wall_s"] for r in without)
     live = statistics.median(r["wall_s"] for r in with_)
+    base_episode = statistics.median(r["episode_s"] for r in without)
+    live_episode = statistics.median(r["episode_s"] for r in with_)
     return {
         "team": team,
         "robots": len(spec.robots),
@@ -76,6 +85,11 @@ def team_case(name: str, team: str, args: argparse.Namespace, tmp: Path) -> dict
         "without_s": round(base, 4),
         "with_s": round(live, 4),
         "overhead_pct": round(100 * (live - base) / base, 1),
+        "episode_without_s": round(base_episode, 4),
+        "episode_with_s": round(live_episode, 4),
+        "episode_overhead_pct": round(100 * (live_episode - base_episode) / base_episode, 1),
+        "cpu_without_s": round(statistics.median(r["cpu_s"] for r in without), 4),
+        "cpu_with_s": round(statistics.median(r["cpu_s"] for r in with_), 4),
         "close_s": round(statistics.median(r["close_s"] for r in with_), 4),
         "logged": with_[-1]["logged"],
         "dropped": max(r["dropped"] for r in with_),
@@ -94,6 +108,7 @@ def main() -> None:
     ap.add_argument("--horizon", type=int, default=50)
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
+    logs.configure("warning")
     with tempfile.TemporaryDirectory(prefix="bench_rerun_") as tmp:
         runs = {
             name: team_case(name, team, args, Path(tmp)) for name, team in (("paper", "paper"), ("eight", "full_house"))

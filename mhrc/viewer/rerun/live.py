@@ -57,11 +57,26 @@ class LiveRecording:
             stdout=subprocess.PIPE,
             env=child_env(),
         )
+        self._ready()
         self._queue: queue.Queue[tuple[str, bytes, float, bool] | None] = queue.Queue(QUEUE)
         self._t0 = time.perf_counter()
         self.queued = self.dropped = self.max_depth = 0
         self._writer = threading.Thread(target=self._write, name=f"rerun-{run}", daemon=True)
         self._writer.start()
+
+    def _ready(self) -> None:
+        """Wait for the logging process to have imported Rerun and opened the recording: its start then costs
+        the episode nothing (on a busy machine, an import beside the world's loop slowed it by a second)."""
+        assert self._proc.stdout is not None
+        line = self._proc.stdout.readline()  # its first line, or nothing if it died
+        if not line.strip().startswith(b"{"):
+            self._proc.kill()
+            self._proc.wait()
+            if self.viewer is not None:
+                self.viewer.stop()
+            raise RuntimeError(
+                f"the recording could not start (the logging process ended with code {self._proc.returncode})"
+            )
 
     def _url(self) -> str:
         assert self.viewer is not None

@@ -5,8 +5,9 @@ Rerun's logging take no time from the world's loop (a thread would share its int
 On stdin, one frame a sample: a header (`FRAME`: the key's and payload's lengths, the seconds since
 the recording began, put or delete) then the key and the payload as the bus carried them. Each
 sample is decoded as the trace would record it (mhrc.core.records) and logged
-(mhrc.viewer.rerun.episode). At the end of stdin it sends the blueprint, closes the recording and
-writes one JSON line on stdout: the samples logged and the warnings.
+(mhrc.viewer.rerun.episode). On stdout, one JSON line once its recording is open (`ready`), and one
+at the end of stdin, once it has sent the blueprint and closed the recording: the samples logged
+and the warnings.
 """
 
 from __future__ import annotations
@@ -73,6 +74,7 @@ def main() -> None:
     die_with_parent()
     rec = open_stream(args.run, args.file, args.connect)
     logger = EpisodeLogger(rec)
+    print(json.dumps({"ready": True}), flush=True)  # imported and open: the episode may start
     try:
         logged = log_frames(sys.stdin.buffer, logger)
         logger.finish()
