@@ -83,7 +83,7 @@ def log_open(rec: rr.RecordingStream, layout: Layout, name: str, is_open: bool) 
             centers=[center],
             sizes=[size],
             colors=[OPEN_COLOR if is_open else (90, 90, 90, 200)],
-            labels=[f"{name} {'open' if is_open else 'closed'}"],
+            labels=[f"{name} open" if is_open else ""],  # a closed one's marker says it without a label on every piece
         ),
     )
 
