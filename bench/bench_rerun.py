@@ -6,7 +6,8 @@ recording to an .rrd file, and reports for each side the median of: the whole ru
 and the CPU time of the episode's process (the world, the agents and, with a recording, the
 hand-over of each sample to the logging process); then the time the recording takes to close once
 the episode is over, the samples it logged and dropped, and the deepest its queue got. Last, the
-same trace made into a recording afterwards (`mhrc show --rerun`), for comparison. Both sides are measured in the same run. Prints JSON (and writes it with --out).
+same trace made into a recording afterwards (`mhrc show --rerun`), for comparison. Both sides are
+measured in the same run. Prints JSON (and writes it with --out).
 
     python bench/bench_rerun.py [--repeats 7] [--objects 6] [--out bench/results/rerun.json]
 """

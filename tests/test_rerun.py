@@ -227,12 +227,13 @@ def test_an_unwritable_rerun_path_is_one_line_and_exit_2_before_the_episode(tmp_
         ["up", "--insecure", "--trace", str(trace), "--rerun", str(blocker / "x.rrd")],
         ["show", str(trace), "--rerun", str(blocker / "x.rrd")],
         ["up", "--insecure", "--trace", str(trace), "--rerun", str(tmp_path / "x.txt")],
+        ["eval", "--out", str(tmp_path / "eval"), "--rerun", str(blocker / "recordings")],
     ):
         result = CliRunner().invoke(main, args)  # the option is checked as it is parsed: nothing has started
         assert result.exit_code == 2, result.output
         errors = [ln for ln in result.output.splitlines() if ln.startswith("Error:")]
         assert len(errors) == 1 and "--rerun" in errors[0] and "Traceback" not in result.output
-        assert not trace.exists() and not (blocker.parent / "x.txt").exists()
+        assert not trace.exists() and not (tmp_path / "x.txt").exists() and not (tmp_path / "eval").exists()
 
 
 def test_without_rerun_sdk_rerun_says_how_to_install_it(tmp_path: Path) -> None:
@@ -271,3 +272,22 @@ def test_rerun_serve_serves_the_web_viewer_on_loopback(episode: dict[str, Path])
         proc.send_signal(signal.SIGINT)
         proc.wait(60)
     assert proc.returncode == 0
+
+
+@pytest.mark.slow
+def test_eval_writes_one_recording_per_episode_at_its_traces_place(tmp_path: Path) -> None:
+    out, recordings = tmp_path / "eval", tmp_path / "recordings"
+    result = subprocess.run(
+        [sys.executable, "-m", "mhrc", "eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3"]
+        + ["--trials", "2", "--horizon", "4", "--workers", "1", "--out", str(out), "--rerun", str(recordings)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    rows = [json.loads(line) for line in (out / "episodes.jsonl").read_text(encoding="utf-8").splitlines()]
+    made = sorted(recordings.rglob("*.rrd"))
+    assert made == sorted((recordings / r["trace"]).with_suffix(".rrd") for r in rows) and len(made) == 2
+    for path in made:
+        verify(path)
+        assert read_back(path).texts("/agents/bob/thought")
