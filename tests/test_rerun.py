@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 from click.testing import CliRunner
+from old_traces import as_version_1
 
 rr = pytest.importorskip("rerun")
 
@@ -197,15 +198,7 @@ def test_a_truncated_or_older_trace_gives_a_recording_of_what_can_be_read(
     text = episode["trace"].read_text(encoding="utf-8")
     cut = tmp_path / "cut.jsonl"
     cut.write_text(text[: len(text) // 2], encoding="utf-8")
-    old = tmp_path / "v1.jsonl"
-    with old.open("w", encoding="utf-8") as f:
-        for row in read_trace(episode["trace"]):
-            msg = row["msg"]
-            if isinstance(msg, dict):
-                if msg["kind"] == "snapshot":
-                    continue
-                msg["v"] = 1
-            f.write(json.dumps(row) + "\n")
+    old = as_version_1(episode["trace"], tmp_path / "v1.jsonl")
     for trace, said in ((cut, "truncated"), (old, "no snapshot")):
         report = CliRunner().invoke(main, ["show", str(trace), "--out", str(tmp_path / "r.html")])
         recording = CliRunner().invoke(main, ["show", str(trace), "--rerun", str(trace.with_suffix(".rrd"))])

@@ -23,20 +23,7 @@ from dataclasses import dataclass, field
 
 import rerun as rr
 
-from mhrc.core.protocol import (
-    ActionAck,
-    ActionRequest,
-    ActionResult,
-    EpisodeDone,
-    EpisodeStarted,
-    RobotAttached,
-    RobotDetached,
-    RobotMessage,
-    ScenarioEvent,
-    Snapshot,
-    Thought,
-    TickClosed,
-)
+from mhrc.core import protocol as wire
 from mhrc.core.records import LineKind, TraceLine
 from mhrc.core.team import PAPER_TEAM
 from mhrc.viewer.rerun.blueprint import blueprint
@@ -83,43 +70,43 @@ class EpisodeLogger:
         if line.kind is not LineKind.PUT or line.msg is None:
             return
         msg = line.msg
-        if isinstance(msg, EpisodeStarted):
+        if isinstance(msg, wire.EpisodeStarted):
             self._started(msg)
-        elif isinstance(msg, Snapshot):
+        elif isinstance(msg, wire.Snapshot):
             self._snapshot(msg)
-        elif isinstance(msg, Thought):
+        elif isinstance(msg, wire.Thought):
             self._thought(msg)
-        elif isinstance(msg, ActionRequest):
+        elif isinstance(msg, wire.ActionRequest):
             self._ticks[msg.goal_id] = msg.tick
             self._at(msg.tick)
             self._text(msg.robot, "action", f"{msg.action.call()}  [goal {msg.goal_id}]")
-        elif isinstance(msg, ActionAck):
+        elif isinstance(msg, wire.ActionAck):
             if not msg.accepted:
                 self._at(self._ticks.get(msg.goal_id, self._tick))
                 code = msg.code.value if msg.code is not None else "rejected"
                 self._text(msg.robot, "action", f"rejected ({code}): {msg.reason}", WARN)
-        elif isinstance(msg, ActionResult):
+        elif isinstance(msg, wire.ActionResult):
             self._result(msg)
-        elif isinstance(msg, RobotMessage):
+        elif isinstance(msg, wire.RobotMessage):
             self._at(msg.tick)
             self.rec.log("messages", rr.TextLog(f"{msg.sender} -> {msg.to}: {msg.content}", level=INFO))
             self._text(msg.to, "inbox", f"from {msg.sender}: {msg.content}")
-        elif isinstance(msg, TickClosed):
+        elif isinstance(msg, wire.TickClosed):
             self._at(msg.tick + 1)
             self._progress(msg.placed, msg.total)
-        elif isinstance(msg, ScenarioEvent):
+        elif isinstance(msg, wire.ScenarioEvent):
             self._at(msg.tick)
             level = INFO if msg.applied else WARN
             text = msg.text or f"{msg.event} ({'applied' if msg.applied else 'skipped: ' + str(msg.skipped)})"
             self.rec.log("events", rr.TextLog(f"scenario {msg.scenario} #{msg.index}: {text}", level=level))
-        elif isinstance(msg, RobotAttached):
+        elif isinstance(msg, wire.RobotAttached):
             self._robot(msg.robot)
             self._at(msg.tick)
             self.rec.log("events", rr.TextLog(f"{msg.robot} attached ({msg.agent_id})", level=INFO))
-        elif isinstance(msg, RobotDetached):
+        elif isinstance(msg, wire.RobotDetached):
             self._at(msg.tick)
             self.rec.log("events", rr.TextLog(f"{msg.robot} detached: {msg.reason}", level=WARN))
-        elif isinstance(msg, EpisodeDone):
+        elif isinstance(msg, wire.EpisodeDone):
             self._done(msg)
 
     def finish(self) -> None:
@@ -137,7 +124,7 @@ class EpisodeLogger:
 
     # ------------------------------------------------------------------ handlers
 
-    def _started(self, msg: EpisodeStarted) -> None:
+    def _started(self, msg: wire.EpisodeStarted) -> None:
         self._at(0)
         kinds = msg.team.kinds if msg.team is not None else PAPER_TEAM.kinds
         self._kinds.update(kinds)
@@ -185,7 +172,7 @@ class EpisodeLogger:
             if len(r.path) > 1:
                 self.rec.log(f"world/paths/{robot}", rr.LineStrips3D([r.path], colors=[PATH_COLOR], labels=[robot]))
 
-    def _snapshot(self, msg: Snapshot) -> None:
+    def _snapshot(self, msg: wire.Snapshot) -> None:
         self._snapshots += 1
         self._at(msg.tick + 1 if msg.goals else msg.tick)
         for robot, pose in msg.robots.items():
@@ -206,7 +193,7 @@ class EpisodeLogger:
                 log_open(self.rec, self._layout, name, is_open)
             self._open[name] = is_open
 
-    def _thought(self, msg: Thought) -> None:
+    def _thought(self, msg: wire.Thought) -> None:
         self._robot(msg.robot)
         self._at(msg.tick)
         if msg.reply:  # a model's reply, its reasoning before it when the server sent one apart
@@ -217,7 +204,7 @@ class EpisodeLogger:
             text += f"\n(no action: {msg.parse_error})"
         self._text(msg.robot, "thought", text, WARN if msg.parse_error else INFO)
 
-    def _result(self, msg: ActionResult) -> None:
+    def _result(self, msg: wire.ActionResult) -> None:
         self._at(msg.tick, msg.ended)
         out = msg.outcome
         status = "ok" if out.succeeded else f"failed ({out.code.value})"
@@ -252,7 +239,7 @@ class EpisodeLogger:
             elif body.arm_base is not None:
                 self._pose(msg.robot, body.arm_base[0], body.arm_base[1], 0.0)
 
-    def _done(self, msg: EpisodeDone) -> None:
+    def _done(self, msg: wire.EpisodeDone) -> None:
         m = msg.metrics
         self._at(m.temporal_steps, m.sim_time or None)
         self._progress(m.placed, m.total)
