@@ -1,6 +1,7 @@
 """The process that makes a live recording (`python -m mhrc.viewer.rerun.logger`), started by
 mhrc.viewer.rerun.live: the episode's process only hands it the bus's samples, so decoding them and
-Rerun's logging take no time from the world's loop (a thread would share its interpreter's lock).
+Rerun's logging take no time from the world's loop (a thread would share its interpreter's lock),
+and it runs at a lower priority (NICE), so that on a busy machine the episode comes first.
 
 On stdin, one frame a sample: a header (`FRAME`: the key's and payload's lengths, the seconds since
 the recording began, put or delete) then the key and the payload as the bus carried them. Each
@@ -13,7 +14,9 @@ and the warnings.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import struct
 import sys
 from pathlib import Path
@@ -27,6 +30,7 @@ from mhrc.viewer.rerun.episode import EpisodeLogger
 from mhrc.viewer.rerun.sinks import close_stream, open_stream
 
 FRAME = struct.Struct("!IIdB")  # key bytes, payload bytes, t, is_put
+NICE = 10  # the logging process's niceness: the episode's processes come first for the CPU
 
 
 def frame(key: str, payload: bytes, t: float, is_put: bool) -> bytes:
@@ -72,6 +76,8 @@ def main() -> None:
     ap.add_argument("--connect", default=None, help="the viewer's gRPC URL to stream to")
     args = ap.parse_args()
     die_with_parent()
+    with contextlib.suppress(OSError, AttributeError):  # not on every platform
+        os.nice(NICE)  # the world's loop first: on a busy machine the recording catches up after
     rec = open_stream(args.run, args.file, args.connect)
     logger = EpisodeLogger(rec)
     print(json.dumps({"ready": True}), flush=True)  # imported and open: the episode may start
