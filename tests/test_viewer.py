@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 from click.testing import CliRunner
+from old_traces import as_version_1
 
 from mhrc.cli import main
 from mhrc.core.trace import read_trace
@@ -242,15 +243,7 @@ def test_a_truncated_trace_renders_what_it_can_with_a_warning(traces: dict[str, 
 def test_an_older_trace_without_snapshots_shows_the_robots_from_their_observations(
     traces: dict[str, Path], tmp_path: Path
 ) -> None:
-    old = tmp_path / "v1.jsonl"
-    with old.open("w", encoding="utf-8") as f:
-        for row in read_trace(traces["heuristic"]):
-            msg = row["msg"]
-            if isinstance(msg, dict):
-                if msg["kind"] == "snapshot":
-                    continue
-                msg["v"] = 1
-            f.write(json.dumps(row) + "\n")
+    old = as_version_1(traces["heuristic"], tmp_path / "v1.jsonl")
     result = show(str(old))
     assert result.exit_code == 0, result.output
     assert "no snapshot" in result.output and len(result.output.strip().splitlines()) == 2  # the warning, the path

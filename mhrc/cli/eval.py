@@ -21,6 +21,7 @@ from mhrc.cli.options import (
     TIME_SCALE_HELP,
     events_option,
     llm_options,
+    rerun_option,
 )
 from mhrc.cli.running import run_command
 from mhrc.core import logs
@@ -142,6 +143,12 @@ def _teams(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -
 )
 @click.option("--resume", is_flag=True, help="Continue the evaluation in --out, skipping finished episodes.")
 @click.option("--dry-run", is_flag=True, help="Print the episodes the grid holds (key, repeat, seed) and exit.")
+@rerun_option(
+    help="Write one Rerun recording per episode into DIR, at its trace's place (DIR = --out: beside each trace); "
+    "pip install 'mhrc[rerun]'.",
+    metavar="DIR",
+    directory=True,
+)
 @LOG_LEVEL
 def eval_(
     tasks: str | None,
@@ -164,6 +171,7 @@ def eval_(
     out: Path | None,
     resume: bool,
     dry_run: bool,
+    rerun: Any,
     log_level: str,
     **llm: Any,
 ) -> None:
@@ -307,6 +315,11 @@ def eval_(
         + (", ".join(map(str, written)) if rows else "no episode finished")
         + (f" (episodes given up: {errors})" if errors.exists() else "")
     )
+    if rerun is not None and rows:
+        from mhrc.cli.rerun_view import eval_recordings
+
+        made = eval_recordings((out / str(r["trace"]) for r in rows if r.get("trace")), rerun.path, out)
+        console.print(f"{len(made)} rerun recording(s) in {rerun.path}")
     if rows:
         click.echo((out / "summary.md").read_text(encoding="utf-8"))  # the summary written, not computed again
 

@@ -142,6 +142,31 @@ def llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
     return f
 
 
+RERUN_HELP = (
+    "Also make a Rerun recording of the episode (pip install 'mhrc[rerun]'): OUT.rrd, a file; `serve`, Rerun's "
+    "web viewer on 127.0.0.1 (its address is printed); `spawn`, the native viewer."
+)
+
+
+def rerun_option(
+    help: str = RERUN_HELP, metavar: str = "OUT.rrd|serve|spawn", directory: bool = False
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """--rerun: a Rerun recording (mhrc.viewer.rerun), checked before anything starts (rerun-sdk installed,
+    the file or, with `directory`, the directory writable) into a Target; a bad one is one line."""
+
+    def check(ctx: click.Context, param: click.Parameter, value: str | None) -> Any:
+        if value is None:
+            return None
+        from mhrc.viewer.rerun import RerunError, parse_target
+
+        try:
+            return parse_target(value, directory=directory)
+        except RerunError as exc:
+            raise click.UsageError(str(exc)) from None
+
+    return click.option("--rerun", "rerun", default=None, metavar=metavar, callback=check, help=help)
+
+
 LOG_LEVEL = click.option(
     "--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"])
 )

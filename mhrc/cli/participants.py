@@ -27,8 +27,10 @@ from mhrc.cli.options import (
     episode_options,
     llm_options,
     load_credentials,
+    rerun_option,
     team_option,
 )
+from mhrc.cli.rerun_view import both, close_live, keep_serving, start_live
 from mhrc.cli.running import run_command
 from mhrc.cli.viewer import render_video_to
 from mhrc.core import logs
@@ -69,6 +71,7 @@ from mhrc.run.config import ConfigError, EpisodeConfig
     default=None,
     help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.",
 )
+@rerun_option()
 @llm_options
 def up(
     processes: bool,
@@ -78,6 +81,7 @@ def up(
     log_level: str,
     video: Path | None,
     secure: bool,
+    rerun: Any,
     **values: Any,
 ) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
@@ -133,13 +137,15 @@ def up(
             err=quiet or as_json,
         )
     runner = functools.partial(up_processes, quiet=quiet) if processes else up_in_process
+    live = None if rerun is None else start_live(rerun, cfg.run, "up")  # fed from the bus as the episode runs
+    observe = both(None if printer is None else printer.attach, None if live is None else live.observe)
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMError
     from mhrc.agents.replay import ReplayMismatch
     from mhrc.core.team import TeamError
 
     try:
-        done = run_command(lambda: runner(cfg, observe=None if printer is None else printer.attach, robots=robots))
+        done = run_command(lambda: runner(cfg, observe=observe, robots=robots))
     except (
         AgentError,
         LLMError,
@@ -155,6 +161,9 @@ def up(
         if exc.returncode <= 0:  # killed, or gone without a word (a positive code: the process said why on stderr)
             click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(exc.returncode if exc.returncode > 0 else 1)
+    finally:
+        if live is not None:
+            close_live(live, "up")
     if printer is not None:
         printer.close()  # what arrived late for its tick, then nothing more: the table is the last line
     console.print(summary_table(done, _recovery(cfg.trace) if cfg.events is not None else None, _lost(cfg.trace)))
@@ -164,6 +173,8 @@ def up(
             console.print(f"video {path}")
     if as_json:
         click.echo(json.dumps(done.metrics.model_dump()))
+    if live is not None:
+        keep_serving(live.viewer)
 
 
 def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:

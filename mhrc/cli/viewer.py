@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
-from mhrc.cli.options import VIDEO_HELP
+from mhrc.cli.options import VIDEO_HELP, rerun_option
 
 
 @click.command()
@@ -59,14 +60,15 @@ def render(scenes_: tuple[str, ...], task: str, seed: int, n_objects: int, out: 
     help="The HTML file to write; default: beside the trace, with .html (with --video: only when --out is given).",
 )
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None, help=VIDEO_HELP)
-def show(run_or_trace: Path, out: Path | None, video: Path | None) -> None:
+@rerun_option(help="Make the episode's Rerun recording (pip install 'mhrc[rerun]'): OUT.rrd, or `serve`, `spawn`.")
+def show(run_or_trace: Path, out: Path | None, video: Path | None, rerun: Any) -> None:
     """Write one self-contained HTML report of an episode (map, robot lanes, messages, failures)
     from RUN_OR_TRACE: a trace file, or a run directory holding trace.jsonl. Prints its path.
-    With --video, render the episode's video instead (or as well, with --out)."""
+    With --video, render the episode's video instead, with --rerun its Rerun recording (or as well, with --out)."""
     from mhrc.viewer.load import NotATrace
     from mhrc.viewer.show import write_report
 
-    if video is None or out is not None:
+    if (video is None and rerun is None) or out is not None:
         try:
             path, warnings = write_report(run_or_trace, out)
         except NotATrace as exc:
@@ -81,6 +83,10 @@ def show(run_or_trace: Path, out: Path | None, video: Path | None) -> None:
     if video is not None:
         trace = run_or_trace / "trace.jsonl" if run_or_trace.is_dir() else run_or_trace
         click.echo(str(render_video_to(trace, video)))
+    if rerun is not None:
+        from mhrc.cli.rerun_view import show_rerun
+
+        show_rerun(run_or_trace, rerun)
 
 
 def render_video_to(trace: Path, video: Path) -> Path:
