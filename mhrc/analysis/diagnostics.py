@@ -224,8 +224,8 @@ def diagnose(rows: Rows, metrics: EpisodeMetrics | None = None) -> Diagnostics:
         if ack.accepted is False:
             reasons[kind_of(ack.code)] += 1
     for line in lines:  # a flood of junk or of rejections, counted by the recorder (mhrc.core.trace)
-        if line.junk is not None and line.key.endswith("/action/ack"):
-            reasons[kind_of(line.junk.code)] += line.junk.count
+        if line.junk is not None and line.key.endswith("/action/ack"):  # the world's codes (never NotCopied)
+            reasons[kind_of(line.junk.code if isinstance(line.junk.code, RejectCode) else None)] += line.junk.count
     d.rejected, d.rejected_by_reason = sum(reasons.values()), dict(sorted(reasons.items()))
 
     names: Counter[str] = Counter()
