@@ -56,6 +56,9 @@ def _page_port_not_world_port(f: Callable[..., Any]) -> Callable[..., Any]:
     "With --connect, --insecure: " + INSECURE_HELP,
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only the page's address and the final summary.")
+@click.option(
+    "--tick-delay", default=0.0, type=float, help="Seconds the world pauses between ticks (to follow your teammates)."
+)
 @_page_port_not_world_port
 @llm_options
 def play(
@@ -66,6 +69,7 @@ def play(
     credentials: Path | None,
     secure: bool,
     quiet: bool,
+    tick_delay: float,
     log_level: str,
     world_port: int,
     **values: Any,
@@ -80,21 +84,21 @@ def play(
     console = Console(highlight=False, soft_wrap=True)
     creds = None
     cfg = None
+    try:
+        sock = bind(page_port)  # before anything is written or started
+    except PortInUse as exc:
+        click.echo(f"mhrc play: {exc}", err=True)
+        sys.exit(2)
     if connect is not None:
         creds = load_credentials(credentials, not secure, connect)
     else:
-        cfg = episode_config(port=world_port, **values)
+        cfg = episode_config(port=world_port, tick_delay=tick_delay, **values)
         if robot not in cfg.robots:
             raise click.BadParameter(
                 f"{robot!r} is not in this episode's team (robots: {', '.join(cfg.robots)}; --team names the team)",
                 param_hint="--robot",
             )
         cfg = cfg.with_credentials() if secure else cfg
-    try:
-        sock = bind(page_port)
-    except PortInUse as exc:
-        click.echo(f"mhrc play: {exc}", err=True)
-        sys.exit(2)
     url = f"http://127.0.0.1:{sock.getsockname()[1]}/"
 
     def ready() -> None:
