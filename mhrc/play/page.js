@@ -113,6 +113,7 @@
   // ---- messages from the server
   ws.onmessage = ev => {
     const m = JSON.parse(ev.data);
+    if (ended) return;  // the end is said once (the last action's result may come after it)
     if (m.type === 'hello'){
       hello = m;
       setStatus('starting', m.started ? 'attaching ' + m.robot + '…' : 'waiting for the episode to start (it starts when every robot is attached)…');
