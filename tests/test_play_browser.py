@@ -175,10 +175,6 @@ def david(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
         facts["observation"] = _css(drv, '[data-panel="observation"]').text
         facts["forms"] = [f.get_attribute("data-skill") for f in drv.find_elements("css selector", "form[data-skill]")]
         facts["map_furniture"] = len(drv.find_elements("css selector", "#map [data-name]"))
-        shot = played.tmp / "play.png"
-        drv.save_screenshot(str(shot))
-        if keep := os.environ.get("MHRC_PLAY_SCREENSHOT"):
-            shutil.copy(shot, keep)
         facts["state_answers"] = {u: _world_state_answers(played, u) for u in ("david", "observer")}
         # bad input: refused on the page with the reason, the decision stays open
         drv.execute_script("window.mhrcPlay.send({tick: arguments[0], skill: 'wait'})", tick - 1 if tick else 99)
@@ -204,6 +200,10 @@ def david(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
         facts["feedback_after_navigate"] = _css(drv, '[data-section="feedback"]').text
         _submit(drv, "communicate", to="alice", content="Alice, David here: I am at the sofa.")
         tick = _deciding(drv, tick)
+        shot = played.tmp / "play.png"  # the page two decisions in: the map, the histories, the forms
+        drv.save_screenshot(str(shot))
+        if keep := os.environ.get("MHRC_PLAY_SCREENSHOT"):
+            shutil.copy(shot, keep)
         # the tab closed mid-episode: the robot is detached; the page opened again attaches it again
         drv.switch_to.new_window("tab")
         blank = drv.current_window_handle
@@ -334,3 +334,17 @@ def test_a_person_plays_alice_and_picks_and_places_an_object(alice: Played) -> N
 def test_a_disabled_control_says_why(alice: Played) -> None:
     reason, shown, enabled = alice.facts["place_disabled"]
     assert reason == "your gripper is empty: pick something first" and shown == reason and not enabled
+
+
+def test_the_report_marks_the_human_lane(david: Played) -> None:
+    """`mhrc show` of the episode: David's lane says a person played it, and how long each decision took."""
+    from click.testing import CliRunner
+
+    from mhrc.cli import main
+
+    result = CliRunner().invoke(main, ["show", str(david.trace)])
+    assert result.exit_code == 0, result.output
+    page = Path(result.output.strip().splitlines()[-1]).read_text()
+    lanes = dict(re.findall(r'<div class="lane([^"]*)" data-robot="(\w+)"', page)[i][::-1] for i in range(3))
+    assert lanes == {"alice": "", "bob": "", "david": " human"}
+    assert page.count("data-human>") == 1 and "decided by a person in" in page

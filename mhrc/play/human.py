@@ -19,10 +19,11 @@ from mhrc.agents import observation as describe
 from mhrc.agents.memory import HISTORIES, Memory
 from mhrc.agents.policy import Decision
 from mhrc.core.protocol import ActionResult, Observation
+from mhrc.core.protocol.thoughts import HUMAN_POLICY
 
 from .forms import MAX_SUBMISSION_BYTES, Refusal, Refused, action_of, as_json, forms
 
-POLICY = "human"
+POLICY = HUMAN_POLICY
 Send = Callable[[dict[str, Any]], None]  # one JSON message to the page
 
 

@@ -11,6 +11,7 @@ from mhrc.core.protocol.base import Message
 # --------------------------------------------------------------------------- thoughts
 
 
+HUMAN_POLICY = "human"  # a Thought.policy: a person decided (mhrc play); its latency is the time the person took
 LLM_ERROR_PREFIX = "llm error: "  # a Thought.parse_error that starts so: the model was unreachable, not misunderstood
 
 
