@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from mhrc.cli import main
 from mhrc.core.protocol import Navigate, Pick, Place
 from mhrc.play.forms import Refusal, Refused, action_of, forms
+from mhrc.play.house import scene_of
 from mhrc.play.human import HumanPolicy
 from mhrc.testing.policy_harness import observation
 
@@ -100,3 +101,8 @@ def test_a_port_in_use_is_one_line_and_exit_2() -> None:
         result.output.strip()
         == f"mhrc play: --port: 127.0.0.1:{port} is in use (Address already in use); pick another port, or 0 for a free one"
     )
+
+
+def test_the_map_of_a_world_elsewhere_is_the_layout_whose_furniture_the_robot_knows() -> None:
+    assert scene_of(observation("david")) == "kitchen"
+    assert scene_of(observation("david", furniture=[])) is None

@@ -13,7 +13,7 @@ import structlog
 import uvicorn
 from starlette.applications import Starlette
 from starlette.requests import Request
-from starlette.responses import HTMLResponse
+from starlette.responses import HTMLResponse, Response
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
@@ -65,7 +65,10 @@ def make_app(session: PlaySession) -> Starlette:
                 await sender
             await session.close(page)
 
-    return Starlette(routes=[Route("/", index), WebSocketRoute("/ws", ws)])
+    async def no_icon(request: Request) -> Response:
+        return Response(status_code=204)  # the page has no icon: said, so a browser's console stays quiet
+
+    return Starlette(routes=[Route("/", index), Route("/favicon.ico", no_icon), WebSocketRoute("/ws", ws)])
 
 
 def bind(port: int, host: str = "127.0.0.1") -> socket.socket:

@@ -4,6 +4,8 @@ given from the start: every robot's scene graph holds all the furniture) as an S
 
 from __future__ import annotations
 
+import math
+
 from mhrc.core.protocol import Observation
 from mhrc.viewer.model import scene_map
 from mhrc.viewer.page import SCALE
@@ -12,17 +14,14 @@ from mhrc.world.scene import LAYOUTS
 
 
 def scene_of(obs: Observation) -> str | None:
-    """The shipped layout whose furniture is the robot's (for a world started elsewhere, whose
-    scene the page was not told); None when none matches."""
-    names = {f.name for f in obs.furniture}
+    """The shipped layout whose furniture stands where the robot knows it (for a world started
+    elsewhere, whose scene the page was not told); None when none matches."""
+    known = {f.name: f.position[:2] for f in obs.furniture if f.stand_poses}
     for name, layout in LAYOUTS.items():
-        if names and names <= {f.name for f in layout.furniture} | set(_fixtures(obs)):
+        there = {f.name: f.center[:2] for f in layout.furniture}
+        if known and all(n in there and math.dist(xy, there[n]) < 0.05 for n, xy in known.items()):
             return name
     return None
-
-
-def _fixtures(obs: Observation) -> list[str]:
-    return [f.name for f in obs.furniture if not f.stand_poses]
 
 
 def house_svg(scene: str | None, obs: Observation) -> str:
