@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
-from test_viewer_browser import browser  # noqa: F401  (the fixture: Debian's chromium and chromedriver)
+from test_viewer_browser import browser, chrome  # noqa: F401  (the fixture: Debian's chromium and chromedriver)
 from waits import until_sync
 
 from mhrc.core.protocol import ActionResult, EpisodeDone, RobotAttached, RobotDetached, RobotMessage, Thought
@@ -77,24 +77,6 @@ def _stop(played: Played) -> None:
         except subprocess.TimeoutExpired:
             played.proc.kill()
             played.proc.wait()
-
-
-def _chrome(browser_paths: tuple[Path, Path]) -> Any:
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    chromium, chromedriver = browser_paths
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(chromium)
-    for arg in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-dev-shm-usage",
-        "--disable-gpu",
-        "--window-size=1400,1400",
-    ):
-        options.add_argument(arg)
-    return webdriver.Chrome(service=Service(str(chromedriver)), options=options)
 
 
 def _css(drv: Any, selector: str) -> Any:
@@ -168,7 +150,7 @@ def david(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
         tmp_path_factory.mktemp("play-david"), "david", "--objects", "3", "--seed", "0", "--tick-delay", "0.4"
     )
     facts = played.facts
-    drv = _chrome(browser)
+    drv = chrome(browser, "1400,1400")
     try:
         drv.get(played.url)
         tick = _deciding(drv)
@@ -300,7 +282,7 @@ def alice(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
     """A person plays Alice: go to Bob's table, pick the book lying beyond his reach, place it."""
     played = _play(tmp_path_factory.mktemp("play-alice"), "alice", "--objects", "3", "--seed", "0", "--noise", "off")
     facts = played.facts
-    drv = _chrome(browser)
+    drv = chrome(browser, "1400,1400")
     try:
         drv.get(played.url)
         tick = _deciding(drv)

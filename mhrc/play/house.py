@@ -8,7 +8,7 @@ import math
 
 from mhrc.core.protocol import Observation
 from mhrc.viewer.model import scene_map
-from mhrc.viewer.page import SCALE
+from mhrc.viewer.page import SCALE, MapFrame
 from mhrc.viewer.wording import html_text as _e
 from mhrc.world.scene import LAYOUTS
 
@@ -38,34 +38,14 @@ def house_svg(scene: str | None, obs: Observation) -> str:
     xmin, xmax, ymin, ymax = bounds
     w, h = round((xmax - xmin) * SCALE), round((ymax - ymin) * SCALE)
 
-    def px(x: float) -> float:
-        return round((x - xmin) * SCALE, 1)
-
-    def py(y: float) -> float:
-        return round((ymax - y) * SCALE, 1)
-
-    def rect(cx: float, cy: float, sx: float, sy: float, cls: str, extra: str = "") -> str:
-        return (
-            f'<rect class="{cls}" x="{px(cx - sx / 2)}" y="{py(cy + sy / 2)}" width="{round(sx * SCALE, 1)}" '
-            f'height="{round(sy * SCALE, 1)}"{extra}/>'
-        )
+    frame = MapFrame(xmin, ymax)
+    px, py, rect = frame.px, frame.py, frame.rect
 
     parts: list[str] = []
     if sc is not None:
         b = sc["bounds"]
         parts.append(rect((b[0] + b[1]) / 2, (b[2] + b[3]) / 2, b[1] - b[0], b[3] - b[2], "floor"))
-        for f in sc["furniture"]:
-            r, g, bl = (int(255 * c) for c in f["color"][:3])
-            parts.append(
-                rect(
-                    f["x"],
-                    f["y"],
-                    f["sx"],
-                    f["sy"],
-                    "furniture",
-                    f' data-name="{_e(f["name"])}" style="fill:rgb({r},{g},{bl})"',
-                )
-            )
+        parts += [frame.piece(f, "furniture") for f in sc["furniture"]]
         for wx, wy, wsx, wsy in sc["walls"]:
             parts.append(rect(wx, wy, wsx, wsy, "wall"))
         for f in sc["furniture"]:
