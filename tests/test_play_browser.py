@@ -40,6 +40,7 @@ class Played:
     proc: subprocess.Popen[bytes]
     url: str = ""
     facts: dict[str, Any] = field(default_factory=dict)
+    world: subprocess.Popen[bytes] | None = None  # `mhrc up --external ROBOT`, for a page that joins a world elsewhere
 
     @property
     def trace(self) -> Path:
@@ -57,26 +58,45 @@ class Played:
             return []
 
 
-def _play(tmp: Path, robot: str, *args: str) -> Played:
-    cmd = [sys.executable, "-m", "mhrc", "play", "--robot", robot, "--no-browser", "--trace", str(tmp / "trace.jsonl")]
-    with (tmp / "out.txt").open("wb") as out, (tmp / "err.txt").open("wb") as err:
-        proc = subprocess.Popen([*cmd, *args], cwd=tmp, stdout=out, stderr=err)
-    played = Played(tmp, proc)
+def _start(tmp: Path, name: str, *args: str) -> subprocess.Popen[bytes]:
+    with (tmp / f"{name}.txt").open("wb") as out, (tmp / f"{name}-err.txt").open("wb") as err:
+        return subprocess.Popen([sys.executable, "-m", "mhrc", *args], cwd=tmp, stdout=out, stderr=err)
+
+
+def _play(tmp: Path, robot: str, *args: str, world: subprocess.Popen[bytes] | None = None) -> Played:
+    """`mhrc play` for `robot` (with `args`), once its page's address is printed."""
+    trace = [] if world is not None else ["--trace", str(tmp / "trace.jsonl")]
+    proc = _start(tmp, "out", "play", "--robot", robot, "--no-browser", *trace, *args)
+    played = Played(tmp, proc, world=world)
     until_sync(lambda: "http://" in played.out or proc.poll() is not None, "the page's address", WAIT)
     match = re.search(r"http://127\.0\.0\.1:\d+/", played.out)
-    assert match, (played.out, (tmp / "err.txt").read_text())
+    assert match, (played.out, (tmp / "out-err.txt").read_text())
     played.url = match.group(0)
     return played
 
 
+def _joining(tmp: Path, robot: str, *args: str) -> Played:
+    """A world started elsewhere (`mhrc up --external ROBOT`) and `mhrc play --connect` with the
+    robot's credentials, as `mhrc up` says to attach it."""
+    world = _start(tmp, "world", "up", "--external", robot, "--trace", str(tmp / "trace.jsonl"), *args)
+    said = tmp / "world.txt"
+    until_sync(lambda: "mhrc agent --robot" in said.read_text() or world.poll() is not None, "the attach line", WAIT)
+    line = re.search(r"mhrc agent --robot \S+ --run (\S+) --connect (\S+) --credentials (\S+)", said.read_text())
+    assert line, said.read_text()
+    run, endpoint, login = line.groups()
+    return _play(tmp, robot, "--run", run, "--connect", endpoint, "--credentials", login, world=world)
+
+
 def _stop(played: Played) -> None:
-    if played.proc.poll() is None:
-        played.proc.send_signal(signal.SIGINT)
+    for proc in (played.proc, played.world):
+        if proc is None or proc.poll() is not None:
+            continue
+        proc.send_signal(signal.SIGINT)
         try:
-            played.proc.wait(30)
+            proc.wait(30)
         except subprocess.TimeoutExpired:
-            played.proc.kill()
-            played.proc.wait()
+            proc.kill()
+            proc.wait()
 
 
 def _css(drv: Any, selector: str) -> Any:
@@ -223,7 +243,7 @@ def david(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
 def test_a_person_plays_david_beside_heuristic_teammates_to_success(david: Played) -> None:
     f = david.facts
     assert f["end"][0] == "yes", f["end"]
-    assert david.proc.returncode == 0, (david.tmp / "err.txt").read_text()[-2000:]
+    assert david.proc.returncode == 0, (david.tmp / "out-err.txt").read_text()[-2000:]
     done = david.of(EpisodeDone)[-1]
     assert done.reason == "success"
     calls = [r.action.call() for r in david.of(ActionResult) if r.robot == "david"]
@@ -279,13 +299,15 @@ def test_the_pages_server_never_gets_world_state(david: Played) -> None:
 
 @pytest.fixture(scope="module")
 def alice(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) -> Iterator[Played]:  # noqa: F811
-    """A person plays Alice: go to Bob's table, pick the book lying beyond his reach, place it."""
-    played = _play(tmp_path_factory.mktemp("play-alice"), "alice", "--objects", "3", "--seed", "0", "--noise", "off")
+    """A person plays Alice of a world started elsewhere (`mhrc play --connect`, her credentials):
+    go to Bob's table, pick the book lying beyond his reach, place it."""
+    played = _joining(tmp_path_factory.mktemp("play-alice"), "alice", "--objects", "3", "--seed", "0", "--noise", "off")
     facts = played.facts
     drv = chrome(browser, "1400,1400")
     try:
         drv.get(played.url)
         tick = _deciding(drv)
+        facts["map_scene"] = _css(drv, "#map").get_attribute("data-scene")
         place = _css(drv, 'form[data-skill="place"]')
         facts["place_disabled"] = (
             place.get_attribute("data-disabled"),
@@ -311,6 +333,7 @@ def test_a_person_plays_alice_and_picks_and_places_an_object(alice: Played) -> N
     results = {r.action.call(): r.outcome.succeeded for r in alice.of(ActionResult) if r.robot == "alice"}
     assert results.get("pick(book)") is True and results.get("place(book, table_0)") is True, results
     assert "holding book" in alice.facts["holding"]
+    assert alice.facts["map_scene"] == "kitchen"  # told nothing of the world's scene, the page found its layout
 
 
 def test_a_disabled_control_says_why(alice: Played) -> None:
