@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import structlog
 
-from mhrc.agents.agent import AgentError, RobotAgent
+from mhrc.agents.agent import AgentError, RobotAgent, WorldGone
 from mhrc.core.bus import Sample, open_client
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, RobotDetached, decode_event
@@ -63,6 +63,7 @@ class PlaySession:
         self.started = False
         self.attaches = 0  # how many pages have driven the robot (a reopened tab attaches again)
         self.ended = asyncio.Event()
+        self.lost: WorldGone | None = None  # the world went away before the episode's end
         self._driver: object | None = None
         self._task: asyncio.Task[None] | None = None
         self._send: Send | None = None
@@ -117,7 +118,10 @@ class PlaySession:
         bus = await open_client(self.connect, self.attach_timeout, security=self.security)
         try:
             bus.subscribe(Keys(self.run).world_event, self._on_event)
+            bus.watch_liveliness(Keys(self.run).alive_world, self._on_world)
             await self.ended.wait()
+            if self.lost is not None:
+                raise self.lost
             assert self.done is not None
             return self.done
         finally:
@@ -125,38 +129,51 @@ class PlaySession:
 
     # ------------------------------------------------------------------ the agent
     async def _drive(self) -> None:
-        """One page's agent: its own bus session, attached until the episode ends or the page leaves."""
-        bus = await open_client(self.connect, self.attach_timeout, security=self.security)
+        """One page's agent: its own bus session, attached until the episode ends or the page leaves.
+        What ends it early (the world gone, its attach refused) is said on the page."""
         try:
-            agent = RobotAgent(
-                bus,
-                self.policy,  # type: ignore[arg-type]
-                run=self.run,
-                robot=self.robot,
-                attach_timeout=self.attach_timeout,
-                endpoint=self.connect,
-                security=self.security,
-            )
-            self.attaches += 1
-            run = asyncio.ensure_future(agent.run())
-            ended = asyncio.ensure_future(self.ended.wait())
-            try:
-                await asyncio.wait({run, ended}, return_when=asyncio.FIRST_COMPLETED)
-                if not run.done() and self.policy.deciding:  # the episode ended while the person thought
-                    run.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    done = await run
-                    if done is not None:
-                        self._end(done)
-            except AgentError as exc:
-                log.warning("the robot's agent ended", robot=self.robot, error=str(exc))
-                if self._send is not None:
-                    self._send({"type": "error", "reason": str(exc)})
-            finally:
-                for t in (run, ended):
-                    t.cancel()
+            bus = await open_client(self.connect, self.attach_timeout, security=self.security)
+        except Exception as exc:  # the world does not answer (BusError, a refused login): said, not raised into nothing
+            self._fail(exc)
+            return
+        agent = RobotAgent(
+            bus,
+            self.policy,  # type: ignore[arg-type]
+            run=self.run,
+            robot=self.robot,
+            attach_timeout=self.attach_timeout,
+            endpoint=self.connect,
+            security=self.security,
+        )
+        self.attaches += 1
+        run = asyncio.ensure_future(agent.run())
+        ended = asyncio.ensure_future(self.ended.wait())
+        try:
+            await asyncio.wait({run, ended}, return_when=asyncio.FIRST_COMPLETED)
+            if not run.done() and self.policy.deciding:  # the episode ended while the person thought
+                run.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                done = await run
+                if done is not None:
+                    self._end(done)
+        except AgentError as exc:
+            self._fail(exc)
         finally:
+            for t in (run, ended):
+                t.cancel()
             await bus.close()
+
+    def _fail(self, exc: BaseException) -> None:
+        log.warning("the robot's agent ended", robot=self.robot, error=str(exc))
+        if self._send is not None:
+            self._send({"type": "error", "reason": str(exc)})
+
+    def _on_world(self, sample: Sample) -> None:
+        """The world's liveliness token went away before the episode's end: nothing will end it now."""
+        if not sample.is_put and self.done is None:
+            self.lost = WorldGone(f"the world of run {self.run} disappeared before the episode's end")
+            self._fail(self.lost)
+            self.ended.set()
 
     def _on_event(self, sample: Sample) -> None:
         try:
