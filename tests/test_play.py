@@ -106,3 +106,8 @@ def test_a_port_in_use_is_one_line_and_exit_2() -> None:
 def test_the_map_of_a_world_elsewhere_is_the_layout_whose_furniture_the_robot_knows() -> None:
     assert scene_of(observation("david")) == "kitchen"
     assert scene_of(observation("david", furniture=[])) is None
+
+
+def test_a_robot_not_in_the_team_is_refused_before_anything_starts() -> None:
+    result = CliRunner().invoke(main, ["play", "--robot", "zed", "--no-browser"])
+    assert result.exit_code == 2 and "--robot: 'zed' is not in this episode's team" in result.output

@@ -109,6 +109,23 @@ def play(
 
             webbrowser.open(url)
 
+    if cfg is not None:
+        from mhrc.run.config import ModelServerDown, check_model_servers
+
+        try:
+            check_model_servers(
+                cfg, [r for r in cfg.robots if r != robot]
+            )  # the teammates' models, before anything starts
+        except ModelServerDown as exc:
+            click.echo(f"mhrc play: {exc}", err=True)
+            sys.exit(2)
+    from mhrc.agents.llm import LLMError
+    from mhrc.core.security import SecurityError
+    from mhrc.core.team import TeamError
+    from mhrc.core.trace import TraceWriteError
+    from mhrc.run.config import ConfigError
+    from mhrc.world.service_config import NobodyAttached
+
     try:
         if cfg is not None:
             from mhrc.play.runner import play_here
@@ -119,9 +136,12 @@ def play(
         else:
             assert connect is not None
             done = run_command(lambda: _there(robot, connect, values.get("run"), sock, creds, ready))
-    except AgentError as exc:
+    except (AgentError, LLMError, TeamError, SecurityError, ConfigError) as exc:  # as mhrc up and mhrc agent say them
         click.echo(f"mhrc play: {exc}", err=True)
         sys.exit(2)
+    except (NobodyAttached, TraceWriteError) as exc:
+        click.echo(f"mhrc play: {exc}", err=True)
+        sys.exit(1)
     from mhrc.run.console import summary_table
 
     console.print(summary_table(done))
