@@ -84,11 +84,6 @@ def play(
     console = Console(highlight=False, soft_wrap=True)
     creds = None
     cfg = None
-    try:
-        sock = bind(page_port)  # before anything is written or started
-    except PortInUse as exc:
-        click.echo(f"mhrc play: {exc}", err=True)
-        sys.exit(2)
     if connect is not None:
         creds = load_credentials(credentials, not secure, connect)
     else:
@@ -98,7 +93,13 @@ def play(
                 f"{robot!r} is not in this episode's team (robots: {', '.join(cfg.robots)}; --team names the team)",
                 param_hint="--robot",
             )
-        cfg = cfg.with_credentials() if secure else cfg
+    try:
+        sock = bind(page_port)  # before anything is written or started
+    except PortInUse as exc:
+        click.echo(f"mhrc play: {exc}", err=True)
+        sys.exit(2)
+    if cfg is not None and secure:
+        cfg = cfg.with_credentials()
     url = f"http://127.0.0.1:{sock.getsockname()[1]}/"
 
     def ready() -> None:
