@@ -8,7 +8,7 @@ import socket
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from mhrc.core.protocol import EpisodeDone
+from mhrc.core.protocol import EpisodeDone, Observation
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.run.serve import EventHook
@@ -27,7 +27,7 @@ def _mapped(session: PlaySession) -> None:
     """The map the page draws: the episode's layout, or the shipped one whose furniture the robot knows."""
     cache: dict[str, tuple[str, str]] = {}
 
-    def house(obs):  # type: ignore[no-untyped-def]
+    def house(obs: Observation) -> tuple[str, str]:
         scene = session.scene or scene_of(obs) or ""
         if scene not in cache:
             cache[scene] = (scene, house_svg(scene or None, obs))

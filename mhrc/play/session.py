@@ -138,7 +138,7 @@ class PlaySession:
             return
         agent = RobotAgent(
             bus,
-            self.policy,  # type: ignore[arg-type]
+            self.policy,
             run=self.run,
             robot=self.robot,
             attach_timeout=self.attach_timeout,
