@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import structlog
@@ -23,14 +22,12 @@ from mhrc.core.bus import Sample, open_client
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, RobotDetached, decode_event
 
-from .human import HumanPolicy
+from .human import HumanPolicy, Send
 
 if TYPE_CHECKING:
     from mhrc.core.security import Credentials
 
 log = structlog.get_logger("mhrc.play")
-
-Send = Callable[[dict[str, Any]], None]
 
 
 class SecondDriver(RuntimeError):
