@@ -28,7 +28,10 @@ them by name. In the paper's team every decision is the one the per-name roles m
   and something asked for is still nowhere (not seen, or gone from where it was: moved or added
   while the team worked), she starts a search round: every surface again, the nearer part
   herself (2/3 beside one scout), the rest split among the working scouts. While a scout is
-  absent or broken down she looks at the surfaces it has not reported on herself; a new scout
+  absent or broken down she looks at the surfaces it has not reported on herself, and so when a
+  scout has reported nothing for a few steps while some are left (a person or a model playing
+  it may never do what was asked: heuristic_fetcher.PATIENCE_TICKS); such a scout gets no more
+  surfaces until it reports again. A new scout
   (or a fetcher that becomes the lead) has the unexplored surfaces handed over again.
 - **Several fetchers** split the work by claims over messages (heuristic_claims.py): before
   fetching an object, or exploring a container, not claimed yet, a fetcher tells every other

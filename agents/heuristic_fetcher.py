@@ -48,6 +48,10 @@ from .heuristic_claims import Claims
 from .policy import Decision
 
 ON_POSE = 0.03  # m: a navigation that succeeded stops this close to its stand pose (one that counts as there within AT_POSE_TOL may not)
+PATIENCE_TICKS = 8  # a scout that has reported nothing for this many ticks since it was handed surfaces (or last
+PATIENCE_SECONDS = 64.0  # reported), and this many simulated seconds where the clock is known (async: a step is
+# 8 s, and a long drive is one step), has let them lapse: the lead looks at them herself. A person (or a model)
+# playing the scout may never do what was asked; the heuristic scout reports after every drive (a few ticks).
 SHARE = 2  # a search round's surfaces: the lead takes SHARE parts to each working scout's one (2/3 beside one scout):
 # she looks on arriving, a scout also has to report each
 
@@ -71,6 +75,10 @@ class AliceHeuristic(Claims):
     mine: list[str] = field(default_factory=list)  # surfaces the lead searches herself in the current round
     late: set[str] = field(default_factory=set)  # asked for after Bob's first request
     searched_for: set[str] = field(default_factory=set)  # what earlier search rounds looked for
+    heard: dict[str, tuple[int, float | None]] = field(
+        default_factory=dict
+    )  # scout -> (tick, clock) handed or heard from
+    lapsed: set[str] = field(default_factory=set)  # scouts that let their surfaces lapse, until they report again
 
     async def decide(self, obs: Observation) -> Decision:
         self._meet(obs)
@@ -110,6 +118,8 @@ class AliceHeuristic(Claims):
         """Split `surfaces` among `scouts` (in order, one contiguous share each) and tell each its share."""
         shares = [(s, share) for s, share in zip(scouts, split(surfaces, len(scouts)), strict=True) if share]
         self.scout_todo = {s: set(share) for s, share in shares}
+        for scout, _ in shares:
+            self.heard[scout] = (obs.tick, self._clock())
         return self._send(obs, [Communicate(to=s, content=explore_sentence(share, s)) for s, share in shares])
 
     # ---- knowledge
@@ -130,9 +140,34 @@ class AliceHeuristic(Claims):
             for hit in REPORT_RE.finditer(m.content):
                 self.explored.add(hit.group(1))
                 self._reported(hit.group(1))
+                self._heard_from(obs, m.sender)
             for hit in UNREACHABLE_RE.finditer(m.content):
                 self._reported(hit.group(1))  # left for the lead's own search
+                self._heard_from(obs, m.sender)
         self._read_claims(obs)
+
+    def _clock(self) -> float | None:
+        """The world's clock at the end of this robot's last action, where known."""
+        return None if self.last is None else self.last.ended
+
+    def _heard_from(self, obs: Observation, scout: str) -> None:
+        if scout in self.heard:
+            self.heard[scout] = (obs.tick, self._clock())
+        self.lapsed.discard(scout)
+
+    def _lapsed(self, obs: Observation, scout: str) -> bool:
+        """`scout` has let the surfaces handed to it lapse: nothing reported for PATIENCE_TICKS
+        ticks and PATIENCE_SECONDS simulated seconds while some are left."""
+        if scout in self.lapsed:
+            return True
+        if scout not in self.heard or not any(s not in self.explored for s in self.scout_todo.get(scout, ())):
+            return False
+        tick, clock = self.heard[scout]
+        now = self._clock()
+        if obs.tick - tick > PATIENCE_TICKS and (clock is None or now is None or now - clock > PATIENCE_SECONDS):
+            self.lapsed.add(scout)
+            return True
+        return False
 
     def _reported(self, surface: str) -> None:
         for todo in self.scout_todo.values():
@@ -185,6 +220,16 @@ class AliceHeuristic(Claims):
             s
             for scout, todo in self.scout_todo.items()
             if self._works(obs, scout) == working
+            for s in sorted(todo)
+            if s not in self.explored
+        ]
+
+    def _lapsed_todo(self, obs: Observation) -> list[str]:
+        """The surfaces handed to working scouts that let them lapse (_lapsed), not reported on."""
+        return [
+            s
+            for scout, todo in self.scout_todo.items()
+            if self._works(obs, scout) and self._lapsed(obs, scout)
             for s in sorted(todo)
             if s not in self.explored
         ]
@@ -316,7 +361,9 @@ class AliceHeuristic(Claims):
         if not names:
             if self._scout_todo(obs, working=True) and not down:
                 if not containers:
-                    return None  # the scouts have not reported everything yet
+                    names = self._lapsed_todo(obs)  # what a scout let lapse she looks at herself, the rest she awaits
+                    if not names:
+                        return None  # the scouts have not reported everything yet
             else:
                 names = down or [
                     s for s in self._open_surfaces(obs) if s not in self.explored and not self._place_taken(obs, s)
@@ -371,7 +418,7 @@ class AliceHeuristic(Claims):
         here = obs.status.base
         if here is not None:
             surfaces.sort(key=lambda s: _dist2(_furniture(obs, s).position, (here.x, here.y)))  # type: ignore[union-attr]
-        scouts = [s for s in self._with_role(obs, "scout") if self._works(obs, s)]
+        scouts = [s for s in self._with_role(obs, "scout") if self._works(obs, s) and s not in self.lapsed]
         if not scouts:
             self.mine = surfaces
             return self._next_exploration(obs)

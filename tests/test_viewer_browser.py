@@ -39,23 +39,22 @@ def browser() -> tuple[Path, Path]:
     return CHROMIUM, CHROMEDRIVER
 
 
-@pytest.fixture
-def driver(browser: tuple[Path, Path]) -> Iterator[Any]:
+def chrome(browser: tuple[Path, Path], size: str = "1400,1800") -> Any:
+    """A headless chromium session (selenium) of the `browser` fixture's binaries."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
     chromium, chromedriver = browser
     options = webdriver.ChromeOptions()
     options.binary_location = str(chromium)
-    for arg in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-dev-shm-usage",
-        "--disable-gpu",
-        "--window-size=1400,1800",
-    ):
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu", f"--window-size={size}"):
         options.add_argument(arg)
-    drv = webdriver.Chrome(service=Service(str(chromedriver)), options=options)
+    return webdriver.Chrome(service=Service(str(chromedriver)), options=options)
+
+
+@pytest.fixture
+def driver(browser: tuple[Path, Path]) -> Iterator[Any]:
+    drv = chrome(browser)
     try:
         yield drv
     finally:

@@ -5,6 +5,7 @@
 - `viewer`: `scenes`, `render`, `show`
 - `scenarios`: `scenarios` (the shipped scenarios of `--events`)
 - `teams`: `teams` (the shipped teams of `--team`, the robot kinds)
+- `play`: `play` (a person drives one robot from a browser page)
 - `bus`: `credentials`, `bus list|echo`, `doctor`, `router`, `schema`
 - `options` (shared options, declared once), `running` (signals and Ctrl-C)
 """
@@ -15,7 +16,7 @@ import os
 
 import click
 
-from mhrc.cli import bus, participants, scenarios, teams, viewer
+from mhrc.cli import bus, participants, play, scenarios, teams, viewer
 from mhrc.cli import eval as eval_cmd
 from mhrc.core import logs
 
@@ -50,6 +51,7 @@ for command in (
     bus.router,
     scenarios.scenarios,
     teams.teams,
+    play.play,
 ):
     main.add_command(command)
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
+from dataclasses import dataclass
 from importlib.resources import files
 from typing import Any, TypeVar
 
@@ -252,21 +253,40 @@ def _static_labels(
     return out
 
 
+@dataclass(frozen=True)
+class MapFrame:
+    """Metres on the floor to the map's SVG pixels (SCALE a metre; y points up in the house, down on the page)."""
+
+    xmin: float
+    ymax: float
+
+    def px(self, x: float) -> float:
+        return round((x - self.xmin) * SCALE, 1)
+
+    def py(self, y: float) -> float:
+        return round((self.ymax - y) * SCALE, 1)
+
+    def rect(self, cx: float, cy: float, sx: float, sy: float, cls: str, extra: str = "") -> str:
+        """An SVG rect of class `cls` centred at (cx, cy), sx by sy metres; `extra` ends its tag."""
+        return (
+            f'<rect class="{cls}" x="{self.px(cx - sx / 2)}" y="{self.py(cy + sy / 2)}" width="{round(sx * SCALE, 1)}" '
+            f'height="{round(sy * SCALE, 1)}"{extra}/>'
+        )
+
+    def piece(self, f: dict[str, Any], cls: str, title: str | None = None) -> str:
+        """A piece of furniture of `scene_map` (mhrc.viewer.model) in its colour, named in `data-name`."""
+        r, g, bl = (int(255 * c) for c in f["color"][:3])
+        inner = f"><title>{_e(title)}</title></rect" if title is not None else ""
+        return self.rect(
+            f["x"], f["y"], f["sx"], f["sy"], cls, f' data-name="{_e(f["name"])}" style="fill:rgb({r},{g},{bl})"{inner}'
+        )
+
+
 def _map(view: EpisodeView, colors: dict[str, str]) -> str:
     xmin, xmax, ymin, ymax = _bounds(view)
     w, hgt = (xmax - xmin) * SCALE, (ymax - ymin) * SCALE
-
-    def px(x: float) -> float:
-        return round((x - xmin) * SCALE, 1)
-
-    def py(y: float) -> float:
-        return round((ymax - y) * SCALE, 1)
-
-    def rect(cx: float, cy: float, sx: float, sy: float, cls: str, extra: str = "") -> str:
-        return (
-            f'<rect class="{cls}" x="{px(cx - sx / 2)}" y="{py(cy + sy / 2)}" width="{round(sx * SCALE, 1)}" '
-            f'height="{round(sy * SCALE, 1)}"{extra}/>'
-        )
+    frame = MapFrame(xmin, ymax)
+    px, py, rect = frame.px, frame.py, frame.rect
 
     parts: list[str] = []
     sc = view.scene
@@ -278,18 +298,8 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
                 cx, cy, sx, sy = f["open_footprint"]
                 parts.append(rect(cx, cy, sx, sy, "open-footprint", f' data-for="{_e(f["name"])}"'))
         for f in sc["furniture"]:
-            r, g, bl = (int(255 * c) for c in f["color"][:3])
             cls = "furniture container" if f["openable"] else "furniture"
-            parts.append(
-                rect(
-                    f["x"],
-                    f["y"],
-                    f["sx"],
-                    f["sy"],
-                    cls,
-                    f' data-name="{_e(f["name"])}" style="fill:rgb({r},{g},{bl})"><title>{_e(f["name"])}: {_e(f["kind"])}</title></rect',
-                )
-            )
+            parts.append(frame.piece(f, cls, f"{f['name']}: {f['kind']}"))
         gx, gy, gsx, gsy = sc["goal_area"]
         parts.append(rect(gx, gy, gsx, gsy, "goal-area", "><title>goal area</title></rect"))
         for fx in sc["fixtures"]:

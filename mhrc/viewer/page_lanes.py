@@ -7,6 +7,7 @@ frame for the page's script. mhrc.viewer.page puts them into the page.
 
 from __future__ import annotations
 
+from mhrc.core.protocol.thoughts import HUMAN_POLICY
 from mhrc.viewer import page_events
 from mhrc.viewer.model import EpisodeView, Step
 from mhrc.viewer.wording import html_text as _e
@@ -50,7 +51,9 @@ def _step_html(s: Step) -> str:
                 f'<div class="dim">sim {res["started"]:.1f}–{(res.get("ended") or res["started"]):.1f} s</div>'
             )
     t = s.thought
-    if t:
+    if t and t.get("policy") == HUMAN_POLICY:  # a person's decision (mhrc play): how long it took
+        parts.append(f'<div class="human-decision">decided by a person in {float(t.get("latency") or 0):.1f} s</div>')
+    elif t:
         if t.get("prompt") is not None or t.get("reply") is not None:
             analysis = _reply_analysis(t.get("reply"))
             if t.get("reasoning"):
@@ -84,8 +87,10 @@ def lanes_section(view: EpisodeView, colors: dict[str, str]) -> str:
         items = page_events.merge(
             steps, [m for m in view.events if page_events.robot_of(m) == r], [_step_html(s) for s in steps]
         )
+        human = view.header["models"].get(r) == HUMAN_POLICY  # played by a person (mhrc play)
+        mark = ' <span class="human-mark" data-human>&#128100; played by a person</span>' if human else ""
         lanes.append(
-            f'<div class="lane" data-robot="{_e(r)}"><h3 style="border-color:{colors[r]}">{_e(r)} '
+            f'<div class="lane{" human" if human else ""}" data-robot="{_e(r)}"><h3 style="border-color:{colors[r]}">{_e(r)}{mark} '
             f'<span class="dim">{_e(view.header["models"].get(r))} · {len(steps)} steps</span></h3><ol>{items}</ol></div>'
         )
     lanes.append(page_events.world_lane(view))

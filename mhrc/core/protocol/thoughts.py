@@ -17,6 +17,7 @@ MAX_THOUGHT_BYTES = 8 * 1024 * 1024  # a thought's payload, checked before it is
 # --------------------------------------------------------------------------- thoughts
 
 
+HUMAN_POLICY = "human"  # a Thought.policy: a person decided (mhrc play); its latency is the time the person took
 LLM_ERROR_PREFIX = "llm error: "  # a Thought.parse_error that starts so: the model was unreachable, not misunderstood
 
 

@@ -1,0 +1,112 @@
+"""The page's server: a Starlette app (the page at `/`, its WebSocket at `/ws`) served by uvicorn
+on 127.0.0.1, in the event loop of the episode's participants."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+from collections.abc import Iterator
+from typing import Any
+
+import structlog
+import uvicorn
+from starlette.applications import Starlette
+from starlette.requests import Request
+from starlette.responses import HTMLResponse, Response
+from starlette.routing import Route, WebSocketRoute
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from .page import page_html
+from .session import PlaySession, SecondDriver
+
+log = structlog.get_logger("mhrc.play")
+
+SECOND_DRIVER = 4409  # the WebSocket close code of a page refused because another drives the robot
+
+
+class PortInUse(OSError):
+    """The page's port is taken."""
+
+
+def make_app(session: PlaySession) -> Starlette:
+    html = page_html(session.robot)
+
+    async def index(request: Request) -> HTMLResponse:
+        return HTMLResponse(html, headers={"Cache-Control": "no-store"})
+
+    async def ws(websocket: WebSocket) -> None:
+        await websocket.accept()
+        outbox: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        page = object()
+        try:
+            session.open(page, outbox.put_nowait)
+        except SecondDriver as exc:
+            await websocket.send_json({"type": "refused_tab", "reason": str(exc)})
+            await websocket.close(code=SECOND_DRIVER)
+            return
+
+        async def pump() -> None:
+            while True:
+                await websocket.send_json(await outbox.get())
+
+        sender = asyncio.create_task(pump())
+        try:
+            while True:
+                msg = await websocket.receive()
+                if msg["type"] == "websocket.disconnect":
+                    break
+                session.submit(page, msg.get("text") or msg.get("bytes") or b"")
+        except WebSocketDisconnect:
+            pass
+        finally:
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await sender
+            await session.close(page)
+
+    async def no_icon(request: Request) -> Response:
+        return Response(status_code=204)  # the page has no icon: said, so a browser's console stays quiet
+
+    return Starlette(routes=[Route("/", index), Route("/favicon.ico", no_icon), WebSocketRoute("/ws", ws)])
+
+
+def bind(port: int, host: str = "127.0.0.1") -> socket.socket:
+    """The page's listening socket, bound before anything starts; PortInUse if taken."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise PortInUse(
+            f"--port: {host}:{port} is in use ({exc.strerror}); pick another port, or 0 for a free one"
+        ) from None
+    sock.listen(16)
+    return sock
+
+
+class _Server(uvicorn.Server):
+    """uvicorn inside the command's loop: the command's own signal handling stays (Ctrl-C ends the episode)."""
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        yield
+
+
+@contextlib.asynccontextmanager
+async def serving(session: PlaySession, sock: socket.socket) -> Any:
+    """Serve the page on `sock` for as long as the block runs."""
+    config = uvicorn.Config(make_app(session), ws="wsproto", lifespan="off", log_level="warning", access_log=False)
+    server = _Server(config)
+    task = asyncio.create_task(server.serve(sockets=[sock]), name="play-page")
+    try:
+        while not server.started and not task.done():
+            await asyncio.sleep(0.02)
+        if task.done():
+            task.result()
+        yield server
+    finally:
+        server.should_exit = True
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await asyncio.wait_for(task, 5.0)
+        sock.close()
