@@ -413,8 +413,7 @@ def test_summaries_carry_the_diagnostics_and_the_page_links_every_episode(
         md,
     ), md
     assert (
-        "| pack_objects | 2 (1) |" in md
-        and "1 episode(s) of this setting were recorded before diagnostics existed" in md
+        "| pack_objects | 2 (1) |" in md and "1 episode of this setting was recorded before diagnostics existed" in md
     )
     line = next(
         r

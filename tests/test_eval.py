@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -87,8 +88,12 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     ]
     assert json.loads(first) in rows_c  # the finished row is kept as it was
     assert _stable(rows_c)[json.loads(first)["key"]] == _stable(rows_a)[json.loads(first)["key"]]
-    for other in ({"ablation": "no_mobile"}, {"aids": ("goal_map",)}, {"history_cap": 9000}):
-        with pytest.raises(ConfigError, match="--resume needs the same"):
+    for other, differs in (
+        ({"ablation": "no_mobile"}, "--ablation was 'none', now 'no_mobile'"),
+        ({"aids": ("goal_map",)}, "--aids was 'paper', now 'aids:goal_map'"),
+        ({"history_cap": 9000}, "--history-cap was None, now 9000"),
+    ):
+        with pytest.raises(ConfigError, match=f"holds another evaluation: {re.escape(differs)}$"):
             asyncio.run(
                 evaluate(
                     EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2, **other),
@@ -394,7 +399,7 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
         assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"]) == (1, 0, 0, True)
         assert (r["prompt_tokens"], r["completion_tokens"]) == (6 * 50, 6 * 9)
     summary = (tmp_path / "ev" / "summary.md").read_text()
-    assert "3 episodes, 2 valid, 1 invalid" in summary and "1 invalid episode(s) left out" in summary
+    assert "3 episodes, 2 valid, 1 invalid" in summary and "1 invalid episode left out" in summary
     assert (
         "- pack_objects/kitchen/4/0 (openai:test-model · ablation none · aids:goal_map · history cap 50000 · horizon 2): the model was unreachable"
         in summary
