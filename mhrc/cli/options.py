@@ -267,3 +267,30 @@ def episode_config(**values: Any) -> EpisodeConfig:
         return EpisodeConfig.build(**values).resolved()
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
+
+
+OVERWRITE = click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace the trace (and its report, trace.html) of an earlier episode at the same --run or --trace; "
+    "without it, such a run is refused and the earlier trace kept.",
+)
+
+
+def fresh_trace(command: str, cfg: EpisodeConfig, overwrite: bool, given_trace: bool) -> None:
+    """Refuse (one line, exit 2) a run whose trace file exists already, so that a reused --run never
+    destroys an earlier episode; with --overwrite, remove that trace and the report made of it."""
+    trace = cfg.trace
+    if trace is None or not trace.exists():
+        return
+    if not overwrite:
+        option = f"--trace {trace}" if given_trace else f"--run {cfg.run}"
+        click.echo(
+            f"mhrc {command}: {option}: {trace} holds an earlier episode's trace; choose another "
+            + ("--trace" if given_trace else "--run (or leave it out for a new one)")
+            + ", or pass --overwrite to replace it",
+            err=True,
+        )
+        raise SystemExit(2)
+    for stale in (trace, trace.with_suffix(".html")):  # the report of the replaced trace describes nothing any more
+        stale.unlink(missing_ok=True)

@@ -21,10 +21,12 @@ from mhrc.cli.options import (
     AIDS_HELP,
     INSECURE_HELP,
     LOG_LEVEL,
+    OVERWRITE,
     VIDEO_HELP,
     credentials_option,
     episode_config,
     episode_options,
+    fresh_trace,
     llm_options,
     load_credentials,
     team_option,
@@ -69,6 +71,7 @@ from mhrc.run.config import ConfigError, EpisodeConfig
     default=None,
     help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.",
 )
+@OVERWRITE
 @llm_options
 def up(
     processes: bool,
@@ -78,6 +81,7 @@ def up(
     log_level: str,
     video: Path | None,
     secure: bool,
+    overwrite: bool,
     **values: Any,
 ) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
@@ -104,6 +108,7 @@ def up(
     except ModelServerDown as exc:
         click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(2)
+    fresh_trace("up", cfg, overwrite, values.get("trace") is not None)  # before the credentials are made anew
     if not secure:
         click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
     else:
@@ -216,8 +221,15 @@ def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None 
     "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control."
 )
 @click.option("--insecure", is_flag=True, help=INSECURE_HELP)
+@OVERWRITE
 def world(
-    log_level: str, start_timeout: float | None, quiet: bool, credentials: Path | None, insecure: bool, **values: Any
+    log_level: str,
+    start_timeout: float | None,
+    quiet: bool,
+    credentials: Path | None,
+    insecure: bool,
+    overwrite: bool,
+    **values: Any,
 ) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
     from mhrc.run.console import ProgressPrinter
@@ -231,6 +243,7 @@ def world(
         if values.get("run") is None:
             values["run"] = creds.run
     cfg = episode_config(start_timeout=start_timeout, credentials=credentials if creds is not None else None, **values)
+    fresh_trace("world", cfg, overwrite, values.get("trace") is not None)
     if quiet:
         _serve_world(cfg)
         return

@@ -173,7 +173,7 @@ class ProgressPrinter:
                 f"[bold]episode {ev.run}[/]: task {ev.task}, scene {ev.scene}, seed {ev.seed}, "
                 f"{ev.n_objects} objects, robots {', '.join(ev.robots)}, horizon {ev.horizon}, fidelity {ev.fidelity}"
                 + (", noise off" if ev.noise.setting == "off" else "")
-                + (f", {ev.scheduler} schedule" if ev.scheduler != "lockstep" else "")
+                + f", {ev.scheduler} schedule"  # always: up (lockstep) and eval (sequential) give one episode other TS
             )
         elif isinstance(ev, TickClosed):
             self._stepped = True
