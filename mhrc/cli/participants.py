@@ -138,7 +138,10 @@ def up(
     from mhrc.core.team import TeamError
 
     try:
-        done = run_command(lambda: runner(cfg, observe=None if printer is None else printer.attach, robots=robots))
+        done = run_command(
+            lambda: runner(cfg, observe=None if printer is None else printer.attach, robots=robots),
+            interrupted=lambda: _interrupted(cfg.trace, printer),
+        )
     except (
         AgentError,
         LLMError,
@@ -163,6 +166,25 @@ def up(
             console.print(f"video {path}")
     if as_json:
         click.echo(json.dumps(done.metrics.model_dump()))
+
+
+def _interrupted(trace: Path | None, printer: Any) -> str:
+    """The one line of an interrupted `mhrc up`: the last tick the world closed, and where its trace is."""
+    from mhrc.core.protocol import EpisodeStarted, TickClosed
+    from mhrc.core.records import messages, read_records
+
+    if printer is not None:
+        printer.mute()  # what the episode's end still sends (robots leaving) is not news after Ctrl-C
+    try:
+        records = read_records(trace) if trace is not None else []
+    except (ValueError, OSError):
+        records = []
+    if not messages(records, EpisodeStarted):
+        when = "before the episode started"
+    else:
+        when = f"at tick {max((t.tick for t in messages(records, TickClosed)), default=-1) + 1}"
+    where = f"the trace is at {trace}" if trace is not None and trace.exists() else "no trace was written"
+    return f"interrupted {when}, {where}"
 
 
 def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:

@@ -9,12 +9,15 @@ import time
 import structlog
 
 LEVELS = ("debug", "info", "warning", "error")
+_level = "warning"  # the level configured last
 
 
 def configure(level: str = "warning") -> None:
     """Route structlog to stderr at `level` (debug, info, warning, error)."""
+    global _level
     if level not in LEVELS:
         raise ValueError(f"log level must be one of {', '.join(LEVELS)}, not {level!r}")
+    _level = level
     structlog.configure(
         processors=[
             structlog.contextvars.merge_contextvars,
@@ -27,6 +30,14 @@ def configure(level: str = "warning") -> None:
         logger_factory=structlog.PrintLoggerFactory(file=sys.stderr),
         cache_logger_on_first_use=False,
     )
+
+
+def hush() -> None:
+    """A run being stopped (Ctrl-C, SIGTERM): at the default level, no more warnings about the
+    other participants leaving, which they do because of the same stop; errors still show, and a
+    --log-level below warning is kept as asked."""
+    if _level == "warning":
+        configure("error")
 
 
 class Throttle:

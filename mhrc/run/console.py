@@ -95,6 +95,10 @@ class ProgressPrinter:
         bus.subscribe(f"{k.base}/agent/*/thought", self._on_thought)
         bus.subscribe(f"{k.base}/agent/*/generating", self._on_generating)
 
+    def mute(self) -> None:
+        """Print nothing more, not even what is held back (the run was interrupted: its end is not news)."""
+        self._closed = True
+
     def close(self) -> None:
         """Print everything still held back, in tick order (and with `summary` the table, if the
         episode ended); the printer prints nothing after."""
