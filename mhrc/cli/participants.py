@@ -63,7 +63,13 @@ from mhrc.run.config import ConfigError, EpisodeConfig
     help="--secure (the default): fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, "
     "access control: an agent can act only as its own robot); --insecure: the open tcp bus, for loopback experiments.",
 )
-@click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print the run id, the trace path, why the episode ended and the final metrics as one JSON object on stdout "
+    "(docs/quickstart.md names every key).",
+)
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
 @click.option(
     "--video",
@@ -164,8 +170,9 @@ def up(
         path = render_video_to(cfg.trace, video)
         if not quiet:
             console.print(f"video {path}")
-    if as_json:
-        click.echo(json.dumps(done.metrics.model_dump()))
+    if as_json:  # the metrics, and which run and trace they are of (docs/quickstart.md lists every key)
+        trace = None if cfg.trace is None else str(cfg.trace)
+        click.echo(json.dumps({"run": done.run, "reason": done.reason, "trace": trace, **done.metrics.model_dump()}))
 
 
 def _interrupted(trace: Path | None, printer: Any) -> str:

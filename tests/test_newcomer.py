@@ -1,0 +1,199 @@
+"""A newcomer's first hour (issue 37): nothing lost, nothing paid twice, and no noise. Every test
+runs the real `mhrc` command in a fresh directory (real episodes, real worker processes, real
+Zenoh on loopback) and reads what a person would see: the lines printed, the exit code, the
+files left behind."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mhrc.core.endpoints import free_port
+from tests.waits import until_sync
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL_EVAL = ["eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3,4", "--workers", "1"]
+
+
+def _mhrc(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """`mhrc ARGS` as a newcomer runs it: stdout and stderr are pipes, not a terminal."""
+    return subprocess.run(
+        [sys.executable, "-m", "mhrc", *args], cwd=cwd, capture_output=True, text=True, timeout=timeout
+    )
+
+
+def _lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.strip()]
+
+
+# --------------------------------------------------------------------------- money and data
+
+
+def test_resume_on_a_directory_without_an_evaluation_is_one_line_and_creates_nothing(tmp_path: Path) -> None:
+    """A mistyped --out with --resume used to start (and pay for) the whole grid: now one line, exit 2."""
+    typo = _mhrc(*SMALL_EVAL, "--resume", "--out", "runs/nothere", cwd=tmp_path)
+    assert typo.returncode == 2 and typo.stdout == "", typo.stderr
+    assert _lines(typo.stderr) == [
+        "mhrc eval: --resume: runs/nothere holds no evaluation (no eval.json); check the path, or leave out "
+        "--resume to start one"
+    ]
+    assert list(tmp_path.iterdir()) == []  # not even runs/
+    # a directory holding something else is no evaluation either, and is left as it was
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "todo.txt").write_text("buy milk\n")
+    other = _mhrc(*SMALL_EVAL, "--resume", "--out", "notes", cwd=tmp_path)
+    assert other.returncode == 2 and len(_lines(other.stderr)) == 1 and "notes holds no evaluation" in other.stderr
+    assert [p.name for p in (tmp_path / "notes").iterdir()] == ["todo.txt"]
+
+
+def test_eval_with_a_model_server_nobody_runs_fails_at_once_and_creates_nothing(tmp_path: Path) -> None:
+    """As `mhrc up` does: a refused connection to the model server is one line before any worker starts."""
+    down = f"http://127.0.0.1:{free_port('127.0.0.1')}/v1"
+    out = _mhrc(*SMALL_EVAL, "--llm", "openai:x", "--base-url", down, "--out", "ev", cwd=tmp_path)
+    assert out.returncode == 2 and out.stdout == "", out.stderr
+    assert _lines(out.stderr) == [
+        f"mhrc eval: nothing listens at {down}, the model server of alice, bob, david (connection refused): "
+        "start the server there, or point --base-url at one"
+    ]
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.fixture(scope="module")
+def small_eval(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, subprocess.CompletedProcess[str]]:
+    """One real evaluation of two short episodes, its stderr a pipe (as in CI, nohup or `| tee`)."""
+    where = tmp_path_factory.mktemp("eval")
+    done = _mhrc(*SMALL_EVAL, "--horizon", "12", "--out", "ev", cwd=where)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return where, done
+
+
+@pytest.mark.slow
+def test_eval_off_a_terminal_prints_one_line_per_finished_episode(
+    small_eval: tuple[Path, subprocess.CompletedProcess[str]],
+) -> None:
+    where, done = small_eval
+    ended = [line for line in _lines(done.stderr) if line.startswith("pack_objects/")]
+    rows = {r["key"]: r for r in map(json.loads, (where / "ev" / "episodes.jsonl").read_text().splitlines())}
+    assert len(ended) == 2, done.stderr
+    for i, line in enumerate(ended, 1):  # key, result, TS and done / total, in the order they finished
+        m = re.fullmatch(
+            r"(?P<key>\S+): (?P<result>solved|not solved \(PS [0-9.]+\)), TS (?P<ts>\d+) \((?P<n>\d)/2\)", line
+        )
+        assert m is not None, line
+        row = rows[m["key"]]
+        assert (m["result"] == "solved", int(m["ts"]), int(m["n"])) == (row["success"], row["temporal_steps"], i)
+    assert "1 worker," in done.stderr and "worker(s)" not in done.stderr and "episode(s)" not in done.stderr
+    summary = (where / "ev" / "summary.md").read_text()
+    assert "2 episodes, 2 valid." in summary and "docs/evaluation.md#metrics" in summary
+    assert "which a sum over three robots cannot be" not in summary  # the long AS paragraph lives in the docs
+
+
+@pytest.mark.slow
+def test_resume_with_other_options_names_the_field_and_both_values(
+    small_eval: tuple[Path, subprocess.CompletedProcess[str]],
+) -> None:
+    where, _ = small_eval
+    rows = (where / "ev" / "episodes.jsonl").read_bytes()
+    other = _mhrc(*SMALL_EVAL, "--horizon", "14", "--ablation", "no_mobile", "--resume", "--out", "ev", cwd=where)
+    assert other.returncode == 2, other.stderr
+    assert _lines(other.stderr) == [
+        "mhrc eval: --resume: ev holds another evaluation: --ablation was 'none', now 'no_mobile'; "
+        "--horizon was 12, now 14"
+    ]
+    assert (where / "ev" / "episodes.jsonl").read_bytes() == rows
+
+
+@pytest.mark.slow
+def test_a_reused_run_name_never_destroys_a_trace(tmp_path: Path) -> None:
+    """The second `mhrc up --run demo` is refused in one line, trace and credentials untouched;
+    --overwrite replaces the trace and removes the report made of the old one."""
+    first = _mhrc("up", "--run", "demo", "--horizon", "3", "--objects", "3", "--quiet", cwd=tmp_path)
+    assert first.returncode == 0, first.stderr[-3000:]
+    run = tmp_path / "runs" / "demo"
+    kept = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    assert run / "trace.jsonl" in kept and any("credentials" in p.parts for p in kept)
+    assert _mhrc("show", "runs/demo", cwd=tmp_path).returncode == 0
+    report = (run / "trace.html").read_text()
+    # horizon 3 is below this episode's bound (cut off before it could finish): no negative excess shown
+    assert 'data-key="steps_above_bound"' in report and ">n/a<" in report
+    assert re.search(r'data-key="steps_above_bound">.*?<td>[^<]*-\d', report) is None
+    kept[run / "trace.html"] = (run / "trace.html").read_bytes()
+    for command in (["up", "--quiet"], ["world", "--insecure", "--quiet"]):
+        again = _mhrc(*command, "--run", "demo", "--horizon", "3", "--objects", "3", cwd=tmp_path)
+        assert again.returncode == 2 and again.stdout == "", again.stderr
+        assert [line for line in _lines(again.stderr) if not line.startswith("insecure:")] == [
+            f"mhrc {command[0]}: --run demo: runs/demo/trace.jsonl holds an earlier episode's trace; choose another "
+            "--run (or leave it out for a new one), or pass --overwrite to replace it"
+        ]
+        assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == kept  # nothing rewritten
+    replaced = _mhrc("up", "--run", "demo", "--horizon", "4", "--objects", "3", "--quiet", "--overwrite", cwd=tmp_path)
+    assert replaced.returncode == 0, replaced.stderr[-3000:]
+    assert not (run / "trace.html").exists()  # it described the trace that is gone
+    assert '"horizon":4,' in (run / "trace.jsonl").read_text()  # the new episode's
+
+
+@pytest.mark.slow
+def test_the_quick_starts_episode_is_solvable_and_json_names_its_run_and_trace(tmp_path: Path) -> None:
+    """The first report a newcomer opens (docs/quickstart.md, README.md) is of an episode the team can solve."""
+    commands = {
+        page: re.findall(r"^mhrc up --run first (.*?)\s*$", (ROOT / page).read_text(), re.M)
+        for page in ("docs/quickstart.md", "README.md")
+    }
+    assert commands["docs/quickstart.md"] == commands["README.md"] and len(commands["README.md"]) == 1, commands
+    args = commands["README.md"][0].split()
+    out = _mhrc("up", "--run", "first", *args, "--quiet", "--json", "--insecure", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-3000:]
+    got = json.loads(out.stdout)
+    assert got["success"] and got["temporal_steps"] >= got["lower_bound"], got
+    assert (got["run"], got["trace"], got["reason"]) == ("first", "runs/first/trace.jsonl", "success")
+    assert (tmp_path / got["trace"]).is_file()
+
+
+# --------------------------------------------------------------------------- noise
+
+
+def _episode_started(trace: Path) -> bool:
+    return trace.is_file() and re.search(r'"kind": ?"tick"', trace.read_text()) is not None
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["in-process", "processes"])
+def test_ctrl_c_on_up_is_one_line_naming_the_tick_and_the_trace(mode: str, tmp_path: Path) -> None:
+    """SIGINT to the command's process group, as a terminal's Ctrl-C: it used to print "interrupted"
+    once per process and every robot's detach twice; now one line, with the tick and the trace."""
+    out, err = tmp_path / "stdout.txt", tmp_path / "stderr.txt"
+    args = ["up", "--run", "stopped", "--tick-delay", "0.3", "--insecure"] + (
+        ["--processes"] if mode == "processes" else []
+    )
+    with out.open("w") as o, err.open("w") as e:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "mhrc", *args], cwd=tmp_path, stdout=o, stderr=e, text=True, start_new_session=True
+        )
+    trace = tmp_path / "runs" / "stopped" / "trace.jsonl"
+    try:
+        until_sync(lambda: _episode_started(trace) or proc.poll() is not None, "a tick in the trace", 120)
+        assert proc.poll() is None, err.read_text()
+        before = len(_lines(err.read_text()))
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    said = _lines(err.read_text())[before:]
+    assert proc.returncode == 130 and len(said) == 1, said
+    m = re.fullmatch(r"interrupted at tick (\d+), the trace is at runs/stopped/trace\.jsonl", said[0])
+    assert m is not None, said
+    records = [json.loads(line) for line in trace.read_text().splitlines()]
+    closed = [r["msg"]["tick"] for r in records if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "tick"]
+    assert int(m[1]) == max(closed) + 1  # the tick that was running
+    printed = out.read_text()
+    assert "detached" not in printed and "unless an agent attaches again" not in printed
+    assert re.search(r"^episode stopped: .*, horizon 50, fidelity paper, lockstep schedule$", printed, re.M), printed
