@@ -197,3 +197,49 @@ def test_ctrl_c_on_up_is_one_line_naming_the_tick_and_the_trace(mode: str, tmp_p
     printed = out.read_text()
     assert "detached" not in printed and "unless an agent attaches again" not in printed
     assert re.search(r"^episode stopped: .*, horizon 50, fidelity paper, lockstep schedule$", printed, re.M), printed
+
+
+def _block_after(page: Path, marker: str) -> str:
+    """The first fenced python block of `page` after the line `marker`."""
+    text = page.read_text().split(marker, 1)[1]
+    return text.split("```python\n", 1)[1].split("\n```", 1)[0] + "\n"
+
+
+@pytest.mark.slow
+def test_the_outside_pytest_example_prints_only_what_it_prints(tmp_path: Path) -> None:
+    """docs/testing.md, "Outside pytest": 30 debug and info lines on stdout used to come first;
+    a library prints nothing unless asked (its warnings would go to stderr)."""
+    (tmp_path / "example.py").write_text(_block_after(ROOT / "docs" / "testing.md", "## Outside pytest"))
+    out = subprocess.run([sys.executable, "example.py"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert re.fullmatch(r"horizon 3 \S+trace\.jsonl\n", out.stdout), out.stdout[-3000:]
+    assert out.stderr == ""
+
+
+@pytest.mark.slow
+def test_the_documented_pytest_command_runs_the_users_tests_without_a_warning(tmp_path: Path) -> None:
+    """docs/testing.md's command for a user's own tests, run as written: no deprecation warning first."""
+    page = (ROOT / "docs" / "testing.md").read_text()
+    block = next(b for b in page.split("```python\n")[1:] if b.startswith("# test_my_unit.py")).split("\n```")[0]
+    command = re.match(r"# (test_my_unit\.py): run with `pytest (.*)`", block)
+    assert command is not None, block[:200]
+    (tmp_path / command[1]).write_text(block + "\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST_", "MHRC_"))}
+    out = subprocess.run(
+        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", *command[2].split()],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stdout[-3000:]
+    assert "warning" not in (out.stdout + out.stderr).lower(), out.stdout[-3000:]
+
+
+def test_the_readme_names_every_command_of_mhrc_help() -> None:
+    from mhrc.cli import main
+
+    listed = re.search(r"`mhrc --help` lists every command: (.*?)\.\n\n", (ROOT / "README.md").read_text(), re.S)
+    assert listed is not None
+    assert sorted(re.findall(r"`(\w+)`", listed[1])) == sorted(main.commands)
