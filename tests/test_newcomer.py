@@ -243,3 +243,84 @@ def test_the_readme_names_every_command_of_mhrc_help() -> None:
     listed = re.search(r"`mhrc --help` lists every command: (.*?)\.\n\n", (ROOT / "README.md").read_text(), re.S)
     assert listed is not None
     assert sorted(re.findall(r"`(\w+)`", listed[1])) == sorted(main.commands)
+
+
+EXAMPLE = ROOT / "examples" / "raw_zenoh_agent.py"
+
+
+def test_the_example_agent_without_a_world_says_so_in_two_lines(tmp_path: Path) -> None:
+    """No traceback: what it waits for, for how long, then one error line (and a secured endpoint
+    without credentials is refused before anything)."""
+    nobody = f"tcp/127.0.0.1:{free_port('127.0.0.1')}"
+    args = ["--run", "x", "--robot", "david", "--attach-timeout", "1"]
+    out = subprocess.run(
+        [sys.executable, str(EXAMPLE), "--connect", nobody, *args], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 1 and out.stdout == "", out.stderr
+    assert _lines(out.stderr) == [
+        f"waiting for the world at {nobody} (up to 1 s)",
+        f"error: cannot connect to {nobody} within 1 s",
+    ]
+    tls = nobody.replace("tcp/", "tls/")
+    out = subprocess.run(
+        [sys.executable, str(EXAMPLE), "--connect", tls, *args], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 2 and _lines(out.stderr) == [
+        f"error: --credentials: {tls} is a secured world; pass this robot's credentials file"
+    ]
+    agent = _mhrc("agent", "--robot", "david", "--connect", nobody, "--attach-timeout", "1", "--insecure", cwd=tmp_path)
+    assert agent.returncode != 0 and "Traceback" not in agent.stderr, agent.stderr
+    assert _lines(agent.stderr)[:2] == [
+        "insecure: the open tcp bus (no TLS, no login, no access control)",
+        f"waiting for the world at {nobody} (up to 1 s)",
+    ], agent.stderr
+
+
+@pytest.mark.slow
+def test_the_example_agent_joins_the_default_secured_external_run(tmp_path: Path) -> None:
+    """`mhrc up --external david` (secured by default) and the example, given David's credentials file."""
+    out, err = tmp_path / "stdout.txt", tmp_path / "stderr.txt"
+    with out.open("w") as o, err.open("w") as e:
+        up = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "mhrc",
+                "up",
+                "--external",
+                "david",
+                "--run",
+                "ext",
+                "--horizon",
+                "4",
+                "--objects",
+                "3",
+            ],
+            cwd=tmp_path,
+            stdout=o,
+            stderr=e,
+            text=True,
+            start_new_session=True,
+        )
+    try:
+        until_sync(
+            lambda: "attach the external robots with" in out.read_text() or up.poll() is not None, "the hint", 120
+        )
+        hint = re.search(r"--connect (tls/\S+) --credentials (\S+)", out.read_text())
+        assert hint is not None, (out.read_text(), err.read_text())
+        david = subprocess.run(
+            [sys.executable, str(EXAMPLE), "--connect", hint[1], "--robot", "david", "--credentials", hint[2]],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=240,
+        )
+        assert david.returncode == 0, david.stderr[-3000:]
+        assert "attached david" in david.stdout and "episode_done reason=horizon" in david.stdout, david.stdout
+        assert up.wait(timeout=120) == 0, err.read_text()[-3000:]
+    finally:
+        if up.poll() is None:
+            os.killpg(up.pid, signal.SIGKILL)
+            up.wait()
+    acted = [json.loads(line) for line in (tmp_path / "runs" / "ext" / "trace.jsonl").read_text().splitlines()]
+    assert any(r["key"].endswith("/robot/david/action/result") for r in acted)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import shlex
 import sys
 from collections.abc import Callable
@@ -349,7 +350,10 @@ def agent(
     options = cfg.policy_options(spec)
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError
+    from mhrc.run.lifeline import PARENT_ENV
 
+    if not os.environ.get(PARENT_ENV):  # said by hand only: a child of mhrc up --processes has its parent's lines
+        click.echo(f"waiting for the world at {connect} (up to {attach_timeout:g} s)", err=True)
     try:
         done = run_command(
             lambda: attach_agent(
