@@ -89,6 +89,11 @@ def test_eval_off_a_terminal_prints_one_line_per_finished_episode(
         assert m is not None, line
         row = rows[m["key"]]
         assert (m["result"] == "solved", int(m["ts"]), int(m["n"])) == (row["success"], row["temporal_steps"], i)
+    shown = _mhrc("show", "ev", cwd=where)  # one episode's command on a directory of many
+    assert shown.returncode == 2 and _lines(shown.stderr) == [
+        "mhrc show: ev is an evaluation (mhrc eval), not one episode: `mhrc report ev` summarizes it "
+        "(ev/summary.html links every episode's report); each episode's trace and report are in ev/traces/"
+    ]
     assert "1 worker," in done.stderr and "worker(s)" not in done.stderr and "episode(s)" not in done.stderr
     summary = (where / "ev" / "summary.md").read_text()
     assert "2 episodes, 2 valid." in summary and "docs/evaluation.md#metrics" in summary
@@ -324,3 +329,16 @@ def test_the_example_agent_joins_the_default_secured_external_run(tmp_path: Path
             up.wait()
     acted = [json.loads(line) for line in (tmp_path / "runs" / "ext" / "trace.jsonl").read_text().splitlines()]
     assert any(r["key"].endswith("/robot/david/action/result") for r in acted)
+
+
+def test_a_bad_replay_trace_is_said_once_and_leaves_no_run_folder(tmp_path: Path) -> None:
+    """It used to be reported by each robot's agent (three warnings and a traceback) after
+    runs/run-XXXX/ was written."""
+    (tmp_path / "bad.jsonl").write_text('{"not": "a trace"}\n')
+    out = _mhrc("up", "--llm", "replay:bad.jsonl", "--horizon", "3", cwd=tmp_path)
+    assert out.returncode == 2 and out.stdout == "", out.stderr
+    assert _lines(out.stderr) == [
+        "mhrc up: --llm: alice's replay: bad.jsonl, line 1 is not a trace line (not_a_line): not an object with "
+        "a string `key` and a `msg`"
+    ]
+    assert [p.name for p in tmp_path.iterdir()] == ["bad.jsonl"]

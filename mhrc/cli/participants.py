@@ -112,7 +112,8 @@ def up(
     robots = tuple(r for r in cfg.robots if r not in external)
     try:
         check_model_servers(cfg, robots)  # before anything is written or started
-    except ModelServerDown as exc:
+        cfg.check_replays(robots)
+    except (ModelServerDown, ConfigError) as exc:
         click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(2)
     fresh_trace("up", cfg, overwrite, values.get("trace") is not None)  # before the credentials are made anew
