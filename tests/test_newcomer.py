@@ -342,3 +342,42 @@ def test_a_bad_replay_trace_is_said_once_and_leaves_no_run_folder(tmp_path: Path
         "a string `key` and a `msg`"
     ]
     assert [p.name for p in tmp_path.iterdir()] == ["bad.jsonl"]
+
+
+@pytest.mark.slow
+def test_the_diagnostics_plots_legend_covers_no_bar(small_eval: tuple[Path, subprocess.CompletedProcess[str]]) -> None:
+    """summary.html's diagnostics plot, for real rows and a second setting whose every bar is tall."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from mhrc.eval.html import diagnostics_figure
+
+    where, _ = small_eval
+    rows = [json.loads(line) for line in (where / "ev" / "episodes.jsonl").read_text().splitlines()]
+    tall = [
+        {**r, "method": "openai:other", **{k: 9 for k, v in r.items() if k.startswith("diag_") and isinstance(v, int)}}
+        for r in rows
+    ]
+    fig = diagnostics_figure(rows + tall)
+    FigureCanvasAgg(fig).draw()
+    renderer = fig.canvas.get_renderer()
+    (ax,) = fig.axes
+    legend = ax.get_legend().get_window_extent(renderer)
+    bars = [p.get_window_extent(renderer) for p in ax.patches if p.get_height() > 0]
+    assert bars and not [b for b in bars if legend.overlaps(b)]
+
+
+def test_the_benchmarks_pages_tables_have_headers_people_read() -> None:
+    """No raw JSON key (`result_ms_p50`) as a column header on docs/benchmarks.md."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("docs_hook_bench_newcomer", ROOT / "docs" / "hooks" / "bench.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.heading("result_ms_p50") == "result p50 (ms)" and bench.heading("llm_calls") == "LLM calls"
+    headers = []
+    for placeholder in bench.PLACEHOLDER.finditer((ROOT / "docs" / "benchmarks.md").read_text()):
+        lines = bench.render(placeholder["spec"]).splitlines()
+        if len(lines) > 1 and lines[1].startswith("| ---"):
+            headers += [cell.strip() for cell in lines[0].strip("|").split("|")]
+    assert headers and not [h for h in headers if "_" in h], headers

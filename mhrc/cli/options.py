@@ -143,7 +143,13 @@ def llm_options(f: Callable[..., Any]) -> Callable[..., Any]:
 
 
 LOG_LEVEL = click.option(
-    "--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"])
+    "--log-level",
+    default="warning",
+    show_default=True,
+    type=click.Choice(["debug", "info", "warning", "error"]),
+    help="How much of the participants' log to print on stderr (structlog lines with run, robot and tick): "
+    "debug and info also show each step's inner workings; default: only what went wrong. $MHRC_LOG_LEVEL sets it "
+    "for commands without the option.",
 )
 INSECURE_HELP = "The open tcp bus: no TLS, no login, no access control (anyone can act as any robot)."
 
