@@ -381,3 +381,29 @@ def test_the_benchmarks_pages_tables_have_headers_people_read() -> None:
         if len(lines) > 1 and lines[1].startswith("| ---"):
             headers += [cell.strip() for cell in lines[0].strip("|").split("|")]
     assert headers and not [h for h in headers if "_" in h], headers
+
+
+@pytest.mark.slow
+def test_the_video_size_is_an_option_said_in_help(tmp_path: Path) -> None:
+    """At 640x480 the objects are a few pixels wide: --video-size renders larger (here smaller, to stay quick)."""
+    import imageio.v3 as iio
+
+    assert "1280x960 shows the objects clearly" in " ".join(_mhrc("show", "--help", cwd=tmp_path).stdout.split())
+    up = _mhrc(
+        "up",
+        "--horizon",
+        "1",
+        "--objects",
+        "3",
+        "--insecure",
+        "-q",
+        "--video",
+        "v.mp4",
+        "--video-size",
+        "320x240",
+        cwd=tmp_path,
+    )
+    assert up.returncode == 0, up.stderr[-3000:]
+    assert iio.imread(tmp_path / "v.mp4", index=0).shape == (240, 320, 3)
+    bad = _mhrc("show", "runs", "--video", "w.mp4", "--video-size", "big", cwd=tmp_path)
+    assert bad.returncode == 2 and "--video-size" in bad.stderr and not (tmp_path / "w.mp4").exists()

@@ -24,6 +24,7 @@ from mhrc.cli.options import (
     LOG_LEVEL,
     OVERWRITE,
     VIDEO_HELP,
+    VIDEO_SIZE,
     credentials_option,
     episode_config,
     episode_options,
@@ -78,6 +79,7 @@ from mhrc.run.config import ConfigError, EpisodeConfig
     default=None,
     help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.",
 )
+@VIDEO_SIZE
 @OVERWRITE
 @llm_options
 def up(
@@ -87,6 +89,7 @@ def up(
     as_json: bool,
     log_level: str,
     video: Path | None,
+    video_size: tuple[int, int],
     secure: bool,
     overwrite: bool,
     **values: Any,
@@ -169,7 +172,7 @@ def up(
         printer.close()  # what arrived late for its tick, then nothing more: the table is the last line
     console.print(summary_table(done, _recovery(cfg.trace) if cfg.events is not None else None, _lost(cfg.trace)))
     if video is not None and cfg.trace is not None:
-        path = render_video_to(cfg.trace, video)
+        path = render_video_to(cfg.trace, video, video_size)
         if not quiet:
             console.print(f"video {path}")
     if as_json:  # the metrics, and which run and trace they are of (docs/quickstart.md lists every key)

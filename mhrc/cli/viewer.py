@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from mhrc.cli.options import VIDEO_HELP
+from mhrc.cli.options import VIDEO_HELP, VIDEO_SIZE
 
 
 @click.command()
@@ -59,7 +59,8 @@ def render(scenes_: tuple[str, ...], task: str, seed: int, n_objects: int, out: 
     help="The HTML file to write; default: beside the trace, with .html (with --video: only when --out is given).",
 )
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None, help=VIDEO_HELP)
-def show(run_or_trace: Path, out: Path | None, video: Path | None) -> None:
+@VIDEO_SIZE
+def show(run_or_trace: Path, out: Path | None, video: Path | None, video_size: tuple[int, int]) -> None:
     """Write one self-contained HTML report of an episode (map, robot lanes, messages, failures)
     from RUN_OR_TRACE: a trace file, or a run directory holding trace.jsonl. Prints its path.
     With --video, render the episode's video instead (or as well, with --out)."""
@@ -80,10 +81,10 @@ def show(run_or_trace: Path, out: Path | None, video: Path | None) -> None:
         click.echo(str(path))
     if video is not None:
         trace = run_or_trace / "trace.jsonl" if run_or_trace.is_dir() else run_or_trace
-        click.echo(str(render_video_to(trace, video)))
+        click.echo(str(render_video_to(trace, video, video_size)))
 
 
-def render_video_to(trace: Path, video: Path) -> Path:
+def render_video_to(trace: Path, video: Path, size: tuple[int, int] = (640, 480)) -> Path:
     """Render `trace` to `video` with a progress bar; one clear line and exit 2 on a bad input."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -96,7 +97,11 @@ def render_video_to(trace: Path, video: Path) -> Path:
         task = bar.add_task("frames", total=None)
         try:
             info = render_video(
-                trace, video, progress=lambda done, total: bar.update(task, completed=done, total=total)
+                trace,
+                video,
+                width=size[0],
+                height=size[1],
+                progress=lambda done, total: bar.update(task, completed=done, total=total),
             )
         except (ValueError, OSError) as exc:  # VideoError is a ValueError
             bar.stop()
