@@ -407,3 +407,29 @@ def test_the_video_size_is_an_option_said_in_help(tmp_path: Path) -> None:
     assert iio.imread(tmp_path / "v.mp4", index=0).shape == (240, 320, 3)
     bad = _mhrc("show", "runs", "--video", "w.mp4", "--video-size", "big", cwd=tmp_path)
     assert bad.returncode == 2 and "--video-size" in bad.stderr and not (tmp_path / "w.mp4").exists()
+
+
+def test_counts_and_settings_read_as_words() -> None:
+    """'1 episode', never '1 episodes' or 'episode(s)'; a scenario grid is not labelled as the paper's."""
+    from click.testing import CliRunner
+
+    from mhrc.cli import main
+    from mhrc.core.plural import counted
+
+    assert (counted(1, "day"), counted(0.5, "day"), counted(2, "worker"), counted(1, "worker")) == (
+        "1 day",
+        "0.5 days",
+        "2 workers",
+        "1 worker",
+    )
+    one = CliRunner().invoke(
+        main, ["eval", "--dry-run", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3"]
+    )
+    assert one.exit_code == 0 and one.output.splitlines()[-1] == "1 episode (fidelity paper, sequential schedule)"
+    dynamic = CliRunner().invoke(main, ["eval", "--dry-run", "--events", "breakdown", "--tasks", "pack_objects"])
+    assert dynamic.exit_code == 0, dynamic.output
+    assert dynamic.output.splitlines()[-1].endswith(
+        "episodes (fidelity paper, sequential schedule, scenario breakdown: not the paper's)"
+    )
+    assert "--log-level" in (help_text := CliRunner().invoke(main, ["up", "--help"]).output)
+    assert "How much of the participants' log" in " ".join(help_text.split())
