@@ -468,6 +468,11 @@ def test_eval_names_every_file_it_wrote_and_a_resume_counts_the_earlier_episodes
     written = ["episodes.jsonl", "summary.md", "summary.csv", "summary.html"]
     assert last.startswith("done in") and all(str(Path("ev") / name) in last for name in written), last
     assert all((tmp_path / "ev" / name).exists() for name in written)
+    # stderr is a pipe (as in CI, nohup, | tee): one line per finished episode, its key, result, TS and count
+    (row,) = _rows(tmp_path / "ev")
+    result = "solved" if row["success"] else f"not solved (PS {row['partial_success']:.2f})"
+    assert f"\npack_objects/kitchen/3/0: {result}, TS {row['temporal_steps']} (1/1)\n" in first.stderr, first.stderr
+    assert "1 worker," in first.stderr and "(s)" not in first.stderr
     # a resume of the finished grid: the totals are the grid's, not "0/0"
     again = _mhrc(*SMALL_ARGS, "--out", "ev", "--resume", cwd=tmp_path)
     assert again.returncode == 0, again.stderr[-2000:]
