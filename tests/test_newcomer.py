@@ -44,6 +44,14 @@ def _lines(text: str) -> list[str]:
     return [line for line in text.splitlines() if line.strip()]
 
 
+def _errors(result: Result) -> list[str]:
+    """A refused option as every option error of mhrc is said (click's usage error): its `Error:` line,
+    after the two lines of usage; nothing else."""
+    lines = _lines(result.stderr)
+    assert len(lines) == 3 and lines[0].startswith("Usage:") and lines[1].startswith("Try "), lines
+    return lines[2:]
+
+
 # --------------------------------------------------------------------------- money and data
 
 
@@ -54,8 +62,8 @@ def test_resume_on_a_directory_without_an_evaluation_is_one_line_and_creates_not
     monkeypatch.chdir(tmp_path)
     typo = _invoke(*SMALL_EVAL, "--resume", "--out", "runs/nothere")
     assert typo.exit_code == 2 and typo.stdout == "", typo.output
-    assert _lines(typo.stderr) == [
-        "mhrc eval: --resume: runs/nothere holds no evaluation (no eval.json); check the path, or leave out "
+    assert _errors(typo) == [
+        "Error: --resume: runs/nothere holds no evaluation (no eval.json); check the path, or leave out "
         "--resume to start one"
     ]
     assert list(tmp_path.iterdir()) == []  # not even runs/
@@ -63,8 +71,8 @@ def test_resume_on_a_directory_without_an_evaluation_is_one_line_and_creates_not
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "todo.txt").write_text("buy milk\n")
     other = _invoke(*SMALL_EVAL, "--resume", "--out", "notes")
-    assert other.exit_code == 2 and _lines(other.stderr) == [
-        "mhrc eval: --resume: notes holds no evaluation (no eval.json); check the path, or leave out --resume to start one"
+    assert other.exit_code == 2 and _errors(other) == [
+        "Error: --resume: notes holds no evaluation (no eval.json); check the path, or leave out --resume to start one"
     ]
     assert [p.name for p in (tmp_path / "notes").iterdir()] == ["todo.txt"]
 
@@ -101,9 +109,8 @@ def test_resume_with_other_options_names_the_field_and_both_values_and_show_poin
     rows = (small_eval / "ev" / "episodes.jsonl").read_bytes()
     other = _invoke(*SMALL_EVAL, "--horizon", "14", "--ablation", "no_mobile", "--resume", "--out", "ev")
     assert other.exit_code == 2, other.output
-    assert _lines(other.stderr) == [
-        "mhrc eval: --resume: ev holds another evaluation: --ablation was 'none', now 'no_mobile'; "
-        "--horizon was 8, now 14"
+    assert _errors(other) == [
+        "Error: --resume: ev holds another evaluation: --ablation was 'none', now 'no_mobile'; --horizon was 8, now 14"
     ]
     assert (small_eval / "ev" / "episodes.jsonl").read_bytes() == rows
     shown = _invoke("show", "ev")  # one episode's command on a directory of many

@@ -292,8 +292,7 @@ def eval_(
     try:  # --out first, and nothing created: a mistyped --resume path must not start (and pay for) a whole grid
         check_out(out, plan, resume)
     except ConfigError as exc:
-        click.echo(f"mhrc eval: {exc}", err=True)
-        sys.exit(2)
+        raise click.UsageError(str(exc)) from None
     try:  # a model server nothing listens at: one line now, as mhrc up says it, not after every episode's retries
         for job in {j.config.team.name: j for j in plan.jobs}.values():
             check_model_servers(job.config, job.config.robots)
