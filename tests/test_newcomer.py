@@ -14,6 +14,7 @@ import re
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,15 @@ from tests.waits import until_sync
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "raw_zenoh_agent.py"
 SMALL_EVAL = ["eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--objects", "3,4", "--workers", "1"]
+
+
+@pytest.fixture(autouse=True)
+def _logging_as_the_suite_has_it() -> Iterator[None]:
+    """A command run in this process configures logging (--log-level): the next test gets the suite's back."""
+    yield
+    from mhrc.core import logs
+
+    logs.configure("info")  # tests/conftest.py's
 
 
 def _mhrc(*args: str, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
