@@ -408,3 +408,19 @@ def test_the_benchmarks_pages_tables_have_headers_people_read() -> None:
         if len(lines) > 1 and lines[1].startswith("| ---"):
             headers += [cell.strip() for cell in lines[0].strip("|").split("|")]
     assert headers and not [h for h in headers if "_" in h], headers
+
+
+def test_what_ci_runs_and_the_checks_contributing_lists_are_what_the_pages_say() -> None:
+    """README: CI installs the browser and runs the checks before "exactly this line"; docs/contributing.md:
+    every check it lists comes with the test extra (no pyflakes nothing installs)."""
+    ci = (ROOT / ".ci" / "run").read_text()
+    readme = (ROOT / "README.md").read_text()
+    assert "install-browser.sh" in ci and "`scripts/install-browser.sh`" in readme
+    assert "CI runs exactly this line" not in readme
+    page = (ROOT / "docs" / "contributing.md").read_text()
+    block = page.split("## Checks", 1)[1].split("```bash\n", 1)[1].split("\n```", 1)[0]
+    tools = {line.split()[0] for line in block.splitlines() if line.strip()}
+    extra = (ROOT / "pyproject.toml").read_text().split("test = [", 1)[1].split("]\n", 1)[0]
+    provides = {"lint-imports": "import-linter", "mypy": "mypy", "ruff": "ruff", "mkdocs": "mkdocs"}
+    assert tools <= set(provides) and all(f'"{provides[t]}>=' in extra for t in tools), tools
+    assert "pyflakes" not in block or "ruff check" in block
