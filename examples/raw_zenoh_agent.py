@@ -5,6 +5,16 @@ JSON Schemas come from `mhrc schema`):
 
     python examples/raw_zenoh_agent.py --connect tcp/127.0.0.1:7447 --run demo --robot david
 
+A secured world (`mhrc up --external david`, a tls/ endpoint) needs this robot's credentials
+file, which `mhrc up` writes to runs/RUN/credentials/david.json and names in the line it prints:
+
+    python examples/raw_zenoh_agent.py --connect tls/127.0.0.1:7447 --robot david \
+        --credentials runs/RUN/credentials/david.json
+
+The file is JSON: `run`, `user`, `password` and `ca` (the run's CA certificate, relative to the
+file); the session then speaks TLS, checks the world's certificate against that CA and logs in
+as `user` (zenoh's transport/link/tls and transport/auth/usrpwd settings).
+
 1. open a zenoh session in client mode, connected to the world's endpoint, scouting off;
 2. subscribe to its ack, result and turn keys and to world/event, declare the liveliness
    token alive/robot/<robot>, then `get` the attach key with an AttachRequest;
@@ -15,13 +25,15 @@ JSON Schemas come from `mhrc schema`):
 Policy: a robot that can navigate visits the furniture in turn (first the surfaces a teammate
 asked it to explore) and reports what it saw there to alice (or whoever asked) with
 `communicate`; anything else it cannot do, it replaces by wait().
-Exit status: 0 when the episode ended, 1 on an error (rejected attach or action, timeout).
+Exit status: 0 when the episode ended, 1 on an error (no world, rejected attach or action, timeout),
+2 on bad arguments (a tls/ endpoint without credentials, a credentials file that cannot be read).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import queue
 import re
 import signal
@@ -53,6 +65,10 @@ class Stop(Exception):
 
 class Failure(Exception):
     """Something the agent cannot go on from."""
+
+
+class Usage(Exception):
+    """Arguments that cannot work (exit 2)."""
 
 
 # --------------------------------------------------------------------------- the bus side
@@ -115,21 +131,37 @@ class Mailbox:
         return True
 
 
-def zenoh_config(connect: str) -> zenoh.Config:
+def read_credentials(path: str) -> Json:
+    """A participant's credentials file (`mhrc up` writes runs/RUN/credentials/ROBOT.json), its CA made absolute."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            creds = json.load(f)
+        creds["ca"] = os.path.join(os.path.dirname(os.path.abspath(path)), creds["ca"])
+        return {k: creds[k] for k in ("run", "user", "password", "ca")}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise Usage(f"--credentials {path}: not a credentials file ({type(exc).__name__}: {exc})") from None
+
+
+def zenoh_config(connect: str, creds: Json | None = None) -> zenoh.Config:
     conf = zenoh.Config()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([connect]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("transport/link/tx/lease", "2000")  # a hung agent is detached after 2 s, not 10
+    if creds is not None:  # TLS to the world, checked against the run's CA, and a login
+        conf.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(creds["ca"]))
+        conf.insert_json5("transport/link/tls/verify_name_on_connect", "true")
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(creds["user"]))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(creds["password"]))
     return conf
 
 
-def open_session(connect: str, timeout: float) -> zenoh.Session:
+def open_session(connect: str, timeout: float, creds: Json | None = None) -> zenoh.Session:
     """Client session to the world's endpoint, retrying while the world starts up."""
     deadline = time.monotonic() + timeout
     while True:
         try:
-            return zenoh.open(zenoh_config(connect))
+            return zenoh.open(zenoh_config(connect, creds))
         except zenoh.ZError:
             if time.monotonic() >= deadline:
                 raise Failure(f"cannot connect to {connect} within {timeout:.0f} s") from None
@@ -340,8 +372,14 @@ class ExplorerPolicy:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--connect", required=True, help="the world's endpoint, e.g. tcp/127.0.0.1:7447")
-    ap.add_argument("--run", required=True, help="the world's run id")
+    ap.add_argument("--run", default=None, help="the world's run id (default: the credentials' run)")
     ap.add_argument("--robot", required=True, help="alice, bob or david")
+    ap.add_argument(
+        "--credentials",
+        default=os.environ.get("MHRC_CREDENTIALS"),
+        help="this robot's credentials file, for a secured world (tls/ endpoint): runs/RUN/credentials/ROBOT.json; "
+        "default $MHRC_CREDENTIALS",
+    )
     ap.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
     ap.add_argument("--step-timeout", type=float, default=300.0, help="seconds to wait for a turn or a result")
     args = ap.parse_args(argv)
@@ -350,10 +388,27 @@ def main(argv: list[str] | None = None) -> int:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_term)
-    session = open_session(args.connect, args.attach_timeout)
+    try:
+        creds = None if args.credentials is None else read_credentials(args.credentials)
+        if creds is None and args.connect.startswith("tls/"):
+            raise Usage(f"--credentials: {args.connect} is a secured world; pass this robot's credentials file")
+        run = args.run or (creds or {}).get("run")
+        if run is None:
+            raise Usage("--run: the world's run id is needed (or --credentials, which names it)")
+    except Usage as exc:
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    print(f"waiting for the world at {args.connect} (up to {args.attach_timeout:g} s)", file=sys.stderr, flush=True)
+    try:
+        session = open_session(args.connect, args.attach_timeout, creds)
+    except Failure as exc:
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        return 1
+    except KeyboardInterrupt:
+        return 130
     agent = None
     try:
-        agent = Agent(session, args.run, args.robot, args.step_timeout)
+        agent = Agent(session, run, args.robot, args.step_timeout)
         try:
             agent.run(args.attach_timeout)
         except Stop as exc:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -87,8 +88,12 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     ]
     assert json.loads(first) in rows_c  # the finished row is kept as it was
     assert _stable(rows_c)[json.loads(first)["key"]] == _stable(rows_a)[json.loads(first)["key"]]
-    for other in ({"ablation": "no_mobile"}, {"aids": ("goal_map",)}, {"history_cap": 9000}):
-        with pytest.raises(ConfigError, match="--resume needs the same"):
+    for other, differs in (
+        ({"ablation": "no_mobile"}, "--ablation was 'none', now 'no_mobile'"),
+        ({"aids": ("goal_map",)}, "--aids was 'paper', now 'aids:goal_map'"),
+        ({"history_cap": 9000}, "--history-cap was None, now 9000"),
+    ):
+        with pytest.raises(ConfigError, match=f"holds another evaluation: {re.escape(differs)}$"):
             asyncio.run(
                 evaluate(
                     EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2, **other),
@@ -394,7 +399,7 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
         assert (r["parse_failures"], r["llm_unreachable"], r["rejected_actions"], r["valid"]) == (1, 0, 0, True)
         assert (r["prompt_tokens"], r["completion_tokens"]) == (6 * 50, 6 * 9)
     summary = (tmp_path / "ev" / "summary.md").read_text()
-    assert "3 episodes, 2 valid, 1 invalid" in summary and "1 invalid episode(s) left out" in summary
+    assert "3 episodes, 2 valid, 1 invalid" in summary and "1 invalid episode left out" in summary
     assert (
         "- pack_objects/kitchen/4/0 (openai:test-model · ablation none · aids:goal_map · history cap 50000 · horizon 2): the model was unreachable"
         in summary
@@ -463,6 +468,11 @@ def test_eval_names_every_file_it_wrote_and_a_resume_counts_the_earlier_episodes
     written = ["episodes.jsonl", "summary.md", "summary.csv", "summary.html"]
     assert last.startswith("done in") and all(str(Path("ev") / name) in last for name in written), last
     assert all((tmp_path / "ev" / name).exists() for name in written)
+    # stderr is a pipe (as in CI, nohup, | tee): one line per finished episode, its key, result, TS and count
+    (row,) = _rows(tmp_path / "ev")
+    result = "solved" if row["success"] else f"not solved (PS {row['partial_success']:.2f})"
+    assert f"\npack_objects/kitchen/3/0: {result}, TS {row['temporal_steps']} (1/1)\n" in first.stderr, first.stderr
+    assert "1 worker," in first.stderr and "(s)" not in first.stderr
     # a resume of the finished grid: the totals are the grid's, not "0/0"
     again = _mhrc(*SMALL_ARGS, "--out", "ev", "--resume", cwd=tmp_path)
     assert again.returncode == 0, again.stderr[-2000:]
@@ -481,15 +491,6 @@ def test_eval_names_every_file_it_wrote_and_a_resume_counts_the_earlier_episodes
             and "Traceback" not in refused.stderr
         ), refused.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "r.csv", "r.html", "r.md"]
-
-
-@pytest.mark.slow
-def test_a_model_server_that_is_down_stops_the_evaluation_without_claiming_finished_rows(tmp_path: Path) -> None:
-    down = f"http://127.0.0.1:{free_port('127.0.0.1')}/v1"  # nothing listens there
-    out = _mhrc(*SMALL_ARGS, "--llm", "openai:x", "--base-url", down, "--concurrency", "1", "--out", "ev", cwd=tmp_path)
-    assert out.returncode == 1, out.stderr[-2000:]
-    assert "no episode finished" in out.stderr and "kept in" not in out.stderr, out.stderr[-2000:]
-    assert "--resume --out ev" in out.stderr and not (tmp_path / "ev" / "episodes.jsonl").exists()
 
 
 @pytest.mark.slow

@@ -293,6 +293,6 @@ def test_a_real_grid_of_two_teams(tmp_path: Path) -> None:
         changed = {k for k in now if now[k] != before[k]}
         assert changed == (set() if key == "pack_objects/kitchen/3/0" else {"team"}), changed
     # --resume with other teams is another evaluation
-    with pytest.raises(ConfigError, match="--resume needs the same"):
+    with pytest.raises(ConfigError, match="holds another evaluation: --team was"):
         asyncio.run(evaluate(EvalSpec(**TINY), out, resume=True))  # type: ignore[arg-type]
     assert asyncio.run(evaluate(spec, out, resume=True, workers=1)) == list(rows.values())

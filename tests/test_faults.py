@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -192,6 +193,11 @@ def test_ctrl_c_on_up_processes_leaves_a_complete_trace(tmp_path: Path) -> None:
     _interrupt(proc, 1)
     err = _stderr(tmp_path)
     assert proc.returncode == 130 and "Traceback" not in err, err[-3000:]
+    # said once, by the parent (the world's and agents' processes ignore Ctrl-C and are stopped by it)
+    said = [line for line in err.splitlines() if line.strip() and not line.startswith("credentials in")]
+    assert len(said) == 1 and re.fullmatch(
+        rf"interrupted at tick \d+, the trace is at {re.escape(str(trace))}", said[0]
+    ), err
     lines = trace.read_text().splitlines()
     done = [json.loads(line)["msg"] for line in lines if '"episode_done"' in line]
     assert done and done[-1]["reason"] == "stopped", "the trace lacks the final episode_done"

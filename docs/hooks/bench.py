@@ -11,6 +11,8 @@ the site always shows what the last benchmark run wrote:
 it (list items by index: `models.0.runs`). A value renders inline. A dict or list renders as
 a table, one row per member that is a dict; without columns, every scalar field of the rows
 is a column; with columns (`| FIELD` or `| HEADER=FIELD`, dotted paths inside a row), those.
+A key becomes a header people read (`heading`: `result_ms_p50` is "result p50 (ms)"); a HEADER
+given in the placeholder is kept as written.
 A dict with no dict member is one record: one row of the columns, or without them a table of
 field and value.
 Each table says which file it came from. A placeholder that names a missing file, path or
@@ -52,6 +54,21 @@ def fmt(value: Any) -> str:
     return str(value).replace("|", "\\|").replace("\n", " ")
 
 
+WORDS = {"succ": "Succ", "ps": "PS", "ts": "TS", "as": "AS", "llm": "LLM"}  # the metrics as the pages write them
+UNITS = {"ms": "ms", "s": "s"}
+STATS = ("p50", "p99", "mean", "min", "max")
+
+
+def heading(name: str) -> str:
+    """A column header for a JSON key, as people read it: `result_ms_p50` -> `result p50 (ms)`,
+    `llm_calls` -> `LLM calls`, `succ` -> `Succ` (headers a placeholder names itself are kept)."""
+    parts = name.split("_")
+    units = [p for p in parts if p in UNITS]
+    words = [WORDS.get(p, p) for p in parts if p not in UNITS and p not in STATS]
+    words += [p for p in parts if p in STATS]
+    return " ".join(words) + (f" ({UNITS[units[0]]})" if units else "")
+
+
 def lookup(data: Any, path: str, where: str) -> Any:
     """The member at a dotted path (list items by index); None where the path passes a null."""
     node = data
@@ -74,16 +91,16 @@ def table(node: Any, columns: list[tuple[str, str]], label: str, where: str) -> 
     if not rows and isinstance(node, dict):  # one record: a row of the chosen fields, or field | value
         if columns:
             return table([node], columns, label, where)
-        return "\n".join(["| field | value |", "| --- | --- |", *(f"| {k} | {fmt(v)} |" for k, v in items)])
+        return "\n".join(["| field | value |", "| --- | --- |", *(f"| {heading(k)} | {fmt(v)} |" for k, v in items)])
     if not rows:
         raise BenchError(f"{where}: nothing to tabulate (no member is an object)")
     if not columns:
         names: dict[str, None] = {}
         for _, row in rows:
             names.update({k: None for k, v in row.items() if not isinstance(v, dict)})
-        columns = [(name, name) for name in names]
+        columns = [(heading(name), name) for name in names]
     keyed = isinstance(node, dict)
-    header = ([label] if keyed else []) + [h for h, _ in columns]
+    header = ([heading(label)] if keyed else []) + [h for h, _ in columns]
     lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
     for key, row in rows:
         cells = [fmt(lookup(row, field, f"{where} row {key!r}")) for _, field in columns]
@@ -105,7 +122,7 @@ def render(spec: str, results: Path = RESULTS) -> str:
         if cols:
             raise BenchError(f"{where}: {path!r} is a value, not a table; drop the columns")
         return fmt(node)
-    columns = [(h.strip(), f.strip()) if sep else (c, c) for c in cols for h, sep, f in [c.partition("=")]]
+    columns = [(h.strip(), f.strip()) if sep else (heading(c), c) for c in cols for h, sep, f in [c.partition("=")]]
     label = path.strip().split(".")[-1] if path.strip() else ""
     return f"{table(node, columns, label, where)}\n\n*From `{where}`{f' (`{path.strip()}`)' if path.strip() else ''}.*"
 

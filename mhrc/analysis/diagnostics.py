@@ -36,8 +36,8 @@ messages of one trace (`mhrc.core.records.read_records`); nothing is re-simulate
   messages_read: distinct messages delivered into their receiver's observation new_messages
   (a message sent in the last tick may never be).
 - steps_above_bound: TS (`mhrc.analysis.metrics.from_trace`'s temporal_steps, as the row's TS) minus the
-  episode's lower bound (`episode_started`); None when either is unknown. Negative only when the
-  horizon is below the bound (the episode was cut off before it could finish).
+  episode's lower bound (`episode_started`); None when either is unknown, and when the horizon
+  is below the bound (the episode was cut off before it could finish: there is no excess to tell).
 
 Episode rows (`episodes.jsonl`) carry these as flat columns prefixed `diag_` (`columns()`);
 rows written before diagnostics existed lack them, and summaries treat them as unknown.
@@ -276,9 +276,10 @@ def diagnose(rows: Rows, metrics: EpisodeMetrics | None = None) -> Diagnostics:
     bound = started[0].lower_bound if started else None
     if bound is not None:
         try:
-            d.steps_above_bound = (metrics or from_trace(lines)).temporal_steps - bound
+            excess = (metrics or from_trace(lines)).temporal_steps - bound
         except TraceError:
-            d.steps_above_bound = None
+            excess = None
+        d.steps_above_bound = excess if excess is not None and excess >= 0 else None  # below: cut off, not fast
     return d
 
 

@@ -25,6 +25,7 @@ from mhrc.core import schema as schema_mod
 from mhrc.core.bus import Bus
 from mhrc.core.endpoints import endpoint
 from mhrc.core.keys import check_id, new_run_id
+from mhrc.core.plural import counted
 from mhrc.core.security import MIN_DAYS, SecurityError, make_run_credentials
 from mhrc.core.team import PAPER_TEAM, TeamSpec
 
@@ -147,7 +148,7 @@ def credentials_(
         if isinstance(exc, OSError):
             raise click.UsageError(f"--out: cannot write the credentials into {out}: {exc.strerror or exc}") from None
         raise click.UsageError(str(exc)) from None
-    click.echo(f"run {run}: credentials in {out} (valid {days:g} days; keep them private)", err=True)
+    click.echo(f"run {run}: credentials in {out} (valid {counted(days, 'day')}; keep them private)", err=True)
     for user, path in files.items():
         click.echo(f"  {user}: {path}", err=True)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -26,8 +27,9 @@ from mhrc.cli.options import (
 from mhrc.cli.running import run_command
 from mhrc.core import logs
 from mhrc.core.fidelity import NOISE
+from mhrc.core.plural import counted
 from mhrc.core.trace import unwritable
-from mhrc.run.config import SCHEDULES, ConfigError
+from mhrc.run.config import SCHEDULES, ConfigError, ModelServerDown, check_model_servers
 
 
 def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
@@ -48,6 +50,27 @@ def _teams(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -
         return tuple(resolve_team(v) for v in value)
     except TeamError as exc:
         raise click.UsageError(str(exc)) from None
+
+
+def _setting(spec: Any) -> str:
+    """The fidelity, the noise when off, the schedule and the scenario: what sets the grid apart from the paper's."""
+    scenario = spec.scenario()[0]
+    return (
+        f"fidelity {spec.fidelity}"
+        + (", noise off" if spec.noise == "off" else "")
+        + f", {spec.schedule} schedule"
+        + (f", scenario {scenario}: not the paper's" if scenario else "")
+    )
+
+
+def _ended(row: dict[str, Any] | None, t: Any) -> str:
+    """One episode that ended, in a line: its key and result (a row), or the last one given up (no row)."""
+    if row is None:
+        return f"{t.given_up[-1]}: given up (errors.jsonl)"
+    if not row.get("valid", True):
+        return f"{row['key']}: invalid ({row.get('invalid_reason')}), left out of the summary"
+    result = "solved" if row["success"] else f"not solved (PS {row['partial_success']:.2f})"
+    return f"{row['key']}: {result}, TS {row['temporal_steps']}"
 
 
 @click.command("eval")
@@ -230,6 +253,7 @@ def eval_(
     )
     out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
     console = Console(stderr=True)
+    console.soft_wrap = not console.is_terminal  # a log file's lines are not cut at 80 columns
     progress = Progress(
         TextColumn("{task.description}"),
         BarColumn(),
@@ -251,7 +275,10 @@ def eval_(
         progress.update(
             bar, total=t.before + t.total, completed=t.before + t.done, description=f"{spec.method} [{rate}]"
         )
-        if row is not None and not row.get("valid", True):
+        if not console.is_terminal:  # CI, nohup, | tee: no bar to watch, so one line per finished episode
+            if row is not None or t.done:  # (the first call, before any episode ended, has neither)
+                progress.console.print(f"{_ended(row, t)} ({t.before + t.done}/{t.before + t.total})", markup=False)
+        elif row is not None and not row.get("valid", True):
             progress.console.print(
                 f"[red]invalid[/]: {row['key']} ({row.get('invalid_reason')}); left out of the summary"
             )
@@ -268,10 +295,19 @@ def eval_(
     if dry_run:
         for job in plan.jobs:
             click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config.seed}")
-        click.echo(f"{n_jobs} episodes ({spec.fidelity} fidelity{', noise off' if spec.noise == 'off' else ''})")
+        click.echo(f"{counted(n_jobs, 'episode')} ({_setting(spec)})")
         return
+    try:  # --out first, and nothing created: a mistyped --resume path must not start (and pay for) a whole grid
+        check_out(out, plan, resume)
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    try:  # a model server nothing listens at: one line now, as mhrc up says it, not after every episode's retries
+        for job in {j.config.team.name: j for j in plan.jobs}.values():
+            check_model_servers(job.config, job.config.robots)
+    except ModelServerDown as exc:
+        click.echo(f"mhrc eval: {exc}", err=True)
+        sys.exit(2)
     try:
-        check_out(out, plan, resume)  # before the model server is asked or a worker starts
         if ray_address is not None:  # a missing extra, an old Ray, an address nothing answers at: one line, now
             from mhrc.eval.cluster import import_ray, probe
 
@@ -293,12 +329,11 @@ def eval_(
         specs = plan.jobs[0].config.robot_specs().values() if spec.llm else [None]
         concurrency = asyncio.run(episodes_at_once(list(specs), spec.base_url))
         options = dataclasses.replace(options, concurrency=concurrency)
-    where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {options.processes} worker(s)"
+    where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {counted(options.processes, 'worker')}"
     console.print(
-        f"evaluating {spec.method} (ablation {ablation}, fidelity "
-        f"{spec.fidelity}{', noise off' if spec.noise == 'off' else ''}, {spec.mode} replies"
-        f"{'' if not teams else ', teams ' + ', '.join(t.name for t in spec.teams)}) on {n_jobs} episodes "
-        f"into {out} {where}, {concurrency} episode(s) at once each"
+        f"evaluating {spec.method} (ablation {ablation}, {_setting(spec)}, {spec.mode} replies"
+        f"{'' if not teams else ', teams ' + ', '.join(t.name for t in spec.teams)}) on {counted(n_jobs, 'episode')} "
+        f"into {out} {where}, {counted(concurrency, 'episode')} at once each"
     )
     t0 = time.perf_counter()
     with progress:

@@ -34,6 +34,25 @@ SCHEDULE_HELP = (
     "the horizon is a budget of HORIZON x 8 simulated seconds and TS is the makespan in such steps)."
 )
 VIDEO_HELP = "Render the episode's video to FILE (.mp4 or .gif) with PyBullet's CPU renderer: a few frames per step, each captioned with every robot's action."
+
+
+def _video_size(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, int]:
+    """WIDTHxHEIGHT, checked before anything runs."""
+    width, sep, height = value.lower().partition("x")
+    if not (sep and width.isdigit() and height.isdigit()) or min(int(width), int(height)) < 64:
+        raise click.BadParameter(f"expected WIDTHxHEIGHT, each at least 64 (e.g. 1280x960), got {value!r}")
+    return int(width), int(height)
+
+
+VIDEO_SIZE = click.option(
+    "--video-size",
+    default="640x480",
+    show_default=True,
+    metavar="WxH",
+    callback=_video_size,
+    help="The video's frame size. At 640x480 the whole house fits and an object is a few pixels wide; 1280x960 "
+    "shows the objects clearly, at about four times the render time (even numbers for .mp4).",
+)
 TIME_SCALE_HELP = "With --schedule async: simulated seconds per wall second (1: real time); 0: as fast as possible."
 EVENTS_HELP = (
     "A scenario: a JSON list of events the world applies during the episode, each with the tick it fires at and a kind "
@@ -168,7 +187,13 @@ def rerun_option(
 
 
 LOG_LEVEL = click.option(
-    "--log-level", default="warning", show_default=True, type=click.Choice(["debug", "info", "warning", "error"])
+    "--log-level",
+    default="warning",
+    show_default=True,
+    type=click.Choice(["debug", "info", "warning", "error"]),
+    help="How much of the participants' log to print on stderr (structlog lines with run, robot and tick): "
+    "debug and info also show each step's inner workings; default: only what went wrong. $MHRC_LOG_LEVEL sets it "
+    "for commands without the option.",
 )
 INSECURE_HELP = "The open tcp bus: no TLS, no login, no access control (anyone can act as any robot)."
 
@@ -292,3 +317,30 @@ def episode_config(**values: Any) -> EpisodeConfig:
         return EpisodeConfig.build(**values).resolved()
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
+
+
+OVERWRITE = click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace the trace (and its report, trace.html) of an earlier episode at the same --run or --trace; "
+    "without it, such a run is refused and the earlier trace kept.",
+)
+
+
+def fresh_trace(command: str, cfg: EpisodeConfig, overwrite: bool, given_trace: bool) -> None:
+    """Refuse (one line, exit 2) a run whose trace file exists already, so that a reused --run never
+    destroys an earlier episode; with --overwrite, remove that trace and the report made of it."""
+    trace = cfg.trace
+    if trace is None or not trace.exists():
+        return
+    if not overwrite:
+        option = f"--trace {trace}" if given_trace else f"--run {cfg.run}"
+        click.echo(
+            f"mhrc {command}: {option}: {trace} holds an earlier episode's trace; choose another "
+            + ("--trace" if given_trace else "--run (or leave it out for a new one)")
+            + ", or pass --overwrite to replace it",
+            err=True,
+        )
+        raise SystemExit(2)
+    for stale in (trace, trace.with_suffix(".html")):  # the report of the replaced trace describes nothing any more
+        stale.unlink(missing_ok=True)

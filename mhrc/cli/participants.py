@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import shlex
 import sys
 from collections.abc import Callable
@@ -21,10 +22,13 @@ from mhrc.cli.options import (
     AIDS_HELP,
     INSECURE_HELP,
     LOG_LEVEL,
+    OVERWRITE,
     VIDEO_HELP,
+    VIDEO_SIZE,
     credentials_option,
     episode_config,
     episode_options,
+    fresh_trace,
     llm_options,
     load_credentials,
     rerun_option,
@@ -63,7 +67,13 @@ from mhrc.run.config import ConfigError, EpisodeConfig
     help="--secure (the default): fresh credentials in runs/RUN/credentials/ (TLS, a login per participant, "
     "access control: an agent can act only as its own robot); --insecure: the open tcp bus, for loopback experiments.",
 )
-@click.option("--json", "as_json", is_flag=True, help="Print the final metrics as JSON on stdout.")
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print the run id, the trace path, why the episode ended and the final metrics as one JSON object on stdout "
+    "(docs/quickstart.md names every key).",
+)
 @click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
 @click.option(
     "--video",
@@ -72,6 +82,8 @@ from mhrc.run.config import ConfigError, EpisodeConfig
     help=VIDEO_HELP + " Rendered from the trace when the episode ends, so the run itself is not slowed.",
 )
 @rerun_option()
+@VIDEO_SIZE
+@OVERWRITE
 @llm_options
 def up(
     processes: bool,
@@ -80,8 +92,10 @@ def up(
     as_json: bool,
     log_level: str,
     video: Path | None,
+    video_size: tuple[int, int],
     secure: bool,
     rerun: Any,
+    overwrite: bool,
     **values: Any,
 ) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
@@ -106,9 +120,11 @@ def up(
     robots = tuple(r for r in cfg.robots if r not in external)
     try:
         check_model_servers(cfg, robots)  # before anything is written or started
-    except ModelServerDown as exc:
+        cfg.check_replays(robots)
+    except (ModelServerDown, ConfigError) as exc:
         click.echo(f"mhrc up: {exc}", err=True)
         sys.exit(2)
+    fresh_trace("up", cfg, overwrite, values.get("trace") is not None)  # before the credentials are made anew
     try:  # a port taken is one line before anything is announced or written (credentials included)
         check_listen(cfg.host, cfg.port, "tls" if secure else "tcp")
     except ListenError as exc:
@@ -145,7 +161,10 @@ def up(
     from mhrc.core.team import TeamError
 
     try:
-        done = run_command(lambda: runner(cfg, observe=observe, robots=robots))
+        done = run_command(
+            lambda: runner(cfg, observe=observe, robots=robots),
+            interrupted=lambda: _interrupted(cfg.trace, printer),
+        )
     except (
         AgentError,
         LLMError,
@@ -168,13 +187,33 @@ def up(
         printer.close()  # what arrived late for its tick, then nothing more: the table is the last line
     console.print(summary_table(done, _recovery(cfg.trace) if cfg.events is not None else None, _lost(cfg.trace)))
     if video is not None and cfg.trace is not None:
-        path = render_video_to(cfg.trace, video)
+        path = render_video_to(cfg.trace, video, video_size)
         if not quiet:
             console.print(f"video {path}")
-    if as_json:
-        click.echo(json.dumps(done.metrics.model_dump()))
+    if as_json:  # the metrics, and which run and trace they are of (docs/quickstart.md lists every key)
+        trace = None if cfg.trace is None else str(cfg.trace)
+        click.echo(json.dumps({"run": done.run, "reason": done.reason, "trace": trace, **done.metrics.model_dump()}))
     if live is not None:
         keep_serving(live.viewer)
+
+
+def _interrupted(trace: Path | None, printer: Any) -> str:
+    """The one line of an interrupted `mhrc up`: the last tick the world closed, and where its trace is."""
+    from mhrc.core.protocol import EpisodeStarted, TickClosed
+    from mhrc.core.records import messages, read_records
+
+    if printer is not None:
+        printer.mute()  # what the episode's end still sends (robots leaving) is not news after Ctrl-C
+    try:
+        records = read_records(trace) if trace is not None else []
+    except (ValueError, OSError):
+        records = []
+    if not messages(records, EpisodeStarted):
+        when = "before the episode started"
+    else:
+        when = f"at tick {max((t.tick for t in messages(records, TickClosed)), default=-1) + 1}"
+    where = f"the trace is at {trace}" if trace is not None and trace.exists() else "no trace was written"
+    return f"interrupted {when}, {where}"
 
 
 def _recovery(trace: Path | None) -> list[dict[str, Any]] | None:
@@ -233,8 +272,15 @@ def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None 
     "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control."
 )
 @click.option("--insecure", is_flag=True, help=INSECURE_HELP)
+@OVERWRITE
 def world(
-    log_level: str, start_timeout: float | None, quiet: bool, credentials: Path | None, insecure: bool, **values: Any
+    log_level: str,
+    start_timeout: float | None,
+    quiet: bool,
+    credentials: Path | None,
+    insecure: bool,
+    overwrite: bool,
+    **values: Any,
 ) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
     from mhrc.run.console import ProgressPrinter
@@ -248,6 +294,7 @@ def world(
         if values.get("run") is None:
             values["run"] = creds.run
     cfg = episode_config(start_timeout=start_timeout, credentials=credentials if creds is not None else None, **values)
+    fresh_trace("world", cfg, overwrite, values.get("trace") is not None)
     if quiet:
         _serve_world(cfg)
         return
@@ -324,7 +371,10 @@ def agent(
     options = cfg.policy_options(spec)
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError
+    from mhrc.run.lifeline import PARENT_ENV
 
+    if not os.environ.get(PARENT_ENV):  # said by hand only: a child of mhrc up --processes has its parent's lines
+        click.echo(f"waiting for the world at {connect} (up to {attach_timeout:g} s)", err=True)
     try:
         done = run_command(
             lambda: attach_agent(

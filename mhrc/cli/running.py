@@ -13,8 +13,9 @@ from typing import Any, NoReturn, TypeVar
 
 import click
 
+from mhrc.core import logs
 from mhrc.core.endpoints import BusError
-from mhrc.run.lifeline import die_with_parent
+from mhrc.run.lifeline import PARENT_ENV, die_with_parent
 
 T = TypeVar("T")
 
@@ -39,23 +40,36 @@ def _plain_signals(loop: asyncio.AbstractEventLoop) -> None:
     the signal wakeup fd" and a traceback."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.remove_signal_handler(sig)  # also clears the wakeup fd once none is left
-        signal.signal(sig, _quit_on_signal)
+        if sig != signal.SIGINT or not os.environ.get(PARENT_ENV):  # a child keeps ignoring Ctrl-C
+            signal.signal(sig, _quit_on_signal)
 
 
-def run_command(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str | Callable[[], str] | None = None) -> T:
+def run_command(
+    coro_fn: Callable[[], Coroutine[Any, Any, T]],
+    *,
+    stopping: str | Callable[[], str] | None = None,
+    interrupted: Callable[[], str] | None = None,
+) -> T:
     """Run a coroutine; SIGTERM cancels it like Ctrl-C, so every session closes in `finally`.
     A child of `mhrc up --processes` or `mhrc eval` gets SIGTERM when its parent dies.
 
     The first Ctrl-C cancels the run (saying `stopping`, what is being done, when given: a
     callable is asked at that moment); a second one quits at once: the children go with this
-    process (mhrc.run.lifeline), never a hang."""
+    process (mhrc.run.lifeline), never a hang. Once interrupted, one line: `interrupted()` when
+    given (where the run's work is), else "interrupted"; a child of `mhrc up --processes` or
+    `mhrc eval` says nothing (its parent, interrupted with it, says it once)."""
     die_with_parent()
 
     async def main() -> T:
         task = asyncio.current_task()
         loop = asyncio.get_running_loop()
         if task is not None:
-            loop.add_signal_handler(signal.SIGTERM, task.cancel)
+
+            def on_term() -> None:
+                logs.hush()
+                task.cancel()
+
+            loop.add_signal_handler(signal.SIGTERM, on_term)
             interrupts = 0
 
             def on_interrupt() -> None:
@@ -64,13 +78,15 @@ def run_command(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str 
                 if interrupts > 1:
                     sys.stderr.write("interrupted again: quitting at once\n")
                     quit_now(130)
+                logs.hush()  # the others leave because of this very Ctrl-C: not news
                 said = stopping() if callable(stopping) else stopping
                 if said:
                     sys.stderr.write(f"\ninterrupted: {said} (Ctrl-C again to quit at once)\n")
                     sys.stderr.flush()
                 task.cancel()
 
-            loop.add_signal_handler(signal.SIGINT, on_interrupt)
+            if not os.environ.get(PARENT_ENV):  # a child ignores Ctrl-C: its parent stops it (SIGTERM)
+                loop.add_signal_handler(signal.SIGINT, on_interrupt)
         try:
             return await coro_fn()
         finally:
@@ -81,7 +97,8 @@ def run_command(coro_fn: Callable[[], Coroutine[Any, Any, T]], *, stopping: str 
     try:
         return asyncio.run(main())
     except (KeyboardInterrupt, asyncio.CancelledError):
-        click.echo("interrupted", err=True)
+        if not os.environ.get(PARENT_ENV):
+            click.echo(interrupted() if interrupted is not None else "interrupted", err=True)
         sys.exit(130)
     except BusError as exc:  # the bus cannot start (port taken, refused): one line that says what to do
         click.echo(f"mhrc: {exc}", err=True)

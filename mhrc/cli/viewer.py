@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from mhrc.cli.options import VIDEO_HELP, rerun_option
+from mhrc.cli.options import VIDEO_HELP, VIDEO_SIZE, rerun_option
 
 
 @click.command()
@@ -61,7 +61,8 @@ def render(scenes_: tuple[str, ...], task: str, seed: int, n_objects: int, out: 
 )
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None, help=VIDEO_HELP)
 @rerun_option(help="Make the episode's Rerun recording (pip install 'mhrc[rerun]'): OUT.rrd, or `serve`, `spawn`.")
-def show(run_or_trace: Path, out: Path | None, video: Path | None, rerun: Any) -> None:
+@VIDEO_SIZE
+def show(run_or_trace: Path, out: Path | None, video: Path | None, rerun: Any, video_size: tuple[int, int]) -> None:
     """Write one self-contained HTML report of an episode (map, robot lanes, messages, failures)
     from RUN_OR_TRACE: a trace file, or a run directory holding trace.jsonl. Prints its path.
     With --video, render the episode's video instead, with --rerun its Rerun recording (or as well, with --out)."""
@@ -82,14 +83,14 @@ def show(run_or_trace: Path, out: Path | None, video: Path | None, rerun: Any) -
         click.echo(str(path))
     if video is not None:
         trace = run_or_trace / "trace.jsonl" if run_or_trace.is_dir() else run_or_trace
-        click.echo(str(render_video_to(trace, video)))
+        click.echo(str(render_video_to(trace, video, video_size)))
     if rerun is not None:
         from mhrc.cli.rerun_view import show_rerun
 
         show_rerun(run_or_trace, rerun)
 
 
-def render_video_to(trace: Path, video: Path) -> Path:
+def render_video_to(trace: Path, video: Path, size: tuple[int, int] = (640, 480)) -> Path:
     """Render `trace` to `video` with a progress bar; one clear line and exit 2 on a bad input."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -102,7 +103,11 @@ def render_video_to(trace: Path, video: Path) -> Path:
         task = bar.add_task("frames", total=None)
         try:
             info = render_video(
-                trace, video, progress=lambda done, total: bar.update(task, completed=done, total=total)
+                trace,
+                video,
+                width=size[0],
+                height=size[1],
+                progress=lambda done, total: bar.update(task, completed=done, total=total),
             )
         except (ValueError, OSError) as exc:  # VideoError is a ValueError
             bar.stop()

@@ -308,6 +308,9 @@ class Bus:
             if asyncio.iscoroutine(result):
                 self.spawn(result, f"handle {sample.key}")
         except Exception as exc:
+            if self._closed:  # the session closes under it (the run is being stopped): nothing is lost that mattered
+                log.debug("bus handler ended by the closing session", key=sample.key, error=str(exc))
+                return
             log.exception("bus handler failed", key=sample.key, error=str(exc))
 
 

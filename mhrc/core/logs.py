@@ -12,12 +12,15 @@ from structlog.typing import EventDict, WrappedLogger
 from mhrc.core.printable import printable
 
 LEVELS = ("debug", "info", "warning", "error")
+_level = "warning"  # the level configured last
 
 
 def configure(level: str = "warning") -> None:
     """Route structlog to stderr at `level` (debug, info, warning, error)."""
+    global _level
     if level not in LEVELS:
         raise ValueError(f"log level must be one of {', '.join(LEVELS)}, not {level!r}")
+    _level = level
     structlog.configure(
         processors=[
             structlog.contextvars.merge_contextvars,
@@ -37,6 +40,14 @@ def inert_values(logger: WrappedLogger, name: str, event: EventDict) -> EventDic
     """Every text of a log line without control characters (mhrc.core.printable): a participant's
     agent id, goal or a reason quoting its payload cannot drive the operator's terminal."""
     return {k: printable(v) if isinstance(v, str) else v for k, v in event.items()}
+
+
+def hush() -> None:
+    """A run being stopped (Ctrl-C, SIGTERM): at the default level, no more warnings about the
+    other participants leaving, which they do because of the same stop; errors still show, and a
+    --log-level below warning is kept as asked."""
+    if _level == "warning":
+        configure("error")
 
 
 class Throttle:

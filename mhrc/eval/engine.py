@@ -41,7 +41,7 @@ from mhrc.eval.records import EvalManifest, EvalRow, Row, read_manifest, read_ro
 from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import merge_runs
 from mhrc.eval.scoring import Scored, score, write_episode_report
-from mhrc.eval.spec import EvalSpec, Plan
+from mhrc.eval.spec import EvalSpec, Plan, identity_difference
 from mhrc.eval.summaries import write_summaries
 from mhrc.run.config import ConfigError
 
@@ -113,6 +113,7 @@ class Tally:
     by_key: dict[str, dict[str, Any]] = field(default_factory=dict)
     before: int = 0
     before_succeeded: int = 0
+    given_up: list[str] = field(default_factory=list)  # keys of the episodes given up (errors.jsonl), in order
 
 
 ProgressHook = Callable[[Tally, Row | None], None]
@@ -138,24 +139,24 @@ class Executor(Protocol):
 
 
 def check_out(out: Path, plan: Plan, resume: bool) -> None:
-    """Raise ConfigError naming --out when DIR cannot hold this evaluation (not creatable, or
-    holding another one); creates nothing, so the CLI checks it before anything starts."""
+    """Raise ConfigError naming --out when DIR cannot hold this evaluation (not creatable, holding
+    another one, or, with --resume, holding none: a mistyped path must not start, and pay for, a
+    whole grid); creates nothing, so the CLI checks it before anything starts."""
     if why := unwritable(out, directory=True):
         raise ConfigError(f"--out: {why}")
     manifest = out / "eval.json"
+    if resume and not manifest.is_file():
+        raise ConfigError(
+            f"--resume: {out} holds no evaluation (no {manifest.name}); check the path, or leave out --resume to start one"
+        )
     if out.exists() and any(out.iterdir()):
         if not resume:
             raise ConfigError(
                 f"--out: {out} is not empty; pass --resume to continue that evaluation, or choose another --out"
             )
-        if manifest.exists():
-            before = read_manifest(manifest).identity  # an older manifest's missing fields: what it ran with
-            if before != plan.identity:
-                raise ConfigError(
-                    f"--out: {out} holds an evaluation of {before.model_dump()}, not {plan.identity.model_dump()}; --resume needs the same --llm, "
-                    "--ablation, --horizon, --aids, --noise, --history-cap, --prompts, --structured, "
-                    "--max-tokens, --llm-seed, --schedule, --time-scale and --events"
-                )
+        before = read_manifest(manifest).identity  # an older manifest's missing fields: what it ran with
+        if before != plan.identity:
+            raise ConfigError(f"--resume: {out} holds another evaluation: {identity_difference(before, plan.identity)}")
 
 
 def prepare_out(out: Path, plan: Plan) -> dict[str, Row]:
@@ -288,6 +289,7 @@ async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progre
             if attempts[res.key] <= RETRIES:
                 return job, False, None
             tally.errors += 1
+            tally.given_up.append(res.key)
             with (out / "errors.jsonl").open("a", encoding="utf-8") as f:
                 f.write(json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n")
             tally.done += 1

@@ -136,10 +136,19 @@ def ts_against_bound(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
 
 def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
     """Mean failure diagnostics per episode, grouped bars per method/setting (episodes without diagnostics left out)."""
+    fig = diagnostics_figure(valid)
+    if fig is None:
+        return []
+    return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.analysis.diagnostics)")]
+
+
+def diagnostics_figure(valid: list[dict[str, Any]]) -> Any:
+    """The figure of `diagnostics_by_setting` (None without diagnostics); its legend stands above
+    the axes, where no bar is."""
     stats = [(setting, summarize_diagnostics(bucket)) for setting, bucket in group(valid, *SETTING).items()]
     stats = [(s, d) for s, d in stats if d["known"]]
     if not stats:
-        return []
+        return None
     fig = _figure(7.0, 3.8)
     ax = fig.add_subplot()
     width = 0.8 / len(stats)
@@ -159,8 +168,8 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
         ha="right",
     )
     ax.set(ylabel="mean per episode")
-    ax.legend(fontsize=7, loc="best")
-    return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.analysis.diagnostics)")]
+    ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.02), ncol=2, frameon=False)  # above: over no bar
+    return fig
 
 
 TEAM_PLOTTED = (("succ", "Succ"), ("ts", "TS"), ("as_ticks", "AS"), ("comm_steps", "communication steps"))

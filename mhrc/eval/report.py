@@ -28,6 +28,7 @@ from typing import Any
 import structlog
 
 from mhrc.analysis.metrics import summarize
+from mhrc.core.plural import counted
 from mhrc.eval.paper import PaperMatch, paper_cell
 from mhrc.eval.rows import (
     CI_METRICS,
@@ -69,12 +70,9 @@ COLUMNS = (
 )
 
 
-AS_NOTE = (
-    "AS is the number of steps in which any robot did a non-wait action: the reading set beside the paper's AS, "
-    "because the paper's AS is below its TS in every row of its tables (48.56 of 50 where episodes fail), which a "
-    "sum over three robots cannot be and a per-robot mean reaches only if every robot acts in nearly every step. "
-    "The other readings are columns: AS sum (actions of all robots, wait excluded) and AS/robot (that sum over the "
-    "number of robots); rows written before AS existed show '-'. TS* is the mean lower bound on TS (world/bound.py)."
+AS_NOTE = (  # why AS reads so, at length: docs/evaluation.md, Metrics
+    "AS: the steps in which any robot did a non-wait action, set beside the paper's AS; AS sum and AS/robot are the "
+    "other readings, TS* the mean lower bound on TS (why: docs/evaluation.md#metrics)."
 )
 
 
@@ -116,7 +114,7 @@ def invalid_note(rows: list[dict[str, Any]]) -> list[str]:
     bad = [r for r in rows if not is_valid(r)]
     if not bad:
         return []
-    lines = [f"{len(bad)} invalid episode(s) left out of every table below:"]
+    lines = [f"{counted(len(bad), 'invalid episode')} left out of every table below:"]
     for r in sorted(bad, key=lambda r: (order_key(setting_of(r)), r["key"])):
         lines.append(f"- {r['key']} ({setting_label(setting_of(r))}): {r.get('invalid_reason') or 'invalid'}")
     return lines + [""]
@@ -134,7 +132,7 @@ def markdown(summary: Summary) -> str:
     rows, valid, resamples, seed = summary.rows, summary.valid, summary.resamples, summary.seed
     n_bad = len(rows) - len(valid)
     lines = ["# Evaluation summary", ""]
-    lines.append(f"{len(rows)} episodes, {len(valid)} valid" + (f", {n_bad} invalid" if n_bad else "") + ".")
+    lines.append(f"{counted(len(rows), 'episode')}, {len(valid)} valid" + (f", {n_bad} invalid" if n_bad else "") + ".")
     lines += ["", *invalid_note(rows)]
     if not valid:
         return "\n".join(lines + ["No valid episodes to summarize.", ""])
@@ -322,7 +320,8 @@ def diagnostics_markdown(summary: Summary) -> list[str]:
         if unknown:
             lines += [
                 "",
-                f"{unknown} episode(s) of this setting were recorded before diagnostics existed: their diagnostics "
+                f"{counted(unknown, 'episode')} of this setting {'was' if unknown == 1 else 'were'} recorded before "
+                "diagnostics existed: their diagnostics "
                 "are unknown (n/a), left out of these means, not counted as zero.",
             ]
         lines.append("")

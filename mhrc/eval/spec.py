@@ -26,7 +26,7 @@ from mhrc.eval.paper import PAPER_OBJECTS
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.world.scenario import load_scenario
 
-__all__ = ["EvalIdentity", "EvalSpec", "Plan", "is_paper_team", "team_identity"]
+__all__ = ["EvalIdentity", "EvalSpec", "Plan", "identity_difference", "is_paper_team", "team_identity"]
 
 TEAM_KEY = re.compile(r"[A-Za-z0-9_-]{1,64}")  # a team's name as the first part of its episodes' keys
 
@@ -63,6 +63,26 @@ class EvalIdentity(BaseModel):
     time_scale: float = 0.0
     scenario: str | None = None  # the scenario file's sha256
     teams: tuple[str, ...] = (team_identity(PAPER_TEAM),)  # team_identity of each team, sorted
+
+
+# the option each identity field comes from, where its name is not the field's
+IDENTITY_OPTIONS = {
+    "method": "--llm",
+    "fidelity": "--aids",
+    "mode": "--structured",
+    "scenario": "--events",
+    "teams": "--team",
+}
+
+
+def identity_difference(before: EvalIdentity, now: EvalIdentity) -> str:
+    """What differs between two identities, for a person: each field as its option, with both values."""
+    was, new = before.model_dump(), now.model_dump()
+    return "; ".join(
+        f"{IDENTITY_OPTIONS.get(k, '--' + k.replace('_', '-'))} was {was[k]!r}, now {new[k]!r}"
+        for k in was
+        if was[k] != new[k]
+    )
 
 
 class EvalSpec(BaseModel):

@@ -217,6 +217,22 @@ class EpisodeConfig(BaseModel):
             raise ConfigError(str(exc)) from None
         return cfg
 
+    def check_replays(self, robots: Sequence[str]) -> None:
+        """Each replay: spec's trace read as the robot's agent will read it (its records, the robot's
+        prompts, the templates they were rendered from): ConfigError before anything is written,
+        instead of each agent failing on it once the run has started."""
+        from mhrc.agents.llm_policy import LLMPolicy
+        from mhrc.agents.replay import ReplayClient, ReplayMismatch
+
+        for robot in robots:
+            spec = self.robot_specs().get(robot)
+            if spec is None or not spec.startswith("replay:"):
+                continue
+            try:
+                LLMPolicy(robot, ReplayClient(spec.removeprefix("replay:"), robot), **self.policy_options(spec))
+            except (ValueError, OSError, ReplayMismatch) as exc:
+                raise ConfigError(f"--llm: {robot}'s replay: {exc}") from None
+
     def scenario(self) -> Scenario | None:
         """The --events file, read and checked against this episode (ScenarioError naming the event
         and field); None without one."""

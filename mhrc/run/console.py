@@ -97,6 +97,10 @@ class ProgressPrinter:
         bus.subscribe(f"{k.base}/agent/*/thought", self._on_thought)
         bus.subscribe(f"{k.base}/agent/*/generating", self._on_generating)
 
+    def mute(self) -> None:
+        """Print nothing more, not even what is held back (the run was interrupted: its end is not news)."""
+        self._closed = True
+
     def close(self) -> None:
         """Print everything still held back, in tick order (and with `summary` the table, if the
         episode ended); the printer prints nothing after."""
@@ -175,7 +179,7 @@ class ProgressPrinter:
                 f"[bold]episode {ev.run}[/]: task {ev.task}, scene {ev.scene}, seed {ev.seed}, "
                 f"{ev.n_objects} objects, robots {', '.join(ev.robots)}, horizon {ev.horizon}, fidelity {ev.fidelity}"
                 + (", noise off" if ev.noise.setting == "off" else "")
-                + (f", {ev.scheduler} schedule" if ev.scheduler != "lockstep" else "")
+                + f", {ev.scheduler} schedule"  # always: up (lockstep) and eval (sequential) give one episode other TS
             )
         elif isinstance(ev, TickClosed):
             self._stepped = True

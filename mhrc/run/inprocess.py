@@ -121,6 +121,11 @@ async def _run_in_process(
                 if errors:  # every agent is gone and nobody else will attach: stop the world
                     raise errors[0]  # type: ignore[misc]
         done = world.result()
+    except asyncio.CancelledError:  # interrupted: the world goes first, so that no robot is reported as vanished
+        world.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await world
+        raise
     finally:
         for t in agents:
             if not t.done():

@@ -51,7 +51,14 @@ def load_trace(path: str | Path) -> LoadedTrace:
     """Read `path` (a trace file or a run directory). Raises NotATrace or OSError."""
     p = resolve(path)
     if not p.exists():
-        raise NotATrace(f"{p} does not exist" + (" (a run directory holds trace.jsonl)" if Path(path).is_dir() else ""))
+        given = Path(path)
+        if (given / "eval.json").is_file():  # an `mhrc eval` directory: one trace per episode, and its own summary
+            raise NotATrace(
+                f"{given} is an evaluation (mhrc eval), not one episode: `mhrc report {given}` summarizes it "
+                f"({given / 'summary.html'} links every episode's report); each episode's trace and report are in "
+                f"{given / 'traces'}/"
+            )
+        raise NotATrace(f"{p} does not exist" + (" (a run directory holds trace.jsonl)" if given.is_dir() else ""))
     raw = p.read_bytes()
     text = raw.decode("utf-8", "replace")
     lines = text.split("\n")

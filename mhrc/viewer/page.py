@@ -379,6 +379,8 @@ def _diagnostic_value(key: str, value: Any) -> str:
             return _e(v)
 
         return "".join(f"<div>{name(str(k))}: {inner(v)}</div>" for k, v in value.items())
+    if key == "steps_above_bound" and value is None:  # not "none": that reads as no step above it
+        return '<span class="dim" title="cut off by the horizon before the bound, or no bound known">n/a</span>'
     if value in (0, None, {}) and not isinstance(value, bool):
         return f'<span class="dim">{"none" if value in (None, {}) else 0}</span>'
     return value_html(value)
