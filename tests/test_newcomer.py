@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner, Result
+from waits import until_sync
 
 from mhrc.cli import main
 from mhrc.core.endpoints import free_port
-from tests.waits import until_sync
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "raw_zenoh_agent.py"

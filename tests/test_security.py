@@ -304,6 +304,7 @@ async def test_the_world_says_which_logins_it_refused(tmp_path: Path) -> None:
             stdout=subprocess.DEVNULL,
             stderr=sink,
             stdin=subprocess.DEVNULL,
+            cwd=tmp_path,  # its trace in runs/ there, not in the checkout (a second run there would be refused)
         )
         try:
             _wait_for(err, "world listening")
@@ -556,6 +557,7 @@ def test_a_hand_started_secured_world_says_how_to_attach_and_why_not(tmp_path: P
             stderr=e_sink,
             stdin=subprocess.DEVNULL,
             env=env,
+            cwd=tmp_path,  # its trace in runs/ there, not in the checkout
         )
         agent = None
         try:

@@ -331,8 +331,8 @@ def fresh_trace(command: str, cfg: EpisodeConfig, overwrite: bool, given_trace: 
     """Refuse (one line, exit 2) a run whose trace file exists already, so that a reused --run never
     destroys an earlier episode; with --overwrite, remove that trace and the report made of it."""
     trace = cfg.trace
-    if trace is None or not trace.exists():
-        return
+    if trace is None or not trace.is_file() or trace.stat().st_size == 0:
+        return  # nothing there, an empty file, or a device (/dev/null, /dev/full) or pipe: no trace to lose
     if not overwrite:
         option = f"--trace {trace}" if given_trace else f"--run {cfg.run}"
         click.echo(
