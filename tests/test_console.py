@@ -478,3 +478,24 @@ def test_the_open_bus_is_said_once_under_processes(tmp_path: Path) -> None:
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stderr.count("insecure: the open tcp bus") == 1, done.stderr
+
+
+def test_unparsed_thoughts_held_for_their_results_are_bounded() -> None:
+    """A login putting thoughts with a parse error for ticks to come (each held until its result
+    prints) cannot grow the console without bound: at most MAX_HELD_THOUGHTS (tick, robot) pairs,
+    two lines each, and only thoughts about the robot whose key they came on (issue 38)."""
+    from mhrc.run.console import MAX_HELD_THOUGHTS, ProgressPrinter
+
+    printer = ProgressPrinter(Console(file=io.StringIO()), summary=False)
+    bus = _Replay()
+    printer.attach(bus, "r")  # type: ignore[arg-type]
+    key = Keys("r").thought("alice")
+    for i in range(MAX_HELD_THOUGHTS + 500):
+        thought = {"v": 2, "kind": "thought", "robot": "alice", "tick": i, "policy": "p", "parse_error": "no"}
+        bus.deliver({"key": key, "msg": thought})
+    for _ in range(5):  # the same tick again and again
+        bus.deliver({"key": key, "msg": thought | {"tick": 3}})
+    bus.deliver({"key": key, "msg": thought | {"robot": "bob", "tick": 1}})  # bob's, on alice's key
+    held = printer._thoughts
+    assert len(held) == MAX_HELD_THOUGHTS and (MAX_HELD_THOUGHTS + 1, "alice") not in held
+    assert len(held[(3, "alice")]) == 2 and (1, "bob") not in held

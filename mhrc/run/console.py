@@ -42,6 +42,7 @@ from mhrc.core.records import ReplyFailure, Rows, as_records, messages, reply_fa
 
 COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
 # the other robots of a team, in the order they first appear: none used twice while these last
+MAX_HELD_THOUGHTS = 10_000  # (tick, robot) pairs whose unparsed reply waits for its result to print before it
 PALETTE = ["yellow", "blue", "red", "bright_magenta", "bright_cyan", "bright_green", "bright_yellow", "bright_blue"]
 
 
@@ -254,8 +255,12 @@ class ProgressPrinter:
         line = f"tick {t.tick:>2} {self._robot(t.robot)} {what}; it waits"
         if t.robot in self._printed.get(t.tick, set()):  # its result came first
             self._print(line)
-        else:
-            self._thoughts.setdefault((t.tick, t.robot), []).append(line)
+        elif sample.key.split("/")[-2] == t.robot and (
+            (t.tick, t.robot) in self._thoughts or len(self._thoughts) < MAX_HELD_THOUGHTS
+        ):  # a robot's own, and a bounded number of them: a login putting thoughts for ticks to come must not grow it
+            held = self._thoughts.setdefault((t.tick, t.robot), [])
+            if len(held) < 2:  # an agent thinks once a tick (twice if it attached again)
+                held.append(line)
 
     def _on_generating(self, sample: Sample) -> None:
         """A long model call, said as it goes (not held back: it is about now, not a tick's record)."""
