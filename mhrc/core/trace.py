@@ -48,9 +48,10 @@ REJECTIONS_IN_FULL = (
 )
 MAX_HELD = 20_000  # requests awaiting their ack (a flood arrives faster than the world acks); past it the oldest is written at once
 EXCERPT = 200  # characters of a malformed request's payload kept in its junk line: enough to see what it was
+REQUEST, THOUGHT = ("robot", "action", "request"), ("agent", "thought")  # an agent's keys, robot left out
 AGENTS_SAY: dict[tuple[str, ...], tuple[type[Message], int]] = {  # an agent's key, robot left out -> model, byte bound
-    ("robot", "action", "request"): (ActionRequest, MAX_REQUEST_BYTES),
-    ("agent", "thought"): (Thought, MAX_THOUGHT_BYTES),
+    REQUEST: (ActionRequest, MAX_REQUEST_BYTES),
+    THOUGHT: (Thought, MAX_THOUGHT_BYTES),
 }
 THOUGHTS_AHEAD = 8  # a robot's thoughts recorded beyond its action requests: an agent thinks once per action
 MAX_REQUESTED = (
@@ -202,13 +203,13 @@ class Recorder:
         requests: counted, not copied. An agent publishes one thought per decision and one
         request per decision, so an honest agent never gets there; a login putting well-formed
         thoughts in a loop (each within the bounds, a few MB) would otherwise fill the disk."""
-        below = sample.key.removeprefix(self._keys.base + "/").split("/")  # robot/<rid>/action/request
-        if below[0] == "robot" and below[2:] == ["action", "request"]:
-            self._asked[below[1]] += 1
+        said = self._said_by(sample.key)
+        if said is None:
             return False
-        if not (len(below) == 3 and below[0] == "agent" and below[2] == "thought"):  # agent/<rid>/thought
+        what, robot = said
+        if what == REQUEST:
+            self._asked[robot] += 1
             return False
-        robot = below[1]
         if self._thought[robot] >= self._asked[robot] + THOUGHTS_AHEAD:
             self._count_junk(
                 sample.key,
@@ -238,17 +239,22 @@ class Recorder:
                 self._write(s.key, "put", m, t_old)
         return True
 
+    def _said_by(self, key: str) -> tuple[tuple[str, ...], str] | None:
+        """For an agent's key of this run (robot/<rid>/action/request, agent/<rid>/thought): the
+        key with the robot left out (as AGENTS_SAY holds it) and the robot; None for any other key."""
+        below = key.removeprefix(self._keys.base + "/").split("/")
+        what = (below[0], *below[2:])
+        return (what, below[1]) if len(below) > 2 and what in AGENTS_SAY else None
+
     def _is_malformed(self, sample: Sample) -> bool:
         """An action request or a thought that is not one (too long, too deep, out of bounds:
         docs/protocol.md, "Limits"): counted, not copied (a flood of junk must not fill the disk).
         Lines of kind `junk` carry, per key and interval, the count, the bytes, the first reason
         and the first one's start."""
-        below = sample.key.removeprefix(self._keys.base + "/").split(
-            "/"
-        )  # robot/<rid>/action/request, agent/<rid>/thought
-        model, limit = AGENTS_SAY.get((below[0], *below[2:]), (None, 0)) if len(below) > 2 else (None, 0)
-        if model is None:
+        said = self._said_by(sample.key)
+        if said is None:
             return False
+        model, limit = AGENTS_SAY[said[0]]
         try:
             decode(sample.payload, model, max_bytes=limit)
             return False
