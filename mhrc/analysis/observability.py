@@ -100,19 +100,20 @@ def check(lines: Sequence[TraceLine]) -> Report:
     started = next((ln.msg for ln in lines if isinstance(ln.msg, EpisodeStarted)), None)
     if started is not None and "live_state" in started.aids:
         return Report([], 0, Unchecked.LIVE_STATE)
-    snaps = [(i, ln.msg) for i, ln in enumerate(lines) if isinstance(ln.msg, Snapshot)]
+    snaps = [ln.msg for ln in lines if isinstance(ln.msg, Snapshot)]
     if not snaps:
         return Report([], 0, Unchecked.NO_SNAPSHOTS)
-    everything = {n for _, snap in snaps for n in snap.objects}
+    everything = {n for snap in snaps for n in snap.objects}
     fixtures: dict[str, set[str]] = {}  # table -> the fixtures on it
     robots: dict[str, _Robot] = {}
     leaks: list[Leak] = []
     checked = 0
     last: Snapshot | None = None
-    for i, ln in enumerate(lines):
+    passed = 0  # snapshots before the current line
+    for ln in lines:
         msg = ln.msg
         if isinstance(msg, Snapshot):
-            last = msg
+            last, passed = msg, passed + 1
             continue
         if isinstance(msg, RobotMessage):
             robots.setdefault(msg.to, _Robot()).known |= _names_in(msg.content, everything)
@@ -138,7 +139,7 @@ def check(lines: Sequence[TraceLine]) -> Report:
             me.known |= _names_in(m.content, everything)
         if obs.status.holding:
             me.known.add(obs.status.holding)
-        after = next((snap for j, snap in snaps if j > i), None)
+        after = snaps[passed] if passed < len(snaps) else None  # the first snapshot after this line
         places = {me.at, *fixtures.get(me.at, set())} if me.at is not None else set()
         me.known |= _visible(last, places) | _visible(after, places)
         checked += 1
