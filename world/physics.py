@@ -326,7 +326,7 @@ class PhysicalWorld:
             p.resetJointState(self.scene.bodies[name], self.scene.joints[name], value, physicsClientId=cid)
         return steps
 
-    def _leans_on_stack(self, obj: ObjectState, fixture: str) -> bool:
+    def _leans_on_stack(self, obj: ObjectState, fixture: str, bottom: float, centre: float) -> bool:
         """Whether `obj` rests on a stacking fixture's stack though its lowest point is below the
         stack's top: tilted across a narrow piece (a bacon strip) onto the layer under it, or lying
         on such a tilted piece. It counts as it lies when it touches a piece of the stack that lies
@@ -335,9 +335,8 @@ class PhysicalWorld:
         if not self.fixtures[fixture].stack or "exact_motion" in self.aids:
             return False
         cid = self.cid
-        (_, _, bottom), _ = p.getAABB(obj.body, physicsClientId=cid)
         pieces = [o for o in self.objects.values() if o.on == fixture and o.held_by is None and o is not obj]
-        if any(self.position(o)[2] >= self.position(obj)[2] - 0.001 for o in pieces):
+        if any(self.position(o)[2] >= centre - 0.001 for o in pieces):
             return False
         return any(
             p.getAABB(o.body, physicsClientId=cid)[0][2] < bottom - 0.002
@@ -349,16 +348,18 @@ class PhysicalWorld:
         """Read where the released object really lies and record it; True if that is `location`.
 
         On a fixture: its centre over the fixture and its lowest point on the fixture's surface
-        (on the top of the stack, for a stacking fixture), tilted or not. Otherwise on the furniture
+        (on the top of the stack, for a stacking fixture, or leaning on it: `_leans_on_stack`),
+        tilted or not. Otherwise on the furniture
         its centre is over, if it rests on that furniture or on something lying there (Bob's
         table, for anything that missed a fixture on it); on nothing (the floor) else."""
-        x, y, _ = self.position(obj)
+        x, y, z = self.position(obj)
         lay = self.layout
         (_, _, bottom), _ = p.getAABB(obj.body, physicsClientId=self.cid)
         obj.on, obj.inside = None, False
         fx = self.fixture_at(x, y)
         if fx is not None and (
-            abs(bottom - self.surface_top(fx.name, without=obj)) < 0.008 or self._leans_on_stack(obj, fx.name)
+            abs(bottom - self.surface_top(fx.name, without=obj)) < 0.008
+            or self._leans_on_stack(obj, fx.name, bottom, z)
         ):
             obj.on = fx.name
         else:
