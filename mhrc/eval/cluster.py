@@ -37,6 +37,11 @@ RAY_MIN = (2, 40)  # the oldest Ray this code is written against
 INSTALL = 'pip install -e ".[ray]"'
 RAY_RETRIES = 3  # runs of a task whose worker process or node died, after the first
 PROBE_TIMEOUT = 5.0  # s to wait for anything to answer at --ray HOST:PORT before saying nothing does
+# A head's Ray Client server forks a server process for every driver that connects; that process
+# sometimes dies at once (a gRPC fork race in Ray's proxier, ray-project/ray#63202: here about a
+# third of first connections after `ray start`, none after). Ray says so only in words, these.
+CLIENT_START_FAILED = "Starting Ray client server failed"
+JOIN_ATTEMPTS = 3  # ray:// joins tried when the cluster failed to start this driver's session
 
 
 def import_ray() -> Any:
@@ -109,14 +114,7 @@ class RayExecutor:
         ray = import_ray()
         await asyncio.to_thread(probe, self.address)
         try:
-            await asyncio.to_thread(
-                ray.init,
-                address=self.address,
-                logging_level=logging.ERROR,
-                log_to_driver=False,
-                configure_logging=True,
-                namespace="mhrc-eval",
-            )
+            await self._join(ray)
         except Exception as exc:  # a version mismatch, a refused token, a cluster that went away
             lines = [x.strip() for x in str(exc).splitlines() if x.strip()] or [type(exc).__name__]
             first = (
@@ -134,6 +132,32 @@ class RayExecutor:
         self._task = ray.remote(max_retries=RAY_RETRIES, retry_exceptions=False)(_episode)
         log.info("joined the Ray cluster", address=self.address, resources=ray.cluster_resources())
         return self
+
+    async def _join(self, ray: Any) -> None:
+        """ray.init; through Ray Client, again (up to JOIN_ATTEMPTS) when the cluster's client
+        server failed to start this driver's session, which is Ray's bug and not the user's."""
+        for attempt in range(1, JOIN_ATTEMPTS + 1):
+            try:
+                await asyncio.to_thread(
+                    ray.init,
+                    address=self.address,
+                    logging_level=logging.ERROR,
+                    log_to_driver=False,
+                    configure_logging=True,
+                    namespace="mhrc-eval",
+                )
+                return
+            except ConnectionAbortedError as exc:
+                if CLIENT_START_FAILED not in str(exc) or attempt == JOIN_ATTEMPTS:
+                    raise
+                log.warning(
+                    "the Ray cluster failed to start this driver's Ray Client session (ray-project/ray#63202); joining again",
+                    address=self.address,
+                    attempt=attempt + 1,
+                    of=JOIN_ATTEMPTS,
+                )
+                with contextlib.suppress(Exception):
+                    await asyncio.to_thread(ray.shutdown)
 
     async def __aexit__(self, *exc: object) -> None:
         await self.stop(grace=0.0)
