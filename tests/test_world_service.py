@@ -14,6 +14,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 from structlog.testing import capture_logs
@@ -534,11 +535,13 @@ def test_processes_mode_exits_cleanly(tmp_path) -> None:  # type: ignore[no-unty
     assert _stray(run) == []
 
 
-async def test_the_world_listens_before_an_observer_can_act() -> None:
+async def test_the_world_listens_before_an_observer_can_act(tmp_path: Path) -> None:
     """serve_world's observers subscribe before the world exists; the first thing the loop runs
     after them finds the world already serving attaches and requests (WorldService.listen), so
     an observer that reacts at once (a flood, an attach) never meets a world not yet listening."""
-    cfg = EpisodeConfig.build(seed=1, n_objects=4, horizon=1, start_timeout=60.0).resolved()
+    cfg = EpisodeConfig.build(
+        seed=1, n_objects=4, horizon=1, start_timeout=60.0, trace=tmp_path / "t.jsonl"
+    ).resolved()  # not ./runs/ of the checkout
     services: list[WorldService] = []
     first: asyncio.Future[bool] = asyncio.get_running_loop().create_future()
 
