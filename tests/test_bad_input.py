@@ -131,9 +131,11 @@ UNWRITABLE = "/dev/null/t.jsonl"  # under a file: no directory can be made there
     ids=["up", "up-insecure", "up-processes", "world", "a-directory"],
 )
 def test_a_trace_that_cannot_be_written_is_refused_before_anything_starts(tmp_path: Path, args: list[str]) -> None:
-    line = _refused(_mhrc(*args, cwd=tmp_path), "--trace")
+    result = _mhrc(*args, cwd=tmp_path)
+    line = _refused(result, "--trace")
     assert "/dev/null" in line or "directory" in line
     assert list(tmp_path.iterdir()) == []  # no runs/, no credentials
+    assert "open tcp bus" not in result.stderr  # a refused command line ends with its error alone
 
 
 def test_an_eval_out_that_cannot_be_created_is_refused_before_anything_starts(tmp_path: Path) -> None:

@@ -286,11 +286,9 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
 
 def load_credentials(path: Path | None, insecure: bool, connect: str | None = None) -> Credentials | None:
     """The participant's credentials (mhrc.core.security.Credentials) from --credentials or
-    $MHRC_CREDENTIALS; None (and a warning on stderr) on the open bus. A tls/ `connect`
-    without credentials is a usage error: it cannot work."""
+    $MHRC_CREDENTIALS; None on the open bus (`open_bus_notice` says so, once the rest of the
+    command line is accepted). A tls/ `connect` without credentials is a usage error: it cannot work."""
     if insecure:
-        if not os.environ.get(PARENT_ENV):  # a child of mhrc up --processes or eval: its parent said it once
-            click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
         return None
     if path is None:
         if connect is not None and connect.startswith("tls/"):
@@ -298,14 +296,22 @@ def load_credentials(path: Path | None, insecure: bool, connect: str | None = No
                 f"--credentials: {connect} is a secured world (tls/); pass this participant's credentials file "
                 "(e.g. runs/RUN/credentials/<robot>.json, or DIR/<robot>.json of mhrc credentials) or set $MHRC_CREDENTIALS"
             )
-        click.echo(
-            "no credentials (--credentials or $MHRC_CREDENTIALS): the open tcp bus, as with --insecure", err=True
-        )
         return None
     try:
         return load(path)
     except SecurityError as exc:
         raise click.UsageError(f"--credentials: {exc}") from None
+
+
+def open_bus_notice(insecure: bool) -> None:
+    """On stderr: this participant is on the open bus (said after its options are checked, so a
+    refused command line ends with its error alone)."""
+    if not insecure:
+        click.echo(
+            "no credentials (--credentials or $MHRC_CREDENTIALS): the open tcp bus, as with --insecure", err=True
+        )
+    elif not os.environ.get(PARENT_ENV):  # a child of mhrc up --processes or eval: its parent said it once
+        click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
 
 
 def episode_config(**values: Any) -> EpisodeConfig:

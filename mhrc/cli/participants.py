@@ -31,6 +31,7 @@ from mhrc.cli.options import (
     fresh_trace,
     llm_options,
     load_credentials,
+    open_bus_notice,
     rerun_option,
     team_option,
 )
@@ -295,6 +296,8 @@ def world(
             values["run"] = creds.run
     cfg = episode_config(start_timeout=start_timeout, credentials=credentials if creds is not None else None, **values)
     fresh_trace("world", cfg, overwrite, values.get("trace") is not None)
+    if creds is None:
+        open_bus_notice(insecure)
     if quiet:
         _serve_world(cfg)
         return
@@ -367,6 +370,8 @@ def agent(
             f"{robot!r} is not in this episode's team (robots: {', '.join(cfg.robots)}; --team names the team)",
             param_hint="--robot",
         )
+    if creds is None:
+        open_bus_notice(insecure)
     spec = cfg.robot_specs().get(robot)
     options = cfg.policy_options(spec)
     from mhrc.agents.agent import AgentError

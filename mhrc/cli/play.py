@@ -19,6 +19,7 @@ from mhrc.cli.options import (
     episode_options,
     llm_options,
     load_credentials,
+    open_bus_notice,
 )
 from mhrc.cli.running import run_command
 from mhrc.core import logs
@@ -100,6 +101,8 @@ def play(
         sys.exit(2)
     if cfg is not None and secure:
         cfg = cfg.with_credentials()
+    if connect is not None and creds is None:
+        open_bus_notice(not secure)
     url = f"http://127.0.0.1:{sock.getsockname()[1]}/"
 
     def ready() -> None:
