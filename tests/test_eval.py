@@ -564,3 +564,19 @@ def _running(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except (OSError, IndexError):
         return False
+
+
+def test_a_row_declares_every_metric_and_every_diagnostic_in_their_own_order() -> None:
+    """EvalRow restates EpisodeMetrics' fields and, prefixed, Diagnostics' (the row allows extra
+    fields, so a metric added to one and not the other would pass silently)."""
+    from dataclasses import fields
+
+    from mhrc.analysis.diagnostics import PREFIX, Diagnostics
+    from mhrc.analysis.metrics import EpisodeMetrics
+    from mhrc.eval.records import EvalRow
+
+    row = list(EvalRow.model_fields)
+    metrics = [f.name for f in fields(EpisodeMetrics)]
+    diagnostics = [PREFIX + f.name for f in fields(Diagnostics)]
+    for names in (metrics, diagnostics):
+        assert [n for n in row if n in names] == names
