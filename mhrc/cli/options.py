@@ -284,6 +284,9 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
     return f
 
 
+OPEN_BUS = "insecure: the open tcp bus (no TLS, no login, no access control)"  # what a participant on it says
+
+
 def load_credentials(path: Path | None, insecure: bool, connect: str | None = None) -> Credentials | None:
     """The participant's credentials (mhrc.core.security.Credentials) from --credentials or
     $MHRC_CREDENTIALS; None on the open bus (`open_bus_notice` says so, once the rest of the
@@ -311,7 +314,7 @@ def open_bus_notice(insecure: bool) -> None:
             "no credentials (--credentials or $MHRC_CREDENTIALS): the open tcp bus, as with --insecure", err=True
         )
     elif not os.environ.get(PARENT_ENV):  # a child of mhrc up --processes or eval: its parent said it once
-        click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
+        click.echo(OPEN_BUS, err=True)
 
 
 def episode_config(**values: Any) -> EpisodeConfig:

@@ -22,6 +22,7 @@ from mhrc.cli.options import (
     AIDS_HELP,
     INSECURE_HELP,
     LOG_LEVEL,
+    OPEN_BUS,
     OVERWRITE,
     VIDEO_HELP,
     VIDEO_SIZE,
@@ -132,7 +133,7 @@ def up(
         click.echo(f"mhrc: {exc}", err=True)
         sys.exit(2)
     if not secure:
-        click.echo("insecure: the open tcp bus (no TLS, no login, no access control)", err=True)
+        click.echo(OPEN_BUS, err=True)
     else:
         cfg = cfg.with_credentials()
         if not quiet:
