@@ -362,3 +362,59 @@ def _alive(pid: int) -> bool:
     except OSError:
         return False
     return state != "Z"
+
+
+@pytest.mark.slow
+def test_a_child_that_got_the_terminals_ctrl_c_does_not_warn_about_the_others_leaving(tmp_path: Path) -> None:
+    """The terminal's Ctrl-C reaches every process of `mhrc up --processes`; the parent then stops
+    the children. When the agents left before the world's own SIGTERM was handled, the world
+    warned "robot detached" for each (seen in a full run: three lines beside "interrupted"). Here
+    the world alone gets the Ctrl-C, and the agents are killed once it has closed two more ticks
+    (a later turn of its loop, so the Ctrl-C was taken): it says nothing of them."""
+    import signal
+
+    from test_faults import _start, _until
+
+    trace = tmp_path / "t.jsonl"
+    proc = _start(["up", "--processes", "--insecure", "--tick-delay", "0.3", "--trace", str(trace)], tmp_path)
+
+    def ticks() -> int:
+        return trace.read_text().count('"kind":"tick"') if trace.exists() else 0
+
+    try:
+        _until(lambda: ticks() >= 2, HANG, "two ticks closed", proc)
+        world = _child_with(proc.pid, "-m mhrc world")
+        agents = [_child_with(proc.pid, f"--robot {r}") for r in ("alice", "bob", "david")]
+        assert world is not None and None not in agents, (world, agents)
+        os.kill(world, signal.SIGINT)
+        after = ticks()
+        _until(lambda: ticks() >= after + 2, HANG, "two more ticks closed", proc)
+        for pid in agents:
+            os.kill(pid, signal.SIGKILL)  # type: ignore[arg-type]
+        proc.wait(timeout=HANG)
+    finally:
+        _kill_group(proc)
+    err = (tmp_path / "stderr.txt").read_text()
+    assert '"kind":"robot_detached"' in trace.read_text()  # the world saw them leave
+    assert "robot detached" not in err, err[-3000:]
+
+
+def test_hush_quiets_a_logger_bound_before_it(capsys: pytest.CaptureFixture[str]) -> None:
+    """structlog fixes a bound logger's level when it is bound (a service binds its run at start):
+    a hush afterwards left its warnings on. Errors still show."""
+    import structlog
+
+    from mhrc.core import logs
+
+    try:
+        logs.configure("warning")
+        bound = structlog.get_logger("mhrc.test").bind(run="r")
+        bound.warning("said before the hush")
+        logs.hush()
+        bound.warning("a participant left")
+        bound.error("an error still shows")
+        err = capsys.readouterr().err
+    finally:
+        logs.configure("info")  # tests/conftest.py's
+    assert "said before the hush" in err and "an error still shows" in err
+    assert "a participant left" not in err

@@ -40,8 +40,8 @@ def _plain_signals(loop: asyncio.AbstractEventLoop) -> None:
     the signal wakeup fd" and a traceback."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.remove_signal_handler(sig)  # also clears the wakeup fd once none is left
-        if sig != signal.SIGINT or not os.environ.get(PARENT_ENV):  # a child keeps ignoring Ctrl-C
-            signal.signal(sig, _quit_on_signal)
+        child_ctrl_c = sig == signal.SIGINT and os.environ.get(PARENT_ENV)
+        signal.signal(sig, signal.SIG_IGN if child_ctrl_c else _quit_on_signal)  # a child keeps ignoring Ctrl-C
 
 
 def run_command(
@@ -57,7 +57,9 @@ def run_command(
     callable is asked at that moment); a second one quits at once: the children go with this
     process (mhrc.run.lifeline), never a hang. Once interrupted, one line: `interrupted()` when
     given (where the run's work is), else "interrupted"; a child of `mhrc up --processes` or
-    `mhrc eval` says nothing (its parent, interrupted with it, says it once)."""
+    `mhrc eval` says nothing (its parent, interrupted with it, says it once), and takes the
+    terminal's Ctrl-C only as the word that the others are about to leave (its warnings about
+    them hushed); its parent stops it."""
     die_with_parent()
 
     async def main() -> T:
@@ -85,8 +87,11 @@ def run_command(
                     sys.stderr.flush()
                 task.cancel()
 
-            if not os.environ.get(PARENT_ENV):  # a child ignores Ctrl-C: its parent stops it (SIGTERM)
+            if not os.environ.get(PARENT_ENV):
                 loop.add_signal_handler(signal.SIGINT, on_interrupt)
+            else:  # a child: the terminal's Ctrl-C reaches it too, and its parent stops it (SIGTERM); the
+                # others leave because of that same Ctrl-C, which may be before this child's SIGTERM comes
+                loop.add_signal_handler(signal.SIGINT, logs.hush)
         try:
             return await coro_fn()
         finally:

@@ -23,6 +23,7 @@ def configure(level: str = "warning") -> None:
     _level = level
     structlog.configure(
         processors=[
+            level_now,
             structlog.contextvars.merge_contextvars,
             structlog.processors.add_log_level,
             structlog.processors.TimeStamper(fmt="%H:%M:%S", utc=False),
@@ -34,6 +35,18 @@ def configure(level: str = "warning") -> None:
         logger_factory=structlog.PrintLoggerFactory(file=sys.stderr),
         cache_logger_on_first_use=False,
     )
+
+
+_SEVERITY = {"debug": 10, "info": 20, "warning": 30, "warn": 30, "error": 40, "exception": 40, "critical": 50}
+
+
+def level_now(logger: WrappedLogger, name: str, event: EventDict) -> EventDict:
+    """Drop an event below the level configured now. A logger bound before a later `configure`
+    (a service's `log.bind(run=...)`) keeps the level and processors of its binding; `hush` must
+    quiet it too, so the level is read here, at every call."""
+    if _SEVERITY.get(name, 50) < _SEVERITY[_level]:
+        raise structlog.DropEvent
+    return event
 
 
 def inert_values(logger: WrappedLogger, name: str, event: EventDict) -> EventDict:
