@@ -406,6 +406,7 @@ def test_hush_quiets_a_logger_bound_before_it(capsys: pytest.CaptureFixture[str]
 
     from mhrc.core import logs
 
+    factory = structlog.get_config()["logger_factory"]  # the session's stderr, not this test's captured one
     try:
         logs.configure("warning")
         bound = structlog.get_logger("mhrc.test").bind(run="r")
@@ -416,5 +417,6 @@ def test_hush_quiets_a_logger_bound_before_it(capsys: pytest.CaptureFixture[str]
         err = capsys.readouterr().err
     finally:
         logs.configure("info")  # tests/conftest.py's
+        structlog.configure(logger_factory=factory)
     assert "said before the hush" in err and "an error still shows" in err
     assert "a participant left" not in err
