@@ -76,7 +76,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     grids = args.grids.split(",")
-    ray_exe = shutil.which("ray") or str(Path(sys.executable).parent / "ray")
+    own = Path(sys.executable).parent / "ray"  # this interpreter's Ray, not one of another Python on PATH
+    ray_exe = str(own) if own.exists() else shutil.which("ray") or str(own)
     os.environ.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(32))
     tmp = Path(tempfile.mkdtemp(prefix="mhrc-bench-ray-", dir="/tmp"))
     httpd = serve(args.latency)

@@ -14,7 +14,6 @@ import json
 import os
 import re
 import shlex
-import shutil
 import signal
 import subprocess
 import sys
@@ -422,12 +421,9 @@ def _to_loopback(argv: list[str], port: int) -> list[str]:
 
 
 def _mhrc() -> list[str]:
+    # this interpreter's own script, never an `mhrc` of another Python found on PATH
     exe = Path(sys.executable).parent / "mhrc"
-    return (
-        [str(exe)]
-        if exe.exists()
-        else ([shutil.which("mhrc")] if shutil.which("mhrc") else [sys.executable, "-m", "mhrc"])
-    )  # type: ignore[list-item]
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "mhrc"]
 
 
 def _in_groups(pgids: set[int]) -> list[str]:

@@ -20,7 +20,9 @@ TOP = ("world", "agents", "prompts")
 
 
 def lint_imports(cwd: Path, **env: str) -> subprocess.CompletedProcess[str]:
-    exe = shutil.which("lint-imports") or str(Path(sys.executable).parent / "lint-imports")
+    # this interpreter's own first: a lint-imports earlier on PATH may belong to another Python
+    own = Path(sys.executable).parent / "lint-imports"
+    exe = str(own) if own.exists() else shutil.which("lint-imports") or str(own)
     # --no-cache: the copy below must be read afresh, never from the checkout's cache.
     return subprocess.run(
         [exe, "--no-cache"], cwd=cwd, capture_output=True, text=True, timeout=300, env={**os.environ, **env}

@@ -2,13 +2,17 @@
 prompts/ folders reached through the package's links), installed in a fresh virtual environment,
 every module imports from the installed copy and every data file the code reads is there.
 
-The venv sees this environment's site-packages for the dependencies (no test downloads), while
-the package itself must come from the wheel: each module's file is checked to lie in the venv."""
+The venv reaches the dependencies through a `.pth` file listing the site-packages of the
+interpreter running the tests (no test downloads), while the package itself must come from the
+wheel: each module's file is checked to lie in the venv. Not `system_site_packages`: that reaches
+the base interpreter's site-packages, which hold nothing when the tests run in a virtual
+environment, as the README's install line is usually typed."""
 
 from __future__ import annotations
 
 import json
 import shutil
+import site
 import subprocess
 import sys
 import venv
@@ -58,8 +62,13 @@ def test_the_wheel_installs_in_a_fresh_venv_and_every_module_imports_from_it(tmp
     assert built.returncode == 0, built.stderr[-3000:]
     (wheel,) = wheels.glob("mhrc-*.whl")
     env = tmp_path / "venv"
-    venv.create(env, system_site_packages=True, with_pip=False)
+    venv.create(env, with_pip=False)
     python = env / "bin" / "python"
+    (purelib,) = env.glob("lib/python3*/site-packages")
+    # plain path lines: appended after the venv's own site-packages (so the wheel's mhrc comes
+    # first), and the .pth files in those folders, the editable install's finder among them,
+    # are not run
+    (purelib / "deps_of_the_test_interpreter.pth").write_text("\n".join(site.getsitepackages()) + "\n")
     installed = subprocess.run(
         [sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps", "--no-index", "-q", str(wheel)],
         capture_output=True,
