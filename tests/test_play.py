@@ -111,3 +111,25 @@ def test_the_map_of_a_world_elsewhere_is_the_layout_whose_furniture_the_robot_kn
 def test_a_robot_not_in_the_team_is_refused_before_anything_starts() -> None:
     result = CliRunner().invoke(main, ["play", "--robot", "zed", "--no-browser"])
     assert result.exit_code == 2 and "--robot: 'zed' is not in this episode's team" in result.output
+
+
+def test_an_existing_run_is_refused_as_mhrc_up_refuses_it(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """`mhrc play --run NAME` keeps an earlier episode's trace: one line, exit 2; with --overwrite
+    and a port in use, the port is refused first and the trace is still kept."""
+    monkeypatch.chdir(tmp_path)
+    trace = tmp_path / "runs" / "first" / "trace.jsonl"
+    trace.parent.mkdir(parents=True)
+    trace.write_text('{"an": "earlier episode"}\n')
+    result = CliRunner().invoke(main, ["play", "--robot", "david", "--run", "first", "--no-browser"])
+    assert result.exit_code == 2
+    assert result.output.strip() == (
+        "mhrc play: --run first: runs/first/trace.jsonl holds an earlier episode's trace; choose another --run "
+        "(or leave it out for a new one), or pass --overwrite to replace it"
+    )
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = str(taken.getsockname()[1])
+        result = CliRunner().invoke(main, ["play", "--robot", "david", "--run", "first", "--overwrite", "--port", port])
+    assert result.exit_code == 2 and "is in use" in result.output
+    assert trace.read_text() == '{"an": "earlier episode"}\n'
