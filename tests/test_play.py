@@ -133,3 +133,33 @@ def test_an_existing_run_is_refused_as_mhrc_up_refuses_it(tmp_path, monkeypatch)
         result = CliRunner().invoke(main, ["play", "--robot", "david", "--run", "first", "--overwrite", "--port", port])
     assert result.exit_code == 2 and "is in use" in result.output
     assert trace.read_text() == '{"an": "earlier episode"}\n'
+
+
+def test_a_reloaded_tab_replaces_its_socket_and_another_tab_is_refused() -> None:
+    """The same tab (its id) reloaded takes over from its old socket, which is told so; a page of
+    another tab is refused while one drives; a page gone leaves the seat free after the grace."""
+    from mhrc.play.session import REPLACED, PlaySession, SecondDriver
+
+    async def pages() -> tuple[list[dict], list[dict], str, bool]:  # type: ignore[type-arg]
+        session = PlaySession("david", run="r", connect="tcp/127.0.0.1:9", attach_timeout=0.2)
+        session.reload_grace = 0.0
+        old: list[dict] = []  # type: ignore[type-arg]
+        new: list[dict] = []  # type: ignore[type-arg]
+        first, second, other = object(), object(), object()
+        session.open(first, old.append, tab="tab-1")
+        session.open(second, new.append, tab="tab-1")  # the same tab, reloaded
+        with pytest.raises(SecondDriver) as refused:
+            session.open(other, lambda m: None, tab="tab-2")
+        await session.close(first)  # the old socket's close comes late: it no longer drives
+        still = session.driven
+        await session.close(second)
+        await asyncio.sleep(0.05)  # the grace (0 s here) runs out
+        session.open(other, lambda m: None, tab="tab-2")  # the seat is free: no SecondDriver now
+        taken = session.driven
+        await session.close(other)
+        await asyncio.sleep(0.05)
+        return old, new, str(refused.value), still and taken
+
+    old, new, refused, held = asyncio.run(pages())
+    assert [m["type"] for m in old][-1] == REPLACED and new[0]["type"] == "hello"
+    assert "one driver per robot" in refused and held

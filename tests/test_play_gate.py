@@ -129,7 +129,7 @@ def test_a_socket_without_the_secret_is_refused_before_it_hears_anything(play_pa
     assert _handshake(play_page, f"?token={play_page.gate.token}", "null") == 403  # a sandboxed frame, a file
     assert _handshake(play_page, f"?token={play_page.gate.token}", None) == 403  # no Origin at all
     assert _handshake(play_page, f"?token={play_page.gate.token}", own, host="evil.example") == 403
-    assert play_page.session.attaches == 0 and play_page.session._driver is None  # none of them counted as a driver
+    assert play_page.session.attaches == 0 and not play_page.session.driven  # none of them counted as a driver
 
 
 def test_the_players_socket_is_let_in(play_page: Page) -> None:

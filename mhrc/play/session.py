@@ -86,6 +86,11 @@ class PlaySession:
             "started": self.started,
         }
 
+    @property
+    def driven(self) -> bool:
+        """A page drives the robot now (a refused socket never counts)."""
+        return self._driver is not None
+
     # ------------------------------------------------------------------ pages
     def open(self, page: object, send: Send, tab: str = "") -> None:
         """`page` drives the robot from now on; SecondDriver when another does. A page of the
