@@ -111,3 +111,55 @@ def test_the_map_of_a_world_elsewhere_is_the_layout_whose_furniture_the_robot_kn
 def test_a_robot_not_in_the_team_is_refused_before_anything_starts() -> None:
     result = CliRunner().invoke(main, ["play", "--robot", "zed", "--no-browser"])
     assert result.exit_code == 2 and "--robot: 'zed' is not in this episode's team" in result.output
+
+
+def test_an_existing_run_is_refused_as_mhrc_up_refuses_it(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """`mhrc play --run NAME` keeps an earlier episode's trace: one line, exit 2; with --overwrite
+    and a port in use, the port is refused first and the trace is still kept."""
+    monkeypatch.chdir(tmp_path)
+    trace = tmp_path / "runs" / "first" / "trace.jsonl"
+    trace.parent.mkdir(parents=True)
+    trace.write_text('{"an": "earlier episode"}\n')
+    result = CliRunner().invoke(main, ["play", "--robot", "david", "--run", "first", "--no-browser"])
+    assert result.exit_code == 2
+    assert result.output.strip() == (
+        "mhrc play: --run first: runs/first/trace.jsonl holds an earlier episode's trace; choose another --run "
+        "(or leave it out for a new one), or pass --overwrite to replace it"
+    )
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = str(taken.getsockname()[1])
+        result = CliRunner().invoke(main, ["play", "--robot", "david", "--run", "first", "--overwrite", "--port", port])
+    assert result.exit_code == 2 and "is in use" in result.output
+    assert trace.read_text() == '{"an": "earlier episode"}\n'
+
+
+def test_a_reloaded_tab_replaces_its_socket_and_another_tab_is_refused() -> None:
+    """The same tab (its id) reloaded takes over from its old socket, which is told so; a page of
+    another tab is refused while one drives; a page gone leaves the seat free after the grace."""
+    from mhrc.play.session import REPLACED, PlaySession, SecondDriver
+
+    async def pages() -> tuple[list[dict], list[dict], str, bool]:  # type: ignore[type-arg]
+        session = PlaySession("david", run="r", connect="tcp/127.0.0.1:9", attach_timeout=0.2)
+        session.reload_grace = 0.0
+        old: list[dict] = []  # type: ignore[type-arg]
+        new: list[dict] = []  # type: ignore[type-arg]
+        first, second, other = object(), object(), object()
+        session.open(first, old.append, tab="tab-1")
+        session.open(second, new.append, tab="tab-1")  # the same tab, reloaded
+        with pytest.raises(SecondDriver) as refused:
+            session.open(other, lambda m: None, tab="tab-2")
+        await session.close(first)  # the old socket's close comes late: it no longer drives
+        still = session.driven
+        await session.close(second)
+        await asyncio.sleep(0.05)  # the grace (0 s here) runs out
+        session.open(other, lambda m: None, tab="tab-2")  # the seat is free: no SecondDriver now
+        taken = session.driven
+        await session.close(other)
+        await asyncio.sleep(0.05)
+        return old, new, str(refused.value), still and taken
+
+    old, new, refused, held = asyncio.run(pages())
+    assert [m["type"] for m in old][-1] == REPLACED and new[0]["type"] == "hello"
+    assert "one driver per robot" in refused and held

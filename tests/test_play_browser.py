@@ -1,25 +1,32 @@
 """`mhrc play` in a real headless chromium (selenium, as the report's browser tests): a person
 plays David beside the heuristic Alice and Bob to a successful episode, and Alice picks and
 places. Each world is one `mhrc play` process on a secured loopback bus; one scripted browser
-session per world collects what the checks below assert on.
+session per world collects what the checks below assert on. Before David's player opens the
+page, a page of another origin, a rebound Host and a socket without the secret try it first.
 
-Set MHRC_PLAY_SCREENSHOT=PATH to keep the first screenshot (docs/play.png is taken so)."""
+Set MHRC_PLAY_SCREENSHOT=PATH to keep the first screenshot (docs/play.png is taken so), and
+Alice's page after she placed the book beside it (PATH's stem + "-alice.png")."""
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import json
 import os
 import re
 import shutil
 import signal
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
+from test_play_gate import Page, play_page  # noqa: F401  (the page's server alone, no world: for the map's drawing)
 from test_viewer_browser import browser, chrome  # noqa: F401  (the fixture: Debian's chromium and chromedriver)
 from waits import until_sync
 
@@ -69,7 +76,7 @@ def _play(tmp: Path, robot: str, *args: str, world: subprocess.Popen[bytes] | No
     proc = _start(tmp, "out", "play", "--robot", robot, "--no-browser", *trace, *args)
     played = Played(tmp, proc, world=world)
     until_sync(lambda: "http://" in played.out or proc.poll() is not None, "the page's address", WAIT)
-    match = re.search(r"http://127\.0\.0\.1:\d+/", played.out)
+    match = re.search(r"http://127\.0\.0\.1:\d+/\?token=[\w-]+", played.out)
     assert match, (played.out, (tmp / "out-err.txt").read_text())
     played.url = match.group(0)
     return played
@@ -140,6 +147,106 @@ def _refused(drv: Any, code: str) -> str:
     return _css(drv, "[data-refusal]").get_attribute("data-refusal")
 
 
+# Every text of the map: the pairs whose boxes overlap on screen, and the smallest one's size on screen.
+LABELS_JS = """
+const ts = [...document.querySelectorAll('#map text')].filter(t => t.textContent);
+const box = t => t.getBoundingClientRect();
+const out = {n: ts.length, overlaps: [], min_px: 1e9};
+ts.forEach((a, i) => {
+  out.min_px = Math.min(out.min_px, parseFloat(getComputedStyle(a).fontSize) * a.getScreenCTM().a);
+  const p = box(a);
+  for (const b of ts.slice(i + 1)){
+    const q = box(b);
+    if (p.left < q.right && q.left < p.right && p.top < q.bottom && q.top < p.bottom) out.overlaps.push([a.textContent, b.textContent]);
+  }
+});
+return out;
+"""
+
+
+def _labels(drv: Any, into: dict[str, Any]) -> None:
+    """Fold the map's labels now into `into` (every overlap seen, the smallest size seen)."""
+    now = drv.execute_script(LABELS_JS)
+    into.setdefault("overlaps", []).extend(now["overlaps"])
+    into["min_px"] = min(into.get("min_px", 1e9), now["min_px"])
+    into["most"] = max(into.get("most", 0), now["n"])
+
+
+def _rect(drv: Any, selector: str) -> tuple[float, float, float, float]:
+    r = _css(drv, selector).rect
+    return r["x"], r["y"], r["width"], r["height"]
+
+
+ANOTHER_ORIGIN = """<!doctype html><title>another origin</title><script>
+window.seen = [];
+function probe(name, url){
+  const ws = new WebSocket(url);
+  ws.onopen = () => { seen.push(name + ':open'); ws.send(JSON.stringify({type: 'submit', tick: 0, skill: 'wait'})); };
+  ws.onmessage = () => seen.push(name + ':message');
+  ws.onclose = () => seen.push(name + ':close');
+}
+probe('with_secret', WITH_SECRET);
+probe('without', WITHOUT);
+</script>"""
+
+
+@contextlib.contextmanager
+def _another_origin(page: str) -> Iterator[str]:
+    """A tiny site on another loopback port serving `page`; its address."""
+
+    class Handler(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:  # noqa: N802
+            body = page.encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html; charset=utf-8")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args: Any) -> None:
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}/"
+    finally:
+        server.shutdown()
+        server.server_close()
+        thread.join(10)
+
+
+def _hostile_first(drv: Any, played: Played) -> dict[str, Any]:
+    """Before the player opens the page: a page of another origin opens the robot's socket (with
+    the secret and without), a rebound Host asks for the page, a plain socket comes without the
+    secret. What each got."""
+    import httpx
+    import websocket
+
+    token = played.url.split("token=")[1]
+    ws = played.url.replace("http://", "ws://").replace("/?token=", "/ws?token=")
+    got: dict[str, Any] = {}
+    page = ANOTHER_ORIGIN.replace("WITH_SECRET", json.dumps(ws)).replace("WITHOUT", json.dumps(ws.split("?")[0]))
+    with _another_origin(page) as elsewhere:
+        drv.get(elsewhere)
+        until_sync(
+            lambda: len([e for e in drv.execute_script("return window.seen") if e.endswith(":close")]) == 2,
+            "the other origin's sockets to close",
+            WAIT,
+        )
+        got["another_origin"] = drv.execute_script("return window.seen")
+    rebound = httpx.get(played.url, headers={"Host": "evil.example"}, timeout=10)
+    got["rebound"] = (rebound.status_code, "observation" in rebound.text)
+    try:
+        websocket.create_connection(ws.split("?")[0], origin=played.url.split("/?")[0], timeout=10).close()
+        got["plain_socket"] = "accepted"
+    except websocket.WebSocketBadStatusException as exc:
+        got["plain_socket"] = exc.status_code
+    got["token"] = token
+    return got
+
+
 def _world_state_answers(played: Played, user: str) -> int:
     """How many answers a session logged in as `user` gets to a world/state query."""
     from mhrc.core.bus import open_client
@@ -167,13 +274,26 @@ def david(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
     from selenium.webdriver.common.action_chains import ActionChains
 
     played = _play(
-        tmp_path_factory.mktemp("play-david"), "david", "--objects", "3", "--seed", "0", "--tick-delay", "0.4"
+        tmp_path_factory.mktemp("play-david"),
+        "david",
+        "--objects",
+        "3",
+        "--seed",
+        "0",
+        "--tick-delay",
+        "0.4",
+        "--log-level",
+        "info",
     )
     facts = played.facts
+    labels: dict[str, Any] = {}
+    facts["labels"] = labels
     drv = chrome(browser, "1400,1400")
     try:
+        facts["hostile"] = _hostile_first(drv, played)
         drv.get(played.url)
         tick = _deciding(drv)
+        _labels(drv, labels)
         facts["observation"] = _css(drv, '[data-panel="observation"]').text
         facts["forms"] = [f.get_attribute("data-skill") for f in drv.find_elements("css selector", "form[data-skill]")]
         facts["map_furniture"] = len(drv.find_elements("css selector", "#map [data-name]"))
@@ -206,6 +326,15 @@ def david(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
         drv.save_screenshot(str(shot))
         if keep := os.environ.get("MHRC_PLAY_SCREENSHOT"):
             shutil.copy(shot, keep)
+        _labels(drv, labels)
+        facts["layout"] = {
+            k: _rect(drv, k) for k in ("#map", '[data-panel="messages"]', '[data-section="scene_graph"]')
+        }
+        # a reload mid-turn: the page attaches again to the same pending tick, and acts on it
+        drv.refresh()
+        facts["reload"] = (tick, _deciding(drv, tick - 1))
+        _submit(drv, "wait")
+        tick = _deciding(drv, tick)
         # the tab closed mid-episode: the robot is detached; the page opened again attaches it again
         drv.switch_to.new_window("tab")
         blank = drv.current_window_handle
@@ -222,6 +351,7 @@ def david(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
             state, now = _status(drv)
             if state == "deciding" and now != answered:
                 answered = now if now is not None else -1
+                _labels(drv, labels)
                 drv.execute_script("document.activeElement && document.activeElement.blur()")
                 ActionChains(drv).send_keys("r" if keys == 1 else "w").perform()
                 keys += 1
@@ -280,6 +410,63 @@ def test_bad_input_is_refused_on_the_page_with_the_reason_and_the_episode_goes_o
     assert f["after_bad_input"][0] == "deciding"
 
 
+def test_a_page_of_another_origin_cannot_drive_the_robot(david: Played) -> None:
+    """Its sockets, with the secret and without, are refused at the handshake: never open, no
+    message heard; the player who came after it drives David (his first action is the player's)."""
+    seen = david.facts["hostile"]["another_origin"]
+    assert sorted(seen) == ["with_secret:close", "without:close"], seen
+    first = next(r for r in david.of(ActionResult) if r.robot == "david")
+    assert first.action.call() == "navigate(sofa, 1)"
+
+
+def test_a_rebinding_host_and_a_socket_without_the_secret_are_refused(david: Played) -> None:
+    hostile = david.facts["hostile"]
+    assert hostile["rebound"] == (400, False)
+    assert hostile["plain_socket"] == 403
+
+
+def test_the_secret_is_in_no_log_and_not_in_the_trace(david: Played) -> None:
+    token = david.facts["hostile"]["token"]
+    logs = (david.tmp / "out-err.txt").read_text()
+    assert "request refused" in logs and "code=origin" in logs  # the refusals were logged, at --log-level info
+    assert token not in logs and token not in david.trace.read_text()
+    assert david.out.count(token) == 1  # the printed address, once
+
+
+def test_a_reload_keeps_the_players_turn(david: Played) -> None:
+    """Reloaded mid-turn, the page shows the same pending tick, and the action chosen after the
+    reload is David's action of that tick; the robot was never detached by the reload."""
+    before, after = david.facts["reload"]
+    assert after == before
+    acted = [r for r in david.of(ActionResult) if r.robot == "david" and r.tick == before]
+    assert [r.action.call() for r in acted] == ["wait()"]
+    detached = [d for d in david.of(RobotDetached) if d.robot == "david"]
+    assert all(d.tick > before for d in detached), detached
+
+
+def test_messages_sit_beside_the_map_above_the_scene_graph(david: Played) -> None:
+    layout = david.facts["layout"]
+    mx, my, mw, mh = layout["#map"]
+    x, y, _, _ = layout['[data-panel="messages"]']
+    assert x >= mx + mw and my <= y < my + mh, layout
+    assert y < layout['[data-section="scene_graph"]'][1]
+
+
+def test_the_end_status_reads_once(david: Played) -> None:
+    text = david.facts["end"][1]
+    assert text.startswith("the episode is over: success, ") and text.count("success") == 1, text
+
+
+@pytest.mark.parametrize(("who", "least"), [("david", 15), ("alice", 16)])
+def test_the_maps_labels_are_readable_and_never_overlap(who: str, least: int, request: pytest.FixtureRequest) -> None:
+    """Every label of the map (furniture and the objects the robot knows), at every decision
+    David saw and after Alice placed the book on table_0: none overlaps another, none is smaller
+    than 12 px on screen."""
+    labels = request.getfixturevalue(who).facts["labels"]
+    assert labels["overlaps"] == [] and labels["min_px"] >= 12, labels
+    assert labels["most"] >= least  # the 15 pieces of furniture's, and Alice's objects'
+
+
 def test_a_second_tab_for_the_robot_is_refused(david: Played) -> None:
     assert "one driver per robot" in david.facts["second_tab"]
 
@@ -323,6 +510,10 @@ def alice(browser: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) 
         tick = _deciding(drv, tick)
         _submit(drv, "place", object="book", location="table_0")
         _deciding(drv, tick)
+        facts["labels"] = {}
+        _labels(drv, facts["labels"])
+        if keep := os.environ.get("MHRC_PLAY_SCREENSHOT"):  # Alice's map, the objects she knows on it
+            drv.save_screenshot(str(Path(keep).with_name(Path(keep).stem + "-alice.png")))
         yield played
     finally:
         drv.quit()
@@ -353,3 +544,36 @@ def test_the_report_marks_the_human_lane(david: Played) -> None:
     lanes = dict(re.findall(r'<div class="lane([^"]*)" data-robot="(\w+)"', page)[i][::-1] for i in range(3))
     assert lanes == {"alice": "", "bob": "", "david": " human"}
     assert page.count("data-human>") == 1 and "decided by a person in" in page
+
+
+def test_labels_of_objects_on_furniture_and_stacked_never_overlap(
+    play_page: Page,  # noqa: F811
+    browser: tuple[Path, Path],  # noqa: F811
+) -> None:
+    """The map of an observation (no world: the page's own drawing, `mhrcPlay.show`): a mug on
+    table_2 (its place pose 15 cm from the table's centre, where the table's name is, as the mug
+    sat over table_3's name), three objects stacked on the tray, soap on table_0 beside the tray.
+    Every name reads, none over another."""
+    from mhrc.play.house import house_svg
+    from mhrc.play.human import HumanPolicy
+    from mhrc.testing.policy_harness import observation
+
+    obs = observation(
+        "alice", objects={"mug": "table_2", "apple": "tray", "bowl": "tray", "plate": "tray", "soap": "table_0"}
+    )
+    policy = HumanPolicy("alice")
+    policy.house = lambda o: ("kitchen", house_svg("kitchen", o))
+    policy.obs = obs
+    view = json.dumps(policy.view())
+    drv = chrome(browser, "1400,1100")
+    try:
+        drv.get(play_page.gate.url)
+        until_sync(lambda: drv.execute_script("return !!window.mhrcPlay"), "the page's script", WAIT)
+        drv.execute_script("window.mhrcPlay.show(JSON.parse(arguments[0]))", view)
+        labels: dict[str, Any] = {}
+        _labels(drv, labels)
+        names = set(drv.execute_script("return [...document.querySelectorAll('#map text')].map(t => t.textContent)"))
+    finally:
+        drv.quit()
+    assert {"mug", "apple", "bowl", "plate", "soap", "table_2", "table_0"} <= names
+    assert labels["overlaps"] == [] and labels["min_px"] >= 12, labels

@@ -14,9 +14,11 @@ import click
 
 from mhrc.cli.options import (
     INSECURE_HELP,
+    OVERWRITE,
     credentials_option,
     episode_config,
     episode_options,
+    fresh_trace,
     llm_options,
     load_credentials,
     open_bus_notice,
@@ -61,6 +63,7 @@ def _page_port_not_world_port(f: Callable[..., Any]) -> Callable[..., Any]:
     "--tick-delay", default=0.0, type=float, help="Seconds the world pauses between ticks (to follow your teammates)."
 )
 @_page_port_not_world_port
+@OVERWRITE
 @llm_options
 def play(
     robot: str,
@@ -73,6 +76,7 @@ def play(
     tick_delay: float,
     log_level: str,
     world_port: int,
+    overwrite: bool,
     **values: Any,
 ) -> None:
     """Drive one robot yourself from a browser page, beside the AI teammates (heuristic, or --llm)."""
@@ -80,6 +84,7 @@ def play(
 
     from mhrc.agents.agent import AgentError
     from mhrc.play.app import PortInUse, bind
+    from mhrc.play.gate import Gate, launcher
 
     logs.configure(log_level)
     console = Console(highlight=False, soft_wrap=True)
@@ -99,11 +104,20 @@ def play(
     except PortInUse as exc:
         click.echo(f"mhrc play: {exc}", err=True)
         sys.exit(2)
+    if cfg is not None:
+        try:  # an earlier episode's trace at this --run is kept (refused) or, with --overwrite, removed
+            fresh_trace("play", cfg, overwrite, values.get("trace") is not None)
+        except SystemExit:
+            sock.close()
+            raise
     if cfg is not None and secure:
         cfg = cfg.with_credentials()
     if connect is not None and creds is None:
         open_bus_notice(not secure)
-    url = f"http://127.0.0.1:{sock.getsockname()[1]}/"
+    gate = Gate("127.0.0.1", sock.getsockname()[1])  # the page's secret: in the address below, never logged
+    url = gate.url
+
+    launched: list[Path] = []
 
     def ready() -> None:
         click.echo(f"play {robot} at {url}", err=False)
@@ -111,7 +125,8 @@ def play(
         if not no_browser:
             import webbrowser
 
-            webbrowser.open(url)
+            launched.append(launcher(url))  # the browser opens a private file, not the secret on its command line
+            webbrowser.open(launched[-1].as_uri())
 
     if cfg is not None:
         from mhrc.run.config import ModelServerDown, check_model_servers
@@ -136,16 +151,19 @@ def play(
 
             if not quiet:
                 console.print(f"world on {cfg.endpoint}, run {cfg.run}, trace {cfg.trace}")
-            done = run_command(lambda: play_here(cfg, robot, sock, on_ready=ready))
+            done = run_command(lambda: play_here(cfg, robot, sock, gate, on_ready=ready))
         else:
             assert connect is not None
-            done = run_command(lambda: _there(robot, connect, values.get("run"), sock, creds, ready))
+            done = run_command(lambda: _there(robot, connect, values.get("run"), sock, gate, creds, ready))
     except (AgentError, LLMError, TeamError, SecurityError, ConfigError) as exc:  # as mhrc up and mhrc agent say them
         click.echo(f"mhrc play: {exc}", err=True)
         sys.exit(2)
     except (NobodyAttached, TraceWriteError) as exc:
         click.echo(f"mhrc play: {exc}", err=True)
         sys.exit(1)
+    finally:
+        for page in launched:
+            page.unlink(missing_ok=True)
     from mhrc.run.console import summary_table
 
     console.print(summary_table(done))
@@ -160,7 +178,9 @@ def play(
         console.print("contribution: " + "; ".join(c.line(you=c.robot == robot) for c in shares))
 
 
-async def _there(robot: str, connect: str, run: str | None, sock: Any, creds: Any, ready: Callable[[], None]) -> Any:
+async def _there(
+    robot: str, connect: str, run: str | None, sock: Any, gate: Any, creds: Any, ready: Callable[[], None]
+) -> Any:
     from mhrc.core.bus import open_client
     from mhrc.play.runner import play_there
     from mhrc.run.attach import find_run
@@ -173,4 +193,4 @@ async def _there(robot: str, connect: str, run: str | None, sock: Any, creds: An
             run = await find_run(bus)
         finally:
             await bus.close()
-    return await play_there(robot, connect, run, sock, security=creds, on_ready=ready)
+    return await play_there(robot, connect, run, sock, gate, security=creds, on_ready=ready)

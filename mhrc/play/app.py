@@ -1,5 +1,6 @@
 """The page's server: a Starlette app (the page at `/`, its WebSocket at `/ws`) served by uvicorn
-on 127.0.0.1, in the event loop of the episode's participants."""
+on 127.0.0.1, in the event loop of the episode's participants, behind the gate (mhrc.play.gate)
+that lets only the player in."""
 
 from __future__ import annotations
 
@@ -17,8 +18,9 @@ from starlette.responses import HTMLResponse, Response
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from .page import page_html
-from .session import PlaySession, SecondDriver
+from .gate import Gate, GateMiddleware, policy
+from .page import CSS, JS, page_html
+from .session import REPLACED, PlaySession, SecondDriver
 
 log = structlog.get_logger("mhrc.play")
 
@@ -29,7 +31,8 @@ class PortInUse(OSError):
     """The page's port is taken."""
 
 
-def make_app(session: PlaySession) -> Starlette:
+def make_app(session: PlaySession, gate: Gate) -> GateMiddleware:
+    """The page and its WebSocket, reachable only through `gate`."""
     html = page_html(session.robot)
 
     async def index(request: Request) -> HTMLResponse:
@@ -39,8 +42,9 @@ def make_app(session: PlaySession) -> Starlette:
         await websocket.accept()
         outbox: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
         page = object()
+        tab = websocket.query_params.get("tab", "")  # the page's tab (kept across its reloads)
         try:
-            session.open(page, outbox.put_nowait)
+            session.open(page, outbox.put_nowait, tab=tab)
         except SecondDriver as exc:
             await websocket.send_json({"type": "refused_tab", "reason": str(exc)})
             await websocket.close(code=SECOND_DRIVER)
@@ -48,7 +52,11 @@ def make_app(session: PlaySession) -> Starlette:
 
         async def pump() -> None:
             while True:
-                await websocket.send_json(await outbox.get())
+                message = await outbox.get()
+                await websocket.send_json(message)
+                if message["type"] == REPLACED:  # the same tab, reloaded, drives on a new socket
+                    await websocket.close()
+                    return
 
         sender = asyncio.create_task(pump())
         try:
@@ -68,7 +76,8 @@ def make_app(session: PlaySession) -> Starlette:
     async def no_icon(request: Request) -> Response:
         return Response(status_code=204)  # the page has no icon: said, so a browser's console stays quiet
 
-    return Starlette(routes=[Route("/", index), Route("/favicon.ico", no_icon), WebSocketRoute("/ws", ws)])
+    app = Starlette(routes=[Route("/", index), Route("/favicon.ico", no_icon), WebSocketRoute("/ws", ws)])
+    return GateMiddleware(app, gate, policy(JS, CSS))
 
 
 def bind(port: int, host: str = "127.0.0.1") -> socket.socket:
@@ -94,9 +103,11 @@ class _Server(uvicorn.Server):
 
 
 @contextlib.asynccontextmanager
-async def serving(session: PlaySession, sock: socket.socket) -> Any:
-    """Serve the page on `sock` for as long as the block runs."""
-    config = uvicorn.Config(make_app(session), ws="wsproto", lifespan="off", log_level="warning", access_log=False)
+async def serving(session: PlaySession, sock: socket.socket, gate: Gate) -> Any:
+    """Serve the page on `sock`, behind `gate`, for as long as the block runs."""
+    config = uvicorn.Config(
+        make_app(session, gate), ws="wsproto", lifespan="off", log_level="warning", access_log=False
+    )
     server = _Server(config)
     task = asyncio.create_task(server.serve(sockets=[sock]), name="play-page")
     try:

@@ -6,7 +6,11 @@ the messages `[data-panel="messages"]`, the status line `[data-status]` (its val
 starting, deciding, acting, done, refused, closed; `data-tick`, `data-success`); each skill's form
 `form[data-skill="<skill>"]` with inputs named as the protocol's fields and a `[data-submit]`
 button, a disabled form's reason in its `data-disabled`; a refused submission's reason in
-`[data-refusal]` (`data-code`). Keys: w waits, r repeats the last action.
+`[data-refusal]` (`data-code`). Keys: w waits, r repeats the last action. The messages sit at
+the top of the right column, beside the map, above the scene graph: a teammate's orders first.
+
+The style and the script are inline and allowed by their hashes in the page's
+Content-Security-Policy (mhrc.play.gate): an inline `style` attribute or handler would not run.
 """
 
 from __future__ import annotations
@@ -33,8 +37,8 @@ def page_html(robot: str) -> str:
 <section id="controls"><h2>Your next action</h2><p class="dim">keys: <kbd>w</kbd> wait, <kbd>r</kbd> repeat your last action</p>
 <div id="forms"></div></section></section>
 <section id="right">
-<section data-panel="observation" id="observation"><h2>What you know</h2><div class="body"><p class="dim">nothing yet</p></div></section>
 <section data-panel="messages" id="messages"><h2>Messages you received</h2><ol class="body"></ol></section>
+<section data-panel="observation" id="observation"><h2>What you know</h2><div class="body"><p class="dim">nothing yet</p></div></section>
 </section></main>
 <script>{JS}</script></body></html>
 """

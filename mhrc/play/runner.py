@@ -14,6 +14,7 @@ from mhrc.run.inprocess import up_in_process
 from mhrc.run.serve import EventHook
 
 from .app import serving
+from .gate import Gate
 from .house import house_svg, scene_of
 from .session import PlaySession
 
@@ -40,12 +41,13 @@ async def play_here(
     cfg: EpisodeConfig,
     robot: str,
     sock: socket.socket,
+    gate: Gate,
     *,
     on_ready: Callable[[], None] | None = None,
     observe: EventHook | None = None,
 ) -> EpisodeDone:
-    """The episode of `cfg` with `robot` driven from the page served on `sock`, the other robots
-    by their agents (heuristic or --llm) in this process."""
+    """The episode of `cfg` with `robot` driven from the page served on `sock` behind `gate`, the
+    other robots by their agents (heuristic or --llm) in this process."""
     session = PlaySession(
         robot,
         run=cfg.run,
@@ -56,7 +58,7 @@ async def play_here(
     )
     _mapped(session)
     teammates = tuple(r for r in cfg.robots if r != robot)
-    async with serving(session, sock):
+    async with serving(session, sock, gate):
         if on_ready is not None:
             on_ready()
         watch = asyncio.create_task(session.watch(), name="play-watch")  # the start and detachments, for the page
@@ -75,6 +77,7 @@ async def play_there(
     connect: str,
     run: str,
     sock: socket.socket,
+    gate: Gate,
     *,
     security: Credentials | None = None,
     on_ready: Callable[[], None] | None = None,
@@ -82,7 +85,7 @@ async def play_there(
     """The page's server as one more agent of a world elsewhere: `robot` of run `run` at `connect`."""
     session = PlaySession(robot, run=run, connect=connect, security=security)
     _mapped(session)
-    async with serving(session, sock):
+    async with serving(session, sock, gate):
         if on_ready is not None:
             on_ready()
         done = await session.watch()

@@ -1,12 +1,16 @@
 """`PlaySession`: the page's server as a participant of the world: one robot, one driver.
 
 A page that connects becomes the robot's agent: a bus session of its own (with the robot's
-credentials on a secured bus), a `RobotAgent` driving the shared `HumanPolicy`. Closing the tab
-closes that session, so the world sees the robot's liveliness token go and detaches it, as it
-would a killed agent; opening the page again attaches again (the policy keeps its histories).
-A second page for the same robot is refused while one drives it: one driver per robot, as the
-world's attach rule. The server subscribes to nothing but the world's events and its robot's
-own keys (the agent's): it never asks for `world/state`.
+credentials on a secured bus), a `RobotAgent` driving the shared `HumanPolicy`. A page that
+goes away keeps the robot attached for `RELOAD_GRACE` seconds: a reload (or the address opened
+again) within it takes over the same agent and is shown the decision still pending, so the
+player's turn is kept. After it, the agent's session closes, so the world sees the robot's
+liveliness token go and detaches it, as it would a killed agent; opening the page again attaches
+again (the policy keeps its histories). A second page for the same robot is refused while one
+drives it: one driver per robot, as the world's attach rule; the same tab reloaded (its `tab`
+id, kept in the tab's sessionStorage) replaces its old socket instead. The server subscribes to
+nothing but the world's events and its robot's own keys (the agent's): it never asks for
+`world/state`.
 """
 
 from __future__ import annotations
@@ -28,6 +32,10 @@ if TYPE_CHECKING:
     from mhrc.core.security import Credentials
 
 log = structlog.get_logger("mhrc.play")
+
+RELOAD_GRACE = 10.0  # s a page's robot stays attached after the page went: a reload takes over its turn
+REPLACED = "replaced"  # the message to a page whose tab reloaded: its socket closes, the new one drives
+MAX_TAB = 64  # characters of a tab id (the page makes a UUID)
 
 
 class SecondDriver(RuntimeError):
@@ -61,9 +69,12 @@ class PlaySession:
         self.attaches = 0  # how many pages have driven the robot (a reopened tab attaches again)
         self.ended = asyncio.Event()
         self.lost: WorldGone | None = None  # the world went away before the episode's end
+        self.reload_grace = RELOAD_GRACE
         self._driver: object | None = None
+        self._tab = ""
         self._task: asyncio.Task[None] | None = None
         self._send: Send | None = None
+        self._leaving: asyncio.Task[None] | None = None  # the grace after a page went, before its agent leaves
 
     def hello(self) -> dict[str, Any]:
         return {
@@ -75,29 +86,53 @@ class PlaySession:
             "started": self.started,
         }
 
+    @property
+    def driven(self) -> bool:
+        """A page drives the robot now (a refused socket never counts)."""
+        return self._driver is not None
+
     # ------------------------------------------------------------------ pages
-    def open(self, page: object, send: Send) -> None:
-        """`page` drives the robot from now on; SecondDriver when another does."""
+    def open(self, page: object, send: Send, tab: str = "") -> None:
+        """`page` drives the robot from now on; SecondDriver when another does. A page of the
+        same `tab` as the driver's (a reload) replaces it; a page within the grace after the
+        driver went takes over its agent, its pending decision included."""
+        tab = tab[:MAX_TAB]
         if self._driver is not None:
-            raise SecondDriver(
-                f"robot {self.robot} is already driven from another page: one driver per robot, as the world attaches one "
-                "agent per robot; close the other tab first"
-            )
+            if not tab or tab != self._tab:
+                raise SecondDriver(
+                    f"robot {self.robot} is already driven from another page: one driver per robot, as the world "
+                    "attaches one agent per robot; close the other tab first"
+                )
+            if self._send is not None:
+                self._send({"type": REPLACED, "reason": "this tab was reloaded: the new page drives"})
         if self.done is not None:
             send(self.hello())
             send(self._done_message())
             return
-        self._driver, self._send = page, send
+        self._driver, self._send, self._tab = page, send, tab
+        if self._leaving is not None:
+            self._leaving.cancel()
+            self._leaving = None
         send(self.hello())
         self.policy.connect(send)
-        self._task = asyncio.create_task(self._drive(), name=f"play-{self.robot}")
+        if self._task is None or self._task.done():
+            self._task = asyncio.create_task(self._drive(), name=f"play-{self.robot}")
 
     async def close(self, page: object) -> None:
-        """`page` is gone (its tab closed): its agent leaves the world, which detaches the robot."""
+        """`page` is gone (reloaded, or its tab closed): after the grace with no page, its agent
+        leaves the world, which detaches the robot."""
         if page is not self._driver:
             return
         self._driver, self._send = None, None
         self.policy.connect(None)
+        if self._leaving is None:
+            self._leaving = asyncio.create_task(self._leave(), name=f"play-{self.robot}-leaving")
+
+    async def _leave(self) -> None:
+        await asyncio.sleep(self.reload_grace)
+        self._leaving = None
+        if self._driver is not None:
+            return
         task, self._task = self._task, None
         if task is not None and not task.done():
             task.cancel()
