@@ -290,6 +290,8 @@ def eval_(
             bar, total=t.before + t.total, completed=t.before + t.done, description=f"{spec.method} [{rate}]"
         )
         if not console.is_terminal:  # CI, nohup, | tee: no bar to watch, so one line per finished episode
+            if row is None and not t.done and t.before:  # the first call of a resume: what was done before
+                progress.console.print(f"{spec.method} [{rate}]", markup=False)
             if row is not None or t.done:  # (the first call, before any episode ended, has neither)
                 progress.console.print(f"{_ended(row, t)} ({t.before + t.done}/{t.before + t.total})", markup=False)
         elif row is not None and not row.get("valid", True):
