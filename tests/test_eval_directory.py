@@ -28,29 +28,31 @@ def _row(key: str, **extra: Any) -> dict[str, Any]:
     """A finished heuristic row of SPEC's grid, as episodes.jsonl holds it."""
     task, scene, n, seed = key.split("/")
     robots = ["alice", "bob", "david"]
-    return _full({
-        "key": key,
-        "method": "heuristic",
-        "ablation": "none",
-        "task": task,
-        "scene": scene,
-        "seed": int(seed),
-        "n_objects": int(n),
-        "robots": robots,
-        "reason": "success",
-        "success": True,
-        "placed": int(n),
-        "total": int(n),
-        "partial_success": 1.0,
-        "temporal_steps": 10,
-        "action_steps": 20,
-        "action_steps_per_robot": {"alice": 8, "bob": 6, "david": 6},
-        "fidelity": "paper",
-        "horizon": 12,
-        "schedule": "sequential",
-        "trace": f"traces/{key.replace('/', '_')}.jsonl",
-        **extra,
-    })
+    return _full(
+        {
+            "key": key,
+            "method": "heuristic",
+            "ablation": "none",
+            "task": task,
+            "scene": scene,
+            "seed": int(seed),
+            "n_objects": int(n),
+            "robots": robots,
+            "reason": "success",
+            "success": True,
+            "placed": int(n),
+            "total": int(n),
+            "partial_success": 1.0,
+            "temporal_steps": 10,
+            "action_steps": 20,
+            "action_steps_per_robot": {"alice": 8, "bob": 6, "david": 6},
+            "fidelity": "paper",
+            "horizon": 12,
+            "schedule": "sequential",
+            "trace": f"traces/{key.replace('/', '_')}.jsonl",
+            **extra,
+        }
+    )
 
 
 def _full(row: dict[str, Any]) -> dict[str, Any]:
@@ -120,7 +122,7 @@ BAD_ROWS = [
     ("a key twice", _line([_row(KEYS[0]), _row(KEYS[1]), _row(KEYS[0])]), "line 3: episode"),
     (
         "a key that is not its episode's",
-        _line(_rows_with(lambda r: r.update(key=KEYS[1]))) ,
+        _line(_rows_with(lambda r: r.update(key=KEYS[1]))),
         "is not its episode's",
     ),
     ("javascript: trace", _line(_rows_with(lambda r: r.update(trace="javascript:alert(1)"))), "trace"),
@@ -210,7 +212,14 @@ def test_a_sound_directory_is_read_and_reported(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     "trace",
-    ["javascript:alert(1)", "javascript:alert(1).jsonl", "/etc/passwd", "../x.jsonl", "traces/../../x.jsonl", "https://e.x/a.jsonl"],
+    [
+        "javascript:alert(1)",
+        "javascript:alert(1).jsonl",
+        "/etc/passwd",
+        "../x.jsonl",
+        "traces/../../x.jsonl",
+        "https://e.x/a.jsonl",
+    ],
 )
 def test_a_row_in_memory_whose_trace_is_no_file_of_traces_gets_no_link(trace: str) -> None:
     """The page is drawn from rows a caller may hand over unchecked: still, no such trace becomes an href."""

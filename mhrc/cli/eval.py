@@ -382,7 +382,9 @@ def eval_(
     if rerun is not None and rows:
         from mhrc.cli.rerun_view import eval_recordings
 
-        made = eval_recordings((out / str(r["trace"]) for r in rows if r.get("trace")), rerun.path, out)  # validated rows: traces/ files
+        made = eval_recordings(
+            (out / str(r["trace"]) for r in rows if r.get("trace")), rerun.path, out
+        )  # validated rows: traces/ files
         console.print(f"{len(made)} rerun recording(s) in {rerun.path}")
     if rows:
         click.echo((out / "summary.md").read_text(encoding="utf-8"))  # the summary written, not computed again

@@ -36,7 +36,9 @@ class LinkRefused(ConfigError):
 
 
 def _refused(path: Path, what: str = "a symlink") -> LinkRefused:
-    return LinkRefused(f"{path} is {what}; an evaluation directory's files are never followed (remove it or copy the file there)")
+    return LinkRefused(
+        f"{path} is {what}; an evaluation directory's files are never followed (remove it or copy the file there)"
+    )
 
 
 def refuse_links(out: Path) -> None:

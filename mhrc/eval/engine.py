@@ -320,7 +320,9 @@ async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progre
                 return job, False, None
             tally.errors += 1
             tally.given_up.append(res.key)
-            append_text(out / "errors.jsonl", json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n")
+            append_text(
+                out / "errors.jsonl", json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n"
+            )
             tally.done += 1
             return None, True, None
         row = _row(plan, job, res, scored, out)

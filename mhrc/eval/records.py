@@ -14,7 +14,6 @@ memory, summaries take a row as its `record()`, the JSON object the file holds, 
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Collection
 from pathlib import Path
 from typing import Annotated, Any
@@ -271,9 +270,13 @@ def read_dir(d: Path) -> list[Row]:
     rows = read_rows(path, grid)
     for r in rows:
         if (r["method"], r["ablation"]) != (manifest.identity.method, manifest.identity.ablation):
-            raise ConfigError(f"{path}: episode {r['key']} ran {r['method']}, ablation {r['ablation']}, not the evaluation's")
+            raise ConfigError(
+                f"{path}: episode {r['key']} ran {r['method']}, ablation {r['ablation']}, not the evaluation's"
+            )
         if r.get("horizon") is not None and r["horizon"] != manifest.identity.horizon:
-            raise ConfigError(f"{path}: episode {r['key']} ran horizon {r['horizon']}, not the evaluation's {manifest.identity.horizon}")
+            raise ConfigError(
+                f"{path}: episode {r['key']} ran horizon {r['horizon']}, not the evaluation's {manifest.identity.horizon}"
+            )
     return rows
 
 
