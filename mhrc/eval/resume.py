@@ -90,7 +90,6 @@ def resumed_spec(out: Path, now: EvalSpec, given: set[str]) -> EvalSpec:
         return now
     if diff := differences(manifest.spec, now, given):
         raise ConfigError(
-            f"--resume: {out} holds another grid or setting: {'; '.join(diff)} "
-            f"(--resume takes them from {path}; leave them out, or choose another --out)"
+            f"--resume: {out} holds another evaluation: {'; '.join(diff)}"
         )
     return manifest.spec
