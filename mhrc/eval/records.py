@@ -9,6 +9,12 @@ read, so summaries never guess. The team's work (mhrc.analysis.teamwork: per-rob
 moves, communication steps, redundant actions) is, like the diagnostics, unknown in older rows. A row's diagnostics (`diag_*`) are the exception: a row
 written before them does not know them, and stays without them (unknown, never zero). In
 memory, summaries take a row as its `record()`, the JSON object the file holds, upgraded.
+
+A directory may come from someone else, so nothing in it is trusted: a row's values have ranges
+(a strict boolean success, PS in [0, 1], counts that are non-negative JSON integers), its key is
+its episode's and of the manifest's grid, once, its trace that key's file in traces/; the
+manifest has no unknown field and a spec that makes its identity. Any other line is a
+ConfigError naming the file and line, before anything is counted or written.
 """
 
 from __future__ import annotations
@@ -196,12 +202,13 @@ def trace_of(key: str) -> str:
     return f"traces/{key.replace('/', '_')}.jsonl"
 
 
-def _lines(path: Path) -> list[tuple[int, str]]:
+def _lines(path: Path) -> tuple[list[tuple[int, str]], bool]:
     """The non-blank lines of a file of the directory (read without following a symlink), numbered
-    from 1; bytes that are not UTF-8 are a ConfigError naming the line."""
+    from 1, and whether the file ends with a newline (a last line without one may be torn); bytes
+    that are not UTF-8 are a ConfigError naming the line."""
     data = read_bytes(path)
     if data is None:
-        return []
+        return [], True
     out = []
     for i, raw in enumerate(data.split(b"\n")):
         try:
@@ -210,7 +217,7 @@ def _lines(path: Path) -> list[tuple[int, str]]:
             raise ConfigError(f"{path}, line {i + 1}: not UTF-8 text (byte {exc.start + 1})") from None
         if line.strip():
             out.append((i + 1, line))
-    return out
+    return out, data.endswith(b"\n")
 
 
 def _json(path: Path, n: int, line: str) -> Any:
@@ -232,8 +239,7 @@ def read_rows(path: Path, grid: Collection[str] | None = None) -> list[Row]:
     (no newline after it: an interrupted write) is skipped; any other line that is no row (not
     UTF-8, not JSON, a value out of its range, a key twice, or, given `grid`, a key the grid does
     not hold) is a ConfigError naming the file and the line."""
-    lines = _lines(path)
-    data_ends_whole = not lines or (read_bytes(path) or b"").endswith(b"\n")
+    lines, data_ends_whole = _lines(path)
     rows: list[Row] = []
     seen: dict[str, int] = {}
     for k, (n, line) in enumerate(lines):
