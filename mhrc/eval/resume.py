@@ -89,7 +89,5 @@ def resumed_spec(out: Path, now: EvalSpec, given: set[str]) -> EvalSpec:
     if manifest.spec is None:
         return now
     if diff := differences(manifest.spec, now, given):
-        raise ConfigError(
-            f"--resume: {out} holds another evaluation: {'; '.join(diff)}"
-        )
+        raise ConfigError(f"--resume: {out} holds another evaluation: {'; '.join(diff)}")
     return manifest.spec
