@@ -221,7 +221,7 @@ def eval_(
     )
 
     from mhrc.core.fidelity import AidsError, parse_aids
-    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, check_out, run
+    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, check_out, resume_command, run
     from mhrc.eval.paper import PAPER_OBJECTS
     from mhrc.eval.summaries import SUMMARY_FILES
     from mhrc.world.scene import LAYOUTS
@@ -252,6 +252,19 @@ def eval_(
         **llm,
     )
     out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
+    if resume:  # the grid and every setting are the directory's (eval.json); options given beside must agree
+        from mhrc.eval.resume import SPEC_OPTIONS, resumed_spec
+
+        ctx = click.get_current_context()
+        given = {
+            name
+            for name in SPEC_OPTIONS
+            if ctx.get_parameter_source(name) not in (None, click.core.ParameterSource.DEFAULT)
+        }
+        try:
+            spec = resumed_spec(out, spec, given)
+        except ConfigError as exc:
+            raise click.UsageError(str(exc)) from None
     console = Console(stderr=True)
     console.soft_wrap = not console.is_terminal  # a log file's lines are not cut at 80 columns
     progress = Progress(
@@ -261,6 +274,7 @@ def eval_(
         TimeElapsedColumn(),
         TimeRemainingColumn(),
         console=console,
+        disable=not console.is_terminal,  # off a terminal: one line per episode (hook), never a bar
     )
     bar = progress.add_task("episodes", total=None)
 
@@ -276,6 +290,8 @@ def eval_(
             bar, total=t.before + t.total, completed=t.before + t.done, description=f"{spec.method} [{rate}]"
         )
         if not console.is_terminal:  # CI, nohup, | tee: no bar to watch, so one line per finished episode
+            if row is None and not t.done and t.before:  # the first call of a resume: what was done before
+                progress.console.print(f"{spec.method} [{rate}]", markup=False)
             if row is not None or t.done:  # (the first call, before any episode ended, has neither)
                 progress.console.print(f"{_ended(row, t)} ({t.before + t.done}/{t.before + t.total})", markup=False)
         elif row is not None and not row.get("valid", True):
@@ -317,11 +333,20 @@ def eval_(
         raise click.UsageError(str(exc)) from None
     rows_path = out / "episodes.jsonl"
 
+    advice = resume_command(out, ray=ray_address, shared_out=shared_out)
+
     def stopping() -> str:
-        """What the first Ctrl-C says: where the finished episodes are, only if one has finished."""
-        kept = rows_path.exists() and rows_path.stat().st_size > 0
-        where = f"every finished episode is kept in {rows_path}" if kept else "no episode has finished yet"
-        return f"stopping the workers; {where} (continue with --resume --out {out})"
+        """What the first Ctrl-C says, once: the bar stops first, so no stale bar is drawn after it."""
+        progress.stop()
+        return "stopping the workers"
+
+    def interrupted() -> str:
+        """The last line, once the workers are stopped: where the finished episodes are, and the command
+        that finishes the grid (without the word "interrupted", which the first line said)."""
+        progress.stop()
+        kept = rows_path.is_file() and rows_path.stat().st_size > 0
+        where = f"every finished episode is kept in {rows_path}" if kept else "no episode finished"
+        return f"stopped: {where}; finish the grid with: {advice}"
 
     if concurrency is None:
         from mhrc.agents.llm import episodes_at_once
@@ -338,7 +363,11 @@ def eval_(
     t0 = time.perf_counter()
     with progress:
         try:
-            rows = run_command(lambda: run(plan, out, options, resume=resume, progress=hook), stopping=stopping)
+            rows = run_command(
+                lambda: run(plan, out, options, resume=resume, progress=hook),
+                stopping=stopping,
+                interrupted=interrupted,
+            )
         except ConfigError as exc:
             raise click.UsageError(str(exc)) from None
         except EvalAborted as exc:
@@ -353,7 +382,9 @@ def eval_(
     if rerun is not None and rows:
         from mhrc.cli.rerun_view import eval_recordings
 
-        made = eval_recordings((out / str(r["trace"]) for r in rows if r.get("trace")), rerun.path, out)
+        made = eval_recordings(
+            (out / str(r["trace"]) for r in rows if r.get("trace")), rerun.path, out
+        )  # validated rows: traces/ files
         console.print(f"{len(made)} rerun recording(s) in {rerun.path}")
     if rows:
         click.echo((out / "summary.md").read_text(encoding="utf-8"))  # the summary written, not computed again
@@ -390,8 +421,8 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     With --out FILE.md, the markdown goes there instead, with FILE.csv and FILE.html (tables,
     plots, a link to each episode's report) beside it."""
     from mhrc.eval.html import links_of
+    from mhrc.eval.records import read_dir
     from mhrc.eval.report import markdown
-    from mhrc.eval.rows import merge_runs
     from mhrc.eval.summaries import write_summary_files
     from mhrc.eval.summary import Summary
 
@@ -405,17 +436,23 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
             if why := unwritable(f):
                 raise click.BadParameter(why, param_hint="--out")
     try:
-        per_dir = [(d, merge_runs([d])) for d in dirs]
+        per_dir = [(d, read_dir(d)) for d in dirs]  # each row validated, and of its directory's grid
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
     rows = [r for _, mine in per_dir for r in mine]
     if not rows:
         raise click.UsageError("no finished episodes in " + ", ".join(map(str, dirs)))
-    summary = Summary.of(rows, resamples=resamples, seed=seed)  # every statistic, once, for the three files
+    page_dir = (out or Path(".")).parent
+    links = [link for d, mine in per_dir for link in links_of(mine, d, page_dir)]
+    # every statistic, once, for the three files; each row's link sorted with it
+    summary = Summary.of(rows, resamples=resamples, seed=seed, links=links)
     if out is None:
         click.echo(markdown(summary))
         return
     md, csv, html = files
-    links = [link for d, mine in per_dir for link in links_of(mine, d, html.parent)]
-    write_summary_files(summary, md, csv, html, links)
+    md.parent.mkdir(parents=True, exist_ok=True)  # checked creatable above (unwritable)
+    try:
+        write_summary_files(summary, md, csv, html, summary.links)
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc), param_hint="--out") from None
     click.echo(f"wrote {md}, {csv}, {html}", err=True)

@@ -93,13 +93,19 @@ def show_rerun(trace: Path, target: Target) -> None:
 
 def eval_recordings(traces: Iterable[Path], directory: Path, root: Path) -> list[Path]:
     """`mhrc eval --rerun DIR`: one recording per episode's trace, at its place under `root` in DIR.
-    A trace that cannot be read is said and skipped: the evaluation's results stand."""
+    A trace that cannot be read, or whose recording would land outside DIR (a path with ../), is said
+    and skipped: the evaluation's results stand."""
+    from mhrc.eval.directory import inside
     from mhrc.viewer.load import NotATrace
     from mhrc.viewer.rerun.record import rrd_beside, write_recording
 
     out = []
     for trace in traces:
         target = rrd_beside(trace, directory, root)
+        assert target.path is not None
+        if not (inside(trace, root) and inside(target.path, directory)):
+            click.echo(f"mhrc eval: --rerun: {trace}: outside {root}; no recording written for it", err=True)
+            continue
         try:
             write_recording(trace, target)
         except (NotATrace, OSError, RuntimeError) as exc:

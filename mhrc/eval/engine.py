@@ -25,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import shlex
 import zlib
 from collections import defaultdict
 from collections.abc import Callable
@@ -36,8 +37,9 @@ import structlog
 
 from mhrc.analysis.metrics import Invalid
 from mhrc.core.trace import unwritable
+from mhrc.eval.directory import append_text, make_dirs, refuse_links, write_bytes, write_text
 from mhrc.eval.episode import Job, WorkerResult
-from mhrc.eval.records import EvalManifest, EvalRow, Row, read_manifest, read_rows
+from mhrc.eval.records import EvalManifest, EvalRow, Row, read_manifest, read_rows, trace_of
 from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import merge_runs
 from mhrc.eval.scoring import Scored, score, write_episode_report
@@ -53,6 +55,7 @@ __all__ = [
     "RunOptions",
     "Tally",
     "check_out",
+    "resume_command",
     "evaluate",
     "merge_runs",
     "run",
@@ -138,13 +141,23 @@ class Executor(Protocol):
     async def stop(self, grace: float) -> list[WorkerResult]: ...
 
 
+def resume_command(out: Path, *, ray: str | None = None, shared_out: bool = False) -> str:
+    """The command that finishes the evaluation in `out` and nothing more: --resume takes the grid and
+    every setting from its eval.json; only where the episodes run is said again."""
+    where = ([f"--ray {shlex.quote(ray)}"] if ray else []) + (["--shared-out"] if shared_out else [])
+    return " ".join(["mhrc eval --resume --out", shlex.quote(str(out)), *where])
+
+
 def check_out(out: Path, plan: Plan, resume: bool) -> None:
     """Raise ConfigError naming --out when DIR cannot hold this evaluation (not creatable, holding
     another one, or, with --resume, holding none: a mistyped path must not start, and pay for, a
-    whole grid); creates nothing, so the CLI checks it before anything starts."""
+    whole grid; a file of it a symlink; a row that is no row of this grid); creates nothing, so
+    the CLI checks it before anything starts."""
     if why := unwritable(out, directory=True):
         raise ConfigError(f"--out: {why}")
     manifest = out / "eval.json"
+    if out.exists():
+        refuse_links(out)
     if resume and not manifest.is_file():
         raise ConfigError(
             f"--resume: {out} holds no evaluation (no {manifest.name}); check the path, or leave out --resume to start one"
@@ -157,17 +170,34 @@ def check_out(out: Path, plan: Plan, resume: bool) -> None:
         before = read_manifest(manifest).identity  # an older manifest's missing fields: what it ran with
         if before != plan.identity:
             raise ConfigError(f"--resume: {out} holds another evaluation: {identity_difference(before, plan.identity)}")
+        finished_rows(out, plan)
+
+
+def finished_rows(out: Path, plan: Plan) -> dict[str, Row]:
+    """The rows DIR holds, by key, each validated (`read_rows`) and of this plan's grid and
+    setting: a row outside the grid, or run with another method, ablation or horizon, is a
+    ConfigError naming its line, never counted."""
+    path = out / "episodes.jsonl"
+    rows = read_rows(path, {j.key for j in plan.jobs})
+    spec = plan.spec
+    for r in rows:
+        if (r["method"], r["ablation"]) != (spec.method, spec.ablation) or r.get("horizon") not in (None, spec.horizon):
+            raise ConfigError(
+                f"{path}: episode {r['key']} ran {r['method']}, ablation {r['ablation']}, horizon {r.get('horizon')}: "
+                "not this evaluation's"
+            )
+    return {r["key"]: r for r in rows}
 
 
 def prepare_out(out: Path, plan: Plan) -> dict[str, Row]:
     """Create DIR (checked by `check_out`) and write its manifest; return the rows already finished, by key."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "traces").mkdir(exist_ok=True)
-    (out / "eval.json").write_text(EvalManifest(identity=plan.identity, spec=plan.spec).text())
-    rows = read_rows(out / "episodes.jsonl")
-    if rows:  # rewrite without a torn last line, so that new rows start on a line of their own
-        (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
-    return {r["key"]: r for r in rows}
+    make_dirs(out)
+    refuse_links(out)
+    finished = finished_rows(out, plan)
+    write_text(out / "eval.json", EvalManifest(identity=plan.identity, spec=plan.spec).text())
+    if finished:  # rewrite without a torn last line, so that new rows start on a line of their own
+        write_text(out / "episodes.jsonl", "".join(json.dumps(r) + "\n" for r in finished.values()))
+    return finished
 
 
 async def evaluate(
@@ -268,11 +298,11 @@ async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progre
         if res.fatal:
             aborted.append(f"{res.key}: {res.error}")
             return None, False, None
-        trace_path = out / "traces" / (res.key.replace("/", "_") + ".jsonl")
+        trace_path = out / trace_of(res.key)
         scored: Scored | None = None
         if res.error is None:
             if res.trace_file is None:
-                trace_path.write_bytes(zlib.decompress(res.trace_z))
+                write_bytes(trace_path, zlib.decompress(res.trace_z))
             try:
                 scored = score(trace_path)  # the trace read once; metrics and diagnostics computed once
             except (ValueError, OSError) as exc:  # TraceError, a line that is not JSON, a file gone
@@ -290,13 +320,13 @@ async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progre
                 return job, False, None
             tally.errors += 1
             tally.given_up.append(res.key)
-            with (out / "errors.jsonl").open("a", encoding="utf-8") as f:
-                f.write(json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n")
+            append_text(
+                out / "errors.jsonl", json.dumps({"key": res.key, "worker": res.worker, "error": res.error}) + "\n"
+            )
             tally.done += 1
             return None, True, None
         row = _row(plan, job, res, scored, out)
-        with rows_path.open("a", encoding="utf-8") as f:
-            f.write(row.line())
+        append_text(rows_path, row.line())
         tally.succeeded += bool(row.success)
         tally.invalid += not row.valid
         tally.done += 1
@@ -334,13 +364,13 @@ async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progre
                 if not res.fatal and res.error is None:
                     told(await asyncio.to_thread(take, res))
     if aborted:
-        kept = read_rows(rows_path)
+        kept = read_rows(rows_path, {j.key for j in plan.jobs})
         await asyncio.to_thread(write_summaries, kept, out)
         raise EvalAborted(
             f"stopped: {aborted[0]}. Every episode would fail the same way; "
             + (f"the {len(kept)} finished episode(s) are kept in {rows_path}" if kept else "no episode finished")
-            + f" (fix the cause, then continue with --resume --out {out})"
+            + f" (fix the cause, then continue with: {resume_command(out)})"
         )
-    rows = read_rows(rows_path)
+    rows = read_rows(rows_path, {j.key for j in plan.jobs})
     await asyncio.to_thread(write_summaries, rows, out)
     return rows

@@ -7,7 +7,9 @@ rendered as HTML by markdown-it-py; the plots draw `mhrc.analysis.metrics.summar
 SVG drawn with matplotlib's object API (no pyplot state, no display), so the page needs no
 network and no other file. Each episode links to `traces/<trace file stem>.html` next to the
 evaluation's episodes.jsonl, the page `mhrc show` writes; the link is there whether or not that
-page has been written yet.
+page has been written yet. A link is a relative URL path into the evaluation directory, made only
+from a trace path of traces/ (never a row's text as it stands), and it stays with its row when the
+summary sorts the rows.
 """
 
 from __future__ import annotations
@@ -15,12 +17,15 @@ from __future__ import annotations
 import html
 import io
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 from mhrc.analysis.diagnostics import summarize_diagnostics
 from mhrc.analysis.metrics import summarize
+from mhrc.eval.directory import write_text
 from mhrc.eval.report import markdown
 from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, group, is_valid, setting_label, setting_of
 from mhrc.eval.summary import Summary
@@ -239,7 +244,7 @@ def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> s
             str(r.get("temporal_steps", "")),
             "" if r.get("lower_bound") is None else str(r["lower_bound"]),
             *([html.escape(_recovery_cell(r.get("recovery") or []))] if dynamic else []),
-            f'<a href="{html.escape(link)}">{html.escape(link)}</a>' if link else "",
+            f'<a href="{html.escape(href)}">{html.escape(href)}</a>' if (href := _href(link)) else "",
         ]
         out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     return "\n".join(out + ["</tbody></table>"])
@@ -261,13 +266,30 @@ def _recovery_cell(recovery: list[dict[str, Any]]) -> str:
     return ", ".join(one(e) for e in recovery)
 
 
+TRACE_FILE = re.compile(r"traces/[A-Za-z0-9_][A-Za-z0-9_.-]*\.jsonl")  # a row's trace, as mhrc eval writes it
+
+
 def _link(row: dict[str, Any], base: Path, page_dir: Path) -> str | None:
-    """`traces/<trace file stem>.html` of the row's evaluation directory, relative to the page."""
+    """`traces/<trace file stem>.html` of the row's evaluation directory, relative to the page, as
+    a URL path: every segment percent-encoded, so no part of it can be read as a scheme. A row
+    whose trace is anything but a file of traces/ (a URL, an absolute path, ../) gets no link."""
     trace = row.get("trace")
-    if not trace:
+    if not isinstance(trace, str) or not TRACE_FILE.fullmatch(trace):
         return None
-    target = base / Path(str(trace)).parent / f"{Path(str(trace)).stem}.html"
-    return Path(os.path.relpath(target, page_dir)).as_posix()
+    target = base / "traces" / f"{trace.removeprefix('traces/').removesuffix('.jsonl')}.html"
+    rel = Path(os.path.relpath(target, page_dir)).as_posix()
+    return "/".join(quote(part, safe="") for part in rel.split("/"))
+
+
+def _href(link: str | None) -> str | None:
+    """`link` if it may be an href: a relative URL path ending in an episode's report, no scheme, no
+    query, not absolute (a link made elsewhere than `_link` is checked again here)."""
+    if not link or link.startswith("/") or any(c in link for c in ":?#\\"):
+        return None
+    parts = link.split("/")
+    if len(parts) < 2 or parts[-2] != "traces" or not parts[-1].endswith(".html") or parts[-1].startswith("."):
+        return None
+    return link
 
 
 def html_summary(
@@ -278,16 +300,24 @@ def html_summary(
     resamples: int = RESAMPLES,
     seed: int = CI_SEED,
 ) -> str:
-    """`page` of the Summary of `rows`."""
-    return page(Summary.of(rows, resamples=resamples, seed=seed), links, title=title)
+    """`page` of the Summary of `rows` (`links[i]` is rows[i]'s link)."""
+    return page(Summary.of(rows, resamples=resamples, seed=seed, links=links), title=title)
 
 
 def page(
-    summary: Summary, links: Sequence[str | None], *, title: str = "Evaluation summary", md: str | None = None
+    summary: Summary,
+    links: Sequence[str | None] | None = None,
+    *,
+    title: str = "Evaluation summary",
+    md: str | None = None,
 ) -> str:
     """The page: summary.md's tables as HTML (`md`, when the caller rendered it already), the plots,
-    and the episodes with their links (`links[i]` is summary.rows[i]'s)."""
+    and the episodes with their links (`links[i]` is summary.rows[i]'s; default: summary.links, kept
+    with their rows when the summary sorted them)."""
     rows, valid = summary.rows, summary.valid
+    links = summary.links if links is None else links
+    if len(links) != len(rows):
+        raise ValueError(f"{len(links)} links for {len(rows)} rows")
     plots = (
         success_by_objects(valid) + ts_against_bound(valid) + diagnostics_by_setting(valid) + against_team_size(summary)
         if valid
@@ -334,5 +364,5 @@ def write_html_summary(
     relative to (default: the page's own directory, as for `mhrc eval --out DIR`)."""
     page_dir = out_path.parent
     links = links_of(rows, base if base is not None else page_dir, page_dir)
-    out_path.write_text(html_summary(rows, links, title=title, resamples=resamples, seed=seed), encoding="utf-8")
+    write_text(out_path, html_summary(rows, links, title=title, resamples=resamples, seed=seed))
     return out_path

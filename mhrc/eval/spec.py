@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from mhrc.agents.llm import DEFAULT_MAX_TOKENS
 from mhrc.core.fidelity import label
@@ -26,9 +27,28 @@ from mhrc.eval.paper import PAPER_OBJECTS
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.world.scenario import load_scenario
 
-__all__ = ["EvalIdentity", "EvalSpec", "Plan", "identity_difference", "is_paper_team", "team_identity"]
+__all__ = [
+    "EvalIdentity",
+    "EvalSpec",
+    "Plan",
+    "bounded",
+    "episode_key",
+    "identity_difference",
+    "is_paper_team",
+    "team_identity",
+]
 
 TEAM_KEY = re.compile(r"[A-Za-z0-9_-]{1,64}")  # a team's name as the first part of its episodes' keys
+MAX_EPISODES = 1_000_000  # the largest grid an evaluation directory's manifest may describe
+MAX_COUNT = 2**31 - 1  # the largest count (steps, objects, seeds, tokens) an evaluation's files may hold
+Horizon = Annotated[int, Field(strict=True, ge=1, le=MAX_COUNT)]
+Bounded = Annotated[int, Field(strict=True, ge=-MAX_COUNT, le=MAX_COUNT)]
+Scale = Annotated[float, Field(strict=True, ge=0.0, allow_inf_nan=False)]
+
+
+def episode_key(team: str | None, task: str, scene: str, n_objects: int, seed: int) -> str:
+    """An episode's key: `task/scene/objects/seed`, after `TEAM/` for any team but the paper's (None)."""
+    return ("" if team is None else f"{team}/") + f"{task}/{scene}/{n_objects}/{seed}"
 
 
 def is_paper_team(team: TeamSpec) -> bool:
@@ -47,20 +67,20 @@ class EvalIdentity(BaseModel):
     grid may grow: more trials, repeats, object counts, scenes or tasks). A field's default is
     what a manifest written before the field existed ran with."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     method: str
     ablation: str
-    horizon: int
+    horizon: Horizon
     fidelity: str = "paper"
     noise: str = "on"
-    history_cap: int | None = None
+    history_cap: Bounded | None = None
     prompts: str | None = None
     mode: str = "free"
-    max_tokens: int | None = None
-    llm_seed: int | None = None
+    max_tokens: Bounded | None = None
+    llm_seed: Bounded | None = None
     schedule: str = "lockstep"
-    time_scale: float = 0.0
+    time_scale: Scale = 0.0
     scenario: str | None = None  # the scenario file's sha256
     teams: tuple[str, ...] = (team_identity(PAPER_TEAM),)  # team_identity of each team, sorted
 
@@ -89,7 +109,7 @@ class EvalSpec(BaseModel):
     """What an evaluation runs: the grid and how each episode is driven. Values are checked by
     `validate`, which names the option, not by the model (a bad value is a usage error)."""
 
-    model_config = ConfigDict(frozen=True)
+    model_config = ConfigDict(frozen=True, extra="forbid")
 
     tasks: tuple[str, ...]
     scenes: tuple[str, ...]
@@ -248,20 +268,50 @@ class EvalSpec(BaseModel):
         out = []
         for repeat in range(self.repeats):
             for team in self.teams:
-                prefix = "" if is_paper_team(team) else f"{team.name}/"
+                prefix = "" if is_paper_team(team) else team.name
                 for task in self.tasks:
                     for scene in self.scenes:
                         for n in self.objects:
                             for trial in range(self.trials):
                                 seed = self.seed(repeat, trial)
                                 config = cells[(team.name, task, scene, n)].model_copy(update={"seed": seed})
-                                key = f"{prefix}{task}/{scene}/{n}/{seed}"
+                                key = episode_key(prefix or None, task, scene, n, seed)
                                 out.append(Job(key=key, config=config, repeat=repeat, trial=trial))
         return out
+
+    def keys(self) -> frozenset[str]:
+        """The key of every episode of the grid, without building a config (what rows may hold)."""
+        return frozenset(
+            episode_key(None if is_paper_team(team) else team.name, task, scene, n, self.seed(repeat, trial))
+            for repeat in range(self.repeats)
+            for team in self.teams
+            for task in self.tasks
+            for scene in self.scenes
+            for n in self.objects
+            for trial in range(self.trials)
+        )
 
     def jobs(self) -> list[Job]:
         """Every episode of the grid (validates the spec: use `validate().jobs` to keep the plan)."""
         return list(self.validate().jobs)
+
+
+def bounded(spec: EvalSpec) -> str | None:
+    """What of a spec read from a file lies outside the range an evaluation may hold (None: nothing):
+    a grid of 10^30 repeats is no grid."""
+    for name in ("horizon", "trials", "repeats"):
+        if not 1 <= getattr(spec, name) <= MAX_COUNT:
+            return f"{name}: {getattr(spec, name)} is outside 1..{MAX_COUNT}"
+    if not all(0 <= n <= MAX_COUNT for n in spec.objects):
+        return f"objects: {list(spec.objects)} holds a count outside 0..{MAX_COUNT}"
+    size = spec.repeats * spec.trials * len(spec.teams) * len(spec.tasks) * len(spec.scenes) * len(spec.objects)
+    if size > MAX_EPISODES:
+        return f"a grid of {size} episodes (more than {MAX_EPISODES})"
+    for name in ("history_cap", "max_tokens", "llm_seed"):
+        value = getattr(spec, name)
+        if value is not None and abs(value) > MAX_COUNT:
+            return f"{name}: {value} is outside the range of a count"
+    return None
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from mhrc.eval.directory import write_text
 from mhrc.eval.html import links_of, page
 from mhrc.eval.report import csv_text, markdown
 from mhrc.eval.rows import CI_SEED, RESAMPLES
@@ -22,11 +23,13 @@ SUMMARY_FILES = (
 def write_summary_files(
     summary: Summary, md: Path, csv: Path, html: Path, links: Sequence[str | None], *, title: str = "Evaluation summary"
 ) -> str:
-    """Render `summary` once each to `md`, `csv` and `html` (the page's tables are the markdown's); returns the markdown."""
+    """Render `summary` once each to `md`, `csv` and `html` (the page's tables are the markdown's;
+    `links[i]` is summary.rows[i]'s, as `Summary.of(rows, links=...)` keeps them); returns the
+    markdown. Each file is written through a temporary file renamed over it, never through a symlink."""
     text = markdown(summary)
-    csv.write_text(csv_text(summary), encoding="utf-8")
-    md.write_text(text, encoding="utf-8")
-    html.write_text(page(summary, links, title=title, md=text), encoding="utf-8")
+    write_text(csv, csv_text(summary))
+    write_text(md, text)
+    write_text(html, page(summary, links, title=title, md=text))
     return text
 
 
@@ -38,6 +41,5 @@ def write_summaries(
     if not rows:
         return None
     md, csv, html = (out / name for name in SUMMARY_FILES)
-    return write_summary_files(
-        Summary.of(rows, resamples=resamples, seed=seed), md, csv, html, links_of(rows, out, out)
-    )
+    summary = Summary.of(rows, resamples=resamples, seed=seed, links=links_of(rows, out, out))
+    return write_summary_files(summary, md, csv, html, summary.links)

@@ -6,6 +6,7 @@ renderings of one Summary (mhrc.eval.report, mhrc.eval.html); none computes a st
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,12 +37,27 @@ class Summary:
     diagnostics: dict[Cell, dict[str, Any]]  # mhrc.analysis.diagnostics.summarize_diagnostics
     matches: dict[Cell, PaperMatch]  # the paper's figures, or why not
     invalid: Counter[Cell]  # invalid rows left out, by setting and task
+    links: list[str | None]  # links[i]: the link to rows[i]'s episode report (None: none)
 
     @classmethod
-    def of(cls, rows: list[Row], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> Summary:
+    def of(
+        cls,
+        rows: list[Row],
+        *,
+        resamples: int = RESAMPLES,
+        seed: int = CI_SEED,
+        links: Sequence[str | None] | None = None,
+    ) -> Summary:
+        """The statistics of `rows`; `links[i]`, the link to rows[i]'s report, is kept with its row."""
+        if links is not None and len(links) != len(rows):
+            raise ValueError(f"{len(links)} links for {len(rows)} rows")
         # in key order, not the order workers finished in: the bootstrap resamples by position, so the same
-        # rows give the same intervals however the episodes were scheduled
-        rows = sorted(rows, key=lambda r: (str(r.get("key", "")), r.get("repeat", 0)))
+        # rows give the same intervals however the episodes were scheduled; each link moves with its row
+        paired = sorted(
+            zip(rows, links if links is not None else [None] * len(rows)),
+            key=lambda p: (str(p[0].get("key", "")), p[0].get("repeat", 0)),
+        )
+        rows = [r for r, _ in paired]
         valid = [r for r in rows if is_valid(r)]
         cells = by_setting_task(valid)
         return cls(
@@ -54,6 +70,7 @@ class Summary:
             diagnostics={k: summarize_diagnostics(v) for k, v in cells.items()},
             matches=matches_of(cells),
             invalid=Counter((setting_of(r), r["task"]) for r in rows if not is_valid(r)),
+            links=[link for _, link in paired],
         )
 
     @property
