@@ -117,3 +117,112 @@ def test_show_still_renders_the_untampered_trace(trace: Path, tmp_path: Path) ->
     result = CliRunner().invoke(main, ["show", str(trace), "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert out.is_file()
+
+
+# --------------------------------------------------------------------------- teams: long, deep, huge, reserved
+
+
+def _refusal(out: subprocess.CompletedProcess[str]) -> str:
+    """A click usage error's one line ("Error: ...", after click's usage lines), exit 2, no traceback."""
+    assert out.returncode == 2, out.stderr[-3000:]
+    assert "Traceback" not in out.stderr + out.stdout, out.stderr[-3000:]
+    said = [ln for ln in out.stderr.splitlines() if ln.strip() and not ln.startswith(("Usage:", "Try '"))]
+    assert len(said) == 1, out.stderr
+    return said[0]
+
+
+LONG_TEAM = ",".join(f"{c * 32}={'tabletop_arm' if c == 'a' else 'mobile_manipulator'}" for c in "abcdefgh")
+
+
+def test_a_valid_inline_team_over_255_characters_is_read_as_robots(tmp_path: Path) -> None:
+    """`Path(text).is_file()` raised OSError (file name too long) in mhrc/run/teams.py."""
+    from mhrc.run.teams import resolve_team
+
+    assert len(LONG_TEAM) > 255
+    assert len(resolve_team(LONG_TEAM).robots) == 8
+    out = _mhrc("teams", LONG_TEAM, cwd=tmp_path)
+    assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr[-3000:]
+    assert "hhhhhhhhhhhhhhhhhhhhhhhhhhhhhhhh: mobile_manipulator" in out.stdout
+
+
+@pytest.mark.slow
+def test_a_long_inline_team_in_eval_dry_run(tmp_path: Path) -> None:
+    out = _mhrc("eval", "--dry-run", "--team", LONG_TEAM, "--out", "ev", cwd=tmp_path)
+    assert "Traceback" not in out.stderr and "File name too long" not in out.stderr, out.stderr[-3000:]
+    assert out.returncode == 0, out.stderr[-3000:]
+
+
+@pytest.mark.parametrize("suffix", [".json", ".toml"])
+def test_a_deeply_nested_team_file_is_one_line(tmp_path: Path, suffix: str) -> None:
+    """RecursionError in core/team.py before."""
+    deep = "[" * 100_000 + "]" * 100_000
+    f = tmp_path / f"deep{suffix}"
+    if suffix == ".json":
+        f.write_text('{"robots": [], "purpose": ' + deep + "}")
+    else:
+        f.write_text(f"purpose = {deep}\n")
+    said = _refusal(_mhrc("teams", f.name, cwd=tmp_path))
+    assert "nested too deeply" in said, said
+
+
+def test_a_deeply_nested_inline_json_team_is_one_line() -> None:
+    from mhrc.core.team import TeamError, TeamProblem
+    from mhrc.run.teams import resolve_team
+
+    with pytest.raises(TeamError) as err:
+        resolve_team('{"robots": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    assert err.value.code is TeamProblem.BAD_FILE and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("start", ["[1e308, 0.0, 0.0]", "[0.0, -1e308, 0.0]", "[0.0, 0.0, 1e308]", "[5000.0, 0.0, 0.0]"])
+def test_a_start_past_any_map_is_refused_at_validation(tmp_path: Path, start: str) -> None:
+    """`"start": [1e308, ...]` overflowed in world/astar.py when the world placed the team."""
+    (tmp_path / "far.toml").write_text(
+        f'[[robots]]\nname = "alice"\nkind = "mobile_manipulator"\nstart = {start}\n'
+        '[[robots]]\nname = "bob"\nkind = "tabletop_arm"\n'
+    )
+    said = _refusal(_mhrc("up", "--team", "far.toml", "--horizon", "2", "--insecure", cwd=tmp_path))
+    assert "robots.0.start" in said and "finite coordinate" in said, said
+    assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("name", ["world", "observer", "robots", "visible"])
+def test_a_robot_named_like_a_participant_is_refused_before_anything_is_written(tmp_path: Path, name: str) -> None:
+    """`--team world=...` passed validation and wrote runs/RUN/credentials (the world's key
+    included) before Zenoh refused; `mhrc credentials --team world=...` exited 0 handing robot
+    `world` the world's login. `robots` and `visible` repeated an id of the router's rules."""
+    team = f"{name}=mobile_manipulator,bob=tabletop_arm"
+    said = _refusal(_mhrc("up", "--team", team, "--horizon", "2", cwd=tmp_path))
+    assert "robots.0.name" in said and repr(name) in said, said
+    said = _refusal(_mhrc("credentials", "--team", team, "--out", "creds", cwd=tmp_path))
+    assert repr(name) in said, said
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_credentials_refuse_a_reserved_robot_name_before_writing(tmp_path: Path) -> None:
+    from mhrc.core.participants import RESERVED
+    from mhrc.core.security import SecurityError, make_run_credentials
+
+    for name in sorted(RESERVED):
+        with pytest.raises(SecurityError):
+            make_run_credentials("r1", ["alice", name], tmp_path / name)
+        assert not (tmp_path / name).exists()
+
+
+def test_every_name_the_router_rules_give_a_participant_is_reserved() -> None:
+    """The reserved names come from the bus: a robot named like one repeats an id of the access rules
+    (or a login); any other robot name keeps every id unique."""
+    from mhrc.core.participants import RESERVED
+    from mhrc.core.security import OBSERVER, WORLD, acl
+
+    def unique(robots: list[str]) -> bool:  # the router wants each rule's, subject's and policy's id once
+        conf = acl("r1", robots)
+        return all(len({i["id"] for i in conf[part]}) == len(conf[part]) for part in ("rules", "subjects", "policies"))
+
+    assert {WORLD, OBSERVER} <= RESERVED
+    for name in RESERVED - {WORLD, OBSERVER}:
+        assert not unique(["alice", name]), name
+    conf = acl("r1", ["alice"])
+    words = {w for part in ("rules", "subjects", "policies") for i in conf[part] for w in i["id"].split("-")}
+    clean = sorted(w for w in words if w.isidentifier() and w not in RESERVED and w != "alice")
+    assert unique(["alice", *clean]), clean
