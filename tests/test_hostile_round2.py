@@ -226,3 +226,37 @@ def test_every_name_the_router_rules_give_a_participant_is_reserved() -> None:
     words = {w for part in ("rules", "subjects", "policies") for i in conf[part] for w in i["id"].split("-")}
     clean = sorted(w for w in words if w.isidentifier() and w not in RESERVED and w != "alice")
     assert unique(["alice", *clean]), clean
+
+
+# --------------------------------------------------------------------------- the AEC env's misuse errors
+
+
+def test_the_aec_env_says_step_before_reset_and_after_the_last_agent_left() -> None:
+    """AttributeError before reset and KeyError 'alice' after every agent left; now ValueErrors
+    that say what to do, as the parallel env's are, and the env still runs after them."""
+    import mhrc.env as mhrc_env
+
+    aec = mhrc_env.env(objects=3, horizon=1)
+    try:
+        with pytest.raises(ValueError, match="before reset"):
+            aec.step("wait()")
+        aec.reset(seed=0)
+        for _ in aec.possible_agents:
+            aec.step("wait()")
+        while aec.agents:
+            aec.step(None)
+        for action in ("wait()", None):
+            with pytest.raises(ValueError, match="no live agent.*reset"):
+                aec.step(action)
+        aec.reset(seed=1)  # another episode runs as ever
+        assert aec.agents == aec.possible_agents
+        aec.step("wait()")
+    finally:
+        aec.close()
+
+    par = mhrc_env.parallel_env(objects=3, horizon=1)
+    try:
+        with pytest.raises(ValueError, match="not live"):
+            par.step({"alice": "wait()"})
+    finally:
+        par.close()
