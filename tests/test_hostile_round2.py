@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import stat
 import subprocess
 import sys
 from collections.abc import Callable
@@ -260,3 +261,51 @@ def test_the_aec_env_says_step_before_reset_and_after_the_last_agent_left() -> N
             par.step({"alice": "wait()"})
     finally:
         par.close()
+
+
+# --------------------------------------------------------------------------- --rerun OUT.rrd: a regular file only
+
+
+def _odd_rrd(kind: str, where: Path) -> Path:
+    out = where / "out.rrd"
+    if kind == "fifo":
+        os.mkfifo(out)
+    elif kind == "symlink":
+        (where / "elsewhere.rrd").write_bytes(b"")
+        out.symlink_to(where / "elsewhere.rrd")
+    elif kind == "dangling symlink":
+        out.symlink_to(where / "nowhere.rrd")
+    elif kind == "device":
+        return _device_rrd(where)
+    return out
+
+
+def _device_rrd(where: Path) -> Path:
+    """A character device named *.rrd: a link would be refused as a link, so a device node where
+    we may make one (as root), else skip."""
+    out = where / "dev.rrd"
+    try:
+        os.mknod(out, 0o600 | stat.S_IFCHR, os.makedev(1, 3))  # /dev/null's numbers
+    except PermissionError:
+        pytest.skip("making a device node needs root")
+    return out
+
+
+@pytest.mark.parametrize("kind", ["fifo", "symlink", "dangling symlink", "device"])
+def test_rerun_refuses_what_is_not_a_regular_file(trace: Path, tmp_path: Path, kind: str) -> None:
+    """A FIFO as `--rerun OUT.rrd` hung for over 60 s; a symlinked .rrd was written through to its
+    target. Now one line and exit 2 before anything is written."""
+    pytest.importorskip("rerun")
+    out = _odd_rrd(kind, tmp_path)
+    target = tmp_path / "elsewhere.rrd"
+    said = _refusal(_mhrc("show", str(trace), "--rerun", str(out), cwd=tmp_path, timeout=30))
+    assert "--rerun" in said and str(out) in said, said
+    assert not target.exists() or target.stat().st_size == 0
+    assert not (tmp_path / "nowhere.rrd").exists()
+
+
+def test_rerun_still_writes_a_regular_file(trace: Path, tmp_path: Path) -> None:
+    pytest.importorskip("rerun")
+    out = _mhrc("show", str(trace), "--rerun", "rec.rrd", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert (tmp_path / "rec.rrd").is_file() and (tmp_path / "rec.rrd").stat().st_size > 0
