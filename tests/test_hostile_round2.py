@@ -175,7 +175,9 @@ def test_a_deeply_nested_inline_json_team_is_one_line() -> None:
     assert err.value.code is TeamProblem.BAD_FILE and "\n" not in str(err.value)
 
 
-@pytest.mark.parametrize("start", ["[1e308, 0.0, 0.0]", "[0.0, -1e308, 0.0]", "[0.0, 0.0, 1e308]", "[5000.0, 0.0, 0.0]"])
+@pytest.mark.parametrize(
+    "start", ["[1e308, 0.0, 0.0]", "[0.0, -1e308, 0.0]", "[0.0, 0.0, 1e308]", "[5000.0, 0.0, 0.0]"]
+)
 def test_a_start_past_any_map_is_refused_at_validation(tmp_path: Path, start: str) -> None:
     """`"start": [1e308, ...]` overflowed in world/astar.py when the world placed the team."""
     (tmp_path / "far.toml").write_text(
