@@ -173,7 +173,8 @@ def _boxes(drv: Any, selector: str) -> list[dict[str, Any]]:
     return drv.execute_script(
         "return Array.from(document.querySelectorAll(arguments[0])).filter(e => e.textContent !== '' || e.tagName !== 'text')"
         ".map(e => "
-        "{ const b = e.getBBox(); return {text: e.textContent, cls: e.getAttribute('class'), x0: b.x, y0: b.y, x1: b.x + b.width, y1: b.y + b.height}; });",
+        "{ const b = e.getBBox(); return {text: e.textContent, cls: e.getAttribute('class'), stack: e.getAttribute('data-stack'), "
+        "x0: b.x, y0: b.y, x1: b.x + b.width, y1: b.y + b.height}; });",
         selector,
     )
 
@@ -259,7 +260,10 @@ def test_a_failed_episode_shows_its_unplaced_targets_in_a_browser(driver: Any, f
             i,
         )
         labels = _boxes(driver, "#map text")
-        assert len(labels) >= len(frames[i]["objects"]) + len(frames[i]["robots"]) + 1
+        named = sum(
+            len(a["stack"].split(",")) if a["stack"] else 1 for a in labels
+        )  # a stack's label lists its objects
+        assert named >= len(frames[i]["objects"]) + len(frames[i]["robots"]) + 1
         for k, a in enumerate(labels):
             for b in labels[k + 1 :]:
                 assert _overlap(a, b) < 0.5, (i, a, b)

@@ -40,10 +40,9 @@ from typing import Any
 from cryptography import x509
 
 from mhrc.core.certs import make_ca, make_server_cert, pem_cert, pem_key, write_private
+from mhrc.core.participants import OBSERVER, WORLD, reserved_why
 
 ENV = "MHRC_CREDENTIALS"
-WORLD = "world"
-OBSERVER = "observer"  # subscribes to everything of the run, publishes nothing (the recorder of `mhrc up --processes`)
 GITIGNORE = "# written by mhrc: credentials are secrets, never to be committed\n*\n"  # in every credentials directory
 RUN = "run"  # the only kind of credentials: one run's participants (an evaluation's job queue, kind "eval", is gone: mhrc eval --ray)
 
@@ -129,6 +128,8 @@ def make_run_credentials(
     check_id(run, "run id")
     for r in robots:
         check_id(r, "robot")
+        if (why := reserved_why(r)) is not None:  # before anything is written: a robot `world` took the world's key
+            raise SecurityError(f"robot {r!r}: no robot may be called that: {why}")
     users = [WORLD, *robots] + ([OBSERVER] if observer else [])
     return _issue(run, users, directory, robots=robots, days=days, hosts=hosts, split=split)
 

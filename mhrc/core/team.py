@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 import tomllib
 from enum import StrEnum
@@ -24,7 +25,10 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from mhrc.core.participants import reserved_why
+
 __all__ = [
+    "MAX_COORD",
     "MAX_ROBOTS",
     "MIN_ROBOTS",
     "NAME",
@@ -41,13 +45,29 @@ __all__ = [
 
 NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")  # a robot's name: a key segment, a login, a prompt's word
 MIN_ROBOTS, MAX_ROBOTS = 2, 8
+MAX_COORD = 1000.0  # m (and rad, for a yaw): far past any layout's walls, and far from a float's overflow
+
+
+def start_problem(start: object) -> str | None:
+    """Why a start pose of three numbers is out of bounds (not finite, or past MAX_COORD), or None;
+    its shape is the model's to check. A start past the walls is refused by the world's placement
+    ("off the map"); this keeps out what its grid arithmetic cannot take (1e308 overflowed
+    converting to a cell)."""
+    if not isinstance(start, (list, tuple)):
+        return None
+    for v in start:
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and (not math.isfinite(v) or abs(v) > MAX_COORD):
+            return f"{v!r:.40} is not a finite coordinate within {MAX_COORD:g} of the origin"
+    return None
 
 
 class TeamProblem(StrEnum):
     """Why a team was refused (TeamError.code)."""
 
     BAD_NAME = "bad_name"  # a robot name that is not a lowercase identifier
+    BAD_START = "bad_start"  # a start pose that is not three finite numbers within MAX_COORD
     DUPLICATE_NAME = "duplicate_name"
+    RESERVED_NAME = "reserved_name"  # a participant's name on the bus other than a robot's (mhrc.core.participants)
     SIZE = "size"  # fewer than MIN_ROBOTS or more than MAX_ROBOTS
     UNKNOWN_KIND = "unknown_kind"
     NO_FINISHER = "no_finisher"  # nobody can place on the goal (no tabletop arm)
@@ -84,6 +104,13 @@ class RobotSpec(BaseModel):
             raise ValueError(
                 f"robot name {v!r} is not a lowercase identifier (a-z first, then a-z, 0-9 or _, at most 32 characters)"
             )
+        return v
+
+    @field_validator("start")
+    @classmethod
+    def _start(cls, v: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if v is not None and (problem := start_problem(v)) is not None:
+            raise ValueError(f"start: {problem}")
         return v
 
 
@@ -152,9 +179,13 @@ def checked(data: dict[str, object], where: str) -> TeamSpec:
                 f"{where}: robots.{i}.name: {name!r} is not a lowercase identifier "
                 "(a-z first, then a-z, 0-9 or _, at most 32 characters)",
             )
+        if (why := reserved_why(name)) is not None:
+            raise TeamError(TeamProblem.RESERVED_NAME, f"{where}: robots.{i}.name: no robot may be called that: {why}")
         if name in seen:
             raise TeamError(TeamProblem.DUPLICATE_NAME, f"{where}: robots.{i}.name: {name!r} appears twice")
         seen.add(name)
+        if r.get("start") is not None and (problem := start_problem(r["start"])) is not None:
+            raise TeamError(TeamProblem.BAD_START, f"{where}: robots.{i}.start: {problem}")
     try:
         return TeamSpec.model_validate(data)
     except ValidationError as exc:
@@ -181,7 +212,9 @@ def load_team_file(path: Path) -> TeamSpec:
         text = path.read_text(encoding="utf-8")
         data = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
     except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise TeamError(TeamProblem.BAD_FILE, f"--team {path}: {exc}") from None
+        raise TeamError(TeamProblem.BAD_FILE, f"--team {path}: {str(exc)[:200]}") from None
+    except RecursionError:  # the JSON and TOML parsers recurse into nested arrays and tables
+        raise TeamError(TeamProblem.BAD_FILE, f"--team {path}: nested too deeply to be a team file") from None
     if not isinstance(data, dict):
         raise TeamError(TeamProblem.BAD_FILE, f"--team {path}: not a table with robots")
     return checked({"name": path.stem, **data}, f"--team {path}")

@@ -18,16 +18,19 @@ class MhrcAECEnv(Made, AECEnv[str, Obs, str]):
 
     Options as `MhrcParallelEnv`'s. A robot's observation is the one the world last gave it: its
     first comes with its first turn (before that it is empty). An action for a robot whose
-    episode is over must be None (PettingZoo's rule: ValueError otherwise)."""
+    episode is over must be None (PettingZoo's rule: ValueError otherwise); `step` before `reset`,
+    or after every robot has left, is a ValueError saying so, as the parallel env's is."""
 
     metadata = {"name": "mhrc_v0", "render_modes": ["rgb_array"], "is_parallelizable": True}
 
     def __init__(self, *, render_mode: str | None = None, expert: bool = False, **options: Any) -> None:
         super().__init__()
         self._make("sequential", render_mode, expert, options)
+        self._was_reset = False
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         self.core.reset(seed)
+        self._was_reset = True
         self.agents = list(self.possible_agents)
         self.rewards = dict.fromkeys(self.agents, 0.0)
         self._cumulative_rewards = dict.fromkeys(self.agents, 0.0)
@@ -42,7 +45,14 @@ class MhrcAECEnv(Made, AECEnv[str, Obs, str]):
         return self.core.observation(agent)
 
     def step(self, action: Any) -> None:
-        """The selected robot's command; one that cannot be read or done is its feedback."""
+        """The selected robot's command; one that cannot be read or done is its feedback.
+        ValueError, with nothing run, before `reset` and once every robot has left."""
+        if not self._was_reset:
+            raise ValueError("step before reset: call reset() to start an episode")
+        if not self.agents:
+            raise ValueError(
+                f"step with no live agent (the episode is over, every robot has left; got {action!r:.80}): call reset() for another"
+            )
         agent = self.agent_selection
         if self.terminations[agent] or self.truncations[agent]:
             self._was_dead_step(action)

@@ -30,8 +30,8 @@ def resolve_team(text: str | None) -> TeamSpec:
     if text in shipped:
         return shipped[text]
     path = Path(text)
-    if path.suffix.lower() in (".toml", ".json") or path.is_file():
-        if not path.is_file():
+    if path.suffix.lower() in (".toml", ".json") or _is_file(path):
+        if not _is_file(path):
             raise TeamError(TeamProblem.BAD_FILE, f"--team {text}: no such file")
         return load_team_file(path)
     if "=" in text:
@@ -41,6 +41,15 @@ def resolve_team(text: str | None) -> TeamSpec:
         f"--team {text!r}: not a shipped team ({', '.join(shipped)}; mhrc teams), "
         "a .toml or .json file, or robots inline (alice=mobile_manipulator,bob=tabletop_arm)",
     )
+
+
+def _is_file(path: Path) -> bool:
+    """Whether `path` is a file; False for text no file can have as its name (a name over the
+    system's limit, as a long inline team is: Path.is_file raises OSError for it, or a NUL byte)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def team_argument(team: TeamSpec) -> str:
@@ -54,8 +63,8 @@ def team_argument(team: TeamSpec) -> str:
 def team_from_json(text: str) -> TeamSpec:
     try:
         data = json.loads(text)
-    except ValueError as exc:
-        raise TeamError(TeamProblem.BAD_FILE, f"--team: not JSON: {exc}") from None
+    except (ValueError, RecursionError) as exc:  # Python's parser raises RecursionError on a deep document
+        raise TeamError(TeamProblem.BAD_FILE, f"--team: not JSON: {type(exc).__name__}: {str(exc)[:200]}") from None
     if not isinstance(data, dict):
         raise TeamError(TeamProblem.BAD_FILE, "--team: the JSON is not an object with robots")
     return checked(data, "--team")

@@ -8,16 +8,26 @@ a file that is no trace at all.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from mhrc.core.protocol import PROTOCOL_VERSION
-from mhrc.core.records import LineError, TraceLine, TraceLineError, parse_line
+from mhrc.core.records import MODELS, LineError, LineKind, TraceLine, TraceLineError, parse_line
 
 
 class NotATrace(ValueError):
     """A file with no line that reads as a trace line: the message says why."""
+
+
+class MalformedLine(NotATrace):
+    """A trace line whose message names a protocol kind but does not fit its model (a string where a
+    number belongs, a list where an object belongs): `line` is its number, the message names it."""
+
+    def __init__(self, path: Path, line: int, problem: str) -> None:
+        self.path, self.line, self.problem = path, line, problem
+        super().__init__(f"{path}, line {line}: {problem}")
 
 
 @dataclass
@@ -32,11 +42,61 @@ class LoadedTrace:
     rows: list[dict[str, Any]] = field(init=False)
 
     def __post_init__(self) -> None:
-        self.rows = [line.as_row() for line in self.records]
+        self.rows = [_typed_row(line) for line in self.records]
 
     def messages(self, kind: str) -> list[dict[str, Any]]:
         """The `msg` (JSON) of every line whose message is of `kind`, in trace order."""
         return [r["msg"] for r in self.rows if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == kind]
+
+
+def _named_kind(raw: Any) -> str | None:
+    """The protocol kind a line's message names (one mhrc.core.records decodes), or None."""
+    kind = raw.get("kind") if isinstance(raw, dict) else None
+    return kind if isinstance(kind, str) and kind in MODELS else None
+
+
+def _not_finite(value: Any) -> bool:
+    """Whether a JSON value holds NaN or an infinity anywhere (Python's parser reads `NaN` and
+    `Infinity`; the page's JSON.parse would fail on them). Iterative: a deep value is no error."""
+    todo = [value]
+    while todo:
+        v = todo.pop()
+        if isinstance(v, float) and not math.isfinite(v):
+            return True
+        if isinstance(v, dict):
+            todo.extend(v.values())
+        elif isinstance(v, list):
+            todo.extend(v)
+    return False
+
+
+def malformed(line: TraceLine) -> str | None:
+    """Why `line` cannot be shown, or None: a message that names a protocol kind must be a `put`
+    that decoded into that kind's model (mhrc.core.records). The page reads what decoded, never
+    the raw JSON, so a value of the wrong type cannot reach it."""
+    if not math.isfinite(line.t) or _not_finite(line.raw):
+        return "a number is NaN or infinite"
+    kind = _named_kind(line.raw)
+    if kind is None or line.msg is not None:
+        return None
+    if line.kind is not LineKind.PUT:
+        return f"a {line.kind.value} line carries a {kind} message"
+    newer = line.raw.get("v") if isinstance(line.raw, dict) else None
+    hint = (
+        f" (protocol version {newer}, newer than this mhrc's {PROTOCOL_VERSION}: upgrade mhrc to read it)"
+        if isinstance(newer, int) and not isinstance(newer, bool) and newer > PROTOCOL_VERSION
+        else ""
+    )
+    return f"the {kind} message does not fit its model: {line.problem}{hint}"
+
+
+def _typed_row(line: TraceLine) -> dict[str, Any]:
+    """The line as JSON for the page: a decoded message as its model dumps it (only the fields the
+    line gave, so an older trace still reads as older), anything else as written."""
+    row = line.as_row()
+    if line.msg is not None and _named_kind(line.raw) is not None:
+        row["msg"] = line.msg.model_dump(mode="json", exclude_unset=True)
+    return row
 
 
 def resolve(path: str | Path) -> Path:
@@ -48,7 +108,8 @@ def resolve(path: str | Path) -> Path:
 
 
 def load_trace(path: str | Path) -> LoadedTrace:
-    """Read `path` (a trace file or a run directory). Raises NotATrace or OSError."""
+    """Read `path` (a trace file or a run directory) through the typed reader (mhrc.core.records).
+    Raises NotATrace (MalformedLine for a line whose message does not fit its model) or OSError."""
     p = resolve(path)
     if not p.exists():
         given = Path(path)
@@ -81,6 +142,9 @@ def load_trace(path: str | Path) -> LoadedTrace:
                 bad.append(i + 1)
             continue
         if record.key.startswith("mhrc/"):
+            problem = malformed(record)
+            if problem is not None:
+                raise MalformedLine(p, record.number, problem)
             records.append(record)
         else:
             bad.append(i + 1)

@@ -1,6 +1,9 @@
 
 (function(){
-  const data = JSON.parse(document.getElementById('mhrc-data').textContent);
+  // every object of the data without a prototype: a robot, object or goal is looked up by its name,
+  // and a name such as `constructor` must find nothing rather than Object.prototype's member
+  const bare = (k, v) => (v !== null && typeof v === 'object' && !Array.isArray(v)) ? Object.assign(Object.create(null), v) : v;
+  const data = JSON.parse(document.getElementById('mhrc-data').textContent, bare);
   const svg = document.getElementById('map');
   const NS = svg.namespaceURI;
   const dyn = document.getElementById('dyn');
@@ -40,7 +43,16 @@
     items.forEach((it, idx) => {
       const t = document.createElementNS(NS, 'text');
       t.setAttribute('class', it.cls); if (it.fill) t.setAttribute('fill', it.fill);
-      t.setAttribute('x', '0'); t.setAttribute('y', '0'); t.textContent = it.text;
+      t.setAttribute('x', '0'); t.setAttribute('y', '0');
+      if (it.lines){  // a stack: one line per object, top first, each styled by its own role
+        it.lines.forEach((ln, k) => {
+          const sp = document.createElementNS(NS, 'tspan');
+          sp.setAttribute('x', '0'); if (k) sp.setAttribute('dy', '1.15em');
+          sp.setAttribute('class', ln.cls); sp.textContent = ln.text;
+          t.appendChild(sp);
+        });
+        t.dataset.stack = it.lines.map(ln => ln.text).join(',');
+      } else t.textContent = it.text;
       if (it.name) t.dataset.for = it.name;
       layer.appendChild(t);
       const bb = t.getBBox();
@@ -57,6 +69,7 @@
       if (!best) best = {b: {x0: it.x + it.r, y0: it.y - bb.height / 2, x1: it.x + it.r + bb.width, y1: it.y + bb.height / 2}};
       const b = best.b;
       t.setAttribute('x', (b.x0 - bb.x).toFixed(1)); t.setAttribute('y', (b.y0 - bb.y).toFixed(1));
+      t.querySelectorAll('tspan').forEach(sp => sp.setAttribute('x', t.getAttribute('x')));
       taken.push(grow(b, 1));
       if (!overlap(b, grow(dots[idx], 5))){  // away from its dot: a leader line to it
         const cx = Math.min(Math.max(it.x, b.x0), b.x1), cy = Math.min(Math.max(it.y, b.y0), b.y1);
@@ -66,6 +79,22 @@
         l.setAttribute('x2', cx.toFixed(1)); l.setAttribute('y2', cy.toFixed(1));
         layer.insertBefore(l, layer.firstChild);
       }
+    });
+  }
+
+  // objects whose dots lie over each other (a stack, a pile on one spot) get one label listing
+  // them, top first, instead of labels crowded round one point
+  function stacks(items){
+    const groups = [];
+    for (const it of items){
+      const g = groups.find(g => Math.hypot(g[0].x - it.x, g[0].y - it.y) < Math.max(g[0].r, it.r));
+      if (g) g.push(it); else groups.push([it]);
+    }
+    return groups.map(g => {
+      if (g.length === 1) return g[0];
+      g.sort((a, b) => b.z - a.z);
+      return {lines: g.map(it => ({text: it.text, cls: it.cls})), cls: 'oname stack', x: g[0].x, y: g[0].y,
+        r: Math.max(...g.map(it => it.r)), name: g[0].name, order: Math.min(...g.map(it => it.order))};
     });
   }
 
@@ -151,10 +180,10 @@
     }
     // scenario events from their frame on, where they happened (under the objects they mark);
     // a breakdown on its robot while it is broken down
-    const labels = [], broken = {};
+    const labels = [], broken = Object.create(null);
     out += eventMarks(i, f, labels, broken);
     // objects, styled by role: a target on its goal, a target elsewhere, a distractor
-    const objs = [];
+    const objs = [], objLabels = [];
     for (const [name, o] of Object.entries(f.objects)){
       const st = state(name, o);
       let cls = 'obj ' + st;
@@ -166,16 +195,17 @@
       out += '<g class="object" data-name="' + esc(name) + '" data-role="' + esc(st) + '">'
         + (i === last && st === 'target unplaced' ? '<circle class="ring" r="11" cx="' + x + '" cy="' + y + '"/>' : '')
         + '<circle class="' + cls + '" r="' + rad + '" cx="' + x + '" cy="' + y + '"><title>' + esc(name + ' (' + role + '): ' + where) + '</title></circle></g>';
-      labels.push({text: name, cls: 'oname ' + st, x: parseFloat(x), y: parseFloat(y), r: i === last && st === 'target unplaced' ? 11 : rad, name: name, order: st === 'target unplaced' ? 1 : st.startsWith('target') ? 2 : 3});
+      objLabels.push({text: name, cls: 'oname ' + st, x: parseFloat(x), y: parseFloat(y), z: o.z || 0, r: i === last && st === 'target unplaced' ? 11 : rad, name: name, order: st === 'target unplaced' ? 1 : st.startsWith('target') ? 2 : 3});
       objs.push('<li class="' + esc(st) + '"><b>' + esc(name) + '</b> <span class="dim">' + esc(role) + '</span>: ' + esc(where) + '</li>');
     }
+    stacks(objLabels).forEach(l => labels.push(l));
     // robots
     for (const r of data.robots){
       const p = f.robots[r];
       if (!p) continue;
       const c = data.colors[r], x = px(p.x), y = py(p.y), yaw = p.yaw || 0;
       const hx = (parseFloat(x) + Math.cos(yaw) * 16).toFixed(1), hy = (parseFloat(y) - Math.sin(yaw) * 16).toFixed(1);
-      const alt = (data.fliers || {})[r];  // a drone: a dashed ring for its rotors, its altitude on hover
+      const alt = (data.fliers || Object.create(null))[r];  // a drone: a dashed ring for its rotors, its altitude on hover
       out += '<g class="robot' + (alt !== undefined ? ' flying' : '') + '" data-robot="' + esc(r) + '" data-x="' + p.x + '" data-y="' + p.y + '"' + (alt !== undefined ? ' data-altitude="' + alt + '"' : '') + '>'
         + (alt !== undefined ? '<title>' + esc(r + ' flies at ' + alt.toFixed(2) + ' m') + '</title><circle class="rotors" r="15" cx="' + x + '" cy="' + y + '" fill="none" stroke="' + c + '" stroke-width="2" stroke-dasharray="4 3"/>' : '')
         + '<circle r="10" cx="' + x + '" cy="' + y + '" fill="' + c + '" fill-opacity=".85" stroke="#000"/>'
@@ -203,10 +233,13 @@
       el.classList.toggle('current', fr === i);
       el.classList.toggle('future', fr !== null && fr > i);
     });
-    document.querySelectorAll('.lane').forEach(lane => {
-      const cur = lane.querySelector('.step.current');
-      if (cur) lane.scrollTop = cur.offsetTop - lane.offsetTop - 40;
-    });
+    // the lanes scroll together, in their own box (never the page): this frame's tick row (or the next) to the top
+    const box = document.getElementById('lanes');
+    const cur = box && (box.querySelector('.step.current, .lane-event.current') || box.querySelector('.step.future, .lane-event.future'));
+    if (cur){
+      const head = box.querySelector('.lane h3');
+      box.scrollTop = Math.max(0, cur.closest('.tick-cell').offsetTop - (head ? head.offsetHeight : 0) - 6);
+    }
     document.querySelectorAll('.ev-marker').forEach(el => el.classList.toggle('current', el.dataset.frame !== undefined && parseInt(el.dataset.frame, 10) === i));
     document.querySelectorAll('tr.msg').forEach(el => el.classList.toggle('current', el.dataset.frame !== undefined && parseInt(el.dataset.frame, 10) === i));
   }

@@ -10,7 +10,7 @@ static episode (no events) gets none of this: its page is the same as before.
 from __future__ import annotations
 
 from mhrc.viewer.events import GLYPHS, KINDS, ScenarioMark, scenario_label
-from mhrc.viewer.model import EpisodeView, Step
+from mhrc.viewer.model import EpisodeView
 from mhrc.viewer.wording import html_text as _e
 
 THUMB = 16  # px: the slider's thumb; a frame's place on the track is where the thumb's centre goes
@@ -93,24 +93,3 @@ def entry(m: ScenarioMark) -> str:
 def robot_of(m: ScenarioMark) -> str | None:
     """The lane an event goes in: its robot's for an applied breakdown, else the world's (None)."""
     return m.robot if m.event == "breakdown" and m.applied else None
-
-
-def merge(steps: list[Step], marks: list[ScenarioMark], step_html: list[str]) -> str:
-    """A robot's lane items: its steps, each event before the first step of its tick or later."""
-    items = list(step_html)
-    for m in sorted(marks, key=lambda m: m.tick, reverse=True):
-        at = next((k for k, s in enumerate(steps) if s.tick is not None and s.tick >= m.tick), len(steps))
-        items.insert(at, entry(m))
-    return "".join(items)
-
-
-def world_lane(view: EpisodeView) -> str:
-    """The `world` lane: every event not on a robot's lane, in order."""
-    marks = [m for m in view.events if robot_of(m) is None or robot_of(m) not in view.robots]
-    if not marks:
-        return ""
-    fact = scenario_fact(view) or ""
-    return (
-        f'<div class="lane world-lane" data-lane="world"><h3 style="border-color:#555">world '
-        f'<span class="dim">scenario {_e(fact)} · {len(marks)} events</span></h3><ol>{"".join(entry(m) for m in marks)}</ol></div>'
-    )

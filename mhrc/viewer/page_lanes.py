@@ -80,21 +80,66 @@ def _step_html(s: Step) -> str:
     return "".join(parts)
 
 
+def _cells(items: list[tuple[int | None, str]], rows: dict[int, int]) -> str:
+    """A lane's items grouped by tick, each tick's group one cell on that tick's row of the lanes'
+    grid (`rows`: tick -> grid row), so that a tick sits at the same height in every lane. An item
+    without a tick joins the tick before it."""
+    groups: list[tuple[int | None, list[str]]] = []
+    for tick, html in items:
+        if tick is None and groups:
+            tick = groups[-1][0]
+        if groups and groups[-1][0] == tick:
+            groups[-1][1].append(html)
+        else:
+            groups.append((tick, [html]))
+    last = max(rows.values(), default=1) + 1
+    return "".join(
+        f'<li class="tick-cell" data-tick="{_e(tick)}" style="grid-row:{rows.get(tick, last) if tick is not None else last}">'
+        f'<ol class="at-tick">{"".join(html)}</ol></li>'
+        for tick, html in groups
+    )
+
+
+def _robot_items(view: EpisodeView, r: str) -> list[tuple[int | None, str]]:
+    """A robot's lane items in order, each with its tick: its steps, each event of its robot before
+    the first step of its tick or later (page_events.merge's order)."""
+    steps = view.steps.get(r, [])
+    items: list[tuple[int | None, str]] = [(s.tick, _step_html(s)) for s in steps]
+    for m in sorted((m for m in view.events if page_events.robot_of(m) == r), key=lambda m: m.tick, reverse=True):
+        at = next((k for k, s in enumerate(steps) if s.tick is not None and s.tick >= m.tick), len(steps))
+        items.insert(at, (m.tick, page_events.entry(m)))
+    return items
+
+
 def lanes_section(view: EpisodeView, colors: dict[str, str]) -> str:
+    """One lane per robot (and the world's, for a scenario's events) side by side on one grid whose
+    rows are the ticks: a tick is at the same height in every lane; the lanes scroll together, in
+    one box, across when there are more than the page's width holds."""
+    world = [m for m in view.events if page_events.robot_of(m) is None or page_events.robot_of(m) not in view.robots]
+    items = {r: _robot_items(view, r) for r in view.robots}
+    ticks = sorted({t for lane in items.values() for t, _ in lane if t is not None} | {m.tick for m in world})
+    rows = {t: i + 2 for i, t in enumerate(ticks)}  # row 1: the lanes' headings
+    span = len(ticks) + 2  # a last row for items with no tick at all
     lanes = []
     for r in view.robots:
-        steps = view.steps.get(r, [])
-        items = page_events.merge(
-            steps, [m for m in view.events if page_events.robot_of(m) == r], [_step_html(s) for s in steps]
-        )
         human = view.header["models"].get(r) == HUMAN_POLICY  # played by a person (mhrc play)
         mark = ' <span class="human-mark" data-human>&#128100; played by a person</span>' if human else ""
         lanes.append(
-            f'<div class="lane{" human" if human else ""}" data-robot="{_e(r)}"><h3 style="border-color:{colors[r]}">{_e(r)}{mark} '
-            f'<span class="dim">{_e(view.header["models"].get(r))} · {len(steps)} steps</span></h3><ol>{items}</ol></div>'
+            f'<div class="lane{" human" if human else ""}" data-robot="{_e(r)}" style="grid-row:1 / span {span}">'
+            f'<h3 style="border-color:{colors[r]}">{_e(r)}{mark} '
+            f'<span class="dim">{_e(view.header["models"].get(r))} · {len(view.steps.get(r, []))} steps</span></h3>'
+            f"<ol>{_cells(items[r], rows)}</ol></div>"
         )
-    lanes.append(page_events.world_lane(view))
-    return f'<section id="lanes-section"><h2>Robots</h2><div id="lanes">{"".join(lanes)}</div></section>'
+    if world:
+        fact = page_events.scenario_fact(view) or ""
+        lanes.append(
+            f'<div class="lane world-lane" data-lane="world" style="grid-row:1 / span {span}"><h3 style="border-color:#555">world '
+            f'<span class="dim">scenario {_e(fact)} · {len(world)} events</span></h3>'
+            f"<ol>{_cells([(m.tick, page_events.entry(m)) for m in world], rows)}</ol></div>"
+        )
+    columns = f"repeat({len(view.robots)}, minmax(11em, 1fr))" + (" minmax(10em, .8fr)" if world else "")
+    grid = f"grid-template-columns:{columns};grid-template-rows:auto repeat({span - 1}, auto)"
+    return f'<section id="lanes-section"><h2>Robots</h2><div id="lanes" style="{grid}">{"".join(lanes)}</div></section>'
 
 
 def messages_section(view: EpisodeView, colors: dict[str, str]) -> str:

@@ -10,6 +10,7 @@ analytics belong to its viewer, never to a recording written by the SDK; a viewe
 from __future__ import annotations
 
 import os
+import stat
 import sys
 from dataclasses import dataclass
 from enum import StrEnum
@@ -26,6 +27,36 @@ class RerunProblem(StrEnum):
     UNWRITABLE = "unwritable"  # the recording's file cannot be written
     NOT_RRD = "not_rrd"  # a file that does not end in .rrd
     NO_DISPLAY = "no_display"  # spawn: the native viewer needs a display
+    NOT_REGULAR = "not_regular"  # OUT.rrd is a symlink, a FIFO, a device or a socket: only a regular file is written
+
+
+def not_regular(path: Path) -> str | None:
+    """Why `path` is no place for a recording: a symlink (written through to its target), or
+    something that exists and is not a regular file (a FIFO blocked the recording's open for good,
+    a device took its bytes); None for a regular file or none at all. Reads the path itself
+    (lstat), never what a link points to."""
+    try:
+        st = path.lstat()
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        return f"{path} cannot be looked at: {exc.strerror or exc}"
+    if stat.S_ISLNK(st.st_mode):
+        return f"{path} is a symbolic link: give the recording's own path, not a link"
+    if not stat.S_ISREG(st.st_mode):
+        what = (
+            "a FIFO"
+            if stat.S_ISFIFO(st.st_mode)
+            else "a device"
+            if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)
+            else "a socket"
+            if stat.S_ISSOCK(st.st_mode)
+            else "a directory"
+            if stat.S_ISDIR(st.st_mode)
+            else "not a regular file"
+        )
+        return f"{path} is {what}: a recording is written to a regular file only"
+    return None
 
 
 class RerunError(ValueError):
@@ -74,6 +105,8 @@ def parse_target(value: str, *, directory: bool = False) -> Target:
     path = Path(value)
     if not directory and path.suffix != ".rrd":
         raise RerunError(RerunProblem.NOT_RRD, f"--rerun: {path} is not an .rrd file (or say serve, or spawn)")
+    if not directory and (odd := not_regular(path)) is not None:
+        raise RerunError(RerunProblem.NOT_REGULAR, f"--rerun: {odd}")
     problem = unwritable(path, directory=directory)
     if problem is not None:
         raise RerunError(RerunProblem.UNWRITABLE, f"--rerun: {problem}")
