@@ -63,6 +63,7 @@ from string import Template
 import structlog
 
 from mhrc.core.protocol import LLM_ERROR_PREFIX, Action, ActionResult, Observation, Wait
+from mhrc.core.protocol.actions import CALLS
 from mhrc.core.team import TeamSpec
 
 from . import observation as describe
@@ -79,7 +80,7 @@ from .llm.completion import (
     prompt_text,
 )
 from .memory import HISTORIES, TITLES, Memory
-from .parse import SIGNATURES, ReplyFormatError, parse_command
+from .parse import ReplyFormatError, parse_command, signature
 from .policy import Decision
 from .replay import ReplayClient
 
@@ -328,7 +329,7 @@ class LLMPolicy:
             robot=self.robot.capitalize(),
             teammates=teammates,
             absent=self._absent_note(),
-            skills="\n".join(f"- {SIGNATURES[s]}: {meanings[s]}" for s in obs.status.skills if s in SIGNATURES),
+            skills="\n".join(f"- {signature(s)}: {meanings[s]}" for s in obs.status.skills if s in CALLS),
             hints=hints,
         )
         if hints and "hints" not in self.system_t.get_identifiers():

@@ -407,10 +407,10 @@ def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None
         assert item in constraints, item
     assert len(re.findall(r"^\d\. ", constraints, re.M)) == {"alice": 5, "bob": 3, "david": 2}[robot]
     # skills with signatures, then the Command / Analysis / Reasoning format
-    from mhrc.agents.parse import SIGNATURES
+    from mhrc.agents.parse import signature
 
     for skill in SKILLS[robot]:
-        assert f"- {SIGNATURES[skill]}: " in skills
+        assert f"- {signature(skill)}: " in skills
     assert [line.split(":")[0] for line in fmt.splitlines() if re.match(r"\d\. ", line)] == [
         "1. Command",
         "2. Analysis",
@@ -536,13 +536,13 @@ def test_the_pick_window_and_message_templates_live_in_the_aid() -> None:
 
 
 def test_skill_signatures_in_the_prompts_are_what_the_parser_accepts() -> None:
-    from mhrc.agents.parse import SIGNATURES, parse_command
+    from mhrc.agents.parse import parse_command, signature
 
     for robot, skills in SKILLS.items():
         text = (GOLDEN / f"{robot}_step1.txt").read_text(encoding="utf-8")
         for skill in skills:
-            assert f"- {SIGNATURES[skill]}:" in text
-            call = SIGNATURES[skill].replace("stand_pose_id", "0").replace("dx", "0.1").replace("dy", "0.2")
+            assert f"- {signature(skill)}:" in text
+            call = signature(skill).replace("stand_pose_id", "0").replace("dx", "0.1").replace("dy", "0.2")
             # the paper's own order (Command first) and its example's (Command last) both parse
             assert (
                 parse_command(
