@@ -64,6 +64,7 @@ import structlog
 
 from mhrc.core.protocol import LLM_ERROR_PREFIX, Action, ActionResult, Observation, Wait
 from mhrc.core.protocol.actions import CALLS
+from mhrc.core.protocol.thoughts import ReplyFailure
 from mhrc.core.team import TeamSpec
 
 from . import observation as describe
@@ -407,7 +408,11 @@ class LLMPolicy:
             self._log.warning("model unavailable, waiting", tick=obs.tick, error=str(exc))
             self._pending = (obs.tick, MODEL_DOWN.format(reason=_short(str(exc))), MODEL_DOWN_TAG)
             return Decision(
-                action=Wait(), prompt=prompt, parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000), schema_hash=digest
+                action=Wait(),
+                prompt=prompt,
+                parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000),
+                failure=ReplyFailure.MODEL_UNREACHABLE,
+                schema_hash=digest,
             )
         self._answered = True
         action, error = self.interpret(c.text, obs.tick, c.finish_reason)
@@ -424,6 +429,11 @@ class LLMPolicy:
             finish_reason=c.finish_reason,
             schema_hash=digest,
             ttft=c.ttft,
+            failure=None
+            if error is None
+            else ReplyFailure.CUT_OFF
+            if c.finish_reason == "length"
+            else ReplyFailure.UNREADABLE,
         )
 
     def _flush_pending(self) -> None:
