@@ -22,6 +22,7 @@ from mhrc.core.protocol.actions import CALLS, ArgKind, build
 
 from .parse import ReplyFormatError
 
+JSONObject = dict[str, Any]  # a JSON object: a JSON Schema or a part of one, a reply
 MAX_ANALYSIS = 2000  # characters: room for the paper's analysis and reasoning, a bound for small local models
 MAX_MESSAGE = 500  # characters of a `communicate` content
 MAX_STEP = 1.0  # metres: the bound on each of move's dx and dy
@@ -38,11 +39,11 @@ STRUCTURED_INSTRUCTIONS = (
 )
 
 
-def _names(values: Iterable[str]) -> dict[str, Any]:
+def _names(values: Iterable[str]) -> JSONObject:
     return {"type": "string", "enum": sorted(set(values))}
 
 
-def _number(low: float, high: float, kind: str = "number") -> dict[str, Any]:
+def _number(low: float, high: float, kind: str = "number") -> JSONObject:
     return {"type": kind, "minimum": low, "maximum": high}
 
 
@@ -51,7 +52,7 @@ def arguments(skill: str) -> dict[str, str]:
     return {a.name: a.field for a in CALLS[skill].ARGS}
 
 
-def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, dict[str, Any]] | None]:
+def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, JSONObject] | None]:
     """Each declared skill's argument schemas, from this robot's own scene graph; None where a name
     enum would be empty."""
     stand = [f for f in obs.furniture if f.stand_poses]
@@ -68,12 +69,12 @@ def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, d
         ArgKind.PLACE: places,
         ArgKind.TEAMMATE: recipients,
     }
-    fixed: dict[ArgKind, dict[str, Any]] = {
+    fixed: dict[ArgKind, JSONObject] = {
         ArgKind.STAND_POSE: _number(0, most, "integer"),
         ArgKind.OFFSET: _number(-MAX_STEP, MAX_STEP),
         ArgKind.TEXT: {"type": "string", "minLength": 1, "maxLength": MAX_MESSAGE},
     }
-    out: dict[str, dict[str, dict[str, Any]] | None] = {}
+    out: dict[str, dict[str, JSONObject] | None] = {}
     for skill, model in CALLS.items():
         if any(a.kind in names and not names[a.kind] for a in model.ARGS):
             out[skill] = None
@@ -82,8 +83,8 @@ def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, d
     return out
 
 
-def _variant(skill: str, args: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    props: dict[str, Any] = {"skill": {"type": "string", "const": skill}} | args
+def _variant(skill: str, args: dict[str, JSONObject]) -> JSONObject:
+    props: JSONObject = {"skill": {"type": "string", "const": skill}} | args
     return {"type": "object", "properties": props, "required": list(props), "additionalProperties": False}
 
 
@@ -100,7 +101,7 @@ def analysis_bound(max_tokens: int | None) -> int:
 
 def decision_schema(
     obs: Observation, teammates: Iterable[str] | None = None, *, max_analysis: int = MAX_ANALYSIS
-) -> dict[str, Any]:
+) -> JSONObject:
     """The JSON Schema of one decision of `obs.robot`: its analysis (at most `max_analysis`
     characters), then one command among its own skills with names from its own scene graph.
     `teammates` are the robots it may message (by default every teammate in the observation).
@@ -123,13 +124,13 @@ def decision_schema(
     }
 
 
-def schema_hash(schema: dict[str, Any]) -> str:
+def schema_hash(schema: JSONObject) -> str:
     """A short stable id of a schema for the trace: equal schemas, equal ids, whatever the key order."""
     canonical = json.dumps(schema, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(canonical.encode()).hexdigest()[:16]
 
 
-def response_format(schema: dict[str, Any], provider: str) -> dict[str, Any]:
+def response_format(schema: JSONObject, provider: str) -> JSONObject:
     """The request-body fields that ask `provider` to enforce `schema` (Ollama takes the bare schema)."""
     if provider == "ollama":
         return {"format": schema}
@@ -141,7 +142,7 @@ def response_format(schema: dict[str, Any], provider: str) -> dict[str, Any]:
     }
 
 
-def _json_object(text: str) -> dict[str, Any]:
+def _json_object(text: str) -> JSONObject:
     """The outermost {...} of a reply, so code fences and text around it do not matter."""
     start, end = text.find("{"), text.rfind("}")
     if start < 0 or end < start:
@@ -183,10 +184,10 @@ def parse_structured(text: str) -> tuple[Action, str]:
             [f"unexpected {', '.join(extra)}"] if extra else []
         )
         raise ReplyFormatError(f"{skill} takes {takes}: {'; '.join(problems)}")
-    fields: dict[str, Any] = {field: command[name] for name, field in params.items()}
+    fields: dict[str, object] = {field: command[name] for name, field in params.items()}
     for arg in CALLS[skill].ARGS:
-        if arg.kind is ArgKind.TEAMMATE and isinstance(fields[arg.field], str):
-            fields[arg.field] = fields[arg.field].strip().lower()  # as parse_command reads a recipient
+        if arg.kind is ArgKind.TEAMMATE and isinstance(name := fields[arg.field], str):
+            fields[arg.field] = name.strip().lower()  # as parse_command reads a recipient
     try:
         action = build(skill, fields)  # the same models parse_command builds
     except ValidationError as exc:

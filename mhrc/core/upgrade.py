@@ -75,7 +75,7 @@ def _code(value: Any, reason: str) -> str | None:
     return legacy.value if legacy is not None else None
 
 
-def legacy_failure(parse_error: Any, finish_reason: Any) -> ReplyFailure | None:
+def legacy_failure(parse_error: object, finish_reason: object) -> ReplyFailure | None:
     """The failure of a thought recorded before thoughts carried one, from its texts (module docstring)."""
     if not parse_error or not isinstance(parse_error, str):
         return None

@@ -12,6 +12,7 @@ below, a test may register one of its own.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum, StrEnum
 from typing import Annotated, Any, ClassVar, Literal, TypeVar, Union, cast
@@ -79,7 +80,7 @@ class ActionModel(_Model):
         return f"{self.skill}({', '.join(_written(a, getattr(self, a.field)) for a in self.ARGS)})"
 
 
-def _written(arg: Arg, value: Any) -> str:
+def _written(arg: Arg, value: object) -> str:
     if arg.kind is ArgKind.OFFSET:
         return f"{value:.2f}"
     if arg.kind is ArgKind.TEXT:
@@ -106,7 +107,7 @@ def signature(skill: str) -> str:
     return f"{skill}({', '.join(a.spoken for a in CALLS[skill].ARGS)})"
 
 
-def build(skill: str, values: dict[str, Any]) -> Action:
+def build(skill: str, values: Mapping[str, object]) -> Action:
     """The action `skill` with its model's fields `values`, validated by its model (pydantic's
     ValidationError if they do not fit)."""
     return cast(Action, CALLS[skill].model_validate({"skill": skill, **values}))
