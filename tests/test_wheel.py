@@ -2,13 +2,15 @@
 prompts/ folders reached through the package's links), installed in a fresh virtual environment,
 every module imports from the installed copy and every data file the code reads is there.
 
-The venv sees this environment's site-packages for the dependencies (no test downloads), while
+The venv sees this environment's site-packages for the dependencies through a .pth file (no test
+downloads; system_site_packages would reach the base interpreter's, which lacks them), while
 the package itself must come from the wheel: each module's file is checked to lie in the venv."""
 
 from __future__ import annotations
 
 import json
 import shutil
+import site
 import subprocess
 import sys
 import venv
@@ -58,8 +60,10 @@ def test_the_wheel_installs_in_a_fresh_venv_and_every_module_imports_from_it(tmp
     assert built.returncode == 0, built.stderr[-3000:]
     (wheel,) = wheels.glob("mhrc-*.whl")
     env = tmp_path / "venv"
-    venv.create(env, system_site_packages=True, with_pip=False)
+    venv.create(env, with_pip=False)
     python = env / "bin" / "python"
+    (purelib,) = env.glob("lib/python3*/site-packages")  # this environment's dependencies, not the base interpreter's
+    (purelib / "_outer_dependencies.pth").write_text("\n".join(site.getsitepackages()) + "\n", encoding="utf-8")
     installed = subprocess.run(
         [sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps", "--no-index", "-q", str(wheel)],
         capture_output=True,
