@@ -465,6 +465,7 @@ class RobotAgent:
                 reply=fit(d.reply),
                 action=fit(d.action.call(), MAX_LINE),
                 parse_error=fit(d.parse_error, MAX_LINE),
+                failure=d.failure,
                 prompt_tokens=d.prompt_tokens,
                 completion_tokens=d.completion_tokens,
                 latency=d.latency,

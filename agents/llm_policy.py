@@ -63,6 +63,8 @@ from string import Template
 import structlog
 
 from mhrc.core.protocol import LLM_ERROR_PREFIX, Action, ActionResult, Observation, Wait
+from mhrc.core.protocol.actions import CALLS
+from mhrc.core.protocol.thoughts import ReplyFailure
 from mhrc.core.team import TeamSpec
 
 from . import observation as describe
@@ -79,7 +81,7 @@ from .llm.completion import (
     prompt_text,
 )
 from .memory import HISTORIES, TITLES, Memory
-from .parse import SIGNATURES, ReplyFormatError, parse_command
+from .parse import ReplyFormatError, parse_command, signature
 from .policy import Decision
 from .replay import ReplayClient
 
@@ -328,7 +330,7 @@ class LLMPolicy:
             robot=self.robot.capitalize(),
             teammates=teammates,
             absent=self._absent_note(),
-            skills="\n".join(f"- {SIGNATURES[s]}: {meanings[s]}" for s in obs.status.skills if s in SIGNATURES),
+            skills="\n".join(f"- {signature(s)}: {meanings[s]}" for s in obs.status.skills if s in CALLS),
             hints=hints,
         )
         if hints and "hints" not in self.system_t.get_identifiers():
@@ -406,7 +408,11 @@ class LLMPolicy:
             self._log.warning("model unavailable, waiting", tick=obs.tick, error=str(exc))
             self._pending = (obs.tick, MODEL_DOWN.format(reason=_short(str(exc))), MODEL_DOWN_TAG)
             return Decision(
-                action=Wait(), prompt=prompt, parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000), schema_hash=digest
+                action=Wait(),
+                prompt=prompt,
+                parse_error=_short(f"{LLM_ERROR_PREFIX}{exc}", 2000),
+                failure=ReplyFailure.MODEL_UNREACHABLE,
+                schema_hash=digest,
             )
         self._answered = True
         action, error = self.interpret(c.text, obs.tick, c.finish_reason)
@@ -423,6 +429,11 @@ class LLMPolicy:
             finish_reason=c.finish_reason,
             schema_hash=digest,
             ttft=c.ttft,
+            failure=None
+            if error is None
+            else ReplyFailure.CUT_OFF
+            if c.finish_reason == "length"
+            else ReplyFailure.UNREADABLE,
         )
 
     def _flush_pending(self) -> None:

@@ -19,8 +19,9 @@ from __future__ import annotations
 import math
 
 from mhrc.core.protocol import FurnitureView, ObjectView, Observation
+from mhrc.core.protocol.actions import CALLS
 
-from .parse import SIGNATURES
+from .parse import signature
 
 AT_POSE_TOL = 0.1  # metres: the base counts as standing at a stand pose within this (a navigation that stops
 # farther away fails as off target)
@@ -166,5 +167,7 @@ def progress_text(obs: Observation) -> str:
 def teammates(obs: Observation, absent: tuple[str, ...] = ()) -> str:
     """`- Name: signature, signature` for every teammate present in this episode."""
     present = {n: s for n, s in obs.teammates.items() if n not in absent}
-    lines = [f"- {n.capitalize()}: {', '.join(SIGNATURES.get(k, k) for k in s)}" for n, s in present.items()]
+    lines = [
+        f"- {n.capitalize()}: {', '.join(signature(k) if k in CALLS else k for k in s)}" for n, s in present.items()
+    ]
     return "\n".join(lines) or "- nobody: you are on your own"

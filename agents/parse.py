@@ -11,26 +11,26 @@ from __future__ import annotations
 
 import re
 
-from mhrc.core.protocol import Action, Communicate, Move, Navigate, Open, Pick, Place, Wait
+from mhrc.core.protocol import Action
+from mhrc.core.protocol.actions import CALLS, Arg, ArgKind, build, signature
 
-SKILL_CALL = re.compile(r"\b(navigate|move|open|pick|place|communicate|wait)\s*\(", re.IGNORECASE)
+__all__ = ["ReplyFormatError", "parse_command", "signature"]
+
 LABEL = re.compile(r"\bcommand\s*\**\s*:\s*\**\s*", re.IGNORECASE)  # "Command:", "**Command:**"
 LOOSE_LABEL = re.compile(r"command\s*[:*]*\s*", re.IGNORECASE)  # "Command pick(x)", for want of a colon
-KEYWORD = re.compile(
-    r"^(?:furniture|target|obj|object|stand_pose_id|stand_pose|location|dx|dy|content|message|robot|to)\s*=\s*",
-    re.IGNORECASE,
-)
+MESSAGE_WORDS = ("message",)  # a text argument may also be written message=...
 
-# Each skill's call form, exactly as parse_command accepts it (the prompts quote these).
-SIGNATURES = {
-    "navigate": "navigate(furniture, stand_pose_id)",
-    "move": "move(dx, dy)",
-    "open": "open(furniture)",
-    "pick": "pick(object)",
-    "place": "place(object, location)",
-    "communicate": "communicate(content, robot)",
-    "wait": "wait()",
-}
+
+def skill_call() -> re.Pattern[str]:
+    """A call of any declared skill (mhrc.core.protocol.actions.CALLS), up to its '('."""
+    return re.compile(rf"\b({'|'.join(CALLS)})\s*\(", re.IGNORECASE)
+
+
+def keyword() -> re.Pattern[str]:
+    """An argument written with its name (``target=table_1``): any name of any declared argument."""
+    words = {w for m in CALLS.values() for a in m.ARGS for w in (a.field, a.name, a.spoken)}
+    words |= set(MESSAGE_WORDS)
+    return re.compile(rf"^(?:{'|'.join(sorted(words, key=lambda w: (-len(w), w)))})\s*=\s*", re.IGNORECASE)
 
 
 class ReplyFormatError(ValueError):
@@ -78,7 +78,7 @@ def _split(args: str) -> list[str]:
 
 
 def _unquote(a: str) -> str:
-    a = KEYWORD.sub("", a.strip().strip("`").strip())  # navigate(furniture=table_1, ...)
+    a = keyword().sub("", a.strip().strip("`").strip())  # navigate(furniture=table_1, ...)
     if len(a) >= 2 and a[0] == a[-1] and a[0] in "\"'":
         a = a[1:-1]
     return a.strip()
@@ -99,7 +99,7 @@ def parse_command(reply: str) -> Action:
     """The one action a reply commands, or ReplyFormatError saying what is wrong."""
     labels = list(LABEL.finditer(reply)) or list(LOOSE_LABEL.finditer(reply))
     scope = reply[labels[-1].end() :] if labels else reply
-    calls = list(SKILL_CALL.finditer(scope))
+    calls = list(skill_call().finditer(scope))
     if not calls:
         raise ReplyFormatError("no command found: give one command, such as Command: pick(apple)")
     if not labels and len(calls) > 1:
@@ -118,33 +118,32 @@ def parse_command(reply: str) -> Action:
 
 
 def _build(skill: str, args: list[str]) -> Action:
-    def need(n: int, sig: str) -> None:
-        if len(args) != n:
-            raise ReplyFormatError(f"{skill} takes {n} argument(s): {sig}; got {len(args)}")
+    """The action of a call of `skill` with `args` (the written arguments, in order), by its declared form."""
+    form = CALLS[skill].ARGS
+    sig, n = signature(skill), len(form)
+    text = next((i for i, a in enumerate(form) if a.kind is ArgKind.TEXT), None)
+    if text is not None:  # a message takes the commas written in it
+        if len(args) < n:
+            raise ReplyFormatError(f"{skill} takes {n} arguments: {sig}")
+        after = n - text - 1
+        message = ", ".join(args[text : len(args) - after]).strip()
+        if not message:
+            raise ReplyFormatError(f"{skill} needs a non-empty message")
+        args = [*args[:text], message, *args[len(args) - after :]]  # (the caller's list, as written, is kept)
+    while len(args) < n and not CALLS[skill].model_fields[form[len(args)].field].is_required():
+        args.append(str(CALLS[skill].model_fields[form[len(args)].field].default))  # navigate(table_1): stand pose 0
+    if len(args) != n:
+        raise ReplyFormatError(f"{skill} takes {n} argument(s): {sig}; got {len(args)}")
+    return build(skill, {a.field: _value(a, v) for a, v in zip(form, args)})
 
-    if skill == "wait":
-        need(0, "wait()")
-        return Wait()
-    if skill == "navigate":
-        if len(args) == 1:
-            args.append("0")
-        need(2, "navigate(furniture, stand_pose_id)")
-        return Navigate(target=_name(args[0]), stand_pose=int(_number(args[1], "stand_pose_id")))
-    if skill == "move":
-        need(2, "move(dx, dy)")
-        return Move(dx=_number(args[0], "dx"), dy=_number(args[1], "dy"))
-    if skill == "open":
-        need(1, "open(furniture)")
-        return Open(target=_name(args[0]))
-    if skill == "pick":
-        need(1, "pick(object)")
-        return Pick(obj=_name(args[0]))
-    if skill == "place":
-        need(2, "place(object, location)")
-        return Place(obj=_name(args[0]), location=_name(args[1]))
-    if len(args) < 2:
-        raise ReplyFormatError("communicate takes 2 arguments: communicate(content, robot)")
-    content = ", ".join(args[:-1]).strip()
-    if not content:
-        raise ReplyFormatError("communicate needs a non-empty message")
-    return Communicate(content=content, to=_name(args[-1]).lower())
+
+def _value(arg: Arg, written: str) -> str | int | float:
+    if arg.kind is ArgKind.STAND_POSE:
+        return int(_number(written, arg.spoken))
+    if arg.kind is ArgKind.OFFSET:
+        return _number(written, arg.spoken)
+    if arg.kind is ArgKind.TEXT:
+        return written
+    if arg.kind is ArgKind.TEAMMATE:
+        return _name(written).lower()
+    return _name(written)

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from mhrc.core.protocol import Action, ActionResult, Observation
+from mhrc.core.protocol.thoughts import ReplyFailure
 
 __all__ = ["Decision", "Policy"]
 
@@ -26,6 +27,7 @@ class Decision:
     finish_reason: str | None = None
     schema_hash: str | None = None
     ttft: float | None = None  # seconds to the reply's first token, where streamed
+    failure: ReplyFailure | None = None  # why no action came of the step (parse_error says it for people)
 
 
 class Policy(Protocol):

@@ -22,7 +22,8 @@ from string import Template
 from typing import Any
 
 from mhrc.core.protocol import LLM_ERROR_PREFIX, Thought
-from mhrc.core.records import ReplyFailure, TraceLine, read_records
+from mhrc.core.protocol.thoughts import ReplyFailure
+from mhrc.core.records import TraceLine, read_records
 
 from .llm.completion import DEFAULT_TEMPERATURE, Completion, LLMError, Messages, prompt_text
 
@@ -104,7 +105,7 @@ class ReplayClient:
             raise ReplayMismatch(
                 f"{self.robot} asked for call {self.calls + 1}; {self.trace} holds {len(self._thoughts)}"
             )
-        line, t = self._lines[self.calls], self._thoughts[self.calls]
+        t = self._thoughts[self.calls]
         self.calls += 1
         prompt = prompt_text(messages)
         if prompt != t.prompt:
@@ -115,7 +116,7 @@ class ReplayClient:
         if t.reply is None:  # the model stayed down in the recorded run: fail the same way
             reason = t.parse_error or "recorded model failure"
             raise LLMError(
-                reason.removeprefix(LLM_ERROR_PREFIX) if line.failure is ReplyFailure.MODEL_UNREACHABLE else reason
+                reason.removeprefix(LLM_ERROR_PREFIX) if t.failure is ReplyFailure.MODEL_UNREACHABLE else reason
             )
         return Completion(
             t.reply,

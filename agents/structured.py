@@ -17,24 +17,15 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from mhrc.core.protocol import ACTION_ADAPTER, SKILLS, Action, Observation
+from mhrc.core.protocol import Action, Observation
+from mhrc.core.protocol.actions import CALLS, ArgKind, build
 
 from .parse import ReplyFormatError
 
+JSONObject = dict[str, Any]  # a JSON object: a JSON Schema or a part of one, a reply
 MAX_ANALYSIS = 2000  # characters: room for the paper's analysis and reasoning, a bound for small local models
 MAX_MESSAGE = 500  # characters of a `communicate` content
 MAX_STEP = 1.0  # metres: the bound on each of move's dx and dy
-
-# skill -> its arguments in call order, as the reply names them -> the action model's field
-ARGUMENTS: dict[str, dict[str, str]] = {
-    "navigate": {"furniture": "target", "stand_pose": "stand_pose"},
-    "move": {"dx": "dx", "dy": "dy"},
-    "open": {"furniture": "target"},
-    "pick": {"object": "obj"},
-    "place": {"object": "obj", "location": "location"},
-    "communicate": {"content": "content", "to": "to"},
-    "wait": {},
-}
 
 STRUCTURED_INSTRUCTIONS = (
     'Answer with one JSON object and nothing else: {"analysis": "...", "command": {"skill": "...", ...}}. '
@@ -48,44 +39,52 @@ STRUCTURED_INSTRUCTIONS = (
 )
 
 
-def _names(values: Iterable[str]) -> dict[str, Any]:
+def _names(values: Iterable[str]) -> JSONObject:
     return {"type": "string", "enum": sorted(set(values))}
 
 
-def _number(low: float, high: float, kind: str = "number") -> dict[str, Any]:
+def _number(low: float, high: float, kind: str = "number") -> JSONObject:
     return {"type": kind, "minimum": low, "maximum": high}
 
 
-def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, dict[str, Any]] | None]:
-    """Each skill's argument schemas, from this robot's own scene graph; None where a name enum would be empty."""
+def arguments(skill: str) -> dict[str, str]:
+    """`skill`'s arguments in call order, as a structured command names them -> the action model's field."""
+    return {a.name: a.field for a in CALLS[skill].ARGS}
+
+
+def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, JSONObject] | None]:
+    """Each declared skill's argument schemas, from this robot's own scene graph; None where a name
+    enum would be empty."""
     stand = [f for f in obs.furniture if f.stand_poses]
-    openable = [f.name for f in obs.furniture if f.openable]
+    most = max((len(f.stand_poses) for f in stand), default=0) - 1
     # the goal fixtures on Bob's table have a place pose but no stand pose; only the robot given the
     # task's object list finishes the task, so only it may place on them
     places = [f.name for f in obs.furniture if f.place_pose is not None and (f.stand_poses or obs.targets)]
-    free = [o.name for o in obs.objects if o.held_by is None]
     known = [o.name for o in obs.objects] + ([obs.status.holding] if obs.status.holding else [])
-    most = max((len(f.stand_poses) for f in stand), default=0) - 1
-    return {
-        "navigate": {"furniture": _names(f.name for f in stand), "stand_pose": _number(0, most, "integer")}
-        if stand
-        else None,
-        "move": {"dx": _number(-MAX_STEP, MAX_STEP), "dy": _number(-MAX_STEP, MAX_STEP)},
-        "open": {"furniture": _names(openable)} if openable else None,
-        "pick": {"object": _names(free)} if free else None,
-        "place": {"object": _names(known), "location": _names(places)} if known and places else None,
-        "communicate": {
-            "content": {"type": "string", "minLength": 1, "maxLength": MAX_MESSAGE},
-            "to": _names(recipients),
-        }
-        if recipients
-        else None,
-        "wait": {},
+    names: dict[ArgKind, list[str]] = {
+        ArgKind.STAND: [f.name for f in stand],
+        ArgKind.OPENABLE: [f.name for f in obs.furniture if f.openable],
+        ArgKind.PICKABLE: [o.name for o in obs.objects if o.held_by is None],
+        ArgKind.OBJECT: known,
+        ArgKind.PLACE: places,
+        ArgKind.TEAMMATE: recipients,
     }
+    fixed: dict[ArgKind, JSONObject] = {
+        ArgKind.STAND_POSE: _number(0, most, "integer"),
+        ArgKind.OFFSET: _number(-MAX_STEP, MAX_STEP),
+        ArgKind.TEXT: {"type": "string", "minLength": 1, "maxLength": MAX_MESSAGE},
+    }
+    out: dict[str, dict[str, JSONObject] | None] = {}
+    for skill, model in CALLS.items():
+        if any(a.kind in names and not names[a.kind] for a in model.ARGS):
+            out[skill] = None
+        else:
+            out[skill] = {a.name: _names(names[a.kind]) if a.kind in names else fixed[a.kind] for a in model.ARGS}
+    return out
 
 
-def _variant(skill: str, args: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    props: dict[str, Any] = {"skill": {"type": "string", "const": skill}} | args
+def _variant(skill: str, args: dict[str, JSONObject]) -> JSONObject:
+    props: JSONObject = {"skill": {"type": "string", "const": skill}} | args
     return {"type": "object", "properties": props, "required": list(props), "additionalProperties": False}
 
 
@@ -102,7 +101,7 @@ def analysis_bound(max_tokens: int | None) -> int:
 
 def decision_schema(
     obs: Observation, teammates: Iterable[str] | None = None, *, max_analysis: int = MAX_ANALYSIS
-) -> dict[str, Any]:
+) -> JSONObject:
     """The JSON Schema of one decision of `obs.robot`: its analysis (at most `max_analysis`
     characters), then one command among its own skills with names from its own scene graph.
     `teammates` are the robots it may message (by default every teammate in the observation).
@@ -111,7 +110,7 @@ def decision_schema(
     args = _arguments(obs, recipients)
     variants = [
         _variant(skill, a)
-        for skill in SKILLS
+        for skill in CALLS
         if (skill in obs.status.skills or skill == "wait") and (a := args[skill]) is not None
     ]
     return {
@@ -125,13 +124,13 @@ def decision_schema(
     }
 
 
-def schema_hash(schema: dict[str, Any]) -> str:
+def schema_hash(schema: JSONObject) -> str:
     """A short stable id of a schema for the trace: equal schemas, equal ids, whatever the key order."""
     canonical = json.dumps(schema, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(canonical.encode()).hexdigest()[:16]
 
 
-def response_format(schema: dict[str, Any], provider: str) -> dict[str, Any]:
+def response_format(schema: JSONObject, provider: str) -> JSONObject:
     """The request-body fields that ask `provider` to enforce `schema` (Ollama takes the bare schema)."""
     if provider == "ollama":
         return {"format": schema}
@@ -143,7 +142,7 @@ def response_format(schema: dict[str, Any], provider: str) -> dict[str, Any]:
     }
 
 
-def _json_object(text: str) -> dict[str, Any]:
+def _json_object(text: str) -> JSONObject:
     """The outermost {...} of a reply, so code fences and text around it do not matter."""
     start, end = text.find("{"), text.rfind("}")
     if start < 0 or end < start:
@@ -172,11 +171,11 @@ def parse_structured(text: str) -> tuple[Action, str]:
     if not isinstance(command, dict):
         raise ReplyFormatError('the reply has no "command" object: give "command": {"skill": "...", ...}')
     skill = command.get("skill")
-    if not isinstance(skill, str) or skill.strip().lower() not in ARGUMENTS:
+    if not isinstance(skill, str) or skill.strip().lower() not in CALLS:
         what = "no skill" if skill is None else f"unknown skill {skill!r}"
-        raise ReplyFormatError(f'the command names {what}: "skill" must be one of {", ".join(ARGUMENTS)}')
+        raise ReplyFormatError(f'the command names {what}: "skill" must be one of {", ".join(CALLS)}')
     skill = skill.strip().lower()
-    params = ARGUMENTS[skill]
+    params = arguments(skill)
     given = set(command) - {"skill"}
     missing, extra = [n for n in params if n not in given], sorted(given - set(params))
     if missing or extra:
@@ -185,11 +184,12 @@ def parse_structured(text: str) -> tuple[Action, str]:
             [f"unexpected {', '.join(extra)}"] if extra else []
         )
         raise ReplyFormatError(f"{skill} takes {takes}: {'; '.join(problems)}")
-    fields: dict[str, Any] = {"skill": skill} | {field: command[name] for name, field in params.items()}
-    if skill == "communicate" and isinstance(fields["to"], str):
-        fields["to"] = fields["to"].strip().lower()  # as parse_command reads a recipient
+    fields: dict[str, object] = {field: command[name] for name, field in params.items()}
+    for arg in CALLS[skill].ARGS:
+        if arg.kind is ArgKind.TEAMMATE and isinstance(name := fields[arg.field], str):
+            fields[arg.field] = name.strip().lower()  # as parse_command reads a recipient
     try:
-        action = ACTION_ADAPTER.validate_python(fields)  # the same models parse_command builds
+        action = build(skill, fields)  # the same models parse_command builds
     except ValidationError as exc:
         names = {field: name for name, field in params.items()}
         errors = "; ".join(f"{names.get(str(e['loc'][-1]), e['loc'][-1])}: {e['msg']}" for e in exc.errors()[:3])

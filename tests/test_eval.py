@@ -554,7 +554,7 @@ def test_a_second_ctrl_c_on_eval_quits_at_once_and_loses_no_row(tmp_path: Path) 
     after = rows.read_text()
     assert after.startswith(before) and after.endswith("\n"), "a finished row was lost or cut"
     deadline = time.monotonic() + 60
-    while alive := [pid for pid in workers if _running(pid)]:  # the workers die with the driver (mhrc.run.lifeline)
+    while alive := [pid for pid in workers if _running(pid)]:  # the workers die with the driver (mhrc.core.lifeline)
         assert time.monotonic() < deadline, f"worker processes {alive} outlived the evaluation"
         time.sleep(0.05)
 

@@ -31,6 +31,7 @@ from mhrc.core.protocol import (
     Thought,
     Wait,
 )
+from mhrc.core.protocol.thoughts import ReplyFailure
 
 ALICE_SKILLS = ["navigate", "move", "open", "pick", "place", "communicate", "wait"]
 
@@ -112,7 +113,7 @@ async def test_a_parsed_reply_becomes_the_action_and_the_decision_carries_everyt
     )
     policy = LLMPolicy("alice", client, temperature=0.3)
     d = await policy.decide(obs())
-    assert d.action == Navigate(target="drawer_unit", stand_pose=0) and d.parse_error is None
+    assert d.action == Navigate(target="drawer_unit", stand_pose=0) and d.parse_error is None and d.failure is None
     assert policy.name == "llm:scripted"
     system, user_msg = client.prompts[0]
     assert (system["role"], user_msg["role"]) == ("system", "user")
@@ -132,6 +133,7 @@ async def test_an_unparseable_reply_makes_the_robot_wait_and_comes_back_as_feedb
         assert (
             d.action == Wait() and d.parse_error is not None and "several commands" in d.parse_error
         )  # the trace keeps the reason
+        assert d.failure is ReplyFailure.UNREADABLE
         assert d.reply == "I would rather pick(apple) or place(apple, tray)"
         policy.record(result(0, Wait(), SkillOutcome.ok("You waited.")))
         nxt = await policy.decide(obs(1))
@@ -156,6 +158,7 @@ async def test_a_model_that_goes_down_later_is_a_wait_with_the_error_as_feedback
         d.action == Wait()
         and d.reply is None
         and d.parse_error == "llm error: m at http://127.0.0.1:9/v1 failed after 5 attempts: ConnectError"
+        and d.failure is ReplyFailure.MODEL_UNREACHABLE  # the code is set where the call failed
     )
     # no result came back for that step (e.g. the agent resynchronized): the reason is fed back anyway
     nxt = await policy.decide(obs(2))
@@ -173,6 +176,7 @@ async def test_a_model_down_for_the_whole_first_step_stops_the_robot_but_a_slow_
     slow = LLMPolicy("alice", ScriptedClient(["Command: wait()"], latency=5.0), step_deadline=0.05)
     d = await slow.decide(obs(0))
     assert d.action == Wait() and d.parse_error == "llm error: no answer within the step deadline of 0.05 s"
+    assert d.failure is ReplyFailure.MODEL_UNREACHABLE
 
 
 async def test_results_messages_and_waits_go_into_memory() -> None:
@@ -407,6 +411,7 @@ async def _record_episode(tmp_path: Path, replies: list[str | BaseException]) ->
             reply=d.reply,
             action=d.action.call(),
             parse_error=d.parse_error,
+            failure=d.failure,
             prompt_tokens=d.prompt_tokens,
             completion_tokens=d.completion_tokens,
             latency=d.latency,

@@ -20,6 +20,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -113,7 +114,7 @@ def observe(robot: str, tick: int = 0, *, base: tuple[float, float, float] | Non
         "task_brief": brief(PACK, ROLES[robot], CREW),  # as the world words each role's task
         "task_detail": detail(PACK, ROLES[robot], CREW, TARGETS, {}),
         "targets": TARGETS if bob else [],
-        "task_status": f"In the tray: nothing yet. Not yet in the tray: {', '.join(TARGETS)}." if bob else None,
+        "task_status": PACK.status(TARGETS, []) if bob else None,  # the default world's: no status_hints aid
         "teammates": {r: SKILLS[r] for r in SKILLS if r != robot},
     }
     return Observation(**(values | update))
@@ -168,7 +169,7 @@ def script(robot: str) -> list[tuple[str, SkillOutcome, Observation]]:
     if robot == "bob":
         in_tray = ObjectView(name="phone", position=(-3.4, 0.19, 0.72), on="tray")
         book = ObjectView(name="book", position=(-2.4, 0.05, 0.715), yaw=1.5708, on="table_0")
-        status = "In the tray: phone. Not yet in the tray: book, soap, mug."
+        status = PACK.status(TARGETS, [SimpleNamespace(name="phone", on="tray")])  # type: ignore[list-item]
         return [
             (
                 'Command: communicate("Alice, please bring these to table_0 within my reach: book, soap, mug.", alice)',
@@ -327,6 +328,19 @@ async def test_prompts_at_step_1_and_step_5(robot: str) -> None:
     assert "(latest) step 3:" in actions and "- step 0:" in actions
 
 
+def test_each_golden_says_what_produced_it_and_the_default_ones_hold_no_aids_text() -> None:
+    """tests/golden/README.md names what produced every golden (the default world or a named aid);
+    a default one holds no text of the status_hints aid (Bob's status says only what is in the tray)."""
+    listed = {m for m in re.findall(r"^\| `([^`]+)` \|", (GOLDEN / "README.md").read_text(encoding="utf-8"), re.M)}
+    assert listed == {p.name for p in GOLDEN.iterdir() if p.name != "README.md"}
+    aid = PACK.status(TARGETS, [], frozenset({"status_hints"})).removeprefix(PACK.status(TARGETS, []))
+    assert aid.strip().startswith("Not yet in the tray")
+    for robot in ROBOTS:
+        for step in (1, 5):
+            text = (GOLDEN / f"{robot}_step{step}.txt").read_text(encoding="utf-8")
+            assert "Not yet in the tray" not in text and "Every listed object is in the tray" not in text, robot
+
+
 def _sections(text: str, heads: list[str]) -> list[str]:
     """The text under each heading, in the order given; fails if a heading is missing or out of order."""
     at = [text.index(h) for h in heads]
@@ -407,10 +421,10 @@ def test_the_system_prompt_carries_the_appendix_in_its_order(robot: str) -> None
         assert item in constraints, item
     assert len(re.findall(r"^\d\. ", constraints, re.M)) == {"alice": 5, "bob": 3, "david": 2}[robot]
     # skills with signatures, then the Command / Analysis / Reasoning format
-    from mhrc.agents.parse import SIGNATURES
+    from mhrc.agents.parse import signature
 
     for skill in SKILLS[robot]:
-        assert f"- {SIGNATURES[skill]}: " in skills
+        assert f"- {signature(skill)}: " in skills
     assert [line.split(":")[0] for line in fmt.splitlines() if re.match(r"\d\. ", line)] == [
         "1. Command",
         "2. Analysis",
@@ -466,7 +480,9 @@ def test_the_user_prompt_carries_the_appendix_in_its_order(robot: str) -> None:
             and "ask Alice to search for them and bring them" in task
             and "Nothing that is not on the list goes into the tray" in task
         )
-        assert rest[0] == "Latest task progress:\nIn the tray: phone. Not yet in the tray: book, soap, mug.\n\n"
+        assert (
+            rest[0] == "Latest task progress:\nIn the tray: phone.\n\n"
+        )  # the default world's status (no status_hints)
     for section in rest[-3:]:
         assert "(latest) step" in section
 
@@ -536,13 +552,13 @@ def test_the_pick_window_and_message_templates_live_in_the_aid() -> None:
 
 
 def test_skill_signatures_in_the_prompts_are_what_the_parser_accepts() -> None:
-    from mhrc.agents.parse import SIGNATURES, parse_command
+    from mhrc.agents.parse import parse_command, signature
 
     for robot, skills in SKILLS.items():
         text = (GOLDEN / f"{robot}_step1.txt").read_text(encoding="utf-8")
         for skill in skills:
-            assert f"- {SIGNATURES[skill]}:" in text
-            call = SIGNATURES[skill].replace("stand_pose_id", "0").replace("dx", "0.1").replace("dy", "0.2")
+            assert f"- {signature(skill)}:" in text
+            call = signature(skill).replace("stand_pose_id", "0").replace("dx", "0.1").replace("dy", "0.2")
             # the paper's own order (Command first) and its example's (Command last) both parse
             assert (
                 parse_command(

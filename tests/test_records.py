@@ -9,7 +9,8 @@ from typing import Any
 import pytest
 
 from mhrc.core.protocol import LLM_ERROR_PREFIX, ActionAck, EpisodeStarted, RejectCode, Thought
-from mhrc.core.records import LineError, LineKind, ReplyFailure, TraceLineError, decode_row, read_records, reply_failure
+from mhrc.core.protocol.thoughts import ReplyFailure
+from mhrc.core.records import LineError, LineKind, TraceLineError, decode_row, read_records
 from mhrc.core.trace import read_trace
 from mhrc.core.upgrade import UNRECORDED
 
@@ -31,7 +32,12 @@ STARTED = {"v": 1, "kind": "episode_started", "run": "r", "task": "pack_objects"
 
 def test_a_trace_reads_as_typed_records_and_read_trace_keeps_its_rows(tmp_path: Path) -> None:
     thought = Thought(
-        robot="bob", tick=0, policy="llm:m", prompt="p", parse_error=LLM_ERROR_PREFIX + "m failed after 5 attempts"
+        robot="bob",
+        tick=0,
+        policy="llm:m",
+        prompt="p",
+        parse_error=LLM_ERROR_PREFIX + "m failed after 5 attempts",
+        failure=ReplyFailure.MODEL_UNREACHABLE,
     ).model_dump(mode="json")
     path = _write(
         tmp_path / "t.jsonl",
@@ -142,12 +148,16 @@ def test_a_message_that_does_not_fit_its_model_is_kept_with_the_reason() -> None
         ("no command found: give one command, such as Command: pick(apple)", "stop", ReplyFailure.UNREADABLE),
     ],
 )
-def test_a_thoughts_failure_code_is_derived_once(
+def test_an_older_thoughts_failure_is_upgraded_to_its_code(
     parse_error: str | None, finish_reason: str | None, code: ReplyFailure | None
 ) -> None:
-    thought = Thought(
-        robot="bob", tick=0, policy="llm:m", prompt="p", parse_error=parse_error, finish_reason=finish_reason
-    )
-    assert reply_failure(thought) is code
-    assert decode_row(_line(thought.model_dump(mode="json"), "mhrc/r/agent/bob/thought"), 1).failure is code
+    """A thought recorded before thoughts carried `failure` reads with the code its texts stand for
+    (mhrc.core.upgrade); one that carries it reads as it says, whatever its texts."""
+    old = Thought(robot="bob", tick=0, policy="llm:m", prompt="p", parse_error=parse_error, finish_reason=finish_reason)
+    row = old.model_dump(mode="json")
+    del row["failure"]  # as a world of before issue 44 wrote it
+    line = decode_row(_line(row, "mhrc/r/agent/bob/thought"), 1)
+    assert isinstance(line.msg, Thought) and line.msg.failure is code and line.failure is code
     assert code is None or code.unparsed == (code is not ReplyFailure.MODEL_UNREACHABLE)
+    today = old.model_copy(update={"failure": ReplyFailure.UNREADABLE}).model_dump(mode="json")
+    assert decode_row(_line(today, "mhrc/r/agent/bob/thought"), 1).failure is ReplyFailure.UNREADABLE

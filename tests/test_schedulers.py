@@ -8,12 +8,13 @@ from pathlib import Path
 
 import pytest
 from sweep import sweep
+from watched_sim import watched
 
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
 from mhrc.core.bus import Bus
-from mhrc.core.protocol import ActionRequest, ActionResult, Observation, SkillOutcome, parse_action
+from mhrc.core.protocol import Action, ActionResult, Observation, SkillOutcome, parse_action
 from mhrc.core.trace import read_trace
 from mhrc.run.config import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
@@ -133,22 +134,20 @@ class _Recording:
         self.inner.record(result)
 
 
-async def test_sequential_is_algorithm_1(mhrc_world, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+async def test_sequential_is_algorithm_1(mhrc_world) -> None:  # type: ignore[no-untyped-def]
     """Within a tick the robots plan and act one at a time, in order, each on the world the earlier
     ones left: robot k decides only after robot k-1's action of the same tick executed, and the
     observation it decides on already shows that action's effect."""
     events: list[tuple[str, ...]] = []
     seen: dict[tuple[str, int], Observation] = {}
-    execute = WorldService._execute
+    decided: dict[str, str] = {}  # robot -> the tick of its last decision
 
-    def logged(self: WorldService, req: ActionRequest, tick: int) -> SkillOutcome:
-        outcome = execute(self, req, tick)
-        events.append(("execute", req.robot, str(tick), req.action.call(), str(outcome.succeeded)))
-        return outcome
+    def logged(robot: str, action: Action, outcome: SkillOutcome) -> None:
+        decided.update({e[1]: e[2] for e in events if e[0] == "decide"})
+        events.append(("execute", robot, decided.get(robot, "?"), action.call(), str(outcome.succeeded)))
 
-    monkeypatch.setattr(WorldService, "_execute", logged)
     horizon = 12
-    async with mhrc_world(seed=0, horizon=horizon, schedule="sequential") as world:
+    async with mhrc_world(seed=0, horizon=horizon, schedule="sequential", simulator=watched(logged)) as world:
         buses = [await world.client() for _ in ROBOTS]
         try:
             agents = [

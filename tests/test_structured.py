@@ -16,8 +16,8 @@ import pytest
 
 from mhrc.agents.parse import ReplyFormatError, parse_command
 from mhrc.agents.structured import (
-    ARGUMENTS,
     STRUCTURED_INSTRUCTIONS,
+    arguments,
     decision_schema,
     parse_structured,
     response_format,
@@ -130,7 +130,7 @@ def test_schema_keeps_to_the_subset_every_server_accepts(observations: list[Obse
             if node.get("type") == "object":  # strict mode: closed objects, every property required
                 assert node["additionalProperties"] is False and node["required"] == list(node["properties"]), path
         for skill, variant in _variants(schema).items():
-            assert list(variant["properties"]) == ["skill", *ARGUMENTS[skill]]
+            assert list(variant["properties"]) == ["skill", *arguments(skill)]
 
 
 def test_enums_are_the_names_in_the_robots_own_scene_graph(observations: list[Observation]) -> None:

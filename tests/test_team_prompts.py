@@ -17,7 +17,7 @@ import pytest
 from mhrc.agents.crew import KIND_PROMPTS, TALKS_TO, crew_of, fill
 from mhrc.agents.llm import ScriptedClient
 from mhrc.agents.llm_policy import LLMPolicy, load_hints, load_template, template_source
-from mhrc.agents.parse import SIGNATURES
+from mhrc.agents.parse import signature
 from mhrc.core.protocol import Observation, RobotStatus
 from mhrc.core.team import PAPER_TEAM, RobotSpec, TeamSpec
 from mhrc.testing import PolicyHarness, observation
@@ -147,10 +147,10 @@ async def test_drone_scout_lucy_is_offered_exactly_her_skills() -> None:
     prompt = d.prompt or ""
     assert prompt.startswith("You are Lucy, a smart robot that can fly through the house.")
     skills = section(prompt, "Skills").strip().splitlines()
-    assert [line.split(":")[0] for line in skills] == [f"- {SIGNATURES[s]}" for s in DRONE_SKILLS]
+    assert [line.split(":")[0] for line in skills] == [f"- {signature(s)}" for s in DRONE_SKILLS]
     assert "fly to the stand pose" in skills[0]
     for other in ("move", "open", "pick", "place"):
-        assert SIGNATURES[other].split("(")[0] + "(" not in prompt.split("# Scene graph")[0], other
+        assert signature(other).split("(")[0] + "(" not in prompt.split("# Scene graph")[0], other
     profile = section(prompt, "Profile")
     assert (
         "You fly above the furniture" in profile

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 from structlog.testing import capture_logs
 from waits import robots_alive, served
+from watched_sim import watched
 
 from mhrc.agents.agent import RobotAgent, WorldGone
 from mhrc.agents.heuristic import heuristic_policy
@@ -213,9 +214,7 @@ REFUSED_WHILE_EXECUTING = {"sequential": "tick_taken", "lockstep": "tick_taken",
 
 
 @pytest.mark.parametrize("schedule", sorted(REFUSED_WHILE_EXECUTING))
-async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(
-    mhrc_world, monkeypatch: pytest.MonkeyPatch, schedule: str
-) -> None:  # type: ignore[no-untyped-def]
+async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(mhrc_world, schedule: str) -> None:  # type: ignore[no-untyped-def]
     """Alice acts alone (Bob and David leave once the episode started). While her first goal
     executes (the simulator's thread held inside it): the same payload again is refused as a
     duplicate, however often it comes, and logged once an interval, not once a message; a second
@@ -226,21 +225,18 @@ async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(
         robot="alice", agent_id="manual-alice", tick=0, action=Navigate(target="table_0", stand_pose=0)
     )
     payload = encode(first)
-    ran: asyncio.Queue[str] = asyncio.Queue()  # goal ids, as the simulator's thread starts each
+    ran: asyncio.Queue[str] = asyncio.Queue()  # the calls, as the simulator (tests/watched_sim.py) executes each
     release = threading.Event()
     loop = asyncio.get_running_loop()
-    execute = WorldService._execute
 
-    def held(self: WorldService, req: ActionRequest, tick: int) -> SkillOutcome:
-        loop.call_soon_threadsafe(ran.put_nowait, req.goal_id)
-        if req.goal_id == first.goal_id:
+    def held(robot: str, action: Action, outcome: SkillOutcome) -> None:
+        loop.call_soon_threadsafe(ran.put_nowait, action.call())
+        if action == first.action:
             release.wait(60)  # until the test has sent what comes while it executes (bounded: never a hang)
-        return execute(self, req, tick)
 
-    monkeypatch.setattr(WorldService, "_execute", held)
     repeats = 10
     with capture_logs() as logs:
-        async with mhrc_world(seed=0, schedule=schedule) as world:
+        async with mhrc_world(seed=0, schedule=schedule, simulator=watched(held)) as world:
             bus, team = await world.client(), await world.client()
             try:
                 alice = ManualAgent(bus, world.run, "alice")
@@ -253,7 +249,7 @@ async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(
                 await alice.seen(lambda event: isinstance(event, RobotDetached) and event.robot == "david")
                 bus.put(alice.keys.action_request("alice"), payload)
                 assert (ack := await asyncio.wait_for(alice.acks.get(), 30)).accepted and ack.goal_id == first.goal_id
-                assert await asyncio.wait_for(ran.get(), 30) == first.goal_id  # executing now, no result yet
+                assert await asyncio.wait_for(ran.get(), 30) == first.action.call()  # executing now, no result yet
 
                 for _ in range(repeats):
                     bus.put(alice.keys.action_request("alice"), payload)
@@ -290,7 +286,7 @@ async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(
                 await bus.close()  # alice's token goes: the episode ends with nobody attached
             done = await world.done(60)
     assert done.reason == "no_agents" and done.metrics.action_steps == 1  # the navigation, once (waits are not counted)
-    assert [ran.get_nowait() for _ in range(ran.qsize())] == [third.goal_id], (
+    assert [ran.get_nowait() for _ in range(ran.qsize())] == [third.action.call()], (
         "after the first, only the third reached the simulator"
     )
     rows = [line["msg"] for line in read_trace(world.trace) if line["kind"] == "put" and isinstance(line["msg"], dict)]
@@ -314,24 +310,21 @@ async def test_a_message_sent_while_its_receiver_reattaches_is_delivered_once_an
     (in the attach reply or in her result, not both, not neither), every observation that
     carries it or comes after it knows the object, and no later observation repeats it."""
     release, loop = threading.Event(), asyncio.get_running_loop()
-    held: asyncio.Queue[str] = asyncio.Queue()  # goal ids, as the simulator's thread stops after each message
+    held: asyncio.Queue[str] = asyncio.Queue()  # senders, as the simulator's thread stops after each message
     observing: asyncio.Queue[str] = asyncio.Queue()  # robots, as the world starts making an observation on the loop
-    execute, observe = WorldService._execute, WorldService.observe
+    observe = WorldService.observe
 
-    def execute_then_hold(self: WorldService, req: ActionRequest, tick: int) -> SkillOutcome:
-        outcome = execute(self, req, tick)
-        if isinstance(req.action, Communicate):
-            loop.call_soon_threadsafe(held.put_nowait, req.goal_id)
+    def hold_after_a_message(robot: str, action: Action, outcome: SkillOutcome) -> None:
+        if isinstance(action, Communicate):
+            loop.call_soon_threadsafe(held.put_nowait, robot)
             release.wait(60)  # until the test has re-attached Alice (bounded: never a hang)
-        return outcome
 
     async def observe_seen(self: WorldService, robot: str, tick: int):  # type: ignore[no-untyped-def]
         observing.put_nowait(robot)
         return await observe(self, robot, tick)
 
-    monkeypatch.setattr(WorldService, "_execute", execute_then_hold)
     monkeypatch.setattr(WorldService, "observe", observe_seen)
-    async with mhrc_world(seed=3, start_timeout=3.0) as world:
+    async with mhrc_world(seed=3, start_timeout=3.0, simulator=watched(hold_after_a_message)) as world:
         bus = await world.client()
         try:
             alice, bob = ManualAgent(bus, world.run, "alice"), ManualAgent(bus, world.run, "bob")

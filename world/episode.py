@@ -10,7 +10,7 @@ lock; the in-process environment (mhrc.env) calls it directly. Both drive the sa
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import structlog
@@ -37,8 +37,6 @@ from .schedulers import Executed, Scheduler, TaskResultLike
 from .service_config import SimLike
 
 log = structlog.get_logger("mhrc.world")
-
-RunOne = Callable[[ActionRequest, int], SkillOutcome]  # one request at a tick -> its outcome
 
 
 @dataclass
@@ -67,15 +65,14 @@ class EpisodeCore:
 
     # ------------------------------------------------------------------ the simulator's side (its thread)
     def execute_batch(
-        self, batch: Sequence[ActionRequest], tick: int, deliver: bool, opens: int | None, run_one: RunOne | None = None
+        self, batch: Sequence[ActionRequest], tick: int, deliver: bool, opens: int | None
     ) -> tuple[Executed, Snapshot, Sequence[Message]]:
-        """The actions in order (each through `run_one`, `execute_one` by default), then the evaluation and
+        """The actions in order (each by `execute_one`), then the evaluation and
         every acting robot's observation of tick + 1 (with `deliver`, after the batch's messages reached their
         receivers' scene graphs: lockstep delivers them with these observations; with `opens`, after that
         tick's scenario events). Also returns the snapshot after the batch and the scenario events fired."""
-        run_one = run_one or self.execute_one
         self.mail.learn()
-        outcomes = [run_one(req, tick) for req in batch]
+        outcomes = [self.execute_one(req, tick) for req in batch]
         if deliver:
             self.mail.delivered(self.sim.robots)
             self.mail.learn()

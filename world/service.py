@@ -35,7 +35,6 @@ from mhrc.core.protocol import (
     RobotAttached,
     RobotDetached,
     RobotMessage,
-    SkillOutcome,
     Snapshot,
     Turn,
     WorldState,
@@ -170,13 +169,10 @@ class WorldService:
     def _execute_batch(
         self, batch: Sequence[ActionRequest], tick: int, deliver: bool, opens: int | None
     ) -> tuple[Executed, Snapshot, Sequence[Message]]:
-        """Runs in a worker thread, holding the sim lock: the batch (EpisodeCore.execute_batch, each action
-        through `_execute`), its observations with the teammates attached now."""
-        done, snapshot, fired = self.core.execute_batch(batch, tick, deliver, opens, self._execute)
+        """Runs in a worker thread, holding the sim lock: the batch (EpisodeCore.execute_batch), its
+        observations with the teammates attached now."""
+        done, snapshot, fired = self.core.execute_batch(batch, tick, deliver, opens)
         return replace(done, observations={r: self._present(o) for r, o in done.observations.items()}), snapshot, fired
-
-    def _execute(self, req: ActionRequest, tick: int) -> SkillOutcome:
-        return self.core.execute_one(req, tick)
 
     def finish(self, reason: str) -> None:
         if self.done is not None:

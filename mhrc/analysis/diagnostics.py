@@ -8,8 +8,9 @@ messages of one trace (`mhrc.core.records.read_records`); nothing is re-simulate
   mhrc.core.records.ReplyFailure, is unreadable or cut_off); llm_unreachable: steps lost to a
   model that stayed down (failure model_unreachable). Both make the robot wait.
 - hallucinations: executed commands (`action_result`) naming an object or furniture the robot
-  had no source for. The names checked are navigate/open's target, pick's obj, place's obj
-  and location. The observation the robot planned on is the one delivered to it (in an
+  had no source for. The names checked are the arguments its call form declares as naming
+  furniture or an object (mhrc.core.protocol.actions, ArgKind.names_a_thing): navigate/open's
+  target, pick's obj, place's obj and location. The observation the robot planned on is the one delivered to it (in an
   `action_result` or a sequential `turn`) whose tick is the action's tick; a name is known if
   that scene graph holds it (furniture, objects, what the robot holds) or the task names it to
   that robot (Bob's targets and goals). When that observation is not in the trace (a robot's
@@ -79,7 +80,11 @@ UNKNOWN_NAME_CODES = (
     OutcomeCode.LOCATION_UNKNOWN.value,
 )
 UNKNOWN_NAME_FEEDBACK = "There is no "  # world/feedback.py: unknown_furniture, object_unknown, location_unknown
-NAMED_ARGS = {"navigate": ("target",), "open": ("target",), "pick": ("obj",), "place": ("obj", "location")}
+
+
+def named_args(action: Action) -> list[str]:
+    """The names of furniture or objects `action` gives, in its call's order (its declared call form)."""
+    return [str(getattr(action, a.field)) for a in action.ARGS if a.kind.names_a_thing]
 
 
 @dataclass
@@ -239,7 +244,7 @@ def diagnose(rows: Rows, metrics: EpisodeMetrics | None = None) -> Diagnostics:
         seen = planned.get((robot, tick))
         pending[robot] |= {n.sender for n in delivered.get((robot, tick), []) if n.sender != robot}
         # hallucinations: names against the scene graph planned on, else the world's verdict
-        args = [str(getattr(action, a)) for a in NAMED_ARGS.get(skill, ()) if getattr(action, a, None) is not None]
+        args = named_args(action)
         if seen is not None:
             unknown = [n for n in args if n not in _known_names(seen)]
         else:

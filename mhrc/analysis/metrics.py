@@ -25,8 +25,8 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
 - llm_calls, prompt_tokens, completion_tokens: from the agents' `thought` events (an LLM step
   is a thought with a prompt, whether or not the model answered);
 - the LLM failures that shaped the episode: parse_failures (replies that did not parse: a
-  thought whose parse_error is set and is not a model error), llm_unreachable (steps lost to a
-  model that stayed down after its retries: parse_error starting with LLM_ERROR_PREFIX),
+  thought whose failure is unreadable or cut_off), llm_unreachable (steps lost to a
+  model that stayed down after its retries: failure model_unreachable),
   rejected_actions (`action_ack` events with accepted false, and the rejections of malformed
   requests the recorder counted as `junk` lines);
 - valid / invalid_code / invalid_reason: an episode that measured the machine, not the method,
@@ -97,7 +97,7 @@ from mhrc.core.protocol import (
     TickClosed,
 )
 from mhrc.core.records import LineKind, Rows, TraceLine, as_records, messages
-from mhrc.core.upgrade import UNRECORDED, paper_team
+from mhrc.core.upgrade import UNRECORDED
 
 __all__ = [
     "UNRECORDED",
@@ -221,7 +221,9 @@ def from_trace(rows: Rows) -> EpisodeMetrics:
     recovery = recovery_of(lines, scheduler, s.step_seconds or 0.0, d)
     invalid, why = _invalidity(lines, d, temporal_steps, results, len(thoughts), unreachable)
     recovered = [int(e["ticks_to_recover"]) for e in recovery if e["applied"] and e["ticks_to_recover"] is not None]
-    team = s.team or paper_team(s.robots)
+    team = s.team
+    if team is None:  # read_records gives every episode_started one (mhrc.core.upgrade): this line was not read so
+        raise TraceError("the trace's episode_started names no team: read traces with mhrc.core.records")
     work = teamwork(results, s.robots)
     return EpisodeMetrics(
         task=s.task,

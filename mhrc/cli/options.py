@@ -11,9 +11,9 @@ import click
 
 from mhrc.core.fidelity import NOISE
 from mhrc.core.fidelity import describe as describe_aids
+from mhrc.core.lifeline import PARENT_ENV
 from mhrc.core.security import Credentials, SecurityError, load
 from mhrc.run.config import SCHEDULES, ConfigError, EpisodeConfig
-from mhrc.run.lifeline import PARENT_ENV
 from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import ScenarioError, resolve_scenario
 

@@ -377,7 +377,7 @@ def agent(
     options = cfg.policy_options(spec)
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError
-    from mhrc.run.lifeline import PARENT_ENV
+    from mhrc.core.lifeline import PARENT_ENV
 
     if not os.environ.get(PARENT_ENV):  # said by hand only: a child of mhrc up --processes has its parent's lines
         click.echo(f"waiting for the world at {connect} (up to {attach_timeout:g} s)", err=True)

@@ -15,7 +15,7 @@ import click
 
 from mhrc.core import logs
 from mhrc.core.endpoints import BusError
-from mhrc.run.lifeline import PARENT_ENV, die_with_parent
+from mhrc.core.lifeline import PARENT_ENV, die_with_parent
 
 T = TypeVar("T")
 
@@ -55,7 +55,7 @@ def run_command(
 
     The first Ctrl-C cancels the run (saying `stopping`, what is being done, when given: a
     callable is asked at that moment); a second one quits at once: the children go with this
-    process (mhrc.run.lifeline), never a hang. Once interrupted, one line: `interrupted()` when
+    process (mhrc.core.lifeline), never a hang. Once interrupted, one line: `interrupted()` when
     given (where the run's work is), else "interrupted"; a child of `mhrc up --processes` or
     `mhrc eval` says nothing (its parent, interrupted with it, says it once), and takes the
     terminal's Ctrl-C only as the word that the others are about to leave (its warnings about

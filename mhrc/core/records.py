@@ -4,7 +4,7 @@ A trace (mhrc.core.trace, the recorder) is JSONL, one line per bus sample: `{"t"
 "msg"}`. `read_records` turns each line into a `TraceLine`: its kind a `LineKind`, and for a
 `put` its message decoded into the protocol's model its `kind` names (`action_result`: an
 `ActionResult`, as on `.../action/result`; `snapshot`: a `Snapshot`, as on `.../world/event`; ...). What machines branch on is decided here, once, as codes:
-a thought's `failure` (`ReplyFailure`, from its parse_error) and a junk line's count (`JunkCount`,
+a thought's `failure` (`ReplyFailure`, as the thought carries it) and a junk line's count (`JunkCount`,
 with its `RejectCode`). Lines of older traces are brought to today's shape first
 (mhrc.core.upgrade).
 
@@ -25,7 +25,6 @@ from typing import Any, TypeVar, Union, get_args
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from mhrc.core.protocol import (
-    LLM_ERROR_PREFIX,
     ActionAck,
     ActionRequest,
     ActionResult,
@@ -43,6 +42,7 @@ from mhrc.core.protocol import (
     Turn,
 )
 from mhrc.core.protocol.base import loads
+from mhrc.core.protocol.thoughts import ReplyFailure
 from mhrc.core.upgrade import upgrade
 
 Payload = Union[
@@ -72,32 +72,6 @@ class LineKind(StrEnum):
     GONE = "gone"  # a liveliness token gone
     JUNK = "junk"  # malformed requests or rejections, counted, not copied
     INCOMPLETE = "incomplete"  # the recording stopped (a failed write): the trace is cut short
-
-
-class ReplyFailure(StrEnum):
-    """Why a robot's step gave no action (a `Thought` whose parse_error is set), for programs; the
-    parse_error says it for people."""
-
-    MODEL_UNREACHABLE = "model_unreachable"  # the model did not answer (down, refused, past the deadline)
-    CUT_OFF = "cut_off"  # the reply was cut at the token limit before it gave a command
-    UNREADABLE = "unreadable"  # the reply came whole but did not parse into one command
-
-    @property
-    def unparsed(self) -> bool:
-        """A reply came and did not parse (the metrics' parse_failures), as against a model that did not answer."""
-        return self is not ReplyFailure.MODEL_UNREACHABLE
-
-
-def reply_failure(thought: Thought) -> ReplyFailure | None:
-    """The code of a thought's failure, or None when its step gave an action. The one place that
-    reads the parse_error's text: LLM_ERROR_PREFIX marks a model that did not answer."""
-    if not thought.parse_error:
-        return None
-    if thought.parse_error.startswith(LLM_ERROR_PREFIX):
-        return ReplyFailure.MODEL_UNREACHABLE
-    if thought.finish_reason == "length":
-        return ReplyFailure.CUT_OFF
-    return ReplyFailure.UNREADABLE
 
 
 class NotCopied(StrEnum):
@@ -245,7 +219,7 @@ def decode_row(row: Any, number: int) -> TraceLine:
         payload = _decode(model.model_validate, msg)
     except ValidationError as exc:
         return TraceLine(number, float(t), key, kind, problem=_reason(exc), raw=raw)
-    failure = reply_failure(payload) if isinstance(payload, Thought) else None
+    failure = payload.failure if isinstance(payload, Thought) else None
     return TraceLine(number, float(t), key, kind, msg=payload, failure=failure, raw=raw)
 
 

@@ -14,7 +14,11 @@ removed (every field added later has a default). What older traces lack, and wha
   none under the exact_motion aid (mhrc.core.fidelity.recorded_noise);
 - an `episode_started` without `team` (before teams were data, issue 33): the paper's team, those of
   Alice, Bob and David the episode ran (`paper_team`: the no_mobile ablation ran Alice and Bob), which
-  is what today's world records for the same episode.
+  is what today's world records for the same episode;
+- a `thought` without `failure` (before a step's failure was a code on the wire, issue 44): the code
+  its parse_error's text stands for (`legacy_failure`): a model that did not answer wrote
+  LLM_ERROR_PREFIX first, a reply cut at the token limit finished with `length`, any other
+  parse_error was a reply that did not parse; none without a parse_error.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ from __future__ import annotations
 from typing import Any
 
 from mhrc.core.fidelity import recorded_noise
-from mhrc.core.protocol import EPISODE_OVER, RejectCode, TeamRecord
+from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX, RejectCode, TeamRecord
+from mhrc.core.protocol.thoughts import ReplyFailure
 from mhrc.core.team import PAPER_TEAM
 
 UNRECORDED = "unrecorded"  # the fidelity of a trace written before episodes recorded it
@@ -70,6 +75,17 @@ def _code(value: Any, reason: str) -> str | None:
     return legacy.value if legacy is not None else None
 
 
+def legacy_failure(parse_error: object, finish_reason: object) -> ReplyFailure | None:
+    """The failure of a thought recorded before thoughts carried one, from its texts (module docstring)."""
+    if not parse_error or not isinstance(parse_error, str):
+        return None
+    if parse_error.startswith(LLM_ERROR_PREFIX):
+        return ReplyFailure.MODEL_UNREACHABLE
+    if finish_reason == "length":
+        return ReplyFailure.CUT_OFF
+    return ReplyFailure.UNREADABLE
+
+
 def upgrade(kind: str, msg: Any) -> Any:
     """A line's `msg` (its JSON) in today's shape; `kind` is the line's. A new dict where something
     changed, the same object otherwise."""
@@ -86,6 +102,9 @@ def upgrade(kind: str, msg: Any) -> Any:
     if kind != "put":
         return msg
     what = msg.get("kind")
+    if what == "thought" and "failure" not in msg and msg.get("parse_error"):
+        failure = legacy_failure(msg.get("parse_error"), msg.get("finish_reason"))
+        return {**msg, "failure": failure.value if failure is not None else None}
     if what == "action_ack" and msg.get("accepted") is False and msg.get("code") is None:
         return {**msg, "code": _code(None, str(msg.get("reason", "")))}
     if what == "episode_started" and ("fidelity" not in msg or not isinstance(msg.get("noise"), dict)):

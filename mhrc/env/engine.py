@@ -16,7 +16,6 @@ import numpy as np
 
 from mhrc.core.protocol import ActionResult, EpisodeDone, Message
 from mhrc.run.config import EpisodeConfig
-from mhrc.run.serve import sim_of
 from mhrc.world.sim import Sim
 
 from .seats import Seat
@@ -48,7 +47,7 @@ class EnvCore:
             raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
         self.close()
         cfg = self.cfg
-        self.sim = sim_of(cfg, None if seed is None else int(seed))
+        self.sim = cfg.sim(None if seed is None else int(seed))
         self.world = DirectWorld(self.sim, schedule=self.schedule, horizon=cfg.horizon)
         self.seats = {r: Seat.make(r, cfg, expert=self.expert) for r in self.robots}
         self.news = {r: {} for r in self.robots}

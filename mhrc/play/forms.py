@@ -2,8 +2,10 @@
 the robot knows (its own Observation, nothing else), a skill that cannot work now disabled with
 the reason; and a form's submission checked against them, refused with a code and a sentence.
 
-The inputs are named as the protocol's fields (`target`, `stand_pose`, `object`, `location`,
-`dx`, `dy`, `content`, `to`); `object` is the protocol's `obj` of pick and place.
+The forms follow each skill's declared call form (mhrc.core.protocol.actions: its arguments, in
+order, free text last); the choices and the reason a form is disabled come from each argument's
+kind. The inputs are named as the protocol's fields (`target`, `stand_pose`, `object`,
+`location`, `dx`, `dy`, `content`, `to`); `object` is the protocol's `obj` of pick and place.
 """
 
 from __future__ import annotations
@@ -13,20 +15,14 @@ from dataclasses import asdict, dataclass, field
 from enum import Enum
 from typing import Any
 
-from mhrc.core.protocol import SKILLS, Action, Observation, ProtocolError, parse_action
-from mhrc.core.protocol.base import MAX_MOVE
+from pydantic import ValidationError
+
+from mhrc.core.protocol import Action, Observation
+from mhrc.core.protocol.actions import CALLS, Arg, ArgKind, build
+from mhrc.core.protocol.base import MAX_MOVE, _reason
 
 MAX_SUBMISSION_BYTES = 16_384  # a form's JSON: a message of the protocol's 4,000 characters fits many times over
-FIELDS = {
-    "navigate": ("target", "stand_pose"),
-    "move": ("dx", "dy"),
-    "open": ("target",),
-    "pick": ("object",),
-    "place": ("object", "location"),
-    "communicate": ("to", "content"),
-    "wait": (),
-}
-WIRE = {"object": "obj"}  # an input's name -> the protocol's field, where they differ
+INPUT = {"obj": "object"}  # the protocol's field -> its input's name, where they differ
 
 
 class Refusal(str, Enum):
@@ -65,48 +61,54 @@ def _gone(o: Any) -> bool:
     return bool(o.last_seen_on and not (o.on or o.held_by))
 
 
+def _input(arg: Arg) -> str:
+    return INPUT.get(arg.field, arg.field)
+
+
+def _choices(kind: ArgKind, obs: Observation) -> tuple[list[str], str | None]:
+    """An argument's choices in `obs` and why a form with it cannot work now (None: it can)."""
+    s = obs.status
+    if kind is ArgKind.STAND:
+        stand = [f.name for f in obs.furniture if f.stand_poses]
+        return stand, None if stand else "you know of no furniture with a stand pose"
+    if kind is ArgKind.STAND_POSE:
+        return [str(i) for i in range(max((len(f.stand_poses) for f in obs.furniture), default=0))], None
+    if kind is ArgKind.OPENABLE:
+        closed = [f.name for f in obs.furniture if f.openable and f.is_open is False and f.stand_poses]
+        return closed, None if closed else "nothing you know of is closed"
+    if kind is ArgKind.PICKABLE:
+        pickable = [o.name for o in obs.objects if not o.held_by and not _gone(o)]
+        if s.holding:
+            return pickable, f"your gripper holds {s.holding}: place it first"
+        return pickable, None if pickable else "you know of no object to pick"
+    if kind is ArgKind.OBJECT:
+        return ([s.holding], None) if s.holding else ([], "your gripper is empty: pick something first")
+    if kind is ArgKind.PLACE:
+        return [x.name for x in obs.furniture], None
+    mates = sorted(r for r in obs.teammates if r != obs.robot)  # TEAMMATE
+    return mates, None if mates else "no teammate is attached to hear you"
+
+
+FREE = {ArgKind.OFFSET: "number", ArgKind.TEXT: "text"}  # the kinds a person types, not chooses
+
+
 def forms(obs: Observation) -> list[SkillForm]:
     """The forms of the skills `obs.status` lists, in the protocol's order."""
-    s = obs.status
-    targets = {f.name: len(f.stand_poses) for f in obs.furniture if f.stand_poses}
-    closed = [f.name for f in obs.furniture if f.openable and f.is_open is False and f.stand_poses]
-    pickable = [o.name for o in obs.objects if not o.held_by and not _gone(o)]
-    mates = sorted(r for r in obs.teammates if r != obs.robot)
     out: list[SkillForm] = []
-    for skill in SKILLS:
-        if skill not in s.skills:
+    for skill, model in CALLS.items():
+        if skill not in obs.status.skills:
             continue
-        if skill == "navigate":
-            f = SkillForm(skill, [Field("target", "choice", list(targets)), Field("stand_pose", "choice")])
-            f.fields[1].choices = [str(i) for i in range(max(targets.values(), default=0))]
-            f.stand_poses = targets
-            f.disabled = None if targets else "you know of no furniture with a stand pose"
-        elif skill == "move":
-            f = SkillForm(skill, [Field("dx", "number"), Field("dy", "number")])
-        elif skill == "open":
-            f = SkillForm(skill, [Field("target", "choice", closed)])
-            f.disabled = None if closed else "nothing you know of is closed"
-        elif skill == "pick":
-            f = SkillForm(skill, [Field("object", "choice", pickable)])
-            if s.holding:
-                f.disabled = f"your gripper holds {s.holding}: place it first"
-            elif not pickable:
-                f.disabled = "you know of no object to pick"
-        elif skill == "place":
-            f = SkillForm(
-                skill,
-                [
-                    Field("object", "choice", [s.holding] if s.holding else []),
-                    Field("location", "choice", [x.name for x in obs.furniture]),
-                ],
-            )
-            f.disabled = None if s.holding else "your gripper is empty: pick something first"
-        elif skill == "communicate":
-            f = SkillForm(skill, [Field("to", "choice", mates), Field("content", "text")])
-            f.disabled = None if mates else "no teammate is attached to hear you"
-        else:
-            f = SkillForm(skill, [])
-        out.append(f)
+        form = SkillForm(skill, [])
+        for arg in sorted(model.ARGS, key=lambda a: a.kind is ArgKind.TEXT):  # free text last
+            if arg.kind in FREE:
+                form.fields.append(Field(_input(arg), FREE[arg.kind]))
+                continue
+            choices, why = _choices(arg.kind, obs)
+            form.fields.append(Field(_input(arg), "choice", choices))
+            form.disabled = form.disabled or why
+            if arg.kind is ArgKind.STAND:
+                form.stand_poses = {f.name: len(f.stand_poses) for f in obs.furniture if f.stand_poses}
+        out.append(form)
     return out
 
 
@@ -133,10 +135,11 @@ def action_of(submission: dict[str, Any], obs: Observation) -> Action:
         )
     if form.disabled:
         raise Refused(Refusal.UNAVAILABLE, f"{skill} cannot work now: {form.disabled}")
-    extra = sorted(set(submission) - {"tick", "skill", *FIELDS[form.skill]})
+    extra = sorted(set(submission) - {"tick", "skill", *(f.name for f in form.fields)})
     if extra:
         raise Refused(Refusal.MALFORMED, f"{skill} takes no {', '.join(x[:64] for x in extra)}")
-    wire: dict[str, Any] = {"skill": skill}
+    fields = {_input(a): a.field for a in CALLS[form.skill].ARGS}
+    wire: dict[str, Any] = {}
     for fld in form.fields:
         value = submission.get(fld.name)
         if not isinstance(value, str | int | float) or isinstance(value, bool):
@@ -144,14 +147,14 @@ def action_of(submission: dict[str, Any], obs: Observation) -> Action:
         if fld.kind == "choice":
             value = str(value)
             choices = fld.choices
-            if fld.name == "stand_pose":
+            if fld.name == "stand_pose":  # the chosen target's own stand poses
                 choices = [str(i) for i in range(form.stand_poses.get(str(submission.get("target")), 0))]
             if value not in choices:
                 raise Refused(
                     Refusal.NOT_A_CHOICE,
                     f"{skill}: {fld.name} {value[:64]!r} is not one of the choices ({', '.join(choices) or 'none'})",
                 )
-            wire[WIRE.get(fld.name, fld.name)] = int(value) if fld.name == "stand_pose" else value
+            wire[fields[fld.name]] = int(value) if fld.name == "stand_pose" else value
         elif fld.kind == "number":
             try:
                 number = float(value)
@@ -159,10 +162,10 @@ def action_of(submission: dict[str, Any], obs: Observation) -> Action:
                 raise Refused(Refusal.MALFORMED, f"{skill}: {fld.name} is not a number") from None
             if not math.isfinite(number) or abs(number) > MAX_MOVE:
                 raise Refused(Refusal.MALFORMED, f"{skill}: {fld.name} must be a number within ±{MAX_MOVE:g} m")
-            wire[fld.name] = number
+            wire[fields[fld.name]] = number
         else:
-            wire[fld.name] = str(value)
+            wire[fields[fld.name]] = str(value)
     try:
-        return parse_action(wire)
-    except ProtocolError as exc:  # the protocol's own bounds, as the world checks them (a message too long)
-        raise Refused(Refusal.MALFORMED, f"malformed action request: {exc}") from None
+        return build(form.skill, wire)
+    except ValidationError as exc:  # the protocol's own bounds, as the world checks them (a message too long)
+        raise Refused(Refusal.MALFORMED, f"malformed action request: {_reason(exc, form.skill)}") from None

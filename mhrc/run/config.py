@@ -6,7 +6,7 @@ from __future__ import annotations
 import socket
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -28,6 +28,9 @@ from mhrc.core.trace import unwritable
 from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import Scenario, check_scenario, load_scenario
 from mhrc.world.schedulers import SCHEDULERS
+
+if TYPE_CHECKING:
+    from mhrc.world.sim import Sim
 
 log = structlog.get_logger("mhrc.run.config")
 
@@ -245,6 +248,25 @@ class EpisodeConfig(BaseModel):
             scenario, episode_facts(task=self.task, scene=self.scene, horizon=self.horizon, robots=self.robots)
         )
         return scenario
+
+    def sim(self, seed: int | None = None) -> Sim:
+        """The world this configuration describes, built (with `seed`, another seed than its own):
+        the world's side of `mhrc up` (mhrc.run.serve) and the environment (mhrc.env) build it here,
+        so both build the same one."""
+        from mhrc.world.sim import Sim  # here, not at the top: the CLI reads configurations without PyBullet
+
+        return Sim(
+            task=self.task,
+            scene=self.scene,
+            seed=self.seed if seed is None else seed,
+            n_objects=self.n_objects,
+            gui=self.gui,
+            team=self.team,
+            robots=self.robots,
+            aids=self.aids,
+            scenario=self.scenario(),
+            noise=self.noise,
+        )
 
     def resolved(self) -> EpisodeConfig:
         """A copy with a concrete port and trace path."""

@@ -37,8 +37,8 @@ from mhrc.core.protocol import (
     decode_event,
 )
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES
-from mhrc.core.protocol.thoughts import MAX_THOUGHT_BYTES
-from mhrc.core.records import ReplyFailure, Rows, as_records, messages, reply_failure
+from mhrc.core.protocol.thoughts import MAX_THOUGHT_BYTES, ReplyFailure
+from mhrc.core.records import Rows, as_records, messages
 
 COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
 # the other robots of a team, in the order they first appear: none used twice while these last
@@ -246,7 +246,7 @@ class ProgressPrinter:
         if t.parse_error is None or not self.verbose:
             return
         error = inert(t.parse_error[:200])
-        failure = reply_failure(t)
+        failure = t.failure
         if failure is ReplyFailure.MODEL_UNREACHABLE:
             what = "[red]model unavailable[/]: " + error.removeprefix(LLM_ERROR_PREFIX)
         else:

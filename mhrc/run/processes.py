@@ -18,12 +18,12 @@ import structlog
 from mhrc.core.bus import open_client
 from mhrc.core.endpoints import check_listen
 from mhrc.core.keys import Keys
+from mhrc.core.lifeline import child_env
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 from mhrc.core.records import messages, read_records
 from mhrc.core.team import PAPER_TEAM
 from mhrc.run.attach import local_models
 from mhrc.run.config import EpisodeConfig
-from mhrc.run.lifeline import child_env
 from mhrc.run.serve import EventHook
 from mhrc.run.teams import team_argument
 

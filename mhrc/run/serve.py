@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import structlog
 
@@ -20,8 +20,7 @@ from mhrc.core.trace import Recorder
 from mhrc.core.uncancelled import to_the_end
 from mhrc.run.config import EpisodeConfig
 from mhrc.world.service import WorldService
-from mhrc.world.service_config import WorldConfig
-from mhrc.world.sim import Sim
+from mhrc.world.service_config import SimLike, WorldConfig
 
 log = structlog.get_logger("mhrc.run.serve")
 
@@ -29,21 +28,13 @@ EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
 LAST_WORDS = 2.0  # s the world waits, once the episode is over, for its agents to leave and its trace to record the end
 
 
-def sim_of(cfg: EpisodeConfig, seed: int | None = None) -> Sim:
-    """The world `cfg` describes, built (with `seed`, another seed than the config's): the world's
-    side of `mhrc up` and the environment (mhrc.env) build it here, so both build the same one."""
-    return Sim(
-        task=cfg.task,
-        scene=cfg.scene,
-        seed=cfg.seed if seed is None else seed,
-        n_objects=cfg.n_objects,
-        gui=cfg.gui,
-        team=cfg.team,
-        robots=cfg.robots,
-        aids=cfg.aids,
-        scenario=cfg.scenario(),
-        noise=cfg.noise,
-    )
+class Simulator(SimLike, Protocol):
+    """What the world's side drives and closes: world.sim.Sim, or a test's stand-in for it."""
+
+    def close(self) -> None: ...
+
+
+Simulators = Callable[[EpisodeConfig], Simulator]  # a configuration -> its simulator, built
 
 
 async def serve_world(
@@ -53,12 +44,15 @@ async def serve_world(
     connect: str | None = None,
     login: Credentials | None = None,
     on_service: Callable[[Any], None] | None = None,
+    simulator: Simulators | None = None,
 ) -> EpisodeDone:
     """Build the scene, open the world's bus (a router on cfg.endpoint, or with `connect` a
     client of a router that already exists, logged in with `login` if given: an evaluation
     worker's), record, and run the episode. `on_service` gets the WorldService once it exists
-    (the in-process runner stops it when an agent fails for good)."""
-    sim = await asyncio.to_thread(sim_of, cfg)
+    (the in-process runner stops it when an agent fails for good). `simulator` builds the simulator
+    from `cfg` (`EpisodeConfig.sim` by default): a test injects one that wraps the real one, as httpx's
+    MockTransport stands in for the network, instead of patching the world's methods."""
+    sim: Simulator = await asyncio.to_thread(simulator or EpisodeConfig.sim, cfg)
     bus = None
     recorder = None
     world: WorldService | None = None
@@ -108,7 +102,7 @@ async def serve_world(
             raise recorder.error  # everything is closed: one line for the user, not a run that goes on unrecorded
 
 
-async def _close(recorder: Recorder | None, until_done: float, bus: Bus | None, sim: Sim) -> None:
+async def _close(recorder: Recorder | None, until_done: float, bus: Bus | None, sim: Simulator) -> None:
     """The trace (its last lines), then the bus, then the simulator."""
     if recorder is not None:
         await asyncio.to_thread(recorder.close, until_done=until_done)

@@ -38,22 +38,32 @@ from mhrc.core.protocol import (
     RobotStatus,
     SkillOutcome,
 )
+from mhrc.world.robots import KINDS, TEAM
 
 __all__ = ["FURNITURE", "PolicyHarness", "Step", "World", "observation", "outcome"]
 
-_MOBILE = ["navigate", "communicate", "wait"]
-_ARM = ["pick", "place", "communicate", "wait"]
-_STATUS = {  # as the world reports its three robots at the start of an episode in the kitchen
+_STATUS = {  # as the world reports its three robots at the start of an episode in the kitchen (kinds: mhrc.world.robots)
     "alice": RobotStatus(
         name="alice",
-        kind="mobile manipulator",
-        skills=["navigate", "move", "open", "pick", "place", "communicate", "wait"],
+        kind=KINDS[TEAM["alice"]].label,
+        skills=list(KINDS[TEAM["alice"]].skills),
         base=Pose2D(x=-1.5, y=1.2),
         arm_base=(-1.3, 1.2, 0.65),
-        reach=0.72,
+        reach=KINDS[TEAM["alice"]].reach,
     ),
-    "bob": RobotStatus(name="bob", kind="tabletop manipulator", skills=_ARM, arm_base=(-3.75, 0.0, 0.7), reach=0.62),
-    "david": RobotStatus(name="david", kind="mobile robot", skills=_MOBILE, base=Pose2D(x=4.3, y=0.5, yaw=3.1416)),
+    "bob": RobotStatus(
+        name="bob",
+        kind=KINDS[TEAM["bob"]].label,
+        skills=list(KINDS[TEAM["bob"]].skills),
+        arm_base=(-3.75, 0.0, 0.7),
+        reach=KINDS[TEAM["bob"]].reach,
+    ),
+    "david": RobotStatus(
+        name="david",
+        kind=KINDS[TEAM["david"]].label,
+        skills=list(KINDS[TEAM["david"]].skills),
+        base=Pose2D(x=4.3, y=0.5, yaw=3.1416),
+    ),
 }
 _BRIEFS = {
     "alice": (

@@ -31,7 +31,7 @@ from mhrc.core.protocol import (
 from mhrc.core.records import Payload, TraceLine, messages, read_records
 from mhrc.run.attach import run_agent
 from mhrc.run.config import EpisodeConfig
-from mhrc.run.serve import serve_world
+from mhrc.run.serve import Simulators, serve_world
 
 __all__ = ["AgentSpec", "EpisodeResult", "LoopbackWorld", "run_episode", "world_on_loopback"]
 
@@ -190,7 +190,7 @@ class LoopbackWorld:
 
 
 @contextlib.asynccontextmanager
-async def world_on_loopback(**options: Any) -> AsyncIterator[LoopbackWorld]:
+async def world_on_loopback(simulator: Simulators | None = None, **options: Any) -> AsyncIterator[LoopbackWorld]:
     """Serve one episode's world on a free port of 127.0.0.1 (a Zenoh router, multicast
     scouting off) as a task of this event loop, and yield its `LoopbackWorld`.
 
@@ -199,7 +199,9 @@ async def world_on_loopback(**options: Any) -> AsyncIterator[LoopbackWorld]:
     checked as ``mhrc up`` checks them (`mhrc.run.config.ConfigError` names the bad one); the host
     is always 127.0.0.1, and without ``trace`` the trace goes to a fresh temporary directory.
     The world waits for every robot of the episode to attach (``start_timeout`` starts it with
-    whoever came). On exit the agents and the world are cancelled if still running and every
+    whoever came). `simulator` builds the world's simulator from the configuration
+    (`EpisodeConfig.sim` by default): a test that must see or hold what the simulator does wraps the
+    real one (``simulator=lambda cfg: Held(cfg.sim())``). On exit the agents and the world are cancelled if still running and every
     session opened through the handle is closed.
     """
     if options.get("host", "127.0.0.1") != "127.0.0.1":
@@ -208,7 +210,7 @@ async def world_on_loopback(**options: Any) -> AsyncIterator[LoopbackWorld]:
     if options.get("trace") is None:
         options["trace"] = _default_trace()
     cfg = EpisodeConfig.build(**options).resolved()
-    world = LoopbackWorld(cfg, asyncio.create_task(serve_world(cfg), name=f"world-{cfg.run}"))
+    world = LoopbackWorld(cfg, asyncio.create_task(serve_world(cfg, simulator=simulator), name=f"world-{cfg.run}"))
     try:
         yield world
     finally:

@@ -1,80 +1,179 @@
-"""The paper's skills as actions (`skill` discriminates the union) and their outcomes."""
+"""The paper's skills as actions (`skill` discriminates the union), each with its call form, and
+their outcomes.
+
+A skill's call form (`ARGS` on its model: the arguments in call order, each with the model's
+field, what kind of thing it names, and the words a model writes for it) is declared here once.
+Everything that reads or offers a call derives from it: the reply parser and the prompts'
+signatures (mhrc.agents.parse), the structured-output schema (mhrc.agents.structured), the play
+page's forms (mhrc.play.forms), the hallucination check (mhrc.analysis.diagnostics). `declare`
+registers a model's call form under its skill name (`CALLS`); the shipped skills are registered
+below, a test may register one of its own.
+"""
 
 from __future__ import annotations
 
-from enum import Enum
-from typing import Annotated, Any, Literal, Union
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import Enum, StrEnum
+from typing import Annotated, Any, ClassVar, Literal, TypeVar, Union, cast
 
 from pydantic import Field, TypeAdapter, ValidationError
 
 from mhrc.core.protocol.base import MAX_INT, MAX_MOVE, MAX_NAME, ProtocolError, _Model, _reason
 
+# --------------------------------------------------------------------------- call forms
+
+
+class ArgKind(StrEnum):
+    """What a call's argument is, and so which values a robot has for it (each reader of the form
+    says which, from the robot's own observation)."""
+
+    STAND = "stand"  # furniture with a stand pose: where a robot can go
+    STAND_POSE = "stand_pose"  # the index of one of the previous argument's stand poses
+    OPENABLE = "openable"  # furniture that opens
+    PICKABLE = "pickable"  # an object lying somewhere, not held
+    OBJECT = "object"  # an object to put down (the one held)
+    PLACE = "place"  # furniture or a receptacle to put an object on
+    OFFSET = "offset"  # metres along a world axis
+    TEXT = "text"  # free text: a message (it takes the commas of a written call)
+    TEAMMATE = "teammate"  # another robot of the team
+
+    @property
+    def names_a_thing(self) -> bool:
+        """The argument names furniture or an object (a name the robot may have made up)."""
+        return self in _THINGS
+
+
+_THINGS = frozenset({ArgKind.STAND, ArgKind.OPENABLE, ArgKind.PICKABLE, ArgKind.OBJECT, ArgKind.PLACE})
+
+
+@dataclass(frozen=True)
+class Arg:
+    """One argument of a skill's call: the model's `field`, its `kind`, the `word` a structured
+    command names it by (the field's name if None) and the word the prompts' signature shows for
+    it (`word` if None)."""
+
+    field: str
+    kind: ArgKind
+    word: str | None = None
+    shown: str | None = None
+
+    @property
+    def name(self) -> str:
+        """The argument's name in a structured command."""
+        return self.word or self.field
+
+    @property
+    def spoken(self) -> str:
+        """The argument's name in the prompts' signature of the call."""
+        return self.shown or self.name
+
+
+class ActionModel(_Model):
+    """Base of every skill's action: its call form (`ARGS`) and its call in the paper's syntax."""
+
+    ARGS: ClassVar[tuple[Arg, ...]] = ()
+    skill: str
+
+    def call(self) -> str:
+        """The action in the paper's syntax, e.g. ``navigate(table_1, 0)``."""
+        return f"{self.skill}({', '.join(_written(a, getattr(self, a.field)) for a in self.ARGS)})"
+
+
+def _written(arg: Arg, value: object) -> str:
+    if arg.kind is ArgKind.OFFSET:
+        return f"{value:.2f}"
+    if arg.kind is ArgKind.TEXT:
+        return repr(value)
+    return str(value)
+
+
+A = TypeVar("A", bound=ActionModel)
+CALLS: dict[str, type[ActionModel]] = {}  # skill -> its action model, in the protocol's order
+
+
+def declare(model: type[A]) -> type[A]:
+    """Register `model`'s call form under its skill name (its `skill` field's default)."""
+    skill = model.model_fields["skill"].default
+    missing = [a.field for a in model.ARGS if a.field not in model.model_fields]
+    if not isinstance(skill, str) or missing:
+        raise TypeError(f"{model.__name__}: no skill name, or ARGS naming no field ({', '.join(missing)})")
+    CALLS[skill] = model
+    return model
+
+
+def signature(skill: str) -> str:
+    """The call form the prompts show, e.g. ``navigate(furniture, stand_pose_id)``."""
+    return f"{skill}({', '.join(a.spoken for a in CALLS[skill].ARGS)})"
+
+
+def build(skill: str, values: Mapping[str, object]) -> Action:
+    """The action `skill` with its model's fields `values`, validated by its model (pydantic's
+    ValidationError if they do not fit)."""
+    return cast(Action, CALLS[skill].model_validate({"skill": skill, **values}))
+
+
 # --------------------------------------------------------------------------- actions
 # The paper's skills, with their arguments. `skill` discriminates the union.
 
 
-class Navigate(_Model):
+@declare
+class Navigate(ActionModel):
+    ARGS = (
+        Arg("target", ArgKind.STAND, word="furniture"),
+        Arg("stand_pose", ArgKind.STAND_POSE, shown="stand_pose_id"),
+    )
     skill: Literal["navigate"] = "navigate"
     target: str = Field(max_length=MAX_NAME, description="furniture name from the scene graph")
     stand_pose: int = Field(0, ge=0, le=MAX_INT, description="index of the target's stand pose")
 
-    def call(self) -> str:
-        return f"navigate({self.target}, {self.stand_pose})"
 
-
-class Move(_Model):
+@declare
+class Move(ActionModel):
+    ARGS = (Arg("dx", ArgKind.OFFSET), Arg("dy", ArgKind.OFFSET))
     skill: Literal["move"] = "move"
     dx: float = Field(ge=-MAX_MOVE, le=MAX_MOVE, allow_inf_nan=False, description="metres along the world x axis")
     dy: float = Field(ge=-MAX_MOVE, le=MAX_MOVE, allow_inf_nan=False, description="metres along the world y axis")
 
-    def call(self) -> str:
-        return f"move({self.dx:.2f}, {self.dy:.2f})"
 
-
-class Open(_Model):
+@declare
+class Open(ActionModel):
+    ARGS = (Arg("target", ArgKind.OPENABLE, word="furniture"),)
     skill: Literal["open"] = "open"
     target: str = Field(max_length=MAX_NAME)
 
-    def call(self) -> str:
-        return f"open({self.target})"
 
-
-class Pick(_Model):
+@declare
+class Pick(ActionModel):
+    ARGS = (Arg("obj", ArgKind.PICKABLE, word="object"),)
     skill: Literal["pick"] = "pick"
     obj: str = Field(max_length=MAX_NAME)
 
-    def call(self) -> str:
-        return f"pick({self.obj})"
 
-
-class Place(_Model):
+@declare
+class Place(ActionModel):
+    ARGS = (Arg("obj", ArgKind.OBJECT, word="object"), Arg("location", ArgKind.PLACE))
     skill: Literal["place"] = "place"
     obj: str = Field(max_length=MAX_NAME)
     location: str = Field(max_length=MAX_NAME, description="furniture or receptacle name, e.g. table_0 or tray")
 
-    def call(self) -> str:
-        return f"place({self.obj}, {self.location})"
 
-
-class Communicate(_Model):
+@declare
+class Communicate(ActionModel):
+    ARGS = (Arg("content", ArgKind.TEXT), Arg("to", ArgKind.TEAMMATE, shown="robot"))
     skill: Literal["communicate"] = "communicate"
     content: str = Field(min_length=1, max_length=4000)
     to: str = Field(max_length=MAX_NAME)
 
-    def call(self) -> str:
-        return f"communicate({self.content!r}, {self.to})"
 
-
-class Wait(_Model):
+@declare
+class Wait(ActionModel):
     skill: Literal["wait"] = "wait"
-
-    def call(self) -> str:
-        return "wait()"
 
 
 Action = Annotated[Union[Navigate, Move, Open, Pick, Place, Communicate, Wait], Field(discriminator="skill")]
 ACTION_ADAPTER: TypeAdapter[Action] = TypeAdapter(Action)
-SKILLS = ("navigate", "move", "open", "pick", "place", "communicate", "wait")
+SKILLS = tuple(CALLS)  # the protocol's skills, in its order ("navigate", ..., "wait")
 
 
 # --------------------------------------------------------------------------- outcomes

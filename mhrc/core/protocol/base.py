@@ -67,10 +67,12 @@ def loads(data: bytes | str) -> Any:
         raise ProtocolError(f"payload: not JSON ({type(exc).__name__}: {str(exc)[:_MAX_MSG]})") from None
 
 
-def _reason(exc: ValidationError) -> str:
+def _reason(exc: ValidationError, within: str | None = None) -> str:
+    """The errors of `exc`, readably; `within`: the union's tag the model was validated under (its errors
+    read as the union's would)."""
     parts = []
     for err in exc.errors()[:5]:
-        loc = ".".join(str(p) for p in err["loc"])[:_MAX_MSG] or "payload"
+        loc = ".".join(str(p) for p in ((within,) if within else ()) + tuple(err["loc"]))[:_MAX_MSG] or "payload"
         msg = err["msg"] if len(err["msg"]) <= _MAX_MSG else err["msg"][:_MAX_MSG] + "..."
         parts.append(f"{loc}: {msg}")
     return "; ".join(parts)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Literal
 
 from pydantic import Field
@@ -18,7 +19,22 @@ MAX_THOUGHT_BYTES = 8 * 1024 * 1024  # a thought's payload, checked before it is
 
 
 HUMAN_POLICY = "human"  # a Thought.policy: a person decided (mhrc play); its latency is the time the person took
-LLM_ERROR_PREFIX = "llm error: "  # a Thought.parse_error that starts so: the model was unreachable, not misunderstood
+LLM_ERROR_PREFIX = "llm error: "  # how a Thought.parse_error of a model that did not answer starts, for people (programs read `failure`)
+
+
+class ReplyFailure(StrEnum):
+    """Why a robot's step gave no action (a `Thought`'s `failure`), for programs; its parse_error
+    says it for people. Set where the step failed (the LLM policy); read from older traces'
+    texts in mhrc.core.upgrade."""
+
+    MODEL_UNREACHABLE = "model_unreachable"  # the model did not answer (down, refused, past the deadline)
+    CUT_OFF = "cut_off"  # the reply was cut at the token limit before it gave a command
+    UNREADABLE = "unreadable"  # the reply came whole but did not parse into one command
+
+    @property
+    def unparsed(self) -> bool:
+        """A reply came and did not parse (the metrics' parse_failures), as against a model that did not answer."""
+        return self is not ReplyFailure.MODEL_UNREACHABLE
 
 
 def fit(text: str | None, limit: int = MAX_TEXT) -> str | None:
@@ -37,6 +53,9 @@ class Thought(Message):
     reply: str | None = Field(None, max_length=MAX_TEXT)
     action: str | None = Field(None, max_length=MAX_LINE)
     parse_error: str | None = Field(None, max_length=MAX_LINE)
+    failure: ReplyFailure | None = Field(
+        None, description="why the step gave no action (with parse_error, the sentence): none when it gave one"
+    )
     prompt_tokens: int = Field(0, ge=0, le=MAX_INT)
     completion_tokens: int = Field(0, ge=0, le=MAX_INT)
     latency: float = Field(0.0, ge=0.0, allow_inf_nan=False)
