@@ -2,7 +2,7 @@
 between them.
 
 Each worker is `python -m mhrc.eval.pool --concurrency N`, a child that dies with the driver
-(mhrc.run.lifeline). The driver writes jobs (`Job`, one JSON line each) to its stdin and reads
+(mhrc.core.lifeline). The driver writes jobs (`Job`, one JSON line each) to its stdin and reads
 results (`WorkerResult`, one JSON line each, the trace in base64) from its stdout; a worker
 holds at most N jobs, so a free slot is the only thing that brings it another. Inside the
 worker an episode runs whole (mhrc.eval.episode); up to N at once (LLM episodes mostly wait
@@ -31,8 +31,8 @@ from typing import IO
 import structlog
 from pydantic import ValidationError
 
+from mhrc.core.lifeline import child_env
 from mhrc.eval.episode import Job, WorkerFailure, WorkerResult, run_job, watch_start, worker_name
-from mhrc.run.lifeline import child_env
 
 log = structlog.get_logger("mhrc.eval")
 
@@ -98,7 +98,7 @@ async def _serve(concurrency: int, results: IO[bytes]) -> None:
 def main(argv: list[str] | None = None) -> None:
     """`python -m mhrc.eval.pool`: one worker of the local pool (started by `mhrc eval`)."""
     from mhrc.core import logs
-    from mhrc.run.lifeline import die_with_parent
+    from mhrc.core.lifeline import die_with_parent
 
     parser = argparse.ArgumentParser(prog="python -m mhrc.eval.pool")
     parser.add_argument("--concurrency", type=int, default=1)

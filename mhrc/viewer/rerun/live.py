@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys
-from mhrc.run.lifeline import child_env
+from mhrc.core.lifeline import child_env
 from mhrc.viewer.rerun import Target
 from mhrc.viewer.rerun.logger import frame
 from mhrc.viewer.rerun.sinks import Viewer, start_viewer

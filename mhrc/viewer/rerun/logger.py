@@ -22,10 +22,10 @@ import sys
 from pathlib import Path
 from typing import BinaryIO
 
+from mhrc.core.lifeline import die_with_parent
 from mhrc.core.protocol import ProtocolError
 from mhrc.core.protocol.base import loads
 from mhrc.core.records import TraceLineError, decode_row
-from mhrc.run.lifeline import die_with_parent
 from mhrc.viewer.rerun.episode import EpisodeLogger
 from mhrc.viewer.rerun.sinks import close_stream, open_stream
 

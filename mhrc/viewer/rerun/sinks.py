@@ -22,7 +22,7 @@ import rerun as rr
 import rerun_cli
 
 from mhrc.core.endpoints import free_port
-from mhrc.run.lifeline import PR_SET_PDEATHSIG
+from mhrc.core.lifeline import PR_SET_PDEATHSIG
 from mhrc.viewer.rerun import Mode, Target
 
 APPLICATION = "mhrc"
