@@ -320,7 +320,8 @@ def summary_table(
     bound = f" (no team can need fewer than {m.lower_bound})" if m.lower_bound is not None else ""
     t.add_row("temporal steps", f"{m.temporal_steps}{bound}")
     t.add_row(
-        "actions (all robots)", f"{m.action_steps} (" + ", ".join(f"{r} {n}" for r, n in m.action_steps_per_robot.items()) + ")"
+        "actions (all robots)",
+        f"{m.action_steps} (" + ", ".join(f"{r} {n}" for r, n in m.action_steps_per_robot.items()) + ")",
     )
     t.add_row("failed actions", ", ".join(f"{k} {v}" for k, v in sorted(m.failed_actions.items())) or "none")
     t.add_row("messages", str(m.messages))
