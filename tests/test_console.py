@@ -193,6 +193,35 @@ def test_the_summary_table_shows_the_makespan_not_the_sum_of_skill_times() -> No
     assert rows["makespan"] == "147.1 s simulated" and "215" not in out.getvalue()
 
 
+def test_the_summary_table_calls_the_sum_over_robots_actions_not_action_steps() -> None:
+    """The summary's AS is the steps in which any robot acted (docs/evaluation.md); the table's
+    42 is every robot's actions summed, so it must not be called "action steps" too."""
+    from mhrc.core.protocol import EpisodeDone, Metrics
+    from mhrc.run.console import summary_table
+
+    metrics = Metrics(
+        success=True,
+        partial_success=1.0,
+        placed=4,
+        total=4,
+        temporal_steps=17,
+        action_steps=42,
+        action_steps_per_robot={"alice": 17, "bob": 9, "david": 16},
+    )
+    out = io.StringIO()
+    Console(file=out, width=120).print(summary_table(EpisodeDone(run="r", reason="success", metrics=metrics)))
+    rows = _table_rows(out.getvalue())
+    assert rows["actions (all robots)"] == "42 (alice 17, bob 9, david 16)"
+    assert not any("action steps" in label for label in rows)
+
+
+def test_every_schedule_has_a_gloss_for_the_header() -> None:
+    from mhrc.run.config import SCHEDULES
+    from mhrc.run.console import SCHEDULE_GLOSS
+
+    assert set(SCHEDULE_GLOSS) == set(SCHEDULES)
+
+
 # --------------------------------------------------------------------------- 3. lines in tick order
 
 
@@ -222,7 +251,7 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     last, after every result (`mhrc world`'s printer prints it; `mhrc up` after the run)."""
     from mhrc.core.trace import read_trace
     from mhrc.run.config import EpisodeConfig
-    from mhrc.run.console import ProgressPrinter, summary_table
+    from mhrc.run.console import SCHEDULE_GLOSS, ProgressPrinter, summary_table
     from mhrc.run.inprocess import up_in_process
 
     out = io.StringIO()
@@ -234,6 +263,8 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     if not summary:
         console.print(summary_table(done))
     lines = out.getvalue().splitlines()
+    header = next(line for line in lines if line.startswith(f"episode {cfg.run}:"))
+    assert header.endswith(f", {schedule} schedule ({SCHEDULE_GLOSS[schedule]})"), header  # why TS differs
 
     closed_at = {int(m.group(1)): i for i, line in enumerate(lines) if (m := CLOSED_LINE.match(line))}
     assert sorted(closed_at) == list(range(done.metrics.temporal_steps)), "a tick closed line is missing"

@@ -164,7 +164,7 @@ def service_env(service: dict[str, Any], env: dict[str, str]) -> dict[str, str]:
 
 def parse(argv: list[str]) -> click.Context:
     """Parse `mhrc ARGV` as click would, strictly; returns the subcommand's context."""
-    assert argv and argv[0] in main.commands, f"not an mhrc command: {argv}"
+    assert argv and argv[0] in main.list_commands(click.Context(main)), f"not an mhrc command: {argv}"
     ctx = main.make_context("mhrc", list(argv), resilient_parsing=False)
     sub = main.get_command(ctx, argv[0])
     assert sub is not None

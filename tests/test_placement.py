@@ -140,6 +140,6 @@ def test_the_lower_bound_shares_the_fetching_among_fetchers() -> None:
     for seed in range(3):
         with Sim(seed=seed, n_objects=6) as paper, Sim(seed=seed, n_objects=6, team=SHIPPED["two_fetchers"]) as two:
             ep = symbolic_episode(paper.world, paper.targets)
-            assert (ep.fetchers, ep.arms) == (1, 2) and paper.lower_bound() == lower_bound(ep)
+            assert (ep.fetchers, ep.finishers) == (1, 1) and paper.lower_bound() == lower_bound(ep)
             assert 0 < two.lower_bound() <= paper.lower_bound()
             assert symbolic_episode(two.world, two.targets).fetchers == 2

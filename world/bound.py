@@ -1,28 +1,38 @@
-"""A lower bound on the temporal steps any team could need for a generated episode.
+"""A lower bound on the temporal steps any team could need for a generated episode (TS*).
 
-The bound comes from a relaxation of the episode, solved exactly: full knowledge (nobody has to
-explore, ask or tell), no failed skills, `navigate` reaches any stand pose in one step, every
-robot acts once per lockstep tick. What the relaxation keeps are the hard constraints of the
-team and the world:
+The bound is the optimum of a relaxation of the episode, solved exactly. The relaxation drops
+what makes the episode hard to plan: every robot knows where everything is (nobody explores,
+asks or tells), no skill fails, `navigate` reaches any stand pose in one step, every robot acts
+once per tick, and within a tick a robot acts on what the robots before it did (the sequential
+schedule, the paper's: the loosest of the tick schedules, so the bound holds for lockstep too).
+It keeps the rules of the task and the team that no plan can get round:
 
-- Alice is the only robot that can both move and carry, and her gripper holds one object at a
-  time. Each target that starts away from Bob's table therefore costs her at least a navigate
-  to it, a pick, a navigate back to Bob's table carrying it, and a place: 4 of her steps, none
-  shared between two objects.
-- A target inside a closed container needs that container opened once (1 step of hers).
-- A target on Bob's table beyond any pose of his arm (farther than the arm's range from his
-  base) needs her pick and place (2 steps), and, if she brings nothing else, a navigate there.
-- A target Bob can reach needs a pick and a place by some arm (2 steps).
+- Only a robot that finishes the task (`RobotKind.finishes_task`: the paper's Bob, fixed on his
+  table) may place on the task's goal fixtures (world/skills/manipulation.py refuses anyone
+  else). So every target costs a finisher a pick and a place: 2 of its steps.
+- Only a fetcher (a robot that navigates and picks: the paper's Alice) moves an object to Bob's
+  table, one object at a time. A target that starts away from it costs a fetcher a navigate to
+  it, a pick, a navigate back carrying it and a place within Bob's reach: 4 steps, none shared
+  between two objects. A closed container is opened once (1 fetcher step) before its targets
+  are picked. A target on Bob's table beyond his reach costs a fetcher a pick and a place (2
+  steps), and a navigate there if she brings nothing else.
+- A target Bob can reach needs only his pick and place.
 
-Alice's steps happen one per tick, so their sum bounds the makespan; so does half the steps of
-both arms together. The bound is the larger of the two, and ignoring order (a sandwich's stack)
-only loosens it. It is never above what a real team achieves (tests check the heuristic team).
+The bound is the largest of:
 
-A team with several fetchers (robots that navigate and pick) shares the fetching work: their
-steps together, divided among them, bound the makespan, and so does the longest chain one
-fetcher must walk alone for one object (its navigate, pick, navigate back and place, after an
-open); the arms' steps are divided among every arm of the team. With the paper's team (one
-fetcher, two arms) this is the bound above.
+- the fetchers' steps shared among the fetchers, plus the finisher's place of the last object
+  they bring (he can pick it in the tick it arrives, not before);
+- the longest chain one object needs: a fetcher's navigate, (open,) pick, navigate, place, then
+  the finisher's place (an open by another fetcher earlier in the same tick does not lengthen it);
+- the finishers' work: for every release tick r (the first tick in which a target can be on
+  Bob's table within his reach: 1 for one he can reach, 2 for one beyond it, 4 or 5 for one
+  fetched), the targets released at r or later need 2 finisher steps each, no earlier than r,
+  shared among the finishers.
+
+Ignoring order (a sandwich's stack) and the time to walk between places only loosens it. It is
+never above what a real team achieves in a tick schedule (tests check the heuristic team of
+every shipped team). The async schedule's TS counts simulated seconds, not actions, so the bound
+is not a bound on it.
 """
 
 from __future__ import annotations
@@ -47,19 +57,30 @@ class SymbolicObject:
 class SymbolicEpisode:
     objects: tuple[SymbolicObject, ...]  # the targets
     fetchers: int = 1  # robots that navigate and pick (the paper's Alice)
-    arms: int = 2  # robots with an arm, fetchers included (Alice and Bob)
+    finishers: int = 1  # robots that may place on the goal fixtures (the paper's Bob)
+
+
+def _release(o: SymbolicObject, fetchers: int) -> int:
+    """The first tick in which `o` can lie on Bob's table within his reach (module docstring)."""
+    if o.on_bob_table:
+        return 1 if o.bob_can_reach else 2  # a fetcher at the table picks (tick 1) and places (tick 2)
+    return 4 + (1 if o.inside and fetchers == 1 else 0)  # navigate, (open,) pick, navigate, place
 
 
 def lower_bound(ep: SymbolicEpisode) -> int:
     """The relaxation's optimum (see the module docstring): a lower bound on temporal steps."""
     away = [o for o in ep.objects if not o.on_bob_table]
     far = [o for o in ep.objects if o.on_bob_table and not o.bob_can_reach]
-    near = [o for o in ep.objects if o.on_bob_table and o.bob_can_reach]
     opens = len({o.source for o in away if o.inside})
-    alice = 4 * len(away) + 2 * len(far) + opens + (1 if far and not away else 0)  # every fetcher's steps
-    arms = alice + 2 * len(near)
-    chain = max([4 + (1 if o.inside else 0) for o in away] + [2 + (0 if away else 1) for o in far] + [0])
-    return max(math.ceil(alice / ep.fetchers), chain, math.ceil(arms / ep.arms))
+    fetching = 4 * len(away) + 2 * len(far) + opens + (1 if far and not away else 0)  # every fetcher's steps
+    bounds = [math.ceil(fetching / ep.fetchers) + 1 if fetching else 0]
+    releases = [_release(o, ep.fetchers) for o in ep.objects]
+    bounds += [r + 1 for r in releases]  # the finisher picks in the release tick at the earliest, places after
+    if ep.finishers:
+        for r in set(releases):
+            later = sum(1 for q in releases if q >= r)
+            bounds.append(r - 1 + math.ceil(2 * later / ep.finishers))
+    return max(bounds + [0])
 
 
 def symbolic_episode(world: PhysicalWorld, targets: list[str]) -> SymbolicEpisode:
@@ -74,5 +95,5 @@ def symbolic_episode(world: PhysicalWorld, targets: list[str]) -> SymbolicEpisod
         reach = base is not None and on_table and math.hypot(x - base[0], y - base[1]) <= MAX_ARM_RANGE
         objs.append(SymbolicObject(name, o.on or "", o.inside, on_table, reach))
     fetchers = sum(1 for b in world.bots.values() if b.kind.mobile and {"navigate", "pick"} <= set(b.kind.skills))
-    arms = sum(1 for b in world.bots.values() if b.kind.has_arm)
-    return SymbolicEpisode(tuple(objs), max(fetchers, 1), max(arms, 1))
+    finishers = sum(1 for b in world.bots.values() if b.kind.finishes_task)
+    return SymbolicEpisode(tuple(objs), max(fetchers, 1), finishers)

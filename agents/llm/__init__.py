@@ -7,7 +7,9 @@
 - `mhrc.agents.llm.reply`: a reply's body (whole or streamed) read into a `Completion`;
 - `mhrc.agents.llm.model_spec`: `--llm` specs (`openai:gpt-4o`, `alice=SPEC,bob=SPEC`, `SPEC@URL`)
   checked and turned into clients, and how many episodes keep a server busy;
-- `mhrc.agents.llm.scripted_client`: `ScriptedClient`, a model answering from a list, in process.
+- `mhrc.agents.llm.scripted_client`: `ScriptedClient`, a model answering from a list, in process;
+- `mhrc.agents.llm.packaged`: the test extra's Gemma 3 270M GGUF, built in $MHRC_MODEL_DIR (not
+  imported here: `python -m mhrc.agents.llm.packaged` prints its path).
 """
 
 from __future__ import annotations

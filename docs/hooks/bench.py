@@ -1,7 +1,10 @@
-"""A MkDocs hook: benchmark figures come from `bench/results/*.json` when the site is built.
+"""Benchmark figures on the docs pages, written into the pages from `bench/results/*.json`.
 
-A page writes a placeholder where a figure or a table belongs, never the number itself, so
-the site always shows what the last benchmark run wrote:
+A page holds a placeholder where a figure or a table belongs, and after it the figure as the
+last benchmark run wrote it, up to `<!-- /bench -->`: the page reads as it is, on GitHub too.
+`python docs/hooks/bench.py` rewrites those figures from the JSON (bench/run_all.sh runs it after
+the benchmarks); as a MkDocs hook it checks them, and a page whose figures are not the JSON's is
+a warning, which fails `mkdocs build --strict`:
 
     <!-- bench: bus:in_process.result_ms_p50 -->           one value, inline
     <!-- bench: bus -->                                      a table of the file's dict rows
@@ -16,8 +19,9 @@ given in the placeholder is kept as written.
 A dict with no dict member is one record: one row of the columns, or without them a table of
 field and value.
 Each table says which file it came from. A placeholder that names a missing file, path or
-field is a warning, which fails `mkdocs build --strict`. (`bench/report.py` only writes the
-JSON; the tables are made here.)
+field is a warning too. (`bench/report.py` only writes the JSON; the tables are made here.)
+
+Filled, a value sits inline (`<!-- bench: X -->2.5<!-- /bench -->`), a table between blank lines.
 """
 
 from __future__ import annotations
@@ -25,11 +29,18 @@ from __future__ import annotations
 import json
 import logging
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
-RESULTS = Path(__file__).resolve().parents[2] / "bench" / "results"
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "bench" / "results"
 PLACEHOLDER = re.compile(r"<!--\s*bench:\s*(?P<spec>.*?)\s*-->")
+END = "<!-- /bench -->"
+# a placeholder and, when filled, its figure up to END (never across another placeholder)
+FIGURE = re.compile(
+    r"<!--\s*bench:\s*(?P<spec>.*?)\s*-->(?:(?P<body>(?:(?!<!--\s*bench:).)*?)<!--\s*/bench\s*-->)?", re.S
+)
 log = logging.getLogger("mkdocs.hooks.bench")
 
 
@@ -127,14 +138,57 @@ def render(spec: str, results: Path = RESULTS) -> str:
     return f"{table(node, columns, label, where)}\n\n*From `{where}`{f' (`{path.strip()}`)' if path.strip() else ''}.*"
 
 
-def on_page_markdown(markdown: str, page: Any, **kwargs: Any) -> str:
-    """MkDocs' hook: replace every placeholder of the page; a bad one is a warning (strict fails)."""
+def fill(markdown: str, results: Path = RESULTS, problems: list[str] | None = None) -> str:
+    """`markdown` with every placeholder followed by its figure as `results` has it now (a figure
+    already there is replaced); a placeholder naming no figure gets a bold note, and `problems` its reason."""
 
     def replace(match: re.Match[str]) -> str:
+        spec = match.group("spec")
         try:
-            return render(match.group("spec"))
+            figure = render(spec, results)
         except (BenchError, ValueError) as exc:
-            log.warning("%s: %s", page.file.src_path, exc)
-            return f"**(benchmark figure missing: {exc})**"
+            if problems is not None:
+                problems.append(str(exc))
+            figure = f"**(benchmark figure missing: {exc})**"
+        body = f"\n\n{figure}\n\n" if "\n" in figure else figure
+        return f"<!-- bench: {spec} -->{body}{END}"
 
-    return PLACEHOLDER.sub(replace, markdown)
+    return FIGURE.sub(replace, markdown)
+
+
+def on_page_markdown(markdown: str, page: Any, **kwargs: Any) -> str:
+    """MkDocs' hook: a placeholder naming no figure, or a page whose figures are not those of
+    bench/results (run `python docs/hooks/bench.py`), is a warning (strict fails)."""
+    problems: list[str] = []
+    filled = fill(markdown, problems=problems)
+    for problem in problems:
+        log.warning("%s: %s", page.file.src_path, problem)
+    if not problems and filled != markdown:
+        log.warning(
+            "%s: its benchmark figures are not those of bench/results; write them with `python docs/hooks/bench.py`",
+            page.file.src_path,
+        )
+    return filled
+
+
+def main(pages: list[str]) -> int:
+    """Write the figures into `pages` (default: every docs page with a placeholder); 1 if one names no figure."""
+    paths = [Path(p) for p in pages] or sorted(
+        p for p in (ROOT / "docs").glob("*.md") if PLACEHOLDER.search(p.read_text())
+    )
+    failed = 0
+    for path in paths:
+        problems: list[str] = []
+        text = path.read_text()
+        filled = fill(text, problems=problems)
+        for problem in problems:
+            print(f"{path}: {problem}", file=sys.stderr)
+        failed += bool(problems)
+        if filled != text:
+            path.write_text(filled)
+            print(f"{path}: figures written from bench/results", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

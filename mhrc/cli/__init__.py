@@ -7,23 +7,76 @@
 - `teams`: `teams` (the shipped teams of `--team`, the robot kinds)
 - `play`: `play` (a person drives one robot from a browser page)
 - `bus`: `credentials`, `bus list|echo`, `doctor`, `router`, `schema`
-- `options` (shared options, declared once), `running` (signals and Ctrl-C)
+- `options` (shared options, declared once), `running` (signals and Ctrl-C), `names` (the
+  shipped names a typo is checked against, without the world)
+
+A command's module is imported only when that command runs (`LazyGroup`), so a mistyped command
+or option is refused before the bus, the simulator or a model client is imported.
 """
 
 from __future__ import annotations
 
+import difflib
+import importlib
 import os
+from typing import Any
 
 import click
 
-from mhrc.cli import bus, participants, play, scenarios, teams, viewer
-from mhrc.cli import eval as eval_cmd
 from mhrc.core import logs
 
 __all__ = ["main"]
 
+# command name -> (module of mhrc.cli, attribute): imported when the command is looked up
+COMMANDS: dict[str, tuple[str, str]] = {
+    "up": ("participants", "up"),
+    "world": ("participants", "world"),
+    "agent": ("participants", "agent"),
+    "scenes": ("viewer", "scenes"),
+    "render": ("viewer", "render"),
+    "eval": ("eval", "eval_"),
+    "report": ("eval", "report"),
+    "schema": ("bus", "schema_"),
+    "credentials": ("bus", "credentials_"),
+    "bus": ("bus", "bus_group"),
+    "doctor": ("bus", "doctor"),
+    "show": ("viewer", "show"),
+    "router": ("bus", "router"),
+    "scenarios": ("scenarios", "scenarios"),
+    "teams": ("teams", "teams"),
+    "play": ("play", "play"),
+}
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+
+def _load(name: str) -> click.Command:
+    module, attr = COMMANDS[name]
+    command = getattr(importlib.import_module(f"mhrc.cli.{module}"), attr)
+    assert isinstance(command, click.Command)
+    return command
+
+
+class LazyGroup(click.Group):
+    """A click group whose commands are imported when looked up, and whose unknown command names
+    get the near matches click gives unknown options."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        return _load(cmd_name) if cmd_name in COMMANDS else None
+
+    def resolve_command(
+        self, ctx: click.Context, args: list[str]
+    ) -> tuple[str | None, click.Command | None, list[str]]:
+        name = args[0] if args else ""
+        if name and name not in COMMANDS and not name.startswith("-"):
+            close = difflib.get_close_matches(name, COMMANDS, n=3)
+            hint = f" Did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+            ctx.fail(f"No such command {name!r}.{hint} The commands: {', '.join(sorted(COMMANDS))}.")
+        return super().resolve_command(ctx, args)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="mhrc")
 def main() -> None:
     """Heterogeneous robots, each driven by its own agent, collaborate on household tasks in a
@@ -35,27 +88,12 @@ def main() -> None:
     logs.configure(os.environ.get("MHRC_LOG_LEVEL", "warning"))  # a command's --log-level overrides it
 
 
-for command in (
-    participants.up,
-    participants.world,
-    participants.agent,
-    viewer.scenes,
-    viewer.render,
-    eval_cmd.eval_,
-    eval_cmd.report,
-    bus.schema_,
-    bus.credentials_,
-    bus.bus_group,
-    bus.doctor,
-    viewer.show,
-    bus.router,
-    scenarios.scenarios,
-    teams.teams,
-    play.play,
-):
-    main.add_command(command)
+def __getattr__(name: str) -> Any:
+    """`mhrc.cli.up`, `.world`, `.agent`: the commands, for callers that invoke one (imported then)."""
+    if name in ("up", "world", "agent"):
+        return _load(name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-up, world, agent = participants.up, participants.world, participants.agent  # the commands, for callers that invoke one
 
 if __name__ == "__main__":
     main()

@@ -5,17 +5,22 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
+from mhrc.cli.names import TOKEN_DEADLINE, check_scene, check_task, unknown_team
 from mhrc.core.fidelity import NOISE
 from mhrc.core.fidelity import describe as describe_aids
 from mhrc.core.lifeline import PARENT_ENV
 from mhrc.core.security import Credentials, SecurityError, load
-from mhrc.run.config import SCHEDULES, ConfigError, EpisodeConfig
-from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import ScenarioError, resolve_scenario
+from mhrc.world.schedulers import SCHEDULERS
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mhrc.run.config import EpisodeConfig  # imports the bus: the commands import it when they run
+
+SCHEDULES = tuple(SCHEDULERS)  # as mhrc.run.config has them
 
 ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
 AIDS_HELP = (
@@ -220,6 +225,8 @@ def _team(ctx: click.Context, param: click.Parameter, value: str | None) -> Any:
     """--team read into a TeamSpec before anything starts; a bad one is one line naming the problem."""
     if value is None:
         return None
+    if (refused := unknown_team(value)) is not None:  # before the teams' registry imports the simulator
+        raise click.UsageError(refused)
     from mhrc.core.team import TeamError
     from mhrc.run.teams import resolve_team
 
@@ -236,8 +243,8 @@ def team_option(f: Callable[..., Any]) -> Callable[..., Any]:
 def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """The episode options `up` and `world` share (task, scene, seed, horizon, schedule, ...)."""
     opts: list[Callable[[Callable[..., Any]], Callable[..., Any]]] = [
-        click.option("--task", default="pack_objects", show_default=True, help="Task id."),
-        click.option("--scene", default="kitchen", show_default=True, help="Scene layout."),
+        click.option("--task", default="pack_objects", show_default=True, callback=check_task, help="Task id."),
+        click.option("--scene", default="kitchen", show_default=True, callback=check_scene, help="Scene layout."),
         click.option("--seed", default=0, show_default=True, type=int, help="Episode generator seed."),
         click.option("--objects", "n_objects", default=4, show_default=True, type=int, help="Target objects, 3-6."),
         click.option(
@@ -319,6 +326,8 @@ def open_bus_notice(insecure: bool) -> None:
 
 def episode_config(**values: Any) -> EpisodeConfig:
     """The episode's config from the options given; a bad value is a usage error naming its option."""
+    from mhrc.run.config import ConfigError, EpisodeConfig
+
     values = {k: v for k, v in values.items() if v is not None}
     if values.get("gui") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise click.UsageError("--gui needs a display (DISPLAY is not set); run without --gui, or under xvfb-run")

@@ -13,7 +13,7 @@ import shlex
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -41,8 +41,9 @@ from mhrc.cli.running import run_command
 from mhrc.cli.viewer import render_video_to
 from mhrc.core import logs
 from mhrc.core.security import SecurityError
-from mhrc.core.trace import TraceWriteError
-from mhrc.run.config import ConfigError, EpisodeConfig
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mhrc.run.config import EpisodeConfig  # the bus and the model clients: imported when a command runs
 
 
 @click.command()
@@ -104,7 +105,8 @@ def up(
     from rich.console import Console
 
     from mhrc.core.endpoints import ListenError, check_listen
-    from mhrc.run.config import ModelServerDown, check_model_servers
+    from mhrc.core.trace import TraceWriteError
+    from mhrc.run.config import ConfigError, ModelServerDown, check_model_servers
     from mhrc.run.console import ProgressPrinter, summary_table
     from mhrc.run.inprocess import up_in_process
     from mhrc.run.processes import ProcessFailed, up_processes
@@ -249,6 +251,7 @@ def _lost(trace: Path | None) -> list[Any]:
 
 def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None = None) -> None:
     """`mhrc world`'s run: one line and exit 1 when no robot attached within --start-timeout."""
+    from mhrc.core.trace import TraceWriteError
     from mhrc.run.serve import serve_world
     from mhrc.world.service_config import NobodyAttached
 
@@ -378,6 +381,7 @@ def agent(
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError
     from mhrc.core.lifeline import PARENT_ENV
+    from mhrc.run.config import ConfigError
 
     if not os.environ.get(PARENT_ENV):  # said by hand only: a child of mhrc up --processes has its parent's lines
         click.echo(f"waiting for the world at {connect} (up to {attach_timeout:g} s)", err=True)

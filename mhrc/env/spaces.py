@@ -33,9 +33,23 @@ _OUTSIDE = re.compile("[^\t\n\r\x20-\x7e\xa0-\ud7ff\ue000-\ufffd]")  # a charact
 EMPTY = {"text": "", "structured": ""}  # a robot's observation before the world gave it one
 
 
+CHARSET_NAME = "BMP printable"  # how a space names CHARSET when printed
+
+
+class BMPText(spaces.Text):
+    """A gymnasium Text space over CHARSET that prints in one short line.
+
+    gymnasium's own repr lists the whole charset (63,000 characters for an action space, twice
+    that for an observation's Dict); this one names it. Everything else (contains, sample,
+    equality, seeding) is gymnasium's."""
+
+    def __repr__(self) -> str:
+        return f"Text({self.min_length}, {self.max_length}, charset={CHARSET_NAME} ({len(self.character_set):,} characters))"
+
+
 @functools.cache
 def _text(max_length: int) -> spaces.Text:
-    return spaces.Text(max_length, min_length=0, charset=CHARSET)
+    return BMPText(max_length, min_length=0, charset=CHARSET)
 
 
 def text_space(max_length: int) -> spaces.Text:

@@ -45,6 +45,14 @@ COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
 MAX_HELD_THOUGHTS = 10_000  # (tick, robot) pairs whose unparsed reply waits for its result to print before it
 PALETTE = ["yellow", "blue", "red", "bright_magenta", "bright_cyan", "bright_green", "bright_yellow", "bright_blue"]
 
+# What the header says of each schedule: up (lockstep) and eval (sequential) give one episode other
+# TS, and a person comparing them must see why (docs/schedules.md).
+SCHEDULE_GLOSS = {
+    "lockstep": "every robot plans on the same state; a sequential run, mhrc eval's default, may take fewer ticks",
+    "sequential": "robots act one at a time, each on what the earlier ones left, the paper's",
+    "async": "no ticks: TS is the makespan in steps",
+}
+
 
 def inert(text: object) -> str:
     """What a participant or a model wrote, as Rich prints it literally: no markup, no control characters."""
@@ -180,7 +188,7 @@ class ProgressPrinter:
                 f"[bold]episode {ev.run}[/]: task {ev.task}, scene {ev.scene}, seed {ev.seed}, "
                 f"{ev.n_objects} objects, robots {', '.join(ev.robots)}, horizon {ev.horizon}, fidelity {ev.fidelity}"
                 + (", noise off" if ev.noise.setting == "off" else "")
-                + f", {ev.scheduler} schedule"  # always: up (lockstep) and eval (sequential) give one episode other TS
+                + f", {ev.scheduler} schedule ({SCHEDULE_GLOSS.get(ev.scheduler, 'see docs/schedules.md')})"
             )
         elif isinstance(ev, TickClosed):
             self._stepped = True
@@ -312,7 +320,8 @@ def summary_table(
     bound = f" (no team can need fewer than {m.lower_bound})" if m.lower_bound is not None else ""
     t.add_row("temporal steps", f"{m.temporal_steps}{bound}")
     t.add_row(
-        "action steps", f"{m.action_steps} (" + ", ".join(f"{r} {n}" for r, n in m.action_steps_per_robot.items()) + ")"
+        "actions (all robots)",
+        f"{m.action_steps} (" + ", ".join(f"{r} {n}" for r, n in m.action_steps_per_robot.items()) + ")",
     )
     t.add_row("failed actions", ", ".join(f"{k} {v}" for k, v in sorted(m.failed_actions.items())) or "none")
     t.add_row("messages", str(m.messages))

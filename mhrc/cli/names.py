@@ -1,0 +1,79 @@
+"""The shipped names an option is checked against before anything heavy is imported (tasks,
+scenes, teams), each refusal with its near matches, as click gives them for option names.
+
+The registries of tasks and teams import the simulator (world/tasks.py builds on world/scene.py),
+so their names are listed here too, and tests/test_cli_light.py keeps both lists equal to the
+registries. Scenes are read from the layout files (numpy and JSON, no simulator). None of this
+imports the simulator, the bus or a model client: a typo is refused in a fraction of a second
+(tests/test_cli_light.py checks which modules a refused command imports)."""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+from pathlib import Path
+
+import click
+
+TASKS = ("pack_objects", "sort_solids", "make_sandwich")  # mhrc.world.tasks.TASKS, in its order
+TEAMS = (
+    "paper",
+    "no_mobile",
+    "two_fetchers",
+    "drone_scout",
+    "scout_and_drone",
+    "large",
+    "full_house",
+)  # world/teams.py
+TOKEN_DEADLINE = 30.0  # mhrc.world.presence.TOKEN_DEADLINE, which imports the bus (a test keeps them equal)
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """'did you mean X?' for the known names close to `name` (difflib, as click does for options), else ''."""
+    close = difflib.get_close_matches(name, list(known), n=2, cutoff=0.6)
+    return f"did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+
+
+def near(name: str, known: Iterable[str]) -> str:
+    """' (did you mean X?)', or '' when no known name is close."""
+    hint = did_you_mean(name, known)
+    return f" ({hint})" if hint else ""
+
+
+def check_task(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """--task: a registered task's id, else one line naming them and the nearest."""
+    if value is None:
+        return None
+    if value not in TASKS:
+        raise click.BadParameter(f"unknown task {value!r}{near(value, TASKS)}; known tasks: {', '.join(TASKS)}")
+    return value
+
+
+def check_scene(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """--scene: a shipped layout's name or a .json file (checked later, when it is loaded)."""
+    if value is None or value.endswith(".json"):
+        return value
+    from mhrc.world.layouts import LAYOUTS
+
+    if value not in LAYOUTS:
+        raise click.BadParameter(
+            f"unknown scene {value!r}{near(value, LAYOUTS)}; known scenes: {', '.join(LAYOUTS)} "
+            "(or a path to a layout .json file)"
+        )
+    return value
+
+
+def unknown_team(value: str) -> str | None:
+    """The one line refusing `--team VALUE`, when it can be neither a shipped team, a file nor
+    robots inline (mhrc.run.teams.resolve_team reads those); None when it may be one of them."""
+    text = value.strip()
+    if text in TEAMS or text.startswith("{") or "=" in text or text.lower().endswith((".toml", ".json")):
+        return None
+    if Path(text).is_file():
+        return None
+    hint = did_you_mean(text, TEAMS)
+    return (
+        f"--team {text!r}: not a shipped team ({', '.join(TEAMS)}; mhrc teams), "
+        "a .toml or .json file, or robots inline (alice=mobile_manipulator,bob=tabletop_arm)"
+        + (f"; {hint}" if hint else "")
+    )

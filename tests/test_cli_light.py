@@ -1,0 +1,86 @@
+"""A typo on the command line is refused before the heavy imports (issue 43): the simulator, the
+bus, plotting, Ray and the model clients stay unimported, checked in a fresh interpreter's
+sys.modules (never by the clock); task, scene, team and command names get near matches."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from mhrc.cli import COMMANDS, main
+from mhrc.cli import names as cli_names
+
+HEAVY = ("pybullet", "zenoh", "matplotlib", "ray", "xllamacpp", "httpx", "openai", "mhrc.agents.llm.openai_client")
+
+PROBE = """
+import json, sys
+from mhrc.cli import main
+try:
+    main(sys.argv[1:], prog_name="mhrc")
+except SystemExit as exc:
+    code = exc.code
+print(json.dumps({"code": code, "heavy": sorted(m for m in HEAVY if m in sys.modules)}))
+"""
+
+
+def _refused(*args: str) -> tuple[dict[str, object], str]:
+    done = subprocess.run(
+        [sys.executable, "-c", f"HEAVY = {HEAVY!r}\n{PROBE}", *args], capture_output=True, text=True, timeout=120
+    )
+    return json.loads(done.stdout.strip().splitlines()[-1]), done.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["upp"], "Did you mean 'up'?"),
+        (["up", "--horizn", "3"], "Did you mean one of: '--horizon'"),
+        (["up", "--task", "pack_objetcs"], "unknown task 'pack_objetcs' (did you mean 'pack_objects'?)"),
+        (["up", "--scene", "kitchn"], "unknown scene 'kitchn' (did you mean 'kitchen'?)"),
+        (["up", "--team", "ful_house"], "did you mean 'full_house'?"),
+        (["world", "--task", "sort_solid"], "(did you mean 'sort_solids'?)"),
+        (["agent", "--robot", "bob", "--connect", "tcp/127.0.0.1:9", "--team", "larg"], "did you mean 'large'?"),
+        (["up", "--objects", "many"], "'many' is not a valid integer"),
+    ],
+    ids=["command", "option", "task", "scene", "team", "world-task", "agent-team", "bad-int"],
+)
+def test_a_typo_is_refused_in_one_line_before_any_heavy_import(args: list[str], said: str) -> None:
+    got, stderr = _refused(*args)
+    assert got["code"] == 2, stderr
+    assert said in stderr, stderr
+    assert got["heavy"] == [], f"{' '.join(args)} imported {got['heavy']} before refusing"
+    assert "Traceback" not in stderr
+
+
+def test_the_light_lists_are_the_registries() -> None:
+    """names.py lists tasks and teams because their registries import the simulator; they must agree."""
+    from mhrc.run.config import SCHEDULES
+    from mhrc.world.presence import TOKEN_DEADLINE
+    from mhrc.world.tasks import TASKS
+    from mhrc.world.teams import SHIPPED
+
+    assert cli_names.TASKS == tuple(TASKS)
+    assert cli_names.TEAMS == tuple(SHIPPED)
+    assert cli_names.TOKEN_DEADLINE == TOKEN_DEADLINE
+    from mhrc.cli.options import SCHEDULES as OPTION_SCHEDULES
+
+    assert OPTION_SCHEDULES == SCHEDULES
+
+
+def test_every_command_loads_under_its_name() -> None:
+    import click
+
+    ctx = click.Context(main)
+    for name in COMMANDS:
+        command = main.get_command(ctx, name)
+        assert command is not None and command.name == name, name
+    assert main.list_commands(ctx) == sorted(COMMANDS)
+
+
+def test_a_team_file_or_inline_team_is_not_taken_for_a_typo(tmp_path: object) -> None:
+    assert cli_names.unknown_team("alice=mobile_manipulator,bob=tabletop_arm") is None
+    assert cli_names.unknown_team("mine.toml") is None and cli_names.unknown_team("full_house") is None
+    assert "not a shipped team (paper, no_mobile" in (cli_names.unknown_team("nosuchteam") or "")
