@@ -7,7 +7,7 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -30,6 +30,9 @@ from mhrc.core.fidelity import NOISE
 from mhrc.core.plural import counted
 from mhrc.core.trace import unwritable
 from mhrc.run.config import SCHEDULES, ConfigError, ModelServerDown, check_model_servers
+
+if TYPE_CHECKING:
+    from mhrc.eval.records import EvalRow
 
 
 def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
@@ -63,14 +66,15 @@ def _setting(spec: Any) -> str:
     )
 
 
-def _ended(row: dict[str, Any] | None, t: Any) -> str:
+def _ended(row: EvalRow | None, t: Any) -> str:
     """One episode that ended, in a line: its key and result (a row), or the last one given up (no row)."""
     if row is None:
         return f"{t.given_up[-1]}: given up (errors.jsonl)"
-    if not row.get("valid", True):
-        return f"{row['key']}: invalid ({row.get('invalid_reason')}), left out of the summary"
-    result = "solved" if row["success"] else f"not solved (PS {row['partial_success']:.2f})"
-    return f"{row['key']}: {result}, TS {row['temporal_steps']}"
+    m = row.metrics
+    if not m.valid:
+        return f"{row.key}: invalid ({m.invalid_reason}), left out of the summary"
+    result = "solved" if m.success else f"not solved (PS {m.partial_success:.2f})"
+    return f"{row.key}: {result}, TS {m.temporal_steps}"
 
 
 @click.command("eval")
@@ -278,7 +282,7 @@ def eval_(
     )
     bar = progress.add_task("episodes", total=None)
 
-    def hook(t: Tally, row: dict[str, Any] | None) -> None:
+    def hook(t: Tally, row: EvalRow | None) -> None:
         # the whole grid: with --resume, the episodes an earlier run finished count too
         rate = f"{t.before_succeeded + t.succeeded}/{t.before + t.done} solved" + (
             f", {t.errors} errors" if t.errors else ""
@@ -294,13 +298,14 @@ def eval_(
                 progress.console.print(f"{spec.method} [{rate}]", markup=False)
             if row is not None or t.done:  # (the first call, before any episode ended, has neither)
                 progress.console.print(f"{_ended(row, t)} ({t.before + t.done}/{t.before + t.total})", markup=False)
-        elif row is not None and not row.get("valid", True):
+        elif row is not None and not row.metrics.valid:
             progress.console.print(
-                f"[red]invalid[/]: {row['key']} ({row.get('invalid_reason')}); left out of the summary"
+                f"[red]invalid[/]: {row.key} ({row.metrics.invalid_reason}); left out of the summary"
             )
-        elif row is not None and not row["success"]:
+        elif row is not None and not row.metrics.success:
+            m = row.metrics
             progress.console.print(
-                f"[yellow]not solved[/]: {row['key']} (PS {row['partial_success']:.2f}, TS {row['temporal_steps']})"
+                f"[yellow]not solved[/]: {row.key} (PS {m.partial_success:.2f}, TS {m.temporal_steps})"
             )
 
     try:
@@ -383,7 +388,7 @@ def eval_(
         from mhrc.cli.rerun_view import eval_recordings
 
         made = eval_recordings(
-            (out / str(r["trace"]) for r in rows if r.get("trace")), rerun.path, out
+            (out / r.trace for r in rows if r.trace), rerun.path, out
         )  # validated rows: traces/ files
         console.print(f"{len(made)} rerun recording(s) in {rerun.path}")
     if rows:
