@@ -418,16 +418,30 @@ def eval_(
     type=int,
     help="Seed of the bootstrap (the same rows and seed give the same intervals).",
 )
-def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) -> None:
+@click.option(
+    "--compare",
+    nargs=2,
+    default=None,
+    metavar="A B",
+    help="Restrict the paired comparison to two arms, each named by its setting label (as the summary titles it) "
+    "or a unique part of it; default: every two arms that share episodes.",
+)
+def report(
+    dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int, compare: tuple[str, str] | None
+) -> None:
     """Merge `mhrc eval` directories into one comparison (markdown on stdout): Succ, PS, TS
     and AS per task with 95% bootstrap confidence intervals, grouped by method, ablation and
     fidelity, and the paper's Table I / II figures beside the settings that match its
     configuration. Invalid episodes (model unreachable throughout) are left out and listed.
     With --out FILE.md, the markdown goes there instead, with FILE.csv and FILE.html (tables,
-    plots, a link to each episode's report) beside it."""
+    plots, a link to each episode's report) beside it. Every two arms (settings) that ran some of
+    the same episodes are compared episode by episode: the paired difference in TS and AS with a
+    paired-bootstrap 95% interval and the exact McNemar test on success (--compare A B: only those two)."""
     from mhrc.eval.html import links_of
+    from mhrc.eval.pairs import resolve_arm
     from mhrc.eval.records import read_dir
     from mhrc.eval.report import markdown
+    from mhrc.eval.rows import is_valid, setting_of
     from mhrc.eval.summaries import write_summary_files
     from mhrc.eval.summary import Summary
 
@@ -447,10 +461,19 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     rows = [r for _, mine in per_dir for r in mine]
     if not rows:
         raise click.UsageError("no finished episodes in " + ", ".join(map(str, dirs)))
+    arms = None
+    if compare is not None:
+        settings = list(dict.fromkeys(setting_of(r) for r in rows if is_valid(r)))
+        try:
+            arms = (resolve_arm(compare[0], settings), resolve_arm(compare[1], settings))
+        except ConfigError as exc:
+            raise click.UsageError(str(exc)) from None
+        if arms[0] == arms[1]:
+            raise click.UsageError(f"--compare: {compare[0]!r} and {compare[1]!r} name the same arm")
     page_dir = (out or Path(".")).parent
     links = [link for d, mine in per_dir for link in links_of(mine, d, page_dir)]
     # every statistic, once, for the three files; each row's link sorted with it
-    summary = Summary.of(rows, resamples=resamples, seed=seed, links=links)
+    summary = Summary.of(rows, resamples=resamples, seed=seed, links=links, compare=arms)
     if out is None:
         click.echo(markdown(summary))
         return

@@ -29,6 +29,7 @@ import structlog
 
 from mhrc.core.plural import counted
 from mhrc.eval.means import summarize
+from mhrc.eval.pairs import paired_markdown
 from mhrc.eval.paper import PaperMatch, paper_cell
 from mhrc.eval.records import EvalRow
 from mhrc.eval.rows import (
@@ -183,6 +184,7 @@ def markdown(summary: Summary) -> str:
         lines += matrix(f"Table II: ablations of {setting_label(family, ablation=False)}", [(s, s[1]) for s in mine])
 
     lines += team_comparison(summary)  # only where the rows hold more than one team
+    lines += paired_markdown(summary.paired, resamples=resamples, seed=seed)  # only where two arms were compared
     lines += [
         "## Per setting, with 95% confidence intervals",
         "",

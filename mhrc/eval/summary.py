@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mhrc.eval.means import summarize_diagnostics
+from mhrc.eval.pairs import PairedArms, paired_comparisons
 from mhrc.eval.paper import PaperMatch, Ran, paper_match
 from mhrc.eval.records import EvalRow
 from mhrc.eval.rows import (
@@ -55,6 +56,7 @@ class Summary:
     matches: dict[Cell, PaperMatch]  # the paper's figures, or why not
     invalid: Counter[Cell]  # invalid rows left out, by setting and task
     links: list[str | None]  # links[i]: the link to rows[i]'s episode report (None: none)
+    paired: PairedArms  # every two arms compared on the episodes they share (mhrc.eval.pairs)
 
     @classmethod
     def of(
@@ -64,8 +66,10 @@ class Summary:
         resamples: int = RESAMPLES,
         seed: int = CI_SEED,
         links: Sequence[str | None] | None = None,
+        compare: tuple[Setting, Setting] | None = None,
     ) -> Summary:
-        """The statistics of `rows`; `links[i]`, the link to rows[i]'s report, is kept with its row."""
+        """The statistics of `rows`; `links[i]`, the link to rows[i]'s report, is kept with its row;
+        `compare`: the two arms the paired comparison is restricted to (default: every two)."""
         if links is not None and len(links) != len(rows):
             raise ValueError(f"{len(links)} links for {len(rows)} rows")
         # in key order, not the order workers finished in: the bootstrap resamples by position, so the same
@@ -88,6 +92,7 @@ class Summary:
             matches=matches_of(cells),
             invalid=Counter((setting_of(r), r.metrics.task) for r in rows if not is_valid(r)),
             links=[link for _, link in paired],
+            paired=paired_comparisons(valid, only=compare, resamples=resamples, seed=seed),
         )
 
     @property
