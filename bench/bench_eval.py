@@ -39,16 +39,16 @@ def run_grid(httpd: CountingServer, spec: EvalSpec, workers: int) -> dict[str, A
         t0 = time.perf_counter()
         rows = asyncio.run(evaluate(spec, Path(tmp) / "ev", workers=workers))
         wall = time.perf_counter() - t0
-    ran = {r["schedule"] for r in rows}
+    ran = {r.settings.schedule for r in rows}
     if ran != {spec.schedule}:
         raise RuntimeError(f"asked for the {spec.schedule} schedule, the episodes report {sorted(ran)}")
     return {
         "episodes": len(rows),
-        "ticks": sum(r["temporal_steps"] for r in rows),
-        "llm_calls": sum(r["llm_calls"] for r in rows),
+        "ticks": sum(r.metrics.temporal_steps for r in rows),
+        "llm_calls": sum(r.metrics.llm_calls for r in rows),
         "server_requests": httpd.requests - before,
         "grid_wall_s": round(wall, 2),
-        "episode_wall_s_mean": round(sum(r["wall_time"] for r in rows) / len(rows), 3),
+        "episode_wall_s_mean": round(sum(r.metrics.wall_time for r in rows) / len(rows), 3),
     }
 
 

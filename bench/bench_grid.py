@@ -18,19 +18,21 @@ from typing import Any
 
 from report import emit
 
-from mhrc.analysis.metrics import summarize
 from mhrc.core.fidelity import parse_aids
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.eval.means import summarize
+from mhrc.eval.records import EvalRow
+from mhrc.eval.rows import BY
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.tasks import TASKS
 
 TABLE_III = ("off_target", "place_failed", "too_far")
 
 
-def _by(rows: list[dict[str, Any]], key: str) -> dict[str, dict[str, Any]]:
-    keys = sorted({str(r[key]) for r in rows})
-    return {k: summarize([r for r in rows if str(r[key]) == k]) for k in keys}
+def _by(rows: list[EvalRow], key: str) -> dict[str, dict[str, Any]]:
+    keys = sorted({str(BY[key](r)) for r in rows})
+    return {k: summarize([r.metrics for r in rows if str(BY[key](r)) == k]) for k in keys}
 
 
 def _outcomes(out: Path) -> dict[str, int]:
@@ -95,9 +97,9 @@ def main() -> None:
             "noise": noise,
             "wall_s": round(wall, 1),
             "episodes": len(rows),
-            "solved": sum(1 for r in rows if r["success"]),
-            "unsolved": sorted(r["key"] for r in rows if not r["success"]),
-            "all": summarize(rows),
+            "solved": sum(1 for r in rows if r.metrics.success),
+            "unsolved": sorted(r.key for r in rows if not r.metrics.success),
+            "all": summarize([r.metrics for r in rows]),
             "per_task": _by(rows, "task"),
             "per_scene": _by(rows, "scene"),
             "per_objects": _by(rows, "n_objects"),

@@ -105,21 +105,21 @@ def run(spec: EvalSpec, model: FixedLatencyModel, concurrency: int) -> dict[str,
         cpu0, t0 = os.times(), time.perf_counter()
         rows = asyncio.run(evaluate(spec, Path(tmp) / "ev", workers=1, concurrency=concurrency))
         wall, cpu = time.perf_counter() - t0, os.times()
-    ticks = max(r["temporal_steps"] for r in rows)
+    ticks = max(r.metrics.temporal_steps for r in rows)
     ideal = ticks * model.latency
     return {
         "concurrency": concurrency,
         "episodes": len(rows),
-        "valid": sum(1 for r in rows if r["valid"]),
-        "llm_calls": sum(r["llm_calls"] for r in rows),
+        "valid": sum(1 for r in rows if r.metrics.valid),
+        "llm_calls": sum(r.metrics.llm_calls for r in rows),
         "server_requests": model.requests,
         "server_max_in_flight": model.max_in_flight,
         "longest_episode_ticks": ticks,
         "wall_s": round(wall, 2),
         "ideal_s": round(ideal, 2),
         "ratio_to_ideal": round(wall / ideal, 2),
-        "episode_wall_s_mean": round(sum(r["wall_time"] for r in rows) / len(rows), 2),
-        "episode_wall_s_max": round(max(r["wall_time"] for r in rows), 2),
+        "episode_wall_s_mean": round(sum(r.metrics.wall_time for r in rows) / len(rows), 2),
+        "episode_wall_s_max": round(max(r.metrics.wall_time for r in rows), 2),
         # the worker process (every episode) and this one (the coordinator's router, scoring, the model server)
         "worker_cpu_s": {
             "user": round(cpu.children_user - cpu0.children_user, 1),

@@ -58,11 +58,11 @@ def run(spec: EvalSpec, out: Path, **kw: Any) -> dict[str, Any]:
     wall = time.perf_counter() - t0
     return {
         "episodes": len(rows),
-        "succeeded": sum(bool(r["success"]) for r in rows),
+        "succeeded": sum(bool(r.metrics.success) for r in rows),
         "errors": len((out / "errors.jsonl").read_text().splitlines()) if (out / "errors.jsonl").exists() else 0,
         "wall_s": round(wall, 2),
         "episodes_per_min": round(60 * len(rows) / wall, 2),
-        "scores": {r["key"]: [r["success"], r["temporal_steps"], r["action_steps"]] for r in rows},
+        "scores": {r.key: [r.metrics.success, r.metrics.temporal_steps, r.metrics.action_steps] for r in rows},
     }
 
 

@@ -25,9 +25,10 @@ from typing import Any
 
 from report import emit
 
-from mhrc.analysis.metrics import summarize
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.eval.means import summarize
+from mhrc.eval.records import EvalRow
 from mhrc.world.scenario import load_scenario, shipped_scenarios
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.tasks import TASKS
@@ -35,17 +36,18 @@ from mhrc.world.tasks import TASKS
 STATIC = "static"
 
 
-def _episode(row: dict[str, Any]) -> tuple[str, str, int, int]:
+def _episode(row: EvalRow) -> tuple[str, str, int, int]:
     """What makes two rows the same episode but for the scenario."""
-    return row["task"], row["scene"], int(row["n_objects"]), int(row["seed"])
+    m = row.metrics
+    return m.task, m.scene, m.n_objects, m.seed
 
 
-def _fired(out: Path, rows: list[dict[str, Any]]) -> dict[tuple[str, str, int, int], list[dict[str, Any]]]:
+def _fired(out: Path, rows: list[EvalRow]) -> dict[tuple[str, str, int, int], list[dict[str, Any]]]:
     """The scenario_event payloads of each episode's trace, by episode."""
     fired = {}
     for row in rows:
         events = []
-        for line in read_trace(out / row["trace"]):
+        for line in read_trace(out / str(row.trace)):
             msg = line.get("msg")
             if isinstance(msg, dict) and msg.get("kind") == "scenario_event":
                 events.append(msg)
@@ -60,9 +62,9 @@ def _mean(xs: list[float]) -> float | None:
 def _scenario_run(
     name: str,
     path: Path,
-    rows: list[dict[str, Any]],
+    rows: list[EvalRow],
     out: Path,
-    static: dict[tuple[str, str, int, int], dict[str, Any]],
+    static: dict[tuple[str, str, int, int], EvalRow],
 ) -> dict[str, Any]:
     """One scenario's figures against the static rows of the same episodes."""
     spec = load_scenario(path)
@@ -82,7 +84,9 @@ def _scenario_run(
             }
         )
     deltas = {
-        _episode(r): r["temporal_steps"] - static[_episode(r)]["temporal_steps"] for r in rows if _episode(r) in static
+        _episode(r): r.metrics.temporal_steps - static[_episode(r)].metrics.temporal_steps
+        for r in rows
+        if _episode(r) in static
     }
     per_kind: dict[str, dict[str, Any]] = {}
     for kind in sorted({ev.kind for ev in spec.events}):
@@ -90,13 +94,13 @@ def _scenario_run(
         recovery = [
             float(e["ticks_to_recover"])
             for r in rows
-            for e in r.get("recovery") or []
+            for e in r.metrics.recovery or []
             if e.get("kind") == kind and e.get("applied") and e.get("ticks_to_recover") is not None
         ]
         unrecovered = sum(
             1
             for r in rows
-            for e in r.get("recovery") or []
+            for e in r.metrics.recovery or []
             if e.get("kind") == kind and e.get("applied") and e.get("ticks_to_recover") is None
         )
         per_kind[kind] = {
@@ -105,24 +109,24 @@ def _scenario_run(
             "recovery_ticks": _mean(recovery),
             "unrecovered": unrecovered,
         }
-    solved = [r for r in rows if r["success"]]
+    solved = [r for r in rows if r.metrics.success]
     return {
         "scenario": name,
         "sha256": spec.sha256,
         "events_text": ", ".join(f"{ev.kind}@{ev.tick}" for ev in spec.events),
         "episodes": len(rows),
         "solved": len(solved),
-        "unsolved": sorted(r["key"] for r in rows if not r["success"]),
+        "unsolved": sorted(r.key for r in rows if not r.metrics.success),
         "succ": round(len(solved) / len(rows), 4),
-        "ts": round(statistics.fmean(r["temporal_steps"] for r in rows), 3),
-        "ts_static": _mean([static[k]["temporal_steps"] for k in deltas]),
+        "ts": round(statistics.fmean(r.metrics.temporal_steps for r in rows), 3),
+        "ts_static": _mean([static[k].metrics.temporal_steps for k in deltas]),
         "ts_delta": _mean(list(deltas.values())),
         "applied": sum(e["applied"] for e in events),
         "skipped": sum(e["skipped"] for e in events),
         "not_fired": sum(e["not_fired"] for e in events),
         "events": events,
         "per_kind": per_kind,
-        "all": summarize(rows),
+        "all": summarize([r.metrics for r in rows]),
     }
 
 
@@ -156,7 +160,7 @@ def main() -> None:
         "per_kind.ts_cost_applied: the same over the episodes where that kind's event applied; recovery_ticks: ticks "
         "until progress resumed (mhrc/analysis/metrics.py), over applied events; not_fired: the episode ended before the tick",
     }
-    static: dict[tuple[str, str, int, int], dict[str, Any]] = {}
+    static: dict[tuple[str, str, int, int], EvalRow] = {}
     table = []
     for name in [STATIC, *names]:
         spec = EvalSpec(
@@ -174,12 +178,12 @@ def main() -> None:
             wall = round(time.perf_counter() - t0, 1)
             if name == STATIC:
                 static = {_episode(r): r for r in rows}
-                summary = summarize(rows)
+                summary = summarize([r.metrics for r in rows])
                 run = {
                     "scenario": STATIC,
                     "episodes": len(rows),
-                    "solved": sum(1 for r in rows if r["success"]),
-                    "unsolved": sorted(r["key"] for r in rows if not r["success"]),
+                    "solved": sum(1 for r in rows if r.metrics.success),
+                    "unsolved": sorted(r.key for r in rows if not r.metrics.success),
                     "succ": summary["succ"],
                     "ts": summary["ts"],
                     "all": summary,

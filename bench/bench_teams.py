@@ -21,13 +21,14 @@ from typing import Any
 
 from report import emit, percentile
 
-from mhrc.analysis.metrics import summarize
 from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionRequest, ActionResult, AttachReply, AttachRequest, Wait, decode
 from mhrc.core.team import TeamSpec
 from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.eval.means import summarize
 from mhrc.eval.paper import PAPER_OBJECTS
+from mhrc.eval.records import EvalRow
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.serve import serve_world
 from mhrc.world.scene import LAYOUTS
@@ -35,11 +36,11 @@ from mhrc.world.tasks import TASKS
 from mhrc.world.teams import SHIPPED
 
 
-def _team_row(rows: list[dict[str, Any]], wall: float) -> dict[str, Any]:
-    s = summarize(rows)
+def _team_row(rows: list[EvalRow], wall: float) -> dict[str, Any]:
+    s = summarize([r.metrics for r in rows])
     moved: dict[str, int] = {}
     for r in rows:
-        for robot, n in (r.get("moves_per_robot") or {}).items():
+        for robot, n in (r.metrics.moves_per_robot or {}).items():
             moved[robot] = moved.get(robot, 0) + n
     total = sum(moved.values())
     return {
@@ -50,13 +51,13 @@ def _team_row(rows: list[dict[str, Any]], wall: float) -> dict[str, Any]:
         "as": s.get("as"),
         "as_per_robot": s.get("as_per_robot"),
         "makespan_s": s.get("makespan"),
-        "messages": round(statistics.mean(r.get("messages", 0) for r in rows), 2),
-        "communication_steps": round(statistics.mean(r.get("communication_steps", 0) or 0 for r in rows), 2),
+        "messages": round(statistics.mean(r.metrics.messages for r in rows), 2),
+        "communication_steps": round(statistics.mean(r.metrics.communication_steps or 0 for r in rows), 2),
         "redundant": round(
-            statistics.mean((r.get("redundant_navigations") or 0) + (r.get("redundant_picks") or 0) for r in rows), 2
+            statistics.mean((r.metrics.redundant_navigations or 0) + (r.metrics.redundant_picks or 0) for r in rows), 2
         ),
         "share": {robot: round(n / total, 3) for robot, n in moved.items()} if total else {},
-        "unsolved": sorted(r["key"] for r in rows if not r["success"]),
+        "unsolved": sorted(r.key for r in rows if not r.metrics.success),
         "wall_s": round(wall, 1),
     }
 

@@ -15,11 +15,13 @@ from typing import Any
 import pytest
 from test_metrics import _complete  # the protocol's required fields a hand-built message leaves out
 
-from mhrc.analysis.diagnostics import diagnose, reject_kind, row_diagnostics, summarize_diagnostics
+from mhrc.analysis.diagnostics import diagnose, reject_kind
 from mhrc.analysis.metrics import from_trace
 from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.eval.means import summarize_diagnostics
+from mhrc.eval.records import DIAG, EvalRow, upgrade_row
 from mhrc.eval.rows import read_rows
 from mhrc.eval.summaries import write_summaries
 from mhrc.run.config import EpisodeConfig
@@ -371,7 +373,8 @@ class _Page(HTMLParser):
             self.images.append(str(a["src"]))
 
 
-def _row(key: str, trace: Path, **extra: Any) -> dict[str, Any]:
+def _flat(key: str, trace: Path, **extra: Any) -> dict[str, Any]:
+    """A row of episode `key` (its seed the key's) as episodes.jsonl holds it."""
     rows = read_trace(trace)
     return {
         "key": key,
@@ -380,13 +383,18 @@ def _row(key: str, trace: Path, **extra: Any) -> dict[str, Any]:
         "repeat": 0,
         "trial": 0,
         **from_trace(rows).as_dict(),
+        "seed": int(key.rsplit("/", 1)[1]),
         "history_cap": None,
         "mode": "free",
         "schedule": "sequential",
         "trace": f"traces/{key.replace('/', '_')}.jsonl",
-        **diagnose(rows).columns(),
+        **{DIAG + k: v for k, v in diagnose(rows).as_dict().items()},
         **extra,
     }
+
+
+def _row(key: str, trace: Path, **extra: Any) -> EvalRow:
+    return upgrade_row(_flat(key, trace, **extra))
 
 
 def test_summaries_carry_the_diagnostics_and_the_page_links_every_episode(
@@ -396,16 +404,16 @@ def test_summaries_carry_the_diagnostics_and_the_page_links_every_episode(
         _row("pack_objects/kitchen/4/0", recorded["heuristic"]),
         _row("pack_objects/kitchen/4/1", recorded["llm"], method="openai:test-model"),
     ]
-    old = {
-        k: v for k, v in _row("pack_objects/kitchen/4/2", recorded["heuristic"]).items() if not k.startswith("diag_")
-    }  # before diagnostics
+    old = upgrade_row(  # before diagnostics
+        {k: v for k, v in _flat("pack_objects/kitchen/4/2", recorded["heuristic"]).items() if not k.startswith(DIAG)}
+    )
     rows.append(old)
-    assert row_diagnostics(old) is None and row_diagnostics(rows[0]) is not None
-    s = summarize_diagnostics(rows)
+    assert old.diagnostics is None and rows[0].diagnostics is not None
+    s = summarize_diagnostics([r.diagnostics for r in rows])
     assert (s["episodes"], s["known"], s["unknown"]) == (3, 2, 1)
     assert s["total"]["parse_failures"] == 1 and s["mean"]["parse_failures"] == 0.5  # the old row is unknown, not zero
     assert s["hallucinated_names"] == {"garage": 2, "mug": 1}
-    assert summarize_diagnostics(rows[2:])["mean"]["hallucinations"] is None
+    assert summarize_diagnostics([r.diagnostics for r in rows[2:]])["mean"]["hallucinations"] is None
 
     write_summaries(rows, tmp_path)
     md = (tmp_path / "summary.md").read_text()
@@ -448,11 +456,10 @@ def test_an_evaluation_writes_diagnostics_on_every_row_and_an_html_summary(tmp_p
     spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=1)
     rows = asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))
     assert rows == read_rows(tmp_path / "ev" / "episodes.jsonl") and len(rows) == 1
-    r = rows[0]
+    r = rows[0].flat()  # as the file holds it
     assert (r["diag_parse_failures"], r["diag_hallucinations"], r["diag_rejected_by_reason"]) == (0, 0, {})
-    assert (
-        r["diag_steps_above_bound"] == r["temporal_steps"] - r["lower_bound"]
-        and r["diag_messages_sent"] == r["messages"]
-    )
+    m = rows[0].metrics
+    assert m.lower_bound is not None
+    assert r["diag_steps_above_bound"] == m.temporal_steps - m.lower_bound and r["diag_messages_sent"] == m.messages
     page = (tmp_path / "ev" / "summary.html").read_text()
-    assert f'href="traces/{Path(r["trace"]).stem}.html"' in page
+    assert f'href="traces/{Path(str(rows[0].trace)).stem}.html"' in page

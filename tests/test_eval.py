@@ -15,20 +15,28 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from pydantic import ValidationError
 
 from mhrc.core.endpoints import free_port
 from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.eval.records import EvalRow, upgrade_row
 from mhrc.eval.report import summary_markdown
 from mhrc.eval.rows import merge_runs
 from mhrc.run.config import ConfigError
 from mhrc.testing import ModelReply, ScriptedModelServer
 
 SMALL = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2)
+TINY_GRID = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,))  # one episode of the default grid
 VOLATILE = {"wall_time", "worker"}
 
 
 def _rows(path: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in (path / "episodes.jsonl").read_text().splitlines()]
+
+
+def _flat(rows: list[EvalRow]) -> list[dict[str, Any]]:
+    """Rows as episodes.jsonl holds them."""
+    return [dict(r.flat()) for r in rows]
 
 
 def _stable(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
@@ -38,8 +46,8 @@ def _stable(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
 @pytest.mark.slow
 def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_work(tmp_path: Path) -> None:
     a, b = tmp_path / "a", tmp_path / "b"
-    rows_a = asyncio.run(evaluate(SMALL, a, workers=2))
-    rows_b = asyncio.run(evaluate(SMALL, b, workers=1))
+    rows_a = _flat(asyncio.run(evaluate(SMALL, a, workers=2)))
+    rows_b = _flat(asyncio.run(evaluate(SMALL, b, workers=1)))
     assert len(rows_a) == 2 and _stable(rows_a) == _stable(rows_b)
     assert all(r["success"] and r["lower_bound"] <= r["temporal_steps"] for r in rows_a)
     for r in rows_a:
@@ -80,7 +88,7 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     first = (c / "episodes.jsonl").read_text().splitlines()[0]
     (c / "episodes.jsonl").write_text(first + "\n" + '{"key": "pack_obj')
     more = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=3)
-    rows_c = asyncio.run(evaluate(more, c, workers=1, resume=True))
+    rows_c = _flat(asyncio.run(evaluate(more, c, workers=1, resume=True)))
     assert sorted(r["key"] for r in rows_c) == [
         "pack_objects/kitchen/3/0",
         "pack_objects/kitchen/3/1",
@@ -104,7 +112,12 @@ def test_the_same_grid_twice_gives_the_same_metrics_and_resume_skips_finished_wo
     # mhrc report merges directories into one table
     merged = merge_runs([a, b])
     # the intervals do not depend on the order the rows come in (the order workers finished in)
-    spread = [dict(merged[0], key=f"pack_objects/kitchen/4/{i}", temporal_steps=10 + i * i) for i in range(12)]
+    spread = [
+        upgrade_row(
+            dict(merged[0].flat(), key=f"pack_objects/kitchen/3/{i}", seed=i, trace=None, temporal_steps=10 + i * i)
+        )
+        for i in range(12)
+    ]
     assert summary_markdown(spread) == summary_markdown(spread[::-1])
     assert (
         len(merged) == 4
@@ -373,7 +386,7 @@ def test_an_llm_evaluation_records_parse_failures_and_leaves_out_an_episode_the_
         history_cap=50_000,
     )
     try:
-        rows = asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))
+        rows = _flat(asyncio.run(evaluate(spec, tmp_path / "ev", workers=1)))
     finally:
         model.close()
     by_key = {r["key"]: r for r in rows}
@@ -566,17 +579,35 @@ def _running(pid: int) -> bool:
         return False
 
 
-def test_a_row_declares_every_metric_and_every_diagnostic_in_their_own_order() -> None:
-    """EvalRow restates EpisodeMetrics' fields and, prefixed, Diagnostics' (the row allows extra
-    fields, so a metric added to one and not the other would pass silently)."""
-    from dataclasses import fields
+def test_a_metric_added_to_the_metrics_reaches_the_file_and_comes_back_declared_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A row holds the one EpisodeMetrics (and the one Diagnostics): a field added there, and
+    nowhere else, is a column of episodes.jsonl, in the metrics' place, and is read back into the
+    row's metrics; the default grid's columns keep their order around it."""
+    from pydantic import create_model
 
-    from mhrc.analysis.diagnostics import PREFIX, Diagnostics
+    from mhrc.analysis.diagnostics import Diagnostics
     from mhrc.analysis.metrics import EpisodeMetrics
-    from mhrc.eval.records import EvalRow
+    from mhrc.analysis.values import Count
+    from mhrc.eval import records
 
-    row = list(EvalRow.model_fields)
-    metrics = [f.name for f in fields(EpisodeMetrics)]
-    diagnostics = [PREFIX + f.name for f in fields(Diagnostics)]
-    for names in (metrics, diagnostics):
-        assert [n for n in row if n in names] == names
+    before = dict(_flat(asyncio.run(evaluate(TINY_GRID, tmp_path / "ev", workers=1)))[0])
+    metrics: Any = create_model("EpisodeMetrics", __base__=EpisodeMetrics, handoffs=(Count, 0))
+    diagnostics: Any = create_model("Diagnostics", __base__=Diagnostics, stalls=(Count, 0))
+    row: Any = create_model(
+        "EvalRow", __base__=records.EvalRow, metrics=(metrics, ...), diagnostics=(diagnostics | None, None)
+    )
+    for name, model in (("EpisodeMetrics", metrics), ("Diagnostics", diagnostics), ("EvalRow", row)):
+        monkeypatch.setattr(records, name, model)
+    flat = {**before, "handoffs": 4, "diag_stalls": 2}
+    read = records.upgrade_row(flat)
+    assert (read.metrics.handoffs, read.diagnostics.stalls) == (4, 2) and not read.model_extra
+    columns = list(read.flat())
+    assert columns.index("redundant_per_robot") + 1 == columns.index("handoffs") == columns.index("aids") - 1
+    assert columns[-1] == "diag_stalls" and read.flat() == {k: flat[k] for k in columns}
+    (tmp_path / "x.jsonl").write_text(read.line())
+    (again,) = records.read_rows(tmp_path / "x.jsonl")
+    assert again == read and again.line() == read.line()
+    with pytest.raises(ValidationError):  # the new metric has its range, as every other
+        records.upgrade_row({**flat, "handoffs": -1})

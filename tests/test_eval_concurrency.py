@@ -65,7 +65,7 @@ def test_one_worker_runs_llm_episodes_at_once_and_writes_each_row_once(tmp_path:
         llm_timeout=20.0,
     )
     try:
-        rows = asyncio.run(evaluate(spec, tmp_path / "ev", workers=1, concurrency=4))
+        rows = [r.flat() for r in asyncio.run(evaluate(spec, tmp_path / "ev", workers=1, concurrency=4))]
     finally:
         model.close()
     keys = [r["key"] for r in _rows(tmp_path / "ev")]
@@ -85,10 +85,10 @@ def test_heuristic_episodes_run_at_once_give_the_same_metrics_as_one_at_a_time(t
     """Each episode has its own PyBullet client and arm planner; the process-wide OMPL generator
     is re-seeded under a lock before every plan (world/arm.py), so sharing a process changes nothing."""
     spec = EvalSpec(tasks=("pack_objects", "sort_solids"), scenes=("kitchen",), objects=(4,))
-    one = asyncio.run(evaluate(spec, tmp_path / "one", workers=1))
-    many = asyncio.run(evaluate(spec, tmp_path / "many", workers=1, concurrency=2))
+    one = [r.flat() for r in asyncio.run(evaluate(spec, tmp_path / "one", workers=1))]
+    many = [r.flat() for r in asyncio.run(evaluate(spec, tmp_path / "many", workers=1, concurrency=2))]
 
-    def stable(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    def stable(rows: list[dict[str, object]]) -> dict[object, dict[str, object]]:
         return {r["key"]: {k: v for k, v in r.items() if k not in ("wall_time", "worker")} for r in rows}
 
     assert len(many) == 2 and all(r["success"] for r in many)

@@ -16,7 +16,7 @@ from click.testing import CliRunner
 
 from mhrc.cli import main
 from mhrc.eval.html import html_summary
-from mhrc.eval.records import EvalManifest, EvalRow, read_rows
+from mhrc.eval.records import EvalManifest, read_rows, upgrade_row
 from mhrc.eval.spec import EvalSpec
 from mhrc.eval.summary import Summary
 
@@ -56,8 +56,8 @@ def _row(key: str, **extra: Any) -> dict[str, Any]:
 
 
 def _full(row: dict[str, Any]) -> dict[str, Any]:
-    """A row as summaries take it in memory: every field, defaults filled in."""
-    return EvalRow.model_validate(row).model_dump(mode="json")
+    """A row as episodes.jsonl holds it, with every field's old meaning filled in."""
+    return dict(upgrade_row(row).flat())
 
 
 def _evaluation(d: Path, rows: list[dict[str, Any]] | None = None) -> Path:
@@ -204,7 +204,7 @@ def test_no_file_of_the_directory_is_followed_through_a_symlink(tmp_path: Path, 
 def test_a_sound_directory_is_read_and_reported(tmp_path: Path) -> None:
     """The fixture itself passes: what the tests above refuse is the tampering, not the directory."""
     d = _evaluation(tmp_path / "ev")
-    assert [r["key"] for r in read_rows(d / "episodes.jsonl", set(KEYS))] == list(KEYS)
+    assert [r.key for r in read_rows(d / "episodes.jsonl", set(KEYS))] == list(KEYS)
     result = CliRunner().invoke(main, ["report", str(d), "--out", str(tmp_path / "r.md")])
     assert result.exit_code == 0, result.output
     assert 'href="ev/traces/pack_objects_kitchen_3_0.html"' in (tmp_path / "r.html").read_text()
@@ -223,12 +223,13 @@ def test_a_sound_directory_is_read_and_reported(tmp_path: Path) -> None:
 )
 def test_a_row_in_memory_whose_trace_is_no_file_of_traces_gets_no_link(trace: str) -> None:
     """The page is drawn from rows a caller may hand over unchecked: still, no such trace becomes an href."""
-    row = _full(_row(KEYS[0]))
-    page = html_summary([dict(row, trace=trace)], [None], resamples=20)
+    row = upgrade_row(_row(KEYS[0]))
+    unchecked = row.model_copy(update={"trace": trace})  # never validated
+    page = html_summary([unchecked], [None], resamples=20)
     assert page.count("<a href=") == 0 and "javascript:" not in page.split("<h2>Episodes</h2>")[1]
     from mhrc.eval.html import links_of
 
-    (link,) = links_of([dict(row, trace=trace)], Path("ev"), Path("."))
+    (link,) = links_of([unchecked], Path("ev"), Path("."))
     assert link is None
     page = html_summary([row], links_of([row], Path("ev"), Path(".")), resamples=20)
     assert '<a href="ev/traces/pack_objects_kitchen_3_0.html">' in page
@@ -236,15 +237,15 @@ def test_a_row_in_memory_whose_trace_is_no_file_of_traces_gets_no_link(trace: st
 
 def test_links_stay_with_their_rows_when_the_summary_sorts_them() -> None:
     """Rows in the order episodes finished (kitchen, then bedroom); the page lists them by key, each with its own link."""
-    rows = [_full(_row("pack_objects/kitchen/3/0")), _full(_row("pack_objects/bedroom/3/0"))]
-    links = [f"traces/{r['key'].replace('/', '_')}.html" for r in rows]
+    rows = [upgrade_row(_row("pack_objects/kitchen/3/0")), upgrade_row(_row("pack_objects/bedroom/3/0"))]
+    links = [f"traces/{r.key.replace('/', '_')}.html" for r in rows]
     summary = Summary.of(rows, resamples=20, links=links)
-    assert [(r["key"], link) for r, link in zip(summary.rows, summary.links)] == [
+    assert [(r.key, link) for r, link in zip(summary.rows, summary.links)] == [
         ("pack_objects/bedroom/3/0", "traces/pack_objects_bedroom_3_0.html"),
         ("pack_objects/kitchen/3/0", "traces/pack_objects_kitchen_3_0.html"),
     ]
     page = html_summary(rows, links, resamples=20)
     for r, link in zip(rows, links):
-        assert f"<td>{r['key']}</td>" in page
-        row_html = page.split(f"<td>{r['key']}</td>", 1)[1].split("</tr>", 1)[0]
+        assert f"<td>{r.key}</td>" in page
+        row_html = page.split(f"<td>{r.key}</td>", 1)[1].split("</tr>", 1)[0]
         assert f'href="{link}"' in row_html, row_html

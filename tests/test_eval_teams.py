@@ -18,7 +18,7 @@ from mhrc.analysis.metrics import from_trace
 from mhrc.core.team import PAPER_TEAM
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.html import against_team_size, page
-from mhrc.eval.records import EvalManifest, read_manifest, read_rows
+from mhrc.eval.records import EvalManifest, read_manifest, read_rows, upgrade_row
 from mhrc.eval.report import csv_text, markdown
 from mhrc.eval.rows import setting_label, setting_of
 from mhrc.eval.spec import EvalIdentity
@@ -164,20 +164,24 @@ def test_an_old_row_reads_as_the_papers_team(tmp_path: Path) -> None:
     ]
     (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in lines))
     trio, duo = read_rows(tmp_path / "episodes.jsonl")
-    assert (trio["team"], trio["team_digest"], trio["team_kinds"]) == ("paper", PAPER_TEAM.digest(), PAPER_KINDS)
-    assert (duo["team"], duo["team_kinds"]) == ("paper", {"alice": "mobile_manipulator", "bob": "tabletop_arm"})
-    assert duo["team_digest"] == PAPER_TEAM.without({"david"}).digest()
-    assert "moves_per_robot" not in trio and "communication_steps" not in trio  # unknown, never zero
+    t, d = trio.metrics, duo.metrics
+    assert (t.team, t.team_digest, t.team_kinds) == ("paper", PAPER_TEAM.digest(), PAPER_KINDS)
+    assert (d.team, d.team_kinds) == ("paper", {"alice": "mobile_manipulator", "bob": "tabletop_arm"})
+    assert d.team_digest == PAPER_TEAM.without({"david"}).digest()
+    assert "moves_per_robot" not in trio.flat() and "communication_steps" not in trio.flat()  # unknown, never zero
     # the paper's team, however an ablation cut it, is no setting of its own: labels read as before
-    assert setting_of(trio) == setting_of({k: v for k, v in trio.items() if not k.startswith("team")})
+    assert setting_of(trio) == setting_of(
+        upgrade_row({k: v for k, v in trio.flat().items() if not k.startswith("team")})
+    )
     assert setting_label(setting_of(trio)) == "heuristic · ablation none · paper"
     assert setting_label(setting_of(duo)) == "heuristic · ablation no_mobile · paper"
     # a team of the same robots under another name is another setting
-    assert setting_label(setting_of({**trio, "team": "custom"})).endswith(f"· team custom@{PAPER_TEAM.digest()}")
+    custom = trio.model_copy(update={"metrics": t.model_copy(update={"team": "custom"})})
+    assert setting_label(setting_of(custom)).endswith(f"· team custom@{PAPER_TEAM.digest()}")
 
 
 def _summaries(rows: list[dict[str, Any]]) -> tuple[Summary, str, str]:
-    summary = Summary.of(rows, resamples=50)
+    summary = Summary.of([upgrade_row(r) for r in rows], resamples=50)
     return summary, markdown(summary), csv_text(summary)
 
 
@@ -258,21 +262,18 @@ def summary_team_index() -> int:
 
 def test_a_real_grid_of_two_teams(tmp_path: Path) -> None:
     spec = EvalSpec(**TINY, teams=(PAPER_TEAM, NO_MOBILE), trials=1)  # type: ignore[arg-type]
-    rows = {r["key"]: r for r in asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))}
+    typed = {r.key: r for r in asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))}
+    rows = {k: r.metrics for k, r in typed.items()}
     assert sorted(rows) == ["no_mobile/pack_objects/kitchen/3/0", "pack_objects/kitchen/3/0"]
     paper, duo = rows["pack_objects/kitchen/3/0"], rows["no_mobile/pack_objects/kitchen/3/0"]
-    assert (paper["team"], paper["team_digest"], paper["team_kinds"]) == ("paper", PAPER_TEAM.digest(), PAPER_KINDS)
-    assert (duo["team"], duo["team_digest"], list(duo["team_kinds"])) == (
-        "no_mobile",
-        NO_MOBILE.digest(),
-        ["alice", "bob"],
-    )
-    for r in rows.values():
+    assert (paper.team, paper.team_digest, paper.team_kinds) == ("paper", PAPER_TEAM.digest(), PAPER_KINDS)
+    assert (duo.team, duo.team_digest, list(duo.team_kinds)) == ("no_mobile", NO_MOBILE.digest(), ["alice", "bob"])
+    for m in rows.values():
         assert (
-            r["success"] and sum(r["moves_per_robot"].values()) >= 2 * r["total"]
+            m.success and sum(m.moves_per_robot.values()) >= 2 * m.total
         )  # each target picked and placed at least once
-        assert r["communication_steps"] <= r["action_steps"] and set(r["messages_per_robot"]) == set(r["robots"])
-    assert paper["moves_per_robot"]["david"] == 0  # the scout moves nothing
+        assert m.communication_steps <= m.action_steps and set(m.messages_per_robot) == set(m.robots)
+    assert paper.moves_per_robot["david"] == 0  # the scout moves nothing
     out = tmp_path / "ev"
     md = (out / "summary.md").read_text()
     assert "## Team comparison" in md and "| no_mobile | alice (mobile_manipulator), bob (tabletop_arm) |" in md
@@ -281,8 +282,8 @@ def test_a_real_grid_of_two_teams(tmp_path: Path) -> None:
     # a trace older than the team field (the field taken out) scores exactly as the world's record of the paper's
     # team; for no_mobile only the team's name differs (its robots are the paper's without David, so its digest is the
     # ablated paper team's): the paper's metrics never read the team
-    for key, r in rows.items():
-        lines = [json.loads(line) for line in (out / r["trace"]).read_text().splitlines() if line.strip()]
+    for key, r in typed.items():
+        lines = [json.loads(line) for line in (out / str(r.trace)).read_text().splitlines() if line.strip()]
         old = [
             {**x, "msg": {k: v for k, v in x["msg"].items() if k != "team"}}
             if isinstance(x.get("msg"), dict) and x["msg"].get("kind") == "episode_started"
@@ -295,4 +296,4 @@ def test_a_real_grid_of_two_teams(tmp_path: Path) -> None:
     # --resume with other teams is another evaluation
     with pytest.raises(ConfigError, match="holds another evaluation: --team was"):
         asyncio.run(evaluate(EvalSpec(**TINY), out, resume=True))  # type: ignore[arg-type]
-    assert asyncio.run(evaluate(spec, out, resume=True, workers=1)) == list(rows.values())
+    assert asyncio.run(evaluate(spec, out, resume=True, workers=1)) == list(typed.values())

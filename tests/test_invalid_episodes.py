@@ -114,7 +114,7 @@ async def test_an_unplayed_episode_is_run_again_and_never_averaged_into_a_score(
     spec = EvalSpec(tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), trials=2, horizon=20)
     never, second = "pack_objects/kitchen/3/0", "pack_objects/kitchen/3/1"
     executor = _Stalling(tmp_path, {never: RETRIES + 1, second: 1})
-    rows = await _drive(spec.validate(), tmp_path / "ev", False, executor, None)
+    rows = [r.flat() for r in await _drive(spec.validate(), tmp_path / "ev", False, executor, None)]
     assert executor.attempts == {never: RETRIES + 1, second: 2}
     by_key = {r["key"]: r for r in rows}
     assert sorted(by_key) == [never, second]  # one row each: a retried attempt leaves none

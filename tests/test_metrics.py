@@ -10,8 +10,9 @@ from typing import Any
 import pytest
 from sweep import sweep
 
-from mhrc.analysis.metrics import TraceError, from_trace, summarize
+from mhrc.analysis.metrics import EpisodeMetrics, TraceError, from_trace
 from mhrc.core.trace import read_trace
+from mhrc.eval.means import summarize
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.world.bound import SymbolicEpisode, SymbolicObject, lower_bound
@@ -124,14 +125,16 @@ def test_an_unfinished_trace_is_an_error() -> None:
 
 
 def test_summary_means_and_both_action_step_readings() -> None:
-    rows = [from_trace(_trace(True)).as_dict(), from_trace(_trace(False)).as_dict()]
+    rows = [from_trace(_trace(True)), from_trace(_trace(False))]
     s = summarize(rows)
     assert s["episodes"] == 2 and s["succ"] == 0.5 and s["ps"] == pytest.approx((1 + 1 / 3) / 2, abs=1e-4)
     assert s["ts"] == 3 and s["as"] == 4 and s["as_per_robot"] == 2 and s["ts_bound"] == 7
     assert (
         s["as_ticks"] == 3
     )  # ticks 0, 1 and 2 each had a non-wait action (tick 1: alice's navigate beside bob's wait)
-    old = [{k: v for k, v in r.items() if k != "active_ticks"} for r in rows]  # rows written before the reading existed
+    old = [  # rows written before the reading existed
+        EpisodeMetrics.model_validate({k: v for k, v in r.as_dict().items() if k != "active_ticks"}) for r in rows
+    ]
     assert summarize(old)["as_ticks"] is None
 
 

@@ -11,7 +11,9 @@ from typing import Any
 import pytest
 from test_metrics import _complete  # the protocol's required fields a hand-built message leaves out
 
-from mhrc.analysis.metrics import from_trace, summarize
+from mhrc.analysis.metrics import EpisodeMetrics, from_trace
+from mhrc.eval.means import summarize
+from mhrc.eval.records import EvalRow, upgrade_row
 from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import setting_of
 
@@ -208,23 +210,24 @@ def test_async_counts_each_event_from_the_targets_in_place_when_it_fired() -> No
 # --------------------------------------------------------------------------- summaries and the report
 
 
-def _row(
-    m: Any, *, scenario: str | None, sha: str | None = None, key: str = "pack_objects/kitchen/3/0"
-) -> dict[str, Any]:
-    return {
-        **m.as_dict(),
-        "key": key,
-        "method": "heuristic",
-        "ablation": "none",
-        "fidelity": "paper",
-        "horizon": 50,
-        "schedule": "sequential",
-        "mode": "free",
-        "history_cap": None,
-        "aids": [],
-        "scenario": scenario,
-        "scenario_sha256": sha,
-    }
+def _row(m: Any, *, scenario: str | None, sha: str | None = None, key: str = "pack_objects/kitchen/3/0") -> EvalRow:
+    return upgrade_row(
+        {
+            **m.as_dict(),
+            "seed": int(key.rsplit("/", 1)[1]),
+            "key": key,
+            "method": "heuristic",
+            "ablation": "none",
+            "fidelity": "paper",
+            "horizon": 50,
+            "schedule": "sequential",
+            "mode": "free",
+            "history_cap": None,
+            "aids": [],
+            "scenario": scenario,
+            "scenario_sha256": sha,
+        }
+    )
 
 
 def test_summarize_averages_recovery_over_the_episodes_that_have_one() -> None:
@@ -232,14 +235,17 @@ def test_summarize_averages_recovery_over_the_episodes_that_have_one() -> None:
     one = from_trace(_ticks([0, 1, 2, 3], {2: [_event(0, 2)]}))  # 1
     never = from_trace(_ticks([0, 1, 1, 1, 1], {2: [_event(0, 2)]}))  # no value, one unrecovered
     static = from_trace(_ticks([1, 2, 3]))
-    rows = [r.as_dict() for r in (three, one, never, static)]
+    rows = [three, one, never, static]
     s = summarize(rows)
     assert s["recovery_ticks"] == 2.0  # (3 + 1) / 2: neither the unrecovered nor the static episode adds a value
     assert s["unrecovered"] == pytest.approx(1 / 3, abs=1e-3)  # over the three scenario episodes
-    assert (
-        summarize([static.as_dict()])["recovery_ticks"] is None and summarize([static.as_dict()])["unrecovered"] is None
-    )
-    old = [{k: v for k, v in r.items() if k not in ("recovery", "recovery_ticks", "unrecovered")} for r in rows]
+    assert summarize([static])["recovery_ticks"] is None and summarize([static])["unrecovered"] is None
+    old = [
+        EpisodeMetrics.model_validate(
+            {k: v for k, v in r.as_dict().items() if k not in ("recovery", "recovery_ticks", "unrecovered")}
+        )
+        for r in rows
+    ]
     assert summarize(old)["recovery_ticks"] is None  # rows written before the fields
 
 

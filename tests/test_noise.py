@@ -23,8 +23,10 @@ from mhrc.core.fidelity import CALIBRATION, NOISELESS, recorded_noise
 from mhrc.core.protocol import EpisodeStarted, Move, Navigate, OutcomeCode, decode_event
 from mhrc.core.trace import read_trace
 from mhrc.eval.engine import EvalSpec, evaluate
+from mhrc.eval.records import upgrade_row
 from mhrc.eval.report import summary_markdown
 from mhrc.eval.rows import setting_label, setting_of
+from mhrc.eval.spec import episode_key
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.world.sim import Sim
 
@@ -132,13 +134,14 @@ def test_a_real_episode_records_the_rates_in_its_trace_and_row_and_noise_off_is_
     assert "fidelity paper, noise off" in out.stderr
     noiseless = _rows(tmp_path / "off")
     for rows, where, noise, rates in (
-        (default, tmp_path / "on", "on", RATES),
+        ([r.flat() for r in default], tmp_path / "on", "on", RATES),
         (noiseless, tmp_path / "off", "off", dict.fromkeys(RATES, 0.0)),
     ):
         (row,) = rows
-        started = _started(where / row["trace"])
+        started = _started(where / str(row["trace"]))
         assert started["noise"] == {"setting": noise, **rates}
         assert (row["noise"], row["noise_rates"]) == (noise, rates)
+    noiseless = [upgrade_row(r) for r in noiseless]
     on, off = setting_of(default[0]), setting_of(noiseless[0])
     assert on != off and setting_label(on) == "heuristic · ablation none · paper · horizon 3"
     assert setting_label(off) == "heuristic · ablation none · paper · noise off · horizon 3"
@@ -204,12 +207,21 @@ def test_a_trace_or_row_from_before_the_field_reads_as_the_calibration() -> None
     end = {k: v for k, v in done.items() if k != "kind"}
     m = from_trace([_put("episode_started", **line), _put("episode_done", **end)])
     assert (m.noise, m.noise_rates) == ("on", RATES)
-    row = {"method": "heuristic", "ablation": "none", "fidelity": "paper", "aids": [], "schedule": "sequential"}
+    metrics = {k: v for k, v in m.as_dict().items() if k not in ("noise", "horizon")}  # a row older than the field
+    row = {
+        **metrics,
+        "key": episode_key(None, m.task, m.scene, m.n_objects, m.seed),
+        "method": "heuristic",
+        "ablation": "none",
+        "fidelity": "paper",
+        "aids": [],
+        "schedule": "sequential",
+    }
     assert (
-        setting_of(row) == setting_of({**row, "noise": "on"})
-        and setting_label(setting_of(row)) == "heuristic · ablation none · paper"
+        setting_of(upgrade_row(row)) == setting_of(upgrade_row({**row, "noise": "on"}))
+        and setting_label(setting_of(upgrade_row(row))) == "heuristic · ablation none · paper"
     )
-    assert setting_of({**row, "fidelity": "aids:exact_motion", "aids": ["exact_motion"]})[3] == "off"
+    assert setting_of(upgrade_row({**row, "fidelity": "aids:exact_motion", "aids": ["exact_motion"]}))[3] == "off"
 
 
 @pytest.mark.parametrize("command", ["up", "world", "eval"])

@@ -10,10 +10,29 @@ from typing import Any
 
 import pytest
 
-from mhrc.eval.html import html_summary
+from mhrc.eval import html, report
 from mhrc.eval.paper import PAPER_FIGURES, Why, paper_match, paper_model
-from mhrc.eval.report import summary_csv, summary_markdown
+from mhrc.eval.records import EvalRow, upgrade_row
 from mhrc.eval.rows import bootstrap_ci
+from mhrc.eval.summary import ran
+
+
+def _typed(rows: list[dict[str, Any]]) -> list[EvalRow]:
+    """Rows as episodes.jsonl holds them, read (mhrc.eval.records.upgrade_row)."""
+    return [upgrade_row(r) for r in rows]
+
+
+def summary_markdown(rows: list[dict[str, Any]]) -> str:
+    return report.summary_markdown(_typed(rows))
+
+
+def summary_csv(rows: list[dict[str, Any]]) -> str:
+    return report.summary_csv(_typed(rows))
+
+
+def html_summary(rows: list[dict[str, Any]], links: list[str | None]) -> str:
+    return html.html_summary(_typed(rows), links)
+
 
 SCENES = ("bathroom", "bedroom", "kitchen")
 GPT4O_PACK = "0.92 / 0.96 / 32.67 / 25.00"  # Table I, GPT-4o, Pack Objects
@@ -54,6 +73,10 @@ def _rows(
                     "seed": repeat,
                     "n_objects": n,
                     "robots": ["alice", "bob", "david"],
+                    "reason": "success" if ok else "horizon",
+                    "placed": n if ok else 0,
+                    "total": n,
+                    "action_steps_per_robot": {},
                     "success": ok,
                     "partial_success": 1.0 if ok else (i % 3) / 3,
                     "temporal_steps": 20 + i if ok else horizon,
@@ -281,10 +304,10 @@ def test_any_other_setting_off_its_default_keeps_the_paper_figures_away() -> Non
     paper = ("openai:gpt-4o", "none", "paper", None, 50, "free", "sequential", None, None)
     rows, defaults = _rows("openai:gpt-4o"), dict.fromkeys(fields) | {"noise": None}
     assert (
-        paper_match(dict(zip(fields, paper)), "pack_objects", rows, defaults).figures
+        paper_match(dict(zip(fields, paper)), "pack_objects", [ran(r) for r in _typed(rows)], defaults).figures
         == PAPER_FIGURES[("GPT-4o", "none")]["pack_objects"]
     )
-    noisy = paper_match(dict(zip(fields, (*paper[:-1], 0.1))), "pack_objects", rows, defaults)
+    noisy = paper_match(dict(zip(fields, (*paper[:-1], 0.1))), "pack_objects", [ran(r) for r in _typed(rows)], defaults)
     assert (
         noisy.figures is None
         and [m.why for m in noisy.mismatches] == [Why.SETTING]

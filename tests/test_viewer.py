@@ -443,6 +443,7 @@ def test_the_worlds_answer_key_comes_first(traces: dict[str, Path], tmp_path: Pa
 
 def test_partial_success_reads_the_same_everywhere(traces: dict[str, Path], tmp_path: Path) -> None:
     from mhrc.eval.html import html_summary
+    from mhrc.eval.records import upgrade_row
 
     for kind in ("failed", "heuristic"):
         _, _, m = _truth(traces[kind])
@@ -486,7 +487,8 @@ def test_partial_success_reads_the_same_everywhere(traces: dict[str, Path], tmp_
         "llm_unreachable": 0,
         "rejected_actions": 0,
     }
-    assert "<td>0.33 (1/3 placed)</td>" in html_summary([row], [None], resamples=50)
+    row |= {"reason": "horizon", "action_steps_per_robot": {}}
+    assert "<td>0.33 (1/3 placed)</td>" in html_summary([upgrade_row(row)], [None], resamples=50)
 
 
 def test_the_page_opens_on_the_last_frame(traces: dict[str, Path], tmp_path: Path) -> None:

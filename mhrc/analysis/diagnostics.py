@@ -1,7 +1,7 @@
 """Failure diagnostics: why an episode went the way it did, counted from its trace alone.
 
-`mhrc.analysis.metrics` says how well an episode went; this module says what went wrong, per episode
-(`diagnose`) and over episodes (`summarize_diagnostics`). Every count comes from the bus
+`mhrc.analysis.metrics` says how well an episode went; this module says what went wrong in one
+episode (`diagnose`; the means over episodes are an evaluation's, mhrc.eval.means). Every count comes from the bus
 messages of one trace (`mhrc.core.records.read_records`); nothing is re-simulated. Definitions:
 
 - parse_failures: replies that did not parse into one command (a `thought` whose failure,
@@ -40,20 +40,19 @@ messages of one trace (`mhrc.core.records.read_records`); nothing is re-simulate
   episode's lower bound (`episode_started`); None when either is unknown, and when the horizon
   is below the bound (the episode was cut off before it could finish: there is no excess to tell).
 
-Episode rows (`episodes.jsonl`) carry these as flat columns prefixed `diag_` (`columns()`);
-rows written before diagnostics existed lack them, and summaries treat them as unknown.
+An evaluation row holds them as its `diagnostics` (episodes.jsonl: flat columns prefixed `diag_`,
+mhrc.eval.records); rows written before diagnostics existed lack them, and summaries treat them as unknown.
 """
 
 from __future__ import annotations
 
-import statistics
 from collections import Counter, defaultdict
-from dataclasses import asdict, dataclass, field, fields
-from typing import Any
+from typing import Any, get_origin
 
 from pydantic import BaseModel
 
 from mhrc.analysis.metrics import EpisodeMetrics, TraceError, from_trace
+from mhrc.analysis.values import Count
 from mhrc.core.protocol import (
     Action,
     ActionAck,
@@ -71,7 +70,6 @@ from mhrc.core.protocol import (
 from mhrc.core.records import LineKind, Rows, as_records, messages
 from mhrc.core.upgrade import legacy_reject_code
 
-PREFIX = "diag_"
 REJECT_KINDS = ("stale_tick", "busy", "out_of_turn", "episode_over", "malformed", "not_attached", "other")
 # The world's codes for a name it does not know (the fallback when the planning observation is not in the trace)
 UNKNOWN_NAME_CODES = (
@@ -87,37 +85,33 @@ def named_args(action: Action) -> list[str]:
     return [str(getattr(action, a.field)) for a in action.ARGS if a.kind.names_a_thing]
 
 
-@dataclass
-class Diagnostics:
-    """One episode's failure diagnostics (definitions: the module docstring)."""
+class Diagnostics(BaseModel):
+    """One episode's failure diagnostics (definitions: the module docstring), with their ranges
+    (mhrc.analysis.values); an evaluation row holds it as it is (mhrc.eval.records.EvalRow.diagnostics)."""
 
-    llm_steps: int = 0
-    parse_failures: int = 0
-    llm_unreachable: int = 0
-    hallucinations: int = 0
-    hallucinated_names: dict[str, int] = field(default_factory=dict)
-    not_capable: int = 0
-    rejected: int = 0
-    rejected_by_reason: dict[str, int] = field(default_factory=dict)
-    failed: int = 0
-    failed_by_code: dict[str, int] = field(default_factory=dict)
-    failed_by_skill: dict[str, dict[str, int]] = field(default_factory=dict)
-    repeated_failures: int = 0
-    waits: int = 0
-    waits_with_pending: int = 0
-    messages_sent: int = 0
-    messages_read: int = 0
-    steps_above_bound: int | None = None
+    llm_steps: Count = 0
+    parse_failures: Count = 0
+    llm_unreachable: Count = 0
+    hallucinations: Count = 0
+    hallucinated_names: dict[str, Count] = {}
+    not_capable: Count = 0
+    rejected: Count = 0
+    rejected_by_reason: dict[str, Count] = {}
+    failed: Count = 0
+    failed_by_code: dict[str, Count] = {}
+    failed_by_skill: dict[str, dict[str, Count]] = {}
+    repeated_failures: Count = 0
+    waits: Count = 0
+    waits_with_pending: Count = 0
+    messages_sent: Count = 0
+    messages_read: Count = 0
+    steps_above_bound: Count | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    def columns(self) -> dict[str, Any]:
-        """The flat, prefixed columns of an episodes.jsonl row."""
-        return {PREFIX + k: v for k, v in self.as_dict().items()}
+        return self.model_dump()
 
 
-COUNTS = tuple(f.name for f in fields(Diagnostics) if f.type in ("int", "int | None"))
+COUNTS = tuple(name for name, f in Diagnostics.model_fields.items() if get_origin(f.annotation) is not dict)
 BREAKDOWNS = ("hallucinated_names", "rejected_by_reason", "failed_by_code")
 
 # What people read for each key, in every report (the episode report's failure panel, the
@@ -285,32 +279,4 @@ def diagnose(rows: Rows, metrics: EpisodeMetrics | None = None) -> Diagnostics:
         except TraceError:
             excess = None
         d.steps_above_bound = excess if excess is not None and excess >= 0 else None  # below: cut off, not fast
-    return d
-
-
-def row_diagnostics(row: dict[str, Any]) -> dict[str, Any] | None:
-    """The diagnostics of an episodes.jsonl row (unprefixed), or None for a row written before they existed."""
-    if PREFIX + "hallucinations" not in row:
-        return None
-    return {k[len(PREFIX) :]: v for k, v in row.items() if k.startswith(PREFIX)}
-
-
-def summarize_diagnostics(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Means and totals over episode rows. Rows without diagnostics (written before they
-    existed) are unknown, not zero: they are left out and counted in `unknown`; with none
-    known, every mean and total is None."""
-    known = [d for r in rows if (d := row_diagnostics(r)) is not None]
-    out: dict[str, Any] = {"episodes": len(rows), "known": len(known), "unknown": len(rows) - len(known)}
-    means: dict[str, float | None] = {}
-    totals: dict[str, int | None] = {}
-    for name in COUNTS:
-        values = [d[name] for d in known if d.get(name) is not None]
-        means[name] = round(statistics.fmean(values), 3) if values else None
-        totals[name] = int(sum(values)) if values else None
-    out["mean"], out["total"] = means, totals
-    for name in BREAKDOWNS:
-        c: Counter[str] = Counter()
-        for d in known:
-            c.update(d.get(name) or {})
-        out[name] = dict(sorted(c.items())) if known else None
-    return out
+    return Diagnostics.model_validate(d.model_dump())  # every field set: a row writes each of them

@@ -69,8 +69,7 @@ The paper's four (Succ, PS, TS, AS) and the extras a comparison needs. Per episo
   picks and places), communication_steps (communicate actions, beside the other action steps),
   redundant_navigations, redundant_picks and redundant_per_robot.
 
-Over episodes, `summarize` takes means (Succ is then the success rate); recovery_ticks and
-unrecovered over the episodes that have a value (a static episode adds nothing to them).
+The means over episodes are an evaluation's (mhrc.eval.means).
 """
 
 from __future__ import annotations
@@ -78,13 +77,13 @@ from __future__ import annotations
 import math
 import statistics
 from collections import Counter
-from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any
 
-from pydantic import BaseModel
+from pydantic import BaseModel, StrictBool
 
 from mhrc.analysis.teamwork import teamwork
+from mhrc.analysis.values import Amount, Count, Name, Rate
 from mhrc.core.protocol import (
     ActionAck,
     ActionResult,
@@ -107,7 +106,6 @@ __all__ = [
     "from_trace",
     "junk_rejections",
     "recovery_of",
-    "summarize",
 ]
 
 
@@ -122,61 +120,63 @@ class Invalid(StrEnum):
     MODEL_UNREACHABLE = "model_unreachable"  # every LLM step found the model unreachable
 
 
-@dataclass
-class EpisodeMetrics:
-    task: str
-    scene: str
-    seed: int
-    n_objects: int
+class EpisodeMetrics(BaseModel):
+    """One episode's metrics (the module docstring defines each), with their ranges
+    (mhrc.analysis.values): the one model of them, which an evaluation row holds as it is
+    (mhrc.eval.records.EvalRow.metrics). A field a row was written without is not set
+    (`model_fields_set`): what it meant then is its default, or, for the team's work, unknown."""
+
+    task: Name
+    scene: Name
+    seed: Count
+    n_objects: Count
     robots: list[str]
     reason: str
-    success: bool
-    placed: int
-    total: int
-    partial_success: float
-    temporal_steps: int
-    action_steps: int
-    action_steps_per_robot: dict[str, int]
-    failed_actions: dict[str, int] = field(default_factory=dict)
-    messages: int = 0
-    llm_calls: int = 0
-    prompt_tokens: int = 0
-    completion_tokens: int = 0
-    wall_time: float = 0.0
-    lower_bound: int | None = None
-    parse_failures: int = 0
-    llm_unreachable: int = 0
-    rejected_actions: int = 0
-    valid: bool = True
+    success: StrictBool
+    placed: Count
+    total: Count
+    partial_success: Rate
+    temporal_steps: Count
+    action_steps: Count
+    action_steps_per_robot: dict[str, Count]
+    failed_actions: dict[str, Count] = {}
+    messages: Count = 0
+    llm_calls: Count = 0
+    prompt_tokens: Count = 0
+    completion_tokens: Count = 0
+    wall_time: Amount = 0.0
+    lower_bound: Count | None = None
+    parse_failures: Count = 0
+    llm_unreachable: Count = 0
+    rejected_actions: Count = 0
+    valid: StrictBool = True
     invalid_reason: str | None = None
     invalid_code: Invalid | None = None
     fidelity: str = UNRECORDED
     noise: str = "on"  # the motion noise: on (the calibration) or off (--noise off, or the exact_motion aid)
-    noise_rates: dict[str, float] = field(
-        default_factory=dict
-    )  # its chances and error scales (mhrc.core.protocol.MotionNoise)
-    horizon: int | None = None
+    noise_rates: dict[str, Amount] = {}  # its chances and error scales (mhrc.core.protocol.MotionNoise)
+    horizon: Count | None = None
     scheduler: str = "lockstep"
-    makespan: float = 0.0
-    busy: dict[str, float] = field(default_factory=dict)
-    idle: dict[str, float] = field(default_factory=dict)
-    actions_per_robot: dict[str, int] = field(default_factory=dict)
-    active_ticks: int | None = None  # steps with a non-wait action of any robot (None: rows written before the field)
-    recovery: list[dict[str, Any]] = field(default_factory=list)  # per scenario event (module docstring)
-    recovery_ticks: float | None = None  # mean ticks_to_recover of the applied events that recovered
-    unrecovered: int | None = None  # applied events after which progress never resumed (None: no scenario events)
-    team: str = "paper"  # the team's name, digest and robots' kinds (module docstring)
+    makespan: Amount = 0.0
+    busy: dict[str, Amount] = {}
+    idle: dict[str, Amount] = {}
+    actions_per_robot: dict[str, Count] = {}
+    active_ticks: Count | None = None  # steps with a non-wait action of any robot (None: rows written before the field)
+    recovery: list[dict[str, Any]] = []  # per scenario event (module docstring)
+    recovery_ticks: Amount | None = None  # mean ticks_to_recover of the applied events that recovered
+    unrecovered: Count | None = None  # applied events after which progress never resumed (None: no scenario events)
+    team: Name = "paper"  # the team's name, digest and robots' kinds (module docstring)
     team_digest: str = ""
-    team_kinds: dict[str, str] = field(default_factory=dict)
-    messages_per_robot: dict[str, int] = field(default_factory=dict)  # mhrc.analysis.teamwork defines these
-    moves_per_robot: dict[str, int] = field(default_factory=dict)
-    communication_steps: int = 0
-    redundant_navigations: int = 0
-    redundant_picks: int = 0
-    redundant_per_robot: dict[str, int] = field(default_factory=dict)
+    team_kinds: dict[str, str] = {}
+    messages_per_robot: dict[str, Count] = {}  # mhrc.analysis.teamwork defines these; not set: unknown
+    moves_per_robot: dict[str, Count] = {}
+    communication_steps: Count = 0
+    redundant_navigations: Count = 0
+    redundant_picks: Count = 0
+    redundant_per_robot: dict[str, Count] = {}
 
     def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return self.model_dump()
 
 
 def junk_rejections(rows: Rows) -> int:
@@ -350,77 +350,3 @@ def _async_progress(lines: list[TraceLine], step_seconds: float, done: EpisodeDo
                     out[index] = max(0, math.ceil(round((at - fired) / step_seconds, 9)))
                     del waiting[index]
     return out
-
-
-def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Means over episode rows (dicts with the EpisodeMetrics fields; rows written before a field
-    existed count it as 0). Leaving invalid episodes out is the caller's choice (mhrc.eval.report)."""
-    if not rows:
-        raise ValueError("no episodes to summarize")
-
-    def mean(key: str) -> float:
-        return statistics.fmean(float(r[key]) for r in rows)
-
-    bounds = [r["lower_bound"] for r in rows if r.get("lower_bound") is not None]
-    return {
-        "episodes": len(rows),
-        "succ": round(mean("success"), 4),
-        "ps": round(mean("partial_success"), 4),
-        "ts": round(mean("temporal_steps"), 3),
-        "ts_bound": round(statistics.fmean(bounds), 3) if bounds else None,
-        "as": round(mean("action_steps"), 3),
-        "as_per_robot": round(statistics.fmean(r["action_steps"] / max(1, len(r["robots"])) for r in rows), 3),
-        # the reading beside the paper's AS (module docstring); None when a row predates it
-        "as_ticks": None if any(r.get("active_ticks") is None for r in rows) else round(mean("active_ticks"), 3),
-        "messages": round(mean("messages"), 3),
-        "llm_calls": round(mean("llm_calls"), 3),
-        "prompt_tokens": round(mean("prompt_tokens"), 1),
-        "completion_tokens": round(mean("completion_tokens"), 1),
-        "parse_failures": round(statistics.fmean(float(r.get("parse_failures", 0)) for r in rows), 3),
-        "llm_unreachable": round(statistics.fmean(float(r.get("llm_unreachable", 0)) for r in rows), 3),
-        "rejected_actions": round(statistics.fmean(float(r.get("rejected_actions", 0)) for r in rows), 3),
-        "failed_actions": round(statistics.fmean(sum(r["failed_actions"].values()) for r in rows), 3),
-        "wall_time": round(mean("wall_time"), 3),
-        "makespan": round(statistics.fmean(float(r.get("makespan", 0.0)) for r in rows), 3),
-        # scenario episodes only (a static episode, or a row written before the fields, adds nothing)
-        "recovery_ticks": _mean_of_known(rows, "recovery_ticks"),
-        "unrecovered": _mean_of_known(rows, "unrecovered"),
-        # the team's work (mhrc.analysis.teamwork); None when a row predates the fields
-        **_teamwork_means(rows),
-    }
-
-
-TEAMWORK_FIELDS = ("communication_steps", "redundant_navigations", "redundant_picks", "moves_per_robot")
-
-
-def _teamwork_means(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """comm_steps and other_steps (the rest of AS sum), redundant (navigations and picks, and each),
-    moves (successful picks and places) per episode, and each robot's share of the moves: its moves
-    over all robots' moves in these rows (an empty share when nothing was moved)."""
-    if any(r.get(f) is None for r in rows for f in TEAMWORK_FIELDS):
-        return dict.fromkeys(
-            ("comm_steps", "other_steps", "redundant", "redundant_navigations", "redundant_picks", "moves", "share")
-        )
-    moves: Counter[str] = Counter()
-    for r in rows:
-        moves.update(r["moves_per_robot"])
-    robots = list(dict.fromkeys(name for r in rows for name in r["robots"]))
-    total = sum(moves.values())
-
-    def mean(f: Any) -> float:
-        return round(statistics.fmean(float(f(r)) for r in rows), 3)
-
-    return {
-        "comm_steps": mean(lambda r: r["communication_steps"]),
-        "other_steps": mean(lambda r: r["action_steps"] - r["communication_steps"]),
-        "redundant": mean(lambda r: r["redundant_navigations"] + r["redundant_picks"]),
-        "redundant_navigations": mean(lambda r: r["redundant_navigations"]),
-        "redundant_picks": mean(lambda r: r["redundant_picks"]),
-        "moves": mean(lambda r: sum(r["moves_per_robot"].values())),
-        "share": {name: round(moves.get(name, 0) / total, 4) for name in robots} if total else {},
-    }
-
-
-def _mean_of_known(rows: list[dict[str, Any]], key: str) -> float | None:
-    known = [float(r[key]) for r in rows if r.get(key) is not None]
-    return round(statistics.fmean(known), 3) if known else None

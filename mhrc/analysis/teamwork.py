@@ -10,7 +10,7 @@ Per robot:
 - moves_per_robot: its successful picks and its successful places, one each (a pick and the place
   that puts the object down are two moves): the objects it moved, its share of the work as PARTNR's
   human-AI study reports it. A robot's share of a set of episodes is its moves over all robots'
-  moves in them (mhrc.analysis.metrics.summarize); a robot that only looks has share 0.
+  moves in them (mhrc.eval.means.summarize); a robot that only looks has share 0.
 
 Communication beside action, DynaHMRC's two cost figures: `communication_steps` are the
 communicate actions executed (delivered or not, as AS counts failed actions); the other action

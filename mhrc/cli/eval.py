@@ -7,7 +7,7 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -30,6 +30,9 @@ from mhrc.core.fidelity import NOISE
 from mhrc.core.plural import counted
 from mhrc.core.trace import unwritable
 from mhrc.run.config import SCHEDULES, ConfigError, ModelServerDown, check_model_servers
+
+if TYPE_CHECKING:
+    from mhrc.eval.records import EvalRow
 
 
 def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
@@ -63,14 +66,15 @@ def _setting(spec: Any) -> str:
     )
 
 
-def _ended(row: dict[str, Any] | None, t: Any) -> str:
+def _ended(row: EvalRow | None, t: Any) -> str:
     """One episode that ended, in a line: its key and result (a row), or the last one given up (no row)."""
     if row is None:
         return f"{t.given_up[-1]}: given up (errors.jsonl)"
-    if not row.get("valid", True):
-        return f"{row['key']}: invalid ({row.get('invalid_reason')}), left out of the summary"
-    result = "solved" if row["success"] else f"not solved (PS {row['partial_success']:.2f})"
-    return f"{row['key']}: {result}, TS {row['temporal_steps']}"
+    m = row.metrics
+    if not m.valid:
+        return f"{row.key}: invalid ({m.invalid_reason}), left out of the summary"
+    result = "solved" if m.success else f"not solved (PS {m.partial_success:.2f})"
+    return f"{row.key}: {result}, TS {m.temporal_steps}"
 
 
 @click.command("eval")
@@ -278,7 +282,7 @@ def eval_(
     )
     bar = progress.add_task("episodes", total=None)
 
-    def hook(t: Tally, row: dict[str, Any] | None) -> None:
+    def hook(t: Tally, row: EvalRow | None) -> None:
         # the whole grid: with --resume, the episodes an earlier run finished count too
         rate = f"{t.before_succeeded + t.succeeded}/{t.before + t.done} solved" + (
             f", {t.errors} errors" if t.errors else ""
@@ -294,13 +298,14 @@ def eval_(
                 progress.console.print(f"{spec.method} [{rate}]", markup=False)
             if row is not None or t.done:  # (the first call, before any episode ended, has neither)
                 progress.console.print(f"{_ended(row, t)} ({t.before + t.done}/{t.before + t.total})", markup=False)
-        elif row is not None and not row.get("valid", True):
+        elif row is not None and not row.metrics.valid:
             progress.console.print(
-                f"[red]invalid[/]: {row['key']} ({row.get('invalid_reason')}); left out of the summary"
+                f"[red]invalid[/]: {row.key} ({row.metrics.invalid_reason}); left out of the summary"
             )
-        elif row is not None and not row["success"]:
+        elif row is not None and not row.metrics.success:
+            m = row.metrics
             progress.console.print(
-                f"[yellow]not solved[/]: {row['key']} (PS {row['partial_success']:.2f}, TS {row['temporal_steps']})"
+                f"[yellow]not solved[/]: {row.key} (PS {m.partial_success:.2f}, TS {m.temporal_steps})"
             )
 
     try:
@@ -383,7 +388,7 @@ def eval_(
         from mhrc.cli.rerun_view import eval_recordings
 
         made = eval_recordings(
-            (out / str(r["trace"]) for r in rows if r.get("trace")), rerun.path, out
+            (out / r.trace for r in rows if r.trace), rerun.path, out
         )  # validated rows: traces/ files
         console.print(f"{len(made)} rerun recording(s) in {rerun.path}")
     if rows:
@@ -413,16 +418,30 @@ def eval_(
     type=int,
     help="Seed of the bootstrap (the same rows and seed give the same intervals).",
 )
-def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) -> None:
+@click.option(
+    "--compare",
+    nargs=2,
+    default=None,
+    metavar="A B",
+    help="Restrict the paired comparison to two arms, each named by its setting label (as the summary titles it) "
+    "or a unique part of it; default: every two arms that share episodes.",
+)
+def report(
+    dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int, compare: tuple[str, str] | None
+) -> None:
     """Merge `mhrc eval` directories into one comparison (markdown on stdout): Succ, PS, TS
     and AS per task with 95% bootstrap confidence intervals, grouped by method, ablation and
     fidelity, and the paper's Table I / II figures beside the settings that match its
     configuration. Invalid episodes (model unreachable throughout) are left out and listed.
     With --out FILE.md, the markdown goes there instead, with FILE.csv and FILE.html (tables,
-    plots, a link to each episode's report) beside it."""
+    plots, a link to each episode's report) beside it. Every two arms (settings) that ran some of
+    the same episodes are compared episode by episode: the paired difference in TS and AS with a
+    paired-bootstrap 95% interval and the exact McNemar test on success (--compare A B: only those two)."""
     from mhrc.eval.html import links_of
+    from mhrc.eval.pairs import resolve_arm
     from mhrc.eval.records import read_dir
     from mhrc.eval.report import markdown
+    from mhrc.eval.rows import is_valid, setting_of
     from mhrc.eval.summaries import write_summary_files
     from mhrc.eval.summary import Summary
 
@@ -442,10 +461,19 @@ def report(dirs: tuple[Path, ...], out: Path | None, resamples: int, seed: int) 
     rows = [r for _, mine in per_dir for r in mine]
     if not rows:
         raise click.UsageError("no finished episodes in " + ", ".join(map(str, dirs)))
+    arms = None
+    if compare is not None:
+        settings = list(dict.fromkeys(setting_of(r) for r in rows if is_valid(r)))
+        try:
+            arms = (resolve_arm(compare[0], settings), resolve_arm(compare[1], settings))
+        except ConfigError as exc:
+            raise click.UsageError(str(exc)) from None
+        if arms[0] == arms[1]:
+            raise click.UsageError(f"--compare: {compare[0]!r} and {compare[1]!r} name the same arm")
     page_dir = (out or Path(".")).parent
     links = [link for d, mine in per_dir for link in links_of(mine, d, page_dir)]
     # every statistic, once, for the three files; each row's link sorted with it
-    summary = Summary.of(rows, resamples=resamples, seed=seed, links=links)
+    summary = Summary.of(rows, resamples=resamples, seed=seed, links=links, compare=arms)
     if out is None:
         click.echo(markdown(summary))
         return

@@ -31,7 +31,7 @@ from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Protocol
 
 import structlog
 
@@ -39,7 +39,7 @@ from mhrc.analysis.metrics import Invalid
 from mhrc.core.trace import unwritable
 from mhrc.eval.directory import append_text, make_dirs, refuse_links, write_bytes, write_text
 from mhrc.eval.episode import Job, WorkerResult
-from mhrc.eval.records import EvalManifest, EvalRow, Row, read_manifest, read_rows, trace_of
+from mhrc.eval.records import EvalManifest, EvalRow, Settings, read_manifest, read_rows, trace_of
 from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import merge_runs
 from mhrc.eval.scoring import Scored, score, write_episode_report
@@ -113,13 +113,12 @@ class Tally:
     succeeded: int = 0
     errors: int = 0
     invalid: int = 0
-    by_key: dict[str, dict[str, Any]] = field(default_factory=dict)
     before: int = 0
     before_succeeded: int = 0
     given_up: list[str] = field(default_factory=list)  # keys of the episodes given up (errors.jsonl), in order
 
 
-ProgressHook = Callable[[Tally, Row | None], None]
+ProgressHook = Callable[[Tally, EvalRow | None], None]
 
 
 STOP_GRACE = (
@@ -173,7 +172,7 @@ def check_out(out: Path, plan: Plan, resume: bool) -> None:
         finished_rows(out, plan)
 
 
-def finished_rows(out: Path, plan: Plan) -> dict[str, Row]:
+def finished_rows(out: Path, plan: Plan) -> dict[str, EvalRow]:
     """The rows DIR holds, by key, each validated (`read_rows`) and of this plan's grid and
     setting: a row outside the grid, or run with another method, ablation or horizon, is a
     ConfigError naming its line, never counted."""
@@ -181,22 +180,23 @@ def finished_rows(out: Path, plan: Plan) -> dict[str, Row]:
     rows = read_rows(path, {j.key for j in plan.jobs})
     spec = plan.spec
     for r in rows:
-        if (r["method"], r["ablation"]) != (spec.method, spec.ablation) or r.get("horizon") not in (None, spec.horizon):
+        s, horizon = r.settings, r.metrics.horizon
+        if (s.method, s.ablation) != (spec.method, spec.ablation) or horizon not in (None, spec.horizon):
             raise ConfigError(
-                f"{path}: episode {r['key']} ran {r['method']}, ablation {r['ablation']}, horizon {r.get('horizon')}: "
+                f"{path}: episode {r.key} ran {s.method}, ablation {s.ablation}, horizon {horizon}: "
                 "not this evaluation's"
             )
-    return {r["key"]: r for r in rows}
+    return {r.key: r for r in rows}
 
 
-def prepare_out(out: Path, plan: Plan) -> dict[str, Row]:
+def prepare_out(out: Path, plan: Plan) -> dict[str, EvalRow]:
     """Create DIR (checked by `check_out`) and write its manifest; return the rows already finished, by key."""
     make_dirs(out)
     refuse_links(out)
     finished = finished_rows(out, plan)
     write_text(out / "eval.json", EvalManifest(identity=plan.identity, spec=plan.spec).text())
     if finished:  # rewrite without a torn last line, so that new rows start on a line of their own
-        write_text(out / "episodes.jsonl", "".join(json.dumps(r) + "\n" for r in finished.values()))
+        write_text(out / "episodes.jsonl", "".join(r.line() for r in finished.values()))
     return finished
 
 
@@ -210,7 +210,7 @@ async def evaluate(
     concurrency: int = 1,
     ray: str | None = None,
     shared_out: bool = False,
-) -> list[Row]:
+) -> list[EvalRow]:
     """Check everything once (the options, the grid, DIR), then `run` the grid; returns every row
     of DIR/episodes.jsonl (old ones too, with --resume).
 
@@ -231,7 +231,7 @@ async def evaluate(
 
 async def run(
     plan: Plan, out: Path, options: RunOptions, *, resume: bool = False, progress: ProgressHook | None = None
-) -> list[Row]:
+) -> list[EvalRow]:
     """Run a plan already checked (`evaluate`, or the CLI, checked the options, the grid and DIR):
     each row is computed here, from the episode's trace, and appended to DIR/episodes.jsonl as it
     arrives; an interrupt (cancellation) keeps every finished row."""
@@ -254,44 +254,47 @@ async def run(
 def _row(plan: Plan, job: Job, res: WorkerResult, scored: Scored, out: Path) -> EvalRow:
     """The row of a finished episode: the evaluation's settings, the metrics and the diagnostics."""
     spec = plan.spec
-    return EvalRow.model_validate(
-        {
-            "key": res.key,
-            "method": spec.method,
-            "ablation": spec.ablation,
-            "repeat": job.repeat,
-            "trial": job.trial,
-            **scored.metrics.as_dict(),
-            "aids": list(spec.aids),
-            "history_cap": spec.history_cap,
-            "mode": spec.mode,
-            "max_tokens": spec.max_tokens if spec.llm else None,
-            "llm_seed": spec.llm_seed,
-            "schedule": spec.schedule,
-            "time_scale": spec.time_scale,
-            "scenario": plan.scenario,
-            "scenario_sha256": plan.scenario_sha256,
-            "prompts": spec.prompts,
-            "base_url": spec.base_url,  # whether the paper's figures may stand beside it (mhrc.eval.paper)
-            "worker": res.worker,
-            "trace": str(scored.path.relative_to(out)),
-            **scored.diagnostics.columns(),
-        }
+    settings = Settings(
+        method=spec.method,
+        ablation=spec.ablation,
+        aids=list(spec.aids),
+        history_cap=spec.history_cap,
+        mode=spec.mode,
+        max_tokens=spec.max_tokens if spec.llm else None,
+        llm_seed=spec.llm_seed,
+        schedule=spec.schedule,
+        time_scale=spec.time_scale,
+        scenario=plan.scenario,
+        scenario_sha256=plan.scenario_sha256,
+        prompts=spec.prompts,
+        base_url=spec.base_url,  # whether the paper's figures may stand beside it (mhrc.eval.paper)
+    )
+    return EvalRow(
+        key=res.key,
+        repeat=job.repeat,
+        trial=job.trial,
+        settings=settings,
+        metrics=scored.metrics,
+        diagnostics=scored.diagnostics,
+        worker=res.worker,
+        trace=str(scored.path.relative_to(out)),
     )
 
 
-async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progress: ProgressHook | None) -> list[Row]:
+async def _drive(
+    plan: Plan, out: Path, resume: bool, executor: Executor, progress: ProgressHook | None
+) -> list[EvalRow]:
     """Run the jobs of `plan` not yet in `out` on `executor`, writing each row as it arrives."""
     finished = prepare_out(out, plan)
     todo = [j for j in plan.jobs if j.key not in finished]
     earlier = [finished[j.key] for j in plan.jobs if j.key in finished]
-    tally = Tally(total=len(todo), before=len(earlier), before_succeeded=sum(bool(r.get("success")) for r in earlier))
+    tally = Tally(total=len(todo), before=len(earlier), before_succeeded=sum(r.metrics.success for r in earlier))
     rows_path = out / "episodes.jsonl"
     jobs = {j.key: j for j in todo}
     attempts: dict[str, int] = defaultdict(int)
     aborted: list[str] = []
 
-    def take(res: WorkerResult) -> tuple[Job | None, bool, Row | None]:
+    def take(res: WorkerResult) -> tuple[Job | None, bool, EvalRow | None]:
         """Write the row of a finished episode (or count a given-up one): the job to run again, if any,
         whether the episode was counted, and its row. Blocking (trace, metrics, HTML): off the loop."""
         job = jobs[res.key]
@@ -327,12 +330,12 @@ async def _drive(plan: Plan, out: Path, resume: bool, executor: Executor, progre
             return None, True, None
         row = _row(plan, job, res, scored, out)
         append_text(rows_path, row.line())
-        tally.succeeded += bool(row.success)
+        tally.succeeded += row.metrics.success
         tally.invalid += not row.valid
         tally.done += 1
-        return None, True, row.record()
+        return None, True, row
 
-    def told(taken: tuple[Job | None, bool, Row | None]) -> Job | None:
+    def told(taken: tuple[Job | None, bool, EvalRow | None]) -> Job | None:
         """Report a counted episode to `progress` (on the loop); the job to run again, if any."""
         again, counted, row = taken
         if counted and progress is not None:

@@ -2,8 +2,8 @@
 summary.md, plots of them, and a link per episode to its report.
 
 The tables are summary.md's own (`mhrc.eval.report.markdown` of the same `mhrc.eval.summary.Summary`),
-rendered as HTML by markdown-it-py; the plots draw `mhrc.analysis.metrics.summarize` over
-`mhrc.eval.report.group`'s buckets and `mhrc.analysis.diagnostics.summarize_diagnostics`. Plots are inline
+rendered as HTML by markdown-it-py; the plots draw `mhrc.eval.means.summarize` over
+`mhrc.eval.rows.group`'s buckets and `mhrc.eval.means.summarize_diagnostics`. Plots are inline
 SVG drawn with matplotlib's object API (no pyplot state, no display), so the page needs no
 network and no other file. Each episode links to `traces/<trace file stem>.html` next to the
 evaluation's episodes.jsonl, the page `mhrc show` writes; the link is there whether or not that
@@ -23,11 +23,11 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
-from mhrc.analysis.diagnostics import summarize_diagnostics
-from mhrc.analysis.metrics import summarize
 from mhrc.eval.directory import write_text
+from mhrc.eval.means import summarize, summarize_diagnostics
+from mhrc.eval.records import EvalRow
 from mhrc.eval.report import markdown
-from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, group, is_valid, setting_label, setting_of
+from mhrc.eval.rows import CI_SEED, RESAMPLES, SETTING, Setting, group, is_valid, setting_label, setting_of
 from mhrc.eval.summary import Summary
 from mhrc.eval.teams import team_cells, team_count, without_team
 from mhrc.viewer.wording import diagnostic_label, partial_success
@@ -93,12 +93,12 @@ def _short(setting: tuple[Any, ...]) -> str:
     return setting_label(setting)
 
 
-def success_by_objects(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
+def success_by_objects(valid: list[EvalRow]) -> list[tuple[str, str]]:
     """Per task: Succ (solid) and PS (dashed) against the object count, one line per setting."""
-    by_task: dict[str, dict[tuple[Any, ...], list[tuple[int, dict[str, Any]]]]] = {}
+    by_task: dict[str, dict[Setting, list[tuple[int, dict[str, Any]]]]] = {}
     for key, bucket in group(valid, "task", *SETTING, "n_objects").items():
         task, setting, n = key[0], key[1:-1], key[-1]
-        by_task.setdefault(task, {}).setdefault(setting, []).append((int(n), summarize(bucket)))
+        by_task.setdefault(task, {}).setdefault(setting, []).append((int(n), summarize([r.metrics for r in bucket])))
     plots = []
     for task, settings in by_task.items():
         fig = _figure(5.5, 3.4)
@@ -116,30 +116,30 @@ def success_by_objects(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
     return plots
 
 
-def ts_against_bound(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
+def ts_against_bound(valid: list[EvalRow]) -> list[tuple[str, str]]:
     """Every episode's TS against its lower bound TS*, one colour per setting; the diagonal is TS = TS*."""
-    have = [r for r in valid if r.get("lower_bound") is not None]
+    have = [(r.metrics.lower_bound, r) for r in valid if r.metrics.lower_bound is not None]
     if not have:
         return []
     fig = _figure(5.5, 4.0)
     ax = fig.add_subplot()
-    for k, (setting, bucket) in enumerate(group(have, *SETTING).items()):
+    for k, (setting, bucket) in enumerate(group([r for _, r in have], *SETTING).items()):
         ax.scatter(
-            [r["lower_bound"] for r in bucket],
-            [r["temporal_steps"] for r in bucket],
+            [r.metrics.lower_bound for r in bucket],
+            [r.metrics.temporal_steps for r in bucket],
             s=18,
             alpha=0.7,
             color=f"C{k % 10}",
             label=_short(setting),
         )
-    top = max(max(r["lower_bound"], r["temporal_steps"]) for r in have) + 1
+    top = max(max(bound, r.metrics.temporal_steps) for bound, r in have) + 1
     ax.plot([0, top], [0, top], color="#888", linewidth=1, linestyle=":", label="TS = TS*")
     ax.set(xlabel="lower bound TS*", ylabel="TS", xlim=(0, top), ylim=(0, top * 1.05))
     ax.legend(fontsize=7, loc="best")
     return [(_svg(fig), "TS against its lower bound TS*, one point per episode")]
 
 
-def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]:
+def diagnostics_by_setting(valid: list[EvalRow]) -> list[tuple[str, str]]:
     """Mean failure diagnostics per episode, grouped bars per method/setting (episodes without diagnostics left out)."""
     fig = diagnostics_figure(valid)
     if fig is None:
@@ -147,10 +147,13 @@ def diagnostics_by_setting(valid: list[dict[str, Any]]) -> list[tuple[str, str]]
     return [(_svg(fig), "failure diagnostics by method and setting (means per episode; mhrc.analysis.diagnostics)")]
 
 
-def diagnostics_figure(valid: list[dict[str, Any]]) -> Any:
+def diagnostics_figure(valid: list[EvalRow]) -> Any:
     """The figure of `diagnostics_by_setting` (None without diagnostics); its legend stands above
     the axes, where no bar is."""
-    stats = [(setting, summarize_diagnostics(bucket)) for setting, bucket in group(valid, *SETTING).items()]
+    stats = [
+        (setting, summarize_diagnostics([r.diagnostics for r in bucket]))
+        for setting, bucket in group(valid, *SETTING).items()
+    ]
     stats = [(s, d) for s, d in stats if d["known"]]
     if not stats:
         return None
@@ -218,8 +221,8 @@ def against_team_size(summary: Summary) -> list[tuple[str, str]]:
 # --------------------------------------------------------------------------- the page
 
 
-def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> str:
-    dynamic = any(r.get("recovery") for r in rows)  # a scenario ran: each event's recovery (mhrc.analysis.metrics)
+def _episode_table(rows: list[EvalRow], links: Sequence[str | None]) -> str:
+    dynamic = any(r.metrics.recovery for r in rows)  # a scenario ran: each event's recovery (mhrc.analysis.metrics)
     head = [
         "episode",
         "setting",
@@ -232,18 +235,18 @@ def _episode_table(rows: list[dict[str, Any]], links: Sequence[str | None]) -> s
         "report",
     ]
     out = ["<table><thead><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr></thead><tbody>"]
-    order = sorted(range(len(rows)), key=lambda i: (setting_label(setting_of(rows[i])), str(rows[i].get("key"))))
+    order = sorted(range(len(rows)), key=lambda i: (setting_label(setting_of(rows[i])), rows[i].key))
     for i in order:
-        r, link = rows[i], links[i]
+        r, m, link = rows[i], rows[i].metrics, links[i]
         cells = [
-            html.escape(str(r.get("key", ""))),
+            html.escape(r.key),
             html.escape(setting_label(setting_of(r))),
             "yes" if is_valid(r) else "no",
-            "1" if r.get("success") else "0",
-            html.escape(partial_success(r.get("partial_success", 0.0), r.get("placed"), r.get("total"))),
-            str(r.get("temporal_steps", "")),
-            "" if r.get("lower_bound") is None else str(r["lower_bound"]),
-            *([html.escape(_recovery_cell(r.get("recovery") or []))] if dynamic else []),
+            "1" if m.success else "0",
+            html.escape(partial_success(m.partial_success, m.placed, m.total)),
+            str(m.temporal_steps),
+            "" if m.lower_bound is None else str(m.lower_bound),
+            *([html.escape(_recovery_cell(m.recovery))] if dynamic else []),
             f'<a href="{html.escape(href)}">{html.escape(href)}</a>' if (href := _href(link)) else "",
         ]
         out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
@@ -269,12 +272,12 @@ def _recovery_cell(recovery: list[dict[str, Any]]) -> str:
 TRACE_FILE = re.compile(r"traces/[A-Za-z0-9_][A-Za-z0-9_.-]*\.jsonl")  # a row's trace, as mhrc eval writes it
 
 
-def _link(row: dict[str, Any], base: Path, page_dir: Path) -> str | None:
+def _link(row: EvalRow, base: Path, page_dir: Path) -> str | None:
     """`traces/<trace file stem>.html` of the row's evaluation directory, relative to the page, as
     a URL path: every segment percent-encoded, so no part of it can be read as a scheme. A row
     whose trace is anything but a file of traces/ (a URL, an absolute path, ../) gets no link."""
-    trace = row.get("trace")
-    if not isinstance(trace, str) or not TRACE_FILE.fullmatch(trace):
+    trace = row.trace
+    if trace is None or not TRACE_FILE.fullmatch(trace):
         return None
     target = base / "traces" / f"{trace.removeprefix('traces/').removesuffix('.jsonl')}.html"
     rel = Path(os.path.relpath(target, page_dir)).as_posix()
@@ -293,7 +296,7 @@ def _href(link: str | None) -> str | None:
 
 
 def html_summary(
-    rows: list[dict[str, Any]],
+    rows: list[EvalRow],
     links: Sequence[str | None],
     *,
     title: str = "Evaluation summary",
@@ -345,13 +348,13 @@ def page(
     )
 
 
-def links_of(rows: Sequence[dict[str, Any]], base: Path, page_dir: Path) -> list[str | None]:
+def links_of(rows: Sequence[EvalRow], base: Path, page_dir: Path) -> list[str | None]:
     """Each row's link to its episode report, from a page in `page_dir` (`_link`)."""
     return [_link(r, base, page_dir) for r in rows]
 
 
 def write_html_summary(
-    rows: list[dict[str, Any]],
+    rows: list[EvalRow],
     out_path: Path,
     *,
     title: str = "Evaluation summary",

@@ -250,18 +250,28 @@ def paper_model(spec: str | None, base_url: str | None = None) -> str | None:
     return judge_spec(spec, base_url).model
 
 
-def team_mismatches(row: Mapping[str, Any]) -> tuple[str | None, tuple[Mismatch, ...]]:
+@dataclass(frozen=True)
+class Ran:
+    """What one episode's row ran, as far as the paper's figures care (mhrc.eval.summary makes it of a row)."""
+
+    method: str
+    robots: tuple[str, ...]
+    scene: str
+    n_objects: int
+    prompts: str | None = None
+    base_url: str | None = None
+
+
+def team_mismatches(row: Ran) -> tuple[str | None, tuple[Mismatch, ...]]:
     """The paper's model every robot of a row runs, or the reasons they do not run one model of
-    the paper's with its prompts. Reads the row's `method`, `robots`, `prompts` and `base_url`
-    (missing: the defaults, no custom prompts and no base URL)."""
-    robots = tuple(str(r) for r in row.get("robots") or ())
-    method = str(row.get("method") or HEURISTIC)
+    the paper's with its prompts (its `method`, `robots`, `prompts` and `base_url`)."""
+    robots, method = row.robots, row.method or HEURISTIC
     specs: dict[str, str | None]
     try:
         specs = dict.fromkeys(robots) if method == HEURISTIC else robot_specs(method, robots)
     except LLMSpecError:  # a method that names robots this row does not have
         specs = {r: method for r in robots}
-    base_url = row.get("base_url")
+    base_url = row.base_url
     verdicts = {r: judge_spec(s, base_url) for r, s in specs.items()}
     found: list[Mismatch] = []
     groups: dict[tuple[Why, str], list[str]] = {}
@@ -276,8 +286,8 @@ def team_mismatches(row: Mapping[str, Any]) -> tuple[str | None, tuple[Mismatch,
             model = verdicts[robots[0]].model
         else:
             found.append(Mismatch(Why.MIXED_MODELS, ", ".join(f"{r} {specs[r]}" for r in robots)))
-    if row.get("prompts"):
-        found.append(Mismatch(Why.CUSTOM_PROMPTS, str(row["prompts"])))
+    if row.prompts:
+        found.append(Mismatch(Why.CUSTOM_PROMPTS, row.prompts))
     return (model if not found else None), tuple(found)
 
 
@@ -315,9 +325,9 @@ class PaperMatch:
         return "; ".join(m.text() for m in self.mismatches)
 
 
-def grid_problem(rows: list[dict[str, Any]]) -> str | None:
+def grid_problem(rows: Sequence[Ran]) -> str | None:
     """Why these rows (one setting, one task) are not the paper grid, or None if they are."""
-    cells = Counter((r["scene"], r["n_objects"]) for r in rows)
+    cells = Counter((r.scene, r.n_objects) for r in rows)
     scenes = sorted({s for s, _ in cells})
     if len(scenes) != PAPER_SCENES:
         return f"{len(scenes)} scene(s), the paper has {PAPER_SCENES}"
@@ -330,9 +340,7 @@ def grid_problem(rows: list[dict[str, Any]]) -> str | None:
     return None
 
 
-def paper_match(
-    setting: Mapping[str, Any], task: str, rows: list[dict[str, Any]], defaults: Mapping[str, Any]
-) -> PaperMatch:
+def paper_match(setting: Mapping[str, Any], task: str, rows: Sequence[Ran], defaults: Mapping[str, Any]) -> PaperMatch:
     """The paper's figures for this setting (field name -> value) and task when every row's team
     and the configuration match; otherwise a PaperMatch without figures and every reason:
     the team's (the first row whose team differs from the paper's) and the setting's, then

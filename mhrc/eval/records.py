@@ -2,52 +2,52 @@
 `episodes.jsonl`) and `EvalManifest` (`eval.json`), each read through one function that
 upgrades what older versions of mhrc wrote.
 
+A row is composed, never restated: the evaluation's `settings`, the episode's `metrics` (the one
+`mhrc.analysis.metrics.EpisodeMetrics`), its `diagnostics` (`mhrc.analysis.diagnostics.Diagnostics`;
+None: written before they existed), the `worker` that ran it and its `trace`. Only the file is
+flat: a line of episodes.jsonl holds every field of these at its top level (the diagnostics
+prefixed `diag_`), in the order `FLAT_ORDER` gives, and `EvalRow.flat` and `from_flat` are the one
+place a row is flattened and put together again. A metric added to EpisodeMetrics reaches the file
+and comes back without being declared anywhere else.
+
 A field added to a row or to the identity after rows were written has, as its default, the
 meaning a file without it had (`OLD_MEANING`, `EvalIdentity`'s defaults; a row without a team ran
-the paper's, as many of Alice, Bob and David as its `robots`): `read_row` fills it in once, on
-read, so summaries never guess. The team's work (mhrc.analysis.teamwork: per-robot messages and
-moves, communication steps, redundant actions) is, like the diagnostics, unknown in older rows. A row's diagnostics (`diag_*`) are the exception: a row
-written before them does not know them, and stays without them (unknown, never zero). In
-memory, summaries take a row as its `record()`, the JSON object the file holds, upgraded.
+the paper's, as many of Alice, Bob and David as its `robots`): `upgrade_row` fills it in once, on
+read, so summaries never guess. A field a row was written without stays unset in its model
+(`model_fields_set`), so the row is written back as it was read; the team's work
+(mhrc.analysis.teamwork) is, like the diagnostics, unknown in a row that lacks it (mhrc.eval.means).
 
 A directory may come from someone else, so nothing in it is trusted: a row's values have ranges
-(a strict boolean success, PS in [0, 1], counts that are non-negative JSON integers), its key is
-its episode's and of the manifest's grid, once, its trace that key's file in traces/; the
-manifest has no unknown field and a spec that makes its identity. Any other line is a
+(mhrc.analysis.values: a strict boolean success, PS in [0, 1], counts that are non-negative JSON
+integers), its key is its episode's and of the manifest's grid, once, its trace that key's file in
+traces/; the manifest has no unknown field and a spec that makes its identity. Any other line is a
 ConfigError naming the file and line, before anything is counted or written.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import structlog
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from mhrc.analysis.metrics import UNRECORDED
+from mhrc.analysis.diagnostics import Diagnostics
+from mhrc.analysis.metrics import UNRECORDED, EpisodeMetrics
+from mhrc.analysis.values import Amount, Count, Seed
 from mhrc.core.upgrade import paper_team
 from mhrc.eval.directory import read_bytes
-from mhrc.eval.spec import MAX_COUNT, EvalIdentity, EvalSpec, bounded, episode_key
+from mhrc.eval.spec import EvalIdentity, EvalSpec, bounded, episode_key
 from mhrc.run.config import ConfigError
 
 log = structlog.get_logger("mhrc.eval.records")
 
-Row = dict[str, Any]  # a row as summaries take it: EvalRow.record()
-
-# a row's values with their ranges: a count is a non-negative JSON integer (never a string, a float
-# or a bool), a rate lies in [0, 1], an amount (seconds, a scale) is finite and non-negative
-Count = Annotated[int, Field(strict=True, ge=0, le=MAX_COUNT)]
-Seed = Annotated[int, Field(strict=True, ge=-MAX_COUNT, le=MAX_COUNT)]
-Rate = Annotated[float, Field(strict=True, ge=0.0, le=1.0, allow_inf_nan=False)]
-Amount = Annotated[float, Field(strict=True, ge=0.0, allow_inf_nan=False)]
-NAME = r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}"  # a task, scene or team as a part of a key (and of a file name)
-Name = Annotated[str, Field(pattern=f"^{NAME}$")]
+Flat = dict[str, object]  # a row as a line of episodes.jsonl holds it: JSON values by column
 
 # what a row written before a setting field existed ran with (noise: see old_noise)
-OLD_MEANING: dict[str, Any] = {
+OLD_MEANING: dict[str, object] = {
     "fidelity": UNRECORDED,
     "history_cap": None,
     "horizon": None,
@@ -59,74 +59,16 @@ OLD_MEANING: dict[str, Any] = {
 }
 
 
-def old_noise(aids: Any) -> str:
+def old_noise(aids: object) -> str:
     """The motion noise of a row older than the field: the calibration, or none under exact_motion."""
-    return "off" if "exact_motion" in (aids or ()) else "on"
+    return "off" if "exact_motion" in (aids if isinstance(aids, (list, tuple)) else ()) else "on"
 
 
-class EvalRow(BaseModel):
-    """One episode's row: the evaluation's settings, the episode's metrics
-    (`mhrc.analysis.metrics.EpisodeMetrics`), where it ran, and its diagnostics
-    (`mhrc.analysis.diagnostics.Diagnostics`, prefixed `diag_`; None: written before they existed).
-    Fields a newer mhrc adds are kept as they are."""
+class Settings(BaseModel):
+    """The evaluation's settings an episode ran with (what its row does not measure)."""
 
-    model_config = ConfigDict(extra="allow")
-
-    key: str = Field(max_length=512)
     method: str
     ablation: str
-    repeat: Count = 0
-    trial: Count = 0
-    # the metrics, in EpisodeMetrics' order
-    task: Name
-    scene: Name
-    seed: Count
-    n_objects: Count
-    robots: list[str]
-    reason: str
-    success: StrictBool
-    placed: Count
-    total: Count
-    partial_success: Rate
-    temporal_steps: Count
-    action_steps: Count
-    action_steps_per_robot: dict[str, Count]
-    failed_actions: dict[str, Count] = {}
-    messages: Count = 0
-    llm_calls: Count = 0
-    prompt_tokens: Count = 0
-    completion_tokens: Count = 0
-    wall_time: Amount = 0.0
-    lower_bound: Count | None = None
-    parse_failures: Count = 0
-    llm_unreachable: Count = 0
-    rejected_actions: Count = 0
-    valid: StrictBool = True
-    invalid_reason: str | None = None
-    invalid_code: str | None = None
-    fidelity: str = UNRECORDED
-    noise: str = "on"
-    noise_rates: dict[str, Amount] = {}
-    horizon: Count | None = None
-    scheduler: str = "lockstep"
-    makespan: Amount = 0.0
-    busy: dict[str, Amount] = {}
-    idle: dict[str, Amount] = {}
-    actions_per_robot: dict[str, Count] = {}
-    active_ticks: Count | None = None
-    recovery: list[dict[str, Any]] = []
-    recovery_ticks: Amount | None = None
-    unrecovered: Count | None = None
-    team: Name = "paper"  # the team: its name, TeamSpec.digest() and each robot's kind (upgrade_row: the paper's)
-    team_digest: str = ""
-    team_kinds: dict[str, str] = {}
-    messages_per_robot: dict[str, Count] = {}  # the team's work (mhrc.analysis.teamwork); absent: unknown
-    moves_per_robot: dict[str, Count] = {}
-    communication_steps: Count = 0
-    redundant_navigations: Count = 0
-    redundant_picks: Count = 0
-    redundant_per_robot: dict[str, Count] = {}
-    # the evaluation's settings
     aids: list[str] = []
     history_cap: Count | None = None
     mode: str = "free"
@@ -138,52 +80,108 @@ class EvalRow(BaseModel):
     scenario_sha256: str | None = None
     prompts: str | None = None
     base_url: str | None = None
-    # where it ran
+
+
+DIAG = "diag_"  # the prefix of the diagnostics' columns in episodes.jsonl
+PARTS = ("settings", "metrics", "diagnostics")  # the submodels; never a column of the file
+
+
+class EvalRow(BaseModel):
+    """One episode's row: its key (and repeat and trial), the evaluation's settings, the episode's
+    metrics and diagnostics, and where it ran. Columns a newer mhrc adds are kept as they are
+    (`model_extra`), and written back after the others."""
+
+    model_config = ConfigDict(extra="allow")
+
+    key: str = Field(max_length=512)
+    repeat: Count = 0
+    trial: Count = 0
+    settings: Settings
+    metrics: EpisodeMetrics
+    diagnostics: Diagnostics | None = None  # None: written before diagnostics existed (unknown, never zero)
     worker: str = ""
     trace: str | None = None
-    # the diagnostics, in Diagnostics' order
-    diag_llm_steps: Count | None = None
-    diag_parse_failures: Count | None = None
-    diag_llm_unreachable: Count | None = None
-    diag_hallucinations: Count | None = None
-    diag_hallucinated_names: dict[str, Count] | None = None
-    diag_not_capable: Count | None = None
-    diag_rejected: Count | None = None
-    diag_rejected_by_reason: dict[str, Count] | None = None
-    diag_failed: Count | None = None
-    diag_failed_by_code: dict[str, Count] | None = None
-    diag_failed_by_skill: dict[str, dict[str, Count]] | None = None
-    diag_repeated_failures: Count | None = None
-    diag_waits: Count | None = None
-    diag_waits_with_pending: Count | None = None
-    diag_messages_sent: Count | None = None
-    diag_messages_read: Count | None = None
-    diag_steps_above_bound: Count | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> EvalRow:
         """The key is the one its task, scene, objects, seed and team make; the trace, if any, is that
         key's file in traces/ (a path anywhere else, or a URL, is no trace of this directory)."""
-        key = episode_key(None if self.team == "paper" else self.team, self.task, self.scene, self.n_objects, self.seed)
+        m = self.metrics
+        key = episode_key(None if m.team == "paper" else m.team, m.task, m.scene, m.n_objects, m.seed)
         if self.key != key:
             raise ValueError(f"key {self.key!r} is not its episode's ({key!r})")
         if self.trace is not None and self.trace != trace_of(key):
             raise ValueError(f"trace {self.trace!r} is not its episode's file ({trace_of(key)!r})")
-        if self.placed > self.total:
-            raise ValueError(f"placed {self.placed} of {self.total} objects")
+        if m.placed > m.total:
+            raise ValueError(f"placed {m.placed} of {m.total} objects")
         return self
 
-    def record(self) -> Row:
-        """The row as its file holds it (JSON types), with the fields it was written with, upgraded:
-        what summaries take. A field it never had (its diagnostics, before they existed) stays absent."""
-        return self.model_dump(mode="json", exclude_unset=True)
+    @property
+    def valid(self) -> bool:
+        return self.metrics.valid
+
+    def flat(self) -> Flat:
+        """The row as its line of episodes.jsonl holds it (JSON values, `FLAT_ORDER`), with the
+        fields it was written with, upgraded; a field it never had (its diagnostics, before they
+        existed) stays absent."""
+        parts: dict[str, Flat] = {
+            "row": self.model_dump(mode="json", exclude_unset=True, exclude=set(PARTS)),
+            "settings": self.settings.model_dump(mode="json", exclude_unset=True),
+            "metrics": self.metrics.model_dump(mode="json", exclude_unset=True),
+            "diagnostics": {}
+            if self.diagnostics is None
+            else {DIAG + k: v for k, v in self.diagnostics.model_dump(mode="json", exclude_unset=True).items()},
+        }
+        out: Flat = {}
+        for part, names in FLAT_ORDER:
+            mine = parts[part]
+            out.update((k, mine[k]) for k in (names or tuple(mine)) if k in mine)
+        out.update(self.model_extra or {})
+        return out
 
     def line(self) -> str:
         """The row's line of episodes.jsonl."""
-        return json.dumps(self.record()) + "\n"
+        return json.dumps(self.flat()) + "\n"
 
 
-def upgrade_row(raw: dict[str, Any]) -> EvalRow:
+# the order of a line's columns: the key, the method and ablation, repeat and trial, the metrics,
+# the other settings, where it ran, the diagnostics (each part's fields in its model's order; None: all)
+_LEAD = ("method", "ablation")
+FLAT_ORDER: tuple[tuple[str, tuple[str, ...] | None], ...] = (
+    ("row", ("key",)),
+    ("settings", _LEAD),
+    ("row", ("repeat", "trial")),
+    ("metrics", None),
+    ("settings", tuple(f for f in Settings.model_fields if f not in _LEAD)),
+    ("row", ("worker", "trace")),
+    ("diagnostics", None),
+)
+
+
+def from_flat(values: Mapping[str, object]) -> EvalRow:
+    """The row a line of episodes.jsonl holds (its columns put back into their parts); raises
+    ValidationError for a value out of its range, ValueError for a column named as a part."""
+    if clash := sorted(set(values) & set(PARTS)):
+        raise ValueError(f"{clash[0]}: no column of a row")
+    part_of = {
+        **{f: "settings" for f in Settings.model_fields},
+        **{f: "metrics" for f in EpisodeMetrics.model_fields},
+        **{DIAG + f: "diagnostics" for f in Diagnostics.model_fields},
+    }
+    nested: dict[str, dict[str, object]] = {part: {} for part in PARTS}
+    top: dict[str, object] = {}
+    for k, v in values.items():
+        part = part_of.get(k)
+        if part == "diagnostics":
+            nested[part][k.removeprefix(DIAG)] = v
+        elif part is not None:
+            nested[part][k] = v
+        else:
+            top[k] = v  # the row's own fields, and columns a newer mhrc added
+    return EvalRow.model_validate({**top, **nested, "diagnostics": nested["diagnostics"] or None})
+
+
+def upgrade_row(raw: Mapping[str, object]) -> EvalRow:
     """A row as any version of mhrc wrote it, with the old meaning of every setting field it lacks:
     the one place old rows are upgraded. Raises ValidationError."""
     values = dict(raw)
@@ -194,7 +192,7 @@ def upgrade_row(raw: dict[str, Any]) -> EvalRow:
     if values.get("team") is None:  # older than teams: the paper's, as many of its robots as the row ran
         team = paper_team(values.get("robots"))
         values.update(team=team.name, team_digest=team.digest, team_kinds=dict(team.kinds))
-    return EvalRow.model_validate(values)
+    return from_flat(values)
 
 
 def trace_of(key: str) -> str:
@@ -229,18 +227,22 @@ def _json(path: Path, n: int, line: str) -> Any:
 
 
 def _first_error(exc: ValidationError) -> str:
+    """The first error, located by the file's column (a row's part is no column of it)."""
     err = exc.errors()[0]
-    where = ".".join(str(p) for p in err["loc"])
+    loc = list(err["loc"])
+    if len(loc) > 1 and loc[0] in PARTS:
+        loc = [(DIAG if loc[0] == "diagnostics" else "") + str(loc[1]), *loc[2:]]
+    where = ".".join(str(p) for p in loc)
     return f"{where}: {err['msg']}" if where else str(err["msg"])
 
 
-def read_rows(path: Path, grid: Collection[str] | None = None) -> list[Row]:
+def read_rows(path: Path, grid: Collection[str] | None = None) -> list[EvalRow]:
     """The rows of an episodes.jsonl, validated and upgraded (`upgrade_row`). A torn last line
     (no newline after it: an interrupted write) is skipped; any other line that is no row (not
     UTF-8, not JSON, a value out of its range, a key twice, or, given `grid`, a key the grid does
     not hold) is a ConfigError naming the file and the line."""
     lines, data_ends_whole = _lines(path)
-    rows: list[Row] = []
+    rows: list[EvalRow] = []
     seen: dict[str, int] = {}
     for k, (n, line) in enumerate(lines):
         try:
@@ -254,18 +256,19 @@ def read_rows(path: Path, grid: Collection[str] | None = None) -> list[Row]:
             raise ConfigError(f"{path}, line {n}: not an episode row (a JSON object)")
         try:
             row = upgrade_row(raw)
-        except ValidationError as exc:
-            raise ConfigError(f"{path}, line {n}: not an episode row ({_first_error(exc)})") from None
+        except ValueError as exc:  # a ValidationError, or a column named as a part of the row
+            why = _first_error(exc) if isinstance(exc, ValidationError) else str(exc)
+            raise ConfigError(f"{path}, line {n}: not an episode row ({why})") from None
         if row.key in seen:
             raise ConfigError(f"{path}, line {n}: episode {row.key} again (line {seen[row.key]})")
         if grid is not None and row.key not in grid:
             raise ConfigError(f"{path}, line {n}: episode {row.key} is not in this evaluation's grid (eval.json)")
         seen[row.key] = n
-        rows.append(row.record())
+        rows.append(row)
     return rows
 
 
-def read_dir(d: Path) -> list[Row]:
+def read_dir(d: Path) -> list[EvalRow]:
     """The rows of evaluation directory `d`, each checked against its manifest's grid (for `mhrc
     report`): ConfigError for a directory without either, or a row outside the grid."""
     path = d / "episodes.jsonl"
@@ -275,18 +278,17 @@ def read_dir(d: Path) -> list[Row]:
     grid = manifest.spec.keys() if manifest.spec is not None else None
     rows = read_rows(path, grid)
     for r in rows:
-        if (r["method"], r["ablation"]) != (manifest.identity.method, manifest.identity.ablation):
+        s, horizon = r.settings, r.metrics.horizon
+        if (s.method, s.ablation) != (manifest.identity.method, manifest.identity.ablation):
+            raise ConfigError(f"{path}: episode {r.key} ran {s.method}, ablation {s.ablation}, not the evaluation's")
+        if horizon is not None and horizon != manifest.identity.horizon:
             raise ConfigError(
-                f"{path}: episode {r['key']} ran {r['method']}, ablation {r['ablation']}, not the evaluation's"
-            )
-        if r.get("horizon") is not None and r["horizon"] != manifest.identity.horizon:
-            raise ConfigError(
-                f"{path}: episode {r['key']} ran horizon {r['horizon']}, not the evaluation's {manifest.identity.horizon}"
+                f"{path}: episode {r.key} ran horizon {horizon}, not the evaluation's {manifest.identity.horizon}"
             )
     return rows
 
 
-def merge_runs(dirs: list[Path]) -> list[Row]:
+def merge_runs(dirs: list[Path]) -> list[EvalRow]:
     """Every episode row of several evaluation directories (for `mhrc report`), each read by `read_dir`."""
     return [r for d in dirs for r in read_dir(d)]
 

@@ -16,7 +16,7 @@ and an ablation the paper reports. Where a setting has no paper cells, its secti
 one line.
 
 Beside the metrics, a "Failure diagnostics" table per setting (`mhrc.analysis.diagnostics`: the rows'
-`diag_*` columns); rows written before those columns existed are unknown there, never zero.
+diagnostics, `diag_*` columns in episodes.jsonl); rows written before those columns existed are unknown there, never zero.
 `write_summaries` writes summary.md, summary.csv and summary.html (`mhrc.eval.html`)."""
 
 from __future__ import annotations
@@ -27,9 +27,11 @@ from typing import Any
 
 import structlog
 
-from mhrc.analysis.metrics import summarize
 from mhrc.core.plural import counted
+from mhrc.eval.means import summarize
+from mhrc.eval.pairs import paired_markdown
 from mhrc.eval.paper import PaperMatch, paper_cell
+from mhrc.eval.records import EvalRow
 from mhrc.eval.rows import (
     CI_METRICS,
     CI_SEED,
@@ -110,17 +112,17 @@ def why_no_paper(shown: list[PaperMatch]) -> str | None:
     return f"No paper figures beside this run: {'; '.join(texts)}." if texts else None
 
 
-def invalid_note(rows: list[dict[str, Any]]) -> list[str]:
+def invalid_note(rows: list[EvalRow]) -> list[str]:
     bad = [r for r in rows if not is_valid(r)]
     if not bad:
         return []
     lines = [f"{counted(len(bad), 'invalid episode')} left out of every table below:"]
-    for r in sorted(bad, key=lambda r: (order_key(setting_of(r)), r["key"])):
-        lines.append(f"- {r['key']} ({setting_label(setting_of(r))}): {r.get('invalid_reason') or 'invalid'}")
+    for r in sorted(bad, key=lambda r: (order_key(setting_of(r)), r.key)):
+        lines.append(f"- {r.key} ({setting_label(setting_of(r))}): {r.metrics.invalid_reason or 'invalid'}")
     return lines + [""]
 
 
-def summary_markdown(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str:
+def summary_markdown(rows: list[EvalRow], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str:
     """`markdown` of the Summary of `rows`."""
     return markdown(Summary.of(rows, resamples=resamples, seed=seed))
 
@@ -182,6 +184,7 @@ def markdown(summary: Summary) -> str:
         lines += matrix(f"Table II: ablations of {setting_label(family, ablation=False)}", [(s, s[1]) for s in mine])
 
     lines += team_comparison(summary)  # only where the rows hold more than one team
+    lines += paired_markdown(summary.paired, resamples=resamples, seed=seed)  # only where two arms were compared
     lines += [
         "## Per setting, with 95% confidence intervals",
         "",
@@ -224,7 +227,7 @@ def markdown(summary: Summary) -> str:
         said = ([team] if team else []) + notes
         lines += ([""] + said if said else []) + [""]
 
-    if any(r.get("llm_calls") for r in valid):
+    if any(r.metrics.llm_calls for r in valid):
         head = "| setting | task | LLM steps | unparsed replies | unreachable steps | rejected actions | prompt tokens | completion tokens |"
         lines += [
             "## LLM failures and cost (means per episode)",
@@ -248,7 +251,7 @@ def markdown(summary: Summary) -> str:
         ]
         for (*fields, v), bucket in group(valid, *SETTING, key).items():
             setting = tuple(fields)
-            s = summarize(bucket)
+            s = summarize([r.metrics for r in bucket])
             m, a, fid = (setting[SETTING.index(f)] for f in ("method", "ablation", "fidelity"))
             extra = "".join(
                 f" · {x}" for x in setting_label(setting).split(" · ")[3:]
@@ -328,7 +331,7 @@ def diagnostics_markdown(summary: Summary) -> list[str]:
     return lines
 
 
-def summary_csv(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str:
+def summary_csv(rows: list[EvalRow], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str:
     """`csv_text` of the Summary of `rows`."""
     return csv_text(Summary.of(rows, resamples=resamples, seed=seed))
 

@@ -4,16 +4,17 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
 import structlog
 
-from mhrc.analysis.metrics import summarize
+from mhrc.analysis.metrics import EpisodeMetrics
 from mhrc.core.upgrade import paper_team
+from mhrc.eval.means import summarize
 from mhrc.eval.paper import PAPER_HORIZON, PAPER_SCHEDULE
-from mhrc.eval.records import OLD_MEANING, old_noise
+from mhrc.eval.records import EvalRow, Settings
 from mhrc.eval.records import merge_runs as merge_runs  # where callers have always found them
 from mhrc.eval.records import read_rows as read_rows
 
@@ -28,12 +29,13 @@ CI_SEED = 0  # every interval is drawn with this seed: the same rows give the sa
 CI_LEVEL = 0.95
 
 
-CI_METRICS = {
-    "succ": "success",
-    "ps": "partial_success",
-    "ts": "temporal_steps",
-    "as_ticks": "active_ticks",
-    "as": "action_steps",
+# each interval's metric, read from a row's metrics
+CI_METRICS: dict[str, Callable[[EvalRow], float | None]] = {
+    "succ": lambda r: float(r.metrics.success),
+    "ps": lambda r: r.metrics.partial_success,
+    "ts": lambda r: r.metrics.temporal_steps,
+    "as_ticks": lambda r: r.metrics.active_ticks,
+    "as": lambda r: r.metrics.action_steps,
 }
 
 
@@ -44,42 +46,53 @@ CI_METRICS = {
 # scenario: the --events scenario as NAME@SHA12 (its name and the first 12 hex digits of the file's sha256, as
 # `mhrc scenarios` lists it: two files of one name are two settings), None for a static episode
 SETTING = ("method", "ablation", "fidelity", "noise", "history_cap", "horizon", "mode", "schedule", "team", "scenario")
+Setting = tuple[Any, ...]  # a row's values of SETTING, in its order
 
 
-def team_setting(row: dict[str, Any]) -> str | None:
-    """A row's team as its setting holds it: None for the paper's (a row without a team ran it),
-    else NAME@DIGEST."""
-    name = row.get("team")
-    if name is None:
+def setting_defaults() -> dict[str, Any]:
+    """Each SETTING field's value in a row written without it: its model's default (team: the paper's, None)."""
+    fields = {**Settings.model_fields, **EpisodeMetrics.model_fields}
+    return {k: None if k == "team" or fields[k].is_required() else fields[k].default for k in SETTING}
+
+
+def team_setting(row: EvalRow) -> str | None:
+    """A row's team as its setting holds it: None for the paper's, else NAME@DIGEST."""
+    m = row.metrics
+    if m.team == "paper" and m.team_digest == paper_team(m.robots).digest:
         return None
-    digest = str(row.get("team_digest") or "")
-    if name == "paper" and digest == paper_team(row.get("robots")).digest:
-        return None
-    return f"{name}@{digest}"
+    return f"{m.team}@{m.team_digest}"
 
 
-def setting_of(row: dict[str, Any]) -> tuple[Any, ...]:
-    """What a row's numbers depend on besides the episode; rows written before a field existed get its old meaning."""
-    values = {
-        k: row.get(k, OLD_MEANING.get(k)) for k in SETTING
-    }  # rows read from a file are upgraded already (read_row)
-    values["team"] = team_setting(row)
-    if values["noise"] is None:
-        values["noise"] = old_noise(row.get("aids"))
-    if values["scenario"] is not None and row.get("scenario_sha256"):
-        values["scenario"] = f"{values['scenario']}@{str(row['scenario_sha256'])[:12]}"
-    return tuple(values[k] for k in SETTING)
+def setting_of(row: EvalRow) -> Setting:
+    """What a row's numbers depend on besides the episode (a row read from a file has every field's
+    old meaning already: mhrc.eval.records.upgrade_row)."""
+    s, m = row.settings, row.metrics
+    scenario = s.scenario
+    if scenario is not None and s.scenario_sha256:
+        scenario = f"{scenario}@{s.scenario_sha256[:12]}"
+    return (
+        s.method,
+        s.ablation,
+        m.fidelity,
+        m.noise,
+        s.history_cap,
+        m.horizon,
+        s.mode,
+        s.schedule,
+        team_setting(row),
+        scenario,
+    )
 
 
-def is_valid(row: dict[str, Any]) -> bool:
-    return row.get("valid", True) is not False
+def is_valid(row: EvalRow) -> bool:
+    return row.metrics.valid
 
 
 def order_key(key: Iterable[Any]) -> tuple[str, ...]:
     return tuple("" if x is None else str(x) for x in key)
 
 
-def setting_label(setting: tuple[Any, ...], *, ablation: bool = True) -> str:
+def setting_label(setting: Setting, *, ablation: bool = True) -> str:
     method, abl, fidelity, noise, cap, horizon, mode, schedule, team, scenario = setting
     parts = (
         [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["noise off"] if noise == "off" else [])
@@ -115,26 +128,37 @@ def bootstrap_ci(
     return float(lo), float(hi)
 
 
-def cell_stats(rows: list[dict[str, Any]], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> dict[str, Any]:
+def cell_stats(rows: list[EvalRow], *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> dict[str, Any]:
     """`summarize` plus a bootstrap interval (`<metric>_ci`) for Succ, PS, TS and AS."""
-    s = summarize(rows)
-    for name, field in CI_METRICS.items():
-        if s.get(name) is None:  # a reading older rows do not have
+    s = summarize([r.metrics for r in rows])
+    for name, value in CI_METRICS.items():
+        values = [value(r) for r in rows]
+        if s.get(name) is None or any(v is None for v in values):  # a reading older rows do not have
             s[f"{name}_ci"] = None
             continue
-        s[f"{name}_ci"] = bootstrap_ci([float(r[field]) for r in rows], resamples=resamples, seed=seed)
+        s[f"{name}_ci"] = bootstrap_ci([float(v or 0.0) for v in values], resamples=resamples, seed=seed)
     return s
 
 
-def group(rows: list[dict[str, Any]], *keys: str) -> dict[tuple[Any, ...], list[dict[str, Any]]]:
-    buckets: dict[tuple[Any, ...], list[dict[str, Any]]] = defaultdict(list)
+# what rows are grouped by besides their setting's fields
+BY: dict[str, Callable[[EvalRow], Any]] = {
+    "task": lambda r: r.metrics.task,
+    "scene": lambda r: r.metrics.scene,
+    "n_objects": lambda r: r.metrics.n_objects,
+}
+
+
+def group(rows: list[EvalRow], *keys: str) -> dict[tuple[Any, ...], list[EvalRow]]:
+    """Rows by the values of `keys` (SETTING's fields, or BY's), in the order every table lists them."""
+    buckets: dict[tuple[Any, ...], list[EvalRow]] = defaultdict(list)
     for r in rows:
-        buckets[tuple(setting_of(r)[SETTING.index(k)] if k in SETTING else r[k] for k in keys)].append(r)
+        setting = setting_of(r)
+        buckets[tuple(setting[SETTING.index(k)] if k in SETTING else BY[k](r) for k in keys)].append(r)
     return dict(sorted(buckets.items(), key=lambda kv: order_key(kv[0])))
 
 
-def by_setting_task(rows: list[dict[str, Any]]) -> dict[tuple[tuple[Any, ...], str], list[dict[str, Any]]]:
-    out: dict[tuple[tuple[Any, ...], str], list[dict[str, Any]]] = defaultdict(list)
+def by_setting_task(rows: list[EvalRow]) -> dict[tuple[Setting, str], list[EvalRow]]:
+    out: dict[tuple[Setting, str], list[EvalRow]] = defaultdict(list)
     for r in rows:
-        out[(setting_of(r), r["task"])].append(r)
+        out[(setting_of(r), r.metrics.task)].append(r)
     return dict(sorted(out.items(), key=lambda kv: (order_key(kv[0][0]), kv[0][1])))

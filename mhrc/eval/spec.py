@@ -20,6 +20,7 @@ from typing import Annotated
 from pydantic import BaseModel, ConfigDict, Field
 
 from mhrc.agents.llm import DEFAULT_MAX_TOKENS
+from mhrc.analysis.values import MAX_COUNT
 from mhrc.core.fidelity import label
 from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.eval.episode import Job
@@ -40,7 +41,6 @@ __all__ = [
 
 TEAM_KEY = re.compile(r"[A-Za-z0-9_-]{1,64}")  # a team's name as the first part of its episodes' keys
 MAX_EPISODES = 1_000_000  # the largest grid an evaluation directory's manifest may describe
-MAX_COUNT = 2**31 - 1  # the largest count (steps, objects, seeds, tokens) an evaluation's files may hold
 Horizon = Annotated[int, Field(strict=True, ge=1, le=MAX_COUNT)]
 Bounded = Annotated[int, Field(strict=True, ge=-MAX_COUNT, le=MAX_COUNT)]
 Scale = Annotated[float, Field(strict=True, ge=0.0, allow_inf_nan=False)]

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from mhrc.eval.directory import write_text
 from mhrc.eval.html import links_of, page
+from mhrc.eval.records import EvalRow
 from mhrc.eval.report import csv_text, markdown
 from mhrc.eval.rows import CI_SEED, RESAMPLES
 from mhrc.eval.summary import Summary
@@ -33,9 +33,7 @@ def write_summary_files(
     return text
 
 
-def write_summaries(
-    rows: list[dict[str, Any]], out: Path, *, resamples: int = RESAMPLES, seed: int = CI_SEED
-) -> str | None:
+def write_summaries(rows: list[EvalRow], out: Path, *, resamples: int = RESAMPLES, seed: int = CI_SEED) -> str | None:
     """SUMMARY_FILES in `out` (an evaluation directory, which the rows' trace paths are relative to);
     returns summary.md's text, None without rows (nothing written)."""
     if not rows:

@@ -39,7 +39,7 @@ class TeamCell:
     setting: tuple[Any, ...]
     task: str
     name: str  # the team's name (the paper's is `paper`)
-    kinds: dict[str, str]  # robot -> kind, in execution order
+    kinds: dict[str, str | None]  # robot -> kind, in execution order (None: a row that does not say)
     stats: dict[str, Any]  # mhrc.eval.rows.cell_stats
 
     @property
@@ -61,9 +61,9 @@ def team_cells(summary: Summary) -> list[TeamCell]:
     then the team's size and name."""
     out = []
     for (setting, task), rows in summary.cells.items():
-        first = rows[0]
-        kinds = dict(first.get("team_kinds") or dict.fromkeys(first.get("robots") or ()))
-        out.append(TeamCell(setting, task, str(first.get("team") or "paper"), kinds, summary.stats[(setting, task)]))
+        first = rows[0].metrics
+        kinds: dict[str, str | None] = dict(first.team_kinds or dict.fromkeys(first.robots))
+        out.append(TeamCell(setting, task, first.team, kinds, summary.stats[(setting, task)]))
     return sorted(out, key=lambda c: (order_key(without_team(c.setting)), c.task, c.size, c.name))
 
 
