@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 from click.testing import CliRunner
+from sweep import sweep
 
 from mhrc.cli import main
 from mhrc.run.config import EpisodeConfig
@@ -189,7 +190,7 @@ def test_a_start_past_any_map_is_refused_at_validation(tmp_path: Path, start: st
     assert not (tmp_path / "runs").exists()
 
 
-@pytest.mark.parametrize("name", ["world", "observer", "robots", "visible"])
+@pytest.mark.parametrize("name", sweep(["world", "observer", "robots", "visible"]))  # two mhrc processes a case
 def test_a_robot_named_like_a_participant_is_refused_before_anything_is_written(tmp_path: Path, name: str) -> None:
     """`--team world=...` passed validation and wrote runs/RUN/credentials (the world's key
     included) before Zenoh refused; `mhrc credentials --team world=...` exited 0 handing robot
