@@ -26,7 +26,8 @@ from typing import Any
 from report import emit
 
 from mhrc.analysis.metrics import summarize
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ScenarioEvent
+from mhrc.core.records import messages, read_records
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.world.scenario import load_scenario, shipped_scenarios
 from mhrc.world.scene import LAYOUTS
@@ -44,11 +45,7 @@ def _fired(out: Path, rows: list[dict[str, Any]]) -> dict[tuple[str, str, int, i
     """The scenario_event payloads of each episode's trace, by episode."""
     fired = {}
     for row in rows:
-        events = []
-        for line in read_trace(out / row["trace"]):
-            msg = line.get("msg")
-            if isinstance(msg, dict) and msg.get("kind") == "scenario_event":
-                events.append(msg)
+        events = [e.model_dump(mode="json") for e in messages(read_records(out / row["trace"]), ScenarioEvent)]
         fired[_episode(row)] = events
     return fired
 

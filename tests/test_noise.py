@@ -15,13 +15,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from json_rows import records
 from test_metrics import _put  # a hand-built trace line, with the protocol's required fields
 from test_table3 import play
 
 from mhrc.analysis.metrics import from_trace
 from mhrc.core.fidelity import CALIBRATION, NOISELESS, recorded_noise
 from mhrc.core.protocol import EpisodeStarted, Move, Navigate, OutcomeCode, decode_event
-from mhrc.core.trace import read_trace
+from mhrc.core.records import messages, read_records
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.report import summary_markdown
 from mhrc.eval.rows import setting_label, setting_of
@@ -33,10 +34,8 @@ RATES = {"navigation_slip": 0.03, "navigation_sigma": 0.015, "release_slip": 0.1
 NOISY = [("make_sandwich", "kitchen", 6, 7), ("make_sandwich", "bathroom", 5, 1)]
 
 
-def _started(trace: Path) -> dict[str, Any]:
-    return next(
-        r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_started"
-    )
+def _started(trace: Path) -> EpisodeStarted:
+    return messages(read_records(trace), EpisodeStarted)[0]
 
 
 def _rows(out: Path) -> list[dict[str, Any]]:
@@ -202,7 +201,7 @@ def test_a_trace_or_row_from_before_the_field_reads_as_the_calibration() -> None
     }
     line = {k: v for k, v in old.items() if k != "kind"}
     end = {k: v for k, v in done.items() if k != "kind"}
-    m = from_trace([_put("episode_started", **line), _put("episode_done", **end)])
+    m = from_trace(records([_put("episode_started", **line), _put("episode_done", **end)]))
     assert (m.noise, m.noise_rates) == ("on", RATES)
     row = {"method": "heuristic", "ablation": "none", "fidelity": "paper", "aids": [], "schedule": "sequential"}
     assert (

@@ -16,7 +16,8 @@ import pytest
 import test_viewer_browser
 from test_viewer import record_heuristic, show
 
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ScenarioEvent, Snapshot
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.viewer.load import load_trace
@@ -37,10 +38,8 @@ def _record(path: Path, events: Path, horizon: int) -> Path:
     return path
 
 
-def _events(trace: Path) -> list[dict[str, Any]]:
-    return [
-        r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "scenario_event"
-    ]
+def _events(trace: Path) -> list[ScenarioEvent]:
+    return messages(read_records(trace), ScenarioEvent)
 
 
 @pytest.fixture(scope="module")
@@ -48,8 +47,8 @@ def busy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """seed 0 with the shipped busy_house scenario: relocate, close, breakdown, new_target, all applied."""
     trace = _record(tmp_path_factory.mktemp("busy") / "trace.jsonl", BUSY_HOUSE, HORIZON)
     fired = _events(trace)
-    assert [e["event"] for e in fired] == ["relocate", "close", "breakdown", "new_target"] and all(
-        e["applied"] for e in fired
+    assert [e.event for e in fired] == ["relocate", "close", "breakdown", "new_target"] and all(
+        e.applied for e in fired
     ), fired
     return trace
 
@@ -62,7 +61,7 @@ def skipped(tmp_path_factory: pytest.TempPathFactory) -> Path:
     scenario.write_text(json.dumps([{"tick": 1, "kind": "close"}]))
     trace = _record(d / "trace.jsonl", scenario, SKIP_HORIZON)
     fired = _events(trace)
-    assert len(fired) == 1 and not fired[0]["applied"] and fired[0]["skipped"], fired
+    assert len(fired) == 1 and not fired[0].applied and fired[0].skipped, fired
     return trace
 
 
@@ -74,12 +73,11 @@ def static(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _snapshot_rows(trace: Path) -> tuple[list[int], dict[int, int]]:
     """The trace positions of the snapshots, and of each scenario event by its index."""
     snaps, events = [], {}
-    for n, r in enumerate(read_trace(trace)):
-        kind = (r["msg"] or {}).get("kind") if isinstance(r["msg"], dict) else None
-        if kind == "snapshot":
+    for n, r in enumerate(read_records(trace)):
+        if isinstance(r.msg, Snapshot):
             snaps.append(n)
-        elif kind == "scenario_event":
-            events[r["msg"]["index"]] = n
+        elif isinstance(r.msg, ScenarioEvent):
+            events[r.msg.index] = n
     return snaps, events
 
 
@@ -92,7 +90,7 @@ def test_the_view_model_holds_each_event_at_the_first_frame_that_shows_it(busy: 
     scenario = load_scenario(BUSY_HOUSE)
     assert view.header["scenario"] == ("busy_house", scenario.sha256)
     assert [(m.index, m.event, m.tick, m.applied, m.changed, m.text) for m in view.events] == [
-        (e["index"], e["event"], e["tick"], e["applied"], e["changed"], e["text"]) for e in fired
+        (e.index, e.event, e.tick, e.applied, e.changed, e.text) for e in fired
     ]
     snaps, rows = _snapshot_rows(busy)
     frames = view.frames
@@ -212,7 +210,7 @@ def test_the_report_marks_every_event_on_the_timeline_in_the_lanes_and_names_the
     # the page's data: each event where the map draws it
     html = (tmp_path / "busy.html").read_text(encoding="utf-8")
     data = json.loads(html.split('id="mhrc-data">', 1)[1].split("</script>", 1)[0])
-    assert [(e["event"], e["frame"], e["at"], e["origin"]) for e in data["events"]] == [
+    assert [(e.event, e.frame, e.at, e.origin) for e in data["events"]] == [
         (e.event, e.frame, list(e.at) if e.at else None, list(e.origin) if e.origin else None) for e in view.events
     ]
 
@@ -373,7 +371,7 @@ def test_the_videos_own_sim_gets_the_new_target_from_its_first_snapshot(busy: Pa
     from mhrc.viewer.video import _spawns
 
     started, steps, _ = read_episode(busy)
-    added = next(e for e in _events(busy) if e["event"] == "new_target")["changed"]
+    added = next(e for e in _events(busy) if e.event == "new_target")["changed"]
     [(first, obj)] = [(i, a) for i, s in enumerate(steps) for a in s.added]
     assert obj == (added["object"], added["on"]) and added["object"] in steps[first].snapshot.objects
     assert added["object"] not in steps[first - 1].snapshot.objects
