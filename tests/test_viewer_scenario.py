@@ -88,7 +88,7 @@ def test_the_view_model_holds_each_event_at_the_first_frame_that_shows_it(busy: 
     view = build_view(load_trace(busy))
     fired = _events(busy)
     scenario = load_scenario(BUSY_HOUSE)
-    assert view.header["scenario"] == ("busy_house", scenario.sha256)
+    assert view.header.scenario == ("busy_house", scenario.sha256)
     assert [(m.index, m.event, m.tick, m.applied, m.changed, m.text) for m in view.events] == [
         (e.index, e.event, e.tick, e.applied, e.changed, e.text) for e in fired
     ]
@@ -99,22 +99,22 @@ def test_the_view_model_holds_each_event_at_the_first_frame_that_shows_it(busy: 
     for m in view.events:
         # the first snapshot recorded after the event: the world as the event's tick opens
         assert m.frame is not None and snaps[m.frame] > rows[m.index] > snaps[m.frame - 1]
-        assert frames[m.frame]["tick"] < m.tick <= frames[m.frame]["tick"] + 1
+        assert frames[m.frame].tick < m.tick <= frames[m.frame].tick + 1
         at[m.event] = m.frame
 
     move = by_kind["relocate"]
-    obj, was, now = move.changed["object"], frames[at["relocate"] - 1]["objects"], frames[at["relocate"]]["objects"]
-    assert (was[obj]["on"], now[obj]["on"]) == (move.changed["from"], move.changed["to"])
-    assert move.at == (now[obj]["x"], now[obj]["y"]) and move.origin == (was[obj]["x"], was[obj]["y"])
+    obj, was, now = move.changed["object"], frames[at["relocate"] - 1].objects, frames[at["relocate"]].objects
+    assert (was[obj].on, now[obj].on) == (move.changed["from"], move.changed["to"])
+    assert move.at == (now[obj].x, now[obj].y) and move.origin == (was[obj].x, was[obj].y)
 
     added = by_kind["new_target"]
-    new, there = added.changed["object"], frames[at["new_target"]]["objects"]
-    assert new not in frames[at["new_target"] - 1]["objects"] and there[new]["on"] == added.changed["on"]
-    assert added.at == (there[new]["x"], there[new]["y"])
+    new, there = added.changed["object"], frames[at["new_target"]].objects
+    assert new not in frames[at["new_target"] - 1].objects and there[new].on == added.changed["on"]
+    assert added.at == (there[new].x, there[new].y)
 
     close = by_kind["close"]
     box = close.changed["container"]
-    assert frames[at["close"] - 1]["open"][box] and not frames[at["close"]]["open"][box]
+    assert frames[at["close"] - 1].open[box] and not frames[at["close"]].open[box]
     furniture = {f["name"]: f for f in view.scene["furniture"]} if view.scene else {}
     assert close.at == (furniture[box]["x"], furniture[box]["y"])
 
@@ -126,7 +126,7 @@ def test_the_view_model_holds_each_event_at_the_first_frame_that_shows_it(busy: 
 
 def test_a_static_episode_has_no_events_and_no_scenario(static: Path) -> None:
     view = build_view(load_trace(static))
-    assert view.events == [] and view.header["scenario"] is None
+    assert view.events == [] and view.header.scenario is None
 
 
 # --------------------------------------------------------------------------- the HTML
@@ -210,7 +210,7 @@ def test_the_report_marks_every_event_on_the_timeline_in_the_lanes_and_names_the
     # the page's data: each event where the map draws it
     html = (tmp_path / "busy.html").read_text(encoding="utf-8")
     data = json.loads(html.split('id="mhrc-data">', 1)[1].split("</script>", 1)[0])
-    assert [(e.event, e.frame, e.at, e.origin) for e in data["events"]] == [
+    assert [(e["event"], e["frame"], e["at"], e["origin"]) for e in data["events"]] == [
         (e.event, e.frame, list(e.at) if e.at else None, list(e.origin) if e.origin else None) for e in view.events
     ]
 
@@ -219,7 +219,7 @@ def test_a_skipped_event_is_marked_skipped_with_why_and_a_static_report_has_no_e
     skipped: Path, static: Path, tmp_path: Path
 ) -> None:
     html, page = _page(skipped, tmp_path / "skipped.html")
-    why = _events(skipped)[0]["skipped"]
+    why = _events(skipped)[0].skipped
     [marker] = page.markers
     assert marker["class"].split() == ["ev-marker", "ev-close", "skipped"]
     assert marker["title"].startswith("tick 1: ") and "skipped" in marker["title"] and why in marker["title"]
@@ -335,13 +335,13 @@ def test_the_video_captions_each_event_at_the_frames_of_its_tick(busy: Path, sta
     started, steps, named = read_episode(busy)
     shown: dict[str, list[int]] = {}
     for ev in _events(busy):
-        text = ev["text"].rstrip(".")
-        said = f"tick {ev['tick']}: {text[0].lower() + text[1:] if text[1].islower() else text}"
-        shown[ev["event"]] = [i for i, s in enumerate(steps) if said in s.events]
+        text = ev.text.rstrip(".")
+        said = f"tick {ev.tick}: {text[0].lower() + text[1:] if text[1].islower() else text}"
+        shown[ev.event] = [i for i, s in enumerate(steps) if said in s.events]
         # from the first snapshot after the event (the world as its tick opens) through its tick's own
-        assert [steps[i].snapshot.tick for i in shown[ev["event"]]] == [ev["tick"] - 1, ev["tick"]], (said, shown)
+        assert [steps[i].snapshot.tick for i in shown[ev.event]] == [ev.tick - 1, ev.tick], (said, shown)
     moved = steps[shown["relocate"][-1]]
-    assert moved.events == ("tick 6: someone moved {object} from {from} to {to}".format(**_events(busy)[0]["changed"]),)
+    assert moved.events == ("tick 6: someone moved {object} from {from} to {to}".format(**_events(busy)[0].changed),)
     quiet = [s for s in steps if not s.events]
     assert len(quiet) == len(steps) - 2 * len(shown)
 
@@ -359,7 +359,7 @@ def test_the_video_captions_each_event_at_the_frames_of_its_tick(busy: Path, sta
     _, plain, unnamed = read_episode(static)
     assert not any(s.events or s.added for s in plain)
     # the title names the scenario (name and hash), a static episode's none
-    sha = _events(busy)[0]["sha256"]
+    sha = _events(busy)[0].sha256
     assert named == f"busy_house ({sha[:8]})" and unnamed is None
     assert _Captioner(320, 240, started, len(steps), scenario=named).title.endswith(
         f"/ scenario busy_house ({sha[:8]})"
@@ -371,7 +371,7 @@ def test_the_videos_own_sim_gets_the_new_target_from_its_first_snapshot(busy: Pa
     from mhrc.viewer.video import _spawns
 
     started, steps, _ = read_episode(busy)
-    added = next(e for e in _events(busy) if e.event == "new_target")["changed"]
+    added = next(e for e in _events(busy) if e.event == "new_target").changed
     [(first, obj)] = [(i, a) for i, s in enumerate(steps) for a in s.added]
     assert obj == (added["object"], added["on"]) and added["object"] in steps[first].snapshot.objects
     assert added["object"] not in steps[first - 1].snapshot.objects
