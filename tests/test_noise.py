@@ -136,7 +136,7 @@ def test_a_real_episode_records_the_rates_in_its_trace_and_row_and_noise_off_is_
     ):
         (row,) = rows
         started = _started(where / row["trace"])
-        assert started["noise"] == {"setting": noise, **rates}
+        assert started.noise.model_dump() == {"setting": noise, **rates}
         assert (row["noise"], row["noise_rates"]) == (noise, rates)
     on, off = setting_of(default[0]), setting_of(noiseless[0])
     assert on != off and setting_label(on) == "heuristic · ablation none · paper · horizon 3"
@@ -170,7 +170,7 @@ def test_mhrc_up_and_its_world_process_run_without_noise_when_asked(tmp_path: Pa
     ]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert _started(trace)["noise"] == NOISELESS.model_dump()
+    assert _started(trace).noise == NOISELESS
     assert "fidelity paper, noise off" in out.stdout
 
 
