@@ -19,7 +19,8 @@ from typing import Any
 from report import emit
 
 from mhrc.core.fidelity import parse_aids
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult
+from mhrc.core.records import messages, read_records
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.means import summarize
 from mhrc.eval.records import EvalRow
@@ -39,13 +40,11 @@ def _outcomes(out: Path) -> dict[str, int]:
     """Failure codes of every action result in the run's traces, and how many actions there were."""
     codes: Counter[str] = Counter()
     for trace in sorted((out / "traces").glob("*.jsonl")):
-        for line in read_trace(trace):
-            msg = line.get("msg")
-            if isinstance(msg, dict) and msg.get("kind") == "action_result":
-                codes[msg["action"]["skill"]] += 1
-                code = msg["outcome"]["code"]
-                if code in TABLE_III:
-                    codes[f"{msg['action']['skill']}:{code}"] += 1
+        for msg in messages(read_records(trace), ActionResult):
+            codes[msg.action.skill] += 1
+            code = msg.outcome.code.value
+            if code in TABLE_III:
+                codes[f"{msg.action.skill}:{code}"] += 1
     return dict(sorted(codes.items()))
 
 

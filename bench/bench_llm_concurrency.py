@@ -29,7 +29,8 @@ from typing import Any
 from report import emit
 
 from mhrc.analysis.metrics import from_trace
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import EpisodeStarted
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 
@@ -80,13 +81,9 @@ def run_episode(httpd: CountingServer, schedule: str, horizon: int) -> dict[str,
             seed=SEED, horizon=horizon, schedule=schedule, llm="openai:fixed-latency", base_url=url, trace=trace
         )
         done = asyncio.run(up_in_process(cfg.resolved()))
-        rows = read_trace(trace)
+        rows = read_records(trace)
     m = from_trace(rows)
-    ran = [
-        r["msg"].get("scheduler")
-        for r in rows
-        if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "episode_started"
-    ]
+    ran = [m.scheduler for m in messages(rows, EpisodeStarted)]
     if ran != [schedule]:
         raise RuntimeError(f"asked for the {schedule} schedule, the world reported {ran}")
     return {

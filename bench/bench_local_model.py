@@ -35,8 +35,9 @@ from report import emit, percentile
 
 from mhrc.agents.llm.local import LocalModelServer
 from mhrc.agents.llm.packaged import packaged_gemma
-from mhrc.core.protocol import LLM_ERROR_PREFIX
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import LLM_ERROR_PREFIX, EpisodeStarted, Thought, TickClosed
+from mhrc.core.protocol.thoughts import ReplyFailure
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import IDLE_TIMEOUT, SERVER_TIMEOUT, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 
@@ -109,33 +110,29 @@ async def episode(srv: LocalModelServer, horizon: int, structured: bool, stream:
         t0 = time.perf_counter()
         await up_in_process(cfg)
         wall = time.perf_counter() - t0
-        lines = read_trace(Path(tmp) / "t.jsonl")
-    thoughts = [line["msg"] for line in lines if line["key"].endswith("/thought")]
-    answered = [t for t in thoughts if not (t["parse_error"] or "").startswith(LLM_ERROR_PREFIX)]
-    lost = [t for t in thoughts if (t["parse_error"] or "").startswith(LLM_ERROR_PREFIX)]
-    ticks = [
-        line["t"]
-        for line in lines
-        if line["key"].endswith("/world/event") and line["msg"].get("kind") in ("episode_started", "tick")
-    ]
+        lines = read_records(Path(tmp) / "t.jsonl")
+    thoughts = messages(lines, Thought)
+    answered = [t for t in thoughts if t.failure is not ReplyFailure.MODEL_UNREACHABLE]
+    lost = [t for t in thoughts if t.failure is ReplyFailure.MODEL_UNREACHABLE]
+    ticks = [line.t for line in lines if isinstance(line.msg, (EpisodeStarted, TickClosed))]
     rates = []  # a slot's decoding rate: tokens after the first over the time after it (streamed), or over the whole call
     for t in answered:
-        decoding = t["latency"] - (t["ttft"] or 0.0)
-        if t["completion_tokens"] > 1 and decoding > 0:
-            rates.append((t["completion_tokens"] - (1 if t["ttft"] is not None else 0)) / decoding)
+        decoding = t.latency - (t.ttft or 0.0)
+        if t.completion_tokens > 1 and decoding > 0:
+            rates.append((t.completion_tokens - (1 if t.ttft is not None else 0)) / decoding)
     return {
         "mode": ("structured" if structured else "free") + (" stream" if stream else " no-stream"),
         "robot_steps": len(thoughts),
         "steps_lost_to_timeouts": len(lost),
         "share_lost": round(len(lost) / len(thoughts), 3) if thoughts else None,
-        "lost_reasons": sorted({(t["parse_error"] or "")[len(LLM_ERROR_PREFIX) :][:160] for t in lost}),
-        "time_to_first_token_s": stats([t["ttft"] for t in answered if t["ttft"] is not None]),
+        "lost_reasons": sorted({(t.parse_error or "")[len(LLM_ERROR_PREFIX) :][:160] for t in lost}),
+        "time_to_first_token_s": stats([t.ttft for t in answered if t.ttft is not None]),
         "tokens_per_s_per_slot": stats(rates),
-        "prompt_tokens_per_step": stats([t["prompt_tokens"] for t in answered]),
-        "completion_tokens_per_step": stats([t["completion_tokens"] for t in answered]),
-        "replies_cut_at_max_tokens": sum(t["finish_reason"] == "length" for t in answered),
-        "parse_failures": sum(t["parse_error"] is not None for t in answered),
-        "latency_per_call_s": stats([t["latency"] for t in answered]),
+        "prompt_tokens_per_step": stats([t.prompt_tokens for t in answered]),
+        "completion_tokens_per_step": stats([t.completion_tokens for t in answered]),
+        "replies_cut_at_max_tokens": sum(t.finish_reason == "length" for t in answered),
+        "parse_failures": sum(t.parse_error is not None for t in answered),
+        "latency_per_call_s": stats([t.latency for t in answered]),
         "wall_per_tick_s": stats([b - a for a, b in zip(ticks, ticks[1:])]),
         "episode_wall_s": round(wall, 1),
         "load_average_1m_before": round(load0, 2),

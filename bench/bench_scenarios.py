@@ -25,7 +25,8 @@ from typing import Any
 
 from report import emit
 
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ScenarioEvent
+from mhrc.core.records import messages, read_records
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.means import summarize
 from mhrc.eval.records import EvalRow
@@ -46,11 +47,7 @@ def _fired(out: Path, rows: list[EvalRow]) -> dict[tuple[str, str, int, int], li
     """The scenario_event payloads of each episode's trace, by episode."""
     fired = {}
     for row in rows:
-        events = []
-        for line in read_trace(out / str(row.trace)):
-            msg = line.get("msg")
-            if isinstance(msg, dict) and msg.get("kind") == "scenario_event":
-                events.append(msg)
+        events = [e.model_dump(mode="json") for e in messages(read_records(out / str(row.trace)), ScenarioEvent)]
         fired[_episode(row)] = events
     return fired
 

@@ -41,7 +41,7 @@ from mhrc.agents.policy import Decision
 from mhrc.analysis.metrics import from_trace
 from mhrc.core.bus import Bus, open_client
 from mhrc.core.protocol import ActionResult, EpisodeDone, Observation
-from mhrc.core.trace import read_trace
+from mhrc.core.records import read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.serve import serve_world
 
@@ -147,7 +147,7 @@ def run(task: str, seed: int, schedule: str, server: ScriptedServer, n_objects: 
         trace = Path(tmp) / "t.jsonl"
         cfg = EpisodeConfig.build(task=task, seed=seed, n_objects=n_objects, schedule=schedule, trace=trace).resolved()
         done, mismatches = asyncio.run(episode(cfg, url))
-        m = from_trace(read_trace(trace))
+        m = from_trace(read_records(trace))
     calls = server.calls - before
     return {
         "task": task,

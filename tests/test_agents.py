@@ -25,9 +25,11 @@ from mhrc.core.protocol import (
     OutcomeCode,
     RobotStatus,
     SkillOutcome,
+    Thought,
     decode,
 )
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol.thoughts import ReplyFailure
+from mhrc.core.records import messages, read_records
 
 
 async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(mhrc_world) -> None:  # type: ignore[no-untyped-def]
@@ -46,11 +48,10 @@ async def test_scripted_replies_drive_a_robot_and_bad_replies_become_feedback(mh
     assert [r.action.call() for r in policy.results] == ["wait()", "pick(ghost)", "wait()"]
     assert policy.results[1].outcome.code == OutcomeCode.OBJECT_UNKNOWN
     assert policy.format_feedback == [UNREADABLE]  # the paper's feedback: only that the command could not be read
-    thoughts = [line["msg"] for line in read_trace(world.config.trace) if line["key"].endswith("/agent/bob/thought")]
-    assert [t["parse_error"] is not None for t in thoughts] == [True, False, False] and "no command found" in thoughts[
-        0
-    ]["parse_error"]
-    assert thoughts[0]["reply"] == "I am not sure what to do."
+    thoughts = [t for t in messages(read_records(world.config.trace), Thought) if t.robot == "bob"]
+    assert [t.parse_error is not None for t in thoughts] == [True, False, False]
+    assert thoughts[0].failure is ReplyFailure.UNREADABLE and "no command found" in (thoughts[0].parse_error or "")
+    assert thoughts[0].reply == "I am not sure what to do."
 
 
 async def test_a_second_agent_for_an_attached_robot_is_refused(mhrc_world) -> None:  # type: ignore[no-untyped-def]

@@ -20,8 +20,8 @@ from mhrc.analysis.metrics import from_trace
 from mhrc.cli import main
 from mhrc.core.bus import Bus
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import ActionAck, ActionRequest, ActionResult, Wait, decode
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionAck, ActionRequest, ActionResult, EpisodeStarted, Pick, Wait, decode
+from mhrc.core.records import TraceLine, messages, read_records
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer, ScriptedPolicy, run_episode, world_on_loopback
@@ -34,8 +34,8 @@ from mhrc.world.sim import Sim
 WAIT = 180.0  # s: a bound on every wait, so that a regression fails instead of hanging
 
 
-def _results(trace: Path) -> list[dict[str, Any]]:
-    return [line["msg"] for line in read_trace(trace) if line["key"].endswith("/action/result")]
+def _results(trace: Path) -> list[ActionResult]:
+    return messages(read_records(trace), ActionResult)
 
 
 # --------------------------------------------------------------------------- options
@@ -83,7 +83,7 @@ async def test_heuristic_team_solves_every_task_async(task: str, scene: str, tmp
     cfg = EpisodeConfig.build(task=task, scene=scene, seed=0, n_objects=4, schedule="async", trace=trace)
     done = await asyncio.wait_for(up_in_process(cfg.resolved()), WAIT)
     assert done.reason == "success" and done.metrics.success, (task, scene, done.metrics)
-    m = from_trace(read_trace(trace))
+    m = from_trace(read_records(trace))
     # TS is the makespan in steps of STEP_SECONDS; the trace and the world agree on both
     assert m.scheduler == "async" and m.makespan == pytest.approx(done.metrics.makespan, abs=1e-3)
     assert (
@@ -91,19 +91,19 @@ async def test_heuristic_team_solves_every_task_async(task: str, scene: str, tmp
         and (m.temporal_steps - 1) * STEP_SECONDS < m.makespan <= m.temporal_steps * STEP_SECONDS
     )
     results = _results(trace)
-    assert len({r["goal_id"] for r in results}) == len(results), "a result went out twice"
+    assert len({r.goal_id for r in results}) == len(results), "a result went out twice"
     for robot in cfg.robots:
-        own = [r for r in results if r["robot"] == robot]
-        assert [r["tick"] for r in own] == list(range(len(own))), "a robot's ticks are its own step count"
+        own = [r for r in results if r.robot == robot]
+        assert [r.tick for r in own] == list(range(len(own))), "a robot's ticks are its own step count"
         # a robot's actions never overlap and never start before the one executed before them
-        assert all(a["ended"] <= b["started"] + 1e-9 for a, b in zip(own, own[1:]))
+        assert all(a.ended <= b.started + 1e-9 for a, b in zip(own, own[1:]))
         assert m.busy[robot] + m.idle[robot] == pytest.approx(m.makespan, abs=0.01)
         assert m.actions_per_robot[robot] == len(own)
-    starts = [r["started"] for r in results]
+    starts = [r.started for r in results]
     assert starts == sorted(starts), (
         "the clock never runs backwards (0 = as fast as possible: results go out as executed)"
     )
-    assert results[-1]["done"] and results[-1]["ended"] == pytest.approx(m.makespan, abs=1e-3)
+    assert results[-1].done and results[-1].ended == pytest.approx(m.makespan, abs=1e-3)
 
 
 # --------------------------------------------------------------------------- a slow robot
@@ -174,22 +174,20 @@ async def test_two_robots_go_for_the_same_object(tmp_path: Path) -> None:
     episode = {"seed": 0, "horizon": 12, "schedule": "async", "start_timeout": 5.0, "trace": trace}
     done = (await run_episode({"alice": alice, "bob": bob, "david": None}, timeout=WAIT, **episode)).done  # no David
     assert done.reason == "horizon"
-    picks = [r for r in _results(trace) if r["action"] == {"skill": "pick", "obj": "soap"}]
-    assert [r["robot"] for r in picks[:1]] == ["alice"]  # her first pick, in cabinet_1
+    picks = [r for r in _results(trace) if r.action == Pick(obj="soap")]
+    assert [r.robot for r in picks[:1]] == ["alice"]  # her first pick, in cabinet_1
     contest = picks[1:]
-    assert sorted(r["robot"] for r in contest) == ["alice", "bob"], contest
-    winners = [r for r in contest if r["outcome"]["succeeded"]]
-    losers = [r for r in contest if not r["outcome"]["succeeded"]]
+    assert sorted(r.robot for r in contest) == ["alice", "bob"], contest
+    winners = [r for r in contest if r.outcome.succeeded]
+    losers = [r for r in contest if not r.outcome.succeeded]
     assert len(winners) == 1 and len(losers) == 1, contest
-    assert f"held by {winners[0]['robot']}" in losers[0]["outcome"]["feedback"].lower(), losers[0]["outcome"]
+    assert f"held by {winners[0].robot}" in losers[0].outcome.feedback.lower(), losers[0].outcome
     holding = {r: p.results[-1].observation.status.holding for r, p in (("alice", alice), ("bob", bob)) if p.results}
     assert sorted(holding.values(), key=str) == sorted([None, "soap"], key=str), holding
     # nothing duplicated, nothing lost: every accepted request has exactly one result
-    lines = read_trace(trace)
-    accepted = [
-        line["msg"]["goal_id"] for line in lines if line["key"].endswith("/action/ack") and line["msg"]["accepted"]
-    ]
-    released = [r["goal_id"] for r in _results(trace)]
+    lines = read_records(trace)
+    accepted = [a.goal_id for a in messages(lines, ActionAck) if a.accepted]
+    released = [r.goal_id for r in _results(trace)]
     assert len(released) == len(set(released)) and set(released) <= set(accepted)
     assert set(accepted) - set(released) <= set(done.final_results.values()) | _unfinished(lines), (
         "an accepted request got no result"
@@ -207,16 +205,16 @@ async def test_two_robots_go_for_the_same_object(tmp_path: Path) -> None:
     )
 
 
-def _unfinished(lines: list[dict[str, Any]]) -> set[str]:
+def _unfinished(lines: list[TraceLine]) -> set[str]:
     """Goal ids of requests sent after the last result each robot got (the episode ended first)."""
     last: dict[str, int] = {}
     for i, line in enumerate(lines):
-        if line["key"].endswith("/action/result"):
-            last[line["msg"]["robot"]] = i
+        if isinstance(line.msg, ActionResult):
+            last[line.msg.robot] = i
     return {
-        line["msg"]["goal_id"]
+        line.msg.goal_id
         for i, line in enumerate(lines)
-        if line["key"].endswith("/action/request") and i > last.get(line["msg"]["robot"], -1)
+        if isinstance(line.msg, ActionRequest) and i > last.get(line.msg.robot, -1)
     }
 
 
@@ -266,16 +264,12 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
         bus.put(keys.action_request("alice"), stale)
         ack = await asyncio.wait_for(acks.get(), 30)
         assert not ack.accepted and "is for tick 0 but alice is at tick 1" in ack.reason and ack.code == "stale_tick"
-    started = [
-        line["msg"]
-        for line in read_trace(tmp_path / "t.jsonl")
-        if line["msg"] and line["msg"].get("kind") == "episode_started"
-    ]
+    started = messages(read_records(tmp_path / "t.jsonl"), EpisodeStarted)
     assert (
         started
-        and started[0]["scheduler"] == "async"
-        and started[0]["time_scale"] == 1.0
-        and started[0]["step_seconds"] == STEP_SECONDS
+        and started[0].scheduler == "async"
+        and started[0].time_scale == 1.0
+        and started[0].step_seconds == STEP_SECONDS
     )
 
 
@@ -296,9 +290,5 @@ async def test_async_runs_across_processes_with_its_time_scale(tmp_path: Path) -
     assert parsed.params["schedule"] == "async" and parsed.params["time_scale"] == 40.0
     done = await asyncio.wait_for(up_processes(cfg), WAIT)
     assert done.reason == "success"
-    started = [
-        line["msg"]
-        for line in read_trace(tmp_path / "t.jsonl")
-        if line["msg"] and line["msg"].get("kind") == "episode_started"
-    ]
-    assert [(m["scheduler"], m["time_scale"]) for m in started] == [("async", 40.0)]
+    started = messages(read_records(tmp_path / "t.jsonl"), EpisodeStarted)
+    assert [(m.scheduler, m.time_scale) for m in started] == [("async", 40.0)]

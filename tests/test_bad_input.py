@@ -37,7 +37,7 @@ from mhrc.core.protocol import (
     decode,
     new_goal_id,
 )
-from mhrc.core.trace import read_trace
+from mhrc.core.records import JunkCount, read_records
 from mhrc.run.config import ROBOTS
 from mhrc.testing import LoopbackWorld, world_on_loopback
 
@@ -245,8 +245,8 @@ def _request(goal: str, **fields: Any) -> dict[str, Any]:
     } | fields
 
 
-def _junk(trace: Path, key_end: str) -> list[dict[str, Any]]:
-    return [r["msg"] for r in read_trace(trace) if r["kind"] == "junk" and r["key"].endswith(key_end)]
+def _junk(trace: Path, key_end: str) -> list[JunkCount]:
+    return [r.junk for r in read_records(trace) if r.junk is not None and r.key.endswith(key_end)]
 
 
 async def test_deeply_nested_json_and_a_huge_tick_are_rejected_at_the_ack(tmp_path: Path) -> None:
@@ -280,8 +280,8 @@ async def test_deeply_nested_json_and_a_huge_tick_are_rejected_at_the_ack(tmp_pa
     assert crashes == []
     warned = [e for e in logs if e["event"] == "malformed action request rejected"]
     assert 1 <= len(warned) < len(payloads), len(warned)  # throttled: a line per interval, with the count held back
-    assert sum(j["count"] for j in _junk(mallory.world.trace, "/action/request")) == len(payloads)
-    assert sum(j["count"] for j in _junk(mallory.world.trace, "/action/ack")) == len(payloads)
+    assert sum(j.count for j in _junk(mallory.world.trace, "/action/request")) == len(payloads)
+    assert sum(j.count for j in _junk(mallory.world.trace, "/action/ack")) == len(payloads)
 
 
 async def test_megabyte_ids_and_names_cannot_fill_the_trace(tmp_path: Path) -> None:

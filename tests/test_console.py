@@ -7,7 +7,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import io
-import json
 import os
 import re
 import subprocess
@@ -34,10 +33,14 @@ from mhrc.core.protocol import (
     EpisodeStarted,
     Observation,
     RobotAttached,
+    RobotMessage,
+    ScenarioEvent,
     Wait,
     decode,
     decode_event,
+    encode,
 )
+from mhrc.core.records import TraceLine
 from mhrc.testing import world_on_loopback
 
 
@@ -157,7 +160,7 @@ def _table_rows(text: str) -> dict[str, str]:
 @pytest.mark.parametrize("processes", sweep([False, True], ids=["in-process", "processes"]))
 def test_quiet_prints_only_the_summary_table_with_the_reports_makespan(processes: bool, tmp_path: Path) -> None:
     from mhrc.analysis.metrics import from_trace
-    from mhrc.core.trace import read_trace
+    from mhrc.core.records import read_records
 
     trace = tmp_path / "t.jsonl"
     run = mhrc("up", "--quiet", "--trace", str(trace), *(["--processes"] if processes else []), cwd=tmp_path)
@@ -168,7 +171,7 @@ def test_quiet_prints_only_the_summary_table_with_the_reports_makespan(processes
     assert run.stderr == "", run.stderr  # nothing went wrong, so nothing on stderr either (--secure: no warning)
     rows = _table_rows(run.stdout)
     assert "simulated time" not in rows  # the sum of every robot's skill time, which no report shows
-    report = from_trace(read_trace(trace))
+    report = from_trace(read_records(trace))
     assert rows["makespan"] == f"{report.makespan:.1f} s simulated"  # the report's figure, under the report's name
 
 
@@ -249,7 +252,8 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     """Results, messages and the tick events travel on different keys; the console must still
     read in tick order: a tick's results, then its messages, then "tick N closed"; the table
     last, after every result (`mhrc world`'s printer prints it; `mhrc up` after the run)."""
-    from mhrc.core.trace import read_trace
+    from mhrc.core.records import messages as messages_of
+    from mhrc.core.records import read_records
     from mhrc.run.config import EpisodeConfig
     from mhrc.run.console import SCHEDULE_GLOSS, ProgressPrinter, summary_table
     from mhrc.run.inprocess import up_in_process
@@ -271,9 +275,7 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     assert list(closed_at.values()) == sorted(closed_at.values()), "tick closed lines out of order"
     results = [(i, int(m.group(1)), m.group(2)) for i, line in enumerate(lines) if (m := TICK_LINE.match(line))]
     assert cfg.trace is not None
-    published = [
-        r for r in read_trace(cfg.trace) if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "action_result"
-    ]
+    published = messages_of(read_records(cfg.trace), ActionResult)
     assert len(results) == len(published), "a result is missing"
     for i, tick, robot in results:
         assert closed_at.get(tick - 1, -1) < i < closed_at[tick], f"line {i} ({lines[i]!r}) is outside tick {tick}"
@@ -301,8 +303,9 @@ class _Replay:
     def subscribe(self, key_expr: str, handler: Any) -> None:
         self.handlers.append((re.compile("^" + re.escape(key_expr).replace(r"\*", "[^/]+") + "$"), handler))
 
-    def deliver(self, record: dict[str, Any]) -> None:
-        sample = Sample(record["key"], json.dumps(record["msg"]).encode())
+    def deliver(self, record: TraceLine) -> None:
+        assert record.msg is not None
+        sample = Sample(record.key, encode(record.msg))
         for pattern, handler in self.handlers:
             if pattern.match(sample.key):
                 handler(sample)
@@ -312,7 +315,7 @@ async def test_messages_that_come_after_the_end_still_print_before_the_table(tmp
     """Each key has its own delivery thread, so a tick's messages may come after its results,
     its closed line and even `episode_done` (CI saw it: seed 0's last tick sends one). The
     printer holds the table until they came, and prints them with their tick."""
-    from mhrc.core.trace import read_trace
+    from mhrc.core.records import read_records
     from mhrc.run.config import EpisodeConfig
     from mhrc.run.console import ProgressPrinter
     from mhrc.run.inprocess import up_in_process
@@ -320,10 +323,10 @@ async def test_messages_that_come_after_the_end_still_print_before_the_table(tmp
     cfg = EpisodeConfig.build(seed=0, trace=tmp_path / "t.jsonl").resolved()
     done = await up_in_process(cfg)
     assert cfg.trace is not None
-    records = [r for r in read_trace(cfg.trace) if isinstance(r.get("msg"), dict)]
+    records = [r for r in read_records(cfg.trace) if r.msg is not None]
     last = done.metrics.temporal_steps - 1
-    late = [r for r in records if "/inbox/" in r["key"]]
-    assert any(r["msg"]["tick"] == last for r in late), (
+    late = [r for r in records if "/inbox/" in r.key]
+    assert any(isinstance(r.msg, RobotMessage) and r.msg.tick == last for r in late), (
         "the episode no longer sends a message in its last tick: pick another seed"
     )
 
@@ -332,7 +335,7 @@ async def test_messages_that_come_after_the_end_still_print_before_the_table(tmp
     replay = _Replay()
     printer.attach(replay, cfg.run)  # type: ignore[arg-type]
     for record in records:
-        if "/inbox/" not in record["key"]:
+        if "/inbox/" not in record.key:
             replay.deliver(record)
     for record in late:  # every message after everything else, the end included
         replay.deliver(record)
@@ -357,7 +360,8 @@ async def test_scenario_events_print_as_their_tick_opens_and_the_table_says_how_
     the closed line of the tick before it (it fires as its tick opens) and before that tick's
     results; the table ends with each event's recovery as the metrics score it."""
     from mhrc.analysis.metrics import from_trace
-    from mhrc.core.trace import read_trace
+    from mhrc.core.records import messages as messages_of
+    from mhrc.core.records import read_records
     from mhrc.run.config import EpisodeConfig
     from mhrc.run.console import ProgressPrinter, summary_table
     from mhrc.run.inprocess import up_in_process
@@ -369,16 +373,12 @@ async def test_scenario_events_print_as_their_tick_opens_and_the_table_says_how_
     done = await up_in_process(cfg, observe=printer.attach)
     printer.close()
     assert cfg.trace is not None
-    recovery = from_trace(read_trace(cfg.trace)).recovery
+    recovery = from_trace(read_records(cfg.trace)).recovery
     console.print(summary_table(done, recovery))
     lines = out.getvalue().splitlines()
     events = [(i, int(m.group(1)), m.group(2)) for i, line in enumerate(lines) if (m := EVENT_LINE.match(line))]
-    fired = [
-        r["msg"]
-        for r in read_trace(cfg.trace)
-        if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == "scenario_event"
-    ]
-    assert [(t, text) for _, t, text in events] == [(e["tick"], e["text"]) for e in fired] and len(events) == 4
+    fired = messages_of(read_records(cfg.trace), ScenarioEvent)
+    assert [(t, text) for _, t, text in events] == [(e.tick, e.text) for e in fired] and len(events) == 4
     for i, tick, _ in events:
         assert CLOSED_LINE.match(lines[i - 1]) and int(CLOSED_LINE.match(lines[i - 1]).group(1)) == tick - 1, lines[
             i - 1 : i + 1

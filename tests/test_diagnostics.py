@@ -13,12 +13,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from json_rows import records
 from test_metrics import _complete  # the protocol's required fields a hand-built message leaves out
 
 from mhrc.analysis.diagnostics import diagnose, reject_kind
 from mhrc.analysis.metrics import from_trace
 from mhrc.core.protocol import EPISODE_OVER, LLM_ERROR_PREFIX
-from mhrc.core.trace import read_trace
+from mhrc.core.records import read_records
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.means import summarize_diagnostics
 from mhrc.eval.records import DIAG, EvalRow, upgrade_row
@@ -157,7 +158,7 @@ def hand_built() -> list[dict[str, Any]]:
 
 
 def test_a_hand_built_trace_gives_exactly_what_it_holds() -> None:
-    d = diagnose(hand_built()).as_dict()
+    d = diagnose(records(hand_built())).as_dict()
     assert d == {
         "llm_steps": 3,
         "parse_failures": 1,
@@ -177,7 +178,7 @@ def test_a_hand_built_trace_gives_exactly_what_it_holds() -> None:
         "messages_read": 2,
         "steps_above_bound": 1,  # 3 ticks, bound 2
     }
-    m = from_trace(hand_built())  # the same trace, the metrics' own counts
+    m = from_trace(records(hand_built()))  # the same trace, the metrics' own counts
     assert (m.parse_failures, m.llm_unreachable, m.rejected_actions, m.messages) == (1, 1, 1, 2)
     assert m.failed_actions == {"navigate": 2, "pick": 1}
 
@@ -228,7 +229,7 @@ def test_without_the_planning_observation_the_worlds_verdict_decides() -> None:
         ),
     ]
     # bob's and alice's tick-1 actions planned on observations the trace holds: neither "moon" nor "sofa" is in them
-    d = diagnose(rows)
+    d = diagnose(records(rows))
     assert (d.hallucinations, d.hallucinated_names, d.steps_above_bound) == (
         3,
         {"ghost": 1, "moon": 1, "sofa": 1},
@@ -338,14 +339,14 @@ def _consistent(rows: list[dict[str, Any]]) -> tuple[Any, Any]:
 
 
 def test_a_heuristic_episode_has_no_llm_failures_and_no_hallucinations(recorded: dict[str, Path]) -> None:
-    d, m = _consistent(read_trace(recorded["heuristic"]))
+    d, m = _consistent(read_records(recorded["heuristic"]))
     assert m.success and d.steps_above_bound is not None and d.steps_above_bound >= 0
     assert (d.parse_failures, d.hallucinations, d.not_capable, d.rejected, d.repeated_failures) == (0, 0, 0, 0, 0)
     assert d.messages_sent == d.messages_read > 0  # every report David sends reaches Alice
 
 
 def test_a_scripted_llm_episode_shows_its_bad_replies(recorded: dict[str, Path]) -> None:
-    d, m = _consistent(read_trace(recorded["llm"]))
+    d, m = _consistent(read_records(recorded["llm"]))
     assert d.parse_failures == m.parse_failures == 1
     assert d.hallucinated_names == {"garage": 2, "mug": 1}  # David's pick names a mug his own scene graph does not hold
     assert (d.hallucinations, d.not_capable, d.repeated_failures) == (3, 1, 1)
@@ -375,7 +376,7 @@ class _Page(HTMLParser):
 
 def _flat(key: str, trace: Path, **extra: Any) -> dict[str, Any]:
     """A row of episode `key` (its seed the key's) as episodes.jsonl holds it."""
-    rows = read_trace(trace)
+    rows = read_records(trace)
     return {
         "key": key,
         "method": extra.pop("method", "heuristic"),

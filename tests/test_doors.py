@@ -10,8 +10,8 @@ import numpy as np
 import pybullet_data
 import pytest
 
-from mhrc.core.protocol import Navigate, Open, Pick
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, Navigate, Open, Pick
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.world.arm import HOME
@@ -137,12 +137,12 @@ async def test_heuristic_team_fetches_a_target_from_behind_a_door(tmp_path) -> N
     done = await up_in_process(cfg)
     assert done.metrics.success, done.metrics
     assert cfg.trace is not None
-    alice = [line["msg"] for line in read_trace(cfg.trace) if line["key"].endswith("/robot/alice/action/result")]
-    opened = [m["action"]["target"] for m in alice if m["action"]["skill"] == "open" and m["outcome"]["succeeded"]]
+    alice = [r for r in messages(read_records(cfg.trace), ActionResult) if r.robot == "alice"]
+    opened = [m.action.target for m in alice if isinstance(m.action, Open) and m.outcome.succeeded]
     assert "microwave" in opened
     with Sim(task="pack_objects", scene="kitchen", seed=seed, n_objects=3) as sim:
         hidden = next(
             o.name for o in sim.objects.values() if o.on == "microwave" and o.inside and o.name in sim.targets
         )
-    picked = [m["action"]["obj"] for m in alice if m["action"]["skill"] == "pick" and m["outcome"]["succeeded"]]
+    picked = [m.action.obj for m in alice if isinstance(m.action, Pick) and m.outcome.succeeded]
     assert hidden in picked

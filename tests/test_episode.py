@@ -11,8 +11,8 @@ import pytest
 from mhrc.agents.agent import AttachRejected
 from mhrc.core.bus import open_client
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import decode_event
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, EpisodeDone, RobotAttached, decode_event
+from mhrc.core.records import messages, read_records
 from mhrc.run.attach import run_agent
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
@@ -27,8 +27,8 @@ async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None: 
     assert done.reason == "success" and m.success and m.placed == m.total == 4
     assert 0 < m.temporal_steps < 50 and m.action_steps > 0
 
-    trace = read_trace(tmp_path / "trace.jsonl")
-    kinds = {line["key"].split("/", 2)[2] for line in trace}
+    trace = read_records(tmp_path / "trace.jsonl")
+    kinds = {line.key.split("/", 2)[2] for line in trace}
     assert {
         "world/event",
         "robot/bob/action/request",
@@ -37,9 +37,9 @@ async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None: 
         "agent/bob/thought",
     } <= kinds
     assert any(k.startswith("robot/alice/inbox/") for k in kinds), "Bob's request to Alice was not recorded"
-    assert any(line["msg"] and line["msg"].get("kind") == "episode_done" for line in trace)
-    results = [line["msg"] for line in trace if line["key"].endswith("/action/result")]
-    assert sum(1 for r in results if r["action"]["skill"] != "wait") == m.action_steps
+    assert messages(trace, EpisodeDone)
+    results = messages(trace, ActionResult)
+    assert sum(1 for r in results if r.action.skill != "wait") == m.action_steps
 
 
 @pytest.mark.slow
@@ -122,11 +122,11 @@ async def test_late_agent_joins_at_the_next_tick(tmp_path) -> None:  # type: ign
         await asyncio.gather(*agents, late)
     finally:
         await observer.close()
-    trace = read_trace(tmp_path / "t.jsonl")
-    attached = [line["msg"] for line in trace if line["msg"] and line["msg"].get("kind") == "robot_attached"]
-    assert {a["robot"]: a["tick"] for a in attached}["david"] > 0
-    david_results = [line["msg"] for line in trace if line["key"].endswith("robot/david/action/result")]
-    assert david_results and david_results[0]["tick"] == {a["robot"]: a["tick"] for a in attached}["david"]
+    trace = read_records(tmp_path / "t.jsonl")
+    attached = messages(trace, RobotAttached)
+    assert {a.robot: a.tick for a in attached}["david"] > 0
+    david_results = [r for r in messages(trace, ActionResult) if r.robot == "david"]
+    assert david_results and david_results[0].tick == {a.robot: a.tick for a in attached}["david"]
     assert done.metrics.action_steps_per_robot["david"] > 0
 
 
@@ -160,8 +160,8 @@ async def test_heuristic_approaches_again_after_a_failed_open(tmp_path) -> None:
     ).resolved()
     done = await up_in_process(cfg)
     assert done.metrics.success, done.metrics
-    alice = [line["msg"] for line in read_trace(cfg.trace) if line["key"].endswith("/robot/alice/action/result")]
-    failed_opens = [i for i, m in enumerate(alice) if m["action"]["skill"] == "open" and not m["outcome"]["succeeded"]]
+    alice = [r for r in messages(read_records(cfg.trace), ActionResult) if r.robot == "alice"]
+    failed_opens = [i for i, m in enumerate(alice) if m.action.skill == "open" and not m.outcome.succeeded]
     assert failed_opens, "the episode no longer has the failed open this test is about"
     for i in failed_opens:  # never the same open again straight away
-        assert i + 1 < len(alice) and alice[i + 1]["action"]["skill"] == "navigate", alice[i + 1]["action"]
+        assert i + 1 < len(alice) and alice[i + 1].action.skill == "navigate", alice[i + 1].action

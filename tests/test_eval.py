@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from json_rows import records
 from pydantic import ValidationError
 
 from mhrc.core.endpoints import free_port
@@ -313,13 +314,13 @@ def test_llm_failures_and_validity_are_counted_from_the_trace() -> None:
         return rows + [_put("tick", tick=0), _put("episode_done", run="r", reason="horizon", metrics=metrics)]
 
     down = LLM_ERROR_PREFIX + "m at http://x failed after 5 attempts: HTTP 503"
-    m = from_trace(trace(None, "no command in the reply", down, None))
+    m = from_trace(records(trace(None, "no command in the reply", down, None)))
     assert (m.llm_calls, m.parse_failures, m.llm_unreachable, m.rejected_actions) == (4, 1, 1, 1)
     assert m.valid and m.invalid_reason is None and (m.fidelity, m.horizon) == ("aids:goal_map", 4)
-    m = from_trace(trace(down, down, fidelity=None))
+    m = from_trace(records(trace(down, down, fidelity=None)))
     assert not m.valid and m.invalid_reason and "unreachable for all 2 LLM steps" in m.invalid_reason
     assert m.fidelity == "unrecorded"  # a trace from before episodes recorded their fidelity
-    assert from_trace(trace()).valid  # no LLM step at all (the heuristic): valid
+    assert from_trace(records(trace())).valid  # no LLM step at all (the heuristic): valid
 
 
 # --------------------------------------------------------------------------- LLM agents over HTTP

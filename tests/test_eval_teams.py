@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from json_rows import records
 
 from mhrc.analysis.metrics import from_trace
 from mhrc.core.team import PAPER_TEAM
@@ -290,7 +291,7 @@ def test_a_real_grid_of_two_teams(tmp_path: Path) -> None:
             else x
             for x in lines
         ]
-        now, before = from_trace(lines).as_dict(), from_trace(old).as_dict()
+        now, before = from_trace(records(lines)).as_dict(), from_trace(records(old)).as_dict()
         changed = {k for k in now if now[k] != before[k]}
         assert changed == (set() if key == "pack_objects/kitchen/3/0" else {"team"}), changed
     # --resume with other teams is another evaluation

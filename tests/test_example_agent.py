@@ -15,7 +15,7 @@ import pytest
 from sweep import sweep
 
 from mhrc.core import protocol
-from mhrc.core.trace import read_trace
+from mhrc.core.records import read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 
@@ -87,24 +87,22 @@ async def test_raw_zenoh_agent_plays_david(tmp_path: Path, schedule: str) -> Non
     assert david.returncode == 0, err
     assert f"episode_done reason={done.reason}" in out
 
-    trace = read_trace(trace_path)
-    msgs = [(line["key"].split("/", 2)[2], line["msg"]) for line in trace if line["msg"]]
-    requests = [m for k, m in msgs if k == "robot/david/action/request"]
-    acks = [m for k, m in msgs if k == "robot/david/action/ack"]
-    results = [m for k, m in msgs if k == "robot/david/action/result"]
-    assert requests and all("-raw-" in m["agent_id"] for m in requests), (
-        "David's requests did not come from the example"
-    )
-    assert not [a for a in acks if not a["accepted"] and "malformed" in a["reason"]]
-    assert [r for r in results if r["action"]["skill"] == "navigate"], "the example never navigated"
+    trace = read_records(trace_path)
+    msgs = [(line.key.split("/", 2)[2], line.msg) for line in trace if line.msg is not None]
+    requests = [m for k, m in msgs if k == "robot/david/action/request" and isinstance(m, protocol.ActionRequest)]
+    acks = [m for k, m in msgs if k == "robot/david/action/ack" and isinstance(m, protocol.ActionAck)]
+    results = [m for k, m in msgs if k == "robot/david/action/result" and isinstance(m, protocol.ActionResult)]
+    assert requests and all("-raw-" in m.agent_id for m in requests), "David's requests did not come from the example"
+    assert not [a for a in acks if not a.accepted and a.code is protocol.RejectCode.MALFORMED]
+    assert [r for r in results if r.action.skill == "navigate"], "the example never navigated"
     assert any(k.startswith("robot/alice/inbox/david") for k, _ in msgs), "the example never reported to Alice"
     assert done.metrics.action_steps_per_robot["david"] > 0
     schema = json.loads(
         subprocess.run([sys.executable, "-m", "mhrc", "schema"], capture_output=True, text=True, timeout=60).stdout
     )["schemas"]
     for req in requests:  # what the example wrote from the docs is what the schema says
-        jsonschema.validate(req, schema["ActionRequest"])
+        jsonschema.validate(req.model_dump(mode="json"), schema["ActionRequest"])
     for result in results:
-        jsonschema.validate(result, schema["ActionResult"])
-    started = next(m for k, m in msgs if m.get("kind") == "episode_started")
-    assert started["scheduler"] == schedule
+        jsonschema.validate(result.model_dump(mode="json"), schema["ActionResult"])
+    started = next(m for k, m in msgs if isinstance(m, protocol.EpisodeStarted))
+    assert started.scheduler == schedule

@@ -224,7 +224,8 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
     from mhrc.core import logs
     from mhrc.core.bus import Bus
     from mhrc.core.keys import Keys
-    from mhrc.core.trace import read_trace
+    from mhrc.core.protocol import ActionRequest
+    from mhrc.core.records import read_records
     from mhrc.run.config import EpisodeConfig
     from mhrc.run.inprocess import up_in_process
 
@@ -260,15 +261,13 @@ async def test_a_flood_of_junk_costs_counts_not_copies(tmp_path: Path) -> None:
     assert done.reason == clean.reason == "success" and done.metrics.temporal_steps == clean.metrics.temporal_steps
     warnings = [line for line in out.getvalue().splitlines() if "malformed action request rejected" in line]
     assert 1 <= len(warnings) <= 5, len(warnings)  # one per 5 s interval, not one per message
-    rows = read_trace(tmp_path / "t.jsonl")
+    rows = read_records(tmp_path / "t.jsonl")
     counted = {
-        key: sum(r["msg"]["count"] for r in rows if r["kind"] == "junk" and r["key"].endswith(key))
+        key: sum(r.junk.count for r in rows if r.junk is not None and r.key.endswith(key))
         for key in ("/action/request", "/action/ack")
     }
     assert counted == {"/action/request": flood, "/action/ack": flood}, counted
-    assert not any(
-        r["kind"] == "put" and r["key"].endswith("/action/request") and "teleport" in json.dumps(r["msg"]) for r in rows
-    )
+    assert not any(isinstance(r.msg, ActionRequest) and "teleport" in r.msg.model_dump_json() for r in rows)
     size, clean_size = (tmp_path / "t.jsonl").stat().st_size, (tmp_path / "clean.jsonl").stat().st_size
     assert size < 1.2 * clean_size + 10_000, (size, clean_size)  # 2 MB of junk would have been copied
     assert from_trace(rows).rejected_actions == flood
@@ -283,8 +282,9 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
     from mhrc.analysis.metrics import from_trace
     from mhrc.core.bus import Bus
     from mhrc.core.keys import Keys
-    from mhrc.core.protocol import ActionRequest, Wait
-    from mhrc.core.trace import REJECTIONS_IN_FULL, read_trace
+    from mhrc.core.protocol import ActionAck, ActionRequest, Wait
+    from mhrc.core.records import read_records
+    from mhrc.core.trace import REJECTIONS_IN_FULL
     from mhrc.run.config import EpisodeConfig
     from mhrc.run.inprocess import up_in_process
 
@@ -302,15 +302,15 @@ async def test_a_flood_of_rejected_requests_costs_counts_not_copies(tmp_path: Pa
         EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "t.jsonl").resolved(), observe=attack
     )
     assert done.reason == "success"
-    rows = read_trace(tmp_path / "t.jsonl")
+    rows = read_records(tmp_path / "t.jsonl")
     ids = {r.goal_id for r in forged}
-    copied = [r for r in rows if r["kind"] == "put" and isinstance(r["msg"], dict) and r["msg"].get("goal_id") in ids]
+    copied = [r for r in rows if getattr(r.msg, "goal_id", None) in ids]
     counted = {
-        key: sum(r["msg"]["count"] for r in rows if r["kind"] == "junk" and r["key"].endswith(key))
+        key: sum(r.junk.count for r in rows if r.junk is not None and r.key.endswith(key))
         for key in ("/action/request", "/action/ack")
     }
-    requests = sum(1 for r in copied if r["key"].endswith("/action/request"))
-    acks = sum(1 for r in copied if r["key"].endswith("/action/ack"))
+    requests = sum(1 for r in copied if isinstance(r.msg, ActionRequest))
+    acks = sum(1 for r in copied if isinstance(r.msg, ActionAck))
     assert requests == acks and 1 <= acks < 40 * REJECTIONS_IN_FULL, (
         requests,
         acks,

@@ -11,8 +11,8 @@ from test_llm_policy import obs
 from mhrc.agents.llm import ScriptedClient
 from mhrc.agents.llm_policy import LLMPolicy, load_hints
 from mhrc.core.fidelity import AIDS, label, parse_aids
-from mhrc.core.protocol import ActionResult, SkillOutcome, Wait
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, EpisodeStarted, SkillOutcome, Wait
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.world.robots import ARM_FORWARD
@@ -36,12 +36,8 @@ def test_the_default_is_the_papers_fidelity_and_aids_are_named() -> None:
 async def test_every_trace_records_its_fidelity(tmp_path: Path, aids: tuple[str, ...], fidelity: str) -> None:
     cfg = EpisodeConfig.build(seed=1, n_objects=3, horizon=2, aids=aids, trace=tmp_path / "t.jsonl").resolved()
     await up_in_process(cfg)
-    started = [
-        r["msg"]
-        for r in read_trace(cfg.trace)
-        if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_started"
-    ]
-    assert [(s["fidelity"], s["aids"]) for s in started] == [(fidelity, list(aids))]
+    started = messages(read_records(cfg.trace), EpisodeStarted)
+    assert [(s.fidelity, s.aids) for s in started] == [(fidelity, list(aids))]
 
 
 def test_bob_is_told_the_goal_of_each_solid_only_with_the_goal_map_aid() -> None:

@@ -16,8 +16,8 @@ from typing import Any
 import pytest
 
 from mhrc.agents.heuristic import EXPLORE_RE, REQUEST_RE
-from mhrc.core.protocol import EpisodeDone
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, EpisodeDone, RobotMessage, ScenarioEvent
+from mhrc.core.records import read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 
@@ -41,16 +41,13 @@ def _run(tmp_path: Path, events: Path, **episode: Any) -> Episode:
     trace = tmp_path / "trace.jsonl"
     done = asyncio.run(up_in_process(EpisodeConfig.build(trace=trace, events=events, **episode).resolved()))
     evs, results, messages = [], [], []
-    for r in read_trace(trace):
-        m = r["msg"]
-        if not isinstance(m, dict):
-            continue
-        if m.get("kind") == "scenario_event":
-            evs.append(m)
-        elif m.get("kind") == "action_result":
-            results.append(m)
-        elif m.get("kind") == "message":
-            messages.append({**m, "to": r["key"].split("/")[-3]})
+    for r in read_records(trace):  # the typed messages, as JSON for the checks below
+        if isinstance(r.msg, ScenarioEvent):
+            evs.append(r.msg.model_dump(mode="json"))
+        elif isinstance(r.msg, ActionResult):
+            results.append(r.msg.model_dump(mode="json"))
+        elif isinstance(r.msg, RobotMessage):
+            messages.append({**r.msg.model_dump(mode="json"), "to": r.key.split("/")[-3]})
     return Episode(done, evs, results, messages)
 
 

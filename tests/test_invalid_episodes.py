@@ -17,7 +17,7 @@ from waits import served
 
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import AttachReply, AttachRequest, EpisodeDone, RobotDetached, decode, decode_event
-from mhrc.core.trace import read_trace
+from mhrc.core.records import read_records
 from mhrc.eval.engine import EvalSpec
 from mhrc.eval.episode import Job, WorkerResult, run_job, worker_name
 from mhrc.testing import world_on_loopback
@@ -100,7 +100,7 @@ async def test_a_team_without_tokens_is_let_go_at_the_deadline_and_its_episode_i
         ("david", "david-stalled"),
     ]
     assert (done.reason, done.metrics.temporal_steps, done.metrics.action_steps) == ("no_agents", 0, 0)
-    m = from_trace(read_trace(tmp_path / "t.jsonl"))
+    m = from_trace(read_records(tmp_path / "t.jsonl"))
     assert (m.valid, m.invalid_code) == (False, Invalid.NOT_PLAYED)
     assert m.invalid_reason is not None
 

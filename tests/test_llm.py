@@ -8,7 +8,8 @@ from typing import Any
 import pytest
 
 from mhrc.agents.llm import LLMError, OpenAIChatClient, check_spec
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, Thought
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply
@@ -111,17 +112,15 @@ async def test_an_llm_episode_over_http_with_bad_replies_and_concurrent_planning
     assert done.reason == "horizon" and done.metrics.temporal_steps == 4
     assert done.metrics.failed_actions.get("pick") == 1  # pick(ghost) reached the world and failed there
 
-    thoughts = [line["msg"] for line in read_trace(cfg.trace) if line["key"].endswith("/thought")]
-    bob = [t for t in thoughts if t["robot"] == "bob"]
-    assert bob[0]["parse_error"] and "no command" in bob[0]["parse_error"] and bob[0]["action"] == "wait()"
-    assert (
-        "Your command could not be read, so you waited." in bob[1]["prompt"]
-    )  # the format error came back as feedback
-    assert all(t["policy"] == "llm:test-model" and t["prompt"] and t["prompt_tokens"] > 0 for t in thoughts)
+    thoughts = messages(read_records(cfg.trace), Thought)
+    bob = [t for t in thoughts if t.robot == "bob"]
+    assert bob[0].parse_error and "no command" in bob[0].parse_error and bob[0].action == "wait()"
+    assert "Your command could not be read, so you waited." in bob[1].prompt  # the format error came back as feedback
+    assert all(t.policy == "llm:test-model" and t.prompt and t.prompt_tokens > 0 for t in thoughts)
 
     for robot, extra in (("David", 1), ("Bob", 2), ("Alice", 1)):  # each hiccup cost one retried request
         sent = sum(1 for body in server.requests if body["messages"][0]["content"].startswith(f"You are {robot}"))
-        assert sent == sum(1 for t in thoughts if t["robot"] == robot.lower()) + extra
+        assert sent == sum(1 for t in thoughts if t.robot == robot.lower()) + extra
 
     # planning overlapped: some answered call of each robot started before another robot's answered
     # call ended and ended after it started (the order of starts and ends, not their times)
@@ -161,11 +160,7 @@ async def test_replay_reproduces_a_recorded_episode_exactly(mhrc_model_server, t
     second = await up_in_process(replayed)
 
     def actions(path: Any) -> list[tuple[str, int, str]]:
-        return sorted(
-            (m["msg"]["robot"], m["msg"]["tick"], m["msg"]["action"]["skill"])
-            for m in read_trace(path)
-            if m["key"].endswith("/action/result")
-        )
+        return sorted((m.robot, m.tick, m.action.skill) for m in messages(read_records(path), ActionResult))
 
     assert first.metrics.model_dump(exclude={"wall_time"}) == second.metrics.model_dump(exclude={"wall_time"})
     assert actions(recorded.trace) == actions(replayed.trace)

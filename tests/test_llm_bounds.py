@@ -19,8 +19,8 @@ from mhrc.agents.llm import MAX_REPLY_CHARS, LLMFatalError, OpenAIChatClient, ro
 from mhrc.agents.llm_policy import LLMUnreachable
 from mhrc.analysis.metrics import from_trace
 from mhrc.cli import main
-from mhrc.core.protocol import EpisodeDone
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, EpisodeDone, Navigate, Thought
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer
@@ -49,8 +49,8 @@ def robot_of(body: dict[str, Any]) -> str:
     return body["messages"][0]["content"].split()[2].rstrip(",").lower()  # "You are Alice, ..."
 
 
-def thoughts(trace: Path) -> list[dict[str, Any]]:
-    return [line["msg"] for line in read_trace(trace) if line["key"].endswith("/thought")]
+def thoughts(trace: Path) -> list[Thought]:
+    return messages(read_records(trace), Thought)
 
 
 def endless(body: dict[str, Any]) -> ModelReply:
@@ -82,9 +82,9 @@ async def test_an_endless_server_costs_each_step_at_most_its_deadline_and_the_ro
     cfg, done, requests = await against_endless(tmp_path, horizon=2, llm_timeout=0.4, step_deadline=5.0)
     assert done.reason == "horizon" and done.metrics.temporal_steps == 2
     assert requests == 3 * 2 * 2  # 3 robots x 2 steps x (one call + one retry of its timeout)
-    m = from_trace(read_trace(cfg.trace))
+    m = from_trace(read_records(cfg.trace))
     assert (m.llm_calls, m.llm_unreachable, m.parse_failures) == (6, 6, 0)
-    assert all("retried at most 1 time" in t["parse_error"] for t in thoughts(cfg.trace))
+    assert all("retried at most 1 time" in t.parse_error for t in thoughts(cfg.trace))
 
 
 async def test_the_step_deadline_bounds_all_attempts_of_one_step(tmp_path: Path) -> None:
@@ -92,7 +92,7 @@ async def test_the_step_deadline_bounds_all_attempts_of_one_step(tmp_path: Path)
         tmp_path, horizon=1, llm_timeout=0.4, step_deadline=0.5
     )  # the retry would end past it
     assert done.metrics.temporal_steps == 1
-    assert all("step deadline of 0.5 s" in t["parse_error"] for t in thoughts(cfg.trace))
+    assert all("step deadline of 0.5 s" in t.parse_error for t in thoughts(cfg.trace))
 
 
 async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_parsed_or_explained(
@@ -115,21 +115,21 @@ async def test_every_request_carries_max_tokens_and_seed_and_a_cut_reply_is_pars
     await up_in_process(cfg)
     assert server.requests and all(b["max_tokens"] == 77 and b["seed"] == 5 for b in server.requests)
     ts = thoughts(cfg.trace)
-    bob = [t for t in ts if t["robot"] == "bob"]
-    alice = [t for t in ts if t["robot"] == "alice"]
-    assert bob[0]["finish_reason"] == "length" and "cut at the token limit" in bob[0]["parse_error"]
+    bob = [t for t in ts if t.robot == "bob"]
+    alice = [t for t in ts if t.robot == "alice"]
+    assert bob[0].finish_reason == "length" and "cut at the token limit" in bob[0].parse_error
     assert (
-        "- (latest) step 0: Your command could not be read, so you waited." in bob[1]["prompt"]
+        "- (latest) step 0: Your command could not be read, so you waited." in bob[1].prompt
     )  # came back as the paper's feedback
-    assert "token limit" not in bob[1]["prompt"]  # the reason and advice are the feedback_advice aid's
+    assert "token limit" not in bob[1].prompt  # the reason and advice are the feedback_advice aid's
     assert (
-        alice[0]["finish_reason"] == "length"
-        and alice[0]["parse_error"] is None
-        and alice[0]["action"] == "navigate(table_1, 0)"
+        alice[0].finish_reason == "length"
+        and alice[0].parse_error is None
+        and alice[0].action == "navigate(table_1, 0)"
     )
     # the 1 MB reply: at most MAX_REPLY_CHARS (and a note) in the trace, a short reason in the next prompt
-    assert len(bob[1]["reply"]) < MAX_REPLY_CHARS + 100 and "more characters cut by mhrc" in bob[1]["reply"]
-    assert len(bob[1]["parse_error"]) <= 300 and len(bob[2]["prompt"]) < len(bob[1]["prompt"]) + 1000
+    assert len(bob[1].reply) < MAX_REPLY_CHARS + 100 and "more characters cut by mhrc" in bob[1].reply
+    assert len(bob[1].parse_error) <= 300 and len(bob[2].prompt) < len(bob[1].prompt) + 1000
     assert cfg.trace.stat().st_size < 2_000_000
 
 
@@ -158,15 +158,15 @@ async def test_reasoning_never_reaches_the_parser_and_is_recorded_apart(mhrc_mod
         seed=0, horizon=1, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl"
     ).resolved()
     await up_in_process(cfg)
-    by = {t["robot"]: t for t in thoughts(cfg.trace)}
-    assert by["alice"]["action"] == "navigate(table_1, 0)" and by["alice"]["reasoning"].startswith("Maybe pick(apple)")
-    assert "<think>" not in by["alice"]["reply"] and by["alice"]["reasoning_tokens"] > 0
+    by = {t.robot: t for t in thoughts(cfg.trace)}
+    assert by["alice"].action == "navigate(table_1, 0)" and by["alice"].reasoning.startswith("Maybe pick(apple)")
+    assert "<think>" not in by["alice"].reply and by["alice"].reasoning_tokens > 0
     assert (
-        by["bob"]["action"] == "wait()"
-        and by["bob"]["reasoning"] == "I could pick(phone) now."
-        and by["bob"]["reasoning_tokens"] == 21
+        by["bob"].action == "wait()"
+        and by["bob"].reasoning == "I could pick(phone) now."
+        and by["bob"].reasoning_tokens == 21
     )
-    assert by["david"]["action"] == "navigate(sofa, 0)" and by["david"]["reasoning"] == "Command: wait() is tempting"
+    assert by["david"].action == "navigate(sofa, 0)" and by["david"].reasoning == "Command: wait() is tempting"
 
 
 def test_an_unclosed_think_block_is_all_reasoning() -> None:
@@ -240,7 +240,7 @@ async def test_a_server_that_goes_down_later_only_costs_steps(mhrc_model_server,
         seed=0, horizon=3, llm="openai:m", base_url=server.url, trace=tmp_path / "t.jsonl"
     ).resolved()
     done = await up_in_process(cfg)
-    assert done.reason == "horizon" and from_trace(read_trace(cfg.trace)).llm_unreachable == 6
+    assert done.reason == "horizon" and from_trace(read_records(cfg.trace)).llm_unreachable == 6
 
 
 async def test_each_robot_reaches_its_own_server_and_the_rest_play_the_heuristic(
@@ -261,7 +261,7 @@ async def test_each_robot_reaches_its_own_server_and_the_rest_play_the_heuristic
         and {robot_of(body) for body in b.requests} == {"bob"}
         and {body["model"] for body in b.requests} == {"model-b"}
     )
-    policies = {t["robot"]: t["policy"] for t in thoughts(cfg.trace)}
+    policies = {t.robot: t.policy for t in thoughts(cfg.trace)}
     assert policies == {"alice": "llm:model-a", "bob": "llm:model-b", "david": "heuristic"}
 
 
@@ -336,18 +336,14 @@ async def test_a_structured_episode_sends_each_robots_schema_and_runs_what_the_j
     ).resolved()
     await up_in_process(cfg)
     ts = thoughts(cfg.trace)
-    assert ts and all(t["schema_hash"] and t["parse_error"] is None for t in ts)
-    assert all('"command": {"skill"' in t["prompt"] for t in ts)  # the JSON instructions replace "Command:"
-    alice = [t for t in ts if t["robot"] == "alice"]
-    first_furniture = json.loads(alice[0]["reply"])["command"]["furniture"]
-    assert alice[0]["action"] == f"navigate({first_furniture}, 0)"
-    results = [
-        line["msg"]
-        for line in read_trace(cfg.trace)
-        if line["key"].endswith("/action/result") and line["msg"]["robot"] == "alice"
-    ]
-    assert results[0]["action"] == {"skill": "navigate", "target": first_furniture, "stand_pose": 0}
-    hashes = {t["schema_hash"] for t in ts}
+    assert ts and all(t.schema_hash and t.parse_error is None for t in ts)
+    assert all('"command": {"skill"' in t.prompt for t in ts)  # the JSON instructions replace "Command:"
+    alice = [t for t in ts if t.robot == "alice"]
+    first_furniture = json.loads(alice[0].reply)["command"]["furniture"]
+    assert alice[0].action == f"navigate({first_furniture}, 0)"
+    results = [r for r in messages(read_records(cfg.trace), ActionResult) if r.robot == "alice"]
+    assert results[0].action == Navigate(target=first_furniture, stand_pose=0)
+    hashes = {t.schema_hash for t in ts}
     assert len(hashes) >= 2  # each robot's own schema (different skills, different names)
 
 

@@ -8,10 +8,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from json_rows import records
 from sweep import sweep
 
 from mhrc.analysis.metrics import EpisodeMetrics, TraceError, from_trace
-from mhrc.core.trace import read_trace
+from mhrc.core.records import read_records
 from mhrc.eval.means import summarize
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
@@ -110,7 +111,7 @@ def _trace(success: bool = True) -> list[dict[str, Any]]:
 
 
 def test_metrics_of_a_hand_built_trace() -> None:
-    m = from_trace(_trace())
+    m = from_trace(records(_trace()))
     assert (m.task, m.scene, m.seed, m.n_objects, m.reason) == ("pack_objects", "kitchen", 3, 3, "success")
     assert m.temporal_steps == 3  # three tick events
     assert m.action_steps == 4 and m.action_steps_per_robot == {"alice": 3, "bob": 1}  # wait excluded, failures counted
@@ -121,11 +122,11 @@ def test_metrics_of_a_hand_built_trace() -> None:
 
 def test_an_unfinished_trace_is_an_error() -> None:
     with pytest.raises(TraceError, match="did not finish"):
-        from_trace(_trace()[:-1])
+        from_trace(records(_trace()[:-1]))
 
 
 def test_summary_means_and_both_action_step_readings() -> None:
-    rows = [from_trace(_trace(True)), from_trace(_trace(False))]
+    rows = [from_trace(records(_trace(True))), from_trace(records(_trace(False)))]
     s = summarize(rows)
     assert s["episodes"] == 2 and s["succ"] == 0.5 and s["ps"] == pytest.approx((1 + 1 / 3) / 2, abs=1e-4)
     assert s["ts"] == 3 and s["as"] == 4 and s["as_per_robot"] == 2 and s["ts_bound"] == 7
@@ -168,7 +169,7 @@ def test_the_three_action_step_readings_differ_as_the_paper_needs() -> None:
             metrics={"success": False, "placed": 1, "total": 3, "partial_success": 1 / 3},
         ),
     ]
-    m = from_trace(rows)
+    m = from_trace(records(rows))
     assert (m.temporal_steps, m.action_steps, m.action_steps / len(m.robots), m.active_ticks) == (3, 3, 1.5, 2)
     with pytest.raises(ValueError):
         summarize([])
@@ -236,7 +237,7 @@ def test_real_episodes_agree_with_the_world_and_respect_the_bound(
 ) -> None:
     cfg = EpisodeConfig.build(task=task, scene=scene, seed=seed, n_objects=n, trace=tmp_path / "t.jsonl").resolved()
     done = asyncio.run(up_in_process(cfg))
-    m = from_trace(read_trace(tmp_path / "t.jsonl"))
+    m = from_trace(read_records(tmp_path / "t.jsonl"))
     w = done.metrics
     assert (m.success, m.placed, m.temporal_steps, m.action_steps) == (
         w.success,

@@ -9,6 +9,7 @@ import io
 from typing import Any
 
 import pytest
+from json_rows import records
 from test_metrics import _complete  # the protocol's required fields a hand-built message leaves out
 
 from mhrc.analysis.metrics import EpisodeMetrics, from_trace
@@ -78,7 +79,7 @@ def _ticks(
 
 
 def _by_index(rows: list[dict[str, Any]]) -> dict[int, int | None]:
-    return {e["index"]: e["ticks_to_recover"] for e in from_trace(rows).recovery}
+    return {e["index"]: e["ticks_to_recover"] for e in from_trace(records(rows)).recovery}
 
 
 @pytest.mark.parametrize("scheduler", ["lockstep", "sequential"])
@@ -86,7 +87,7 @@ def test_progress_three_ticks_after_the_event_is_three(scheduler: str) -> None:
     """Event at tick 5 (one target in place after tick 4); ticks 5 and 6 place nothing, tick 7
     places the second: ticks 5, 6 and 7 ran from the event to the progress."""
     rows = _ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5)]}, scheduler)
-    m = from_trace(rows)
+    m = from_trace(records(rows))
     assert m.recovery == [{"index": 0, "kind": "relocate", "tick": 5, "applied": True, "ticks_to_recover": 3}]
     assert m.recovery_ticks == 3 and m.unrecovered == 0
 
@@ -100,14 +101,14 @@ def test_an_event_at_tick_one_counts_from_what_tick_zero_left() -> None:
 
 
 def test_no_progress_after_the_event_is_none() -> None:
-    m = from_trace(_ticks([0, 1, 1, 1, 1], {2: [_event(0, 2, "breakdown")]}))
+    m = from_trace(records(_ticks([0, 1, 1, 1, 1], {2: [_event(0, 2, "breakdown")]})))
     assert [e["ticks_to_recover"] for e in m.recovery] == [None]
     assert m.recovery_ticks is None and m.unrecovered == 1
 
 
 def test_a_skipped_event_has_no_recovery_value() -> None:
     """Progress follows it, but it changed nothing to recover from: no value, not unrecovered either."""
-    m = from_trace(_ticks([0, 1, 1, 2, 3], {2: [_event(0, 2, "close", applied=False)]}))
+    m = from_trace(records(_ticks([0, 1, 1, 2, 3], {2: [_event(0, 2, "close", applied=False)]})))
     assert m.recovery == [{"index": 0, "kind": "close", "tick": 2, "applied": False, "ticks_to_recover": None}]
     assert m.recovery_ticks is None and m.unrecovered == 0
 
@@ -122,7 +123,7 @@ def test_several_events_each_from_its_own_tick_and_count() -> None:
         4: [_event(2, 4, "close", applied=False)],
         6: [_event(3, 6, "new_target")],
     }
-    m = from_trace(_ticks(placed, events))
+    m = from_trace(records(_ticks(placed, events)))
     assert [(e["index"], e["kind"], e["applied"], e["ticks_to_recover"]) for e in m.recovery] == [
         (0, "relocate", True, 2),
         (1, "close", True, 1),
@@ -133,7 +134,7 @@ def test_several_events_each_from_its_own_tick_and_count() -> None:
 
 
 def test_a_static_episode_has_no_recovery() -> None:
-    m = from_trace(_ticks([1, 2, 3]))
+    m = from_trace(records(_ticks([1, 2, 3])))
     assert m.recovery == [] and m.recovery_ticks is None and m.unrecovered is None
 
 
@@ -186,7 +187,7 @@ def _async_trace(
 def test_async_counts_in_steps_from_the_events_simulated_time() -> None:
     """The event fires at 3 x 8 s = 24 s; the mug lands in the tray at the end of an action ending
     at 45 s: (45 - 24) / 8 = 2.6, rounded up as TS is: 3 steps."""
-    m = from_trace(_async_trace([_event(0, 3)], mug_placed_at=45.0))
+    m = from_trace(records(_async_trace([_event(0, 3)], mug_placed_at=45.0)))
     assert m.scheduler == "async" and [e["ticks_to_recover"] for e in m.recovery] == [3]
     assert m.recovery_ticks == 3
 
@@ -231,10 +232,10 @@ def _row(m: Any, *, scenario: str | None, sha: str | None = None, key: str = "pa
 
 
 def test_summarize_averages_recovery_over_the_episodes_that_have_one() -> None:
-    three = from_trace(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5)]}))  # 3
-    one = from_trace(_ticks([0, 1, 2, 3], {2: [_event(0, 2)]}))  # 1
-    never = from_trace(_ticks([0, 1, 1, 1, 1], {2: [_event(0, 2)]}))  # no value, one unrecovered
-    static = from_trace(_ticks([1, 2, 3]))
+    three = from_trace(records(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5)]})))  # 3
+    one = from_trace(records(_ticks([0, 1, 2, 3], {2: [_event(0, 2)]})))  # 1
+    never = from_trace(records(_ticks([0, 1, 1, 1, 1], {2: [_event(0, 2)]})))  # no value, one unrecovered
+    static = from_trace(records(_ticks([1, 2, 3])))
     rows = [three, one, never, static]
     s = summarize(rows)
     assert s["recovery_ticks"] == 2.0  # (3 + 1) / 2: neither the unrecovered nor the static episode adds a value
@@ -251,8 +252,8 @@ def test_summarize_averages_recovery_over_the_episodes_that_have_one() -> None:
 
 def test_the_report_shows_recovery_only_where_a_scenario_ran_and_never_mixes_two() -> None:
     sha_a, sha_b = "a" * 64, "b" * 64
-    scen = from_trace(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5)]}))
-    static = from_trace(_ticks([1, 2, 3]))
+    scen = from_trace(records(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5)]})))
+    static = from_trace(records(_ticks([1, 2, 3])))
     rows = [
         _row(static, scenario=None),
         _row(scen, scenario="relocate", sha=sha_a),
@@ -286,8 +287,10 @@ def test_the_report_shows_recovery_only_where_a_scenario_ran_and_never_mixes_two
 def test_the_html_summary_lists_each_episodes_recovery_only_where_a_scenario_ran() -> None:
     from mhrc.eval.html import html_summary
 
-    scen = from_trace(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5), _event(1, 5, "close", applied=False)]}))
-    static = from_trace(_ticks([1, 2, 3]))
+    scen = from_trace(
+        records(_ticks([0, 1, 1, 1, 1, 1, 1, 2, 3], {5: [_event(0, 5), _event(1, 5, "close", applied=False)]}))
+    )
+    static = from_trace(records(_ticks([1, 2, 3])))
     page = html_summary(
         [_row(static, scenario=None), _row(scen, scenario="relocate", sha="a" * 64, key="pack_objects/kitchen/3/1")],
         [None, None],

@@ -7,11 +7,12 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from json_rows import records
 from test_metrics import _put, _result
 
 from mhrc.analysis.metrics import EpisodeMetrics, from_trace
 from mhrc.core.protocol import EpisodeStarted
-from mhrc.core.records import as_records, messages
+from mhrc.core.records import messages
 from mhrc.core.team import PAPER_TEAM
 from mhrc.core.upgrade import paper_team
 from mhrc.eval.means import summarize
@@ -91,20 +92,20 @@ def say(robot: str, tick: int, to: str, ok: bool = True) -> dict[str, Any]:
 
 def test_the_team_is_read_from_the_trace() -> None:
     team = {"name": "drone_scout", "digest": "abcdef012345", "kinds": {"alice": "mobile_manipulator", "lucy": "drone"}}
-    m = from_trace([_started(["alice", "lucy"], team), _done()])
+    m = from_trace(records([_started(["alice", "lucy"], team), _done()]))
     assert (m.team, m.team_digest, m.team_kinds) == ("drone_scout", "abcdef012345", team["kinds"])
 
 
 def test_a_trace_older_than_the_field_ran_the_paper_team() -> None:
-    m = from_trace([_started(["alice", "bob", "david"]), _done()])
+    m = from_trace(records([_started(["alice", "bob", "david"]), _done()]))
     assert (m.team, m.team_digest) == ("paper", PAPER_TEAM.digest())
     assert m.team_kinds == {"alice": "mobile_manipulator", "bob": "tabletop_arm", "david": "mobile_base"}
     # the no_mobile ablation ran Alice and Bob: the paper's team without David, as today's world records it
-    m = from_trace([_started(["alice", "bob"]), _done()])
+    m = from_trace(records([_started(["alice", "bob"]), _done()]))
     assert (m.team, m.team_digest) == ("paper", PAPER_TEAM.without({"david"}).digest())
     assert list(m.team_kinds) == ["alice", "bob"] and m.team_digest != PAPER_TEAM.digest()
     # the upgrade is the one place: the decoded event holds the team
-    (started,) = messages(as_records([_started(["alice", "bob", "david"])]), EpisodeStarted)
+    (started,) = messages(records([_started(["alice", "bob", "david"])]), EpisodeStarted)
     assert started.team == paper_team(["alice", "bob", "david"])
 
 
@@ -115,10 +116,10 @@ def test_the_team_does_not_change_the_papers_metrics() -> None:
         pick("alice", 1, "apple"),
         _result("bob", 1, "wait"),
     )
-    old = from_trace(_episode(*results)).as_dict()
+    old = from_trace(records(_episode(*results))).as_dict()
     lines = _episode(*results)
     lines[0] = _started(["alice", "bob", "david"], {"name": "x", "digest": "d", "kinds": {"alice": "k"}})
-    new = from_trace(lines).as_dict()
+    new = from_trace(records(lines)).as_dict()
     assert {k: new[k] for k in PAPER_METRICS} == {k: old[k] for k in PAPER_METRICS}
     assert (old["active_ticks"], old["action_steps"], old["temporal_steps"]) == (2, 3, 2)
 
@@ -128,16 +129,18 @@ def test_the_team_does_not_change_the_papers_metrics() -> None:
 
 def test_per_robot_messages_moves_and_communication_steps() -> None:
     m = from_trace(
-        _episode(
-            say("david", 0, "alice"),
-            pick("alice", 0, "apple"),
-            say("david", 1, "bob", ok=False),  # not delivered: a communication step, not a message
-            place("alice", 1, "apple"),
-            pick("bob", 2, "apple"),
-            pick("bob", 3, "pear", ok=False),  # a failed pick moves nothing
-            place("bob", 4, "apple", "tray"),
-            say("alice", 4, "bob"),
-            _result("david", 4, "wait"),
+        records(
+            _episode(
+                say("david", 0, "alice"),
+                pick("alice", 0, "apple"),
+                say("david", 1, "bob", ok=False),  # not delivered: a communication step, not a message
+                place("alice", 1, "apple"),
+                pick("bob", 2, "apple"),
+                pick("bob", 3, "pear", ok=False),  # a failed pick moves nothing
+                place("bob", 4, "apple", "tray"),
+                say("alice", 4, "bob"),
+                _result("david", 4, "wait"),
+            )
         )
     )
     assert m.messages_per_robot == {"alice": 1, "bob": 0, "david": 1} and m.messages == 2
@@ -208,7 +211,7 @@ def test_per_robot_messages_moves_and_communication_steps() -> None:
     ],
 )
 def test_redundant_navigations(results: tuple[dict[str, Any], ...], redundant: int) -> None:
-    m = from_trace(_episode(*results))
+    m = from_trace(records(_episode(*results)))
     assert (m.redundant_navigations, m.redundant_picks) == (redundant, 0)
     assert m.redundant_per_robot == {"alice": redundant, "bob": 0, "david": 0}
 
@@ -217,12 +220,12 @@ def test_before_is_on_the_worlds_clock() -> None:
     """Sequential: David's turn of tick 1 ends at 3.0 and Alice's starts then, so David got there
     first; lockstep: both start at 2.0, so neither did."""
     sequential = _episode(_at(nav("david", 1, "cabinet"), 2.0, 3.0), _at(nav("alice", 1, "cabinet"), 3.0, 5.0))
-    assert from_trace(sequential).redundant_per_robot == {"alice": 1, "bob": 0, "david": 0}
+    assert from_trace(records(sequential)).redundant_per_robot == {"alice": 1, "bob": 0, "david": 0}
     lockstep = _episode(_at(nav("david", 1, "cabinet"), 2.0, 3.0), _at(nav("alice", 1, "cabinet"), 2.0, 5.0))
-    assert from_trace(lockstep).redundant_navigations == 0
+    assert from_trace(records(lockstep)).redundant_navigations == 0
     # a later tick whose clock says it started before the other ended (async): not before
     overlapping = _episode(_at(nav("david", 0, "cabinet"), 0.0, 9.0), _at(nav("alice", 1, "cabinet"), 4.0, 6.0))
-    assert from_trace(overlapping).redundant_navigations == 0
+    assert from_trace(records(overlapping)).redundant_navigations == 0
 
 
 # --------------------------------------------------------------------------- redundant picks
@@ -261,13 +264,13 @@ def test_before_is_on_the_worlds_clock() -> None:
     ],
 )
 def test_redundant_picks(results: tuple[dict[str, Any], ...], redundant: int) -> None:
-    m = from_trace(_episode(*results, robots=("alice", "bob", "carol")))
+    m = from_trace(records(_episode(*results, robots=("alice", "bob", "carol"))))
     assert (m.redundant_picks, m.redundant_navigations) == (redundant, 0)
     assert m.redundant_per_robot == {"alice": 0, "bob": 0, "carol": redundant}
 
 
 def test_own_pick_again_is_not_a_teammates() -> None:
-    m = from_trace(_episode(pick("alice", 0, "apple"), pick("alice", 1, "apple", ok=False)))
+    m = from_trace(records(_episode(pick("alice", 0, "apple"), pick("alice", 1, "apple", ok=False))))
     assert m.redundant_picks == 0
 
 
@@ -276,17 +279,25 @@ def test_own_pick_again_is_not_a_teammates() -> None:
 
 def test_summary_of_team_metrics() -> None:
     a = from_trace(
-        _episode(say("david", 0, "alice"), pick("alice", 0, "apple"), place("alice", 1, "apple"), nav("david", 1, "x"))
+        records(
+            _episode(
+                say("david", 0, "alice"), pick("alice", 0, "apple"), place("alice", 1, "apple"), nav("david", 1, "x")
+            )
+        )
     )
     b = from_trace(
-        _episode(nav("david", 0, "cabinet"), nav("alice", 1, "cabinet"), pick("bob", 1, "pear"), say("bob", 2, "alice"))
+        records(
+            _episode(
+                nav("david", 0, "cabinet"), nav("alice", 1, "cabinet"), pick("bob", 1, "pear"), say("bob", 2, "alice")
+            )
+        )
     )
     s = summarize([a, b])
     assert s["comm_steps"] == 1.0 and s["other_steps"] == 3.0 and s["as"] == 4.0
     assert (s["redundant"], s["redundant_navigations"], s["redundant_picks"]) == (0.5, 0.5, 0.0)
     assert s["moves"] == 1.5
     assert s["share"] == {"alice": round(2 / 3, 4), "bob": round(1 / 3, 4), "david": 0.0}  # moves over all moves
-    nothing = from_trace(_episode(nav("david", 0, "x")))
+    nothing = from_trace(records(_episode(nav("david", 0, "x"))))
     assert summarize([nothing])["share"] == {}
     older = EpisodeMetrics.model_validate(  # a row written before the fields
         {k: v for k, v in a.as_dict().items() if k != "moves_per_robot"}

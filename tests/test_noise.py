@@ -15,13 +15,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from json_rows import records
 from test_metrics import _put  # a hand-built trace line, with the protocol's required fields
 from test_table3 import play
 
 from mhrc.analysis.metrics import from_trace
 from mhrc.core.fidelity import CALIBRATION, NOISELESS, recorded_noise
 from mhrc.core.protocol import EpisodeStarted, Move, Navigate, OutcomeCode, decode_event
-from mhrc.core.trace import read_trace
+from mhrc.core.records import messages, read_records
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.records import upgrade_row
 from mhrc.eval.report import summary_markdown
@@ -35,10 +36,8 @@ RATES = {"navigation_slip": 0.03, "navigation_sigma": 0.015, "release_slip": 0.1
 NOISY = [("make_sandwich", "kitchen", 6, 7), ("make_sandwich", "bathroom", 5, 1)]
 
 
-def _started(trace: Path) -> dict[str, Any]:
-    return next(
-        r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_started"
-    )
+def _started(trace: Path) -> EpisodeStarted:
+    return messages(read_records(trace), EpisodeStarted)[0]
 
 
 def _rows(out: Path) -> list[dict[str, Any]]:
@@ -139,7 +138,7 @@ def test_a_real_episode_records_the_rates_in_its_trace_and_row_and_noise_off_is_
     ):
         (row,) = rows
         started = _started(where / str(row["trace"]))
-        assert started["noise"] == {"setting": noise, **rates}
+        assert started.noise.model_dump() == {"setting": noise, **rates}
         assert (row["noise"], row["noise_rates"]) == (noise, rates)
     noiseless = [upgrade_row(r) for r in noiseless]
     on, off = setting_of(default[0]), setting_of(noiseless[0])
@@ -174,7 +173,7 @@ def test_mhrc_up_and_its_world_process_run_without_noise_when_asked(tmp_path: Pa
     ]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert _started(trace)["noise"] == NOISELESS.model_dump()
+    assert _started(trace).noise == NOISELESS
     assert "fidelity paper, noise off" in out.stdout
 
 
@@ -205,7 +204,7 @@ def test_a_trace_or_row_from_before_the_field_reads_as_the_calibration() -> None
     }
     line = {k: v for k, v in old.items() if k != "kind"}
     end = {k: v for k, v in done.items() if k != "kind"}
-    m = from_trace([_put("episode_started", **line), _put("episode_done", **end)])
+    m = from_trace(records([_put("episode_started", **line), _put("episode_done", **end)]))
     assert (m.noise, m.noise_rates) == ("on", RATES)
     metrics = {k: v for k, v in m.as_dict().items() if k not in ("noise", "horizon")}  # a row older than the field
     row = {

@@ -5,13 +5,12 @@ these tests check the plumbing, the formats and the limits, never whether a task
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from mhrc.agents.llm.local import LocalModelServer
-from mhrc.core.protocol import Observation
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, Observation, Thought
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 
@@ -19,17 +18,15 @@ pytestmark = pytest.mark.slow
 CTX = 6144  # tokens per slot: the paper's prompts are about 2,000-3,500 tokens at the start
 
 
-def thoughts(trace: Path) -> list[dict[str, Any]]:
-    return [line["msg"] for line in read_trace(trace) if line["key"].endswith("/thought")]
+def thoughts(trace: Path) -> list[Thought]:
+    return messages(read_records(trace), Thought)
 
 
 def observations(trace: Path) -> dict[tuple[str, int], Observation]:
     """Each robot's observation per tick, from the results (the state it planned on next)."""
     out = {}
-    for line in read_trace(trace):
-        if line["key"].endswith("/action/result"):
-            msg = line["msg"]
-            out[(msg["robot"], msg["tick"] + 1)] = Observation.model_validate(msg["observation"])
+    for msg in messages(read_records(trace), ActionResult):
+        out[(msg.robot, msg.tick + 1)] = msg.observation
     return out
 
 
@@ -49,18 +46,15 @@ async def test_a_free_text_episode_at_the_defaults_gets_every_robot_its_models_o
         done = await up_in_process(cfg)
     assert done.reason == "horizon" and done.metrics.temporal_steps == 1
     ts = thoughts(cfg.trace)
-    assert len(ts) == 3 and not any((t["parse_error"] or "").startswith(LLM_ERROR_PREFIX) for t in ts), [
-        t["parse_error"] for t in ts
+    assert len(ts) == 3 and not any((t.parse_error or "").startswith(LLM_ERROR_PREFIX) for t in ts), [
+        t.parse_error for t in ts
     ]
-    assert all(
-        t["reply"] is not None and t["prompt_tokens"] > 500 and t["ttft"] is not None and t["ttft"] < t["latency"]
-        for t in ts
-    )
+    assert all(t.reply is not None and t.prompt_tokens > 500 and t.ttft is not None and t.ttft < t.latency for t in ts)
     # the server counted its tokens: none went past the default cap (the rambling base model reaches it)
-    assert all(0 < t["completion_tokens"] <= 1024 for t in ts)
-    assert all(t["finish_reason"] in ("stop", "length") for t in ts)
+    assert all(0 < t.completion_tokens <= 1024 for t in ts)
+    assert all(t.finish_reason in ("stop", "length") for t in ts)
     for t in ts:  # whatever it wrote, the robot either acted or was told why not
-        assert t["action"] and (t["parse_error"] is None or len(t["parse_error"]) <= 300)
+        assert t.action and (t.parse_error is None or len(t.parse_error) <= 300)
 
 
 async def test_a_structured_episode_against_llama_cpp_parses_every_reply_into_a_known_action(
@@ -82,16 +76,16 @@ async def test_a_structured_episode_against_llama_cpp_parses_every_reply_into_a_
         await up_in_process(cfg)
     ts = thoughts(cfg.trace)
     assert len(ts) == 6
-    assert all(t["parse_error"] is None and t["schema_hash"] and t["completion_tokens"] <= 400 for t in ts), [
-        t["parse_error"] for t in ts
+    assert all(t.parse_error is None and t.schema_hash and t.completion_tokens <= 400 for t in ts), [
+        t.parse_error for t in ts
     ]
-    results = [line["msg"] for line in read_trace(cfg.trace) if line["key"].endswith("/action/result")]
+    results = messages(read_records(cfg.trace), ActionResult)
     later = observations(cfg.trace)
     for r in results:  # every name in an action is one the robot knew when it chose it
-        a = r["action"]
-        if r["tick"] == 0:
+        a = r.action.model_dump()
+        if r.tick == 0:
             continue  # the start-of-episode observation is not in a result; tick 0 is covered by the schema test
-        obs = later[(r["robot"], r["tick"])]
+        obs = later[(r.robot, r.tick)]
         known = (
             {f.name for f in obs.furniture}
             | {o.name for o in obs.objects}
@@ -100,7 +94,7 @@ async def test_a_structured_episode_against_llama_cpp_parses_every_reply_into_a_
         )
         for field in ("target", "obj", "location"):
             if field in a:
-                assert a[field] in known, (r["robot"], a)
+                assert a[field] in known, (r.robot, a)
 
 
 async def test_a_gguf_episode_needs_no_server_of_its_own(gemma: Path, tmp_path: Path) -> None:
@@ -110,5 +104,5 @@ async def test_a_gguf_episode_needs_no_server_of_its_own(gemma: Path, tmp_path: 
     done = await up_in_process(cfg)
     assert done.metrics.temporal_steps == 1
     ts = thoughts(cfg.trace)
-    assert {t["robot"] for t in ts} == {"alice", "bob", "david"}
-    assert all(t["policy"] == f"llm:{gemma}" and 0 < t["completion_tokens"] <= 24 for t in ts)
+    assert {t.robot for t in ts} == {"alice", "bob", "david"}
+    assert all(t.policy == f"llm:{gemma}" and 0 < t.completion_tokens <= 24 for t in ts)

@@ -9,7 +9,8 @@ from mhrc.core.bus import Bus
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionAck, ActionRequest, Wait
-from mhrc.core.trace import Recorder, read_trace
+from mhrc.core.records import read_records
+from mhrc.core.trace import Recorder
 
 
 def _request(goal: str) -> ActionRequest:
@@ -43,8 +44,10 @@ async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_p
     finally:
         recorder.close()
         await bus.close()
-    rows = read_trace(tmp_path / "t.jsonl")
-    order = [(r["msg"]["kind"], r["msg"].get("goal_id")) for r in rows]
+    rows = read_records(tmp_path / "t.jsonl")  # the `end` line names no protocol kind: its key's last part
+    order = [
+        (r.msg.kind if r.msg is not None else r.key.rsplit("/", 1)[-1], getattr(r.msg, "goal_id", None)) for r in rows
+    ]
     assert order == [
         ("action_request", "in-order"),
         ("action_ack", "in-order"),
@@ -56,5 +59,5 @@ async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_p
         ("action_ack", "orphan"),
     ], order
     for goal in ("late", "late-rejected"):
-        request, answer = (r["t"] for r in rows if r["msg"].get("goal_id") == goal)
+        request, answer = (r.t for r in rows if getattr(r.msg, "goal_id", None) == goal)
         assert request == answer, f"the {goal} request takes the time of its answer"

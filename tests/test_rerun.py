@@ -23,7 +23,8 @@ from old_traces import as_version_1
 rr = pytest.importorskip("rerun")
 
 from mhrc.cli import main  # noqa: E402
-from mhrc.core.trace import read_trace  # noqa: E402
+from mhrc.core.protocol import EpisodeDone  # noqa: E402
+from mhrc.core.records import messages, read_records  # noqa: E402
 from mhrc.run.config import EpisodeConfig  # noqa: E402
 from mhrc.run.inprocess import up_in_process  # noqa: E402
 from mhrc.testing import ModelReply, ScriptedModelServer  # noqa: E402
@@ -86,10 +87,8 @@ def verify(path: Path) -> None:
     assert done.returncode == 0, done.stderr[-2000:]
 
 
-def done_of(trace: Path) -> dict[str, Any]:
-    return next(
-        r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"]["kind"] == "episode_done"
-    )
+def done_of(trace: Path) -> EpisodeDone:
+    return messages(read_records(trace), EpisodeDone)[-1]
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +124,7 @@ def test_a_recording_passes_rerun_verify_and_holds_the_episode(episode: dict[str
     assert {f"/world/furniture/{f.name}" for f in layout.furniture} <= got.static
     assert any(p.endswith("/state") for p in got.rows)
     # each robot: its body, its pose on the tick timeline from tick 0 to the end, its text logs
-    ts = done["metrics"]["temporal_steps"]
+    ts = done.metrics.temporal_steps
     for robot in TEAM_ROBOTS:
         assert f"/world/robots/{robot}/body" in got.static
         ticks = got.ticks(f"/world/robots/{robot}")
@@ -140,15 +139,15 @@ def test_a_recording_passes_rerun_verify_and_holds_the_episode(episode: dict[str
     assert {p[2] for r in got.rows["/world/robots/david"] for p in r["Transform3D:translation"]} == {0.0}
     # objects where the world has them, where each robot believes them; messages; events
     objects = {name for r in got.rows["/world/objects"] for name in r["Points3D:labels"]}
-    assert set(done["targets"]) <= objects
+    assert set(done.targets) <= objects
     assert got.rows["/world/beliefs/alice"] and got.texts("/messages")
     assert any("episode done" in t for t in got.texts("/events"))
     # progress: the last placed count and PS are the episode's
     placed = got.rows["/progress/placed"]
     last = max(placed, key=lambda r: r["tick"])
-    assert last["Scalars:scalars"] == [float(done["metrics"]["placed"])]
+    assert last["Scalars:scalars"] == [float(done.metrics.placed)]
     last_ps = max(got.rows["/progress/ps"], key=lambda r: r["tick"])["Scalars:scalars"][0]
-    assert last_ps == pytest.approx(done["metrics"]["partial_success"])
+    assert last_ps == pytest.approx(done.metrics.partial_success)
     # the blueprint: the 3D view of the house, a text panel per robot, the progress plot
     assert ("3D", "world") in got.views and ("TimeSeries", "progress") in got.views
     assert {("TextLog", f"agents/{r}") for r in TEAM_ROBOTS} <= set(got.views)

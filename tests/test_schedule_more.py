@@ -30,10 +30,11 @@ from mhrc.core.protocol import (
     Observation,
     RobotAttached,
     RobotDetached,
+    TickClosed,
+    Turn,
     decode_event,
-    parse_action,
 )
-from mhrc.core.trace import read_trace
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import ROBOTS, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.run.processes import up_processes
@@ -45,18 +46,15 @@ WAIT = 120.0  # s: generous bound on every wait, so a regression fails instead o
 def _executed(trace: Path) -> list[tuple[int, str, str, str]]:
     """(tick, robot, action, feedback) of every action result in a trace, in the order recorded
     (a copy of tests/test_schedulers.py's helper: tests/ is no package here)."""
-    return [
-        (m["tick"], m["robot"], parse_action(m["action"]).call(), m["outcome"]["feedback"])
-        for line in read_trace(trace)
-        if line["key"].endswith("/action/result") and (m := line["msg"])
-    ]
+    return [(m.tick, m.robot, m.action.call(), m.outcome.feedback) for m in messages(read_records(trace), ActionResult)]
 
 
-def _events(trace: Path, kind: str) -> list[dict[str, Any]]:
+def _events(trace: Path, kind: str) -> list[Any]:
+    """The world's events of `kind`, as their protocol models."""
     return [
-        line["msg"]
-        for line in read_trace(trace)
-        if line["msg"] and line["key"].endswith("/world/event") and line["msg"].get("kind") == kind
+        line.msg
+        for line in read_records(trace)
+        if line.msg is not None and line.key.endswith("/world/event") and line.msg.kind == kind
     ]
 
 
@@ -77,8 +75,8 @@ async def test_lockstep_same_trace_in_one_process_or_many(tmp_path: Path) -> Non
     assert [(tick, robot) for tick, robot, _, _ in ta] == [(t, r) for t in range(8) for r in ROBOTS]
     assert ta == tb
     for name in ("a", "b"):
-        assert [m["scheduler"] for m in _events(tmp_path / f"{name}.jsonl", "episode_started")] == ["lockstep"]
-        assert not any(line["key"].endswith("/turn") for line in read_trace(tmp_path / f"{name}.jsonl")), (
+        assert [m.scheduler for m in _events(tmp_path / f"{name}.jsonl", "episode_started")] == ["lockstep"]
+        assert not any(line.key.endswith("/turn") for line in read_records(tmp_path / f"{name}.jsonl")), (
             "lockstep gives no turns"
         )
     assert a.metrics.model_dump(exclude={"wall_time"}) == b.metrics.model_dump(exclude={"wall_time"})
@@ -148,12 +146,12 @@ async def _detach(agent: asyncio.Task[EpisodeDone | None]) -> None:
         await agent
 
 
-def _ticks_closed(trace: Path) -> list[dict[str, Any]]:
+def _ticks_closed(trace: Path) -> list[TickClosed]:
     return _events(trace, "tick")
 
 
 def _key_index(trace: Path, predicate: Any) -> list[int]:
-    return [i for i, line in enumerate(read_trace(trace)) if predicate(line)]
+    return [i for i, line in enumerate(read_records(trace)) if predicate(line)]
 
 
 K = 2  # the tick at which David's agent goes away
@@ -181,16 +179,16 @@ async def test_sequential_goes_on_without_a_robot_whose_agent_left(tmp_path: Pat
     assert isinstance(detached, RobotDetached) and detached.robot == "david" and detached.tick == K
     assert done.reason == "horizon" and done.metrics.temporal_steps == HORIZON, done
     assert all(e is not None and e.reason == "horizon" for e in ends)
-    results = [line["msg"] for line in read_trace(trace) if line["key"].endswith("/action/result")]
-    finals = [m for m in results if m["done"]]
-    assert sorted((m["robot"], m["tick"]) for m in finals) == [("alice", HORIZON - 1), ("bob", HORIZON - 1)]
-    assert {r: g for r, g in done.final_results.items() if r != "david"} == {m["robot"]: m["goal_id"] for m in finals}
+    results = messages(read_records(trace), ActionResult)
+    finals = [m for m in results if m.done]
+    assert sorted((m.robot, m.tick) for m in finals) == [("alice", HORIZON - 1), ("bob", HORIZON - 1)]
+    assert {r: g for r, g in done.final_results.items() if r != "david"} == {m.robot: m.goal_id for m in finals}
     # David's entry, if the world names one, can only be the last result it got before it left
-    assert done.final_results.get("david") in (None, [m["goal_id"] for m in results if m["robot"] == "david"][-1])
+    assert done.final_results.get("david") in (None, [m.goal_id for m in results if m.robot == "david"][-1])
 
     ticks = _ticks_closed(trace)
-    assert [t["tick"] for t in ticks] == list(range(HORIZON)), "every tick closes, after the detach too"
-    assert [sorted(t["actions"]) for t in ticks] == [sorted(ROBOTS)] * K + [["alice", "bob"]] * (HORIZON - K)
+    assert [t.tick for t in ticks] == list(range(HORIZON)), "every tick closes, after the detach too"
+    assert [sorted(t.actions) for t in ticks] == [sorted(ROBOTS)] * K + [["alice", "bob"]] * (HORIZON - K)
 
     executed = _executed(trace)
     # Alice and Bob get every turn to the end
@@ -201,21 +199,16 @@ async def test_sequential_goes_on_without_a_robot_whose_agent_left(tmp_path: Pat
     # turn); while Alice planned, its tick K-1 action had executed but its result was still held
     # for its turn, and a detached robot's held result is dropped
     assert [t for t, r, _, _ in executed if r == "david"] == list(range(K if on_turn else K - 1))
-    left = _key_index(trace, lambda line: line["msg"] and line["msg"].get("kind") == "robot_detached")
+    left = _key_index(trace, lambda line: isinstance(line.msg, RobotDetached))
     assert len(left) == 1
-    assert all(
-        i < left[0] for i in _key_index(trace, lambda line: line["key"].endswith("robot/david/action/result"))
-    ), "no result for David after it left"
-    assert not [line for line in read_trace(trace)[left[0] :] if line["key"].endswith("robot/david/turn")], (
+    assert all(i < left[0] for i in _key_index(trace, lambda line: line.key.endswith("robot/david/action/result"))), (
+        "no result for David after it left"
+    )
+    assert not [line for line in read_records(trace)[left[0] :] if line.key.endswith("robot/david/turn")], (
         "no turn for David after it left"
     )
     # the detach happened on a live episode: the world kept publishing ticks after it
-    assert (
-        _key_index(trace, lambda line: line["msg"] and line["msg"].get("kind") == "tick" and line["msg"]["tick"] == K)[
-            0
-        ]
-        > left[0]
-    )
+    assert _key_index(trace, lambda line: isinstance(line.msg, TickClosed) and line.msg.tick == K)[0] > left[0]
 
 
 async def test_sequential_gives_turns_to_a_replacement_agent(tmp_path: Path) -> None:
@@ -241,20 +234,18 @@ async def test_sequential_gives_turns_to_a_replacement_agent(tmp_path: Path) -> 
     assert isinstance(again, RobotAttached) and again.tick == back
     assert done.reason == "horizon" and done.metrics.temporal_steps == HORIZON, done
     assert all(e is not None and e.reason == "horizon" for e in ends), ends
-    finals = [
-        line["msg"] for line in read_trace(trace) if line["key"].endswith("/action/result") and line["msg"]["done"]
-    ]
-    assert sorted(m["robot"] for m in finals) == sorted(ROBOTS) and all(m["tick"] == HORIZON - 1 for m in finals)
-    assert done.final_results == {m["robot"]: m["goal_id"] for m in finals}
+    finals = [m for m in messages(read_records(trace), ActionResult) if m.done]
+    assert sorted(m.robot for m in finals) == sorted(ROBOTS) and all(m.tick == HORIZON - 1 for m in finals)
+    assert done.final_results == {m.robot: m.goal_id for m in finals}
 
     attached = _events(trace, "robot_attached")
-    davids = [a for a in attached if a["robot"] == "david"]
-    assert [a["tick"] for a in davids] == [0, back] and davids[0]["agent_id"] != davids[1]["agent_id"]
-    assert [d["robot"] for d in _events(trace, "robot_detached")] == ["david"]
+    davids = [a for a in attached if a.robot == "david"]
+    assert [a.tick for a in davids] == [0, back] and davids[0].agent_id != davids[1].agent_id
+    assert [d.robot for d in _events(trace, "robot_detached")] == ["david"]
 
     ticks = _ticks_closed(trace)
-    assert [t["tick"] for t in ticks] == list(range(HORIZON))
-    with_david = [t["tick"] for t in ticks if "david" in t["actions"]]
+    assert [t.tick for t in ticks] == list(range(HORIZON))
+    with_david = [t.tick for t in ticks if "david" in t.actions]
     assert with_david == [*range(K), *range(back, HORIZON)], (
         "David acts before it left and in every tick from its return"
     )
@@ -266,7 +257,7 @@ async def test_sequential_gives_turns_to_a_replacement_agent(tmp_path: Path) -> 
     ]
     # the replacement attached off its turn (Alice was planning), so it waited for a Turn, given
     # after Bob's tick K+2 action executed
-    turns = [(line["msg"]["robot"], line["msg"]["tick"]) for line in read_trace(trace) if line["key"].endswith("/turn")]
+    turns = [(m.robot, m.tick) for m in messages(read_records(trace), Turn)]
     assert turns == [("bob", 0), ("david", 0), ("david", back)]
 
 

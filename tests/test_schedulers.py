@@ -14,8 +14,8 @@ from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Decision
 from mhrc.core.bus import Bus
-from mhrc.core.protocol import Action, ActionResult, Observation, SkillOutcome, parse_action
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import Action, ActionResult, EpisodeStarted, Observation, SkillOutcome, Turn
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import ROBOTS, SCHEDULES, ConfigError, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.run.processes import up_processes
@@ -48,11 +48,7 @@ async def test_unknown_schedule_names_the_known_ones() -> None:
 def _executed(trace: Path) -> list[tuple[int, str, str, str]]:
     """(tick, robot, action, feedback) of every action result in a trace, in the order recorded
     (the recorder shares the world's session, so that is the order the world released them)."""
-    return [
-        (m["tick"], m["robot"], parse_action(m["action"]).call(), m["outcome"]["feedback"])
-        for line in read_trace(trace)
-        if line["key"].endswith("/action/result") and (m := line["msg"])
-    ]
+    return [(m.tick, m.robot, m.action.call(), m.outcome.feedback) for m in messages(read_records(trace), ActionResult)]
 
 
 async def test_same_seed_same_actions_and_outcomes(tmp_path: Path) -> None:
@@ -101,18 +97,14 @@ async def test_sequential_same_trace_in_one_process_or_many(tmp_path: Path) -> N
     assert [(tick, robot) for tick, robot, _, _ in ta] == [(t, r) for t in range(8) for r in ("alice", "bob", "david")]
     assert ta == tb
     for name in ("a", "b"):
-        started = [
-            line["msg"]
-            for line in read_trace(tmp_path / f"{name}.jsonl")
-            if line["msg"] and line["msg"].get("kind") == "episode_started"
-        ]
-        assert [m["scheduler"] for m in started] == ["sequential"]
-    turns = [line["msg"]["robot"] for line in read_trace(tmp_path / "a.jsonl") if line["key"].endswith("/turn")]
+        started = messages(read_records(tmp_path / f"{name}.jsonl"), EpisodeStarted)
+        assert [m.scheduler for m in started] == ["sequential"]
+    turns = [m.robot for m in messages(read_records(tmp_path / "a.jsonl"), Turn)]
     assert turns == ["bob", "david"]  # tick 0: Alice plans on the attach reply, the others wait for their turn
-    finals = [line["msg"] for line in read_trace(tmp_path / "a.jsonl") if line["key"].endswith("/action/result")][-3:]
-    assert all(m["done"] and m["tick"] == 7 for m in finals)
+    finals = messages(read_records(tmp_path / "a.jsonl"), ActionResult)[-3:]
+    assert all(m.done and m.tick == 7 for m in finals)
     assert set(a.final_results) == {"alice", "bob", "david"}
-    assert a.final_results == {m["robot"]: m["goal_id"] for m in finals}
+    assert a.final_results == {m.robot: m.goal_id for m in finals}
 
 
 class _Recording:
@@ -197,8 +189,8 @@ async def test_sequential_skips_a_robot_that_never_attached(tmp_path: Path) -> N
     ).resolved()
     done = await asyncio.wait_for(up_in_process(cfg, robots=("bob", "david")), 60)
     assert done.reason == "horizon" and done.metrics.temporal_steps == 3 and set(done.final_results) == {"bob", "david"}
-    lines = read_trace(tmp_path / "t.jsonl")
-    assert [line["msg"]["robot"] for line in lines if line["key"].endswith("/turn")] == ["bob", "david"]
+    lines = read_records(tmp_path / "t.jsonl")
+    assert [m.robot for m in messages(lines, Turn)] == ["bob", "david"]
     assert [(t, r) for t, r, _, _ in _executed(tmp_path / "t.jsonl")] == [
         (t, r) for t in range(3) for r in ("bob", "david")
     ]

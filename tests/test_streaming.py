@@ -340,7 +340,8 @@ async def test_a_long_call_shows_at_the_console_as_reading_then_generating_and_s
     from rich.console import Console
 
     from mhrc.agents import agent as agent_module
-    from mhrc.core.trace import read_trace
+    from mhrc.core.protocol import Thought
+    from mhrc.core.records import read_records
     from mhrc.run.console import ProgressPrinter
 
     monkeypatch.setattr(agent_module, "GENERATING_EVERY", 0.2)
@@ -367,10 +368,10 @@ async def test_a_long_call_shows_at_the_console_as_reading_then_generating_and_s
     counts = [n for _, n in generating]
     assert counts == sorted(counts) and 0 < counts[-1] <= len(words) + 1
     assert not any("unavailable" in line for line in lines)
-    trace = read_trace(cfg.trace)
-    assert not any(line["key"].endswith("/generating") for line in trace)
-    thought = next(line["msg"] for line in trace if line["key"].endswith("/agent/alice/thought"))
-    assert thought["ttft"] is not None and 0.5 < thought["ttft"] < thought["latency"]
+    trace = read_records(cfg.trace)
+    assert not any(line.key.endswith("/generating") for line in trace)
+    thought = next(line.msg for line in trace if line.key.endswith("/agent/alice/thought"))
+    assert isinstance(thought, Thought) and thought.ttft is not None and 0.5 < thought.ttft < thought.latency
 
 
 def _obs(tick: int = 0) -> Any:

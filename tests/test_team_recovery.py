@@ -19,8 +19,8 @@ import pytest
 from sweep import sweep
 
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import EpisodeDone, RobotDetached, TickClosed, decode_event
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ActionResult, EpisodeDone, RobotDetached, TickClosed, decode_event
+from mhrc.core.records import messages, read_records
 from mhrc.testing import world_on_loopback
 
 WAIT = 180.0
@@ -64,11 +64,9 @@ async def _episode(
 
 def _acted_after(trace: Path, robot: str, tick: int) -> list[str]:
     return [
-        line["msg"]["action"]["skill"]
-        for line in read_trace(trace)
-        if line["key"].endswith(f"/robot/{robot}/action/result")
-        and line["msg"]["tick"] > tick
-        and line["msg"]["action"]["skill"] != "wait"
+        r.action.skill
+        for r in messages(read_records(trace), ActionResult)
+        if r.robot == robot and r.tick > tick and r.action.skill != "wait"
     ]
 
 

@@ -15,10 +15,21 @@ from click.testing import CliRunner
 from old_traces import as_version_1
 
 from mhrc.cli import main
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import LLM_ERROR_PREFIX
+from mhrc.core.records import read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer
+
+
+def _msgs(path: Path) -> list[dict[str, Any]]:
+    """The trace's messages as mhrc.core.records decodes them (older ones upgraded), as JSON for the checks."""
+    return [line.msg.model_dump(mode="json") for line in read_records(path) if line.msg is not None]
+
+
+def _json_lines(path: Path) -> list[dict[str, Any]]:
+    """The trace's lines as written, to write a changed copy of it (an older or a tampered trace)."""
+    return [json.loads(text) for text in path.read_text(encoding="utf-8").splitlines() if text.strip()]
 
 
 def record_heuristic(path: Path, horizon: int = 30) -> Path:
@@ -32,7 +43,7 @@ FAILED_HORIZON = 5  # seed 0's heuristic team places 1 of 4 targets by then (its
 def record_failed(path: Path) -> Path:
     """A heuristic episode cut off by a tiny horizon: some targets placed, some not."""
     record_heuristic(path, horizon=FAILED_HORIZON)
-    done = next(r["msg"] for r in read_trace(path) if isinstance(r["msg"], dict) and r["msg"]["kind"] == "episode_done")
+    done = next(m for m in _msgs(path) if m["kind"] == "episode_done")
     m = done["metrics"]
     assert not m["success"] and 0 < m["placed"] < m["total"], m  # the test needs a partial failure
     return path
@@ -142,8 +153,7 @@ def test_the_report_holds_every_step_and_every_snapshot(traces: dict[str, Path],
     html = out.read_text(encoding="utf-8")
     _self_contained(html)
     page = parse(html)
-    rows = read_trace(trace)
-    msgs = [r["msg"] for r in rows if isinstance(r["msg"], dict)]
+    msgs = _msgs(trace)
     started = next(m for m in msgs if m["kind"] == "episode_started")
     assert {"map", "tick-slider", "tick-label", "lanes", "failures", "messages", "header"} <= page.ids
     assert page.lanes == started["robots"]
@@ -203,9 +213,7 @@ def test_llm_steps_show_the_analysis_command_prompt_and_reply(traces: dict[str, 
     assert show(str(traces["llm"]), "--out", str(out)).exit_code == 0
     html = out.read_text(encoding="utf-8")
     page = parse(html)
-    thoughts = [
-        r["msg"] for r in read_trace(traces["llm"]) if isinstance(r["msg"], dict) and r["msg"]["kind"] == "thought"
-    ]
+    thoughts = [m for m in _msgs(traces["llm"]) if m["kind"] == "thought"]
     assert thoughts and all(t["prompt"] for t in thoughts)
     assert page.details >= 2 * len(thoughts)  # prompt and raw reply of each step
     assert "llm:test-model" in html
@@ -258,7 +266,7 @@ def test_an_older_trace_without_snapshots_shows_the_robots_from_their_observatio
         for f in data["frames"]
         if "alice" in f["robots"]
     )
-    results = [r for r in read_trace(old) if isinstance(r["msg"], dict) and r["msg"]["kind"] == "action_result"]
+    results = [m for m in _msgs(old) if m["kind"] == "action_result"]
     assert sum(1 for s in page.steps if "has-result" in str(s["class"])) == len(results)
 
 
@@ -289,7 +297,7 @@ def test_the_failure_panel_renders_the_diagnosis_or_a_note(traces: dict[str, Pat
     section = section[: section.index("</section>")]
     from mhrc.analysis.diagnostics import LABELS
 
-    diag, note = diagnostics_for(read_trace(traces["llm"]))
+    diag, note = diagnostics_for(read_records(traces["llm"]))
     assert diag is not None, note
     assert "<table" in section
     for key in diag:  # every finding, under the label people read, the key in its title
@@ -353,7 +361,7 @@ def _targets_section(html: str) -> str:
 
 def _truth(trace: Path) -> tuple[list[str], dict[str, Any], dict[str, Any]]:
     """Bob's target list, the last snapshot's objects and the world's metrics, straight from the trace."""
-    msgs = [r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict)]
+    msgs = _msgs(trace)
     targets = next(m["observation"]["targets"] for m in msgs if m["kind"] == "action_result" and m["robot"] == "bob")
     last = [m for m in msgs if m["kind"] == "snapshot"][-1]["objects"]
     return targets, last, next(m for m in msgs if m["kind"] == "episode_done")["metrics"]
@@ -402,7 +410,7 @@ def test_targets_come_from_the_task_when_the_trace_does_not_name_them(traces: di
     """A trace whose observations carry no target list (say, Bob never acted): the task's generator names them, and says so."""
     bare = tmp_path / "bare.jsonl"
     with bare.open("w", encoding="utf-8") as f:
-        for row in read_trace(traces["failed"]):
+        for row in _json_lines(traces["failed"]):
             msg = row["msg"]
             if isinstance(msg, dict) and isinstance(msg.get("observation"), dict):
                 msg["observation"]["targets"] = []
@@ -421,15 +429,11 @@ def test_the_worlds_answer_key_comes_first(traces: dict[str, Path], tmp_path: Pa
     """The world names the task's targets, goals and order in episode_done (once nobody can use
     them): the report takes them from there, before Bob's observations."""
     targets, last, _ = _truth(traces["failed"])
-    done = next(
-        r["msg"]
-        for r in read_trace(traces["failed"])
-        if isinstance(r["msg"], dict) and r["msg"].get("kind") == "episode_done"
-    )
+    done = next(m for m in _msgs(traces["failed"]) if m["kind"] == "episode_done")
     assert done["targets"] == targets and done["goals"] == {t: "tray" for t in targets} and done["ordered"] is False
     named = tmp_path / "named.jsonl"
     with named.open("w", encoding="utf-8") as f:
-        for row in read_trace(traces["failed"]):
+        for row in _json_lines(traces["failed"]):
             msg = row["msg"]
             if isinstance(msg, dict) and msg.get("kind") == "episode_done":
                 msg["targets"] = targets[::-1]
@@ -517,7 +521,7 @@ def test_paths_follow_the_planned_routes_around_walls(traces: dict[str, Path], t
     trace = traces["heuristic"]
     data = _data(_report(trace, tmp_path))
     walls = [list(w) for w in get_layout("kitchen").walls]
-    msgs = [r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict)]
+    msgs = _msgs(trace)
     navigates = [
         m
         for m in msgs
@@ -547,7 +551,7 @@ def test_an_older_trace_without_routes_still_loads_and_draws_straight_lines(
 
     old = tmp_path / "noroutes.jsonl"
     with old.open("w", encoding="utf-8") as f:
-        for row in read_trace(traces["heuristic"]):
+        for row in _json_lines(traces["heuristic"]):
             msg = row["msg"]
             if isinstance(msg, dict) and msg.get("kind") == "action_result":
                 msg["outcome"].pop("path", None)
@@ -584,3 +588,21 @@ def test_no_two_map_labels_overlap_in_the_kitchen(traces: dict[str, Path], tmp_p
             assert a[1] >= 0 and a[2] >= 0 and a[3] <= float(vb.group(1)) and a[4] <= float(vb.group(2)), a
             for b in boxes[i + 1 :]:
                 assert min(a[3], b[3]) <= max(a[1], b[1]) or min(a[4], b[4]) <= max(a[2], b[2]), (a, b)
+
+
+def test_an_older_trace_renders_with_its_upgraded_values(traces: dict[str, Path], tmp_path: Path) -> None:
+    """A trace as mhrc wrote it before thoughts carried `failure` and acks a reject code: the report shows the
+    codes mhrc.core.upgrade reads from their texts (the page reads decoded messages, never the JSON as written)."""
+    old = tmp_path / "old.jsonl"
+    rows = _json_lines(traces["llm"])
+    thought = next(r["msg"] for r in rows if isinstance(r["msg"], dict) and r["msg"].get("kind") == "thought")
+    thought.pop("failure", None)
+    thought["parse_error"] = LLM_ERROR_PREFIX + "m at http://x failed after 5 attempts: HTTP 503"
+    ack = next(r["msg"] for r in rows if isinstance(r["msg"], dict) and r["msg"].get("kind") == "action_ack")
+    ack.update(accepted=False, reason="the request is for tick 3 but alice is at tick 4")
+    ack.pop("code", None)
+    old.write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
+    html = _report(old, tmp_path)
+    assert 'data-failure="model_unreachable"' in html and "(model unreachable)" in html
+    assert 'data-code="stale_tick"' in html
+    assert html.count("data-failure=") == 1 and html.count("data-code=") == 1  # today's lines carry no such failure

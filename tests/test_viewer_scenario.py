@@ -16,7 +16,8 @@ import pytest
 import test_viewer_browser
 from test_viewer import record_heuristic, show
 
-from mhrc.core.trace import read_trace
+from mhrc.core.protocol import ScenarioEvent, Snapshot
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.viewer.load import load_trace
@@ -37,10 +38,8 @@ def _record(path: Path, events: Path, horizon: int) -> Path:
     return path
 
 
-def _events(trace: Path) -> list[dict[str, Any]]:
-    return [
-        r["msg"] for r in read_trace(trace) if isinstance(r["msg"], dict) and r["msg"].get("kind") == "scenario_event"
-    ]
+def _events(trace: Path) -> list[ScenarioEvent]:
+    return messages(read_records(trace), ScenarioEvent)
 
 
 @pytest.fixture(scope="module")
@@ -48,8 +47,8 @@ def busy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """seed 0 with the shipped busy_house scenario: relocate, close, breakdown, new_target, all applied."""
     trace = _record(tmp_path_factory.mktemp("busy") / "trace.jsonl", BUSY_HOUSE, HORIZON)
     fired = _events(trace)
-    assert [e["event"] for e in fired] == ["relocate", "close", "breakdown", "new_target"] and all(
-        e["applied"] for e in fired
+    assert [e.event for e in fired] == ["relocate", "close", "breakdown", "new_target"] and all(
+        e.applied for e in fired
     ), fired
     return trace
 
@@ -62,7 +61,7 @@ def skipped(tmp_path_factory: pytest.TempPathFactory) -> Path:
     scenario.write_text(json.dumps([{"tick": 1, "kind": "close"}]))
     trace = _record(d / "trace.jsonl", scenario, SKIP_HORIZON)
     fired = _events(trace)
-    assert len(fired) == 1 and not fired[0]["applied"] and fired[0]["skipped"], fired
+    assert len(fired) == 1 and not fired[0].applied and fired[0].skipped, fired
     return trace
 
 
@@ -74,12 +73,11 @@ def static(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _snapshot_rows(trace: Path) -> tuple[list[int], dict[int, int]]:
     """The trace positions of the snapshots, and of each scenario event by its index."""
     snaps, events = [], {}
-    for n, r in enumerate(read_trace(trace)):
-        kind = (r["msg"] or {}).get("kind") if isinstance(r["msg"], dict) else None
-        if kind == "snapshot":
+    for n, r in enumerate(read_records(trace)):
+        if isinstance(r.msg, Snapshot):
             snaps.append(n)
-        elif kind == "scenario_event":
-            events[r["msg"]["index"]] = n
+        elif isinstance(r.msg, ScenarioEvent):
+            events[r.msg.index] = n
     return snaps, events
 
 
@@ -90,9 +88,9 @@ def test_the_view_model_holds_each_event_at_the_first_frame_that_shows_it(busy: 
     view = build_view(load_trace(busy))
     fired = _events(busy)
     scenario = load_scenario(BUSY_HOUSE)
-    assert view.header["scenario"] == ("busy_house", scenario.sha256)
+    assert view.header.scenario == ("busy_house", scenario.sha256)
     assert [(m.index, m.event, m.tick, m.applied, m.changed, m.text) for m in view.events] == [
-        (e["index"], e["event"], e["tick"], e["applied"], e["changed"], e["text"]) for e in fired
+        (e.index, e.event, e.tick, e.applied, e.changed, e.text) for e in fired
     ]
     snaps, rows = _snapshot_rows(busy)
     frames = view.frames
@@ -101,22 +99,22 @@ def test_the_view_model_holds_each_event_at_the_first_frame_that_shows_it(busy: 
     for m in view.events:
         # the first snapshot recorded after the event: the world as the event's tick opens
         assert m.frame is not None and snaps[m.frame] > rows[m.index] > snaps[m.frame - 1]
-        assert frames[m.frame]["tick"] < m.tick <= frames[m.frame]["tick"] + 1
+        assert frames[m.frame].tick < m.tick <= frames[m.frame].tick + 1
         at[m.event] = m.frame
 
     move = by_kind["relocate"]
-    obj, was, now = move.changed["object"], frames[at["relocate"] - 1]["objects"], frames[at["relocate"]]["objects"]
-    assert (was[obj]["on"], now[obj]["on"]) == (move.changed["from"], move.changed["to"])
-    assert move.at == (now[obj]["x"], now[obj]["y"]) and move.origin == (was[obj]["x"], was[obj]["y"])
+    obj, was, now = move.changed["object"], frames[at["relocate"] - 1].objects, frames[at["relocate"]].objects
+    assert (was[obj].on, now[obj].on) == (move.changed["from"], move.changed["to"])
+    assert move.at == (now[obj].x, now[obj].y) and move.origin == (was[obj].x, was[obj].y)
 
     added = by_kind["new_target"]
-    new, there = added.changed["object"], frames[at["new_target"]]["objects"]
-    assert new not in frames[at["new_target"] - 1]["objects"] and there[new]["on"] == added.changed["on"]
-    assert added.at == (there[new]["x"], there[new]["y"])
+    new, there = added.changed["object"], frames[at["new_target"]].objects
+    assert new not in frames[at["new_target"] - 1].objects and there[new].on == added.changed["on"]
+    assert added.at == (there[new].x, there[new].y)
 
     close = by_kind["close"]
     box = close.changed["container"]
-    assert frames[at["close"] - 1]["open"][box] and not frames[at["close"]]["open"][box]
+    assert frames[at["close"] - 1].open[box] and not frames[at["close"]].open[box]
     furniture = {f["name"]: f for f in view.scene["furniture"]} if view.scene else {}
     assert close.at == (furniture[box]["x"], furniture[box]["y"])
 
@@ -128,7 +126,7 @@ def test_the_view_model_holds_each_event_at_the_first_frame_that_shows_it(busy: 
 
 def test_a_static_episode_has_no_events_and_no_scenario(static: Path) -> None:
     view = build_view(load_trace(static))
-    assert view.events == [] and view.header["scenario"] is None
+    assert view.events == [] and view.header.scenario is None
 
 
 # --------------------------------------------------------------------------- the HTML
@@ -221,7 +219,7 @@ def test_a_skipped_event_is_marked_skipped_with_why_and_a_static_report_has_no_e
     skipped: Path, static: Path, tmp_path: Path
 ) -> None:
     html, page = _page(skipped, tmp_path / "skipped.html")
-    why = _events(skipped)[0]["skipped"]
+    why = _events(skipped)[0].skipped
     [marker] = page.markers
     assert marker["class"].split() == ["ev-marker", "ev-close", "skipped"]
     assert marker["title"].startswith("tick 1: ") and "skipped" in marker["title"] and why in marker["title"]
@@ -337,13 +335,13 @@ def test_the_video_captions_each_event_at_the_frames_of_its_tick(busy: Path, sta
     started, steps, named = read_episode(busy)
     shown: dict[str, list[int]] = {}
     for ev in _events(busy):
-        text = ev["text"].rstrip(".")
-        said = f"tick {ev['tick']}: {text[0].lower() + text[1:] if text[1].islower() else text}"
-        shown[ev["event"]] = [i for i, s in enumerate(steps) if said in s.events]
+        text = ev.text.rstrip(".")
+        said = f"tick {ev.tick}: {text[0].lower() + text[1:] if text[1].islower() else text}"
+        shown[ev.event] = [i for i, s in enumerate(steps) if said in s.events]
         # from the first snapshot after the event (the world as its tick opens) through its tick's own
-        assert [steps[i].snapshot.tick for i in shown[ev["event"]]] == [ev["tick"] - 1, ev["tick"]], (said, shown)
+        assert [steps[i].snapshot.tick for i in shown[ev.event]] == [ev.tick - 1, ev.tick], (said, shown)
     moved = steps[shown["relocate"][-1]]
-    assert moved.events == ("tick 6: someone moved {object} from {from} to {to}".format(**_events(busy)[0]["changed"]),)
+    assert moved.events == ("tick 6: someone moved {object} from {from} to {to}".format(**_events(busy)[0].changed),)
     quiet = [s for s in steps if not s.events]
     assert len(quiet) == len(steps) - 2 * len(shown)
 
@@ -361,7 +359,7 @@ def test_the_video_captions_each_event_at_the_frames_of_its_tick(busy: Path, sta
     _, plain, unnamed = read_episode(static)
     assert not any(s.events or s.added for s in plain)
     # the title names the scenario (name and hash), a static episode's none
-    sha = _events(busy)[0]["sha256"]
+    sha = _events(busy)[0].sha256
     assert named == f"busy_house ({sha[:8]})" and unnamed is None
     assert _Captioner(320, 240, started, len(steps), scenario=named).title.endswith(
         f"/ scenario busy_house ({sha[:8]})"
@@ -373,7 +371,7 @@ def test_the_videos_own_sim_gets_the_new_target_from_its_first_snapshot(busy: Pa
     from mhrc.viewer.video import _spawns
 
     started, steps, _ = read_episode(busy)
-    added = next(e for e in _events(busy) if e["event"] == "new_target")["changed"]
+    added = next(e for e in _events(busy) if e.event == "new_target").changed
     [(first, obj)] = [(i, a) for i, s in enumerate(steps) for a in s.added]
     assert obj == (added["object"], added["on"]) and added["object"] in steps[first].snapshot.objects
     assert added["object"] not in steps[first - 1].snapshot.objects

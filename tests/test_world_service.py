@@ -42,12 +42,13 @@ from mhrc.core.protocol import (
     Place,
     RobotDetached,
     SkillOutcome,
+    Snapshot,
     Wait,
     decode,
     decode_event,
     encode,
 )
-from mhrc.core.trace import read_trace
+from mhrc.core.records import messages, read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.processes import agent_command, wait_for_port, world_command
 from mhrc.run.serve import serve_world
@@ -289,9 +290,9 @@ async def test_a_goal_executes_once_and_a_robot_acts_once_a_tick(mhrc_world, sch
     assert [ran.get_nowait() for _ in range(ran.qsize())] == [third.action.call()], (
         "after the first, only the third reached the simulator"
     )
-    rows = [line["msg"] for line in read_trace(world.trace) if line["kind"] == "put" and isinstance(line["msg"], dict)]
-    assert [m["goal_id"] for m in rows if m["kind"] == "action_result"] == [first.goal_id, third.goal_id]
-    assert [(m["tick"], m["goals"]) for m in rows if m["kind"] == "snapshot" and m["goals"]] == [
+    records = read_records(world.trace)
+    assert [m.goal_id for m in messages(records, ActionResult)] == [first.goal_id, third.goal_id]
+    assert [(m.tick, m.goals) for m in messages(records, Snapshot) if m.goals] == [
         (0, [first.goal_id]),
         (1, [third.goal_id]),
     ]

@@ -47,6 +47,7 @@ mhrc.eval.records); rows written before diagnostics existed lack them, and summa
 from __future__ import annotations
 
 from collections import Counter, defaultdict
+from collections.abc import Sequence
 from typing import Any, get_origin
 
 from pydantic import BaseModel
@@ -67,7 +68,7 @@ from mhrc.core.protocol import (
     Thought,
     Turn,
 )
-from mhrc.core.records import LineKind, Rows, as_records, messages
+from mhrc.core.records import LineKind, TraceLine, messages
 from mhrc.core.upgrade import legacy_reject_code
 
 REJECT_KINDS = ("stale_tick", "busy", "out_of_turn", "episode_over", "malformed", "not_attached", "other")
@@ -188,10 +189,9 @@ def _world_says_unknown(outcome: SkillOutcome) -> bool:
     return outcome.code.value in UNKNOWN_NAME_CODES and outcome.feedback.startswith(UNKNOWN_NAME_FEEDBACK)
 
 
-def diagnose(rows: Rows, metrics: EpisodeMetrics | None = None) -> Diagnostics:
-    """The failure diagnostics of one episode from its trace (`mhrc.core.records.read_records`, or the rows of
-    `read_trace`); `metrics`: the trace's metrics when the caller has them already (computed from it otherwise)."""
-    lines = as_records(rows)
+def diagnose(lines: Sequence[TraceLine], metrics: EpisodeMetrics | None = None) -> Diagnostics:
+    """The failure diagnostics of one episode from its trace (`mhrc.core.records.read_records`); `metrics`: the
+    trace's metrics when the caller has them already (computed from it otherwise)."""
     d = Diagnostics()
     # what each robot planned on: (robot, tick) -> the last observation of that tick, and every message it delivered
     planned: dict[tuple[str, int], Observation] = {}

@@ -77,6 +77,7 @@ from __future__ import annotations
 import math
 import statistics
 from collections import Counter
+from collections.abc import Sequence
 from enum import StrEnum
 from typing import Any
 
@@ -95,7 +96,7 @@ from mhrc.core.protocol import (
     Thought,
     TickClosed,
 )
-from mhrc.core.records import LineKind, Rows, TraceLine, as_records, messages
+from mhrc.core.records import LineKind, TraceLine, messages
 from mhrc.core.upgrade import UNRECORDED
 
 __all__ = [
@@ -179,16 +180,13 @@ class EpisodeMetrics(BaseModel):
         return self.model_dump()
 
 
-def junk_rejections(rows: Rows) -> int:
+def junk_rejections(lines: Sequence[TraceLine]) -> int:
     """Rejections of malformed requests, which the recorder counts instead of copying (`junk` lines)."""
-    return sum(
-        line.junk.count for line in as_records(rows) if line.junk is not None and line.key.endswith("/action/ack")
-    )
+    return sum(line.junk.count for line in lines if line.junk is not None and line.key.endswith("/action/ack"))
 
 
-def from_trace(rows: Rows) -> EpisodeMetrics:
-    """The metrics of one episode from its trace (`mhrc.core.records.read_records`, or the rows of `read_trace`)."""
-    lines = as_records(rows)
+def from_trace(lines: Sequence[TraceLine]) -> EpisodeMetrics:
+    """The metrics of one episode from its trace (`mhrc.core.records.read_records`)."""
     started, done = messages(lines, EpisodeStarted), messages(lines, EpisodeDone)
     if not started or not done:
         raise TraceError("the trace has no episode_started or no episode_done event: the episode did not finish")
@@ -278,7 +276,7 @@ def from_trace(rows: Rows) -> EpisodeMetrics:
 
 
 def _invalidity(
-    lines: list[TraceLine],
+    lines: Sequence[TraceLine],
     done: EpisodeDone,
     temporal_steps: int,
     results: list[ActionResult],
@@ -298,9 +296,10 @@ def _invalidity(
     return None, None
 
 
-def recovery_of(rows: Rows, scheduler: str, step_seconds: float, done: EpisodeDone) -> list[dict[str, Any]]:
+def recovery_of(
+    lines: Sequence[TraceLine], scheduler: str, step_seconds: float, done: EpisodeDone
+) -> list[dict[str, Any]]:
     """Per scenario event of the trace, the steps until the team's progress resumes (module docstring)."""
-    lines = as_records(rows)
     events = messages(lines, ScenarioEvent)
     if not events:
         return []
@@ -327,7 +326,7 @@ def recovery_of(rows: Rows, scheduler: str, step_seconds: float, done: EpisodeDo
     ]
 
 
-def _async_progress(lines: list[TraceLine], step_seconds: float, done: EpisodeDone) -> dict[int, int | None]:
+def _async_progress(lines: Sequence[TraceLine], step_seconds: float, done: EpisodeDone) -> dict[int, int | None]:
     """Async: scenario event index -> ceil((end of the first action after it that put one more target
     in place - its firing time) / step_seconds), None if none did; counted on the snapshots."""
     goals = dict(done.goals)

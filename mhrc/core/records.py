@@ -10,7 +10,8 @@ with its `RejectCode`). Lines of older traces are brought to today's shape first
 
 A line that is not a trace line raises `TraceLineError` (a code, the file and the line number). A
 `put` whose message does not fit its model (anything may be published under a run's keys) is kept, with `msg`
-None and the reason in `problem`: a trace records the bus, junk included.
+None, the kind it names in `named` and the reason in `problem`: a trace records the bus, junk included.
+A line's JSON is not kept: readers read the decoded (and upgraded) message, never the text as written.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from mhrc.core.protocol import (
     TickClosed,
     Turn,
 )
-from mhrc.core.protocol.base import loads
+from mhrc.core.protocol.base import PROTOCOL_VERSION, loads
 from mhrc.core.protocol.thoughts import ReplyFailure
 from mhrc.core.upgrade import upgrade
 
@@ -123,14 +124,7 @@ class TraceLine:
     failure: ReplyFailure | None = None  # a thought's, when its step gave no action
     junk: JunkCount | None = None  # a junk line's count
     problem: str | None = None  # why a put's message did not decode as the model its kind names (msg is then None)
-    raw: Any = None  # the line's `msg` as written (JSON), before any upgrade
-
-    def as_row(self) -> dict[str, Any]:
-        """The line as `json.loads` reads it."""
-        return {"t": self.t, "key": self.key, "kind": self.kind.value, "msg": self.raw}
-
-
-Rows = Iterable[TraceLine | Mapping[str, Any]]  # decoded trace lines, or lines as json.loads reads them (read_trace's)
+    named: str | None = None  # the protocol kind (a key of MODELS) the line's message names, decoded or not
 
 
 MODELS: dict[str, type[Payload]] = {  # a message's `kind` -> its model (the key it travels on says the same)
@@ -144,11 +138,18 @@ def _model_of(msg: Any) -> type[Payload] | None:
     return MODELS.get(kind) if isinstance(kind, str) else None
 
 
-def _reason(exc: ValidationError) -> str:
+def _reason(exc: ValidationError, msg: Any = None) -> str:
+    """What did not fit, and for a message of a newer protocol version than this mhrc's, that it is newer."""
     first = exc.errors()[0]
     where = ".".join(str(p) for p in first["loc"]) or "msg"
     more = f" (and {exc.error_count() - 1} more)" if exc.error_count() > 1 else ""
-    return f"{where}: {first['msg'][:200]}{more}"
+    v = msg.get("v") if isinstance(msg, dict) else None
+    newer = (
+        f" (protocol version {v}, newer than this mhrc's {PROTOCOL_VERSION}: upgrade mhrc to read it)"
+        if isinstance(v, int) and not isinstance(v, bool) and v > PROTOCOL_VERSION
+        else ""
+    )
+    return f"{where}: {first['msg'][:200]}{more}{newer}"
 
 
 def _decode(decoder: Callable[[Any], Payload], msg: Any) -> Payload:
@@ -205,22 +206,22 @@ def decode_row(row: Any, number: int) -> TraceLine:
         kind = LineKind(str(row.get("kind")))
     except ValueError:
         raise TraceLineError(LineError.UNKNOWN_KIND, number, f"`kind` is {str(row.get('kind'))[:40]!r}") from None
-    key, raw = row["key"], row["msg"]
-    msg = upgrade(kind.value, raw)
+    key, msg = row["key"], upgrade(kind.value, row["msg"])
     if kind is LineKind.JUNK:
         try:
-            return TraceLine(number, float(t), key, kind, junk=JunkCount.model_validate(msg), raw=raw)
+            return TraceLine(number, float(t), key, kind, junk=JunkCount.model_validate(msg))
         except ValidationError as exc:
-            return TraceLine(number, float(t), key, kind, problem=_reason(exc), raw=raw)
-    model = _model_of(msg) if kind is LineKind.PUT else None
-    if model is None:
-        return TraceLine(number, float(t), key, kind, raw=raw)
+            return TraceLine(number, float(t), key, kind, problem=_reason(exc))
+    model = _model_of(msg)
+    named = model.model_fields["kind"].default if model is not None else None
+    if model is None or kind is not LineKind.PUT:
+        return TraceLine(number, float(t), key, kind, named=named)
     try:
         payload = _decode(model.model_validate, msg)
     except ValidationError as exc:
-        return TraceLine(number, float(t), key, kind, problem=_reason(exc), raw=raw)
+        return TraceLine(number, float(t), key, kind, problem=_reason(exc, msg), named=named)
     failure = payload.failure if isinstance(payload, Thought) else None
-    return TraceLine(number, float(t), key, kind, msg=payload, failure=failure, raw=raw)
+    return TraceLine(number, float(t), key, kind, msg=payload, failure=failure, named=named)
 
 
 def parse_line(text: str, number: int) -> TraceLine:
@@ -246,11 +247,6 @@ def read_records(path: str | Path) -> list[TraceLine]:
             except TraceLineError as exc:
                 raise TraceLineError(exc.code, exc.line, exc.detail, p) from None
     return out
-
-
-def as_records(rows: Rows) -> list[TraceLine]:
-    """Trace lines from decoded records or from rows as `json.loads` reads them (numbered in order)."""
-    return [r if isinstance(r, TraceLine) else decode_row(r, n) for n, r in enumerate(rows, 1)]
 
 
 def messages(lines: Iterable[TraceLine], model: type[M]) -> list[M]:

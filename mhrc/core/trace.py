@@ -38,7 +38,7 @@ from mhrc.core.keys import Keys
 from mhrc.core.protocol import ActionRequest, ProtocolError, Thought, decode
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES, Message, loads
 from mhrc.core.protocol.thoughts import MAX_THOUGHT_BYTES
-from mhrc.core.records import NotCopied, read_records
+from mhrc.core.records import NotCopied
 
 JUNK_INTERVAL = (
     1.0  # s: malformed requests (and the world's rejections of them) go in as one count per key and interval
@@ -381,10 +381,3 @@ def unwritable(path: Path, *, directory: bool = False) -> str | None:
     if not os.access(parent, os.W_OK | os.X_OK):
         return f"cannot create {path}: {parent} is not writable"
     return None
-
-
-def read_trace(path: str | Path) -> list[dict[str, Any]]:
-    """The lines of a trace file as JSON dicts, for scripts and tests that look at the raw JSON
-    (bench/, tests/). It reads through mhrc.core.records.read_records (a line that is not a trace
-    line raises its TraceLineError, a ValueError); the package's own code reads the records."""
-    return [line.as_row() for line in read_records(path)]

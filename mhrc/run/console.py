@@ -8,6 +8,7 @@ until every result that tick is known to have (`TickClosed.actions`) has printed
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,7 +39,7 @@ from mhrc.core.protocol import (
 )
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES
 from mhrc.core.protocol.thoughts import MAX_THOUGHT_BYTES, ReplyFailure
-from mhrc.core.records import Rows, as_records, messages
+from mhrc.core.records import TraceLine, messages
 
 COLORS = {"alice": "magenta", "bob": "cyan", "david": "green"}
 # the other robots of a team, in the order they first appear: none used twice while these last
@@ -336,12 +337,12 @@ def summary_table(
     return t
 
 
-def lost_robots(rows: Rows) -> list[RobotDetached]:
-    """From a trace (records, or the rows of read_trace): the robots detached between the start and the end of
+def lost_robots(lines: Iterable[TraceLine]) -> list[RobotDetached]:
+    """From a trace (mhrc.core.records.read_records): the robots detached between the start and the end of
     the episode (an agent killed, frozen past its lease, gone) that did not attach again before the end."""
     lost: dict[str, RobotDetached] = {}
     started = False
-    for ev in messages(as_records(rows), BaseModel):
+    for ev in messages(lines, BaseModel):
         if isinstance(ev, EpisodeStarted):
             started = True
         elif isinstance(ev, EpisodeDone):

@@ -18,6 +18,8 @@ from bisect import bisect_right
 from dataclasses import dataclass
 from typing import Any
 
+from mhrc.core.protocol import ObjectPose, ScenarioEvent, Snapshot
+from mhrc.viewer.frames import Frame
 from mhrc.viewer.load import LoadedTrace
 
 KINDS = ("relocate", "new_target", "close", "breakdown")
@@ -95,10 +97,8 @@ def scenario_label(name: str, sha256: str) -> str:
     return f"{name} ({sha256[:8]})" if sha256 else name
 
 
-def _xy(pose: Any) -> tuple[float, float] | None:
-    if isinstance(pose, dict) and isinstance(pose.get("x"), (int, float)) and isinstance(pose.get("y"), (int, float)):
-        return float(pose["x"]), float(pose["y"])
-    return None
+def _xy(pose: ObjectPose | None) -> tuple[float, float] | None:
+    return (pose.x, pose.y) if pose is not None else None
 
 
 def _centre(scene: dict[str, Any] | None, name: str | None) -> tuple[float, float] | None:
@@ -109,46 +109,41 @@ def _centre(scene: dict[str, Any] | None, name: str | None) -> tuple[float, floa
 
 
 def scenario_marks(
-    trace: LoadedTrace, frames: list[dict[str, Any]], frames_from: str, scene: dict[str, Any] | None
+    trace: LoadedTrace, frames: list[Frame], frames_from: str, scene: dict[str, Any] | None
 ) -> list[ScenarioMark]:
     """Every scenario event of the trace, in trace order, with its frame and place."""
     snap_rows: list[int] = []
-    found: list[tuple[int, dict[str, Any]]] = []
-    for i, row in enumerate(trace.rows):
-        msg = row.get("msg")
-        if not isinstance(msg, dict):
-            continue
-        if msg.get("kind") == "snapshot":
+    found: list[tuple[int, ScenarioEvent]] = []
+    for i, line in enumerate(trace.records):
+        if isinstance(line.msg, Snapshot):
             snap_rows.append(i)
-        elif msg.get("kind") == "scenario_event":
-            found.append((i, msg))
+        elif isinstance(line.msg, ScenarioEvent):
+            found.append((i, line.msg))
     marks = []
     for at, msg in found:
-        given = msg.get("changed")
-        changed: dict[str, Any] = given if isinstance(given, dict) else {}
         m = ScenarioMark(
-            index=int(msg.get("index") or 0),
-            event=str(msg.get("event") or "?"),
-            tick=int(msg.get("tick") or 0),
-            applied=bool(msg.get("applied")),
-            skipped=msg.get("skipped"),
-            changed={str(k): str(v) for k, v in changed.items()},
-            text=str(msg.get("text") or ""),
-            scenario=str(msg.get("scenario") or ""),
-            sha256=str(msg.get("sha256") or ""),
+            index=msg.index,
+            event=msg.event,
+            tick=msg.tick,
+            applied=msg.applied,
+            skipped=msg.skipped,
+            changed=dict(msg.changed),
+            text=msg.text,
+            scenario=msg.scenario,
+            sha256=msg.sha256,
         )
         if frames_from == "snapshots":
             first = bisect_right(snap_rows, at)
             m.frame = first if first < len(frames) else None
         else:  # no snapshots (an older trace): the first frame at or after its tick
-            m.frame = next((k for k, f in enumerate(frames) if int(f.get("tick", 0)) >= m.tick), None)
+            m.frame = next((k for k, f in enumerate(frames) if f.tick >= m.tick), None)
         if m.applied:
             _place(m, frames, scene)
         marks.append(m)
     return marks
 
 
-def _place(m: ScenarioMark, frames: list[dict[str, Any]], scene: dict[str, Any] | None) -> None:
+def _place(m: ScenarioMark, frames: list[Frame], scene: dict[str, Any] | None) -> None:
     c = m.changed
     if m.event == "breakdown":
         m.robot = c.get("robot")
@@ -162,11 +157,11 @@ def _place(m: ScenarioMark, frames: list[dict[str, Any]], scene: dict[str, Any] 
         return
     obj = c.get("object")
     if m.frame is not None:
-        m.at = _xy((frames[m.frame].get("objects") or {}).get(obj))
+        m.at = _xy(frames[m.frame].objects.get(obj or ""))
     if m.at is None:
         m.at = _centre(scene, c.get("to") or c.get("on"))
     if m.event == "relocate":
-        before = _xy((frames[m.frame - 1].get("objects") or {}).get(obj)) if m.frame else None
+        before = _xy(frames[m.frame - 1].objects.get(obj or "")) if m.frame else None
         m.origin = before or _centre(scene, c.get("from"))
 
 

@@ -3,7 +3,11 @@
 A trace is JSONL, one bus message a line (mhrc.core.trace). The viewer must render what it can of a
 trace cut off mid-line (a run killed while recording), of one from an older protocol version
 (version 1: no `snapshot` events) or with a few damaged lines, and refuse, with one sentence,
-a file that is no trace at all.
+a file that is no trace at all, or a line whose message does not fit its model (one of a newer protocol
+version says so).
+
+Every line is decoded by mhrc.core.records, which brings an older message to today's shape first
+(mhrc.core.upgrade, the one upgrade path): the page reads protocol models, never the JSON as written.
 """
 
 from __future__ import annotations
@@ -11,10 +15,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TypeVar
 
-from mhrc.core.protocol import PROTOCOL_VERSION
-from mhrc.core.records import MODELS, LineError, LineKind, TraceLine, TraceLineError, parse_line
+from pydantic import BaseModel
+
+from mhrc.core.protocol import EpisodeDone, EpisodeStarted, Message, Snapshot
+from mhrc.core.records import LineError, LineKind, TraceLine, TraceLineError, messages, parse_line
+
+M = TypeVar("M", bound=BaseModel)
 
 
 class NotATrace(ValueError):
@@ -32,32 +40,32 @@ class MalformedLine(NotATrace):
 
 @dataclass
 class LoadedTrace:
-    """The decoded lines of a trace (mhrc.core.records), with warnings about what could not be read.
-    `rows` are the same lines as JSON, for the page's data (mhrc.viewer.model)."""
+    """The decoded lines of a trace (mhrc.core.records: older lines upgraded to today's shape, by
+    mhrc.core.upgrade), with warnings about what could not be read. The page reads the messages
+    that decoded, as their protocol models, and nothing else."""
 
     path: Path
     records: list[TraceLine]
     warnings: list[str] = field(default_factory=list)
     versions: set[int] = field(default_factory=set)
-    rows: list[dict[str, Any]] = field(init=False)
 
-    def __post_init__(self) -> None:
-        self.rows = [_typed_row(line) for line in self.records]
+    def messages(self, model: type[M]) -> list[M]:
+        """Every message of type `model` in the trace, in trace order."""
+        return messages(self.records, model)
 
-    def messages(self, kind: str) -> list[dict[str, Any]]:
-        """The `msg` (JSON) of every line whose message is of `kind`, in trace order."""
-        return [r["msg"] for r in self.rows if isinstance(r.get("msg"), dict) and r["msg"].get("kind") == kind]
+    def first(self, model: type[M]) -> M | None:
+        """The trace's first message of type `model`, or None."""
+        return next((line.msg for line in self.records if isinstance(line.msg, model)), None)
+
+    def last(self, model: type[M]) -> M | None:
+        """The trace's last message of type `model`, or None."""
+        found = self.messages(model)
+        return found[-1] if found else None
 
 
-def _named_kind(raw: Any) -> str | None:
-    """The protocol kind a line's message names (one mhrc.core.records decodes), or None."""
-    kind = raw.get("kind") if isinstance(raw, dict) else None
-    return kind if isinstance(kind, str) and kind in MODELS else None
-
-
-def _not_finite(value: Any) -> bool:
-    """Whether a JSON value holds NaN or an infinity anywhere (Python's parser reads `NaN` and
-    `Infinity`; the page's JSON.parse would fail on them). Iterative: a deep value is no error."""
+def _not_finite(value: object) -> bool:
+    """Whether a value holds NaN or an infinity anywhere (Python's parser reads `NaN` and `Infinity`, and a
+    protocol float takes them; the page's JSON.parse would fail on them). Iterative: a deep value is no error."""
     todo = [value]
     while todo:
         v = todo.pop()
@@ -65,38 +73,22 @@ def _not_finite(value: Any) -> bool:
             return True
         if isinstance(v, dict):
             todo.extend(v.values())
-        elif isinstance(v, list):
+        elif isinstance(v, (list, tuple)):
             todo.extend(v)
     return False
 
 
 def malformed(line: TraceLine) -> str | None:
     """Why `line` cannot be shown, or None: a message that names a protocol kind must be a `put`
-    that decoded into that kind's model (mhrc.core.records). The page reads what decoded, never
-    the raw JSON, so a value of the wrong type cannot reach it."""
-    if not math.isfinite(line.t) or _not_finite(line.raw):
+    that decoded into that kind's model (mhrc.core.records), with finite numbers. The page reads
+    what decoded, never the JSON as written, so a value of the wrong type cannot reach it."""
+    if not math.isfinite(line.t) or (line.msg is not None and _not_finite(line.msg.model_dump())):
         return "a number is NaN or infinite"
-    kind = _named_kind(line.raw)
-    if kind is None or line.msg is not None:
+    if line.named is None or line.msg is not None:
         return None
     if line.kind is not LineKind.PUT:
-        return f"a {line.kind.value} line carries a {kind} message"
-    newer = line.raw.get("v") if isinstance(line.raw, dict) else None
-    hint = (
-        f" (protocol version {newer}, newer than this mhrc's {PROTOCOL_VERSION}: upgrade mhrc to read it)"
-        if isinstance(newer, int) and not isinstance(newer, bool) and newer > PROTOCOL_VERSION
-        else ""
-    )
-    return f"the {kind} message does not fit its model: {line.problem}{hint}"
-
-
-def _typed_row(line: TraceLine) -> dict[str, Any]:
-    """The line as JSON for the page: a decoded message as its model dumps it (only the fields the
-    line gave, so an older trace still reads as older), anything else as written."""
-    row = line.as_row()
-    if line.msg is not None and _named_kind(line.raw) is not None:
-        row["msg"] = line.msg.model_dump(mode="json", exclude_unset=True)
-    return row
+        return f"a {line.kind.value} line carries a {line.named} message"
+    return f"the {line.named} message does not fit its model: {line.problem}"
 
 
 def resolve(path: str | Path) -> Path:
@@ -167,26 +159,20 @@ def from_records(path: Path, records: list[TraceLine], warnings: list[str] | Non
     """A trace whose lines were decoded already (by `load_trace`, or by a caller that read the file
     once for its own use, as `mhrc eval` does), with the warnings about what it holds."""
     trace = LoadedTrace(path=path, records=records, warnings=list(warnings or ()))
-    for r in trace.rows:
-        msg = r.get("msg")
-        if isinstance(msg, dict) and isinstance(msg.get("v"), int):
-            trace.versions.add(msg["v"])
-    newer = {v for v in trace.versions if v > PROTOCOL_VERSION}
-    if newer:
-        trace.warnings.append(
-            f"the trace has protocol version {max(newer)}, newer than this viewer's {PROTOCOL_VERSION}: some fields may be missing"
-        )
-    if not trace.messages("episode_started"):
+    for line in records:  # the versions the messages recorded (a message without `v` names none)
+        if isinstance(line.msg, Message) and "v" in line.msg.model_fields_set:
+            trace.versions.add(line.msg.v)
+    if not trace.messages(EpisodeStarted):
         trace.warnings.append(
             "the trace has no episode_started event: task, scene and seed are unknown and the house is not drawn"
         )
-    if not trace.messages("snapshot"):
+    if not trace.messages(Snapshot):
         old = f" (protocol version {max(trace.versions)})" if trace.versions and max(trace.versions) < 2 else ""
         trace.warnings.append(
             f"the trace has no snapshot events{old}: the map shows the robots' positions from their own observations "
             "and no objects"
         )
-    if not trace.messages("episode_done"):
+    if not trace.messages(EpisodeDone):
         trace.warnings.append(
             "the trace has no episode_done event: the episode did not finish while recording, no metrics"
         )

@@ -13,7 +13,21 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from mhrc.core.protocol import (
+    Action,
+    ActionAck,
+    ActionRequest,
+    ActionResult,
+    EpisodeDone,
+    EpisodeStarted,
+    Metrics,
+    RobotMessage,
+    RobotPose,
+    Snapshot,
+    Thought,
+)
 from mhrc.viewer.events import ScenarioMark, scenario_marks, scenario_name
+from mhrc.viewer.frames import Frame
 from mhrc.viewer.load import LoadedTrace
 from mhrc.viewer.targets import TaskView, task_view
 from mhrc.world.layouts import Layout, get_layout
@@ -27,11 +41,11 @@ class Step:
     robot: str
     goal_id: str
     tick: int | None = None
-    action: dict[str, Any] | None = None
+    action: Action | None = None
     call: str = ""
-    ack: dict[str, Any] | None = None
-    result: dict[str, Any] | None = None
-    thought: dict[str, Any] | None = None
+    ack: ActionAck | None = None
+    result: ActionResult | None = None
+    thought: Thought | None = None
     frame: int | None = None  # index of the map frame right after it executed
 
 
@@ -46,11 +60,37 @@ class MapMessage:
 
 
 @dataclass
+class Header:
+    """What the report's header says of the episode: its start event's facts, its end, its metrics."""
+
+    run: str | None
+    task: str | None
+    scene: str | None
+    seed: int | None
+    n_objects: int | None
+    robots: list[str]
+    fliers: dict[str, float]  # robot -> the altitude it flies at (m)
+    models: dict[str, str]  # robot -> the policy its thoughts name
+    horizon: int | None
+    scheduler: str | None
+    fidelity: str | None
+    aids: list[str] | None
+    time_scale: float | None
+    step_seconds: float | None
+    lower_bound: int | None
+    reason: str | None
+    scenario: tuple[str, str] | None  # (name, sha256), or None for a static episode
+    metrics: Metrics | None
+    versions: list[int]
+    trace: str
+
+
+@dataclass
 class EpisodeView:
-    header: dict[str, Any]
+    header: Header
     robots: list[str]
     steps: dict[str, list[Step]]
-    frames: list[dict[str, Any]]
+    frames: list[Frame]
     frames_from: str  # "snapshots", "observations" or "none"
     messages: list[MapMessage]
     scene: dict[str, Any] | None
@@ -58,24 +98,6 @@ class EpisodeView:
     routes: dict[str, list[list[float]]] = field(default_factory=dict)  # goal id -> a navigate's planned route
     events: list[ScenarioMark] = field(default_factory=list)  # a dynamic episode's scenario events (mhrc.viewer.events)
     warnings: list[str] = field(default_factory=list)
-
-
-def _call(action: dict[str, Any] | None) -> str:
-    if not action:
-        return ""
-    skill = action.get("skill", "?")
-    args = [f"{v!r}" if k == "content" else str(v) for k, v in action.items() if k != "skill"]
-    return f"{skill}({', '.join(args)})"
-
-
-def _robot_of(key: str) -> str | None:
-    parts = key.split("/")
-    for marker in ("robot", "agent"):
-        if marker in parts:
-            i = parts.index(marker)
-            if i + 1 < len(parts):
-                return parts[i + 1]
-    return None
 
 
 def scene_map(scene: str, fixtures: dict[str, tuple[float, float]], warnings: list[str]) -> dict[str, Any] | None:
@@ -116,10 +138,10 @@ def scene_map(scene: str, fixtures: dict[str, tuple[float, float]], warnings: li
     }
 
 
-def fliers(started: dict[str, Any], scene: dict[str, Any] | None) -> dict[str, float]:
+def fliers(started: EpisodeStarted | None, scene: dict[str, Any] | None) -> dict[str, float]:
     """The robots of the recorded team that fly, and the altitude they fly at in that house (m),
     as the world set it (world/robots.py flight_altitude)."""
-    kinds = (started.get("team") or {}).get("kinds") or {}
+    kinds = started.team.kinds if started is not None and started.team is not None else {}
     out = {}
     for robot, kind in kinds.items():
         spec = KINDS.get(kind)
@@ -128,17 +150,26 @@ def fliers(started: dict[str, Any], scene: dict[str, Any] | None) -> dict[str, f
     return out
 
 
+def _deliver(messages: list[MapMessage], result: ActionResult) -> None:
+    """Mark the messages a result's observation carried as delivered at its tick (the first not yet delivered of each)."""
+    obs = result.observation
+    for m in obs.new_messages:
+        for mm in messages:
+            if mm.delivered is None and mm.sender == m.sender and mm.to == m.to and mm.content == m.content:
+                mm.delivered = obs.tick
+                break
+
+
 def build_view(trace: LoadedTrace) -> EpisodeView:
     warnings = list(trace.warnings)
-    started = (trace.messages("episode_started") or [{}])[0]
-    done_list = trace.messages("episode_done")
-    done = done_list[-1] if done_list else None
+    started = trace.first(EpisodeStarted)
+    done = trace.last(EpisodeDone)
 
     steps: dict[str, dict[str, Step]] = {}
-    thoughts: dict[str, list[dict[str, Any]]] = {}
+    thoughts: dict[str, list[Thought]] = {}
     order: dict[str, list[str]] = {}
     messages: list[MapMessage] = []
-    robots: list[str] = list(started.get("robots") or [])
+    robots: list[str] = list(started.robots) if started is not None else []
     policies: dict[str, str] = {}
 
     def step(robot: str, goal: str) -> Step:
@@ -152,52 +183,29 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
             order[robot].append(goal)
         return steps[robot][goal]
 
-    for row in trace.rows:
-        msg = row.get("msg")
-        if not isinstance(msg, dict):
-            continue
-        kind = msg.get("kind")
-        robot = msg.get("robot") or _robot_of(row["key"])
-        goal = msg.get("goal_id")
-        if kind == "thought" and isinstance(robot, str):
-            thoughts.setdefault(robot, []).append(msg)
-            if msg.get("policy"):
-                policies.setdefault(robot, str(msg["policy"]))
-        elif kind == "action_request" and isinstance(robot, str) and isinstance(goal, str):
-            s = step(robot, goal)
-            s.tick = msg.get("tick", s.tick)
-            s.action = msg.get("action")
-        elif kind == "action_ack" and isinstance(robot, str) and isinstance(goal, str):
-            step(robot, goal).ack = msg
-        elif kind == "action_result" and isinstance(robot, str) and isinstance(goal, str):
-            s = step(robot, goal)
+    for line in trace.records:
+        msg = line.msg
+        if isinstance(msg, Thought):
+            thoughts.setdefault(msg.robot, []).append(msg)
+            if msg.policy:
+                policies.setdefault(msg.robot, msg.policy)
+        elif isinstance(msg, ActionRequest):
+            s = step(msg.robot, msg.goal_id)
+            s.tick = msg.tick
+            s.action = msg.action
+        elif isinstance(msg, ActionAck):
+            step(msg.robot, msg.goal_id).ack = msg
+        elif isinstance(msg, ActionResult):
+            s = step(msg.robot, msg.goal_id)
             s.result = msg
-            s.action = s.action or msg.get("action")
+            s.action = s.action or msg.action
             if s.tick is None:
-                s.tick = msg.get("tick")
-            obs = msg.get("observation") or {}
-            for m in obs.get("new_messages") or []:
-                for mm in messages:
-                    if (
-                        mm.delivered is None
-                        and mm.sender == m.get("sender")
-                        and mm.to == m.get("to")
-                        and mm.content == m.get("content")
-                    ):
-                        mm.delivered = obs.get("tick")
-                        break
-        elif kind == "message":
-            messages.append(
-                MapMessage(
-                    str(msg.get("sender")),
-                    str(msg.get("to")),
-                    str(msg.get("content", "")),
-                    int(msg.get("tick", 0)),
-                    None,
-                )
-            )
+                s.tick = msg.tick
+            _deliver(messages, msg)
+        elif isinstance(msg, RobotMessage):
+            messages.append(MapMessage(msg.sender, msg.to, msg.content, msg.tick, None))
     # async: a message reaches its receiver when sent
-    if started.get("scheduler") == "async":
+    if started is not None and started.scheduler == "async":
         for mm in messages:
             if mm.delivered is None:
                 mm.delivered = mm.sent
@@ -212,59 +220,59 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
                 continue
             # the next thought of this robot at or before the step's tick
             for i, t in enumerate(th):
-                if s.tick is None or t.get("tick", 0) <= s.tick:
+                if s.tick is None or t.tick <= s.tick:
                     s.thought = th.pop(i)
                     break
         for s in lane:
-            s.call = _call(s.action)
+            s.call = s.action.call() if s.action is not None else ""
         out[robot] = lane
 
-    frames, frames_from = _frames(trace, out, started)
-    goal_frame = {g: i for i, f in enumerate(frames) for g in f.get("goals", [])}
+    frames, frames_from = _frames(trace, out)
+    goal_frame = {g: i for i, f in enumerate(frames) for g in f.goals}
     for lane in out.values():
         for s in lane:
             s.frame = goal_frame.get(s.goal_id)
     for mm in messages:
-        mm.frame = next((i for i, f in enumerate(frames) if f["tick"] >= mm.sent and i > 0), None)
+        mm.frame = next((i for i, f in enumerate(frames) if f.tick >= mm.sent and i > 0), None)
 
     fixtures: dict[str, tuple[float, float]] = {}
     scene_names: set[str] = set()
-    for r in trace.messages("action_result"):
-        for f in (r.get("observation") or {}).get("furniture") or []:
-            if not f.get("stand_poses") and isinstance(f.get("position"), list):
-                fixtures[str(f.get("name"))] = (float(f["position"][0]), float(f["position"][1]))
+    for r in trace.messages(ActionResult):
+        for f in r.observation.furniture:
+            if not f.stand_poses:
+                fixtures[f.name] = (f.position[0], f.position[1])
             else:
-                scene_names.add(str(f.get("name")))
+                scene_names.add(f.name)
     scene = (
-        scene_map(str(started["scene"]), {k: v for k, v in fixtures.items() if k not in scene_names}, warnings)
-        if started.get("scene")
+        scene_map(started.scene, {k: v for k, v in fixtures.items() if k not in scene_names}, warnings)
+        if started is not None and started.scene
         else None
     )
 
     marks = scenario_marks(trace, frames, frames_from, scene)
-    metrics = (done or {}).get("metrics") or {}
-    header = {
-        "run": started.get("run"),
-        "task": started.get("task"),
-        "scene": started.get("scene"),
-        "seed": started.get("seed"),
-        "n_objects": started.get("n_objects"),
-        "robots": robots,
-        "fliers": fliers(started, scene),
-        "models": {r: policies.get(r, "unknown") for r in robots},
-        "horizon": started.get("horizon"),
-        "scheduler": started.get("scheduler"),
-        "fidelity": started.get("fidelity", "unrecorded" if started else None),
-        "aids": started.get("aids"),
-        "time_scale": started.get("time_scale"),
-        "step_seconds": started.get("step_seconds"),
-        "lower_bound": started.get("lower_bound", metrics.get("lower_bound")),
-        "reason": (done or {}).get("reason"),
-        "scenario": scenario_name(marks),  # (name, sha256), or None for a static episode
-        "metrics": metrics,
-        "versions": sorted(trace.versions),
-        "trace": str(trace.path),
-    }
+    metrics = done.metrics if done is not None else None
+    header = Header(
+        run=started.run if started else None,
+        task=started.task if started else None,
+        scene=started.scene if started else None,
+        seed=started.seed if started else None,
+        n_objects=started.n_objects if started else None,
+        robots=robots,
+        fliers=fliers(started, scene),
+        models={r: policies.get(r, "unknown") for r in robots},
+        horizon=started.horizon if started else None,
+        scheduler=started.scheduler if started else None,
+        fidelity=started.fidelity if started else None,
+        aids=started.aids if started else None,
+        time_scale=started.time_scale if started else None,
+        step_seconds=started.step_seconds if started else None,
+        lower_bound=_lower_bound(started, metrics),
+        reason=done.reason if done else None,
+        scenario=scenario_name(marks),
+        metrics=metrics,
+        versions=sorted(trace.versions),
+        trace=str(trace.path),
+    )
     return EpisodeView(
         header=header,
         robots=robots,
@@ -280,63 +288,46 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
     )
 
 
+def _lower_bound(started: EpisodeStarted | None, metrics: Metrics | None) -> int | None:
+    """The episode's TS lower bound: its start event's, else its metrics' (mhrc.world.bound)."""
+    if started is not None and started.lower_bound is not None:
+        return started.lower_bound
+    return metrics.lower_bound if metrics is not None else None
+
+
 def _routes(lanes: dict[str, list[Step]]) -> dict[str, list[list[float]]]:
     """The planned route of every navigate whose outcome carries one (traces before routes have none:
     the map joins the stops with straight lines)."""
     out: dict[str, list[list[float]]] = {}
     for lane in lanes.values():
         for s in lane:
-            path = ((s.result or {}).get("outcome") or {}).get("path")
-            if isinstance(path, list) and len(path) >= 2:
-                try:
-                    out[s.goal_id] = [[float(p[0]), float(p[1])] for p in path]
-                except (TypeError, ValueError, IndexError):
-                    continue  # a damaged route: the straight line it is
+            path = s.result.outcome.path if s.result is not None else None
+            if path is not None and len(path) >= 2:
+                out[s.goal_id] = [[x, y] for x, y in path]
     return out
 
 
-def _frames(
-    trace: LoadedTrace, lanes: dict[str, list[Step]], started: dict[str, Any]
-) -> tuple[list[dict[str, Any]], str]:
-    snaps = trace.messages("snapshot")
+def _frames(trace: LoadedTrace, lanes: dict[str, list[Step]]) -> tuple[list[Frame], str]:
+    snaps = trace.messages(Snapshot)
     if snaps:
-        return [
-            {
-                "tick": s.get("tick", 0),
-                "goals": list(s.get("goals") or []),
-                "robots": s.get("robots") or {},
-                "objects": s.get("objects") or {},
-                "open": s.get("open") or {},
-            }
-            for s in snaps
-        ], "snapshots"
+        return [Frame(s.tick, list(s.goals), dict(s.robots), dict(s.objects), dict(s.open)) for s in snaps], "snapshots"
     # no snapshots: each robot's base from its own observations, after each tick
-    results = [s for lane in lanes.values() for s in lane if s.result is not None]
-    if not results:
+    by_tick: dict[int, list[tuple[Step, ActionResult]]] = {}
+    for s in (s for lane in lanes.values() for s in lane):
+        if s.result is not None:
+            by_tick.setdefault(s.result.tick, []).append((s, s.result))
+    if not by_tick:
         return [], "none"
-    by_tick: dict[int, list[Step]] = {}
-    for s in results:
-        by_tick.setdefault(int(s.result.get("tick", 0)) if s.result else 0, []).append(s)
-    frames: list[dict[str, Any]] = []
-    pose: dict[str, dict[str, Any]] = {}
+    frames: list[Frame] = []
+    pose: dict[str, RobotPose] = {}
     for tick in sorted(by_tick):
         goals = []
-        for s in by_tick[tick]:
-            obs = (s.result or {}).get("observation") or {}
-            status = obs.get("status") or {}
-            base = status.get("base")
-            arm = status.get("arm_base")
-            if isinstance(base, dict):
-                pose[s.robot] = {
-                    "x": base.get("x", 0.0),
-                    "y": base.get("y", 0.0),
-                    "yaw": base.get("yaw", 0.0),
-                    "holding": status.get("holding"),
-                }
-            elif isinstance(arm, list) and len(arm) >= 2:
-                pose[s.robot] = {"x": arm[0], "y": arm[1], "yaw": 0.0, "holding": status.get("holding")}
+        for s, result in by_tick[tick]:
+            status = result.observation.status
+            if status.base is not None:
+                pose[s.robot] = RobotPose(x=status.base.x, y=status.base.y, yaw=status.base.yaw, holding=status.holding)
+            elif status.arm_base is not None:
+                pose[s.robot] = RobotPose(x=status.arm_base[0], y=status.arm_base[1], yaw=0.0, holding=status.holding)
             goals.append(s.goal_id)
-        frames.append(
-            {"tick": tick, "goals": goals, "robots": {k: dict(v) for k, v in pose.items()}, "objects": {}, "open": {}}
-        )
+        frames.append(Frame(tick, goals, dict(pose)))
     return frames, "observations"

@@ -58,8 +58,8 @@ def _bounds(view: EpisodeView) -> tuple[float, float, float, float]:
     if view.scene:
         b = view.scene["bounds"]
         return float(b[0]) - 0.3, float(b[1]) + 0.3, float(b[2]) - 0.3, float(b[3]) + 0.3
-    xs = [p["x"] for f in view.frames for group in ("robots", "objects") for p in f[group].values()]
-    ys = [p["y"] for f in view.frames for group in ("robots", "objects") for p in f[group].values()]
+    xs = [p.x for f in view.frames for p in f.robots.values()] + [p.x for f in view.frames for p in f.objects.values()]
+    ys = [p.y for f in view.frames for p in f.robots.values()] + [p.y for f in view.frames for p in f.objects.values()]
     if not xs:
         return -5.0, 5.0, -4.0, 4.0
     return min(xs) - 1, max(xs) + 1, min(ys) - 1, max(ys) + 1
@@ -100,36 +100,36 @@ def value_html(value: Any, depth: int = 0) -> str:
 
 def _header(view: EpisodeView) -> str:
     h = view.header
-    models = ", ".join(f"{r}: {m}" for r, m in h["models"].items()) or "unknown"
-    facts = {
-        "task": h["task"],
-        "scene": h["scene"],
-        "seed": h["seed"],
-        "objects": h["n_objects"],
-        "robots": ", ".join(h["robots"]),
+    models = ", ".join(f"{r}: {m}" for r, m in h.models.items()) or "unknown"
+    facts: dict[str, object] = {
+        "task": h.task,
+        "scene": h.scene,
+        "seed": h.seed,
+        "objects": h.n_objects,
+        "robots": ", ".join(h.robots),
         "model(s)": models,
-        "fidelity": h["fidelity"],
-        "aids": ", ".join(h["aids"] or []) or "none",
-        "scheduler": h["scheduler"],
-        "horizon": h["horizon"],
-        "TS lower bound": h["lower_bound"],
-        "end": h["reason"] or "not recorded",
+        "fidelity": h.fidelity,
+        "aids": ", ".join(h.aids or []) or "none",
+        "scheduler": h.scheduler,
+        "horizon": h.horizon,
+        "TS lower bound": h.lower_bound,
+        "end": h.reason or "not recorded",
     }
     scenario = page_events.scenario_fact(view)
     if scenario is not None:  # a dynamic episode: the scenario of events it ran with
         facts = {**dict(list(facts.items())[:4]), "scenario": scenario, **dict(list(facts.items())[4:])}
-    if h["scheduler"] == "async":
-        facts["time scale"] = h["time_scale"]
-        facts["step seconds"] = h["step_seconds"]
-    facts["protocol version(s)"] = ", ".join(str(v) for v in h["versions"]) or "unknown"
-    facts["trace"] = h["trace"]
+    if h.scheduler == "async":
+        facts["time scale"] = h.time_scale
+        facts["step seconds"] = h.step_seconds
+    facts["protocol version(s)"] = ", ".join(str(v) for v in h.versions) or "unknown"
+    facts["trace"] = h.trace
     fact_rows = "".join(
         f"<tr><th>{_e(k)}</th><td>{_e(v if v is not None else 'unknown')}</td></tr>" for k, v in facts.items()
     )
-    m = h["metrics"]
-    if m:
+    if h.metrics is not None:
+        m = h.metrics.model_dump(mode="json")  # every metric, shown as the generic table shows JSON
         key = {"success": "Succ", "partial_success": "PS", "temporal_steps": "TS", "action_steps": "AS"}
-        ps = partial_success(m.get("partial_success"), m.get("placed"), m.get("total"))
+        ps = partial_success(h.metrics.partial_success, h.metrics.placed, h.metrics.total)
         shown = {k: value_html(m.get(k)) for k in key}
         score, _, count = ps.partition(" ")
         count_html = f' <span class="mvs">{_e(count)}</span>' if count else ""
@@ -138,7 +138,7 @@ def _header(view: EpisodeView) -> str:
             f'<div class="metric" data-metric="{k}"><div class="mv">{shown[k]}</div><div class="mk">{label}</div></div>'
             for k, label in key.items()
         )
-        lb = h["lower_bound"]
+        lb = h.lower_bound
         first += f'<div class="metric"><div class="mv">{_e(lb if lb is not None else "?")}</div><div class="mk">TS lower bound</div></div>'
         first += f'<div class="metric"><div class="mv">{value_html(m.get("makespan"))} s</div><div class="mk">makespan</div></div>'
         everything = {k: (ps if k == "partial_success" else v) for k, v in m.items()}
@@ -146,9 +146,9 @@ def _header(view: EpisodeView) -> str:
     else:
         metrics = '<p class="dim">no metrics: the trace has no episode_done event</p>'
     warn = "".join(f'<div class="warning">&#9888; {_e(w)}</div>' for w in view.warnings)
-    title = f"{h['task'] or 'episode'} in {h['scene'] or 'an unknown scene'}, seed {h['seed'] if h['seed'] is not None else '?'}"
-    if h.get("scenario"):
-        title += f", scenario {h['scenario'][0]}"
+    title = f"{h.task or 'episode'} in {h.scene or 'an unknown scene'}, seed {h.seed if h.seed is not None else '?'}"
+    if h.scenario:
+        title += f", scenario {h.scenario[0]}"
     return (
         f'<header id="header"><h1>mhrc: {_e(title)}</h1>{warn}'
         f'<div class="cols"><table class="kv facts">{fact_rows}</table><div>{metrics}</div></div></header>'
@@ -232,9 +232,9 @@ def _static_labels(
     soft: list[tuple[Box, float]] = [(b, 1.0) for _, b in furniture] + [(goal, 1.0)]
     soft += [(box(*wall), 3.0) for wall in sc["walls"]]
     soft += [(box(fx["x"], fx["y"], 0.16, 0.12), 1.0) for fx in sc["fixtures"]]
-    spots = {(round(o["x"], 1), round(o["y"], 1)) for f in view.frames for o in f["objects"].values()}
+    spots = {(round(o.x, 1), round(o.y, 1)) for f in view.frames for o in f.objects.values()}
     soft += [(Box.centred(px(x), py(y), 14, 14), 3.0) for x, y in spots]  # where objects lie: keep them visible
-    stands = {(round(r["x"], 1), round(r["y"], 1)) for f in view.frames for r in f["robots"].values()}
+    stands = {(round(r.x, 1), round(r.y, 1)) for f in view.frames for r in f.robots.values()}
     soft += [(Box.centred(px(x), py(y), 22, 22), 1.0) for x, y in stands]
     requests = [
         Request(f["name"] + (" ▣" if f["openable"] else ""), "fname", b)
@@ -336,7 +336,7 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
     if view.events:  # the scenario's events on a track under the slider
         slider = f'<div class="timeline">{slider}{page_events.timeline(view)}</div>'
     frame_events = '<div id="frame-events"></div>' if view.events else ""
-    tick_label = f"tick {view.frames[-1]['tick']} (the end)" if n else "no frames"
+    tick_label = f"tick {view.frames[-1].tick} (the end)" if n else "no frames"
     return f"""
 <section id="map-section"><h2>House map</h2>{note}
 <div class="controls">
@@ -399,15 +399,15 @@ def _failures(diagnostics: dict[str, Any] | None, note: str | None) -> str:
 
 def _data(view: EpisodeView, colors: dict[str, str]) -> str:
     calls = {
-        s.goal_id: {"robot": s.robot, "call": s.call, "ok": bool((s.result or {}).get("outcome", {}).get("succeeded"))}
+        s.goal_id: {"robot": s.robot, "call": s.call, "ok": s.result is not None and s.result.outcome.succeeded}
         for lane in view.steps.values()
         for s in lane
     }
-    data = {
+    data: dict[str, object] = {
         "robots": view.robots,
-        "fliers": view.header.get("fliers") or {},
+        "fliers": view.header.fliers,
         "colors": colors,
-        "frames": view.frames,
+        "frames": [f.as_data() for f in view.frames],
         "framesFrom": view.frames_from,
         "messages": [
             {
@@ -437,7 +437,7 @@ def render_page(
     view: EpisodeView, diagnostics: dict[str, Any] | None = None, diagnostics_note: str | None = None
 ) -> str:
     colors = robot_colors(view.robots)
-    title = f"mhrc {view.header.get('task') or ''} {view.header.get('scene') or ''} seed {view.header.get('seed')}"
+    title = f"mhrc {view.header.task or ''} {view.header.scene or ''} seed {view.header.seed}"
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
 <title>{_e(title)}</title><style>{CSS}</style></head>

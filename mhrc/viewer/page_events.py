@@ -19,11 +19,11 @@ ROW = 15  # px between stacked markers (events of one frame)
 
 def scenario_fact(view: EpisodeView) -> str | None:
     """`busy_house (d45b5975)` for the header, or None for a static episode."""
-    named = view.header.get("scenario")
+    named = view.header.scenario
     if not named:
         return None
     name, sha = named
-    return scenario_label(str(name), str(sha))
+    return scenario_label(name, sha)
 
 
 def _tooltip(m: ScenarioMark) -> str:

@@ -7,9 +7,11 @@ frame for the page's script. mhrc.viewer.page puts them into the page.
 
 from __future__ import annotations
 
+from mhrc.core.protocol import ActionAck, Thought
 from mhrc.core.protocol.thoughts import HUMAN_POLICY
 from mhrc.viewer import page_events
 from mhrc.viewer.model import EpisodeView, Step
+from mhrc.viewer.wording import diagnostic_label
 from mhrc.viewer.wording import html_text as _e
 
 
@@ -20,19 +22,64 @@ def _reply_analysis(reply: str | None) -> str:
     return "\n".join(lines).strip()
 
 
+def _ack_html(ack: ActionAck) -> str:
+    """The ack's line; a rejection's code (mhrc.core.upgrade reads it from an older trace's sentence) in `data-code`."""
+    if ack.accepted:
+        return f'<div class="ack">ack: accepted{": " + _e(ack.reason) if ack.reason else ""}</div>'
+    code = f' data-code="{_e(ack.code.value)}" title="{_e(diagnostic_label(ack.code.value))}"' if ack.code else ""
+    return f'<div class="ack"{code}>ack: rejected{": " + _e(ack.reason) if ack.reason else ""}</div>'
+
+
+def _parse_error_html(t: Thought, prefix: str) -> str:
+    """A thought's parse error, with its failure's code (mhrc.core.upgrade reads it from an older trace's texts) in
+    `data-failure` and as a label people read."""
+    if t.failure is None:
+        return f'<div class="perr">{prefix}{_e(t.parse_error)}</div>'
+    return (
+        f'<div class="perr" data-failure="{_e(t.failure.value)}">{prefix}{_e(t.parse_error)} '
+        f'<span class="dim">({_e(diagnostic_label(t.failure.value))})</span></div>'
+    )
+
+
+def _thought_html(t: Thought) -> list[str]:
+    """The thought behind a step: the model's analysis, reasoning, command, parse error, usage, prompt and reply."""
+    if t.policy == HUMAN_POLICY:  # a person's decision (mhrc play): how long it took
+        return [f'<div class="human-decision">decided by a person in {t.latency:.1f} s</div>']
+    if t.prompt is None and t.reply is None:
+        return [_parse_error_html(t, "")] if t.parse_error else []
+    parts = []
+    analysis = _reply_analysis(t.reply)
+    if t.reasoning:
+        parts.append(
+            f'<details class="reasoning"><summary>reasoning ({_e(t.reasoning_tokens)} '
+            f"tokens)</summary><pre>{_e(t.reasoning)}</pre></details>"
+        )
+    if analysis:
+        parts.append(f'<div class="analysis">{_e(analysis)}</div>')
+    parts.append(f'<div class="command">command: <code>{_e(t.action)}</code></div>')
+    if t.parse_error:
+        parts.append(_parse_error_html(t, "parse error: "))
+    parts.append(
+        f'<div class="dim">{_e(t.policy)} · {_e(t.prompt_tokens)} prompt + {_e(t.completion_tokens)} completion tokens'
+        f" · {t.latency:.2f} s{' · finish ' + _e(t.finish_reason) if t.finish_reason else ''}</div>"
+    )
+    parts.append(f'<details class="prompt"><summary>prompt</summary><pre>{_e(t.prompt)}</pre></details>')
+    parts.append(f'<details class="reply"><summary>raw reply</summary><pre>{_e(t.reply)}</pre></details>')
+    return parts
+
+
 def _step_html(s: Step) -> str:
-    res = s.result or {}
-    out = res.get("outcome") or {}
-    ack = s.ack
-    if ack is not None and not ack.get("accepted", True):
-        status, cls = f"rejected: {ack.get('reason') or 'no reason given'}", "rejected"
-    elif res:
-        status, cls = ("ok", "ok") if out.get("succeeded") else (f"failed: {out.get('code', '?')}", "failed")
+    res, ack = s.result, s.ack
+    if ack is not None and not ack.accepted:
+        status, cls = f"rejected: {ack.reason or 'no reason given'}", "rejected"
+    elif res is not None:
+        out = res.outcome
+        status, cls = ("ok", "ok") if out.succeeded else (f"failed: {out.code.value}", "failed")
     elif ack is not None:
         status, cls = "accepted, no result recorded", "pending"
     else:
         status, cls = "no ack or result recorded", "pending"
-    has_result = " has-result" if res else ""
+    has_result = " has-result" if res is not None else ""
     frame = "" if s.frame is None else f' data-frame="{s.frame}"'
     parts = [
         f'<li class="step {cls}{has_result}" data-goal="{_e(s.goal_id)}" data-tick="{_e(s.tick)}"{frame}>',
@@ -40,42 +87,13 @@ def _step_html(s: Step) -> str:
         f' <span class="badge {cls}">{_e(status)}</span></div>',
     ]
     if ack is not None:
-        parts.append(
-            f'<div class="ack">ack: {"accepted" if ack.get("accepted", True) else "rejected"}'
-            f"{': ' + _e(ack.get('reason')) if ack.get('reason') else ''}</div>"
-        )
-    if out:
-        parts.append(f'<div class="feedback">{_e(out.get("feedback"))}</div>')
-        if res.get("started") is not None:
-            parts.append(
-                f'<div class="dim">sim {res["started"]:.1f}–{(res.get("ended") or res["started"]):.1f} s</div>'
-            )
-    t = s.thought
-    if t and t.get("policy") == HUMAN_POLICY:  # a person's decision (mhrc play): how long it took
-        parts.append(f'<div class="human-decision">decided by a person in {float(t.get("latency") or 0):.1f} s</div>')
-    elif t:
-        if t.get("prompt") is not None or t.get("reply") is not None:
-            analysis = _reply_analysis(t.get("reply"))
-            if t.get("reasoning"):
-                parts.append(
-                    f'<details class="reasoning"><summary>reasoning ({_e(t.get("reasoning_tokens", 0))} '
-                    f"tokens)</summary><pre>{_e(t['reasoning'])}</pre></details>"
-                )
-            if analysis:
-                parts.append(f'<div class="analysis">{_e(analysis)}</div>')
-            parts.append(f'<div class="command">command: <code>{_e(t.get("action"))}</code></div>')
-            if t.get("parse_error"):
-                parts.append(f'<div class="perr">parse error: {_e(t["parse_error"])}</div>')
-            parts.append(
-                f'<div class="dim">{_e(t.get("policy"))} · {_e(t.get("prompt_tokens", 0))} prompt + {_e(t.get("completion_tokens", 0))} completion tokens'
-                f" · {float(t.get('latency') or 0):.2f} s{' · finish ' + _e(t['finish_reason']) if t.get('finish_reason') else ''}</div>"
-            )
-            parts.append(f'<details class="prompt"><summary>prompt</summary><pre>{_e(t.get("prompt"))}</pre></details>')
-            parts.append(
-                f'<details class="reply"><summary>raw reply</summary><pre>{_e(t.get("reply"))}</pre></details>'
-            )
-        elif t.get("parse_error"):
-            parts.append(f'<div class="perr">{_e(t["parse_error"])}</div>')
+        parts.append(_ack_html(ack))
+    if res is not None:
+        parts.append(f'<div class="feedback">{_e(res.outcome.feedback)}</div>')
+        if res.started is not None:
+            parts.append(f'<div class="dim">sim {res.started:.1f}–{(res.ended or res.started):.1f} s</div>')
+    if s.thought is not None:
+        parts += _thought_html(s.thought)
     parts.append("</li>")
     return "".join(parts)
 
@@ -122,12 +140,12 @@ def lanes_section(view: EpisodeView, colors: dict[str, str]) -> str:
     span = len(ticks) + 2  # a last row for items with no tick at all
     lanes = []
     for r in view.robots:
-        human = view.header["models"].get(r) == HUMAN_POLICY  # played by a person (mhrc play)
+        human = view.header.models.get(r) == HUMAN_POLICY  # played by a person (mhrc play)
         mark = ' <span class="human-mark" data-human>&#128100; played by a person</span>' if human else ""
         lanes.append(
             f'<div class="lane{" human" if human else ""}" data-robot="{_e(r)}" style="grid-row:1 / span {span}">'
             f'<h3 style="border-color:{colors[r]}">{_e(r)}{mark} '
-            f'<span class="dim">{_e(view.header["models"].get(r))} · {len(view.steps.get(r, []))} steps</span></h3>'
+            f'<span class="dim">{_e(view.header.models.get(r))} · {len(view.steps.get(r, []))} steps</span></h3>'
             f"<ol>{_cells(items[r], rows)}</ol></div>"
         )
     if world:

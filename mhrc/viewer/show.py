@@ -2,20 +2,21 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from mhrc.analysis.diagnostics import diagnose
-from mhrc.core.records import Rows
+from mhrc.core.records import TraceLine
 from mhrc.viewer.load import LoadedTrace, load_trace, resolve
 from mhrc.viewer.model import build_view
 from mhrc.viewer.page import render_page
 
 
-def diagnostics_for(rows: Rows) -> tuple[dict[str, Any] | None, str | None]:
+def diagnostics_for(lines: Sequence[TraceLine]) -> tuple[dict[str, Any] | None, str | None]:
     """mhrc.analysis.diagnostics' findings for the failure panel, or why there are none."""
     try:
-        result = diagnose(rows).as_dict()
+        result = diagnose(lines).as_dict()
     except Exception as exc:  # a diagnosis that fails must not cost the user the report
         return None, f"the failure diagnosis failed on this trace: {type(exc).__name__}: {exc}"
     if not isinstance(result, dict):

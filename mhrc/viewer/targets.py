@@ -21,8 +21,18 @@ the stack's correct prefix, so the page shows the world's count beside this one 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
+from mhrc.core.protocol import (
+    ActionResult,
+    EpisodeDone,
+    EpisodeStarted,
+    Metrics,
+    ObjectPose,
+    ObjectView,
+    Observation,
+    Turn,
+)
+from mhrc.viewer.frames import Frame
 from mhrc.viewer.load import LoadedTrace
 from mhrc.world.layouts import get_layout
 from mhrc.world.tasks import get_task
@@ -68,76 +78,66 @@ class TaskView:
         return {o.name: o.role for o in self.objects}
 
 
-def _observations(trace: LoadedTrace) -> list[dict[str, Any]]:
-    out = []
-    for kind in ("action_result", "turn"):
-        for m in trace.messages(kind):
-            obs = m.get("observation")
-            if isinstance(obs, dict):
-                out.append(obs)
-    out.sort(key=lambda o: int(o.get("tick") or 0))
+def _observations(trace: LoadedTrace) -> list[Observation]:
+    out = [m.observation for m in trace.messages(ActionResult)] + [m.observation for m in trace.messages(Turn)]
+    out.sort(key=lambda o: o.tick)
     return out
 
 
-def _generated(started: dict[str, Any]) -> tuple[dict[str, tuple[bool, str | None]], str | None]:
+def _generated(started: EpisodeStarted) -> tuple[dict[str, tuple[bool, str | None]], str | None]:
     """name -> (target, goal) from the task's generator, or why not."""
     try:
-        task = get_task(str(started["task"]))
-        placements = task.generate(get_layout(str(started["scene"])), int(started["seed"]), int(started["n_objects"]))
+        task = get_task(started.task)
+        placements = task.generate(get_layout(started.scene), started.seed, started.n_objects)
     except Exception as exc:  # an unknown task or scene, an older trace: the page says the goals are unknown
         return {}, f"{type(exc).__name__}: {exc}"
     return {pl.kind.name: (pl.target, task.goal(pl.kind) if pl.target else None) for pl in placements}, None
 
 
-def _where(pose: dict[str, Any]) -> str:
-    if pose.get("held_by"):
-        return f"held by {pose['held_by']}"
-    if pose.get("on"):
-        return f"{'in' if pose.get('inside') else 'on'} {pose['on']}"
+def _where(pose: ObjectPose | ObjectView) -> str:
+    if pose.held_by:
+        return f"held by {pose.held_by}"
+    if pose.on:
+        return f"{'in' if pose.inside else 'on'} {pose.on}"
     return "on the floor"
 
 
 def task_view(
-    trace: LoadedTrace, started: dict[str, Any], frames: list[dict[str, Any]], frames_from: str, metrics: dict[str, Any]
+    trace: LoadedTrace,
+    started: EpisodeStarted | None,
+    frames: list[Frame],
+    frames_from: str,
+    metrics: Metrics | None,
 ) -> TaskView:
     """The task's objects, their roles, goals and ends, from the trace (see the module docstring)."""
     observations = _observations(trace)
     notes: list[str] = []
-    done = next(iter(trace.messages("episode_done")[-1:]), {})
-    if done.get("targets"):  # the world's answer key, sent once the episode is over
-        started = {
-            **started,
-            "targets": done["targets"],
-            "goals": done.get("goals") or started.get("goals"),
-            "ordered": done.get("ordered", False),
-        }
+    done = trace.last(EpisodeDone)
+    key = done if done is not None and done.targets else None  # the world's answer key, sent once the episode is over
 
     targets: list[str] | None = None
     targets_from = ""
-    if isinstance(started.get("targets"), list) and started["targets"]:
-        targets, targets_from = [str(t) for t in started["targets"]], "the world (its episode_done event)"
+    if key is not None:
+        targets, targets_from = list(key.targets), "the world (its episode_done event)"
     else:
         for obs in observations:
-            if obs.get("targets"):
-                targets, targets_from = [str(t) for t in obs["targets"]], f"{obs.get('robot', 'bob')}'s observations"
+            if obs.targets:
+                targets, targets_from = list(obs.targets), f"{obs.robot}'s observations"
                 break
-    ordered = any(bool(o.get("ordered")) for o in observations) or bool(started.get("ordered"))
+    ordered = any(o.ordered for o in observations) or (key is not None and key.ordered)
 
     goals: dict[str, str] = {}
     goals_from = ""
-    if isinstance(started.get("goals"), dict) and started["goals"]:
-        goals, goals_from = {str(k): str(v) for k, v in started["goals"].items()}, "the world (its episode_done event)"
+    if key is not None and key.goals:
+        goals, goals_from = dict(key.goals), "the world (its episode_done event)"
     else:
         for obs in observations:
-            if obs.get("goals"):
-                goals, goals_from = (
-                    {str(k): str(v) for k, v in obs["goals"].items()},
-                    f"{obs.get('robot', 'bob')}'s observations",
-                )
+            if obs.goals:
+                goals, goals_from = dict(obs.goals), f"{obs.robot}'s observations"
                 break
 
     generated: dict[str, tuple[bool, str | None]] = {}
-    if (targets is None or not goals) and started.get("task"):
+    if (targets is None or not goals) and started is not None:
         generated, why = _generated(started)
         gen_targets = [n for n, (t, _) in generated.items() if t]
         if targets is None and gen_targets:
@@ -156,23 +156,23 @@ def task_view(
             goals_from = "the task's goal for each target"
 
     # where each object ended
-    ends: dict[str, dict[str, Any]] = {}
+    ends: dict[str, ObjectPose] = {}
     end_from = ""
     if frames_from == "snapshots" and frames:
-        ends = {str(k): v for k, v in (frames[-1].get("objects") or {}).items()}
-        end_from = f"the last snapshot (tick {frames[-1].get('tick')})"
+        ends = dict(frames[-1].objects)
+        end_from = f"the last snapshot (tick {frames[-1].tick})"
     seen: dict[str, str] = {}
     for obs in observations:  # the robots' last word on each object, for traces without snapshots
-        for o in obs.get("objects") or []:
-            if isinstance(o, dict) and o.get("name"):
-                seen[str(o["name"])] = f"{_where(o)} (as {obs.get('robot')} last saw it, tick {obs.get('tick')})"
+        for o in obs.objects:
+            if o.name:
+                seen[o.name] = f"{_where(o)} (as {obs.robot} last saw it, tick {obs.tick})"
     if not end_from:
         end_from = "the robots' observations (no snapshots: the ground truth is not in the trace)" if seen else ""
 
     names: list[str] = list(targets or [])
     others = set(ends) | set(seen) | {n for n in generated if n not in names}
     if frames_from == "snapshots":
-        others |= {str(n) for f in frames for n in (f.get("objects") or {})}
+        others |= {n for f in frames for n in f.objects}
     names += sorted(others - set(names))
     objects: list[ObjectFate] = []
     for name in names:
@@ -184,16 +184,16 @@ def task_view(
         fate = ObjectFate(name=name, role=role, goal=goals.get(name))
         pose = ends.get(name)
         if pose is not None:
-            fate.where, fate.x, fate.y = _where(pose), pose.get("x"), pose.get("y")
+            fate.where, fate.x, fate.y = _where(pose), pose.x, pose.y
             if role == "target" and fate.goal is not None:
-                fate.placed = pose.get("on") == fate.goal and not pose.get("held_by")
+                fate.placed = pose.on == fate.goal and not pose.held_by
         elif name in seen:
             fate.where = seen[name]
         else:
             fate.where = "never seen"
         objects.append(fate)
 
-    placed, total = metrics.get("placed"), metrics.get("total")
+    placed, total = (metrics.placed, metrics.total) if metrics is not None else (None, None)
     view = TaskView(
         targets=targets,
         targets_from=targets_from,
@@ -202,8 +202,8 @@ def task_view(
         end_from=end_from,
         objects=objects,
         ordered=ordered,
-        placed_by_world=placed if isinstance(placed, int) else None,
-        total_by_world=total if isinstance(total, int) else None,
+        placed_by_world=placed,
+        total_by_world=total,
         notes=notes,
     )
     mine = sum(1 for o in objects if o.role == "target" and o.placed)

@@ -135,14 +135,8 @@ def read_episode(trace: Path) -> tuple[EpisodeStarted, list[Step], str | None]:
     added: list[tuple[int, str, str]] = []  # each new target's (line, object, furniture)
     for n, line in enumerate(read_records(trace)):
         msg = line.msg
-        if (
-            line.problem is not None
-            and isinstance(line.raw, dict)
-            and line.raw.get("kind") in ("episode_started", "snapshot", "scenario_event")
-        ):
-            raise VideoError(
-                f"{trace}: a {line.raw['kind']} event does not match this version of mhrc ({line.problem})"
-            )
+        if line.problem is not None and line.named in ("episode_started", "snapshot", "scenario_event"):
+            raise VideoError(f"{trace}: a {line.named} event does not match this version of mhrc ({line.problem})")
         if isinstance(msg, EpisodeStarted) and started is None:
             started = msg
         elif isinstance(msg, Snapshot):

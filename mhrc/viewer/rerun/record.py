@@ -11,6 +11,7 @@ from pathlib import Path
 
 import rerun as rr
 
+from mhrc.core.protocol import EpisodeStarted
 from mhrc.viewer.load import LoadedTrace, load_trace
 from mhrc.viewer.rerun import Mode, Target
 from mhrc.viewer.rerun.episode import EpisodeLogger
@@ -61,6 +62,5 @@ def rrd_beside(trace: Path, directory: Path, root: Path) -> Target:
 
 
 def _run_of(trace: LoadedTrace) -> str:
-    started = trace.messages("episode_started")
-    run = started[0].get("run") if started else None
-    return str(run) if run else trace.path.stem
+    started = trace.first(EpisodeStarted)
+    return started.run if started is not None and started.run else trace.path.stem
