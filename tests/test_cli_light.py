@@ -84,3 +84,12 @@ def test_a_team_file_or_inline_team_is_not_taken_for_a_typo(tmp_path: object) ->
     assert cli_names.unknown_team("alice=mobile_manipulator,bob=tabletop_arm") is None
     assert cli_names.unknown_team("mine.toml") is None and cli_names.unknown_team("full_house") is None
     assert "not a shipped team (paper, no_mobile" in (cli_names.unknown_team("nosuchteam") or "")
+
+
+def test_each_command_module_is_named_after_a_command_it_holds() -> None:
+    """Issue 44: `mhrc up` is in cli/up.py, `mhrc doctor` in cli/doctor.py; only the viewer's module
+    holds a group (`scenes`, `render`, `show`) under the group's name."""
+    modules = {module for module, _ in COMMANDS.values()}
+    assert modules - set(COMMANDS) == {"viewer"}
+    for name, (module, _) in COMMANDS.items():
+        assert module == name or name in {"report", "scenes", "render", "show"}, (name, module)
