@@ -44,8 +44,16 @@ def _refused(*args: str) -> tuple[dict[str, object], str]:
         (["world", "--task", "sort_solid"], "(did you mean 'sort_solids'?)"),
         (["agent", "--robot", "bob", "--connect", "tcp/127.0.0.1:9", "--team", "larg"], "did you mean 'large'?"),
         (["up", "--objects", "many"], "'many' is not a valid integer"),
+        (["eval", "--tasks", "pack_objects,sort_solid"], "unknown task 'sort_solid' (did you mean 'sort_solids'?)"),
+        (["eval", "--scenes", "kitchen,kitchn"], "unknown scene 'kitchn' (did you mean 'kitchen'?)"),
+        (["eval", "--trails", "2"], "'--trials'"),
+        (["eval", "--team", "paper", "--team", "ful_house"], "did you mean 'full_house'?"),
+        (["eval", "--schedule", "lockstp"], "'lockstp' is not one of"),
     ],
-    ids=["command", "option", "task", "scene", "team", "world-task", "agent-team", "bad-int"],
+    ids=[
+        *("command", "option", "task", "scene", "team", "world-task", "agent-team", "bad-int"),
+        *("eval-task", "eval-scene", "eval-option", "eval-team", "eval-schedule"),
+    ],
 )
 def test_a_typo_is_refused_in_one_line_before_any_heavy_import(args: list[str], said: str) -> None:
     got, stderr = _refused(*args)

@@ -6,11 +6,13 @@ import asyncio
 import dataclasses
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import click
 
+from mhrc.cli.names import check_scene, check_task, unknown_team
 from mhrc.cli.options import (
     ABLATIONS,
     AIDS_HELP,
@@ -18,6 +20,7 @@ from mhrc.cli.options import (
     LOG_LEVEL,
     NOISE_HELP,
     SCHEDULE_HELP,
+    SCHEDULES,
     TEAM_HELP,
     TIME_SCALE_HELP,
     events_option,
@@ -28,8 +31,8 @@ from mhrc.cli.running import run_command
 from mhrc.core import logs
 from mhrc.core.fidelity import NOISE
 from mhrc.core.plural import counted
-from mhrc.core.trace import unwritable
-from mhrc.run.config import SCHEDULES, ConfigError, ModelServerDown, check_model_servers
+from mhrc.core.writable import unwritable
+from mhrc.run.errors import ConfigError, ModelServerDown  # the bus and the model clients: imported in eval_
 
 
 def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
@@ -41,8 +44,25 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
         raise click.BadParameter(f"expected a comma-separated list, got {text!r}") from None
 
 
+def _each(check: Callable[[click.Context, click.Parameter, str], object]) -> Callable[..., str | None]:
+    """A comma-separated list's callback: each name checked as `check` checks one (mhrc.cli.names),
+    before anything heavy is imported; the list itself is returned as given."""
+
+    def callback(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+        for name in (value or "").split(","):
+            if name.strip():
+                check(ctx, param, name.strip())
+        return value
+
+    return callback
+
+
 def _teams(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> Any:
-    """Each --team read into a TeamSpec before anything starts; a bad one is one line naming it."""
+    """Each --team read into a TeamSpec before anything starts; a bad one is one line naming it
+    (a name that is no team, file or inline team before the teams' registry is imported)."""
+    for v in value:
+        if why := unknown_team(v):
+            raise click.UsageError(why)
     from mhrc.core.team import TeamError
     from mhrc.run.teams import resolve_team
 
@@ -75,8 +95,18 @@ def _ended(row: dict[str, Any] | None, t: Any) -> str:
 
 @click.command("eval")
 @llm_options
-@click.option("--tasks", default=None, help="Comma-separated task ids; default: every registered task.")
-@click.option("--scenes", default=None, help="Comma-separated layouts; default: every built-in layout.")
+@click.option(
+    "--tasks",
+    default=None,
+    callback=_each(check_task),
+    help="Comma-separated task ids; default: every registered task.",
+)
+@click.option(
+    "--scenes",
+    default=None,
+    callback=_each(check_scene),
+    help="Comma-separated layouts; default: every built-in layout.",
+)
 @click.option(
     "--objects",
     default=None,
@@ -224,6 +254,7 @@ def eval_(
     from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, check_out, resume_command, run
     from mhrc.eval.paper import PAPER_OBJECTS
     from mhrc.eval.summaries import SUMMARY_FILES
+    from mhrc.run.config import check_model_servers
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 

@@ -36,7 +36,7 @@ from typing import Any, Protocol
 import structlog
 
 from mhrc.analysis.metrics import Invalid
-from mhrc.core.trace import unwritable
+from mhrc.core.writable import unwritable
 from mhrc.eval.directory import append_text, make_dirs, refuse_links, write_bytes, write_text
 from mhrc.eval.episode import Job, WorkerResult
 from mhrc.eval.records import EvalManifest, EvalRow, Row, read_manifest, read_rows, trace_of
