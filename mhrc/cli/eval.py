@@ -251,10 +251,9 @@ def eval_(
     )
 
     from mhrc.core.fidelity import AidsError, parse_aids
-    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, check_out, resume_command, run
+    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, preflight, resume_command, run
     from mhrc.eval.paper import PAPER_OBJECTS
     from mhrc.eval.summaries import SUMMARY_FILES
-    from mhrc.run.config import check_model_servers
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 
@@ -344,22 +343,11 @@ def eval_(
             click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config.seed}")
         click.echo(f"{counted(n_jobs, 'episode')} ({_setting(spec)})")
         return
-    try:  # --out first, and nothing created: a mistyped --resume path must not start (and pay for) a whole grid
-        check_out(out, plan, resume)
-    except ConfigError as exc:
-        raise click.UsageError(str(exc)) from None
-    try:  # a model server nothing listens at: one line now, as mhrc up says it, not after every episode's retries
-        for job in {j.config.team.name: j for j in plan.jobs}.values():
-            check_model_servers(job.config, job.config.robots)
-    except ModelServerDown as exc:
+    try:  # --out first, nothing created (a mistyped --resume path must not start, and pay for, a whole grid), then
+        preflight(plan, out, options, resume)  # the model servers and the Ray cluster: what evaluate checks too
+    except ModelServerDown as exc:  # one line now, as mhrc up says it, not after every episode's retries
         click.echo(f"mhrc eval: {exc}", err=True)
         sys.exit(2)
-    try:
-        if ray_address is not None:  # a missing extra, an old Ray, an address nothing answers at: one line, now
-            from mhrc.eval.cluster import import_ray, probe
-
-            import_ray()
-            probe(ray_address)
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
     rows_path = out / "episodes.jsonl"
