@@ -276,7 +276,7 @@ async def test_a_request_while_the_previous_action_runs_is_rejected_and_nothing_
 @pytest.mark.slow
 async def test_async_runs_across_processes_with_its_time_scale(tmp_path: Path) -> None:
     """`--processes` gives the world process the schedule and its time scale (parsed back by the CLI)."""
-    from mhrc.cli import world as world_command_cli
+    from mhrc.cli.world import world as world_command_cli
     from mhrc.run.processes import up_processes, world_command
 
     cfg = EpisodeConfig.build(seed=0, schedule="async", time_scale=40.0, trace=tmp_path / "t.jsonl").resolved()

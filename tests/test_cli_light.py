@@ -44,8 +44,16 @@ def _refused(*args: str) -> tuple[dict[str, object], str]:
         (["world", "--task", "sort_solid"], "(did you mean 'sort_solids'?)"),
         (["agent", "--robot", "bob", "--connect", "tcp/127.0.0.1:9", "--team", "larg"], "did you mean 'large'?"),
         (["up", "--objects", "many"], "'many' is not a valid integer"),
+        (["eval", "--tasks", "pack_objects,sort_solid"], "unknown task 'sort_solid' (did you mean 'sort_solids'?)"),
+        (["eval", "--scenes", "kitchen,kitchn"], "unknown scene 'kitchn' (did you mean 'kitchen'?)"),
+        (["eval", "--trails", "2"], "'--trials'"),
+        (["eval", "--team", "paper", "--team", "ful_house"], "did you mean 'full_house'?"),
+        (["eval", "--schedule", "lockstp"], "'lockstp' is not one of"),
     ],
-    ids=["command", "option", "task", "scene", "team", "world-task", "agent-team", "bad-int"],
+    ids=[
+        *("command", "option", "task", "scene", "team", "world-task", "agent-team", "bad-int"),
+        *("eval-task", "eval-scene", "eval-option", "eval-team", "eval-schedule"),
+    ],
 )
 def test_a_typo_is_refused_in_one_line_before_any_heavy_import(args: list[str], said: str) -> None:
     got, stderr = _refused(*args)
@@ -84,3 +92,12 @@ def test_a_team_file_or_inline_team_is_not_taken_for_a_typo(tmp_path: object) ->
     assert cli_names.unknown_team("alice=mobile_manipulator,bob=tabletop_arm") is None
     assert cli_names.unknown_team("mine.toml") is None and cli_names.unknown_team("full_house") is None
     assert "not a shipped team (paper, no_mobile" in (cli_names.unknown_team("nosuchteam") or "")
+
+
+def test_each_command_module_is_named_after_a_command_it_holds() -> None:
+    """Issue 44: `mhrc up` is in cli/up.py, `mhrc doctor` in cli/doctor.py; only the viewer's module
+    holds a group (`scenes`, `render`, `show`) under the group's name."""
+    modules = {module for module, _ in COMMANDS.values()}
+    assert modules - set(COMMANDS) == {"viewer"}
+    for name, (module, _) in COMMANDS.items():
+        assert module == name or name in {"report", "scenes", "render", "show"}, (name, module)

@@ -17,13 +17,13 @@ import shlex
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
 import click
 import pytest
 import yaml
+from waits import until_sync
 
 from mhrc.cli import main
 from mhrc.core.endpoints import free_port
@@ -494,10 +494,7 @@ class Processes:
             p.wait(timeout=30)
         for f in self._logs:
             f.close()
-        deadline = time.monotonic() + 10
-        while _in_groups(pgids) and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert not _in_groups(pgids), f"stray processes: {_in_groups(pgids)}"
+        until_sync(lambda: not _in_groups(pgids), f"no stray process in the groups {sorted(pgids)}", 10, every=0.2)
 
 
 def _compose_env(**settings: str) -> dict[str, str]:

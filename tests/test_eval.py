@@ -10,13 +10,13 @@ import re
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
 import pytest
 from json_rows import records
 from pydantic import ValidationError
+from waits import until_sync
 
 from mhrc.core.endpoints import free_port
 from mhrc.eval.engine import EvalSpec, evaluate
@@ -212,10 +212,14 @@ def test_an_episode_whose_worker_process_dies_runs_again_on_a_new_one(tmp_path: 
         cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ, TMPDIR=str(tmp))
     )
     try:
-        deadline = time.monotonic() + 120
-        while not any(p.stat().st_size for p in tmp.glob("mhrc-eval-*/trace.jsonl")):  # an episode is under way
-            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-2000:]
-            time.sleep(0.05)
+        until_sync(
+            lambda: any(p.stat().st_size for p in tmp.glob("mhrc-eval-*/trace.jsonl")),
+            "an episode under way",
+            120,
+            every=0.05,
+            running=proc,
+            said=lambda: proc.communicate()[1][-2000:],
+        )
         (victim,) = _pool_workers(proc.pid)
         os.kill(victim, signal.SIGKILL)
         _, err = proc.communicate(timeout=240)
@@ -540,15 +544,8 @@ def test_a_second_ctrl_c_on_eval_quits_at_once_and_loses_no_row(tmp_path: Path) 
             start_new_session=True,
         )  # fmt: skip  (a session of its own: the signals go to its group, as a terminal's Ctrl-C)
 
-    def until(what: str, predicate: Any) -> None:
-        deadline = time.monotonic() + 240
-        while not predicate():
-            if proc.poll() is not None:
-                pytest.fail(f"eval ended (exit {proc.returncode}) before {what}: {err.read_text()[-2000:]}")
-            if time.monotonic() > deadline:
-                os.killpg(proc.pid, signal.SIGKILL)
-                pytest.fail(f"no {what}")
-            time.sleep(0.02)
+    def until(what: str, predicate: Any) -> None:  # the finally below kills the evaluation if it never comes
+        until_sync(predicate, what, 240, every=0.02, running=proc, said=lambda: err.read_text()[-2000:])
 
     rows = tmp_path / "ev" / "episodes.jsonl"
     try:
@@ -567,10 +564,9 @@ def test_a_second_ctrl_c_on_eval_quits_at_once_and_loses_no_row(tmp_path: Path) 
     assert "quitting at once" in text and proc.returncode == 130, (proc.returncode, text[-2000:])
     after = rows.read_text()
     assert after.startswith(before) and after.endswith("\n"), "a finished row was lost or cut"
-    deadline = time.monotonic() + 60
-    while alive := [pid for pid in workers if _running(pid)]:  # the workers die with the driver (mhrc.core.lifeline)
-        assert time.monotonic() < deadline, f"worker processes {alive} outlived the evaluation"
-        time.sleep(0.05)
+    until_sync(  # the workers die with the driver (mhrc.core.lifeline)
+        lambda: not [pid for pid in workers if _running(pid)], f"worker processes {workers} gone", 60, every=0.05
+    )
 
 
 def _running(pid: int) -> bool:

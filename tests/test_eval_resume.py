@@ -11,7 +11,6 @@ import shlex
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +19,7 @@ from typing import Any
 import pytest
 from test_viewer_browser import browser as browser  # the session's chromium (a fixture)
 from test_viewer_browser import chrome
+from waits import until_sync
 
 pytestmark = pytest.mark.slow
 
@@ -60,11 +60,14 @@ def interrupted(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Interrupte
         )
     rows = home / "ev" / "episodes.jsonl"
     try:
-        deadline = time.monotonic() + 240
-        while not (rows.exists() and rows.read_text().endswith("\n")):
-            assert proc.poll() is None, f"eval ended before its first episode: {err.read_text()[-2000:]}"
-            assert time.monotonic() < deadline, "no episode finished"
-            time.sleep(0.02)
+        until_sync(
+            lambda: rows.exists() and rows.read_text().endswith("\n"),
+            "an episode finished",
+            240,
+            every=0.02,
+            running=proc,
+            said=lambda: err.read_text()[-2000:],
+        )
         before = rows.read_text()
         os.killpg(proc.pid, signal.SIGINT)
         proc.wait(timeout=120)

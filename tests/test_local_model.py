@@ -21,6 +21,7 @@ from typing import Any
 
 import httpx
 import pytest
+from waits import until
 
 from mhrc.agents.llm.local import (
     GEMMA_CHAT_TEMPLATE,
@@ -274,8 +275,11 @@ async def test_stop_waits_for_a_reply_in_flight(gemma: Path) -> None:
             order.append(f"reply {reply['usage']['completion_tokens']}")
 
         request = asyncio.create_task(ask())
-        while await srv.idle() and not request.done():
-            await asyncio.sleep(0.01)
+
+        async def under_way() -> bool:
+            return not await srv.idle() or request.done()
+
+        await until(under_way, "the request under way", every=0.01)
         await srv.stop()
         order.append("stopped")
         await request

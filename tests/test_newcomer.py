@@ -103,6 +103,23 @@ def test_eval_with_a_model_server_nobody_runs_fails_at_once_and_creates_nothing(
     assert list(tmp_path.iterdir()) == []
 
 
+def test_evaluate_from_python_checks_what_mhrc_eval_checks(tmp_path: Path) -> None:
+    """Issue 44: evaluate() and `mhrc eval` share one pre-flight check (mhrc.eval.engine.preflight):
+    a model server nobody runs is refused before DIR is made, not after an episode's retries."""
+    import asyncio
+
+    from mhrc.eval.engine import EvalSpec, evaluate
+    from mhrc.run.config import ModelServerDown
+
+    down = f"http://127.0.0.1:{free_port('127.0.0.1')}/v1"
+    spec = EvalSpec(
+        tasks=("pack_objects",), scenes=("kitchen",), objects=(3,), horizon=1, llm="openai:x", base_url=down
+    )
+    with pytest.raises(ModelServerDown, match=f"nothing listens at {down}, the model server of alice, bob, david"):
+        asyncio.run(evaluate(spec, tmp_path / "ev", workers=1))
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.fixture(scope="module")
 def small_eval(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The directory of one real evaluation of two short episodes."""

@@ -14,13 +14,13 @@ import signal
 import subprocess
 import sys
 import tempfile
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
+from waits import until_sync
 
 from mhrc.core.endpoints import free_port
 
@@ -149,13 +149,17 @@ def test_a_ray_worker_killed_mid_episode_costs_no_row(ray_cluster: Cluster, tmp_
         text=True,
     )
     try:
-        deadline = time.monotonic() + 300
-        while (held := _holder_of(ray_cluster.tmp)) is None or held[
-            1
-        ].stat().st_size == 0:  # an episode under way on a Ray worker
-            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-3000:]
-            time.sleep(0.05)
-        pid, _trace = held
+        seen: list[tuple[int, Path]] = []  # the last holder seen
+
+        def under_way() -> bool:  # an episode under way on a Ray worker
+            held = _holder_of(ray_cluster.tmp)
+            seen[:] = [] if held is None else [held]
+            return held is not None and held[1].stat().st_size > 0
+
+        until_sync(
+            under_way, "an episode under way", 300, every=0.05, running=proc, said=lambda: proc.communicate()[1][-3000:]
+        )
+        ((pid, _trace),) = seen
         os.kill(pid, signal.SIGKILL)
         _, err = proc.communicate(timeout=600)
         assert proc.returncode == 0, err[-3000:]
@@ -191,10 +195,14 @@ def test_ctrl_c_keeps_the_finished_rows_and_resume_completes_on_ray(ray_cluster:
         )
     rows_path = tmp_path / "ev" / "episodes.jsonl"
     try:
-        deadline = time.monotonic() + 300
-        while not (rows_path.exists() and rows_path.read_text().endswith("\n")):
-            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()[-3000:]
-            time.sleep(0.05)
+        until_sync(
+            lambda: rows_path.exists() and rows_path.read_text().endswith("\n"),
+            "an episode finished",
+            300,
+            every=0.05,
+            running=proc,
+            said=lambda: err.read_text()[-3000:],
+        )
         before = rows_path.read_text()
         os.killpg(proc.pid, signal.SIGINT)  # a terminal's Ctrl-C: the driver's group (the cluster is not in it)
         proc.wait(timeout=120)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
+
+from waits import until
 
 from mhrc.core.bus import Bus
 from mhrc.core.endpoints import endpoint, free_port
@@ -37,10 +38,8 @@ async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_p
         bus.put(k.action_request("alice"), _request("late-rejected"))
         bus.put(ack, ActionAck(goal_id="orphan", robot="alice", accepted=True))  # its request never comes
         bus.put(f"{k.base}/end", b'{"kind": "end"}')  # the subscriber's thread takes the samples in the order put:
-        for _ in range(300):  # once this line is written, every sample before it was handled
-            if recorder.count >= 7:
-                break
-            await asyncio.sleep(0.05)
+        # once this line is written, every sample before it was handled
+        await until(lambda: recorder.count >= 7, "the recorder's 7 lines", 15, every=0.05)
     finally:
         recorder.close()
         await bus.close()

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 from sweep import sweep
-from waits import served, subscribed
+from waits import served, subscribed, until, until_sync
 
 from mhrc.core import certs, security
 from mhrc.core.bus import Bus, Sample, open_client
@@ -246,13 +246,13 @@ async def test_up_processes_with_credentials(task: str, tmp_path: Path) -> None:
 
 
 def _wait_for(path: Path, text: str, timeout: float = 60.0) -> str:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        out = path.read_text(errors="replace") if path.exists() else ""
-        if text in out:
-            return out
-        time.sleep(0.2)
-    raise AssertionError(f"{text!r} never appeared in {path}:\n{path.read_text(errors='replace')[-3000:]}")
+    """`path`'s text once `text` is in it."""
+
+    def out() -> str:
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    until_sync(lambda: text in out(), f"{text!r} in {path}", timeout, every=0.2, said=lambda: out()[-3000:])
+    return out()
 
 
 def _open_without_login(port: int, ca: Path) -> None:
@@ -452,10 +452,13 @@ async def test_only_the_world_speaks_for_the_world(attacker: str, tmp_path: Path
                 world.put(f"{k.base}/{key}", b"genuine")
             everything = {f"{k.base}/{key}" for key in WORLD_ONLY_PUTS}
             for who, expected in (("world", everything), ("alice", set(alice_keys)), ("recorder", everything)):
-                for _ in range(200):
-                    if {key for key, p in seen[who] if p == b"genuine"} >= expected:
-                        break
-                    await asyncio.sleep(0.05)
+                with contextlib.suppress(AssertionError):  # the assert below names what is missing
+                    await until(
+                        lambda: {key for key, p in seen[who] if p == b"genuine"} >= expected,  # noqa: B023
+                        f"{who}'s genuine messages",
+                        10,
+                        every=0.05,
+                    )
                 assert sorted(key for key, p in seen[who] if p == b"genuine") == sorted(expected), who
             for who, got in seen.items():
                 assert [key for key, p in got if p == b"forged"] == [], f"{who} saw a message forged by {attacker}"

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from waits import until
 
 from mhrc.agents.llm import LLMSilent, LLMTimeout, OpenAIChatClient, make_client
 from mhrc.agents.llm_policy import LLMPolicy, LLMUnreachable
@@ -408,14 +409,12 @@ async def test_an_abandoned_call_frees_llama_cpps_slot_at_once_on_a_busy_server(
                 )
             )
             try:
-                while await _decoding(admin) < 1:
-                    await asyncio.sleep(0.02)
+                await until(lambda: _decoding_at_least(admin, 1), "the neighbour decoding", 300, every=0.02)
                 async with OpenAIChatClient(
                     srv.model, srv.base_url, max_tokens=long, timeout=300, extra_body={"ignore_eos": True}
                 ) as client:
                     call = asyncio.create_task(client.complete(prompt))
-                    while await _decoding(admin) < 2:  # ours is under way too
-                        await asyncio.sleep(0.02)
+                    await until(lambda: _decoding_at_least(admin, 2), "ours decoding too", 300, every=0.02)
                     call.cancel()
                     with pytest.raises(asyncio.CancelledError):
                         await call
@@ -493,6 +492,10 @@ async def _stream(http: Any, body: dict[str, Any]) -> None:
     async with http.stream("POST", "/v1/chat/completions", json=body) as resp:
         async for _ in resp.aiter_lines():
             pass
+
+
+async def _decoding_at_least(admin: Any, n: int) -> bool:
+    return await _decoding(admin) >= n
 
 
 async def _decoding(admin: Any) -> int:

@@ -10,12 +10,12 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import httpx
 import pytest
+from waits import until_sync
 
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm import make_client
@@ -169,8 +169,7 @@ def test_an_endless_stream_is_written_until_the_client_hangs_up_or_the_server_cl
     slow = ScriptedModelServer(["Command: wait()"], latency=30.0)
     with socket.create_connection(("127.0.0.1", slow.port)) as sock:
         sock.sendall(b"POST /v1/chat/completions HTTP/1.0\r\nContent-Length: 2\r\n\r\n{}")
-        while len(slow.requests) < 1:
-            time.sleep(0.01)
+        until_sync(lambda: slow.requests, "the request reached the server", every=0.01)
         slow.close()  # cuts the 30 s latency short: the answer comes before the socket's 10 s timeout
         sock.settimeout(10.0)
         assert sock.recv(12).startswith(b"HTTP/1.1 200")  # uvicorn's status line, to an HTTP/1.0 client too

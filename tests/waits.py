@@ -10,6 +10,8 @@ has no call for it, so these helpers declare their probe on the bus's own zenoh 
 from __future__ import annotations
 
 import asyncio
+import inspect
+import subprocess
 import time
 from collections.abc import Callable
 from typing import Any
@@ -22,18 +24,35 @@ TIMEOUT = 30.0  # s: generous; a declaration that never arrives fails the test i
 
 async def until(condition: Callable[[], object], what: str, timeout: float = TIMEOUT, every: float = 0.01) -> None:
     """Return once `condition()` is true, checked every `every` seconds on the running loop;
-    fail the test with `what` (the thing awaited) after `timeout`."""
+    fail the test with `what` (the thing awaited) after `timeout`. A condition may be a coroutine
+    function (one that asks a server, say): its answer is awaited."""
     deadline = time.monotonic() + timeout
-    while not condition():
+    while not await _holds(condition):
         if time.monotonic() > deadline:
             raise AssertionError(f"{what}: not within {timeout:g} s")
         await asyncio.sleep(every)
 
 
-def until_sync(condition: Callable[[], object], what: str, timeout: float = TIMEOUT, every: float = 0.1) -> None:
-    """`until` for a test without a loop (subprocesses, /proc): blocks the thread between checks."""
+async def _holds(condition: Callable[[], object]) -> object:
+    got = condition()
+    return await got if inspect.isawaitable(got) else got
+
+
+def until_sync(
+    condition: Callable[[], object],
+    what: str,
+    timeout: float = TIMEOUT,
+    every: float = 0.1,
+    running: subprocess.Popen[Any] | None = None,
+    said: Callable[[], object] = str,
+) -> None:
+    """`until` for a test without a loop (subprocesses, /proc): blocks the thread between checks.
+    `running`: the process whose work is awaited; its end fails the test at once, with `said()`
+    (its stderr's tail, say)."""
     deadline = time.monotonic() + timeout
     while not condition():
+        if running is not None and running.poll() is not None:
+            raise AssertionError(f"{what}: the process ended first (exit {running.returncode}) {said()}")
         if time.monotonic() > deadline:
             raise AssertionError(f"{what}: not within {timeout:g} s")
         time.sleep(every)

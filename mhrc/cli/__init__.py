@@ -1,12 +1,12 @@
-"""The `mhrc` command: one module per command group, registered on one click group here.
+"""The `mhrc` command: one module per command group, named after it, registered on one click group here.
 
-- `participants`: `up`, `world`, `agent`
+- `up`, `world`, `agent`: an episode, the world alone, one robot's agent
 - `eval`: `eval`, `report`
 - `viewer`: `scenes`, `render`, `show`
 - `scenarios`: `scenarios` (the shipped scenarios of `--events`)
 - `teams`: `teams` (the shipped teams of `--team`, the robot kinds)
 - `play`: `play` (a person drives one robot from a browser page)
-- `bus`: `credentials`, `bus list|echo`, `doctor`, `router`, `schema`
+- `bus`: `bus list|echo` (over `bustools`); `doctor`, `router`, `schema`, `credentials`: each its own
 - `options` (shared options, declared once), `running` (signals and Ctrl-C), `names` (the
   shipped names a typo is checked against, without the world)
 
@@ -19,7 +19,6 @@ from __future__ import annotations
 import difflib
 import importlib
 import os
-from typing import Any
 
 import click
 
@@ -29,19 +28,19 @@ __all__ = ["main"]
 
 # command name -> (module of mhrc.cli, attribute): imported when the command is looked up
 COMMANDS: dict[str, tuple[str, str]] = {
-    "up": ("participants", "up"),
-    "world": ("participants", "world"),
-    "agent": ("participants", "agent"),
+    "up": ("up", "up"),
+    "world": ("world", "world"),
+    "agent": ("agent", "agent"),
     "scenes": ("viewer", "scenes"),
     "render": ("viewer", "render"),
     "eval": ("eval", "eval_"),
     "report": ("eval", "report"),
-    "schema": ("bus", "schema_"),
-    "credentials": ("bus", "credentials_"),
+    "schema": ("schema", "schema_"),
+    "credentials": ("credentials", "credentials_"),
     "bus": ("bus", "bus_group"),
-    "doctor": ("bus", "doctor"),
+    "doctor": ("doctor", "doctor"),
     "show": ("viewer", "show"),
-    "router": ("bus", "router"),
+    "router": ("router", "router"),
     "scenarios": ("scenarios", "scenarios"),
     "teams": ("teams", "teams"),
     "play": ("play", "play"),
@@ -86,13 +85,6 @@ def main() -> None:
     table_0) and David (mobile robot) driven by the built-in heuristic policy.
     """
     logs.configure(os.environ.get("MHRC_LOG_LEVEL", "warning"))  # a command's --log-level overrides it
-
-
-def __getattr__(name: str) -> Any:
-    """`mhrc.cli.up`, `.world`, `.agent`: the commands, for callers that invoke one (imported then)."""
-    if name in ("up", "world", "agent"):
-        return _load(name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 if __name__ == "__main__":

@@ -6,11 +6,13 @@ import asyncio
 import dataclasses
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import click
 
+from mhrc.cli.names import check_scene, check_task, unknown_team
 from mhrc.cli.options import (
     ABLATIONS,
     AIDS_HELP,
@@ -18,6 +20,7 @@ from mhrc.cli.options import (
     LOG_LEVEL,
     NOISE_HELP,
     SCHEDULE_HELP,
+    SCHEDULES,
     TEAM_HELP,
     TIME_SCALE_HELP,
     events_option,
@@ -28,8 +31,8 @@ from mhrc.cli.running import run_command
 from mhrc.core import logs
 from mhrc.core.fidelity import NOISE
 from mhrc.core.plural import counted
-from mhrc.core.trace import unwritable
-from mhrc.run.config import SCHEDULES, ConfigError, ModelServerDown, check_model_servers
+from mhrc.core.writable import unwritable
+from mhrc.run.errors import ConfigError, ModelServerDown  # the bus and the model clients: imported in eval_
 
 if TYPE_CHECKING:
     from mhrc.eval.records import EvalRow
@@ -44,8 +47,25 @@ def _csv(kind: type, text: str | None) -> tuple[Any, ...] | None:
         raise click.BadParameter(f"expected a comma-separated list, got {text!r}") from None
 
 
+def _each(check: Callable[[click.Context, click.Parameter, str], object]) -> Callable[..., str | None]:
+    """A comma-separated list's callback: each name checked as `check` checks one (mhrc.cli.names),
+    before anything heavy is imported; the list itself is returned as given."""
+
+    def callback(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+        for name in (value or "").split(","):
+            if name.strip():
+                check(ctx, param, name.strip())
+        return value
+
+    return callback
+
+
 def _teams(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> Any:
-    """Each --team read into a TeamSpec before anything starts; a bad one is one line naming it."""
+    """Each --team read into a TeamSpec before anything starts; a bad one is one line naming it
+    (a name that is no team, file or inline team before the teams' registry is imported)."""
+    for v in value:
+        if why := unknown_team(v):
+            raise click.UsageError(why)
     from mhrc.core.team import TeamError
     from mhrc.run.teams import resolve_team
 
@@ -79,8 +99,18 @@ def _ended(row: EvalRow | None, t: Any) -> str:
 
 @click.command("eval")
 @llm_options
-@click.option("--tasks", default=None, help="Comma-separated task ids; default: every registered task.")
-@click.option("--scenes", default=None, help="Comma-separated layouts; default: every built-in layout.")
+@click.option(
+    "--tasks",
+    default=None,
+    callback=_each(check_task),
+    help="Comma-separated task ids; default: every registered task.",
+)
+@click.option(
+    "--scenes",
+    default=None,
+    callback=_each(check_scene),
+    help="Comma-separated layouts; default: every built-in layout.",
+)
 @click.option(
     "--objects",
     default=None,
@@ -225,7 +255,7 @@ def eval_(
     )
 
     from mhrc.core.fidelity import AidsError, parse_aids
-    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, check_out, resume_command, run
+    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, preflight, resume_command, run
     from mhrc.eval.paper import PAPER_OBJECTS
     from mhrc.eval.summaries import SUMMARY_FILES
     from mhrc.world.scene import LAYOUTS
@@ -318,22 +348,11 @@ def eval_(
             click.echo(f"{job.key} repeat={job.repeat} trial={job.trial} seed={job.config.seed}")
         click.echo(f"{counted(n_jobs, 'episode')} ({_setting(spec)})")
         return
-    try:  # --out first, and nothing created: a mistyped --resume path must not start (and pay for) a whole grid
-        check_out(out, plan, resume)
-    except ConfigError as exc:
-        raise click.UsageError(str(exc)) from None
-    try:  # a model server nothing listens at: one line now, as mhrc up says it, not after every episode's retries
-        for job in {j.config.team.name: j for j in plan.jobs}.values():
-            check_model_servers(job.config, job.config.robots)
-    except ModelServerDown as exc:
+    try:  # --out first, nothing created (a mistyped --resume path must not start, and pay for, a whole grid), then
+        preflight(plan, out, options, resume)  # the model servers and the Ray cluster: what evaluate checks too
+    except ModelServerDown as exc:  # one line now, as mhrc up says it, not after every episode's retries
         click.echo(f"mhrc eval: {exc}", err=True)
         sys.exit(2)
-    try:
-        if ray_address is not None:  # a missing extra, an old Ray, an address nothing answers at: one line, now
-            from mhrc.eval.cluster import import_ray, probe
-
-            import_ray()
-            probe(ray_address)
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
     rows_path = out / "episodes.jsonl"

@@ -36,7 +36,7 @@ from typing import Protocol
 import structlog
 
 from mhrc.analysis.metrics import Invalid
-from mhrc.core.trace import unwritable
+from mhrc.core.writable import unwritable
 from mhrc.eval.directory import append_text, make_dirs, refuse_links, write_bytes, write_text
 from mhrc.eval.episode import Job, WorkerResult
 from mhrc.eval.records import EvalManifest, EvalRow, Settings, read_manifest, read_rows, trace_of
@@ -45,7 +45,7 @@ from mhrc.eval.rows import merge_runs
 from mhrc.eval.scoring import Scored, score, write_episode_report
 from mhrc.eval.spec import EvalSpec, Plan, identity_difference
 from mhrc.eval.summaries import write_summaries
-from mhrc.run.config import ConfigError
+from mhrc.run.config import ConfigError, check_model_servers
 
 __all__ = [
     "EvalAborted",
@@ -55,6 +55,7 @@ __all__ = [
     "RunOptions",
     "Tally",
     "check_out",
+    "preflight",
     "resume_command",
     "evaluate",
     "merge_runs",
@@ -172,6 +173,21 @@ def check_out(out: Path, plan: Plan, resume: bool) -> None:
         finished_rows(out, plan)
 
 
+def preflight(plan: Plan, out: Path, options: RunOptions, resume: bool) -> None:
+    """Every check an evaluation passes before it starts, for `evaluate` and `mhrc eval` alike: DIR
+    (`check_out`), each team's model servers listening (ModelServerDown, as `mhrc up` checks them:
+    one line now, not every episode's retries), and with Ray the extra and the cluster answering.
+    Raises ConfigError naming the option; creates nothing."""
+    check_out(out, plan, resume)
+    for job in {j.config.team.name: j for j in plan.jobs}.values():
+        check_model_servers(job.config, job.config.robots)
+    if options.ray is not None:  # a missing extra, an old Ray, an address nothing answers at
+        from mhrc.eval.cluster import import_ray, probe
+
+        import_ray()
+        probe(options.ray)
+
+
 def finished_rows(out: Path, plan: Plan) -> dict[str, EvalRow]:
     """The rows DIR holds, by key, each validated (`read_rows`) and of this plan's grid and
     setting: a row outside the grid, or run with another method, ablation or horizon, is a
@@ -225,14 +241,14 @@ async def evaluate(
         shared_out=shared_out,
     )
     plan = spec if isinstance(spec, Plan) else spec.validate()
-    check_out(out, plan, resume)
+    preflight(plan, out, options, resume)
     return await run(plan, out, options, resume=resume, progress=progress)
 
 
 async def run(
     plan: Plan, out: Path, options: RunOptions, *, resume: bool = False, progress: ProgressHook | None = None
 ) -> list[EvalRow]:
-    """Run a plan already checked (`evaluate`, or the CLI, checked the options, the grid and DIR):
+    """Run a plan already checked (`evaluate`, or the CLI: the options, the grid, then `preflight`):
     each row is computed here, from the episode's trace, and appended to DIR/episodes.jsonl as it
     arrives; an interrupt (cancellation) keeps every finished row."""
     executor: Executor

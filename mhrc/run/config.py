@@ -24,7 +24,11 @@ from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse
 from mhrc.core.keys import check_id, new_run_id
 from mhrc.core.security import Credentials, check_for, load, make_run_credentials
 from mhrc.core.team import PAPER_TEAM, TeamSpec
-from mhrc.core.trace import unwritable
+from mhrc.core.writable import unwritable
+from mhrc.run.errors import (
+    ConfigError as ConfigError,  # defined apart: the CLI catches it without this module's imports
+)
+from mhrc.run.errors import ModelServerDown as ModelServerDown
 from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import Scenario, check_scenario, load_scenario
 from mhrc.world.schedulers import SCHEDULERS
@@ -37,15 +41,6 @@ log = structlog.get_logger("mhrc.run.config")
 
 ROBOTS = PAPER_TEAM.names  # the paper's team, the default (--team chooses another)
 SCHEDULES = tuple(SCHEDULERS)  # the world's registry, in its order: sequential (the paper's), lockstep, async
-
-
-class ConfigError(ValueError):
-    """A configuration value that cannot work; the message names the field."""
-
-
-class ModelServerDown(ConfigError):
-    """Nothing listens where a robot's model server should be (connection refused): no step could
-    ever be planned, so the run does not start."""
 
 
 OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 
-from mhrc.core.trace import unwritable
+from mhrc.core.writable import unwritable
 
 INSTALL = "pip install 'mhrc[rerun]'"  # the one line that says how
 RERUN_VERSION = "0.41"  # the rerun-sdk this code is written against (pyproject's extra)

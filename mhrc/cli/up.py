@@ -1,6 +1,6 @@
-"""`mhrc up` (a whole episode), `mhrc world` (the world alone) and `mhrc agent` (one robot).
+"""`mhrc up`: a whole episode (the world and every robot's agent), then its metrics.
 
-The world, the agents and the console are imported inside the commands: `mhrc --help` and the
+The world, the agents and the console are imported inside the command: `mhrc --help` and the
 bus tools stay light.
 """
 
@@ -8,42 +8,27 @@ from __future__ import annotations
 
 import functools
 import json
-import os
-import shlex
 import sys
-from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import click
 
 from mhrc.cli.options import (
-    ABLATIONS,
-    AIDS_HELP,
-    INSECURE_HELP,
-    LOG_LEVEL,
     OPEN_BUS,
     OVERWRITE,
     VIDEO_HELP,
     VIDEO_SIZE,
-    credentials_option,
     episode_config,
     episode_options,
     fresh_trace,
     llm_options,
-    load_credentials,
-    open_bus_notice,
     rerun_option,
-    team_option,
 )
 from mhrc.cli.rerun_view import both, close_live, keep_serving, start_live
 from mhrc.cli.running import run_command
 from mhrc.cli.viewer import render_video_to
 from mhrc.core import logs
-from mhrc.core.security import SecurityError
-
-if TYPE_CHECKING:  # pragma: no cover
-    from mhrc.run.config import EpisodeConfig  # the bus and the model clients: imported when a command runs
 
 
 @click.command()
@@ -247,170 +232,3 @@ def _lost(trace: Path | None) -> list[Any]:
         return lost_robots(read_records(trace))
     except (ValueError, OSError):  # a trace that cannot be read: the table goes without the row
         return []
-
-
-def _serve_world(cfg: EpisodeConfig, observe: Callable[[Any, str], None] | None = None) -> None:
-    """`mhrc world`'s run: one line and exit 1 when no robot attached within --start-timeout."""
-    from mhrc.core.trace import TraceWriteError
-    from mhrc.run.serve import serve_world
-    from mhrc.world.service_config import NobodyAttached
-
-    try:
-        run_command(lambda: serve_world(cfg, observe=observe))
-    except (NobodyAttached, TraceWriteError) as exc:
-        click.echo(f"mhrc world: {exc}", err=True)
-        sys.exit(1)
-
-
-@click.command()
-@episode_options
-@click.option(
-    "--start-timeout",
-    type=float,
-    default=None,
-    help="Start with the robots attached after this many seconds (fail if none is); default: wait for all three.",
-)
-@click.option("--tick-delay", default=0.0, type=float, help="Seconds to pause between ticks (to watch with --gui).")
-@click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
-@credentials_option(
-    "This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "
-    "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control."
-)
-@click.option("--insecure", is_flag=True, help=INSECURE_HELP)
-@OVERWRITE
-def world(
-    log_level: str,
-    start_timeout: float | None,
-    quiet: bool,
-    credentials: Path | None,
-    insecure: bool,
-    overwrite: bool,
-    **values: Any,
-) -> None:
-    """Run the world alone and wait for agents to attach (`mhrc agent`)."""
-    from mhrc.run.console import ProgressPrinter
-
-    logs.configure(log_level)
-    creds = load_credentials(credentials, insecure)
-    if creds is not None:
-        from mhrc.core.zenoh_log import watch_refusals
-
-        watch_refusals()  # a refused login is said here too, not only on the refused agent's side
-        if values.get("run") is None:
-            values["run"] = creds.run
-    cfg = episode_config(start_timeout=start_timeout, credentials=credentials if creds is not None else None, **values)
-    fresh_trace("world", cfg, overwrite, values.get("trace") is not None)
-    if creds is None:
-        open_bus_notice(insecure)
-    if quiet:
-        _serve_world(cfg)
-        return
-    printer = ProgressPrinter(verbose=False)
-
-    def listening(bus: Any, run: str) -> None:  # said once the world listens, not before
-        click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
-        for r in cfg.robots:
-            login = "" if creds is None else f" --credentials {_login_of(creds, r)}"
-            click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}{login}", err=True)
-        printer.attach(bus, run)
-
-    _serve_world(cfg, listening)
-
-
-def _login_of(world: Any, user: str) -> str:
-    """Where `user`'s credentials file lies beside the world's (`mhrc credentials` flat or
-    --split, `mhrc up`'s runs/RUN/credentials/), or a placeholder naming it."""
-    if world.path is not None:
-        here = world.path.parent
-        for candidate in (here / f"{user}.json", here.parent / user / f"{user}.json"):
-            if candidate.is_file():
-                return shlex.quote(str(candidate))
-    return f"<{user}'s credentials file>"
-
-
-@click.command()
-@click.option(
-    "--robot", required=True, help="The robot this agent drives (a robot of --team; the paper's alice, bob, david)."
-)
-@click.option("--connect", required=True, help="The world's endpoint, e.g. tcp/127.0.0.1:7447.")
-@click.option("--run", default=None, help="Run id of the world; default: the only world alive at --connect.")
-@click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
-@llm_options
-@click.option(
-    "--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation."
-)
-@team_option
-@click.option(
-    "--aids",
-    default=None,
-    metavar="NAMES",
-    help="Agent-side aids (reach_labels, prompt_hints, feedback_advice: its unreadable-reply "
-    "half); the world's aids are set on the world. " + AIDS_HELP,
-)
-@LOG_LEVEL
-@credentials_option(
-    "This participant's credentials file (runs/RUN/credentials/<user>.json, written by `mhrc up`); "
-    "default $MHRC_CREDENTIALS. The bus is then TLS with a login and the world's access control."
-)
-@click.option("--insecure", is_flag=True, help=INSECURE_HELP)
-def agent(
-    robot: str,
-    connect: str,
-    run: str | None,
-    attach_timeout: float,
-    log_level: str,
-    credentials: Path | None,
-    insecure: bool,
-    **values: Any,
-) -> None:
-    """Attach one robot's agent (heuristic or LLM policy) to a running world."""
-    from mhrc.run.attach import attach_agent
-
-    logs.configure(log_level)
-    creds = load_credentials(credentials, insecure, connect)
-    cfg = episode_config(**values)
-    if robot not in cfg.robots:
-        raise click.BadParameter(
-            f"{robot!r} is not in this episode's team (robots: {', '.join(cfg.robots)}; --team names the team)",
-            param_hint="--robot",
-        )
-    if creds is None:
-        open_bus_notice(insecure)
-    spec = cfg.robot_specs().get(robot)
-    options = cfg.policy_options(spec)
-    from mhrc.agents.agent import AgentError
-    from mhrc.agents.llm import LLMFatalError
-    from mhrc.core.lifeline import PARENT_ENV
-    from mhrc.run.config import ConfigError
-
-    if not os.environ.get(PARENT_ENV):  # said by hand only: a child of mhrc up --processes has its parent's lines
-        click.echo(f"waiting for the world at {connect} (up to {attach_timeout:g} s)", err=True)
-    try:
-        done = run_command(
-            lambda: attach_agent(
-                robot,
-                connect,
-                run,
-                attach_timeout,
-                spec,
-                cfg.base_url,
-                cfg.client_options(spec),
-                security=creds,
-                **options,
-            )
-        )
-    except (
-        AgentError,
-        LLMFatalError,
-        SecurityError,
-        ConfigError,
-    ) as exc:  # the world, the model or the setup: one line, exit 2
-        click.echo(f"mhrc agent {robot}: {exc}", err=True)
-        sys.exit(2)
-    except Exception as exc:  # anything else: say what happened, exit 1
-        raise click.ClickException(f"{type(exc).__name__}: {exc}") from None
-    if done is not None:
-        m = done.metrics
-        click.echo(
-            f"{robot}: episode {done.run} ended ({done.reason}): success={m.success} placed={m.placed}/{m.total} TS={m.temporal_steps}"
-        )
