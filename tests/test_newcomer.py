@@ -286,7 +286,11 @@ def test_ctrl_c_on_up_is_one_line_naming_the_tick_and_the_trace(tmp_path: Path) 
     assert int(m[1]) == max(closed) + 1  # the tick that was running
     printed = out.read_text()
     assert "detached" not in printed and "unless an agent attaches again" not in printed
-    assert re.search(r"^episode stopped: .*, horizon 50, fidelity paper, lockstep schedule$", printed, re.M), printed
+    assert re.search(
+        r"^episode stopped: .*, horizon 50, fidelity paper, lockstep schedule \(every robot plans on the same state; [^)]*\)$",
+        printed,
+        re.M,
+    ), printed
 
 
 def _block_after(page: Path, marker: str) -> str:
