@@ -19,9 +19,11 @@ from mhrc.agents.llm import (
     robot_specs,
     split_url,
 )
+from mhrc.agents.protocols import CoordinationProtocol, ProtocolRefused, Refusal, protocol
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse_aids, parse_noise
 from mhrc.core.keys import check_id, new_run_id
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.security import Credentials, check_for, load, make_run_credentials
 from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.core.trace import unwritable
@@ -38,6 +40,14 @@ SCHEDULES = tuple(SCHEDULERS)  # the world's registry, in its order: sequential 
 
 class ConfigError(ValueError):
     """A configuration value that cannot work; the message names the field."""
+
+
+class ProtocolConfigError(ConfigError):
+    """--protocol names no protocol, or one that cannot run this episode: `code` says which."""
+
+    def __init__(self, message: str, code: Refusal) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 class ModelServerDown(ConfigError):
@@ -140,6 +150,11 @@ class EpisodeConfig(BaseModel):
     events: Path | None = Field(
         None, description="a scenario file: events the world applies during the episode (world/scenario.py)"
     )
+    protocol: str = Field(
+        DEFAULT_PROTOCOL,
+        description="how the team decides: a coordination protocol (mhrc.agents.protocols; docs/protocols.md); "
+        "the paper's, mhrc, by default",
+    )
     credentials: Path | None = Field(
         None,
         description="the run's credentials (mhrc.core.security): the directory of every participant's files, or one participant's "
@@ -197,6 +212,7 @@ class EpisodeConfig(BaseModel):
             check_team(cfg.team, get_layout(cfg.scene))
             check_placement(get_layout(cfg.scene), cfg.team, cfg.seed)  # room for every robot, before anything starts
             cfg.scenario()
+            cfg.coordination()
             if any(cfg.robot_specs().values()):
                 from mhrc.agents.llm import check_spec
                 from mhrc.agents.llm_policy import load_template
@@ -216,6 +232,18 @@ class EpisodeConfig(BaseModel):
         except (ValueError, FileNotFoundError) as exc:
             raise ConfigError(str(exc)) from None
         return cfg
+
+    def coordination(self) -> CoordinationProtocol:
+        """The episode's protocol; ConfigError (--protocol) for an unknown one or one that cannot
+        run this team (its refusal's code is the error's `code`)."""
+        try:
+            p = protocol(self.protocol)
+            refused = p.refusal(self.team, llm=any(self.robot_specs().values()))
+        except ProtocolRefused as exc:
+            refused = exc
+        if refused is not None:
+            raise ProtocolConfigError(f"--protocol: {refused}", refused.code)
+        return p
 
     def check_replays(self, robots: Sequence[str]) -> None:
         """Each replay: spec's trace read as the robot's agent will read it (its records, the robot's

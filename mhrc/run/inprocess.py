@@ -22,6 +22,7 @@ if TYPE_CHECKING:
 from mhrc.agents.llm import LLMFatalError
 from mhrc.run.attach import local_models, run_agent
 from mhrc.run.config import EpisodeConfig
+from mhrc.run.coordinated import seat
 from mhrc.run.serve import EventHook, serve_world
 
 log = structlog.get_logger("mhrc.run.inprocess")
@@ -87,6 +88,7 @@ async def _run_in_process(
         ready.cancel()
         return world.result()
     own = cfg.robot_specs()  # before gguf: specs became their local servers' URLs
+    seats = seat(cfg, robots)
     agents = [
         asyncio.create_task(
             run_agent(
@@ -98,6 +100,7 @@ async def _run_in_process(
                 client_options=cfg.client_options(own[r]),
                 security=login or cfg.participant(r),
                 on_error=on_agent_error,
+                policy=seats.get(r),
                 **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",
