@@ -36,7 +36,7 @@ from ..policy import Decision, Policy
 from .allocation import assign
 from .base import Seating
 from .knowledge import Knowledge
-from .steps import Hand, Job, finisher_can_take, finisher_step, job_step
+from .steps import MAX_TRIES, Hand, Job, Taken, finisher_can_take, finisher_step, job_step, make_room
 
 __all__ = ["CentralPlanner", "Seat", "build_centralized"]
 
@@ -141,7 +141,12 @@ class CentralPlanner:
             return Wait()
         if not self._mobile(hand.robot):
             return finisher_step(k, hand) or Wait()
-        taken = {h.pose for h in self.hands.values() if h is not hand and h.pose is not None}
+        others = [h for h in self.hands.values() if h is not hand and h.pose is not None]
+        idle = {h.pose for h in others if h.job is None and k.obs[h.robot].status.holding is None}
+        taken = Taken({h.pose for h in others if h.pose is not None} - idle, idle)  # type: ignore[misc]
+        if hand.job is None and k.obs[hand.robot].status.holding is None:
+            claimed = {h.pose for h in others if h.pose is not None and h.pose not in idle}
+            return make_room(k, hand, claimed, taken) or Wait()
         step = job_step(k, hand, taken)
         if step is None and hand.job is not None:
             hand.job = None  # its work is done or cannot go on: the next round gives it other work
@@ -176,7 +181,7 @@ class CentralPlanner:
                 and not k.goal_fixture(o.on)
                 and not (fin is not None and finisher_can_take(k, fin, t))
             ):
-                if all(h.tries.get(t, 0) < 4 for h in self.hands.values() if h is not fin):
+                if any(h.tries.get(t, 0) < MAX_TRIES for h in self.hands.values() if h is not fin):
                     jobs.append(Job("fetch", t))
         if lost:
             unseen = [
@@ -195,7 +200,13 @@ class CentralPlanner:
         if job.kind == "explore":
             return job.target not in k.explored and (not k.targets or any(k.located(t) is None for t in k.todo()))
         o = k.located(job.target)
-        return o is not None and o.held_by in (None, hand.robot) and not k.done(job.target)
+        fin = self._finisher()
+        return (
+            o is not None
+            and o.held_by in (None, hand.robot)
+            and not k.done(job.target)
+            and (o.held_by == hand.robot or fin is None or not finisher_can_take(k, fin, job.target))
+        )
 
 
 @dataclass

@@ -6,7 +6,9 @@ the robots themselves.
 Each robot's scene graph is its own memory, and memories disagree (one robot saw an object
 taken away, another still remembers it where it was). The union keeps, for each object, the
 newest change any robot's memory made: when a robot's view of an object differs from its view
-at the step before, it learned something, and that is what the team now believes.
+at the step before, it learned something, and that is what the team now believes. One change is
+not: a robot that finds an object gone from where it saw it, when the team already believes it
+elsewhere (a teammate moved it), learned nothing new.
 """
 
 from __future__ import annotations
@@ -42,7 +44,11 @@ class Knowledge:
         self.obs[obs.robot] = obs
         before = self._views.setdefault(obs.robot, {})
         for o in obs.objects:
-            if before.get(o.name) != o or o.name not in self.objects:
+            known = self.objects.get(o.name)
+            stale = (
+                known is not None and o.last_seen_on is not None and known.on != o.last_seen_on
+            )  # "gone from where I saw it", about a place the team knows it left already
+            if known is None or (before.get(o.name) != o and not stale):
                 self.objects[o.name] = o
             before[o.name] = o
         opened = self._open.setdefault(obs.robot, {})

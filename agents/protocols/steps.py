@@ -23,6 +23,7 @@ from mhrc.core.protocol import (
     OutcomeCode,
     Pick,
     Place,
+    Wait,
 )
 
 from ..heuristic_base import HANDOVER, _at_stand_pose, corrective_move, failed
@@ -30,7 +31,7 @@ from .knowledge import Knowledge, dist
 
 __all__ = ["MAX_TRIES", "Hand", "Job", "finisher_step", "job_step"]
 
-MAX_TRIES = 4  # failed grasps of one object before it is left (the experts' MAX_GRASP_TRIES)
+MAX_TRIES = 8  # failed grasps of one object by one robot before it leaves it to others
 BOB_TRIES = 2  # failed picks by the finisher before a fetcher brings the object closer
 STRETCH = 0.1  # m beyond the finisher's reach it still tries for an object brought to its table
 
@@ -54,7 +55,7 @@ class Hand:
     job: Job | None = None
     last: ActionResult | None = None
     pose: tuple[str, int] | None = None  # the stand pose it stands at or heads to
-    pose_choice: dict[str, int] = field(default_factory=dict)  # furniture -> the stand pose to use there
+    bad: dict[str, set[int]] = field(default_factory=dict)  # furniture -> stand poses that failed it there
     tries: dict[str, int] = field(default_factory=dict)  # object -> failed grasps
     slips: int = 0
     place_shift: int = 0
@@ -71,16 +72,33 @@ class Hand:
             return
         if isinstance(a, Pick) and not result.outcome.succeeded:
             self.tries[a.obj] = self.tries.get(a.obj, 0) + 1
-        if isinstance(a, Place):
-            self.place_shift = 0 if result.outcome.succeeded else self.place_shift + 1
+        if isinstance(a, Place) and not result.outcome.succeeded:
+            self.place_shift += 1  # a table too crowded there, or beyond the arm: the next stand pose (kept)
         if isinstance(a, Navigate):
             self.slips = self.slips + 1 if code == OutcomeCode.OFF_TARGET else 0
             if failed(result) and code != OutcomeCode.OFF_TARGET:
-                self.pose_choice[a.target] = a.stand_pose + 1  # that stand pose is not to be had: the next
+                self.spoil(a.target, a.stand_pose)  # that stand pose is not to be had: another
                 self.pose = None
 
+    def spoil(self, furniture: str, idx: int | None = None) -> None:
+        """Stand pose `idx` of `furniture` (the one it stands at, by default) failed it: use another."""
+        if idx is None:
+            if self.pose is None or self.pose[0] != furniture:
+                return
+            idx = self.pose[1]
+        self.bad.setdefault(furniture, set()).add(idx)
 
-Taken = set[tuple[str, int]]  # stand poses other robots stand at or head to
+
+class Taken(set[tuple[str, int]]):
+    """Stand poses other robots stand at or head to; `yielding`: those held by idle robots, which
+    leave when another robot needs the pose."""
+
+    def __init__(self, held: set[tuple[str, int]], yielding: set[tuple[str, int]]) -> None:
+        super().__init__(held | yielding)
+        self.yielding = yielding
+
+
+WAIT_FOR_ROOM = -1  # _pose: the pose is claimed from an idle robot; wait a step for it to leave
 
 
 def _pose(k: Knowledge, hand: Hand, furniture: str, near: tuple[float, ...], taken: Taken) -> int | None:
@@ -91,14 +109,23 @@ def _pose(k: Knowledge, hand: Hand, furniture: str, near: tuple[float, ...], tak
     if not n:
         return None
     order = sorted(range(n), key=lambda i: dist((f.stand_poses[i].x, f.stand_poses[i].y), near))
-    if furniture in hand.pose_choice:
-        start = hand.pose_choice[furniture] % n
-        order = order[order.index(start) :] + order[: order.index(start)]
+    bad = hand.bad.get(furniture, set())
+    if len(bad) >= n:
+        bad.clear()  # every pose failed once: try them again
+    order = [i for i in order if i not in bad]
+    if all((furniture, i) in taken for i in order) and order and taken.yielding:
+        # every pose is held; one held by an idle robot is claimed: it leaves (the planner's round) and this one waits
+        idle = next((i for i in order if (furniture, i) in taken.yielding), None)
+        if idle is not None:
+            hand.pose = (furniture, idle)
+            return WAIT_FOR_ROOM
     return next((i for i in order if (furniture, i) not in taken), None)
 
 
 def _go(k: Knowledge, hand: Hand, furniture: str, idx: int) -> Action | None:
     """Navigate to stand pose `idx` of `furniture` unless the robot stands there already."""
+    if idx == WAIT_FOR_ROOM:
+        return Wait()
     hand.pose = (furniture, idx)
     if _at_stand_pose(k.obs[hand.robot], k.furniture[furniture], idx):
         return None
@@ -121,7 +148,7 @@ def _open(k: Knowledge, hand: Hand, furniture: str, taken: Taken) -> Action | No
     f = k.furniture[furniture]
     last = hand.last
     if last is not None and isinstance(last.action, Open) and last.action.target == furniture and failed(last):
-        hand.pose_choice[furniture] = hand.pose_choice.get(furniture, 0) + 1  # approach again, from the next pose
+        hand.spoil(furniture)  # approach again, from another pose
         hand.last = None
     idx = _pose(k, hand, furniture, f.position, taken)
     if idx is None:
@@ -151,8 +178,7 @@ def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | N
     table = k.furniture.get(HANDOVER)
     if table is None or not table.stand_poses:
         return None
-    goal = k.furniture.get(k.goal(holding))
-    near = goal.position if goal is not None else (table.place_pose or table.position)
+    near = table.place_pose or table.position
     n = len(table.stand_poses)
     order = sorted(range(n), key=lambda i: dist((table.stand_poses[i].x, table.stand_poses[i].y), near))
     order = order[hand.place_shift % n :] + order[: hand.place_shift % n]
@@ -185,14 +211,17 @@ def job_step(k: Knowledge, hand: Hand, taken: Taken) -> Action | None:
     if (slip := _retry_slip(hand)) is not None:
         return slip
     last = hand.last
-    if last is not None and isinstance(last.action, Pick) and last.action.obj == job.target and failed(last):
+    if last is not None and isinstance(last.action, Move) and failed(last):  # the fix could not be driven: another pose
+        hand.spoil(f.name)
+        hand.last = None
+    elif last is not None and isinstance(last.action, Pick) and last.action.obj == job.target and failed(last):
         d = last.outcome.details
         if last.outcome.code == OutcomeCode.TOO_FAR and "offset_x" in d and "offset_y" in d:
             fix = corrective_move(k.obs[hand.robot], (float(d["offset_x"]), float(d["offset_y"])))
             if fix is not None:
                 hand.last = None
                 return Move(dx=fix[0], dy=fix[1])
-        hand.pose_choice[f.name] = (hand.pose[1] + 1) if hand.pose is not None and hand.pose[0] == f.name else 1
+        hand.spoil(f.name)
         hand.last = None
     moved = last is not None and isinstance(last.action, Move) and last.outcome.succeeded
     if moved and hand.pose is not None and hand.pose[0] == f.name:
@@ -224,3 +253,25 @@ def finisher_can_take(k: Knowledge, hand: Hand, name: str) -> bool:
     """Whether the finisher will take `name` from its table itself (no fetcher needed)."""
     o = k.located(name)
     return o is not None and hand.tries.get(name, 0) < BOB_TRIES and k.in_reach(hand.robot, o, STRETCH)
+
+
+def make_room(k: Knowledge, hand: Hand, claimed: set[tuple[str, int]], taken: Taken) -> Action | None:
+    """An idle robot standing where another robot needs to stand: to the nearest stand pose of a
+    furniture nobody needs (not the finisher's table, nothing claimed there)."""
+    if hand.pose is None or hand.pose not in claimed:
+        return None
+    here = k.base(hand.robot)
+    if here is None:
+        return None
+    options = [
+        (dist(here, (sp.x, sp.y)), f.name, i)
+        for f in k.furniture.values()
+        if f.name != HANDOVER and f.name != hand.pose[0]
+        for i, sp in enumerate(f.stand_poses)
+        if (f.name, i) not in taken and (f.name, i) not in claimed
+    ]
+    if not options:
+        return None
+    _, name, idx = min(options)
+    hand.pose = (name, idx)
+    return Navigate(target=name, stand_pose=idx)
