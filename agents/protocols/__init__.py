@@ -11,7 +11,6 @@ from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 
 from .base import CoordinationProtocol, ProtocolRefused, Refusal, Seating
 from .centralized import build_centralized
-from .leader import build_leader
 
 __all__ = [
     "DEFAULT_PROTOCOL",
@@ -58,12 +57,5 @@ register(
         "one planner decides every robot's next action from all their observations; allocation by assignment",
         build=build_centralized,
         whole_team=True,
-    )
-)
-register(
-    CoordinationProtocol(
-        "leader",
-        "DynaHMRC's loop: self-description, bids, an elected leader allocates by auction; re-election on loss",
-        build=build_leader,
     )
 )

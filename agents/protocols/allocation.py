@@ -46,11 +46,11 @@ def cost(k: Knowledge, hand: Hand, job: Job) -> float:
     o = k.located(job.target)
     if o is None or o.on is None:
         return INFEASIBLE
-    f = k.furniture.get(o.on)
+    src = k.furniture.get(o.on)
     table = k.furniture.get(HANDOVER)
-    if f is None or table is None:
+    if src is None or table is None:
         return INFEASIBLE
-    steps = 4.0 + (1 if f.openable and not f.is_open else 0) + (1 if hand.tries.get(job.target, 0) else 0)
+    steps = 4.0 + (1 if src.openable and not src.is_open else 0) + (1 if hand.tries.get(job.target, 0) else 0)
     walk = dist(here, o.position) + dist(o.position, table.position)
     return steps + PER_METRE * walk + keep
 

@@ -142,8 +142,10 @@ class CentralPlanner:
         if not self._mobile(hand.robot):
             return finisher_step(k, hand) or Wait()
         others = [h for h in self.hands.values() if h is not hand and h.pose is not None]
-        idle = {h.pose for h in others if h.job is None and k.obs[h.robot].status.holding is None}
-        taken = Taken({h.pose for h in others if h.pose is not None} - idle, idle)  # type: ignore[misc]
+        idle = {
+            h.pose for h in others if h.pose is not None and h.job is None and k.obs[h.robot].status.holding is None
+        }
+        taken = Taken({h.pose for h in others if h.pose is not None} - idle, idle)
         if hand.job is None and k.obs[hand.robot].status.holding is None:
             claimed = {h.pose for h in others if h.pose is not None and h.pose not in idle}
             return make_room(k, hand, claimed, taken) or Wait()

@@ -53,8 +53,8 @@ class Knowledge:
             before[o.name] = o
         opened = self._open.setdefault(obs.robot, {})
         for f in obs.furniture:
-            known = self.furniture.get(f.name)
-            if known is None or opened.get(f.name, f.is_open) != f.is_open:
+            seen = self.furniture.get(f.name)
+            if seen is None or opened.get(f.name, f.is_open) != f.is_open:
                 self.furniture[f.name] = f
             opened[f.name] = f.is_open
         holding = obs.status.holding

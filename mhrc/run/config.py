@@ -212,7 +212,6 @@ class EpisodeConfig(BaseModel):
             check_team(cfg.team, get_layout(cfg.scene))
             check_placement(get_layout(cfg.scene), cfg.team, cfg.seed)  # room for every robot, before anything starts
             cfg.scenario()
-            cfg.coordination()
             if any(cfg.robot_specs().values()):
                 from mhrc.agents.llm import check_spec
                 from mhrc.agents.llm_policy import load_template
@@ -231,6 +230,7 @@ class EpisodeConfig(BaseModel):
                         load_template(robot, part, cfg.prompts, team=cfg.team)
         except (ValueError, FileNotFoundError) as exc:
             raise ConfigError(str(exc)) from None
+        cfg.coordination()  # ProtocolConfigError, with its refusal's code
         return cfg
 
     def coordination(self) -> CoordinationProtocol:
