@@ -129,7 +129,8 @@ class CentralPlanner:
             if self._working(h) and k.obs[h.robot].status.holding is None and (h.job is None or h.job.kind == "explore")
         ]
         jobs = [j for j in self._jobs() if j not in fetching]
-        given = assign(k, free, jobs)  # a robot's own job costs it a little less (allocation.STAY)
+        busy = sum(1 for h in self.hands.values() if h not in free and h.job is not None and h.job.kind == "fetch")
+        given = assign(k, free, jobs, start=busy, scouts=self._scouting())  # its own job costs a robot less (STAY)
         for h in free:
             h.job = given.get(h.robot)
 
@@ -146,7 +147,10 @@ class CentralPlanner:
             h.pose for h in others if h.pose is not None and h.job is None and k.obs[h.robot].status.holding is None
         }
         taken = Taken({h.pose for h in others if h.pose is not None} - idle, idle)
-        if hand.job is None and k.obs[hand.robot].status.holding is None:
+        holding = k.obs[hand.robot].status.holding
+        if holding is not None and holding in k.targets:
+            hand.job = Job("fetch", holding)  # what it carries is its work: nobody else is sent for it
+        if hand.job is None and holding is None:
             claimed = {h.pose for h in others if h.pose is not None and h.pose not in idle}
             return make_room(k, hand, claimed, taken) or Wait()
         step = job_step(k, hand, taken)
@@ -161,6 +165,15 @@ class CentralPlanner:
     def _working(self, hand: Hand) -> bool:
         return self.knowledge.obs[hand.robot].tick >= hand.broken_until
 
+    def _scouting(self) -> bool:
+        """A scout (a robot that navigates and cannot pick) is there and working to look at surfaces."""
+        k = self.knowledge
+        return any(
+            self._mobile(r) and role_of(k.obs[r].status.skills) == "scout" and self._working(self.hands[r])
+            for r in self.robots
+            if r in k.obs
+        )
+
     def _finisher(self) -> Hand | None:
         k = self.knowledge
         return next(
@@ -174,15 +187,22 @@ class CentralPlanner:
         fin = self._finisher()
         jobs: list[Job] = []
         lost = not k.targets  # the task's list not known yet (the finisher has not been heard): look around
+        fetchers = sum(1 for r in self.robots if r in k.obs and role_of(k.obs[r].status.skills) == "fetcher")
+        wanted = 0  # an ordered task: only the next few are fetched (steps.next_wanted), one per fetcher
         for t in k.todo():
             o = k.located(t)
             if o is None:
                 lost = True
+            elif o.held_by is not None and o.held_by != (fin.robot if fin else None):
+                wanted += 1  # on its way
             elif (
                 o.held_by is None
                 and not k.goal_fixture(o.on)
                 and not (fin is not None and finisher_can_take(k, fin, t))
             ):
+                wanted += 1
+                if k.ordered and wanted > max(1, fetchers):
+                    continue
                 if any(h.tries.get(t, 0) < MAX_TRIES for h in self.hands.values() if h is not fin):
                     jobs.append(Job("fetch", t))
         if lost:

@@ -8,7 +8,8 @@ taken away, another still remembers it where it was). The union keeps, for each 
 newest change any robot's memory made: when a robot's view of an object differs from its view
 at the step before, it learned something, and that is what the team now believes. One change is
 not: a robot that finds an object gone from where it saw it, when the team already believes it
-elsewhere (a teammate moved it), learned nothing new.
+elsewhere (a teammate moved it), learned nothing new; nor does one that finds an object gone from
+the finisher's table (the finisher took it, and the finisher's own view of its table says so).
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ class Knowledge:
             stale = (
                 known is not None and o.last_seen_on is not None and known.on != o.last_seen_on
             )  # "gone from where I saw it", about a place the team knows it left already
+            if o.on is None and o.held_by is None and o.last_seen_on == HANDOVER and obs.robot != self.finisher:
+                stale = stale or self.finisher is not None  # the finisher sees its own table: its word on it counts
             if known is None or (before.get(o.name) != o and not stale):
                 self.objects[o.name] = o
             before[o.name] = o

@@ -29,10 +29,12 @@ from mhrc.core.protocol import (
 from ..heuristic_base import HANDOVER, _at_stand_pose, corrective_move, failed
 from .knowledge import Knowledge, dist
 
-__all__ = ["MAX_TRIES", "Hand", "Job", "finisher_step", "job_step"]
+__all__ = ["MAX_TRIES", "Hand", "Job", "finisher_step", "job_step", "next_wanted"]
 
+HOLD_TICKS = 8  # ticks a fetcher holds an object the ordered task does not want yet, before putting it down
 MAX_TRIES = 8  # failed grasps of one object by one robot before it leaves it to others
 BOB_TRIES = 2  # failed picks by the finisher before a fetcher brings the object closer
+REACH_MARGIN = 0.1  # m inside a fetcher's reach it picks from where it stands rather than walk to a nearer pose
 STRETCH = 0.1  # m beyond the finisher's reach it still tries for an object brought to its table
 
 
@@ -60,6 +62,7 @@ class Hand:
     slips: int = 0
     place_shift: int = 0
     broken_until: int = 0
+    held_for: int = 0  # ticks it has waited at the table holding an object not wanted yet
 
     def record(self, result: ActionResult) -> None:
         self.last = result
@@ -74,6 +77,9 @@ class Hand:
             self.tries[a.obj] = self.tries.get(a.obj, 0) + 1
         if isinstance(a, Place) and not result.outcome.succeeded:
             self.place_shift += 1  # a table too crowded there, or beyond the arm: the next stand pose (kept)
+            self.spoil(a.location)  # and not from here again
+        if isinstance(a, Place) and result.outcome.succeeded:
+            self.bad.pop(a.location, None)
         if isinstance(a, Navigate):
             self.slips = self.slips + 1 if code == OutcomeCode.OFF_TARGET else 0
             if failed(result) and code != OutcomeCode.OFF_TARGET:
@@ -174,18 +180,59 @@ def explore_step(k: Knowledge, hand: Hand, furniture: str, taken: Taken) -> Acti
     return step
 
 
+def _standing_at(k: Knowledge, hand: Hand, furniture: str) -> int | None:
+    """The stand pose of `furniture` the robot stands at now, if any."""
+    f = k.furniture.get(furniture)
+    if f is None:
+        return None
+    obs = k.obs[hand.robot]
+    return next((i for i in range(len(f.stand_poses)) if _at_stand_pose(obs, f, i)), None)
+
+
+def next_wanted(k: Knowledge) -> str | None:
+    """For an ordered task (a sandwich), the first target still to go that is not lying on the
+    finisher's table already: the only one a fetcher puts down there (the table's band the arm
+    reaches holds few objects; one brought early can leave no room for the next)."""
+    if not k.ordered:
+        return None
+    for t in k.todo():
+        o = k.objects.get(t)
+        if o is None or o.on != HANDOVER:
+            return t
+    return None
+
+
 def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | None:
+    """To the finisher's table and put it down: from the stand pose it stands at already, else
+    the free one nearest the table's place pose (after a place failed, the next one). In an
+    ordered task only the object wanted next is put down; another waits in the gripper there
+    (a few ticks at most: `HOLD_TICKS`)."""
     table = k.furniture.get(HANDOVER)
     if table is None or not table.stand_poses:
         return None
-    near = table.place_pose or table.position
+    bad = hand.bad.get(HANDOVER, set())
     n = len(table.stand_poses)
-    order = sorted(range(n), key=lambda i: dist((table.stand_poses[i].x, table.stand_poses[i].y), near))
-    order = order[hand.place_shift % n :] + order[: hand.place_shift % n]
-    idx = next((i for i in order if (HANDOVER, i) not in taken), None)
+    if len(bad) >= n:
+        bad.clear()  # it failed from every pose (the table was crowded): try them again
+    here = _standing_at(k, hand, HANDOVER)
+    idx: int | None
+    if here is not None and here not in bad and (HANDOVER, here) not in taken:
+        idx = here
+    else:
+        near = table.place_pose or table.position
+        order = sorted(range(n), key=lambda i: dist((table.stand_poses[i].x, table.stand_poses[i].y), near))
+        idx = next((i for i in order if (HANDOVER, i) not in taken and i not in bad), None)
     if idx is None:
         return None
-    return _go(k, hand, HANDOVER, idx) or Place(obj=holding, location=HANDOVER)
+    step = _go(k, hand, HANDOVER, idx)
+    if step is not None:
+        return step
+    wanted = next_wanted(k)
+    if wanted is not None and holding != wanted and holding in k.targets and hand.held_for < HOLD_TICKS:
+        hand.held_for += 1
+        return Wait()
+    hand.held_for = 0
+    return Place(obj=holding, location=HANDOVER)
 
 
 def job_step(k: Knowledge, hand: Hand, taken: Taken) -> Action | None:
@@ -226,10 +273,19 @@ def job_step(k: Knowledge, hand: Hand, taken: Taken) -> Action | None:
     moved = last is not None and isinstance(last.action, Move) and last.outcome.succeeded
     if moved and hand.pose is not None and hand.pose[0] == f.name:
         return Pick(obj=job.target)
+    here = _standing_at(k, hand, f.name)
+    if here is not None and here not in hand.bad.get(f.name, set()) and _within_arm(k, hand.robot, o.position):
+        hand.pose = (f.name, here)  # it looked from here (or brought another from here): no need to stand elsewhere
+        return Pick(obj=job.target)
     idx = _pose(k, hand, f.name, o.position, taken)
     if idx is None:
         return None
     return _go(k, hand, f.name, idx) or Pick(obj=job.target)
+
+
+def _within_arm(k: Knowledge, robot: str, position: tuple[float, ...]) -> bool:
+    s = k.obs[robot].status
+    return s.arm_base is not None and s.reach is not None and dist(position, s.arm_base) <= s.reach - REACH_MARGIN
 
 
 def finisher_step(k: Knowledge, hand: Hand) -> Action | None:
