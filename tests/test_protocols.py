@@ -26,7 +26,7 @@ from mhrc.run.inprocess import up_in_process
 
 
 def test_every_protocol_lists_in_one_line_and_mhrc_is_the_default() -> None:
-    assert list(PROTOCOLS) == ["mhrc", "centralized"]
+    assert list(PROTOCOLS) == ["mhrc", "centralized", "leader"]
     for p in PROTOCOLS.values():
         assert "\n" not in p.line() and p.line().startswith(p.name)
     assert EpisodeConfig.build().protocol == "mhrc"

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 
+from . import leader_talk
 from .base import CoordinationProtocol, ProtocolRefused, Refusal, Seating
 from .centralized import build_centralized
+from .leader import build_leader
 
 __all__ = [
     "DEFAULT_PROTOCOL",
@@ -19,6 +21,7 @@ __all__ = [
     "ProtocolRefused",
     "Refusal",
     "Seating",
+    "leader_talk",
     "protocol",
     "register",
 ]
@@ -57,5 +60,12 @@ register(
         "one planner decides every robot's next action from all their observations; allocation by assignment",
         build=build_centralized,
         whole_team=True,
+    )
+)
+register(
+    CoordinationProtocol(
+        "leader",
+        "DynaHMRC's loop: self-descriptions and bids by message, an elected leader allocates by auction, robots report",
+        build=build_leader,
     )
 )

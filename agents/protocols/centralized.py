@@ -163,16 +163,28 @@ class CentralPlanner:
         return "navigate" in self.knowledge.obs[robot].status.skills
 
     def _working(self, hand: Hand) -> bool:
-        return self.knowledge.obs[hand.robot].tick >= hand.broken_until
+        o = self.knowledge.obs.get(hand.robot)
+        return o is None or o.tick >= hand.broken_until
 
     def _scouting(self) -> bool:
-        """A scout (a robot that navigates and cannot pick) is there and working to look at surfaces."""
+        """A scout (a robot that navigates and cannot pick) is there and working to look at
+        surfaces: one heard from, or one its teammates' observations list as attached."""
         k = self.knowledge
-        return any(
-            self._mobile(r) and role_of(k.obs[r].status.skills) == "scout" and self._working(self.hands[r])
-            for r in self.robots
-            if r in k.obs
-        )
+        for r in self.robots:
+            o = k.obs.get(r)
+            skills = (
+                o.status.skills
+                if o is not None
+                else next((t[r] for t in (ob.teammates for ob in k.obs.values()) if r in t), None)
+            )
+            if (
+                skills is not None
+                and "navigate" in skills
+                and role_of(skills) == "scout"
+                and self._working(self.hands[r])
+            ):
+                return True
+        return False
 
     def _finisher(self) -> Hand | None:
         k = self.knowledge
@@ -193,6 +205,7 @@ class CentralPlanner:
             o = k.located(t)
             if o is None:
                 lost = True
+                wanted += 1  # in a sandwich, what comes after it waits until it is found
             elif o.held_by is not None and o.held_by != (fin.robot if fin else None):
                 wanted += 1  # on its way
             elif (

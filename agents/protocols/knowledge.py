@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import ActionResult, FurnitureView, Navigate, ObjectView, Observation, Open, OutcomeCode
+from mhrc.core.protocol import ActionResult, FurnitureView, Navigate, ObjectView, Observation, Open, OutcomeCode, Place
 
 from ..heuristic_base import HANDOVER, goal_of, role_of
 
@@ -36,6 +36,9 @@ class Knowledge:
     objects: dict[str, ObjectView] = field(default_factory=dict)
     obs: dict[str, Observation] = field(default_factory=dict)  # robot -> its latest observation
     explored: set[str] = field(default_factory=set)  # furniture some robot has looked at (inside, for a container)
+    told: list[str] = field(default_factory=list)  # the task's targets as a teammate told them (no task view here)
+    told_ordered: bool = False
+    brought: set[str] = field(default_factory=set)  # put on the finisher's table (by this robot, or as reported)
     _views: dict[str, dict[str, ObjectView]] = field(default_factory=dict)  # robot -> object -> its last view
     _open: dict[str, dict[str, bool | None]] = field(default_factory=dict)  # robot -> container -> is_open
 
@@ -71,6 +74,8 @@ class Knowledge:
             f = self.furniture.get(a.target)
             if f is not None and not (f.openable and not f.is_open):
                 self.explored.add(a.target)
+        if isinstance(a, Place) and ok and a.location == HANDOVER:
+            self.brought.add(a.obj)
         if isinstance(a, Open) and (ok or result.outcome.code == OutcomeCode.ALREADY_OPEN):
             self.explored.add(a.target)
 
@@ -86,18 +91,22 @@ class Knowledge:
     @property
     def targets(self) -> list[str]:
         t = self.task_obs()
-        return list(t.targets) if t is not None else []
+        return list(t.targets) if t is not None else list(self.told)
 
     @property
     def ordered(self) -> bool:
         t = self.task_obs()
-        return t is not None and t.ordered
+        return t.ordered if t is not None else self.told_ordered
 
     def goal(self, target: str) -> str:
         t = self.task_obs()
         return goal_of(t, target) if t is not None else HANDOVER
 
     def done(self, target: str) -> bool:
+        """On its goal; for a robot without the task's view (only the finisher has it), brought to
+        the finisher's table by this robot or, as a teammate reported, by another."""
+        if self.task_obs() is None:
+            return target in self.brought
         o = self.objects.get(target)
         return o is not None and o.held_by is None and o.on == self.goal(target)
 

@@ -34,6 +34,7 @@ __all__ = ["MAX_TRIES", "Hand", "Job", "finisher_step", "job_step", "next_wanted
 HOLD_TICKS = 8  # ticks a fetcher holds an object the ordered task does not want yet, before putting it down
 MAX_TRIES = 8  # failed grasps of one object by one robot before it leaves it to others
 BOB_TRIES = 2  # failed picks by the finisher before a fetcher brings the object closer
+HANDOVER_MARGIN = 0.35  # m: how far inside both arms' reach the band of the finisher's table must lie
 REACH_MARGIN = 0.1  # m inside a fetcher's reach it picks from where it stands rather than walk to a nearer pose
 STRETCH = 0.1  # m beyond the finisher's reach it still tries for an object brought to its table
 
@@ -202,6 +203,17 @@ def next_wanted(k: Knowledge) -> str | None:
     return None
 
 
+def _hands_over(k: Knowledge, robot: str) -> bool:
+    """Whether `robot`'s arm, where it stands, reaches into the band of the finisher's table the
+    finisher's arm reaches (the place skill puts an object there or fails)."""
+    mine = k.obs[robot].status
+    fin = k.obs.get(k.finisher or "")
+    theirs = fin.status if fin is not None else None
+    if mine.arm_base is None or mine.reach is None or theirs is None or theirs.arm_base is None:
+        return False
+    return dist(mine.arm_base, theirs.arm_base) <= mine.reach + (theirs.reach or 0.0) - HANDOVER_MARGIN
+
+
 def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | None:
     """To the finisher's table and put it down: from the stand pose it stands at already, else
     the free one nearest the table's place pose (after a place failed, the next one). In an
@@ -216,7 +228,7 @@ def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | N
         bad.clear()  # it failed from every pose (the table was crowded): try them again
     here = _standing_at(k, hand, HANDOVER)
     idx: int | None
-    if here is not None and here not in bad and (HANDOVER, here) not in taken:
+    if here is not None and here not in bad and (HANDOVER, here) not in taken and _hands_over(k, hand.robot):
         idx = here
     else:
         near = table.place_pose or table.position
