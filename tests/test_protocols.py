@@ -44,7 +44,7 @@ def test_refusals_are_typed() -> None:
     assert unknown.value.code is Refusal.UNKNOWN_PROTOCOL and "centralized" in str(unknown.value)
     assert isinstance(unknown.value, ConfigError)
     with pytest.raises(ProtocolConfigError) as llm:
-        EpisodeConfig.build(protocol="centralized", llm="openai:m", base_url="http://127.0.0.1:9/v1")
+        EpisodeConfig.build(protocol="leader", llm="openai:m", base_url="http://127.0.0.1:9/v1")
     assert llm.value.code is Refusal.NO_LLM_FORM
     cfg = EpisodeConfig.build(protocol="centralized")
     with pytest.raises(ProtocolConfigError) as partial:  # the planner drives the whole team or nothing

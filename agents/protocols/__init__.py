@@ -59,6 +59,7 @@ register(
         "centralized",
         "one planner decides every robot's next action from all their observations; allocation by assignment",
         build=build_centralized,
+        forms=("heuristic", "llm"),
         whole_team=True,
     )
 )

@@ -11,8 +11,9 @@ results and messages, never the world's state.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import Any
 
 from mhrc.core.team import TeamSpec
 
@@ -48,6 +49,9 @@ class Seating:
     team: TeamSpec
     robots: tuple[str, ...]
     schedule: str = "lockstep"
+    model: str | None = None  # the LLM form's model spec (None: the heuristic form)
+    base_url: str | None = None
+    client_options: Mapping[str, Any] = field(default_factory=dict)
 
 
 Build = Callable[[Seating], Mapping[str, Policy]]

@@ -63,7 +63,7 @@ class CentralPlanner:
         """The command of `obs.robot` for its observation's tick."""
         self.knowledge.take(obs)
         if self.schedule != "lockstep":
-            return self.round((obs.robot,))[obs.robot]
+            return (await self.plan((obs.robot,)))[obs.robot]
         if self._arrived is None:
             self._arrived = asyncio.Condition()
         async with self._arrived:
@@ -75,7 +75,7 @@ class CentralPlanner:
                     pass
             if obs.tick not in self._commands or obs.robot not in self._commands[obs.tick]:
                 ready = tuple(r for r in self.robots if self._at(r, obs.tick))
-                self._commands[obs.tick] = self._commands.get(obs.tick, {}) | self.round(ready)
+                self._commands[obs.tick] = self._commands.get(obs.tick, {}) | await self.plan(ready)
                 for old in [t for t in self._commands if t < obs.tick - 2]:
                     del self._commands[old]
             return self._commands[obs.tick][obs.robot]
@@ -100,6 +100,15 @@ class CentralPlanner:
                     h.tries.pop(a.obj, None)
 
     # ---------------------------------------------------------------- a round
+    async def plan(self, asking: tuple[str, ...]) -> dict[str, Action]:
+        """The round's commands for the `asking` robots (the LLM form asks its model here)."""
+        return self.round(asking)
+
+    def decision(self, robot: str, action: Action) -> Decision:
+        """What `robot`'s seat publishes with its command."""
+        hand = self.hands[robot]
+        return Decision(action=action, reasoning=f"round {self.rounds}: {hand.job.call() if hand.job else 'no work'}")
+
     def round(self, asking: tuple[str, ...]) -> dict[str, Action]:
         """Allocate the work of every robot, then each asking robot's next step."""
         self.rounds += 1
@@ -254,15 +263,21 @@ class Seat:
 
     async def decide(self, obs: Observation) -> Decision:
         action = await self.planner.command(obs)
-        hand = self.planner.hands[self.robot]
-        why = f"round {self.planner.rounds}: {hand.job.call() if hand.job else 'no work'}"
-        return Decision(action=action, reasoning=why)
+        return self.planner.decision(self.robot, action)
 
     def record(self, result: ActionResult) -> None:
         self.planner.record(self.robot, result)
 
 
 def build_centralized(seating: Seating) -> Mapping[str, Policy]:
-    """One planner for `seating.robots`, a seat of it for each."""
-    planner = CentralPlanner(seating.robots, seating.schedule)
+    """One planner for `seating.robots`, a seat of it for each: the LLM form's when the seating
+    names a model (centralized_llm.py), else the heuristic form."""
+    if seating.model is not None:
+        from ..llm.model_spec import make_client
+        from .centralized_llm import LLMCentralPlanner
+
+        client = make_client(seating.model, seating.base_url, **dict(seating.client_options))
+        planner: CentralPlanner = LLMCentralPlanner(seating.robots, seating.schedule, client=client)
+    else:
+        planner = CentralPlanner(seating.robots, seating.schedule)
     return {r: Seat(r, planner) for r in seating.robots}

@@ -1,27 +1,30 @@
 """`leader`: DynaHMRC's loop, with every stage a `communicate` action (it costs its sender a step,
 as every message does in the paper's protocol), in the fixed sentences of leader_talk.py.
 
-1. **Self-description and bid.** Each robot tells every attached teammate, in the team's order,
-   what it is, what it can do, and its bid to lead: the estimated cost of leading, the steps of
-   its own work it would set aside (`ROLE_BID`: a scout's are the cheapest, a fetcher's the
-   dearest).
-2. **Election.** Once a robot has every attached teammate's bid, it elects the lowest bidder
-   (ties by the team's order); every robot computes the same winner from the same bids, so no
-   vote is sent. The finisher then tells the leader the task's targets and those it takes itself.
+1. **Self-description and bid.** Each robot tells the *convener* what it is, what it can do, and
+   its bid to lead: the estimated cost of leading, the steps of its own work it would set aside
+   (`ROLE_BID`: a scout's are the cheapest, a fetcher's the dearest). The convener is the robot
+   every robot can name from its teammates' skills: the lowest bid by role, first in the team's
+   order (one message per robot, not one to every teammate).
+2. **Election.** Once the convener has every attached robot's bid (or waited `ELECTION_WAIT`
+   ticks) it elects the lowest bidder, ties by the team's order, and announces the winner when it
+   is not itself. The finisher then tells the leader the task's targets and those it takes itself.
 3. **Allocation by auction.** The leader holds what it saw and what it was told, and each round
-   auctions the work to the free robots, one job after another (the first fetch, then the closed
-   containers to look into, then the other fetches, then the surfaces), each to the lowest bid:
-   the estimated steps of that robot for that job, from its self-description and where it last
-   reported from. Each allocation is a message ("Leader david assigns alice: fetch(book).");
-   the leader's own job needs none.
-4. **Reflective execution.** A robot carries out its job a step at a time (steps.py, the
-   experts' recoveries), then reports: done (with what it found, for a look), or failed, with
+   auctions the work to the robots holding fewer than `QUEUE` jobs, one job after another (the
+   first fetch, then the closed containers to look into, then the other fetches, then the
+   surfaces), each to the lowest bid: the estimated steps of that robot for that job, from its
+   self-description and where it last reported from, plus `LOAD` per job it holds. Each
+   allocation is a message ("Leader david assigns alice: fetch(book)."); the leader's own job
+   needs none.
+4. **Reflective execution.** A robot carries out its jobs a step at a time (steps.py, the
+   experts' recoveries), and reports each: done (with what it found, for a look), or failed, with
    the failure's code and a reflection that says what should happen next; the leader books it
-   and allocates again.
+   and allocates again. A robot with no work steps out of the stand pose it stands at.
 
 **Re-election.** A robot whose leader is no longer attached (its agent detached: gone from the
-observation's teammates) drops its bid and elects again from the bids it holds; each robot then
-tells the new leader what it is working on, and the finisher tells it the task again.
+observation's teammates) drops the leader's bid and the election is held again among those
+attached; each robot then tells the new leader what it is working on, and the finisher tells it
+the task again.
 """
 
 from __future__ import annotations

@@ -232,10 +232,17 @@ def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | N
         idx = here
     else:
         near = table.place_pose or table.position
-        order = sorted(range(n), key=lambda i: dist((table.stand_poses[i].x, table.stand_poses[i].y), near))
-        idx = next((i for i in order if (HANDOVER, i) not in taken and i not in bad), None)
-    if idx is None:
-        return None
+        order = [
+            i
+            for i in sorted(range(n), key=lambda i: dist((table.stand_poses[i].x, table.stand_poses[i].y), near))
+            if i not in bad
+        ]
+        idx = next((i for i in order if (HANDOVER, i) not in taken), None)
+        if idx is None:  # every pose it may use is held: claim one an idle robot holds (it leaves), else wait
+            idle = next((i for i in order if (HANDOVER, i) in taken.yielding), None)
+            if idle is not None:
+                hand.pose = (HANDOVER, idle)
+            return Wait()
     step = _go(k, hand, HANDOVER, idx)
     if step is not None:
         return step
@@ -326,8 +333,8 @@ def finisher_can_take(k: Knowledge, hand: Hand, name: str) -> bool:
 def make_room(k: Knowledge, hand: Hand, claimed: set[tuple[str, int]], taken: Taken) -> Action | None:
     """An idle robot standing where another robot needs to stand: to the nearest stand pose of a
     furniture nobody needs (not the finisher's table, nothing claimed there)."""
-    if hand.pose is None or hand.pose not in claimed:
-        return None
+    if hand.pose is None or (hand.pose not in claimed and hand.pose[0] != HANDOVER):
+        return None  # (at the finisher's table it leaves anyway: that is where the fetchers come)
     here = k.base(hand.robot)
     if here is None:
         return None

@@ -88,7 +88,7 @@ async def _run_in_process(
         ready.cancel()
         return world.result()
     own = cfg.robot_specs()  # before gguf: specs became their local servers' URLs
-    seats = seat(cfg, robots)
+    seats = seat(cfg, robots, specs)
     agents = [
         asyncio.create_task(
             run_agent(
