@@ -36,7 +36,7 @@ from ..policy import Decision, Policy
 from .allocation import assign
 from .base import Seating
 from .knowledge import Knowledge
-from .steps import MAX_TRIES, Hand, Job, Taken, finisher_can_take, finisher_step, job_step, make_room
+from .steps import MAX_TRIES, Hand, Job, Taken, finisher_can_take, finisher_step, job_step, make_room, standing
 
 __all__ = ["CentralPlanner", "Seat", "build_centralized"]
 
@@ -151,6 +151,9 @@ class CentralPlanner:
             return Wait()
         if not self._mobile(hand.robot):
             return finisher_step(k, hand) or Wait()
+        for h in self.hands.values():
+            if h.pose is None and h.robot in k.obs:
+                h.pose = standing(k, h.robot)  # a navigation that failed left it where it stood
         others = [h for h in self.hands.values() if h is not hand and h.pose is not None]
         idle = {
             h.pose for h in others if h.pose is not None and h.job is None and k.obs[h.robot].status.holding is None

@@ -29,7 +29,7 @@ from mhrc.core.protocol import (
 from ..heuristic_base import HANDOVER, _at_stand_pose, corrective_move, failed
 from .knowledge import Knowledge, dist
 
-__all__ = ["MAX_TRIES", "Hand", "Job", "finisher_step", "job_step", "next_wanted"]
+__all__ = ["MAX_TRIES", "Hand", "Job", "finisher_step", "job_step", "next_wanted", "standing"]
 
 HOLD_TICKS = 8  # ticks a fetcher holds an object the ordered task does not want yet, before putting it down
 MAX_TRIES = 8  # failed grasps of one object by one robot before it leaves it to others
@@ -188,6 +188,18 @@ def _standing_at(k: Knowledge, hand: Hand, furniture: str) -> int | None:
         return None
     obs = k.obs[hand.robot]
     return next((i for i in range(len(f.stand_poses)) if _at_stand_pose(obs, f, i)), None)
+
+
+def standing(k: Knowledge, robot: str) -> tuple[str, int] | None:
+    """The stand pose `robot` stands at now (furniture, index), if any."""
+    obs = k.obs.get(robot)
+    if obs is None or obs.status.base is None:
+        return None
+    for f in k.furniture.values():
+        for i in range(len(f.stand_poses)):
+            if _at_stand_pose(obs, f, i):
+                return (f.name, i)
+    return None
 
 
 def next_wanted(k: Knowledge) -> str | None:
