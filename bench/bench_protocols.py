@@ -1,6 +1,7 @@
 """Coordination protocols (issue 45): every protocol's heuristic form x every shipped team on the
 evaluation's default grid, in one run, the paper's protocol (`mhrc`) measured beside the others:
-Succ, TS, TS over its lower bound, AS, messages, makespan (simulated seconds), wall time.
+Succ, TS, TS over its lower bound, AS, messages, makespan (simulated seconds), wall time. With
+--out the file is written after each team (`"complete": false` until the last).
 
     python bench/bench_protocols.py [--protocols mhrc,centralized,leader] [--teams paper,two_fetchers,...]
                                     [--trials 1] [--workers 2] [--schedule sequential]
@@ -15,6 +16,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
+import json
 import statistics
 import tempfile
 import time
@@ -82,12 +84,7 @@ def main() -> None:
     args = ap.parse_args()
     protocols = args.protocols.split(",")
     teams = [SHIPPED[name] for name in args.teams.split(",")]
-    out: dict[str, dict[str, Any]] = {}
-    with tempfile.TemporaryDirectory() as d:
-        for p in protocols:
-            out[p] = {}
-            for team in teams:
-                out[p][team.name] = asyncio.run(cell(p, team, args.trials, args.workers, args.schedule, Path(d)))
+    out: dict[str, dict[str, Any]] = {p: {} for p in protocols}
     report = {
         "bench": "protocols",
         "policy": "heuristic",
@@ -95,8 +92,17 @@ def main() -> None:
         f"horizon 50, schedule {args.schedule}",
         "note": "ts_bound: world/bound.py's lower bound on TS; ts_over_bound: the mean of each episode's TS over its "
         "bound; makespan_s: simulated seconds; TS, AS and messages are deterministic, wall_s is the shared machine's",
+        "complete": False,
         "protocols": out,
     }
+    with tempfile.TemporaryDirectory() as d:
+        for team in teams:  # a team's protocols side by side; with --out, the file grows a team at a time
+            for p in protocols:
+                out[p][team.name] = asyncio.run(cell(p, team, args.trials, args.workers, args.schedule, Path(d)))
+            if args.out:
+                args.out.parent.mkdir(parents=True, exist_ok=True)
+                args.out.write_text(json.dumps(report, indent=2) + "\n")
+    report["complete"] = True
     emit(report, args.out)
 
 

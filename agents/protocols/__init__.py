@@ -11,7 +11,7 @@ from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 
 from . import leader_talk
 from .base import CoordinationProtocol, ProtocolRefused, Refusal, Seating
-from .centralized import build_centralized
+from .centralized_llm import build_centralized
 from .leader import build_leader
 
 __all__ = [

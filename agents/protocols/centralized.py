@@ -26,19 +26,17 @@ message (in the paper's protocol a message is an action that costs its sender a 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from mhrc.core.protocol import Action, ActionResult, Observation, Place, Wait
 
 from ..heuristic_base import HANDOVER, role_of
-from ..policy import Decision, Policy
+from ..policy import Decision
 from .allocation import assign
-from .base import Seating
 from .knowledge import Knowledge
 from .steps import MAX_TRIES, Hand, Job, Taken, finisher_can_take, finisher_step, job_step, make_room, standing
 
-__all__ = ["CentralPlanner", "Seat", "build_centralized"]
+__all__ = ["CentralPlanner", "Seat"]
 
 BARRIER_TIMEOUT = 5.0  # s: lockstep, how long a round waits for a robot that may be re-attaching
 
@@ -270,17 +268,3 @@ class Seat:
 
     def record(self, result: ActionResult) -> None:
         self.planner.record(self.robot, result)
-
-
-def build_centralized(seating: Seating) -> Mapping[str, Policy]:
-    """One planner for `seating.robots`, a seat of it for each: the LLM form's when the seating
-    names a model (centralized_llm.py), else the heuristic form."""
-    if seating.model is not None:
-        from ..llm.model_spec import make_client
-        from .centralized_llm import LLMCentralPlanner
-
-        client = make_client(seating.model, seating.base_url, **dict(seating.client_options))
-        planner: CentralPlanner = LLMCentralPlanner(seating.robots, seating.schedule, client=client)
-    else:
-        planner = CentralPlanner(seating.robots, seating.schedule)
-    return {r: Seat(r, planner) for r in seating.robots}

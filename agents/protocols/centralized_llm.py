@@ -16,6 +16,7 @@ a tick, its commands kept for the later turns of that tick; async, one call per 
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from string import Template
@@ -25,10 +26,11 @@ from mhrc.core.protocol import Action, ActionResult, Observation, Wait
 from ..llm.completion import Completion, LLMClient
 from ..observation import robot_status, scene_graph, task_text
 from ..parse import ReplyFormatError, parse_command
-from ..policy import Decision
-from .centralized import CentralPlanner
+from ..policy import Decision, Policy
+from .base import Seating
+from .centralized import CentralPlanner, Seat
 
-__all__ = ["LLMCentralPlanner", "parse_round", "round_prompt"]
+__all__ = ["LLMCentralPlanner", "build_centralized", "parse_round", "round_prompt"]
 
 LINE = re.compile(r"^\s*[-*]?\s*([A-Za-z][A-Za-z0-9_]*)\s*:\s*(.+?)\s*$")
 
@@ -137,3 +139,16 @@ class LLMCentralPlanner(CentralPlanner):
             reasoning=done.reasoning,
             finish_reason=done.finish_reason,
         )
+
+
+def build_centralized(seating: Seating) -> Mapping[str, Policy]:
+    """One planner for `seating.robots`, a seat of it for each: the LLM form's when the seating
+    names a model, else the heuristic form (centralized.py)."""
+    if seating.model is not None:
+        from ..llm.model_spec import make_client  # here: the heuristic form needs no HTTP client
+
+        client = make_client(seating.model, seating.base_url, **dict(seating.client_options))
+        planner: CentralPlanner = LLMCentralPlanner(seating.robots, seating.schedule, client=client)
+    else:
+        planner = CentralPlanner(seating.robots, seating.schedule)
+    return {r: Seat(r, planner) for r in seating.robots}
