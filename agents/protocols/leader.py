@@ -45,6 +45,7 @@ from .steps import BOB_TRIES, Hand, Job, Taken, finisher_step, job_step
 __all__ = ["ROLE_BID", "LeaderPolicy", "build_leader"]
 
 ROLE_BID = {"scout": 2.0, "finisher": 5.0, "fetcher": 9.0}  # steps of its own work a robot sets aside to lead
+BLOCKED = 3  # navigations in a row to an occupied stand pose before a robot reports and leaves the job
 TRIES = 3  # failed grasps of one object before a robot reports and leaves it to another
 AT_POSE = 0.3  # m: a robot this near a stand pose stands at it
 ASIDE = 0.5  # m: how far an idle robot steps away from the furniture it stood at
@@ -55,6 +56,7 @@ SCOUT_SURFACE = 3.0  # steps: a robot that can pick bids this much more to look 
 REFLECTIONS = {
     OutcomeCode.TOO_FAR: "it lies beyond my arm from every stand pose I tried, another robot should try",
     OutcomeCode.OFF_TARGET: "I could not stop at a stand pose there, another robot should try",
+    OutcomeCode.OCCUPIED: "another robot stands where I must stand; it should do it, or leave",
 }
 
 
@@ -86,6 +88,7 @@ class LeaderPolicy:
     failed_by: dict[Job, set[str]] = field(default_factory=dict)
     where: dict[str, str] = field(default_factory=dict)  # robot -> the furniture it last reported from
     aside: bool = False  # stepped out of a stand pose since its last job
+    blocked: int = 0  # navigations in a row that found the stand pose occupied
 
     def __post_init__(self) -> None:
         self.hand = Hand(self.robot)
@@ -324,7 +327,8 @@ class LeaderPolicy:
             return 1e6
         o = self.k.located(job.target)
         src = self.k.furniture.get(o.on or "") if o is not None else None
-        return 4.0 + (1 if src is not None and src.openable and not src.is_open else 0)
+        there = src is not None and self.where.get(robot) == src.name
+        return (3.0 if there else 4.0) + (1 if src is not None and src.openable and not src.is_open else 0)
 
     # ---------------------------------------------------------------- stage 4: execution and reflection
     def _act(self, obs: Observation) -> Decision:
@@ -333,6 +337,12 @@ class LeaderPolicy:
         job = self.hand.job
         if job is not None and job.kind == "fetch" and self.hand.tries.get(job.target, 0) >= TRIES:
             self.hand.tries.pop(job.target)  # reflect now: another robot may do better than an eighth try
+            return self._give_up(obs, job)
+        last = self.hand.last
+        occupied = last is not None and isinstance(last.action, Navigate) and last.outcome.code == OutcomeCode.OCCUPIED
+        self.blocked = self.blocked + 1 if occupied else 0
+        if job is not None and obs.status.holding is None and self.blocked >= BLOCKED:
+            self.blocked = 0
             return self._give_up(obs, job)
         if job is None and obs.status.holding is None:
             return self._step_aside(obs)
@@ -361,20 +371,33 @@ class LeaderPolicy:
 
     def _step_aside(self, obs: Observation) -> Decision:
         """No work: out of the stand pose it stands at (nobody else knows it is idle there, and one
-        robot stands at a stand pose at a time), once, by a short move away from the furniture."""
+        robot stands at a stand pose at a time): to a stand pose of a furniture it saw empty,
+        else by a short move away from the furniture; tried again while it still stands there."""
         base = obs.status.base
-        if self.aside or base is None:
+        if base is None:
             return self._say(Wait(), "no work")
-        self.aside = True
-        if "move" not in obs.status.skills:
-            return self._park(obs)
-        for f in self.k.furniture.values():
-            for sp in f.stand_poses:
-                if math.hypot(base.x - sp.x, base.y - sp.y) <= AT_POSE:
-                    dx, dy = base.x - f.position[0], base.y - f.position[1]
-                    d = math.hypot(dx, dy) or 1.0
-                    return self._say(Move(dx=ASIDE * dx / d, dy=ASIDE * dy / d), "no work: out of the way")
-        return self._say(Wait(), "no work")  # (the leader's own report: on to the next job)
+        at = [
+            f
+            for f in self.k.furniture.values()
+            if any(math.hypot(base.x - sp.x, base.y - sp.y) <= AT_POSE for sp in f.stand_poses)
+        ]
+        if not at:
+            return self._say(Wait(), "no work")
+        last = self.hand.last
+        if self.aside and last is not None and isinstance(last.action, Navigate) and last.outcome.succeeded:
+            return self._say(Wait(), "no work: parked")  # at an empty furniture: nobody is sent there
+        moved_failed = last is not None and isinstance(last.action, Move) and failed(last)
+        parking_failed = self.aside and last is not None and isinstance(last.action, Navigate) and failed(last)
+        park = self._park(obs, {f.name for f in at})
+        if park is not None and not parking_failed:
+            self.aside = True
+            return self._say(park, "no work: out of the way")
+        if "move" in obs.status.skills and not moved_failed:
+            f = at[0]
+            dx, dy = base.x - f.position[0], base.y - f.position[1]
+            d = math.hypot(dx, dy) or 1.0
+            return self._say(Move(dx=ASIDE * dx / d, dy=ASIDE * dy / d), "no work: out of the way")
+        return self._say(Wait(), "no work")
 
     def _finish(self, obs: Observation) -> Decision:
         step = finisher_step(self.k, self.hand)
@@ -386,9 +409,9 @@ class LeaderPolicy:
             return self._send()
         return self._say(step or Wait(), "the finisher: what is within my reach onto its goal")
 
-    def _park(self, obs: Observation) -> Decision:
-        """A robot that cannot `move` (a mobile base, a drone) steps aside by navigating to the
-        nearest furniture it saw empty (nobody is sent there)."""
+    def _park(self, obs: Observation, here: set[str]) -> Navigate | None:
+        """A stand pose of the nearest furniture it saw empty, not one it stands at (nobody is sent
+        to an empty furniture); None when it knows none."""
         base = obs.status.base
         assert base is not None
         empty = [
@@ -396,20 +419,15 @@ class LeaderPolicy:
             for f in self.k.furniture.values()
             if f.stand_poses
             and f.name != HANDOVER
+            and f.name not in here
             and f.name in self.k.explored
             and not any(o.on == f.name for o in self.k.objects.values())
         ]
-        here = min(
-            (
-                (math.hypot(base.x - sp.x, base.y - sp.y), f.name, i)
-                for f in empty
-                for i, sp in enumerate(f.stand_poses)
-            ),
-            default=None,
+        spots = (
+            (math.hypot(base.x - sp.x, base.y - sp.y), f.name, i) for f in empty for i, sp in enumerate(f.stand_poses)
         )
-        if here is None or here[0] <= AT_POSE:
-            return self._say(Wait(), "no work")
-        return self._say(Navigate(target=here[1], stand_pose=here[2]), "no work: out of the way")
+        best = min(spots, default=None)
+        return None if best is None else Navigate(target=best[1], stand_pose=best[2])
 
     def _report(self, text: str) -> None:
         """A report goes to the leader; the leader books its own at once."""

@@ -84,8 +84,9 @@ class Hand:
         if isinstance(a, Navigate):
             self.slips = self.slips + 1 if code == OutcomeCode.OFF_TARGET else 0
             if failed(result) and code != OutcomeCode.OFF_TARGET:
-                self.spoil(a.target, a.stand_pose)  # that stand pose is not to be had: another
-                self.pose = None
+                if code != OutcomeCode.OCCUPIED:  # (an occupied one frees)
+                    self.spoil(a.target, a.stand_pose)  # that stand pose is not to be had: another
+                self.pose = None  # it is where it was (its planner looks: steps.standing)
 
     def spoil(self, furniture: str, idx: int | None = None) -> None:
         """Stand pose `idx` of `furniture` (the one it stands at, by default) failed it: use another."""
