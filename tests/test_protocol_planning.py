@@ -7,8 +7,8 @@ from __future__ import annotations
 from mhrc.agents.protocols.allocation import assign
 from mhrc.agents.protocols.centralized import CentralPlanner
 from mhrc.agents.protocols.knowledge import Knowledge
-from mhrc.agents.protocols.steps import Hand, Job
-from mhrc.core.protocol import FurnitureView, ObjectView, Observation, Pose2D, RobotStatus
+from mhrc.agents.protocols.steps import Hand, Job, Taken, job_step
+from mhrc.core.protocol import FurnitureView, ObjectView, Observation, Place, Pose2D, RobotStatus, Wait
 
 FETCHER = ["navigate", "move", "open", "pick", "place", "communicate", "wait"]
 SCOUT = ["navigate", "communicate", "wait"]
@@ -37,7 +37,7 @@ def _obs(robot: str, skills: list[str], x: float, objects: list[ObjectView] = ()
         name=robot,
         kind="k",
         skills=skills,
-        base=Pose2D(x=x, y=-2.0) if mobile else None,
+        base=Pose2D(x=x, y=float(kw.pop("y", -2.0))) if mobile else None,  # type: ignore[arg-type]
         arm_base=(x, -1.8, 0.6) if "pick" in skills else None,
         reach=0.7 if "pick" in skills else None,
         holding=kw.pop("holding", None),  # type: ignore[arg-type]
@@ -97,3 +97,18 @@ def test_an_object_gone_from_the_finishers_table_is_not_lost() -> None:
     assert k.located("mug") is not None
     planner = CentralPlanner(("f0", "bob", "david"), "sequential", knowledge=k)
     assert not [j for j in planner._jobs() if j.kind == "explore"]
+
+
+def test_in_a_sandwich_only_the_object_wanted_next_is_put_down() -> None:
+    """The band of the finisher's table its arm reaches holds few objects: one brought early can
+    leave no room for the next, so a fetcher holding a later one waits with it at the table."""
+    ham = ObjectView(name="ham", position=(9.0, 0.0, 0.8), on="cabinet", inside=True)
+    k = Knowledge()
+    k.take(_obs("bob", ARM, 0.0, [ham], targets=["ham", "tomato"], goals={}, ordered=True))
+    held = ObjectView(name="tomato", position=(0.0, -1.0, 0.9), held_by="f0")
+    k.take(_obs("f0", FETCHER, 0.0, [held], y=-1.0, holding="tomato"))  # at table_0's stand pose 0
+    hand = Hand("f0", job=Job("fetch", "tomato"))
+    assert job_step(k, hand, Taken(set(), set())) == Wait()
+    on_goal = ObjectView(name="ham", position=(0.0, 0.2, 0.85), on="tray")
+    k.take(_obs("bob", ARM, 0.0, [on_goal], targets=["ham", "tomato"], goals={}, ordered=True, tick=2))
+    assert job_step(k, hand, Taken(set(), set())) == Place(obj="tomato", location="table_0")
