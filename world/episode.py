@@ -31,6 +31,7 @@ from mhrc.core.protocol import (
     TeamRecord,
     Wait,
 )
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 
 from .mail import Mailroom
 from .schedulers import Executed, Scheduler, TaskResultLike
@@ -129,7 +130,8 @@ class EpisodeCore:
                 self.tally.failed[req.action.skill] += 1
 
     # ------------------------------------------------------------------ the episode's first and last events
-    def started(self, scheduler: Scheduler) -> EpisodeStarted:
+    def started(self, scheduler: Scheduler, protocol: str = DEFAULT_PROTOCOL) -> EpisodeStarted:
+        """The episode's header; `protocol`: how its team decides, as the assembly said (recorded only)."""
         sim = self.sim
         return EpisodeStarted(
             run=self.run,
@@ -145,6 +147,7 @@ class EpisodeCore:
             noise=sim.noise,
             team=TeamRecord(name=sim.team.name, digest=sim.team.digest(), kinds=sim.team.kinds),
             scheduler=scheduler.name,  # type: ignore[arg-type]
+            protocol=protocol,
             **scheduler.started_fields(),  # type: ignore[arg-type]
         )
 

@@ -161,7 +161,7 @@ class WorldService:
         self.started = True
         self._t0 = time.perf_counter()
         self.scheduler.start()
-        self.bus.put(self.keys.world_event, self.core.started(self.scheduler))
+        self.bus.put(self.keys.world_event, self.core.started(self.scheduler, self.cfg.protocol))
         self.bus.put(self.keys.world_event, self.core.snapshot(0, []))  # where everything starts (nothing has run yet)
         self._log.info("episode started", attached=sorted(self.attached))
         self._wake.set()

@@ -21,6 +21,7 @@ from mhrc.core.protocol import (
     RobotPose,
     SkillOutcome,
 )
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.team import TeamSpec
 
 from .presence import TOKEN_DEADLINE
@@ -77,3 +78,4 @@ class WorldConfig:
     schedule: str = "lockstep"  # the time policy, a name in world.schedulers.SCHEDULERS
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
     token_deadline: float = TOKEN_DEADLINE  # s an attached agent has to show its liveliness token (presence.py)
+    protocol: str = DEFAULT_PROTOCOL  # how the team decides (mhrc.agents.protocols): recorded in episode_started only

@@ -21,6 +21,7 @@ from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm import make_client
 from mhrc.agents.llm.local import LocalModelServer
 from mhrc.agents.llm_policy import LLMPolicy
+from mhrc.agents.policy import Policy
 from mhrc.agents.replay import ReplayClient
 from mhrc.core.bus import open_client
 from mhrc.core.security import check_for
@@ -40,10 +41,12 @@ async def run_agent(
     attach_timeout: float = 30.0,
     security: Credentials | None = None,
     on_error: Callable[[BaseException], None] | None = None,
+    policy: Policy | None = None,
     **policy_options: Any,
 ) -> EpisodeDone | None:
     """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
-    the heuristic policy, or with `llm` (one robot's spec) an LLMPolicy on that model. A
+    `policy` when given (a coordination protocol's: mhrc.agents.protocols), else the heuristic
+    policy, or with `llm` (one robot's spec) an LLMPolicy on that model. A
     `gguf:PATH` spec gets a one-slot local server of its own for as long as the agent runs.
     `on_error` hears an error that ends the agent while its session is still open: before the
     world sees the robot vanish."""
@@ -51,7 +54,9 @@ async def run_agent(
     if security is not None:
         check_for(security, run=run, user=robot)
     async with contextlib.AsyncExitStack() as stack:
-        if llm is None:
+        if policy is not None:
+            pass
+        elif llm is None:
             policy = heuristic_policy(robot)
         else:
             if llm.startswith("replay:"):

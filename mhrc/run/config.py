@@ -19,9 +19,11 @@ from mhrc.agents.llm import (
     robot_specs,
     split_url,
 )
+from mhrc.agents.protocols import CoordinationProtocol, ProtocolRefused, Refusal, protocol
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse_aids, parse_noise
 from mhrc.core.keys import check_id, new_run_id
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.security import Credentials, check_for, load, make_run_credentials
 from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.core.writable import unwritable
@@ -41,6 +43,14 @@ log = structlog.get_logger("mhrc.run.config")
 
 ROBOTS = PAPER_TEAM.names  # the paper's team, the default (--team chooses another)
 SCHEDULES = tuple(SCHEDULERS)  # the world's registry, in its order: sequential (the paper's), lockstep, async
+
+
+class ProtocolConfigError(ConfigError):
+    """--protocol names no protocol, or one that cannot run this episode: `code` says which."""
+
+    def __init__(self, message: str, code: Refusal) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 OPTIONS = {"n_objects": "--objects", "llm_timeout": "--llm-timeout"}
@@ -138,6 +148,11 @@ class EpisodeConfig(BaseModel):
     events: Path | None = Field(
         None, description="a scenario file: events the world applies during the episode (world/scenario.py)"
     )
+    protocol: str = Field(
+        DEFAULT_PROTOCOL,
+        description="how the team decides: a coordination protocol (mhrc.agents.protocols; docs/protocols.md); "
+        "the paper's, mhrc, by default",
+    )
     credentials: Path | None = Field(
         None,
         description="the run's credentials (mhrc.core.security): the directory of every participant's files, or one participant's "
@@ -213,7 +228,20 @@ class EpisodeConfig(BaseModel):
                         load_template(robot, part, cfg.prompts, team=cfg.team)
         except (ValueError, FileNotFoundError) as exc:
             raise ConfigError(str(exc)) from None
+        cfg.coordination()  # ProtocolConfigError, with its refusal's code
         return cfg
+
+    def coordination(self) -> CoordinationProtocol:
+        """The episode's protocol; ConfigError (--protocol) for an unknown one or one that cannot
+        run this team (its refusal's code is the error's `code`)."""
+        try:
+            p = protocol(self.protocol)
+            refused = p.refusal(self.team, llm=any(self.robot_specs().values()))
+        except ProtocolRefused as exc:
+            refused = exc
+        if refused is not None:
+            raise ProtocolConfigError(f"--protocol: {refused}", refused.code)
+        return p
 
     def check_replays(self, robots: Sequence[str]) -> None:
         """Each replay: spec's trace read as the robot's agent will read it (its records, the robot's

@@ -22,6 +22,7 @@ if TYPE_CHECKING:
 from mhrc.agents.llm import LLMFatalError
 from mhrc.run.attach import local_models, run_agent
 from mhrc.run.config import EpisodeConfig
+from mhrc.run.coordinated import seat
 from mhrc.run.serve import EventHook, serve_world
 
 log = structlog.get_logger("mhrc.run.inprocess")
@@ -87,6 +88,7 @@ async def _run_in_process(
         ready.cancel()
         return world.result()
     own = cfg.robot_specs()  # before gguf: specs became their local servers' URLs
+    seats = seat(cfg, robots, specs)
     agents = [
         asyncio.create_task(
             run_agent(
@@ -98,6 +100,7 @@ async def _run_in_process(
                 client_options=cfg.client_options(own[r]),
                 security=login or cfg.participant(r),
                 on_error=on_agent_error,
+                policy=seats.get(r),
                 **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",
@@ -110,14 +113,15 @@ async def _run_in_process(
             finished, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
             if failures:  # a model that cannot answer at all: stop now, not at the horizon
                 raise failures[0]
-            early = [t.exception() for t in agents if t in finished and t.exception() is not None]
+            early = [t.exception() for t in agents if t in finished and not t.cancelled() and t.exception() is not None]
             if early and not started.is_set():  # an agent gave up before the start (e.g. its attach timed out):
                 if services and services[0].done is not None:  # the world ended it first (its trace failed): its reason
                     await asyncio.wait({world})
                     world.result()
                 raise early[0]  # type: ignore[misc]  # the world would wait for its robot forever
+            # (an agent's task cancelled mid-episode, its agent killed, is a robot that detached: the world goes on)
             if world not in finished and not any(t in pending for t in agents):
-                errors = [t.exception() for t in agents if t.exception() is not None]
+                errors = [t.exception() for t in agents if not t.cancelled() and t.exception() is not None]
                 if errors:  # every agent is gone and nobody else will attach: stop the world
                     raise errors[0]  # type: ignore[misc]
         done = world.result()

@@ -82,6 +82,7 @@ async def serve_world(
                 schedule=cfg.schedule,
                 time_scale=cfg.time_scale,
                 token_deadline=cfg.token_deadline,
+                protocol=cfg.protocol,
             ),
         )
         if on_service is not None:

@@ -6,8 +6,10 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, TypeAdapter, ValidationError
 
-from mhrc.core.protocol.base import Message, ProtocolError, _Model, _reason
+from mhrc.core.protocol.base import MAX_NAME, Message, ProtocolError, _Model, _reason
 from mhrc.core.protocol.observation import FurnitureView, ObjectView
+
+DEFAULT_PROTOCOL = "mhrc"  # the paper's coordination: one agent per robot, messages as actions (mhrc.agents.protocols)
 
 # --------------------------------------------------------------------------- world events
 
@@ -97,6 +99,13 @@ class EpisodeStarted(Message):
     team: TeamRecord | None = Field(
         None,
         description="the team this episode ran (an event without it: the paper's Alice, Bob and David, those of them in `robots`)",
+    )
+    protocol: str = Field(
+        DEFAULT_PROTOCOL,
+        max_length=MAX_NAME,
+        pattern=r"^[a-z0-9_-]+$",
+        description="how the team decided: a coordination protocol's name (mhrc.agents.protocols; an event without it: "
+        "the paper's, `mhrc`)",
     )
 
 

@@ -1,0 +1,72 @@
+"""Coordination protocols: how a team decides, by name (docs/protocols.md).
+
+`PROTOCOLS` is the registry, in listing order; `protocol(name)` looks one up (ProtocolRefused
+with `Refusal.UNKNOWN_PROTOCOL` for a name nobody registered), `register` adds one. The paper's
+protocol, `mhrc`, is the default: every robot its own agent, messages as actions.
+"""
+
+from __future__ import annotations
+
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
+
+from . import leader_talk
+from .base import CoordinationProtocol, ProtocolRefused, Refusal, Seating
+from .centralized_llm import build_centralized
+from .leader import build_leader
+
+__all__ = [
+    "DEFAULT_PROTOCOL",
+    "PROTOCOLS",
+    "CoordinationProtocol",
+    "ProtocolRefused",
+    "Refusal",
+    "Seating",
+    "leader_talk",
+    "protocol",
+    "register",
+]
+
+PROTOCOLS: dict[str, CoordinationProtocol] = {}
+
+
+def register(p: CoordinationProtocol) -> CoordinationProtocol:
+    """Add `p` to the registry (a name registered twice is a mistake: ValueError)."""
+    if p.name in PROTOCOLS:
+        raise ValueError(f"protocol {p.name!r} is registered already")
+    PROTOCOLS[p.name] = p
+    return p
+
+
+def protocol(name: str) -> CoordinationProtocol:
+    """The protocol called `name`; ProtocolRefused (UNKNOWN_PROTOCOL) naming the known ones."""
+    try:
+        return PROTOCOLS[name]
+    except KeyError:
+        raise ProtocolRefused(
+            Refusal.UNKNOWN_PROTOCOL, f"unknown protocol {name!r}: the protocols are {', '.join(PROTOCOLS)}"
+        ) from None
+
+
+register(
+    CoordinationProtocol(
+        DEFAULT_PROTOCOL,
+        "the paper's: one agent per robot, each deciding alone; messages are actions (they cost a step)",
+        forms=("heuristic", "llm"),
+    )
+)
+register(
+    CoordinationProtocol(
+        "centralized",
+        "one planner decides every robot's next action from all their observations; allocation by assignment",
+        build=build_centralized,
+        forms=("heuristic", "llm"),
+        whole_team=True,
+    )
+)
+register(
+    CoordinationProtocol(
+        "leader",
+        "DynaHMRC's loop: self-descriptions and bids by message, an elected leader allocates by auction, robots report",
+        build=build_leader,
+    )
+)

@@ -1,0 +1,65 @@
+"""The LLM form of `centralized`: one model call per decision round naming one command per robot,
+against the scripted model server (real HTTP on loopback), on real PyBullet and real Zenoh: a
+command the planner cannot read becomes that robot's feedback while the others' still run."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+from mhrc.agents.protocols.centralized_llm import parse_round
+from mhrc.core.protocol import ActionResult, Navigate, Wait
+from mhrc.core.records import read_records
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
+from mhrc.testing import ScriptedModelServer
+
+ROBOTS = ("alice", "bob", "david")
+
+
+def test_a_reply_names_one_command_per_robot_and_a_bad_line_is_that_robots_problem() -> None:
+    commands, problems = parse_round(
+        "alice: navigate(table_1)\n- Bob: wait()\ndavid: fly(table_2)\nzed: wait()\nReasoning: look around.", ROBOTS
+    )
+    assert commands == {"alice": Navigate(target="table_1"), "bob": Wait()}
+    assert set(problems) == {"david"} and "fly(table_2)" in problems["david"]
+    _, missing = parse_round("alice: wait()", ROBOTS)
+    assert set(missing) == {"bob", "david"}
+
+
+async def test_one_model_call_per_round_and_an_unreadable_command_is_feedback(tmp_path: Path) -> None:
+    replies = [
+        "alice: navigate(table_1)\nbob: wait()\ndavid: fly(sofa)",  # david's cannot be read
+        "alice: wait()\nbob: wait()\ndavid: navigate(sofa)",
+        "alice: wait()\nbob: wait()\ndavid: wait()",
+    ]
+    server = ScriptedModelServer(replies, when_done=None)
+    try:
+        trace = tmp_path / "t.jsonl"
+        cfg = EpisodeConfig.build(
+            protocol="centralized",
+            task="pack_objects",
+            scene="bathroom",
+            seed=0,
+            n_objects=3,
+            horizon=3,
+            schedule="lockstep",
+            llm="openai:scripted",
+            base_url=server.url,
+            trace=trace,
+        )
+        done = await asyncio.wait_for(up_in_process(cfg.resolved()), 120)
+    finally:
+        server.close()
+    assert done.reason == "horizon"
+    assert len(server.requests) == 3  # one call per round (a tick), not one per robot
+    results = [r.msg for r in read_records(trace) if isinstance(r.msg, ActionResult)]
+    by_tick = {(m.tick, m.robot): m.action for m in results}
+    assert by_tick[(0, "alice")] == Navigate(target="table_1")  # the readable commands ran
+    assert by_tick[(0, "david")] == Wait()  # the unreadable one: david waited
+    assert by_tick[(1, "david")] == Navigate(target="sofa")
+    second = server.requests[1]["messages"][-1]["content"]
+    assert "could not be read" in second and "fly(sofa)" in second  # ... and was told why
+    for body in server.requests:  # every robot's observation in the one prompt
+        prompt = body["messages"][-1]["content"]
+        assert all(f"## {r}" in prompt for r in ROBOTS)

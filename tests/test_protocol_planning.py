@@ -1,0 +1,114 @@
+"""The centralized planner's decisions on a small hand-made world (no simulator): who does which
+work when the exact assignment weighs exploring against fetching, and what the team's knowledge
+makes of a fetcher finding an object gone from the finisher's table."""
+
+from __future__ import annotations
+
+from mhrc.agents.protocols.allocation import assign
+from mhrc.agents.protocols.centralized import CentralPlanner
+from mhrc.agents.protocols.knowledge import Knowledge
+from mhrc.agents.protocols.steps import Hand, Job, Taken, job_step
+from mhrc.core.protocol import FurnitureView, ObjectView, Observation, Place, Pose2D, RobotStatus, Wait
+
+FETCHER = ["navigate", "move", "open", "pick", "place", "communicate", "wait"]
+SCOUT = ["navigate", "communicate", "wait"]
+ARM = ["pick", "place", "communicate", "wait"]
+
+
+def _furniture() -> list[FurnitureView]:
+    def f(name: str, x: float, openable: bool = False) -> FurnitureView:
+        return FurnitureView(
+            name=name,
+            kind=name,
+            position=(x, 0.0, 0.5),
+            openable=openable,
+            is_open=False if openable else None,
+            stand_poses=[Pose2D(x=x, y=-1.0), Pose2D(x=x + 0.5, y=-1.0)],
+            place_pose=(x, 0.0, 0.8),
+        )
+
+    tray = FurnitureView(name="tray", kind="tray", position=(0.0, 0.2, 0.8))
+    return [f("table_0", 0.0), tray, f("table_1", 3.0), f("sofa", 5.0), f("fridge", 7.0, True), f("cabinet", 9.0, True)]
+
+
+def _obs(robot: str, skills: list[str], x: float, objects: list[ObjectView] = (), **kw: object) -> Observation:  # type: ignore[assignment]
+    mobile = "navigate" in skills
+    status = RobotStatus(
+        name=robot,
+        kind="k",
+        skills=skills,
+        base=Pose2D(x=x, y=float(kw.pop("y", -2.0))) if mobile else None,  # type: ignore[arg-type]
+        arm_base=(x, -1.8, 0.6) if "pick" in skills else None,
+        reach=0.7 if "pick" in skills else None,
+        holding=kw.pop("holding", None),  # type: ignore[arg-type]
+    )
+    return Observation(
+        robot=robot,
+        tick=int(kw.pop("tick", 1)),  # type: ignore[call-overload]
+        status=status,
+        furniture=_furniture(),
+        objects=list(objects),
+        task_brief="",
+        task_detail="",
+        **kw,  # type: ignore[arg-type]
+    )
+
+
+def _team(fetchers: int, targets: list[str], seen: list[ObjectView]) -> Knowledge:
+    k = Knowledge()
+    k.take(_obs("bob", ARM, 0.0, targets=targets, goals={t: "tray" for t in targets}))
+    for i in range(fetchers):
+        k.take(_obs(f"f{i}", FETCHER, 2.0 + i, seen))
+    k.take(_obs("david", SCOUT, 4.0))
+    return k
+
+
+def _mug() -> ObjectView:
+    return ObjectView(name="mug", position=(3.0, 0.0, 0.8), on="table_1")
+
+
+def test_a_lone_fetcher_fetches_what_is_known_before_it_opens_a_container() -> None:
+    k = _team(1, ["mug", "soap"], [_mug()])
+    jobs = [Job("fetch", "mug"), Job("explore", "fridge"), Job("explore", "cabinet")]
+    assert assign(k, [Hand("f0")], jobs, scouts=True) == {"f0": Job("fetch", "mug")}
+
+
+def test_of_two_fetchers_one_opens_a_container_while_the_other_fetches() -> None:
+    """Exploration is parallel work: the object still unseen cannot be fetched until someone looks."""
+    k = _team(2, ["mug", "cup", "soap"], [_mug(), ObjectView(name="cup", position=(3.2, 0.0, 0.8), on="table_1")])
+    jobs = [Job("fetch", "mug"), Job("fetch", "cup"), Job("explore", "fridge"), Job("explore", "cabinet")]
+    given = assign(k, [Hand("f0"), Hand("f1")], jobs, scouts=True)
+    assert sorted(j.kind for j in given.values()) == ["explore", "fetch"]
+
+
+def test_a_fetcher_leaves_the_surfaces_to_the_scout_and_opens_containers() -> None:
+    k = _team(1, ["soap"], [])
+    jobs = [Job("explore", "table_1"), Job("explore", "sofa"), Job("explore", "fridge")]
+    given = assign(k, [Hand("f0"), Hand("david")], jobs, scouts=True)
+    assert given["f0"] == Job("explore", "fridge") and given["david"].target in ("table_1", "sofa")
+
+
+def test_an_object_gone_from_the_finishers_table_is_not_lost() -> None:
+    """A fetcher at the finisher's table sees an object gone from it when the finisher picks it
+    up; the finisher's view of its own table counts, so nobody is sent to search for it."""
+    k = _team(1, ["mug"], [ObjectView(name="mug", position=(0.5, 0.0, 0.8), on="table_0")])
+    gone = ObjectView(name="mug", position=(0.5, 0.0, 0.8), on=None, last_seen_on="table_0")
+    k.take(_obs("f0", FETCHER, 0.5, [gone], tick=2))
+    assert k.located("mug") is not None
+    planner = CentralPlanner(("f0", "bob", "david"), "sequential", knowledge=k)
+    assert not [j for j in planner._jobs() if j.kind == "explore"]
+
+
+def test_in_a_sandwich_only_the_object_wanted_next_is_put_down() -> None:
+    """The band of the finisher's table its arm reaches holds few objects: one brought early can
+    leave no room for the next, so a fetcher holding a later one waits with it at the table."""
+    ham = ObjectView(name="ham", position=(9.0, 0.0, 0.8), on="cabinet", inside=True)
+    k = Knowledge()
+    k.take(_obs("bob", ARM, 0.0, [ham], targets=["ham", "tomato"], goals={}, ordered=True))
+    held = ObjectView(name="tomato", position=(0.0, -1.0, 0.9), held_by="f0")
+    k.take(_obs("f0", FETCHER, 0.0, [held], y=-1.0, holding="tomato"))  # at table_0's stand pose 0
+    hand = Hand("f0", job=Job("fetch", "tomato"))
+    assert job_step(k, hand, Taken(set(), set())) == Wait()
+    on_goal = ObjectView(name="ham", position=(0.0, 0.2, 0.85), on="tray")
+    k.take(_obs("bob", ARM, 0.0, [on_goal], targets=["ham", "tomato"], goals={}, ordered=True, tick=2))
+    assert job_step(k, hand, Taken(set(), set())) == Place(obj="tomato", location="table_0")
