@@ -139,7 +139,7 @@ async def test_a_slow_robot_does_not_hold_back_the_fast_ones(schedule: str, tmp_
     finally:
         server.close()
     assert done.reason == "horizon"
-    counts = Counter(r["robot"] for r in _results(trace))
+    counts = Counter(r.robot for r in _results(trace))
     calls = Counter(_robot_of(body) for body in server.requests)
     if schedule == "lockstep":
         assert counts == {"alice": 3, "bob": 3, "david": 3}

@@ -309,8 +309,8 @@ async def test_megabyte_ids_and_names_cannot_fill_the_trace(tmp_path: Path) -> N
     assert "more than the 65536" in acks["big-0"].reason and "more than the 65536" in acks["long-name"].reason
     assert "agent_id" in acks["long-id"].reason and "action.pick.obj" in acks["long-obj"].reason
     junk = _junk(mallory.world.trace, "/action/request")
-    assert sum(j["count"] for j in junk) == len(big) + 3
-    assert all(0 < len(j["excerpt"]) <= 200 for j in junk)
+    assert sum(j.count for j in junk) == len(big) + 3
+    assert all(0 < len(j.excerpt) <= 200 for j in junk)
 
 
 @pytest.mark.parametrize(

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from json_rows import records
 from rich.console import Console
 from sweep import sweep
 from waits import served
@@ -293,6 +294,12 @@ async def test_the_console_prints_each_tick_in_order_and_nothing_after_the_table
     )
 
 
+def _line(key: str, msg: dict[str, Any]) -> TraceLine:
+    """A hand-built trace line with `msg` on `key`."""
+    (line,) = records([{"t": 0.0, "key": key, "kind": "put", "msg": msg}])
+    return line
+
+
 class _Replay:
     """Stands where a Bus stands for `ProgressPrinter.attach`: keeps its handlers by key pattern,
     so a test can hand it a real trace's samples in an order the bus may deliver them in."""
@@ -523,10 +530,10 @@ def test_unparsed_thoughts_held_for_their_results_are_bounded() -> None:
     key = Keys("r").thought("alice")
     for i in range(MAX_HELD_THOUGHTS + 500):
         thought = {"v": 2, "kind": "thought", "robot": "alice", "tick": i, "policy": "p", "parse_error": "no"}
-        bus.deliver({"key": key, "msg": thought})
+        bus.deliver(_line(key, thought))
     for _ in range(5):  # the same tick again and again
-        bus.deliver({"key": key, "msg": thought | {"tick": 3}})
-    bus.deliver({"key": key, "msg": thought | {"robot": "bob", "tick": 1}})  # bob's, on alice's key
+        bus.deliver(_line(key, thought | {"tick": 3}))
+    bus.deliver(_line(key, thought | {"robot": "bob", "tick": 1}))  # bob's, on alice's key
     held = printer._thoughts
     assert len(held) == MAX_HELD_THOUGHTS and (MAX_HELD_THOUGHTS + 1, "alice") not in held
     assert len(held[(3, "alice")]) == 2 and (1, "bob") not in held
