@@ -89,7 +89,10 @@ class EpisodeCore:
             try:
                 return self.sim.execute(req.robot, action)
             except Exception as exc:  # a simulator bug must not take the world down
-                self._log.exception("skill crashed", robot=req.robot, action=action.call())
+                if getattr(self.sim, "closed", False):  # the world stopped under the skill: no bug to report
+                    self._log.debug("skill cut short: the simulator closed", robot=req.robot, action=action.call())
+                else:
+                    self._log.exception("skill crashed", robot=req.robot, action=action.call())
                 return SkillOutcome.fail(
                     OutcomeCode.PLAN_FAILED, f"The {action.skill} skill failed unexpectedly: {exc}."
                 )

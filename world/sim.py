@@ -173,6 +173,11 @@ class Sim:
         self.dynamics = Dynamics(w, self.task, self.targets, self.goals, self.assets, self.seed, self._scenario)
         log.debug("episode built", task=self.task_id, scene=self.scene_id, seed=self.seed, objects=list(w.objects))
 
+    @property
+    def closed(self) -> bool:
+        """Whether `close` has run (the world is stopping)."""
+        return self.cid < 0
+
     def close(self) -> None:
         """Disconnect every PyBullet client and remove the generated assets (idempotent)."""
         if self.cid >= 0:
