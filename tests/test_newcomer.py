@@ -157,13 +157,14 @@ def test_the_diagnostics_plots_legend_covers_no_bar(small_eval: Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     from mhrc.eval.html import diagnostics_figure
+    from mhrc.eval.records import from_flat
 
     rows = [json.loads(line) for line in (small_eval / "ev" / "episodes.jsonl").read_text().splitlines()]
     tall = [
         {**r, "method": "openai:other", **{k: 9 for k, v in r.items() if k.startswith("diag_") and isinstance(v, int)}}
         for r in rows
     ]
-    fig = diagnostics_figure(rows + tall)
+    fig = diagnostics_figure([from_flat(r) for r in rows + tall])
     FigureCanvasAgg(fig).draw()
     renderer = fig.canvas.get_renderer()
     (ax,) = fig.axes
