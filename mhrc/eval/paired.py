@@ -17,11 +17,13 @@ from math import comb
 
 import numpy as np
 
+from mhrc.eval.rows import CI_LEVEL, CI_SEED, bootstrap_ci
+from mhrc.eval.rows import RESAMPLES as RESAMPLES
+
 __all__ = ["Outcome", "Paired", "compare", "mcnemar_exact", "paired_bootstrap_ci"]
 
-RESAMPLES = 2000
-SEED = 0
-LEVEL = 0.95
+SEED = CI_SEED
+LEVEL = CI_LEVEL
 
 
 @dataclass(frozen=True)
@@ -59,17 +61,8 @@ def paired_bootstrap_ci(
     diffs: list[float], *, resamples: int = RESAMPLES, seed: int = SEED, level: float = LEVEL
 ) -> tuple[float, float]:
     """Percentile interval of the mean paired difference: the episodes (each one difference) are
-    resampled with replacement `resamples` times with generator `seed`."""
-    x = np.asarray(diffs, dtype=float)
-    if x.size == 0:
-        raise ValueError("no paired episodes to bootstrap")
-    if resamples < 1 or not 0 < level < 1:
-        raise ValueError("need resamples >= 1 and 0 < level < 1")
-    rng = np.random.default_rng(seed)
-    means = x[rng.integers(0, x.size, size=(resamples, x.size))].mean(axis=1)
-    alpha = (1 - level) / 2
-    lo, hi = np.percentile(means, [100 * alpha, 100 * (1 - alpha)])
-    return float(lo), float(hi)
+    resampled with replacement, as every interval of the summaries is drawn (`rows.bootstrap_ci`)."""
+    return bootstrap_ci(diffs, resamples=resamples, seed=seed, level=level)
 
 
 def mcnemar_exact(a_only: int, b_only: int) -> float:
