@@ -119,8 +119,8 @@ async def test_thoughts_out_of_bounds_are_counted_not_copied(tmp_path: Path) -> 
     longest = max(len(line) for line in trace.read_text().splitlines())
     assert size < 200_000 and longest < 64 * 1024, (size, longest)
     junk = _junk(trace, "/agent/alice/thought")
-    assert sum(j["count"] for j in junk) == 31, junk
-    assert all(j["code"] == "malformed" and 0 < len(j["excerpt"]) <= 200 for j in junk), junk
+    assert sum(j.count for j in junk) == 31, junk
+    assert all(j.code == "malformed" and 0 < len(j.excerpt) <= 200 for j in junk), junk
     recorded = [
         Thought.model_validate(line["msg"])
         for line in _lines(trace)
@@ -164,7 +164,7 @@ async def test_a_flood_of_well_formed_thoughts_is_counted_not_copied(tmp_path: P
         f"flood-{i}" for i in range(THOUGHTS_AHEAD)
     ]
     junk = _junk(trace, "/agent/alice/thought")
-    assert sum(j["count"] for j in junk) == 300 - THOUGHTS_AHEAD and {j["code"] for j in junk} == {"thoughts_ahead"}
+    assert sum(j.count for j in junk) == 300 - THOUGHTS_AHEAD and {j.code for j in junk} == {"thoughts_ahead"}
     assert trace.stat().st_size < (THOUGHTS_AHEAD + 2) * 100_000
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from mhrc.core.protocol import LLM_ERROR_PREFIX, ActionAck, EpisodeStarted, RejectCode, Thought
 from mhrc.core.protocol.thoughts import ReplyFailure
-from mhrc.core.records import LineError, LineKind, TraceLineError, decode_row, read_records
+from mhrc.core.records import LineError, LineKind, NotCopied, TraceLineError, decode_row, read_records
 from mhrc.core.upgrade import UNRECORDED
 
 
@@ -155,3 +155,21 @@ def test_an_older_thoughts_failure_is_upgraded_to_its_code(
     assert code is None or code.unparsed == (code is not ReplyFailure.MODEL_UNREACHABLE)
     today = old.model_copy(update={"failure": ReplyFailure.UNREADABLE}).model_dump(mode="json")
     assert decode_row(_line(today, "mhrc/r/agent/bob/thought"), 1).failure is ReplyFailure.UNREADABLE
+
+
+def test_a_junk_line_keeps_the_recorders_own_code() -> None:
+    """A `thoughts_ahead` count has no excerpt; upgrading it read its code from the reason as a
+    rejection's and lost it (the flood test saw None)."""
+    row = {"count": 3, "bytes": 10, "reason": "more than 8 thoughts", "code": "thoughts_ahead"}
+    line = decode_row({"t": 0.0, "key": "mhrc/r/agent/alice/thought", "kind": "junk", "msg": row}, 1)
+    assert line.junk is not None and line.junk.code is NotCopied.THOUGHTS_AHEAD and line.junk.excerpt is None
+    old = decode_row(
+        {
+            "t": 0.0,
+            "key": "mhrc/r/robot/alice/action/request",
+            "kind": "junk",
+            "msg": {**row, "code": None, "reason": "malformed: x"},
+        },
+        2,
+    )
+    assert old.junk is not None and old.junk.code is RejectCode.MALFORMED

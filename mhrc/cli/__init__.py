@@ -1,7 +1,7 @@
 """The `mhrc` command: one module per command group, named after it, registered on one click group here.
 
 - `up`, `world`, `agent`: an episode, the world alone, one robot's agent
-- `eval`: `eval`, `report`
+- `eval`: `eval`; `report`: `report`
 - `viewer`: `scenes`, `render`, `show`
 - `scenarios`: `scenarios` (the shipped scenarios of `--events`)
 - `teams`: `teams` (the shipped teams of `--team`, the robot kinds)
@@ -34,7 +34,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "scenes": ("viewer", "scenes"),
     "render": ("viewer", "render"),
     "eval": ("eval", "eval_"),
-    "report": ("eval", "report"),
+    "report": ("report", "report"),
     "schema": ("schema", "schema_"),
     "credentials": ("credentials", "credentials_"),
     "bus": ("bus", "bus_group"),

@@ -93,11 +93,12 @@ def upgrade(kind: str, msg: Any) -> Any:
         return msg
     if kind == "junk":
         if msg.get("code") is None or "excerpt" not in msg:
-            return {
-                "excerpt": None,
-                **msg,
-                "code": _code(msg.get("code"), str(msg.get("reason", "")).removeprefix(JUNK_REJECTED)),
-            }
+            # a code the line carries is kept (a rejection's, or the recorder's own: thoughts_ahead);
+            # only a line without one has it read from its reason
+            code = msg.get("code")
+            if code is None:
+                code = _code(None, str(msg.get("reason", "")).removeprefix(JUNK_REJECTED))
+            return {"excerpt": None, **msg, "code": code}
         return msg
     if kind != "put":
         return msg
