@@ -175,11 +175,13 @@ class Sim:
 
     @property
     def closed(self) -> bool:
-        """Whether `close` has run (the world is stopping)."""
-        return self.cid < 0
+        """Whether `close` has begun (the world is stopping): set before the client disconnects, so
+        a skill that the disconnect fails in another thread already sees it."""
+        return getattr(self, "_closing", False) or self.cid < 0
 
     def close(self) -> None:
         """Disconnect every PyBullet client and remove the generated assets (idempotent)."""
+        self._closing = True
         if self.cid >= 0:
             p.disconnect(self.cid)
             self.cid = -1
