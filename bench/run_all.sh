@@ -9,10 +9,10 @@ declare -A BENCH=(
   [llm_concurrency]=bench_llm_concurrency.py [prompt_size]=bench_prompt_size.py [eval]=bench_eval.py
   [eval_grid]=bench_grid.py [llm_grid]=bench_llm_grid.py [local_model]=bench_local_model.py [schedulers]=bench_schedulers.py
   [video]=bench_video.py [security]=bench_security.py [memory]=bench_memory.py [ray]=bench_ray.py
-  [scenarios]=bench_scenarios.py [teams]=bench_teams.py [env]=bench_env.py [hostile]=bench_hostile.py [rerun]=bench_rerun.py
+  [scenarios]=bench_scenarios.py [teams]=bench_teams.py [env]=bench_env.py [hostile]=bench_hostile.py [rerun]=bench_rerun.py [protocols]=bench_protocols.py [protocol_scaling]=bench_protocol_scaling.py
 )
 names=("$@")
-[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model schedulers video security memory ray scenarios teams env hostile rerun)
+[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model schedulers video security memory ray scenarios teams env hostile rerun protocols protocol_scaling)
 for name in "${names[@]}"; do
   script=${BENCH[$name]:?"unknown benchmark $name; known: ${!BENCH[*]}"}
   echo "== $name ($script)" >&2
