@@ -6,9 +6,7 @@ chromium, links every row to the report of that very episode."""
 from __future__ import annotations
 
 import json
-import os
 import shlex
-import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -19,7 +17,7 @@ from typing import Any
 import pytest
 from test_viewer_browser import browser as browser  # the session's chromium (a fixture)
 from test_viewer_browser import chrome
-from waits import until_sync
+from waits import interrupt_after_first_row
 
 pytestmark = pytest.mark.slow
 
@@ -48,34 +46,9 @@ def _rows(text: str) -> list[dict[str, Any]]:
 @pytest.fixture(scope="module")
 def interrupted(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Interrupted]:
     home = tmp_path_factory.mktemp("interrupted")
-    err = home / "stderr.txt"
-    with err.open("w") as stderr:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "mhrc", "eval", *GRID, "--workers", "1", "--out", "ev"],
-            cwd=home,
-            stdout=subprocess.DEVNULL,
-            stderr=stderr,  # a file, not a terminal: one line per episode, no bar
-            text=True,
-            start_new_session=True,  # the signal goes to its group, as a terminal's Ctrl-C
-        )
     rows = home / "ev" / "episodes.jsonl"
-    try:
-        until_sync(
-            lambda: rows.exists() and rows.read_text().endswith("\n"),
-            "an episode finished",
-            240,
-            every=0.02,
-            running=proc,
-            said=lambda: err.read_text()[-2000:],
-        )
-        before = rows.read_text()
-        os.killpg(proc.pid, signal.SIGINT)
-        proc.wait(timeout=120)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    text = err.read_text()
+    args = [sys.executable, "-m", "mhrc", "eval", *GRID, "--workers", "1", "--out", "ev"]
+    returncode, before, text = interrupt_after_first_row(args, home, rows, 240)
     last = text.strip().splitlines()[-1]
     assert "finish the grid with: " in last, text[-2000:]
     advice = last.split("finish the grid with: ", 1)[1]
@@ -85,7 +58,7 @@ def interrupted(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Interrupte
     resumed = subprocess.run(
         [sys.executable, "-m", "mhrc", *words[1:]], cwd=home, capture_output=True, text=True, timeout=300
     )
-    yield Interrupted(home, text, proc.returncode, before, after_stop, advice, resumed)
+    yield Interrupted(home, text, returncode, before, after_stop, advice, resumed)
 
 
 def test_an_interrupt_says_so_once_draws_no_bar_off_a_terminal_and_advises_a_command(

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from waits import until_sync
+from waits import interrupt_after_first_row, until_sync
 
 from mhrc.core.endpoints import free_port
 
@@ -188,30 +188,10 @@ def test_ctrl_c_keeps_the_finished_rows_and_resume_completes_on_ray(ray_cluster:
         "--out",
         "ev",
     ]
-    err = tmp_path / "stderr.txt"
-    with err.open("w") as stderr:
-        proc = subprocess.Popen(
-            args, cwd=tmp_path, env=ray_cluster.env, stdout=subprocess.DEVNULL, stderr=stderr, start_new_session=True
-        )
     rows_path = tmp_path / "ev" / "episodes.jsonl"
-    try:
-        until_sync(
-            lambda: rows_path.exists() and rows_path.read_text().endswith("\n"),
-            "an episode finished",
-            300,
-            every=0.05,
-            running=proc,
-            said=lambda: err.read_text()[-3000:],
-        )
-        before = rows_path.read_text()
-        os.killpg(proc.pid, signal.SIGINT)  # a terminal's Ctrl-C: the driver's group (the cluster is not in it)
-        proc.wait(timeout=120)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    text = err.read_text()
-    assert proc.returncode == 130 and "interrupted: stopping the workers" in text, text[-3000:]
+    # a terminal's Ctrl-C goes to the driver's group (the cluster is not in it)
+    returncode, before, text = interrupt_after_first_row(args, tmp_path, rows_path, 300, env=ray_cluster.env)
+    assert returncode == 130 and "interrupted: stopping the workers" in text, text[-3000:]
     assert "every finished episode is kept in" in text and "--resume --out ev --ray" in text, text[-3000:]
     assert "Traceback" not in text, text[-3000:]
     kept = rows_path.read_text()

@@ -11,9 +11,12 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import os
+import signal
 import subprocess
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from mhrc.core.bus import Bus
@@ -95,3 +98,34 @@ async def robots_alive(bus: Bus, run: str, robots: set[str], timeout: float = TI
         await robots_attached(bus, run, robots, timeout)
     except TimeoutError as exc:
         raise AssertionError(str(exc)) from None
+
+
+def interrupt_after_first_row(
+    args: list[str], cwd: Path, rows: Path, timeout: float, env: dict[str, str] | None = None
+) -> tuple[int, str, str]:
+    """Run `mhrc eval` (`args`, a whole command line) in its own process group, wait until its
+    first row is written to `rows`, then send the group SIGINT, as a terminal's Ctrl-C. Returns the
+    exit code, the rows written before the signal, and stderr (a file, not a terminal: one line per
+    episode, no bar). The process never outlives the call (SIGKILL if it did not stop in 120 s)."""
+    err = cwd / "stderr.txt"
+    with err.open("w") as stderr:
+        proc = subprocess.Popen(
+            args, cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=stderr, text=True, start_new_session=True
+        )
+    try:
+        until_sync(
+            lambda: rows.exists() and rows.read_text().endswith("\n"),
+            "an episode finished",
+            timeout,
+            every=0.02,
+            running=proc,
+            said=lambda: err.read_text()[-3000:],
+        )
+        before = rows.read_text()
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    return proc.returncode, before, err.read_text()
