@@ -474,5 +474,6 @@ class RobotAgent:
                 finish_reason=fit(d.finish_reason, MAX_LINE),
                 schema_hash=fit(d.schema_hash, MAX_LINE),
                 ttft=d.ttft,
+                coordination=d.coordination,
             ),
         )

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from mhrc.core.protocol import Action, ActionResult, Observation
-from mhrc.core.protocol.thoughts import ReplyFailure
+from mhrc.core.protocol.thoughts import Coordination, ReplyFailure
 
 __all__ = ["Decision", "Policy"]
 
@@ -28,6 +28,7 @@ class Decision:
     schema_hash: str | None = None
     ttft: float | None = None  # seconds to the reply's first token, where streamed
     failure: ReplyFailure | None = None  # why no action came of the step (parse_error says it for people)
+    coordination: Coordination | None = None  # what a protocol other than the paper's decided for this robot
 
 
 class Policy(Protocol):

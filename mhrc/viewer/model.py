@@ -26,6 +26,7 @@ from mhrc.core.protocol import (
     Snapshot,
     Thought,
 )
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.viewer.events import ScenarioMark, scenario_marks, scenario_name
 from mhrc.viewer.frames import Frame
 from mhrc.viewer.load import LoadedTrace
@@ -83,6 +84,7 @@ class Header:
     metrics: Metrics | None
     versions: list[int]
     trace: str
+    protocol: str = DEFAULT_PROTOCOL  # how the team decided (mhrc.agents.protocols): the paper's unless the trace says
 
 
 @dataclass
@@ -272,6 +274,7 @@ def build_view(trace: LoadedTrace) -> EpisodeView:
         metrics=metrics,
         versions=sorted(trace.versions),
         trace=str(trace.path),
+        protocol=started.protocol if started else DEFAULT_PROTOCOL,
     )
     return EpisodeView(
         header=header,

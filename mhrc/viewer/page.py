@@ -23,7 +23,8 @@ from dataclasses import dataclass
 from importlib.resources import files
 from typing import Any, TypeVar
 
-from mhrc.viewer import page_events
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
+from mhrc.viewer import page_coordination, page_events
 from mhrc.viewer.model import EpisodeView
 from mhrc.viewer.page_lanes import lanes_section, messages_section
 from mhrc.viewer.placement import Box, Request, place
@@ -107,6 +108,7 @@ def _header(view: EpisodeView) -> str:
         "seed": h.seed,
         "objects": h.n_objects,
         "robots": ", ".join(h.robots),
+        **({"protocol": h.protocol} if h.protocol != DEFAULT_PROTOCOL else {}),  # the paper's page is as it was
         "model(s)": models,
         "fidelity": h.fidelity,
         "aids": ", ".join(h.aids or []) or "none",
@@ -445,7 +447,7 @@ def render_page(
 {_header(view)}
 {_targets(view.task)}
 {_map(view, colors)}
-{lanes_section(view, colors)}
+{page_coordination.section(view)}{lanes_section(view, colors)}
 {messages_section(view, colors)}
 {_failures(diagnostics, diagnostics_note)}
 <script type="application/json" id="mhrc-data">{_data(view, colors)}</script>

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from mhrc.core.protocol import ActionAck, Thought
 from mhrc.core.protocol.thoughts import HUMAN_POLICY
-from mhrc.viewer import page_events
+from mhrc.viewer import page_coordination, page_events
 from mhrc.viewer.model import EpisodeView, Step
 from mhrc.viewer.wording import diagnostic_label
 from mhrc.viewer.wording import html_text as _e
@@ -93,6 +93,7 @@ def _step_html(s: Step) -> str:
         if res.started is not None:
             parts.append(f'<div class="dim">sim {res.started:.1f}–{(res.ended or res.started):.1f} s</div>')
     if s.thought is not None:
+        parts.append(page_coordination.step_line(s.thought.coordination))
         parts += _thought_html(s.thought)
     parts.append("</li>")
     return "".join(parts)

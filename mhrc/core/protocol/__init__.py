@@ -58,7 +58,7 @@ from mhrc.core.protocol.exchange import (
     new_goal_id,
 )
 from mhrc.core.protocol.observation import FurnitureView, ObjectView, Observation, Pose2D, RobotMessage, RobotStatus
-from mhrc.core.protocol.thoughts import LLM_ERROR_PREFIX, Generating, Thought
+from mhrc.core.protocol.thoughts import LLM_ERROR_PREFIX, Coordination, Generating, Thought
 
 __all__ = [
     "PROTOCOL_VERSION",
@@ -111,6 +111,7 @@ __all__ = [
     "WorldState",
     "LLM_ERROR_PREFIX",
     "Thought",
+    "Coordination",
     "Generating",
     "encode",
     "decode",

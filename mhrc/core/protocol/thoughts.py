@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Literal
+from typing import Any, Literal
 
-from pydantic import Field
+from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer
 
 from mhrc.core.protocol.base import MAX_INT, MAX_NAME, Message
 
@@ -40,6 +40,26 @@ class ReplyFailure(StrEnum):
 def fit(text: str | None, limit: int = MAX_TEXT) -> str | None:
     """`text` cut to `limit` characters, for an agent building its Thought (the bound is never met in practice)."""
     return text if text is None or len(text) <= limit else text[:limit]
+
+
+class Coordination(BaseModel):
+    """What a coordination protocol decided for a robot at a step (a `Thought`'s `coordination`):
+    whom the robot follows and the job it was given. Set by the protocols other than the paper's
+    (docs/protocols.md); the paper's robots decide alone and send none."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    leader: str | None = Field(
+        None, max_length=MAX_NAME, description="the robot this one believes leads the team (a leader protocol)"
+    )
+    job: str | None = Field(
+        None,
+        max_length=MAX_LINE,
+        description="the job allocated to this robot, as a call: fetch(book), explore(fridge)",
+    )
+    by: str | None = Field(
+        None, max_length=MAX_NAME, description="who allocated it: the leader's name, or 'planner' (centralized)"
+    )
 
 
 class Thought(Message):
@@ -77,6 +97,17 @@ class Thought(Message):
         allow_inf_nan=False,
         description="seconds to the reply's first token (prompt processing, mostly), where it was streamed",
     )
+    coordination: Coordination | None = Field(
+        None, description="what the team's protocol decided for this robot (absent under the paper's protocol)"
+    )
+
+    @model_serializer(mode="wrap")
+    def _no_empty_coordination(self, handler: SerializerFunctionWrapHandler) -> Any:
+        """A thought without coordination is written as before the field existed, byte for byte."""
+        data = handler(self)
+        if isinstance(data, dict) and data.get("coordination") is None:
+            data.pop("coordination", None)
+        return data
 
 
 class Generating(Message):

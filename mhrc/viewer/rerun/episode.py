@@ -13,6 +13,7 @@ The entity tree (docs/seeing.md, "In Rerun"):
     world/paths/<robot>, world/routes/<robot>                   where it went, a navigate's planned route
     world/objects, world/beliefs/<robot>              objects where the world has them / where a robot believes
     agents/<robot>/thought, /action, /outcome, /inbox                    each robot's text logs
+    agents/<robot>/coordination          its leader and job, where a protocol other than the paper's set them
     messages, events                                     messages between robots; the episode's events
     progress/placed, progress/ps                               placed objects and partial success
 """
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 import rerun as rr
 
 from mhrc.core import protocol as wire
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.records import LineKind, TraceLine
 from mhrc.core.team import PAPER_TEAM
 from mhrc.viewer.rerun.blueprint import blueprint
@@ -57,6 +59,7 @@ class EpisodeLogger:
         self._robots: dict[str, _Robot] = {}
         self._shown: tuple[str, ...] = ()  # the robots the blueprint last sent has panels for
         self._open: dict[str, bool] = {}
+        self._coordination: dict[str, wire.Coordination] = {}  # robot -> what its protocol last decided for it
         self._ticks: dict[str, int] = {}  # goal id -> its request's tick
         self._tick = 0
         self._sim = 0.0
@@ -145,7 +148,8 @@ class EpisodeLogger:
             "events",
             rr.TextLog(
                 f"episode {msg.run}: {msg.task} in {msg.scene}, seed {msg.seed}, {msg.n_objects} objects, "
-                f"robots {', '.join(msg.robots)}, {msg.scheduler}, horizon {msg.horizon}",
+                f"robots {', '.join(msg.robots)}, {msg.scheduler}, horizon {msg.horizon}"
+                + (f", protocol {msg.protocol}" if msg.protocol != DEFAULT_PROTOCOL else ""),
                 level=INFO,
             ),
         )
@@ -203,6 +207,11 @@ class EpisodeLogger:
         if msg.parse_error:
             text += f"\n(no action: {msg.parse_error})"
         self._text(msg.robot, "thought", text, WARN if msg.parse_error else INFO)
+        c = msg.coordination
+        if c is not None and self._coordination.get(msg.robot) != c:  # a new leader or a new job: who leads, what whom
+            self._coordination[msg.robot] = c
+            job = f"job {c.job}" + (f" from {c.by}" if c.by else "") if c.job else "no job"
+            self._text(msg.robot, "coordination", job + (f"; leader {c.leader}" if c.leader else ""))
 
     def _result(self, msg: wire.ActionResult) -> None:
         self._at(msg.tick, msg.ended)
