@@ -276,7 +276,7 @@ class MapFrame:
         )
 
     def piece(self, f: Piece, cls: str, title: str | None = None) -> str:
-        """A piece of furniture of `scene_map` (mhrc.viewer.model) in its colour, named in `data-name`."""
+        """A piece of furniture of the map (mhrc.viewer.scene_map) in its colour, named in `data-name`."""
         r, g, bl = (int(255 * c) for c in f.color[:3])
         inner = f"><title>{_e(title)}</title></rect" if title is not None else ""
         return self.rect(f.x, f.y, f.sx, f.sy, cls, f' data-name="{_e(f.name)}" style="fill:rgb({r},{g},{bl})"{inner}')
