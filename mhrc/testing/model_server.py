@@ -22,7 +22,7 @@ from typing import Any, TypeAlias
 from mhrc.core.jsontypes import JsonObject, JsonValue
 from mhrc.testing.loopback_http import Answer, Incoming, LoopbackHTTP
 
-__all__ = ["ModelCall", "ModelReply", "Reply", "Request", "Script", "ScriptedModelServer", "WHEN_DONE"]
+__all__ = ["ModelCall", "ModelReply", "Reply", "Script", "ScriptedModelServer", "WHEN_DONE"]
 
 Request: TypeAlias = JsonObject  # a chat-completions request's JSON body, as the client sent it (unchecked)
 
