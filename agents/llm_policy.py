@@ -59,6 +59,7 @@ import re
 from importlib import resources
 from pathlib import Path
 from string import Template
+from typing import TypedDict
 
 import structlog
 
@@ -221,6 +222,24 @@ def load_hints(robot: str, prompts_dir: str | Path | None = None, *, team: TeamS
 def _tidy(text: str) -> str:
     """No runs of blank lines where an ablation emptied a section."""
     return re.sub(r"\n{3,}", "\n\n", text).strip() + "\n"
+
+
+class PolicyOptions(TypedDict, total=False):
+    """LLMPolicy's settings besides its robot and client (an episode's: mhrc.run.config.EpisodeConfig.policy_options)."""
+
+    prompts_dir: str | Path | None
+    temperature: float
+    feedback: bool
+    history: bool
+    prompt_cap_chars: int | None
+    teammates_absent: tuple[str, ...]
+    reach_labels: bool
+    prompt_hints: bool
+    feedback_advice: bool
+    structured: bool
+    step_deadline: float | None
+    max_tokens: int | None
+    team: TeamSpec | None
 
 
 class LLMPolicy:

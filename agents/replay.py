@@ -19,8 +19,8 @@ from collections import defaultdict
 from collections.abc import Mapping
 from pathlib import Path
 from string import Template
-from typing import Any
 
+from mhrc.core.jsontypes import JsonObject
 from mhrc.core.protocol import LLM_ERROR_PREFIX, Thought
 from mhrc.core.protocol.thoughts import ReplyFailure
 from mhrc.core.records import TraceLine, read_records
@@ -99,7 +99,7 @@ class ReplayClient:
         return len(self._thoughts) - self.calls
 
     async def complete(
-        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
+        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: JsonObject | None = None
     ) -> Completion:
         if self.calls >= len(self._thoughts):
             raise ReplayMismatch(

@@ -13,16 +13,15 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Iterable
-from typing import Any
 
 from pydantic import ValidationError
 
+from mhrc.core.jsontypes import JsonObject  # a JSON Schema or a part of one, a reply
 from mhrc.core.protocol import Action, Observation
 from mhrc.core.protocol.actions import CALLS, ArgKind, build
 
 from .parse import ReplyFormatError
 
-JSONObject = dict[str, Any]  # a JSON object: a JSON Schema or a part of one, a reply
 MAX_ANALYSIS = 2000  # characters: room for the paper's analysis and reasoning, a bound for small local models
 MAX_MESSAGE = 500  # characters of a `communicate` content
 MAX_STEP = 1.0  # metres: the bound on each of move's dx and dy
@@ -39,11 +38,11 @@ STRUCTURED_INSTRUCTIONS = (
 )
 
 
-def _names(values: Iterable[str]) -> JSONObject:
+def _names(values: Iterable[str]) -> JsonObject:
     return {"type": "string", "enum": sorted(set(values))}
 
 
-def _number(low: float, high: float, kind: str = "number") -> JSONObject:
+def _number(low: float, high: float, kind: str = "number") -> JsonObject:
     return {"type": kind, "minimum": low, "maximum": high}
 
 
@@ -52,7 +51,7 @@ def arguments(skill: str) -> dict[str, str]:
     return {a.name: a.field for a in CALLS[skill].ARGS}
 
 
-def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, JSONObject] | None]:
+def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, JsonObject] | None]:
     """Each declared skill's argument schemas, from this robot's own scene graph; None where a name
     enum would be empty."""
     stand = [f for f in obs.furniture if f.stand_poses]
@@ -69,12 +68,12 @@ def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, J
         ArgKind.PLACE: places,
         ArgKind.TEAMMATE: recipients,
     }
-    fixed: dict[ArgKind, JSONObject] = {
+    fixed: dict[ArgKind, JsonObject] = {
         ArgKind.STAND_POSE: _number(0, most, "integer"),
         ArgKind.OFFSET: _number(-MAX_STEP, MAX_STEP),
         ArgKind.TEXT: {"type": "string", "minLength": 1, "maxLength": MAX_MESSAGE},
     }
-    out: dict[str, dict[str, JSONObject] | None] = {}
+    out: dict[str, dict[str, JsonObject] | None] = {}
     for skill, model in CALLS.items():
         if any(a.kind in names and not names[a.kind] for a in model.ARGS):
             out[skill] = None
@@ -83,8 +82,8 @@ def _arguments(obs: Observation, recipients: list[str]) -> dict[str, dict[str, J
     return out
 
 
-def _variant(skill: str, args: dict[str, JSONObject]) -> JSONObject:
-    props: JSONObject = {"skill": {"type": "string", "const": skill}} | args
+def _variant(skill: str, args: dict[str, JsonObject]) -> JsonObject:
+    props: JsonObject = {"skill": {"type": "string", "const": skill}, **args}
     return {"type": "object", "properties": props, "required": list(props), "additionalProperties": False}
 
 
@@ -101,7 +100,7 @@ def analysis_bound(max_tokens: int | None) -> int:
 
 def decision_schema(
     obs: Observation, teammates: Iterable[str] | None = None, *, max_analysis: int = MAX_ANALYSIS
-) -> JSONObject:
+) -> JsonObject:
     """The JSON Schema of one decision of `obs.robot`: its analysis (at most `max_analysis`
     characters), then one command among its own skills with names from its own scene graph.
     `teammates` are the robots it may message (by default every teammate in the observation).
@@ -124,13 +123,13 @@ def decision_schema(
     }
 
 
-def schema_hash(schema: JSONObject) -> str:
+def schema_hash(schema: JsonObject) -> str:
     """A short stable id of a schema for the trace: equal schemas, equal ids, whatever the key order."""
     canonical = json.dumps(schema, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(canonical.encode()).hexdigest()[:16]
 
 
-def response_format(schema: JSONObject, provider: str) -> JSONObject:
+def response_format(schema: JsonObject, provider: str) -> JsonObject:
     """The request-body fields that ask `provider` to enforce `schema` (Ollama takes the bare schema)."""
     if provider == "ollama":
         return {"format": schema}
@@ -142,7 +141,7 @@ def response_format(schema: JSONObject, provider: str) -> JSONObject:
     }
 
 
-def _json_object(text: str) -> JSONObject:
+def _json_object(text: str) -> JsonObject:
     """The outermost {...} of a reply, so code fences and text around it do not matter."""
     start, end = text.find("{"), text.rfind("}")
     if start < 0 or end < start:

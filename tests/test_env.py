@@ -161,6 +161,7 @@ def test_random_commands_for_200_steps_never_raise() -> None:
         ("objects", 9, "--objects"),
         ("colour", "red", "colour"),
         ("aids", ("x_ray",), "x_ray"),
+        ("events", 5, "--events"),  # not a path: said, where it was a TypeError from Path(5)
     ],
 )
 def test_a_bad_option_is_a_value_error_naming_it_when_the_env_is_made(option: str, value: Any, named: str) -> None:

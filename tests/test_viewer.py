@@ -300,7 +300,7 @@ def test_the_failure_panel_renders_the_diagnosis_or_a_note(traces: dict[str, Pat
     diag, note = diagnostics_for(read_records(traces["llm"]))
     assert diag is not None, note
     assert "<table" in section
-    for key in diag:  # every finding, under the label people read, the key in its title
+    for key in diag.as_dict():  # every finding, under the label people read, the key in its title
         assert f'<th title="{key}">{escape(LABELS[key])}</th>' in section
     assert "hallucinated names" in section and "hallucinated_names</th>" not in section
     assert not re.search(r"<th[^>]*>[a-z]+_[a-z_]+</th>", section)  # no raw key as a row's heading

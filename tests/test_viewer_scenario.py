@@ -115,8 +115,8 @@ def test_the_view_model_holds_each_event_at_the_first_frame_that_shows_it(busy: 
     close = by_kind["close"]
     box = close.changed["container"]
     assert frames[at["close"] - 1].open[box] and not frames[at["close"]].open[box]
-    furniture = {f["name"]: f for f in view.scene["furniture"]} if view.scene else {}
-    assert close.at == (furniture[box]["x"], furniture[box]["y"])
+    furniture = {f.name: f for f in view.scene.furniture} if view.scene else {}
+    assert close.at == (furniture[box].x, furniture[box].y)
 
     broke = by_kind["breakdown"]
     assert (broke.robot, broke.until, broke.at) == ("david", 17, None)

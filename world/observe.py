@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any
+from typing import TypedDict
 
 from mhrc.core.protocol import FurnitureView, ObjectPose, ObjectView, Observation, Pose2D, RobotPose, RobotStatus
 
@@ -306,7 +306,15 @@ def apply_snapshot(
             obj.local = (c * (op.x - cx) + s * (op.y - cy), -s * (op.x - cx) + c * (op.y - cy))
 
 
-def snapshot(world: PhysicalWorld) -> dict[str, Any]:
+class WorldSnapshot(TypedDict):
+    """Every body's pose and robot state (`snapshot`)."""
+
+    objects: dict[str, tuple[tuple[float, float, float], str | None, bool, str | None]]  # position, on, inside, held by
+    robots: dict[str, tuple[tuple[float, float, float] | None, tuple[float, ...], str | None]]  # base, joints, holding
+    containers: dict[str, float]  # container -> its joint's value
+
+
+def snapshot(world: PhysicalWorld) -> WorldSnapshot:
     """Every body's pose and robot state, for comparing runs (determinism tests)."""
     return {
         "objects": {o.name: (world.position(o), o.on, o.inside, o.held_by) for o in world.objects.values()},

@@ -15,7 +15,6 @@ from __future__ import annotations
 import zlib
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 import structlog
@@ -45,7 +44,7 @@ from .assets import AssetDir
 from .astar import Grid
 from .bound import lower_bound, symbolic_episode
 from .dynamics import Dynamics
-from .observe import Knowledge
+from .observe import Knowledge, WorldSnapshot
 from .physics import ObjectState, PhysicalWorld
 from .placement import floor_margin, place_team
 from .robots import KINDS, RobotBody, flight_altitude, spawn
@@ -374,6 +373,6 @@ class Sim:
         """Teleport bodies to a `snapshot` event's poses (for videos; see observe.apply_snapshot)."""
         observe.apply_snapshot(self.world, robots, objects, open)
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self) -> WorldSnapshot:
         """Every body's pose and robot state, for comparing runs (determinism tests)."""
         return observe.snapshot(self.world)

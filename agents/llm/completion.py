@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
+
+from mhrc.core.jsontypes import JsonObject
 
 Messages = list[dict[str, str]]
 
@@ -61,7 +63,7 @@ class LLMClient(Protocol):
     model: str
 
     async def complete(
-        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
+        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: JsonObject | None = None
     ) -> Completion: ...
 
 

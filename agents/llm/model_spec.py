@@ -12,12 +12,12 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Sequence
-from typing import Any
+from typing import Unpack
 
 import httpx
 
 from .local import GGUFError, check_gguf
-from .openai_client import OpenAIChatClient
+from .openai_client import ClientOptions, OpenAIChatClient
 
 # provider -> (default base URL, environment variable holding the API key, or None)
 # `replay:TRACE` is not a provider: mhrc.agents.replay builds one client per robot from a trace.
@@ -112,7 +112,7 @@ def check_spec(spec: str, base_url: str | None = None, api_key_env: str | None =
 
 
 def make_client(
-    spec: str, base_url: str | None = None, *, api_key_env: str | None = None, **options: Any
+    spec: str, base_url: str | None = None, *, api_key_env: str | None = None, **options: Unpack[ClientOptions]
 ) -> OpenAIChatClient:
     """An OpenAI-compatible client for a model spec; raises LLMSpecError before any request if unusable.
 

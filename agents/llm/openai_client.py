@@ -25,10 +25,12 @@ import re
 import ssl
 import time
 from collections.abc import AsyncIterator
-from typing import Any, Self
+from typing import Self, TypedDict
 
 import httpx
 import structlog
+
+from mhrc.core.jsontypes import JsonObject
 
 from ..progress import PROGRESS
 from .completion import (
@@ -55,6 +57,24 @@ MAX_STREAM_CHUNKS = 200_000  # nor past this many chunks (a server that streams 
 _ANSWERED: set[str] = set()  # base URLs that sent this process a status line: slow from then on, never down
 
 
+class ClientOptions(TypedDict, total=False):
+    """OpenAIChatClient's settings besides its model, URL, key and provider (an episode's:
+    mhrc.run.config.EpisodeConfig.client_options)."""
+
+    timeout: float
+    idle_timeout: float
+    stream: bool
+    retries: int
+    backoff: float
+    max_backoff: float
+    max_concurrency: int
+    max_tokens: int | None
+    seed: int | None
+    timeout_retries: int
+    extra_body: JsonObject | None
+    transport: httpx.AsyncBaseTransport | None
+
+
 class OpenAIChatClient:
     """POST {base_url}/chat/completions, streamed, with retries, first-token and idle timeouts and a concurrency limit."""
 
@@ -77,7 +97,7 @@ class OpenAIChatClient:
         seed: int | None = None,
         provider: str = "",
         timeout_retries: int = 1,
-        extra_body: dict[str, Any] | None = None,
+        extra_body: JsonObject | None = None,
         transport: httpx.AsyncBaseTransport | None = None,
     ) -> None:
         if retries < 0 or timeout <= 0 or idle_timeout <= 0 or max_concurrency < 1 or timeout_retries < 0:
@@ -125,8 +145,9 @@ class OpenAIChatClient:
     async def __aexit__(self, *exc: object) -> None:
         await self.aclose()
 
-    def body(self, messages: Messages, temperature: float, schema: dict[str, Any] | None = None) -> dict[str, Any]:
-        body: dict[str, Any] = {"model": self.model, "messages": messages, "temperature": temperature}
+    def body(self, messages: Messages, temperature: float, schema: JsonObject | None = None) -> JsonObject:
+        """The chat-completions request: the call's fields, then `extra_body`'s over them."""
+        body: JsonObject = {"model": self.model, "messages": messages, "temperature": temperature}
         if self.max_tokens is not None:
             body["max_tokens"] = self.max_tokens
         if self.seed is not None:
@@ -142,7 +163,7 @@ class OpenAIChatClient:
         return body | self.extra_body
 
     async def complete(
-        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
+        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: JsonObject | None = None
     ) -> Completion:
         url = f"{self.base_url}/chat/completions"
         body = self.body(messages, temperature, schema)
@@ -193,7 +214,7 @@ class OpenAIChatClient:
         raise LLMError(f"{self.model} at {self.base_url} failed after {self.retries + 1} attempts: {last}")
 
     async def _attempt(
-        self, url: str, body: dict[str, Any], messages: Messages, structured: bool, delay: float
+        self, url: str, body: JsonObject, messages: Messages, structured: bool, delay: float
     ) -> Completion:
         """One HTTP attempt. Leaving this (a result, an error, a timeout or a cancellation)
         closes the response, and with a body not read to its end, the connection: the server

@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any
+from collections.abc import Mapping
 
 import httpx
 
+from mhrc.core.jsontypes import JsonValue
+
 from ..progress import Progress
 from .completion import Completion, Messages, bounded, estimate_tokens, prompt_text, split_reasoning
+
+Usage = Mapping[str, JsonValue]  # a completion's `usage` object as the server sent it, read field by field
 
 
 class Unreadable(ValueError):
@@ -32,7 +36,7 @@ class StreamedReply:
         self.content: list[str] = []
         self.reasoning: list[str] = []
         self.finish_reason: str | None = None
-        self.usage: dict[str, Any] = {}
+        self.usage: Usage = {}
         self.chunks = 0
         self.size = 0  # characters of content and reasoning so far
         self.done = False
@@ -105,7 +109,7 @@ def whole_completion(resp: httpx.Response, messages: Messages, latency: float) -
 def make_completion(
     text: str,
     reasoning: str | None,
-    usage: dict[str, Any],
+    usage: Usage,
     finish_reason: str | None,
     messages: Messages,
     latency: float,
@@ -117,11 +121,13 @@ def make_completion(
     if thoughts is not None:
         thoughts = bounded(thoughts)[0]
     details = usage.get("completion_tokens_details") or {}
-    reasoning_tokens = int(details.get("reasoning_tokens") or 0) or (estimate_tokens(thoughts) if thoughts else 0)
+    if not isinstance(details, Mapping):
+        raise TypeError(f"usage.completion_tokens_details is {type(details).__name__}, not an object")
+    reasoning_tokens = _count(details.get("reasoning_tokens") or 0) or (estimate_tokens(thoughts) if thoughts else 0)
     return Completion(
         text=answer,
-        prompt_tokens=int(usage.get("prompt_tokens") or estimate_tokens(prompt_text(messages))),
-        completion_tokens=int(usage.get("completion_tokens") or estimate_tokens(text)),
+        prompt_tokens=_count(usage.get("prompt_tokens") or estimate_tokens(prompt_text(messages))),
+        completion_tokens=_count(usage.get("completion_tokens") or estimate_tokens(text)),
         latency=latency,
         finish_reason=finish_reason,
         reasoning=thoughts,
@@ -129,3 +135,10 @@ def make_completion(
         truncated=cut,
         ttft=ttft,
     )
+
+
+def _count(value: JsonValue) -> int:
+    """A token count as the server sent it: a number, or a number's text."""
+    if not isinstance(value, int | float | str):
+        raise TypeError(f"a token count is {type(value).__name__}, not a number")
+    return int(value)

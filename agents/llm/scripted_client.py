@@ -5,7 +5,8 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+
+from mhrc.core.jsontypes import JsonObject
 
 from .completion import (
     DEFAULT_TEMPERATURE,
@@ -36,14 +37,14 @@ class ScriptedClient:
         self._replies: list[Reply] | Callable[[Messages], Reply] = replies if callable(replies) else list(replies)
         self.latency = latency
         self.prompts: list[Messages] = []
-        self.schemas: list[dict[str, Any] | None] = []
+        self.schemas: list[JsonObject | None] = []  # each call's JSON Schema (None: a plain reply)
 
     @property
     def calls(self) -> int:
         return len(self.prompts)
 
     async def complete(
-        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: dict[str, Any] | None = None
+        self, messages: Messages, *, temperature: float = DEFAULT_TEMPERATURE, schema: JsonObject | None = None
     ) -> Completion:
         self.prompts.append([dict(m) for m in messages])
         self.schemas.append(schema)

@@ -84,7 +84,7 @@ class Bus:
         self._loop = loop
         self._entities: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._tokens: dict[str, Any] = {}  # key -> this session's liveliness token on it
+        self._tokens: dict[str, zenoh.LivelinessToken] = {}  # key -> this session's liveliness token on it
         self._tasks: set[asyncio.Task[Any]] = (
             set()
         )  # the handlers' tasks still running (the loop keeps only weak references)

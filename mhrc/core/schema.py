@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from pydantic import BaseModel
 
 from mhrc.core import protocol
+from mhrc.core.jsontypes import JsonObject
 from mhrc.core.protocol import PROTOCOL_VERSION, WORLD_EVENT_ADAPTER, Message
 
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
+JsonSchema = JsonObject  # one JSON Schema document (pydantic's model_json_schema)
 
 # payload -> (key under mhrc/<run>/, direction); <rid> is the robot, <to>/<from> the receiver and sender
 KEYS: dict[str, tuple[str, str]] = {
@@ -63,11 +65,11 @@ def message_models() -> list[type[Message]]:
     return found
 
 
-def _schema_of(name: str, schema: dict[str, Any]) -> dict[str, Any]:
+def _schema_of(name: str, schema: JsonSchema) -> JsonSchema:
     key, direction = KEYS.get(name) or (
         ("world/event", "world -> all (put), as part of WorldEvent") if name in WORLD_EVENT_KINDS else ("", "")
     )
-    out: dict[str, Any] = {"$schema": SCHEMA_DIALECT, "$id": f"mhrc/v{PROTOCOL_VERSION}/{name}.json"}
+    out: JsonSchema = {"$schema": SCHEMA_DIALECT, "$id": f"mhrc/v{PROTOCOL_VERSION}/{name}.json"}
     out.update(schema)
     out.setdefault("title", name)
     if key:
@@ -76,9 +78,9 @@ def _schema_of(name: str, schema: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def schemas() -> dict[str, dict[str, Any]]:
+def schemas() -> dict[str, JsonSchema]:
     """name -> JSON Schema of every bus payload, plus `WorldEvent` (the union on world/event)."""
-    out: dict[str, dict[str, Any]] = {}
+    out: dict[str, JsonSchema] = {}
     for model in message_models():
         out[model.__name__] = _schema_of(model.__name__, _model_schema(model))
     event = WORLD_EVENT_ADAPTER.json_schema(mode="validation")
@@ -87,23 +89,50 @@ def schemas() -> dict[str, dict[str, Any]]:
     return out
 
 
-def _model_schema(model: type[BaseModel]) -> dict[str, Any]:
+def _model_schema(model: type[BaseModel]) -> JsonSchema:
     return model.model_json_schema(mode="validation")
 
 
-def index(all_schemas: dict[str, dict[str, Any]]) -> dict[str, Any]:
+class Payload(TypedDict):
+    """One payload in the index: its schema's file, its key and who sends it."""
+
+    file: str
+    key: str
+    direction: str
+
+
+class SchemaIndex(TypedDict):
+    """`index.json`: the protocol's versions and every payload's file, key and direction."""
+
+    protocol_version: int
+    supported_versions: list[int]
+    encoding: str
+    payloads: dict[str, Payload]
+
+
+class SchemaDocument(SchemaIndex):
+    """`mhrc schema` as one document: the index and every schema."""
+
+    schemas: dict[str, JsonSchema]
+
+
+def index(all_schemas: dict[str, JsonSchema]) -> SchemaIndex:
     return {
         "protocol_version": PROTOCOL_VERSION,
         "supported_versions": list(protocol.SUPPORTED_VERSIONS),
         "encoding": "UTF-8 JSON, one message per zenoh sample; unknown fields are rejected",
         "payloads": {
-            name: {"file": f"{name}.json", "key": s.get("x-mhrc-key", ""), "direction": s.get("x-mhrc-direction", "")}
+            name: {
+                "file": f"{name}.json",
+                "key": str(s.get("x-mhrc-key", "")),
+                "direction": str(s.get("x-mhrc-direction", "")),
+            }
             for name, s in all_schemas.items()
         },
     }
 
 
-def document() -> dict[str, Any]:
+def document() -> SchemaDocument:
     """Everything as one JSON document: the index and every schema."""
     all_schemas = schemas()
     return {**index(all_schemas), "schemas": all_schemas}

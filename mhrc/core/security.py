@@ -35,7 +35,7 @@ import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 from cryptography import x509
 
@@ -107,6 +107,20 @@ class Credentials:
         return f"user {self.user!r} of run {self.run!r}" + (f" ({self.path})" if self.path else "")
 
 
+class CredentialsFile(TypedDict):
+    """A participant's `<user>.json`, as `make_run_credentials` writes it and `load` reads it
+    (paths relative to the file; the world's alone has its certificate, key and users)."""
+
+    run: str
+    user: str
+    password: str
+    ca: str
+    robots: list[str]
+    cert: NotRequired[str]
+    key: NotRequired[str]
+    users: NotRequired[str]
+
+
 def make_run_credentials(
     run: str,
     robots: Sequence[str],
@@ -169,7 +183,7 @@ def _issue(
         if d not in with_ca:  # once per directory: all of them share it flat, each has its own split
             write_private(d / "ca.pem", pem_cert(ca), private=False)
             with_ca.add(d)
-        entry: dict[str, Any] = {
+        entry: CredentialsFile = {
             "run": run,
             "user": u,
             "password": passwords[u],
@@ -180,7 +194,7 @@ def _issue(
             write_private(d / f"{u}.pem", pem_cert(cert))
             write_private(d / f"{u}.key", pem_key(key))
             write_private(d / "users.txt", "".join(f"{name}:{pw}\n" for name, pw in passwords.items()))
-            entry.update(cert=f"{u}.pem", key=f"{u}.key", users="users.txt")
+            entry |= {"cert": f"{u}.pem", "key": f"{u}.key", "users": "users.txt"}
         out[u] = write_private(d / f"{u}.json", json.dumps(entry, indent=2) + "\n")
     return out
 
@@ -276,7 +290,40 @@ def check_for(creds: Credentials, *, run: str | None = None, user: str | None = 
 
 
 # ---------------------------------------------------------------------------------- zenoh config
-def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
+class AclRule(TypedDict):
+    """One rule of zenoh's `access_control`: which messages, which way, on which keys."""
+
+    id: str
+    messages: list[str]
+    flows: list[str]
+    permission: str
+    key_exprs: list[str]
+
+
+class AclSubject(TypedDict):
+    id: str
+    usernames: list[str]
+
+
+class AclPolicy(TypedDict):
+    """Which rules apply to which subjects."""
+
+    id: str
+    rules: list[str]
+    subjects: list[str]
+
+
+class AccessControl(TypedDict):
+    """zenoh's `access_control` configuration, as `acl` writes it."""
+
+    enabled: bool
+    default_permission: str
+    rules: list[AclRule]
+    subjects: list[AclSubject]
+    policies: list[AclPolicy]
+
+
+def acl(run: str, robots: Sequence[str]) -> AccessControl:
     """The world router's `access_control`: default deny. Only the world's user speaks for the
     world: it alone may put world events, acks, results, turns and inbox copies, reply to
     queries and hold `alive/world`. The observer reads the whole run (and may ask `world/state`),
@@ -288,7 +335,7 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
     router, egress what the router sends to that client."""
     base = f"mhrc/{run}"
     events = [f"{base}/world/event", f"{base}/alive/world", "mhrc/*/alive/world"]  # anyone logged in reads these
-    rules: list[dict[str, Any]] = [
+    rules: list[AclRule] = [
         {
             "id": "world-all",
             "messages": [
@@ -359,12 +406,12 @@ def acl(run: str, robots: Sequence[str]) -> dict[str, Any]:
             "key_exprs": [f"{base}/**"],
         },
     ]
-    subjects: list[dict[str, Any]] = [
+    subjects: list[AclSubject] = [
         {"id": "s-world", "usernames": [WORLD]},
         {"id": "s-observer", "usernames": [OBSERVER]},
         {"id": "s-robots", "usernames": list(robots)},
     ]
-    policies: list[dict[str, Any]] = [
+    policies: list[AclPolicy] = [
         {"id": "p-world", "rules": ["world-all"], "subjects": ["s-world"]},
         {
             "id": "p-observer",
@@ -430,7 +477,7 @@ def apply(conf: Any, creds: Credentials, *, router: bool) -> None:
     """Insert TLS, user/password authentication and (on the world's router) access control
     into the zenoh.Config `conf`."""
 
-    def put(key: str, value: Any) -> None:
+    def put(key: str, value: object) -> None:
         conf.insert_json5(key, json.dumps(value))
 
     put("transport/link/tls/root_ca_certificate", str(creds.ca))

@@ -30,6 +30,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
@@ -72,6 +73,31 @@ class TraceWriteError(RuntimeError):
         )
 
 
+@dataclass
+class _Junk:
+    """One key's junk in the current interval, as its `junk` line will say it (mhrc.core.records.JunkCount):
+    the first sample's reason, code and excerpt, and the count and bytes of them all."""
+
+    reason: str
+    code: str | None
+    excerpt: str | None
+    since: float  # when the interval started
+    count: int = 0
+    bytes: int = 0
+
+    def line(self) -> dict[str, str | int | None]:
+        """The `junk` line's message, its keys in the order the recorder has always written them."""
+        out: dict[str, str | int | None] = {
+            "count": self.count,
+            "bytes": self.bytes,
+            "reason": self.reason,
+            "code": self.code,
+        }
+        if self.excerpt is not None:
+            out["excerpt"] = self.excerpt
+        return out
+
+
 class Recorder:
     """Writes every sample of `run` to `path` (JSONL, flushed line by line). `on_error` is called
     once, on a bus thread, when a write fails (see TraceWriteError)."""
@@ -91,7 +117,7 @@ class Recorder:
         self._t0 = time.perf_counter()
         self.count = 0
         self._ended = threading.Event()  # an episode_done event is on disk
-        self._junk: dict[str, dict[str, Any]] = {}  # key -> counts not yet written
+        self._junk: dict[str, _Junk] = {}  # key -> counts not yet written
         self._held: dict[str, tuple[float, str, Any]] = {}  # goal id -> (t, key, msg) of a request awaiting its ack
         self._requested: dict[str, None] = {}  # goal ids whose request was seen (the newest MAX_REQUESTED, in order)
         self._early: dict[
@@ -315,22 +341,22 @@ class Recorder:
             return False
 
     def _count_junk(
-        self, key: str, reason: str, size: int, now: float, code: Any = None, excerpt: str | None = None
+        self, key: str, reason: str, size: int, now: float, code: object = None, excerpt: str | None = None
     ) -> None:
         """Count one junk sample of `key`; `code` is the rejection's (mhrc.core.protocol.RejectCode), if it has one;
         `excerpt`, the start of a malformed payload (the interval's first is kept)."""
-        code = code if isinstance(code, str) else None
-        first = {"reason": reason[:300], "code": code, **({"excerpt": excerpt} if excerpt is not None else {})}
-        junk = self._junk.setdefault(key, {"count": 0, "bytes": 0, **first, "since": now})
-        junk["count"] += 1
-        junk["bytes"] += size
-        if now - junk["since"] >= JUNK_INTERVAL:
+        junk = self._junk.get(key)
+        if junk is None:
+            junk = self._junk[key] = _Junk(reason[:300], code if isinstance(code, str) else None, excerpt, now)
+        junk.count += 1
+        junk.bytes += size
+        if now - junk.since >= JUNK_INTERVAL:
             self._flush_junk(key)
 
     def _flush_junk(self, key: str) -> None:
         junk = self._junk.pop(key, None)
-        if junk is not None and junk["count"]:
-            self._write(key, "junk", {k: junk[k] for k in ("count", "bytes", "reason", "code", "excerpt") if k in junk})
+        if junk is not None and junk.count:
+            self._write(key, "junk", junk.line())
 
     def _on_liveliness(self, sample: Sample) -> None:
         self._write(sample.key, "alive" if sample.is_put else "gone", None)

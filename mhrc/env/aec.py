@@ -4,6 +4,7 @@ robot's action's outcome comes back with its next turn's observation, as in the 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from pettingzoo import AECEnv
@@ -28,7 +29,7 @@ class MhrcAECEnv(Made, AECEnv[str, Obs, str]):
         self._make("sequential", render_mode, expert, options)
         self._was_reset = False
 
-    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
+    def reset(self, seed: int | None = None, options: Mapping[str, object] | None = None) -> None:
         self.core.reset(seed)
         self._was_reset = True
         self.agents = list(self.possible_agents)

@@ -10,10 +10,11 @@ carry the paper's metrics (`metrics`, as `mhrc up`'s episode_done) and why it en
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Required, TypedDict
 
 import numpy as np
 
+from mhrc.core.jsontypes import JsonObject
 from mhrc.core.protocol import ActionResult, EpisodeDone, Message
 from mhrc.run.config import EpisodeConfig
 from mhrc.world.sim import Sim
@@ -22,6 +23,32 @@ from .seats import Seat
 from .world import DirectWorld
 
 FRAME = (480, 640)  # rgb_array's height and width: the video's default frame size
+
+
+class Outcome(TypedDict):
+    """A robot's last action as its infos tell it."""
+
+    action: str  # its call
+    code: str  # the world's OutcomeCode
+    succeeded: bool
+    feedback: str
+
+
+class News(TypedDict, total=False):
+    """What reached a robot in the last step."""
+
+    unreadable: str  # why its command could not be read (it waited)
+    outcome: Outcome
+
+
+class RobotInfo(News, total=False):
+    """A robot's infos (PettingZoo's per-agent dict; docs/env.md)."""
+
+    tick: Required[int]
+    system_prompt: str  # at the reset
+    expert_action: str  # with expert=True, the heuristic's next command
+    reason: str  # at the end: why the episode ended
+    metrics: JsonObject  # at the end: the paper's metrics, as episode_done carries them
 
 
 class EnvCore:
@@ -37,7 +64,7 @@ class EnvCore:
         self.world: DirectWorld | None = None
         self.seats: dict[str, Seat] = {}
         self.placed = 0
-        self.news: dict[str, dict[str, Any]] = {}  # robot -> what reached it in the last step (for its infos)
+        self.news: dict[str, News] = {}  # robot -> what reached it in the last step (for its infos)
 
     # ------------------------------------------------------------------ the episode
     def reset(self, seed: int | None) -> None:
@@ -63,7 +90,8 @@ class EnvCore:
         rejection = world.submit(robot, action)
         if rejection is not None:  # the APIs hand over only what the world accepts: a bug, said plainly
             raise RuntimeError(f"the world refused {robot}'s action ({rejection.code.value}): {rejection.reason}")
-        self.news[robot] = {"unreadable": unreadable} if unreadable is not None else {}  # its earlier news was read
+        # its earlier news was read
+        self.news[robot] = News(unreadable=unreadable) if unreadable is not None else News()
         for result in world.results:
             self._deliver(result)
         for turn in world.turns:
@@ -75,14 +103,13 @@ class EnvCore:
         seat = self.seats[result.robot]
         seat.record(result)
         seat.see(result.observation)
-        self.news[result.robot] = self.news.get(result.robot, {}) | {
-            "outcome": {
-                "action": result.action.call(),
-                "code": result.outcome.code.value,
-                "succeeded": result.outcome.succeeded,
-                "feedback": result.outcome.feedback,
-            }
-        }
+        news = self.news.setdefault(result.robot, News())
+        news["outcome"] = Outcome(
+            action=result.action.call(),
+            code=result.outcome.code.value,
+            succeeded=result.outcome.succeeded,
+            feedback=result.outcome.feedback,
+        )
 
     def reward(self) -> float:
         """The change in placed objects since the last call (the team's reward)."""
@@ -115,12 +142,12 @@ class EnvCore:
     def observation(self, robot: str) -> dict[str, str]:
         return dict(self.seats[robot].shown)
 
-    def info(self, robot: str, *, first: bool = False) -> dict[str, Any]:
+    def info(self, robot: str, *, first: bool = False) -> RobotInfo:
         """`robot`'s infos: the tick, what reached it in the last step (its action's outcome, why its
         command could not be read), the expert's next command, the system prompt at the reset, and at
         the end the paper's metrics and why the episode ended."""
         seat, world = self.seats[robot], self._world()
-        info: dict[str, Any] = {"tick": world.tick} | self.news.get(robot, {})
+        info: RobotInfo = {"tick": world.tick, **self.news.get(robot, News())}
         if first:
             info["system_prompt"] = seat.system
         if self.expert and seat.expert_action is not None and world.done is None:

@@ -3,6 +3,7 @@ agents and their spaces, rendering and closing."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,7 @@ class Made:
 
     render_mode: str | None
 
-    def _make(self, schedule: str, render_mode: str | None, expert: bool, options: dict[str, Any]) -> None:
+    def _make(self, schedule: str, render_mode: str | None, expert: bool, options: Mapping[str, object]) -> None:
         """Check the options (ValueError naming a bad one) and set up the core, agents and spaces."""
         cfg = episode_config(options)
         self.render_mode = check_render_mode(render_mode)

@@ -3,8 +3,9 @@ the same `EpisodeConfig` before anything is built; a bad one is a ValueError nam
 
 from __future__ import annotations
 
+import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 from mhrc.core.team import TeamSpec
 from mhrc.run.config import EpisodeConfig
@@ -33,8 +34,9 @@ class EnvOptionError(ValueError):
     """An option the environment cannot be made with; the message names it."""
 
 
-def episode_config(options: dict[str, Any]) -> EpisodeConfig:
-    """The episode the options describe (EnvOptionError naming a bad or unknown one)."""
+def episode_config(options: Mapping[str, object]) -> EpisodeConfig:
+    """The episode the options describe (EnvOptionError naming a bad or unknown one): the caller's
+    values, unchecked until EpisodeConfig checks them."""
     unknown = sorted(set(options) - set(OPTIONS))
     if unknown:
         raise EnvOptionError(
@@ -45,8 +47,9 @@ def episode_config(options: dict[str, Any]) -> EpisodeConfig:
     if team is not None and not isinstance(team, TeamSpec):
         values["team"] = resolve_team(str(team))  # a shipped team's name, a file, or robots inline
     for path in ("events", "prompts"):
-        if values.get(path) is not None:
-            values[path] = Path(values[path])
+        value = values.get(path)
+        if isinstance(value, str | os.PathLike):  # anything else is EpisodeConfig's to refuse, naming it
+            values[path] = Path(value)
     try:
         return EpisodeConfig.build(run="env", **values)
     except ValueError as exc:

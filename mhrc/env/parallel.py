@@ -8,6 +8,7 @@ from typing import Any
 
 from pettingzoo import ParallelEnv
 
+from .engine import RobotInfo
 from .making import Made
 
 Obs = dict[str, str]
@@ -26,8 +27,8 @@ class MhrcParallelEnv(Made, ParallelEnv[str, Obs, str]):
         self._make("lockstep", render_mode, expert, options)
 
     def reset(
-        self, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[dict[str, Obs], dict[str, dict[str, Any]]]:
+        self, seed: int | None = None, options: Mapping[str, object] | None = None
+    ) -> tuple[dict[str, Obs], dict[str, RobotInfo]]:
         self.core.reset(seed)
         self.agents = list(self.possible_agents)
         observations = {a: self.core.observation(a) for a in self.agents}
@@ -35,7 +36,7 @@ class MhrcParallelEnv(Made, ParallelEnv[str, Obs, str]):
 
     def step(
         self, actions: Mapping[str, Any]
-    ) -> tuple[dict[str, Obs], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
+    ) -> tuple[dict[str, Obs], dict[str, float], dict[str, bool], dict[str, bool], dict[str, RobotInfo]]:
         """Every live robot's command (a dict keyed by agent); a command that cannot be read or
         done is that robot's feedback. ValueError, with nothing run, for actions that are not such
         a dict: not a mapping, an agent that is not live, a live agent left out."""

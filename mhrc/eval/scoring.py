@@ -47,6 +47,6 @@ def write_episode_report(scored: Scored) -> None:
     from mhrc.viewer.show import default_out, render_report
 
     try:
-        render_report(from_records(scored.path, scored.lines), default_out(scored.path), scored.diagnostics.as_dict())
+        render_report(from_records(scored.path, scored.lines), default_out(scored.path), scored.diagnostics)
     except Exception as exc:
         log.warning("episode report not written", trace=str(scored.path), error=f"{type(exc).__name__}: {exc}")

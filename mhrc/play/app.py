@@ -19,6 +19,7 @@ from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from .gate import Gate, GateMiddleware, policy
+from .messages import PageMessage
 from .page import CSS, JS, page_html
 from .session import REPLACED, PlaySession, SecondDriver
 
@@ -40,7 +41,7 @@ def make_app(session: PlaySession, gate: Gate) -> GateMiddleware:
 
     async def ws(websocket: WebSocket) -> None:
         await websocket.accept()
-        outbox: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+        outbox: asyncio.Queue[PageMessage] = asyncio.Queue()
         page = object()
         tab = websocket.query_params.get("tab", "")  # the page's tab (kept across its reloads)
         try:

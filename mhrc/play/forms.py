@@ -11,15 +11,16 @@ kind. The inputs are named as the protocol's fields (`target`, `stand_pose`, `ob
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any
 
 from pydantic import ValidationError
 
-from mhrc.core.protocol import Action, Observation
+from mhrc.core.protocol import Action, ObjectView, Observation
 from mhrc.core.protocol.actions import CALLS, Arg, ArgKind, build
 from mhrc.core.protocol.base import MAX_MOVE, _reason
+
+from .messages import FieldData, FormData, Submission
 
 MAX_SUBMISSION_BYTES = 16_384  # a form's JSON: a message of the protocol's 4,000 characters fits many times over
 INPUT = {"obj": "object"}  # the protocol's field -> its input's name, where they differ
@@ -57,7 +58,7 @@ class SkillForm:
     stand_poses: dict[str, int] = field(default_factory=dict)  # navigate: target -> how many stand poses
 
 
-def _gone(o: Any) -> bool:
+def _gone(o: ObjectView) -> bool:
     return bool(o.last_seen_on and not (o.on or o.held_by))
 
 
@@ -112,11 +113,19 @@ def forms(obs: Observation) -> list[SkillForm]:
     return out
 
 
-def as_json(forms_: list[SkillForm]) -> list[dict[str, Any]]:
-    return [asdict(f) for f in forms_]
+def as_json(forms_: list[SkillForm]) -> list[FormData]:
+    return [
+        FormData(
+            skill=f.skill,
+            fields=[FieldData(name=x.name, kind=x.kind, choices=list(x.choices)) for x in f.fields],
+            disabled=f.disabled,
+            stand_poses=dict(f.stand_poses),
+        )
+        for f in forms_
+    ]
 
 
-def action_of(submission: dict[str, Any], obs: Observation) -> Action:
+def action_of(submission: Submission, obs: Observation) -> Action:
     """The action a form's submission asks for, planned on `obs`; Refused when it cannot be sent."""
     tick = submission.get("tick")
     if not isinstance(tick, int) or isinstance(tick, bool):
@@ -139,7 +148,7 @@ def action_of(submission: dict[str, Any], obs: Observation) -> Action:
     if extra:
         raise Refused(Refusal.MALFORMED, f"{skill} takes no {', '.join(x[:64] for x in extra)}")
     fields = {_input(a): a.field for a in CALLS[form.skill].ARGS}
-    wire: dict[str, Any] = {}
+    wire: dict[str, str | int | float] = {}  # the action's fields
     for fld in form.fields:
         value = submission.get(fld.name)
         if not isinstance(value, str | int | float) or isinstance(value, bool):

@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 
 from mhrc.core.protocol import Observation
-from mhrc.viewer.model import scene_map
 from mhrc.viewer.page import SCALE, MapFrame
+from mhrc.viewer.scene_map import scene_map
 from mhrc.viewer.wording import html_text as _e
 from mhrc.world.scene import LAYOUTS
 
@@ -42,7 +42,7 @@ def house_svg(scene: str | None, obs: Observation) -> str:
         ys = [f.position[1] for f in obs.furniture] or [0.0]
         bounds = (min(xs) - 1, max(xs) + 1, min(ys) - 1, max(ys) + 1)
     else:
-        b = sc["bounds"]
+        b = sc.bounds
         bounds = (b[0] - 0.3, b[1] + 0.3, b[2] - 0.3, b[3] + 0.3)
     xmin, xmax, ymin, ymax = bounds
     w, h = round((xmax - xmin) * SCALE), round((ymax - ymin) * SCALE)
@@ -52,25 +52,25 @@ def house_svg(scene: str | None, obs: Observation) -> str:
 
     parts: list[str] = []
     if sc is not None:
-        b = sc["bounds"]
+        b = sc.bounds
         parts.append(rect((b[0] + b[1]) / 2, (b[2] + b[3]) / 2, b[1] - b[0], b[3] - b[2], "floor"))
-        for f in sc["furniture"]:
-            r, g, b_ = (int(255 * c) for c in f["color"][:3])
+        for f in sc.furniture:
+            r, g, b_ = (int(255 * c) for c in f.color[:3])
             parts.append(
                 rect(
-                    f["x"],
-                    f["y"],
-                    f["sx"],
-                    f["sy"],
+                    f.x,
+                    f.y,
+                    f.sx,
+                    f.sy,
                     "furniture",
-                    f' data-name="{_e(f["name"])}" fill="rgb({r},{g},{b_})"',
+                    f' data-name="{_e(f.name)}" fill="rgb({r},{g},{b_})"',
                 )
             )
-        for wx, wy, wsx, wsy in sc["walls"]:
+        for wx, wy, wsx, wsy in sc.walls:
             parts.append(rect(wx, wy, wsx, wsy, "wall"))
-        for f in sc["furniture"]:
-            box = f"{px(f['x'] - f['sx'] / 2)} {py(f['y'] + f['sy'] / 2)} {f['sx'] * SCALE:.1f} {f['sy'] * SCALE:.1f}"
-            parts.append(_label(f["name"], px(f["x"]), py(f["y"]), box))
+        for f in sc.furniture:
+            box = f"{px(f.x - f.sx / 2)} {py(f.y + f.sy / 2)} {f.sx * SCALE:.1f} {f.sy * SCALE:.1f}"
+            parts.append(_label(f.name, px(f.x), py(f.y), box))
     else:
         for fv in obs.furniture:
             x, y = px(fv.position[0]), py(fv.position[1])

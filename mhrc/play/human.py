@@ -13,7 +13,6 @@ import asyncio
 import json
 import time
 from collections.abc import Callable
-from typing import Any
 
 from mhrc.agents import observation as describe
 from mhrc.agents.memory import HISTORIES, Memory
@@ -22,9 +21,10 @@ from mhrc.core.protocol import ActionResult, Observation
 from mhrc.core.protocol.thoughts import HUMAN_POLICY
 
 from .forms import MAX_SUBMISSION_BYTES, Refusal, Refused, action_of, as_json, forms
+from .messages import HistoryEntry, PageMessage, Submission, View
 
 POLICY = HUMAN_POLICY
-Send = Callable[[dict[str, Any]], None]  # one JSON message to the page
+Send = Callable[[PageMessage], None]  # one JSON message to the page
 
 
 class HumanPolicy:
@@ -37,7 +37,7 @@ class HumanPolicy:
         self.memory = Memory()
         self.obs: Observation | None = None
         self.shown_at = 0.0  # time.monotonic() when the current observation reached the person
-        self.last_submission: dict[str, Any] | None = None
+        self.last_submission: Submission | None = None
         self._pending: asyncio.Future[Decision] | None = None
         self._send: Send | None = None
         self.decisions = 0
@@ -50,7 +50,7 @@ class HumanPolicy:
         if send is not None and self.obs is not None:
             send(self.view())
 
-    def _tell(self, message: dict[str, Any]) -> None:
+    def _tell(self, message: PageMessage) -> None:
         if self._send is not None:
             self._send(message)
 
@@ -58,7 +58,7 @@ class HumanPolicy:
     def deciding(self) -> bool:
         return self._pending is not None and not self._pending.done()
 
-    def view(self) -> dict[str, Any]:
+    def view(self) -> View:
         """What the page shows: the observation (as sent and in an agent's words), the histories,
         the forms with their choices, and whether a decision is awaited."""
         obs = self.obs
@@ -71,7 +71,7 @@ class HumanPolicy:
             "teammates": describe.teammates(obs),
         }
         scene, svg = self.house(obs) if self.house is not None else ("", "")
-        histories = {n: [{"step": e.step, "text": e.text} for e in self.memory.history(n)] for n in HISTORIES}
+        histories = {n: [HistoryEntry(step=e.step, text=e.text) for e in self.memory.history(n)] for n in HISTORIES}
         return {
             "type": "view",
             "tick": obs.tick,
@@ -117,7 +117,7 @@ class HumanPolicy:
         self._pending.set_result(Decision(action=action, latency=latency))
 
     @staticmethod
-    def _parse(raw: str | bytes) -> dict[str, Any]:
+    def _parse(raw: str | bytes) -> Submission:
         if len(raw) > MAX_SUBMISSION_BYTES:
             raise Refused(
                 Refusal.MALFORMED,

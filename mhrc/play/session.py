@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Final
 
 import structlog
 
@@ -27,6 +27,7 @@ from mhrc.core.keys import Keys
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, RobotDetached, decode_event
 
 from .human import HumanPolicy, Send
+from .messages import Done, Hello
 
 if TYPE_CHECKING:
     from mhrc.core.security import Credentials
@@ -34,7 +35,7 @@ if TYPE_CHECKING:
 log = structlog.get_logger("mhrc.play")
 
 RELOAD_GRACE = 10.0  # s a page's robot stays attached after the page went: a reload takes over its turn
-REPLACED = "replaced"  # the message to a page whose tab reloaded: its socket closes, the new one drives
+REPLACED: Final = "replaced"  # the message to a page whose tab reloaded: its socket closes, the new one drives
 MAX_TAB = 64  # characters of a tab id (the page makes a UUID)
 
 
@@ -76,7 +77,7 @@ class PlaySession:
         self._send: Send | None = None
         self._leaving: asyncio.Task[None] | None = None  # the grace after a page went, before its agent leaves
 
-    def hello(self) -> dict[str, Any]:
+    def hello(self) -> Hello:
         return {
             "type": "hello",
             "robot": self.robot,
@@ -232,7 +233,7 @@ class PlaySession:
                 self._send(self._done_message())
         self.ended.set()
 
-    def _done_message(self) -> dict[str, Any]:
+    def _done_message(self) -> Done:
         assert self.done is not None
         m = self.done.metrics
         return {

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import AsyncIterator, Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Unpack
 
 import structlog
 
@@ -20,7 +20,8 @@ from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.llm import make_client
 from mhrc.agents.llm.local import LocalModelServer
-from mhrc.agents.llm_policy import LLMPolicy
+from mhrc.agents.llm.openai_client import ClientOptions
+from mhrc.agents.llm_policy import LLMPolicy, PolicyOptions
 from mhrc.agents.policy import Policy
 from mhrc.agents.replay import ReplayClient
 from mhrc.core.bus import open_client
@@ -37,12 +38,12 @@ async def run_agent(
     *,
     llm: str | None = None,
     base_url: str | None = None,
-    client_options: dict[str, Any] | None = None,
+    client_options: ClientOptions | None = None,
     attach_timeout: float = 30.0,
     security: Credentials | None = None,
     on_error: Callable[[BaseException], None] | None = None,
     policy: Policy | None = None,
-    **policy_options: Any,
+    **policy_options: Unpack[PolicyOptions],
 ) -> EpisodeDone | None:
     """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
     `policy` when given (a coordination protocol's: mhrc.agents.protocols), else the heuristic
@@ -132,9 +133,9 @@ async def attach_agent(
     attach_timeout: float = 30.0,
     llm: str | None = None,
     base_url: str | None = None,
-    client_options: dict[str, Any] | None = None,
+    client_options: ClientOptions | None = None,
     security: Credentials | None = None,
-    **policy_options: Any,
+    **policy_options: Unpack[PolicyOptions],
 ) -> EpisodeDone | None:
     """`mhrc agent`: find the run if not given (the credentials' run, or the only world alive),
     then play `robot` (heuristic policy, or `llm`)."""

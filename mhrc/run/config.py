@@ -6,7 +6,7 @@ from __future__ import annotations
 import socket
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -36,6 +36,8 @@ from mhrc.world.scenario import Scenario, check_scenario, load_scenario
 from mhrc.world.schedulers import SCHEDULERS
 
 if TYPE_CHECKING:
+    from mhrc.agents.llm.openai_client import ClientOptions
+    from mhrc.agents.llm_policy import PolicyOptions
     from mhrc.world.sim import Sim
 
 log = structlog.get_logger("mhrc.run.config")
@@ -347,7 +349,7 @@ class EpisodeConfig(BaseModel):
             return self.llm_timeout
         return LOCAL_TIMEOUT if spec is not None and spec.startswith("gguf:") else SERVER_TIMEOUT
 
-    def policy_options(self, spec: str | None = None) -> dict[str, Any]:
+    def policy_options(self, spec: str | None = None) -> PolicyOptions:
         """LLMPolicy switches for the ablation (the heuristic policy ignores them), for a robot
         driven by `spec`."""
         return {
@@ -365,7 +367,7 @@ class EpisodeConfig(BaseModel):
             "max_tokens": self.max_tokens,
         }
 
-    def client_options(self, spec: str | None = None) -> dict[str, Any]:
+    def client_options(self, spec: str | None = None) -> ClientOptions:
         """OpenAIChatClient settings of a robot driven by `spec`."""
         return {
             "timeout": self.timeout_for(spec),

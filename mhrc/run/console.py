@@ -8,9 +8,8 @@ until every result that tick is known to have (`TickClosed.actions`) has printed
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 from pydantic import BaseModel
 from rich.console import Console
@@ -309,7 +308,9 @@ class ProgressPrinter:
 
 
 def summary_table(
-    done: EpisodeDone, recovery: list[dict[str, Any]] | None = None, lost: list[RobotDetached] | None = None
+    done: EpisodeDone,
+    recovery: Sequence[Mapping[str, object]] | None = None,
+    lost: list[RobotDetached] | None = None,
 ) -> Table:
     """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics").
     `recovery`: a scenario's events as mhrc.analysis.metrics scores them (`--events`), one row of them;
@@ -354,7 +355,7 @@ def lost_robots(lines: Iterable[TraceLine]) -> list[RobotDetached]:
     return list(lost.values())
 
 
-def _recovered(e: dict[str, Any]) -> str:
+def _recovered(e: Mapping[str, object]) -> str:
     where = f"{e['kind']}@{e['tick']}"
     if not e["applied"]:
         return f"{where} skipped"

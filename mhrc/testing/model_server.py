@@ -19,9 +19,12 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeAlias
 
+from mhrc.core.jsontypes import JsonObject, JsonValue
 from mhrc.testing.loopback_http import Answer, Incoming, LoopbackHTTP
 
 __all__ = ["ModelCall", "ModelReply", "Reply", "Script", "ScriptedModelServer", "WHEN_DONE"]
+
+Request: TypeAlias = JsonObject  # a chat-completions request's JSON body, as the client sent it (unchecked)
 
 
 @dataclass(frozen=True)
@@ -65,7 +68,7 @@ class ModelReply:
     finish_reason: str = "stop"
     reasoning: str | None = None
     reasoning_field: str = "reasoning_content"
-    usage: Mapping[str, Any] | bool = True
+    usage: Mapping[str, JsonValue] | bool = True
     stream: Iterable[bytes] | None = None
     stream_interval: float = 0.0
     stall: bool = False
@@ -86,7 +89,7 @@ class ModelCall:
     opened): calls on one connection reused it.
     """
 
-    request: dict[str, Any]
+    request: Request
     headers: dict[str, str]
     path: str
     robot: str | None
@@ -98,7 +101,17 @@ class ModelCall:
 
 
 Reply: TypeAlias = "str | ModelReply"
-Script: TypeAlias = "Sequence[Reply] | Mapping[str, Sequence[Reply]] | Callable[[dict[str, Any]], Reply]"
+Script: TypeAlias = "Sequence[Reply] | Mapping[str, Sequence[Reply]] | Callable[[Request], Reply]"
+
+
+def _contents(request: Mapping[str, JsonValue]) -> list[str]:
+    """The text of each of a request's messages, in order ("" for a message without content; none
+    when the request has no list of messages)."""
+    messages = request.get("messages")
+    if not isinstance(messages, list):
+        return []
+    return [str(m.get("content") or "") if isinstance(m, Mapping) else "" for m in messages]
+
 
 WHEN_DONE = "Analysis: the script is over.\nCommand: wait()"
 
@@ -140,14 +153,14 @@ class ScriptedModelServer:
         self,
         script: Script,
         *,
-        latency: float | Callable[[dict[str, Any]], float] = 0.0,
+        latency: float | Callable[[Request], float] = 0.0,
         when_done: Reply | None = WHEN_DONE,
         keep_alive: bool = False,
     ) -> None:
         self.script = script
         self.latency = latency
         self.when_done = when_done
-        self.requests: list[dict[str, Any]] = []
+        self.requests: list[Request] = []
         self.headers: list[dict[str, str]] = []
         self.paths: list[str] = []
         self.calls: list[ModelCall] = []
@@ -166,28 +179,28 @@ class ScriptedModelServer:
         self._closed = False
 
     @staticmethod
-    def robot_of(request: Mapping[str, Any]) -> str | None:
+    def robot_of(request: Mapping[str, JsonValue]) -> str | None:
         """The robot a request comes from, read from its system prompt ("You are Alice, ...")."""
-        messages = request.get("messages") or []
-        text = str(messages[0].get("content") or "") if messages else ""
+        contents = _contents(request)
+        text = contents[0] if contents else ""
         if not text.startswith("You are "):
             return None
         return text.removeprefix("You are ").split(",")[0].split()[0].strip(".").lower() or None
 
     @staticmethod
-    def step_of(request: Mapping[str, Any]) -> int | None:
+    def step_of(request: Mapping[str, JsonValue]) -> int | None:
         """The step a request's prompt plans, read from its action history (the default prompts
         show no step number, as the paper's): 0 before the robot's first action, else one after
         its latest; None for a prompt without an action history (no_history, your own templates)."""
-        messages = request.get("messages") or []
-        text = str(messages[-1].get("content") or "") if messages else ""
+        contents = _contents(request)
+        text = contents[-1] if contents else ""
         if "Your actions so far" not in text:
             return None
         actions = text.split("Your actions so far", 1)[1]
         latest = re.findall(r"\(latest\) step (\d+):", actions)
         return int(latest[-1]) + 1 if latest else 0
 
-    def requests_of(self, robot: str) -> list[dict[str, Any]]:
+    def requests_of(self, robot: str) -> list[Request]:
         """The recorded requests of one robot, in arrival order."""
         with self._lock:
             return [r for r in self.requests if self.robot_of(r) == robot]
@@ -209,7 +222,7 @@ class ScriptedModelServer:
         self._end(call, answer)
         return answer
 
-    def _begin(self, body: dict[str, Any], headers: dict[str, str], path: str, connection: int = 0) -> ModelCall:
+    def _begin(self, body: Request, headers: dict[str, str], path: str, connection: int = 0) -> ModelCall:
         with self._lock:
             self.requests.append(body)
             self.headers.append(headers)
@@ -230,7 +243,7 @@ class ScriptedModelServer:
             self._seq += 1
             call.ended, call.latency, call.reply = self._seq, answer.delay, answer.reply
 
-    def _next(self, body: dict[str, Any]) -> Reply | None:
+    def _next(self, body: Request) -> Reply | None:
         if isinstance(self.script, Mapping):
             key = self.robot_of(body)
         elif callable(self.script):
@@ -243,7 +256,7 @@ class ScriptedModelServer:
                 return queue.pop(0)
         return self.when_done
 
-    def _answer(self, body: dict[str, Any]) -> _Answer:
+    def _answer(self, body: Request) -> _Answer:
         try:
             reply = self._next(body)
         except Exception as exc:  # a bug in the test's script: answer it, visibly
@@ -277,10 +290,10 @@ class ScriptedModelServer:
         if reply.text is None:  # an error status with no content
             answer.payload = json.dumps({"error": f"scripted HTTP {reply.status}"}).encode()
             return answer
-        message: dict[str, Any] = {"role": "assistant", "content": reply.text}
+        message: dict[str, str] = {"role": "assistant", "content": reply.text}  # and the reasoning, if any
         if reply.reasoning is not None:
             message[reply.reasoning_field] = reply.reasoning
-        completion: dict[str, Any] = {
+        completion: JsonObject = {
             "id": f"chatcmpl-{uuid.uuid4().hex[:12]}",
             "object": "chat.completion",
             "created": int(time.time()),
@@ -288,7 +301,7 @@ class ScriptedModelServer:
             "choices": [{"index": 0, "message": message, "finish_reason": reply.finish_reason}],
         }
         if reply.usage is True:
-            prompt = sum(len(str(m.get("content") or "")) for m in body.get("messages") or [])
+            prompt = sum(len(c) for c in _contents(body))
             completion["usage"] = {
                 "prompt_tokens": max(1, prompt // 4),
                 "completion_tokens": max(1, len(reply.text) // 4),

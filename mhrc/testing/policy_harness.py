@@ -155,7 +155,7 @@ def observation(
     )
     others = [r for r in _STATUS if r != robot] if teammates is None else list(teammates)
     brief, detail = _BRIEFS[robot]
-    values: dict[str, Any] = {
+    values: dict[str, object] = {  # Observation's fields, checked by it with the caller's `fields` over them
         "robot": robot,
         "tick": tick,
         "status": _STATUS[robot].model_copy(update={"holding": holding}),
@@ -173,7 +173,7 @@ def observation(
             for m in messages
         ],
     }
-    return Observation(**(values | fields))
+    return Observation.model_validate(values | fields)
 
 
 def _object(name: str, on: str, where: Mapping[str, FurnitureView]) -> ObjectView:

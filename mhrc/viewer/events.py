@@ -16,16 +16,35 @@ from __future__ import annotations
 
 from bisect import bisect_right
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 from mhrc.core.protocol import ObjectPose, ScenarioEvent, Snapshot
 from mhrc.viewer.frames import Frame
 from mhrc.viewer.load import LoadedTrace
+from mhrc.viewer.scene_map import SceneMap
 
 KINDS = ("relocate", "new_target", "close", "breakdown")
 # each kind's mark, the same on the timeline, the map's legend and the lanes
 GLYPHS = {"relocate": "\u25c6", "new_target": "\u2605", "close": "\u25a0", "breakdown": "\u25b2"}
 NAMES = {"relocate": "moved", "new_target": "added", "close": "closed", "breakdown": "broken down"}
+
+
+class MarkData(TypedDict):
+    """A scenario event as the page's script draws it (`ScenarioMark.as_data`)."""
+
+    index: int
+    event: str
+    tick: int
+    applied: bool
+    skipped: str | None
+    changed: dict[str, str]
+    text: str  # its caption
+    frame: int | None
+    robot: str | None
+    until: int | None
+    at: list[float] | None
+    origin: list[float] | None
+    label: str
 
 
 @dataclass
@@ -52,7 +71,7 @@ class ScenarioMark:
         """`tick 6: someone moved mug from table_3 to tub`: the line the video and the tooltips show."""
         return caption(self.tick, self.text)
 
-    def as_data(self) -> dict[str, Any]:
+    def as_data(self) -> MarkData:
         """What the page's script draws it from."""
         return {
             "index": self.index,
@@ -101,15 +120,12 @@ def _xy(pose: ObjectPose | None) -> tuple[float, float] | None:
     return (pose.x, pose.y) if pose is not None else None
 
 
-def _centre(scene: dict[str, Any] | None, name: str | None) -> tuple[float, float] | None:
-    for f in (scene or {}).get("furniture") or []:
-        if f.get("name") == name:
-            return float(f["x"]), float(f["y"])
-    return None
+def _centre(scene: SceneMap | None, name: str | None) -> tuple[float, float] | None:
+    return scene.centre(name) if scene is not None else None
 
 
 def scenario_marks(
-    trace: LoadedTrace, frames: list[Frame], frames_from: str, scene: dict[str, Any] | None
+    trace: LoadedTrace, frames: list[Frame], frames_from: str, scene: SceneMap | None
 ) -> list[ScenarioMark]:
     """Every scenario event of the trace, in trace order, with its frame and place."""
     snap_rows: list[int] = []
@@ -143,7 +159,7 @@ def scenario_marks(
     return marks
 
 
-def _place(m: ScenarioMark, frames: list[Frame], scene: dict[str, Any] | None) -> None:
+def _place(m: ScenarioMark, frames: list[Frame], scene: SceneMap | None) -> None:
     c = m.changed
     if m.event == "breakdown":
         m.robot = c.get("robot")

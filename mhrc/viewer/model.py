@@ -11,7 +11,6 @@ episode's scenario events, with their frame and place, from mhrc.viewer.events.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from mhrc.core.protocol import (
     Action,
@@ -30,8 +29,8 @@ from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.viewer.events import ScenarioMark, scenario_marks, scenario_name
 from mhrc.viewer.frames import Frame
 from mhrc.viewer.load import LoadedTrace
+from mhrc.viewer.scene_map import SceneMap, scene_map
 from mhrc.viewer.targets import TaskView, task_view
-from mhrc.world.layouts import Layout, get_layout
 from mhrc.world.robots import KINDS, flight_altitude
 
 
@@ -95,52 +94,14 @@ class EpisodeView:
     frames: list[Frame]
     frames_from: str  # "snapshots", "observations" or "none"
     messages: list[MapMessage]
-    scene: dict[str, Any] | None
+    scene: SceneMap | None
     task: TaskView | None = None
     routes: dict[str, list[list[float]]] = field(default_factory=dict)  # goal id -> a navigate's planned route
     events: list[ScenarioMark] = field(default_factory=list)  # a dynamic episode's scenario events (mhrc.viewer.events)
     warnings: list[str] = field(default_factory=list)
 
 
-def scene_map(scene: str, fixtures: dict[str, tuple[float, float]], warnings: list[str]) -> dict[str, Any] | None:
-    """What the map draws of the house: bounds, walls, furniture footprints, goal area, fixtures."""
-    try:
-        layout: Layout = get_layout(scene)
-    except Exception as exc:  # an unknown name or a layout file that is gone: draw what the snapshots show
-        warnings.append(f"scene {scene!r} could not be loaded ({exc}): the house is not drawn")
-        return None
-    furniture = []
-    for f in layout.furniture:
-        item: dict[str, Any] = {
-            "name": f.name,
-            "kind": f.kind,
-            "style": f.style,
-            "x": f.center[0],
-            "y": f.center[1],
-            "sx": f.size[0],
-            "sy": f.size[1],
-            "openable": f.container is not None,
-            "color": list(f.color),
-        }
-        opened = f.open_drawer_footprint()
-        if opened is not None:
-            (cx, cy), (sx, sy) = opened
-            item["open_footprint"] = [cx, cy, sx, sy]
-        furniture.append(item)
-    return {
-        "name": layout.name,
-        "bounds": list(layout.bounds),
-        "walls": [list(w) for w in layout.walls],
-        "furniture": furniture,
-        "bob_table": layout.bob_table,
-        "bob_base": list(layout.bob_base[:2]),
-        "goal_area": list(layout.goal_area),
-        "fixtures": [{"name": n, "x": x, "y": y} for n, (x, y) in sorted(fixtures.items())],
-        "tallest": max((f.size[2] for f in layout.furniture), default=0.0),
-    }
-
-
-def fliers(started: EpisodeStarted | None, scene: dict[str, Any] | None) -> dict[str, float]:
+def fliers(started: EpisodeStarted | None, scene: SceneMap | None) -> dict[str, float]:
     """The robots of the recorded team that fly, and the altitude they fly at in that house (m),
     as the world set it (world/robots.py flight_altitude)."""
     kinds = started.team.kinds if started is not None and started.team is not None else {}
@@ -148,7 +109,7 @@ def fliers(started: EpisodeStarted | None, scene: dict[str, Any] | None) -> dict
     for robot, kind in kinds.items():
         spec = KINDS.get(kind)
         if spec is not None and spec.flies:
-            out[robot] = flight_altitude(spec, scene["tallest"] if scene else 0.0)
+            out[robot] = flight_altitude(spec, scene.tallest if scene else 0.0)
     return out
 
 

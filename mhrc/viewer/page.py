@@ -23,11 +23,13 @@ from dataclasses import dataclass
 from importlib.resources import files
 from typing import Any, TypeVar
 
+from mhrc.analysis.diagnostics import Diagnostics
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.viewer import page_coordination, page_events
 from mhrc.viewer.model import EpisodeView
 from mhrc.viewer.page_lanes import lanes_section, messages_section
 from mhrc.viewer.placement import Box, Request, place
+from mhrc.viewer.scene_map import Piece
 from mhrc.viewer.targets import ObjectFate, TaskView
 from mhrc.viewer.wording import diagnostic_label, partial_success
 from mhrc.viewer.wording import html_text as _e
@@ -57,7 +59,7 @@ def distinct(robots: list[str], named: dict[str, T], palette: list[T]) -> dict[s
 
 def _bounds(view: EpisodeView) -> tuple[float, float, float, float]:
     if view.scene:
-        b = view.scene["bounds"]
+        b = view.scene.bounds
         return float(b[0]) - 0.3, float(b[1]) + 0.3, float(b[2]) - 0.3, float(b[3]) + 0.3
     xs = [p.x for f in view.frames for p in f.robots.values()] + [p.x for f in view.frames for p in f.objects.values()]
     ys = [p.y for f in view.frames for p in f.robots.values()] + [p.y for f in view.frames for p in f.objects.values()]
@@ -229,17 +231,17 @@ def _static_labels(
     def box(cx: float, cy: float, sx: float, sy: float) -> Box:
         return Box(px(cx - sx / 2), py(cy + sy / 2), px(cx + sx / 2), py(cy - sy / 2))
 
-    furniture = [(f, box(f["x"], f["y"], f["sx"], f["sy"])) for f in sc["furniture"]]
-    goal = box(*sc["goal_area"])
+    furniture = [(f, box(f.x, f.y, f.sx, f.sy)) for f in sc.furniture]
+    goal = box(*sc.goal_area)
     soft: list[tuple[Box, float]] = [(b, 1.0) for _, b in furniture] + [(goal, 1.0)]
-    soft += [(box(*wall), 3.0) for wall in sc["walls"]]
-    soft += [(box(fx["x"], fx["y"], 0.16, 0.12), 1.0) for fx in sc["fixtures"]]
+    soft += [(box(*wall), 3.0) for wall in sc.walls]
+    soft += [(box(fx.x, fx.y, 0.16, 0.12), 1.0) for fx in sc.fixtures]
     spots = {(round(o.x, 1), round(o.y, 1)) for f in view.frames for o in f.objects.values()}
     soft += [(Box.centred(px(x), py(y), 14, 14), 3.0) for x, y in spots]  # where objects lie: keep them visible
     stands = {(round(r.x, 1), round(r.y, 1)) for f in view.frames for r in f.robots.values()}
     soft += [(Box.centred(px(x), py(y), 22, 22), 1.0) for x, y in stands]
     requests = [
-        Request(f["name"] + (" ▣" if f["openable"] else ""), "fname", b)
+        Request(f.name + (" ▣" if f.openable else ""), "fname", b)
         for f, b in sorted(furniture, key=lambda fb: (fb[1].x1 - fb[1].x0) * (fb[1].y1 - fb[1].y0))
     ]
     requests.append(Request("goal area", "gname", goal, fonts=(10.0, 8.5), prefer_outside=True))
@@ -275,13 +277,11 @@ class MapFrame:
             f'height="{round(sy * SCALE, 1)}"{extra}/>'
         )
 
-    def piece(self, f: dict[str, Any], cls: str, title: str | None = None) -> str:
-        """A piece of furniture of `scene_map` (mhrc.viewer.model) in its colour, named in `data-name`."""
-        r, g, bl = (int(255 * c) for c in f["color"][:3])
+    def piece(self, f: Piece, cls: str, title: str | None = None) -> str:
+        """A piece of furniture of the map (mhrc.viewer.scene_map) in its colour, named in `data-name`."""
+        r, g, bl = (int(255 * c) for c in f.color[:3])
         inner = f"><title>{_e(title)}</title></rect" if title is not None else ""
-        return self.rect(
-            f["x"], f["y"], f["sx"], f["sy"], cls, f' data-name="{_e(f["name"])}" style="fill:rgb({r},{g},{bl})"{inner}'
-        )
+        return self.rect(f.x, f.y, f.sx, f.sy, cls, f' data-name="{_e(f.name)}" style="fill:rgb({r},{g},{bl})"{inner}')
 
 
 def _map(view: EpisodeView, colors: dict[str, str]) -> str:
@@ -293,20 +293,20 @@ def _map(view: EpisodeView, colors: dict[str, str]) -> str:
     parts: list[str] = []
     sc = view.scene
     if sc:
-        b = sc["bounds"]
+        b = sc.bounds
         parts.append(rect((b[0] + b[1]) / 2, (b[2] + b[3]) / 2, b[1] - b[0], b[3] - b[2], "floor"))
-        for f in sc["furniture"]:
-            if "open_footprint" in f:
-                cx, cy, sx, sy = f["open_footprint"]
-                parts.append(rect(cx, cy, sx, sy, "open-footprint", f' data-for="{_e(f["name"])}"'))
-        for f in sc["furniture"]:
-            cls = "furniture container" if f["openable"] else "furniture"
-            parts.append(frame.piece(f, cls, f"{f['name']}: {f['kind']}"))
-        gx, gy, gsx, gsy = sc["goal_area"]
+        for f in sc.furniture:
+            if f.open_footprint is not None:
+                cx, cy, sx, sy = f.open_footprint
+                parts.append(rect(cx, cy, sx, sy, "open-footprint", f' data-for="{_e(f.name)}"'))
+        for f in sc.furniture:
+            cls = "furniture container" if f.openable else "furniture"
+            parts.append(frame.piece(f, cls, f"{f.name}: {f.kind}"))
+        gx, gy, gsx, gsy = sc.goal_area
         parts.append(rect(gx, gy, gsx, gsy, "goal-area", "><title>goal area</title></rect"))
-        for fx in sc["fixtures"]:
-            parts.append(rect(fx["x"], fx["y"], 0.16, 0.12, "fixture", f"><title>{_e(fx['name'])}</title></rect"))
-        for wx, wy, wsx, wsy in sc["walls"]:
+        for fx in sc.fixtures:
+            parts.append(rect(fx.x, fx.y, 0.16, 0.12, "fixture", f"><title>{_e(fx.name)}</title></rect"))
+        for wx, wy, wsx, wsy in sc.walls:
             parts.append(rect(wx, wy, wsx, wsy, "wall"))
         parts += _static_labels(view, px, py, Box(0.0, 0.0, w, hgt))
     legend = "".join(
@@ -388,13 +388,13 @@ def _diagnostic_value(key: str, value: Any) -> str:
     return value_html(value)
 
 
-def _failures(diagnostics: dict[str, Any] | None, note: str | None) -> str:
+def _failures(diagnostics: Diagnostics | None, note: str | None) -> str:
     """mhrc.analysis.diagnostics' findings with the labels people read (mhrc.analysis.diagnostics.LABELS); the key in each row's title."""
     if diagnostics is None:
         return f'<section id="failures"><h2>Failures</h2><p class="note">{_e(note)}</p></section>'
     rows = "".join(
         f'<tr data-key="{_e(k)}"><th title="{_e(k)}">{_e(diagnostic_label(str(k)))}</th><td>{_diagnostic_value(str(k), v)}</td></tr>'
-        for k, v in diagnostics.items()
+        for k, v in diagnostics.as_dict().items()
     )
     return f'<section id="failures"><h2>Failures</h2><table class="kv diag">{rows}</table></section>'
 
@@ -426,7 +426,7 @@ def _data(view: EpisodeView, colors: dict[str, str]) -> str:
         "routes": view.routes,
         "roles": view.task.roles() if view.task else {},
         "goals": view.task.goals if view.task else {},
-        "bobBase": view.scene["bob_base"] if view.scene else None,
+        "bobBase": list(view.scene.bob_base) if view.scene else None,
     }
     if view.events:
         data["events"] = [m.as_data() for m in view.events]
@@ -435,9 +435,7 @@ def _data(view: EpisodeView, colors: dict[str, str]) -> str:
     return text.replace("<", "\\u003c").replace("\u2028", "\\u2028").replace("\u2029", "\\u2029")
 
 
-def render_page(
-    view: EpisodeView, diagnostics: dict[str, Any] | None = None, diagnostics_note: str | None = None
-) -> str:
+def render_page(view: EpisodeView, diagnostics: Diagnostics | None = None, diagnostics_note: str | None = None) -> str:
     colors = robot_colors(view.robots)
     title = f"mhrc {view.header.task or ''} {view.header.scene or ''} seed {view.header.seed}"
     return f"""<!DOCTYPE html>

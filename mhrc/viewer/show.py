@@ -4,24 +4,20 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-from mhrc.analysis.diagnostics import diagnose
+from mhrc.analysis.diagnostics import Diagnostics, diagnose
 from mhrc.core.records import TraceLine
 from mhrc.viewer.load import LoadedTrace, load_trace, resolve
 from mhrc.viewer.model import build_view
 from mhrc.viewer.page import render_page
 
 
-def diagnostics_for(lines: Sequence[TraceLine]) -> tuple[dict[str, Any] | None, str | None]:
+def diagnostics_for(lines: Sequence[TraceLine]) -> tuple[Diagnostics | None, str | None]:
     """mhrc.analysis.diagnostics' findings for the failure panel, or why there are none."""
     try:
-        result = diagnose(lines).as_dict()
+        return diagnose(lines), None
     except Exception as exc:  # a diagnosis that fails must not cost the user the report
         return None, f"the failure diagnosis failed on this trace: {type(exc).__name__}: {exc}"
-    if not isinstance(result, dict):
-        return None, f"the failure diagnosis returned {type(result).__name__}, not a dict"
-    return result, None
 
 
 def default_out(path: str | Path) -> Path:
@@ -37,7 +33,7 @@ def write_report(path: str | Path, out: str | Path | None = None) -> tuple[Path,
     return target, render_report(trace, target, *diagnostics_for(trace.records))
 
 
-def render_report(trace: LoadedTrace, target: Path, diag: dict[str, Any] | None, note: str | None = None) -> list[str]:
+def render_report(trace: LoadedTrace, target: Path, diag: Diagnostics | None, note: str | None = None) -> list[str]:
     """Write the report of a trace already read, with its diagnostics already computed (`mhrc eval`
     has both); returns the warnings."""
     view = build_view(trace)
