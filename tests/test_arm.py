@@ -133,3 +133,44 @@ def test_a_slow_machine_plans_what_a_fast_one_does(planner: ArmPlanner) -> None:
         del planner.valid
     assert slowed.path is not None and slowed.checks == fast.checks
     assert all(np.array_equal(a, b) for a, b in zip(fast.path, slowed.path))
+
+
+def test_the_shadow_panda_collides_as_pybullet_datas_does() -> None:
+    """The planning client loads panda.urdf without its visual meshes (7x faster): the same
+    collision shapes, so the same contacts in every configuration, and the same kinematics;
+    set_joints (one call for the seven joints) leaves the state a reset per joint left: the same
+    links, joints and contacts (listed in another order now and then; `valid` asks only whether
+    there is one)."""
+    import pybullet_data
+
+    from mhrc.world.arm import ARM_JOINTS, set_joints
+    from mhrc.world.quiet import pybullet as p
+
+    pl = ArmPlanner([], seed=0)
+    clients = [p.connect(p.DIRECT), p.connect(p.DIRECT)]
+    try:
+        urdfs = [pl.panda, pybullet_data.getDataPath() + "/franka_panda/panda.urdf"]
+        arms = [p.loadURDF(u, useFixedBase=True, physicsClientId=c) for u, c in zip(urdfs, clients)]
+        for c in clients:
+            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=(0.2, 0.2, 0.2), physicsClientId=c)
+            p.createMultiBody(0, shape, -1, (0.45, -0.3, 0.3), physicsClientId=c)
+        rng = np.random.default_rng(0)
+        touching = 0
+        for _ in range(300):
+            q = rng.uniform(LOWER, UPPER)
+            set_joints(clients[0], arms[0], q)
+            for j in ARM_JOINTS:  # one joint at a time, as before set_joints
+                p.resetJointState(arms[1], j, float(q[j]), physicsClientId=clients[1])
+            seen = []
+            for c, body in zip(clients, arms):
+                p.performCollisionDetection(physicsClientId=c)
+                contacts = sorted(p.getContactPoints(bodyA=body, physicsClientId=c))  # in another order, now and then
+                links = [p.getLinkState(body, k, computeForwardKinematics=True, physicsClientId=c) for k in range(12)]
+                seen.append((contacts, links, p.getJointStates(body, list(ARM_JOINTS), physicsClientId=c)))
+            assert seen[0] == seen[1]
+            touching += bool(seen[0][0])
+        assert 30 < touching < 270  # both kinds of configuration were compared
+    finally:
+        for c in clients:
+            p.disconnect(c)
+        pl.close()
