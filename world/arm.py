@@ -191,8 +191,8 @@ class ArmPlanner:
         best, collided = math.inf, False
         for k in range(restarts):
             q = np.array(seed_q if k == 0 else self.rng.uniform(LOWER, UPPER), dtype=float)
+            self._set(q)  # later rounds start where fk(q) left the arm
             for _ in range(3):
-                self._set(q)
                 sol = p.calculateInverseKinematics(
                     self.arm,
                     EE_LINK,
@@ -279,8 +279,10 @@ class ArmPlanner:
 
 
 def set_joints(cid: int, body: int, q: np.ndarray) -> None:
-    """A Panda's seven arm joints at `q`, still: one call, the state that a resetJointState per joint leaves."""
-    p.resetJointStatesMultiDof(body, ARM_JOINTS, [[float(v)] for v in q[:7]], _STILL, physicsClientId=cid)
+    """A Panda's seven arm joints at `q`, still: one call, the state that a resetJointState per joint leaves.
+    For the planning client only: contacts come out the same but listed in another order now and
+    then, which would not matter to `valid` but might to the live world's physics (its contact solver)."""
+    p.resetJointStatesMultiDof(body, ARM_JOINTS, np.reshape(q[:7], (7, 1)).tolist(), _STILL, physicsClientId=cid)
 
 
 def straight(a: np.ndarray, b: np.ndarray, n: int) -> list[np.ndarray]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import heapq
 import math
 from dataclasses import dataclass
@@ -129,10 +130,18 @@ def astar(
     return smooth(grid, pts) if smoothed else pts
 
 
+@functools.lru_cache(maxsize=256)
+def _fractions(n: int) -> np.ndarray:
+    """np.linspace(0, 1, n), read-only (shared by every call)."""
+    t = np.linspace(0.0, 1.0, n)
+    t.flags.writeable = False
+    return t
+
+
 def line_free(grid: Grid, a: tuple[float, float], b: tuple[float, float]) -> bool:
     """Whether the straight segment a-b crosses only free cells (sampled at half a cell)."""
     n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / (grid.res * 0.5)) + 1)
-    t = np.linspace(0.0, 1.0, n)
+    t = _fractions(n)
     # Grid.free of every sample at once: the same float operations, truncated toward zero as int() does
     i = ((a[0] + (b[0] - a[0]) * t - grid.x0) / grid.res).astype(np.int64)
     j = ((a[1] + (b[1] - a[1]) * t - grid.y0) / grid.res).astype(np.int64)

@@ -19,7 +19,7 @@ import pybullet_data
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from . import assets
-from .arm import EE_LINK, FINGERS, HOME, set_joints
+from .arm import EE_LINK, FINGERS, HOME
 from .assets import AssetDir
 
 
@@ -165,7 +165,8 @@ class RobotBody:
 
     def set_arm(self, q: np.ndarray) -> None:
         self.q = np.array(q, dtype=float)
-        set_joints(self.cid, self.arm, self.q)
+        for j in range(7):
+            p.resetJointState(self.arm, j, float(self.q[j]), physicsClientId=self.cid)
         self._carry()
 
     def run(self, path: list[np.ndarray], joint_speed: float = 1.0) -> float:
