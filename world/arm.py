@@ -279,9 +279,9 @@ class ArmPlanner:
 
 
 def set_joints(cid: int, body: int, q: np.ndarray) -> None:
-    """A Panda's seven arm joints at `q`, still: one call, the state that a resetJointState per joint leaves.
-    For the planning client only: contacts come out the same but listed in another order now and
-    then, which would not matter to `valid` but might to the live world's physics (its contact solver)."""
+    """A Panda's seven arm joints at `q`, still: one call, the state that a resetJointState per joint
+    leaves (the same links and contacts; the planning client lists contacts in another order now and
+    then, which `valid` ignores; the live world's settling came out bit for bit the same)."""
     p.resetJointStatesMultiDof(body, ARM_JOINTS, np.reshape(q[:7], (7, 1)).tolist(), _STILL, physicsClientId=cid)
 
 
