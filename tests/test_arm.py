@@ -9,9 +9,11 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from mhrc.core.protocol import Action, SkillOutcome
 from mhrc.world.arm import HOME, LOWER, UPPER, ArmPlanner, straight
 from mhrc.world.assets import AssetDir
 from mhrc.world.scene import LAYOUTS, StaticBody, scene_statics
+from mhrc.world.sim import Sim
 
 BASE = (0.0, 0.0, 0.7)
 
@@ -133,3 +135,107 @@ def test_a_slow_machine_plans_what_a_fast_one_does(planner: ArmPlanner) -> None:
         del planner.valid
     assert slowed.path is not None and slowed.checks == fast.checks
     assert all(np.array_equal(a, b) for a, b in zip(fast.path, slowed.path))
+
+
+def test_the_shadow_panda_collides_as_pybullet_datas_does() -> None:
+    """The planning client loads panda.urdf without its visual meshes (7x faster): the same
+    collision shapes, so the same contacts in every configuration, and the same kinematics;
+    set_joints (one call for the seven joints) leaves the state a reset per joint left: the same
+    links, joints and contacts (listed in another order now and then; `valid` asks only whether
+    there is one)."""
+    import pybullet_data
+
+    from mhrc.world.arm import ARM_JOINTS, set_joints
+    from mhrc.world.quiet import pybullet as p
+
+    pl = ArmPlanner([], seed=0)
+    clients = [p.connect(p.DIRECT), p.connect(p.DIRECT)]
+    try:
+        urdfs = [pl.panda, pybullet_data.getDataPath() + "/franka_panda/panda.urdf"]
+        arms = [p.loadURDF(u, useFixedBase=True, physicsClientId=c) for u, c in zip(urdfs, clients)]
+        for c in clients:
+            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=(0.2, 0.2, 0.2), physicsClientId=c)
+            p.createMultiBody(0, shape, -1, (0.45, -0.3, 0.3), physicsClientId=c)
+        rng = np.random.default_rng(0)
+        touching = 0
+        for _ in range(300):
+            q = rng.uniform(LOWER, UPPER)
+            set_joints(clients[0], arms[0], q)
+            for j in ARM_JOINTS:  # one joint at a time, as before set_joints
+                p.resetJointState(arms[1], j, float(q[j]), physicsClientId=clients[1])
+            seen = []
+            for c, body in zip(clients, arms):
+                p.performCollisionDetection(physicsClientId=c)
+                contacts = sorted(p.getContactPoints(bodyA=body, physicsClientId=c))  # in another order, now and then
+                links = [p.getLinkState(body, k, computeForwardKinematics=True, physicsClientId=c) for k in range(12)]
+                seen.append((contacts, links, p.getJointStates(body, list(ARM_JOINTS), physicsClientId=c)))
+            assert seen[0] == seen[1]
+            touching += bool(seen[0][0])
+        assert 30 < touching < 270  # both kinds of configuration were compared
+    finally:
+        for c in clients:
+            p.disconnect(c)
+        pl.close()
+
+
+def _world_state(sim: Sim) -> list[object]:
+    """Every body's pose and every joint's position and velocity, as PyBullet holds them."""
+    from mhrc.world.quiet import pybullet as p
+
+    out: list[object] = []
+    for k in range(p.getNumBodies(physicsClientId=sim.cid)):
+        body = p.getBodyUniqueId(k, physicsClientId=sim.cid)
+        out.append(p.getBasePositionAndOrientation(body, physicsClientId=sim.cid))
+        joints = list(range(p.getNumJoints(body, physicsClientId=sim.cid)))
+        out.append([s[:2] for s in p.getJointStates(body, joints, physicsClientId=sim.cid)] if joints else [])
+    return out
+
+
+def _play(monkeypatch: pytest.MonkeyPatch, every_waypoint: bool) -> list[tuple[str, list[object]]]:
+    """An episode of the team plan (motion noise on: releases slip and settle), the world after each skill."""
+    from itertools import pairwise
+
+    from mhrc.world.quiet import pybullet as p
+    from mhrc.world.robots import RobotBody
+    from mhrc.world.team_plan import play_team_plan
+
+    if every_waypoint:  # as RobotBody.run was: every waypoint, a reset per joint
+
+        def set_arm(self: RobotBody, q: np.ndarray) -> None:
+            self.q = np.array(q, dtype=float)
+            for j in range(7):
+                p.resetJointState(self.arm, j, float(self.q[j]), physicsClientId=self.cid)
+            self._carry()
+
+        def run(self: RobotBody, path: list[np.ndarray], joint_speed: float = 1.0) -> float:
+            for q in path:
+                self.set_arm(q)
+            return sum(float(np.max(np.abs(b - a))) for a, b in pairwise(path)) / joint_speed
+
+        monkeypatch.setattr(RobotBody, "set_arm", set_arm)
+        monkeypatch.setattr(RobotBody, "run", run)
+    sim = Sim(task="make_sandwich", scene="kitchen", seed=3, n_objects=4)
+    seen: list[tuple[str, list[object]]] = []
+    try:
+
+        def act(robot: str, action: Action) -> SkillOutcome:
+            out = sim.execute(robot, action)
+            seen.append((out.model_dump_json(), _world_state(sim)))
+            return out
+
+        play_team_plan(sim, act)
+    finally:
+        sim.close()
+        monkeypatch.undo()
+    return seen
+
+
+@pytest.mark.slow
+def test_an_arm_set_to_its_paths_end_leaves_the_world_every_waypoint_left(monkeypatch: pytest.MonkeyPatch) -> None:
+    """RobotBody.run sets only a path's end, its seven joints in one call: after every skill of an
+    episode (releases that slip and settle under physics included) every body and joint of the
+    live world is where, and moves as, setting each waypoint a joint at a time left it."""
+    before = _play(monkeypatch, every_waypoint=True)
+    now = _play(monkeypatch, every_waypoint=False)
+    assert len(before) > 20
+    assert now == before

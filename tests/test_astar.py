@@ -112,3 +112,81 @@ def test_every_stand_pose_is_free_and_reachable_from_every_start(scene: str) -> 
             for i, (x, y, _) in enumerate(f.stand_poses):
                 assert grid.free(x, y), f"{f.name} stand pose {i} is on an obstacle"
                 assert astar(grid, start[:2], (x, y)) is not None, f"{robot} cannot reach {f.name} pose {i}"
+
+
+def _astar_by_pairs(
+    grid: Grid, start: tuple[float, float], goal: tuple[float, float]
+) -> list[tuple[float, float]] | None:
+    """The search as it was written before it ran on flat indices: over (i, j) pairs, bounds checked."""
+    s, g = grid.cell(*start), grid.cell(*goal)
+    b = grid.blocked
+    if s == g:
+        return [start, goal]
+    openq: list[tuple[float, float, tuple[int, int]]] = [(0.0, 0.0, s)]
+    came: dict[tuple[int, int], tuple[int, int]] = {}
+    cost = {s: 0.0}
+    steps = [(1, 0, 1.0), (-1, 0, 1.0), (0, 1, 1.0), (0, -1, 1.0)]
+    steps += [(1, 1, SQRT2), (1, -1, SQRT2), (-1, 1, SQRT2), (-1, -1, SQRT2)]
+    nx, ny = b.shape
+    while openq:
+        _, c, cur = heapq.heappop(openq)
+        if cur == g:
+            break
+        if c > cost.get(cur, math.inf):
+            continue
+        i, j = cur
+        for di, dj, w in steps:
+            ni, nj = i + di, j + dj
+            if not (0 <= ni < nx and 0 <= nj < ny) or b[ni, nj]:
+                continue
+            if di and dj and (b[i + di, j] or b[i, j + dj]):
+                continue
+            nc = c + w
+            if nc < cost.get((ni, nj), math.inf):
+                cost[(ni, nj)] = nc
+                came[(ni, nj)] = cur
+                dx, dy = abs(ni - g[0]), abs(nj - g[1])
+                h = (dx + dy) + (SQRT2 - 2) * min(dx, dy)  # added to nc after: (nc + dx + dy) + ... rounds otherwise
+                heapq.heappush(openq, (nc + h, nc, (ni, nj)))
+    if g not in came:
+        return None
+    cells = [g]
+    while cells[-1] != s:
+        cells.append(came[cells[-1]])
+    cells.reverse()
+    return [start] + [grid.center(*c) for c in cells[1:-1]] + [goal]
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_same_path_as_the_search_over_cell_pairs(seed: int) -> None:
+    """Ties included: many equally short paths cross an open grid, and the one chosen decides
+    where a robot drives (and so an episode's rows)."""
+    rng = np.random.default_rng(seed)
+    grid = Grid(-1.0, 2.0, 0.05, rng.random((40, 31)) < (0.05 + 0.05 * seed))
+    pts = grid.x0 + rng.random((12, 2)) * np.array(grid.blocked.shape) * grid.res
+    for a, b in zip(pts[:6], pts[6:]):
+        start = (float(a[0]), float(a[1] - grid.x0 + grid.y0))
+        goal = (float(b[0]), float(b[1] - grid.x0 + grid.y0))
+        want = _astar_by_pairs(grid, start, goal)
+        assert astar(grid, start, goal, smoothed=False) == want
+        assert astar(grid, start, goal) == (None if want is None else smooth(grid, want))
+
+
+@pytest.mark.parametrize("scene", sorted(LAYOUTS))
+def test_the_same_paths_in_the_layouts(scene: str) -> None:
+    lay = LAYOUTS[scene]
+    grid = occupancy(lay, 0.3)
+    for start in lay.starts.values():
+        for f in lay.furniture:
+            for x, y, _ in f.stand_poses:
+                assert astar(grid, start[:2], (x, y), smoothed=False) == _astar_by_pairs(grid, start[:2], (x, y))
+
+
+def test_line_free_samples_as_grid_free_does() -> None:
+    rng = np.random.default_rng(3)
+    grid = Grid(0.0, 0.0, 0.05, rng.random((30, 30)) < 0.02)
+    for _ in range(300):
+        a, b = tuple(rng.uniform(-0.2, 1.7, 2)), tuple(rng.uniform(-0.2, 1.7, 2))
+        n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / (grid.res * 0.5)) + 1)
+        want = all(grid.free(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t) for t in np.linspace(0.0, 1.0, n))
+        assert line_free(grid, a, b) == want

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import heapq
 import math
 from dataclasses import dataclass
@@ -63,60 +64,91 @@ def astar(
     """Shortest 8-connected path between two free points (cell centres, ends exact), or None.
 
     With `smoothed`, waypoints whose neighbours see each other in a straight line are dropped.
+
+    The search runs on flat indices into the grid padded with a blocked border (no bounds checks),
+    with the octile heuristic of every cell computed at once in numpy. A flat index orders cells as
+    their (i, j) pairs do and every cost is the same sum, so it expands the cells, breaks ties and
+    returns the path exactly as the search over (i, j) pairs did before it.
     """
     s, g = grid.cell(*start), grid.cell(*goal)
-    blocked = grid.blocked
     if s == g:
         return [start, goal]
-    openq: list[tuple[float, float, tuple[int, int]]] = [(0.0, 0.0, s)]
-    came: dict[tuple[int, int], tuple[int, int]] = {}
-    cost = {s: 0.0}
+    nx, ny = grid.blocked.shape
+    if not (0 <= s[0] < nx and 0 <= s[1] < ny):
+        return None  # a start off the grid has no path
+    w = ny + 2  # a padded row
+    blocked: list[bool] = np.pad(grid.blocked, 1, constant_values=True).ravel().tolist()
     gi, gj = g
+    dx = np.abs(np.arange(-1, nx + 1) - gi)[:, None]
+    dy = np.abs(np.arange(-1, ny + 1) - gj)[None, :]
+    heuristic: list[float] = ((dx + dy) + (SQRT2 - 2) * np.minimum(dx, dy)).ravel().tolist()
+    # (flat offset, cost, the two side cells a diagonal step must not cut between)
     steps = [
-        (1, 0, 1.0),
-        (-1, 0, 1.0),
-        (0, 1, 1.0),
-        (0, -1, 1.0),
-        (1, 1, SQRT2),
-        (1, -1, SQRT2),
-        (-1, 1, SQRT2),
-        (-1, -1, SQRT2),
+        (w, 1.0, 0, 0),
+        (-w, 1.0, 0, 0),
+        (1, 1.0, 0, 0),
+        (-1, 1.0, 0, 0),
+        (w + 1, SQRT2, w, 1),
+        (w - 1, SQRT2, w, -1),
+        (-w + 1, SQRT2, -w, 1),
+        (-w - 1, SQRT2, -w, -1),
     ]
-    nx, ny = blocked.shape
+    fs = (s[0] + 1) * w + s[1] + 1
+    fg = (gi + 1) * w + gj + 1
+    if not (0 <= gi < nx and 0 <= gj < ny) or blocked[fg]:
+        return None  # never reached: the search would only have exhausted every cell first
+    inf = math.inf
+    cost = [inf] * len(blocked)
+    came = [-1] * len(blocked)
+    cost[fs] = 0.0
+    openq: list[tuple[float, float, int]] = [(0.0, 0.0, fs)]
+    pop, push = heapq.heappop, heapq.heappush
     while openq:
-        _, c, cur = heapq.heappop(openq)
-        if cur == g:
+        _, c, cur = pop(openq)
+        if cur == fg:
             break
-        if c > cost.get(cur, math.inf):
+        if c > cost[cur]:
             continue
-        i, j = cur
-        for di, dj, w in steps:
-            ni, nj = i + di, j + dj
-            if not (0 <= ni < nx and 0 <= nj < ny) or blocked[ni, nj]:
+        for d, wt, side_a, side_b in steps:
+            n = cur + d
+            if blocked[n]:
                 continue
-            if di and dj and (blocked[i + di, j] or blocked[i, j + dj]):
+            if side_a and (blocked[cur + side_a] or blocked[cur + side_b]):
                 continue  # no corner cutting
-            nc = c + w
-            if nc < cost.get((ni, nj), math.inf):
-                cost[(ni, nj)] = nc
-                came[(ni, nj)] = cur
-                dx, dy = abs(ni - gi), abs(nj - gj)
-                h = (dx + dy) + (SQRT2 - 2) * min(dx, dy)
-                heapq.heappush(openq, (nc + h, nc, (ni, nj)))
-    if g not in came:
+            nc = c + wt
+            if nc < cost[n]:
+                cost[n] = nc
+                came[n] = cur
+                push(openq, (nc + heuristic[n], nc, n))
+    if came[fg] < 0:
         return None
-    cells = [g]
-    while cells[-1] != s:
+    cells = [fg]
+    while cells[-1] != fs:
         cells.append(came[cells[-1]])
     cells.reverse()
-    pts = [start] + [grid.center(*c) for c in cells[1:-1]] + [goal]
+    pts = [start] + [grid.center(c // w - 1, c % w - 1) for c in cells[1:-1]] + [goal]
     return smooth(grid, pts) if smoothed else pts
+
+
+@functools.lru_cache(maxsize=256)
+def _fractions(n: int) -> np.ndarray:
+    """np.linspace(0, 1, n), read-only (shared by every call)."""
+    t = np.linspace(0.0, 1.0, n)
+    t.flags.writeable = False
+    return t
 
 
 def line_free(grid: Grid, a: tuple[float, float], b: tuple[float, float]) -> bool:
     """Whether the straight segment a-b crosses only free cells (sampled at half a cell)."""
     n = max(2, int(math.hypot(b[0] - a[0], b[1] - a[1]) / (grid.res * 0.5)) + 1)
-    return all(grid.free(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t) for t in np.linspace(0.0, 1.0, n))
+    t = _fractions(n)
+    # Grid.free of every sample at once: the same float operations, truncated toward zero as int() does
+    i = ((a[0] + (b[0] - a[0]) * t - grid.x0) / grid.res).astype(np.int64)
+    j = ((a[1] + (b[1] - a[1]) * t - grid.y0) / grid.res).astype(np.int64)
+    nx, ny = grid.blocked.shape
+    if i.min() < 0 or j.min() < 0 or i.max() >= nx or j.max() >= ny:
+        return False
+    return not grid.blocked[i, j].any()
 
 
 def smooth(grid: Grid, pts: list[tuple[float, float]]) -> list[tuple[float, float]]:

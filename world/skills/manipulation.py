@@ -100,13 +100,15 @@ def free_spots(
     out: list[tuple[float, float, float]] = []
     for yaw in (0.0, math.pi / 2):
         hx, hy = half_extent(held.kind, yaw)
-        for x in np.arange(x0 + hx, x1 - hx + 1e-9, 0.02):
-            for y in np.arange(y0 + hy, y1 - hy + 1e-9, 0.02):
-                c = (round(float(x), 4), round(float(y), 4))
-                if math.hypot(c[0] - center[0], c[1] - center[1]) > radius:
+        xs = [round(float(x), 4) for x in np.arange(x0 + hx, x1 - hx + 1e-9, 0.02)]
+        ys = [round(float(y), 4) for y in np.arange(y0 + hy, y1 - hy + 1e-9, 0.02)]
+        clear = _clear(xs, ys, (hx, hy), boxes)  # [x, y]: the spot overlaps no box
+        for i, cx_ in enumerate(xs):
+            for j, cy_ in enumerate(ys):
+                if radius < math.inf and math.hypot(cx_ - center[0], cy_ - center[1]) > radius:
                     continue
-                if not any(_overlaps(c, (hx, hy), b, h) for b, h in boxes):
-                    out.append((c[0], c[1], yaw))
+                if clear[i][j]:
+                    out.append((cx_, cy_, yaw))
     if fx is not None and fx.rim:
         # pack a tray tightly: keep what it holds within the smallest rectangle from its far corner
         inside = [b for b in boxes if fx.contains_xy(*b[0])]
@@ -125,6 +127,24 @@ def free_spots(
 
 def _overlaps(a: tuple[float, float], ha: tuple[float, float], b: tuple[float, float], hb: tuple[float, float]) -> bool:
     return abs(a[0] - b[0]) < ha[0] + hb[0] and abs(a[1] - b[1]) < ha[1] + hb[1]
+
+
+def _clear(
+    xs: list[float],
+    ys: list[float],
+    half: tuple[float, float],
+    boxes: list[tuple[tuple[float, float], tuple[float, float]]],
+) -> list[list[bool]]:
+    """For every spot (x, y) of xs x ys, whether a box of `half` extents there overlaps none of
+    `boxes`: `_overlaps` for the whole grid of spots at once (the same comparisons, per axis)."""
+    if not boxes:
+        return [[True] * len(ys) for _ in xs]
+    centers = np.array([b for b, _ in boxes])
+    halves = np.array([h for _, h in boxes])
+    near_x = np.abs(np.array(xs)[None, :] - centers[:, :1]) < half[0] + halves[:, :1]  # [box, x]
+    near_y = np.abs(np.array(ys)[None, :] - centers[:, 1:]) < half[1] + halves[:, 1:]  # [box, y]
+    hit = (near_x[:, :, None] & near_y[:, None, :]).any(axis=0)
+    return (~hit).tolist()  # type: ignore[no-any-return]
 
 
 def tool_yaw_for(r: RobotBody, object_yaw: float) -> float:
