@@ -20,7 +20,7 @@ import re
 from dataclasses import dataclass
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from mhrc.agents.llm import DEFAULT_MAX_TOKENS
 from mhrc.analysis.values import MAX_COUNT
@@ -92,6 +92,16 @@ class EvalIdentity(BaseModel):
     scenario: str | None = None  # the scenario file's sha256
     teams: tuple[str, ...] = (team_identity(PAPER_TEAM),)  # team_identity of each team, sorted
     protocols: tuple[str, ...] = (DEFAULT_PROTOCOL,)  # the coordination protocols of the grid, sorted
+
+    @field_validator("protocols")
+    @classmethod
+    def _protocols(cls, v: tuple[str, ...]) -> tuple[str, ...]:
+        """Registered protocols only: a manifest naming another is no manifest of an evaluation."""
+        from mhrc.agents.protocols import PROTOCOLS
+
+        if unknown := [p for p in v if p not in PROTOCOLS]:
+            raise ValueError(f"unknown protocol {unknown[0]!r} (the protocols: {', '.join(PROTOCOLS)})")
+        return v
 
 
 # the option each identity field comes from, where its name is not the field's
