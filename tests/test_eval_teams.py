@@ -330,7 +330,7 @@ def test_the_papers_protocol_keeps_its_keys_and_the_others_are_prefixed() -> Non
     [
         ({"protocols": ("nope",)}, "--protocol: unknown protocol 'nope'", None),
         ({"protocols": ("leader", "leader")}, "--protocol: 'leader' is given twice", None),
-        ({"protocols": ()}, "--protocol must each name at least one value", None),
+        ({"protocols": ()}, "--protocol must name at least one protocol", None),
         (
             {"protocols": ("mhrc", "leader"), "llm": "openai:m", "base_url": "http://127.0.0.1:9/v1"},
             "protocol 'leader' has no LLM form yet",

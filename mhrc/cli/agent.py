@@ -58,6 +58,7 @@ from mhrc.core.security import Credentials, SecurityError
 @LOG_LEVEL
 @click.option(
     "--credentials",
+    "credential_files",  # not EpisodeConfig's credentials (a run's directory, or one file)
     type=click.Path(dir_okay=False, path_type=Path),
     multiple=True,
     envvar="MHRC_CREDENTIALS",
@@ -72,7 +73,7 @@ def agent(
     run: str | None,
     attach_timeout: float,
     log_level: str,
-    credentials: tuple[Path, ...],
+    credential_files: tuple[Path, ...],
     insecure: bool,
     **values: Any,
 ) -> None:
@@ -81,7 +82,7 @@ def agent(
     from mhrc.run.attach import attach_agent
 
     logs.configure(log_level)
-    logins = [load_credentials(path, insecure, connect) for path in credentials] or [
+    logins = [load_credentials(path, insecure, connect) for path in credential_files] or [
         load_credentials(None, insecure, connect)
     ]
     cfg = episode_config(**values)

@@ -248,8 +248,10 @@ class EvalSpec(BaseModel):
             raise ConfigError(f"--repeats: must be at least 1 (got {self.repeats})")
         if self.trials < 1:
             raise ConfigError(f"--trials: must be at least 1 (got {self.trials})")
-        if not (self.tasks and self.scenes and self.objects and self.teams and self.protocols):
-            raise ConfigError("--tasks, --scenes, --objects, --team and --protocol must each name at least one value")
+        if not (self.tasks and self.scenes and self.objects and self.teams):
+            raise ConfigError("--tasks, --scenes, --objects and --team must each name at least one value")
+        if not self.protocols:
+            raise ConfigError("--protocol must name at least one protocol")
         self._check_teams()
         self._check_protocols()
         from mhrc.run.coordinated import check_seating
