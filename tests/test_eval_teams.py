@@ -403,3 +403,11 @@ def test_a_real_grid_of_two_protocols(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="holds another evaluation: --protocol was"):
         asyncio.run(evaluate(EvalSpec(**TINY), out, resume=True))  # type: ignore[arg-type]
     assert asyncio.run(evaluate(spec, out, resume=True, workers=1)) == list(typed.values())
+
+
+def test_resume_names_the_protocols_that_differ() -> None:
+    from mhrc.eval.resume import differences
+
+    before, now = EvalSpec(**TINY), EvalSpec(**TINY, protocols=("mhrc", "leader"))  # type: ignore[arg-type]
+    assert differences(before, now, {"protocols"}) == ["--protocol was mhrc, now mhrc,leader"]
+    assert differences(before, before, {"protocols"}) == []
