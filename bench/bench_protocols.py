@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import dataclasses
 import json
 import statistics
 import tempfile
@@ -64,14 +63,13 @@ async def cell(protocol: str, team: TeamSpec, trials: int, workers: int, schedul
         objects=PAPER_OBJECTS,
         trials=trials,
         teams=(team,),
+        protocols=(protocol,),  # the evaluation's own axis: every row records it
         schedule=schedule,
     )
-    plan = spec.validate()
-    jobs = tuple(j.model_copy(update={"config": j.config.model_copy(update={"protocol": protocol})}) for j in plan.jobs)
-    plan = dataclasses.replace(plan, jobs=jobs)
     t0 = time.perf_counter()
-    rows = await evaluate(plan, tmp / f"{protocol}-{team.name}", workers=workers)
-    return _row(rows, time.perf_counter() - t0)
+    rows = await evaluate(spec, tmp / f"{protocol}-{team.name}", workers=workers)
+    assert {r.settings.protocol for r in rows} <= {protocol}
+    return {"protocol": protocol, "team": team.name, **_row(rows, time.perf_counter() - t0)}
 
 
 def main() -> None:

@@ -160,6 +160,55 @@ def test_an_eval_out_that_cannot_be_created_is_refused_before_anything_starts(tm
     assert list(tmp_path.iterdir()) == []
 
 
+# ------------------------------------------------------------------------- --protocol (issue 45)
+NO_SERVER = ("--llm", "llamacpp:m", "--base-url", "http://127.0.0.1:9/v1")  # a spec that needs no key
+
+
+@pytest.mark.parametrize(
+    ("args", "option", "said"),
+    [
+        (["up", "--protocol", "leader", *NO_SERVER], "--protocol", "has no LLM form yet"),
+        (["up", "--processes", "--protocol", "centralized", "--external", "bob"], "--external", "none can be external"),
+        (["play", "--robot", "bob", "--no-browser", "--protocol", "centralized"], "--protocol", "cannot leave bob"),
+        (["eval", "--protocol", "mhrc", "--protocol", "leader", *NO_SERVER], "--protocol", "no LLM form"),
+        (
+            ["agent", "--insecure", "--connect", "tcp/127.0.0.1:9", "--protocol", "centralized", "--robot", "alice"],
+            "--protocol",
+            "it was not given bob, david",
+        ),
+        (
+            ["agent", "--insecure", "--connect", "tcp/127.0.0.1:9", "--robot", "alice", "--robot", "bob"],
+            "--robot",
+            "one robot per agent under protocol 'mhrc'",
+        ),
+    ],
+    ids=["no-llm-form", "external", "play", "eval", "planner-partial", "two-robots"],  # unknown names: test_cli_light
+)
+def test_a_protocol_that_cannot_run_is_refused_before_anything_starts(
+    tmp_path: Path, args: list[str], option: str, said: str
+) -> None:
+    result = _mhrc(*args, cwd=tmp_path)
+    assert said in _refused(result, option)
+    assert list(tmp_path.iterdir()) == []  # no runs/, no credentials, no trace
+
+
+def test_a_planner_without_a_robots_credentials_is_refused_before_it_connects(tmp_path: Path) -> None:
+    """On the secured bus the centralized planner acts only for the robots whose logins it was
+    given: a robot of the team without one is one line naming it, before anything connects."""
+    creds = security.make_run_credentials("r1", ROBOTS, tmp_path / "creds")
+    cwd = tmp_path / "here"
+    cwd.mkdir()
+    planner = ["agent", "--connect", "tls/127.0.0.1:9", "--protocol", "centralized"]
+    planner += [x for r in ROBOTS for x in ("--robot", r)]
+    result = _mhrc(*planner, "--credentials", str(creds["alice"]), "--credentials", str(creds["bob"]), cwd=cwd)
+    assert "no credentials for david" in _refused(result, "--credentials")
+    result = _mhrc(
+        *planner, *(x for r in ("alice", "bob", "david", "observer") for x in ("--credentials", str(creds[r]))), cwd=cwd
+    )
+    assert "credentials of 'observer', not a robot this planner drives" in _refused(result, "--credentials")
+    assert list(cwd.iterdir()) == []
+
+
 # ------------------------------------------------------------------------- a hostile robot on the wire (issue 38)
 class Mallory:
     """Alice's login in hostile hands: attaches alice, puts raw payloads on her request key and

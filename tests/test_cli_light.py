@@ -49,10 +49,14 @@ def _refused(*args: str) -> tuple[dict[str, object], str]:
         (["eval", "--trails", "2"], "'--trials'"),
         (["eval", "--team", "paper", "--team", "ful_house"], "did you mean 'full_house'?"),
         (["eval", "--schedule", "lockstp"], "'lockstp' is not one of"),
+        (["up", "--protocol", "centraliz"], "unknown protocol 'centraliz' (did you mean 'centralized'?)"),
+        (["eval", "--protocol", "mhrc,leder"], "unknown protocol 'leder' (did you mean 'leader'?)"),
+        (["agent", "--robot", "bob", "--connect", "tcp/127.0.0.1:9", "--protocol", "lead"], "did you mean 'leader'?"),
     ],
     ids=[
         *("command", "option", "task", "scene", "team", "world-task", "agent-team", "bad-int"),
         *("eval-task", "eval-scene", "eval-option", "eval-team", "eval-schedule"),
+        *("up-protocol", "eval-protocol", "agent-protocol"),
     ],
 )
 def test_a_typo_is_refused_in_one_line_before_any_heavy_import(args: list[str], said: str) -> None:
@@ -72,6 +76,9 @@ def test_the_light_lists_are_the_registries() -> None:
 
     assert cli_names.TASKS == tuple(TASKS)
     assert cli_names.TEAMS == tuple(SHIPPED)
+    from mhrc.agents.protocols import PROTOCOLS
+
+    assert cli_names.PROTOCOLS == tuple(PROTOCOLS)
     assert cli_names.TOKEN_DEADLINE == TOKEN_DEADLINE
     from mhrc.cli.options import SCHEDULES as OPTION_SCHEDULES
 
@@ -101,3 +108,12 @@ def test_each_command_module_is_named_after_a_command_it_holds() -> None:
     assert modules - set(COMMANDS) == {"viewer"}
     for name, (module, _) in COMMANDS.items():
         assert module == name or name in {"report", "scenes", "render", "show"}, (name, module)
+
+
+def test_mhrc_protocols_lists_each_protocol_in_one_line() -> None:
+    from click.testing import CliRunner
+
+    from mhrc.agents.protocols import PROTOCOLS
+
+    out = CliRunner().invoke(main, ["protocols"])
+    assert out.exit_code == 0 and out.output.splitlines() == [p.line() for p in PROTOCOLS.values()]

@@ -125,6 +125,16 @@ BAD_ROWS = [
         _line(_rows_with(lambda r: r.update(key=KEYS[1]))),
         "is not its episode's",
     ),
+    (
+        "unknown protocol",
+        _line(_rows_with(lambda r: r.update(protocol="nope"))),
+        "protocol: Value error, unknown protocol 'nope'",
+    ),
+    (
+        "a protocol its key does not say",
+        _line(_rows_with(lambda r: r.update(protocol="centralized"))),
+        "is not its episode's ('@centralized/",
+    ),
     ("javascript: trace", _line(_rows_with(lambda r: r.update(trace="javascript:alert(1)"))), "trace"),
     ("../ trace", _line(_rows_with(lambda r: r.update(trace="traces/../../evil.jsonl"))), "trace"),
     ("absolute trace", _line(_rows_with(lambda r: r.update(trace="/etc/passwd"))), "trace"),
@@ -164,6 +174,16 @@ BAD_MANIFESTS = [
     ("unknown spec field", _manifest(lambda m: m["spec"].update(colour="blue")), "spec.colour"),
     ("spec and identity apart", _manifest(lambda m: m["spec"].update(horizon=30)), "does not make its identity"),
     ("a grid of 10^30 repeats", _manifest(lambda m: m["spec"].update(repeats=10**30)), "spec.repeats"),
+    (
+        "unknown protocol",
+        _manifest(lambda m: (m["identity"].update(protocols=["nope"]), m["spec"].update(protocols=["nope"]))),
+        "identity.protocols: Value error, unknown protocol 'nope'",
+    ),
+    (
+        "a protocol the grid did not run",
+        _manifest(lambda m: m["spec"].update(protocols=["centralized", "mhrc"])),
+        "does not make its identity: protocols",
+    ),
     ("nested", b'{"identity": ' + NESTED + b"}", "nested too deeply"),
     ("non-UTF-8", b'{"identity": "\xff"}', "not UTF-8"),
 ]

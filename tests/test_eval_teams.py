@@ -298,3 +298,116 @@ def test_a_real_grid_of_two_teams(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="holds another evaluation: --team was"):
         asyncio.run(evaluate(EvalSpec(**TINY), out, resume=True))  # type: ignore[arg-type]
     assert asyncio.run(evaluate(spec, out, resume=True, workers=1)) == list(typed.values())
+
+
+# --------------------------------------------------------------------------- protocols: an axis like the team
+
+
+def test_the_papers_protocol_keeps_its_keys_and_the_others_are_prefixed() -> None:
+    spec = EvalSpec(**TINY, teams=(PAPER_TEAM, NO_MOBILE), protocols=("mhrc", "centralized"))  # type: ignore[arg-type]
+    jobs = spec.jobs()
+    assert (
+        [j.key for j in jobs]
+        == [
+            "pack_objects/kitchen/3/0",
+            "no_mobile/pack_objects/kitchen/3/0",
+            "@centralized/pack_objects/kitchen/3/0",
+            "@centralized/no_mobile/pack_objects/kitchen/3/0",
+        ]
+        == sorted(spec.keys(), key=[j.key for j in jobs].index)
+    )
+    assert [j.config.protocol for j in jobs] == ["mhrc", "mhrc", "centralized", "centralized"]
+    default = EvalSpec(**TINY).identity()  # type: ignore[arg-type]
+    old = EvalIdentity.model_validate({k: v for k, v in default.model_dump().items() if k != "protocols"})
+    assert old == default and default.protocols == ("mhrc",)  # a manifest older than the axis ran the paper's
+    a = EvalSpec(**TINY, protocols=("mhrc", "leader")).identity()  # type: ignore[arg-type]
+    b = EvalSpec(**TINY, protocols=("leader", "mhrc")).identity()  # type: ignore[arg-type]
+    assert a == b != default and a.protocols == ("leader", "mhrc")
+
+
+@pytest.mark.parametrize(
+    ("values", "message", "code"),
+    [
+        ({"protocols": ("nope",)}, "--protocol: unknown protocol 'nope'", None),
+        ({"protocols": ("leader", "leader")}, "--protocol: 'leader' is given twice", None),
+        ({"protocols": ()}, "--protocol must name at least one protocol", None),
+        (
+            {"protocols": ("mhrc", "leader"), "llm": "openai:m", "base_url": "http://127.0.0.1:9/v1"},
+            "protocol 'leader' has no LLM form yet",
+            "no_llm_form",
+        ),
+        (
+            {"protocols": ("centralized",), "ablation": "no_mobile"},
+            "it was not given david",
+            "not_all_robots",
+        ),
+    ],
+    ids=["unknown", "twice", "none", "no-llm-form", "not-all-robots"],
+)
+def test_each_protocol_is_checked_before_anything_starts(
+    values: dict[str, Any], message: str, code: str | None
+) -> None:
+    from mhrc.run.config import ProtocolConfigError
+
+    with pytest.raises(ConfigError) as exc:
+        EvalSpec(**TINY, **values).validate()  # type: ignore[arg-type]
+    assert message in str(exc.value)
+    if code is not None:
+        assert isinstance(exc.value, ProtocolConfigError) and exc.value.code == code
+
+
+def test_a_bad_protocol_on_the_command_line_is_one_line_and_exit_2(tmp_path: Path) -> None:
+    for args, message in (
+        (["--protocol", "mhrc,leder"], "unknown protocol 'leder' (did you mean 'leader'?)"),
+        (["--protocol", "leader", "--llm", "openai:m", "--base-url", "http://127.0.0.1:9/v1"], "no LLM form"),
+    ):
+        out = subprocess.run(
+            [sys.executable, "-m", "mhrc", "eval", "--out", str(tmp_path / "x"), *args],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert out.returncode == 2 and message in out.stderr and "Traceback" not in out.stderr, out.stderr
+        assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.slow
+def test_a_real_grid_of_two_protocols(tmp_path: Path) -> None:
+    """One episode under the paper's protocol and the same one under the centralized planner:
+    their rows, tables, CSV columns, paired comparison and manifest keep them apart, and the
+    paper's row is written as it always was (no protocol column)."""
+    spec = EvalSpec(**TINY, protocols=("mhrc", "centralized"))  # type: ignore[arg-type]
+    out = tmp_path / "ev"
+    typed = {r.key: r for r in asyncio.run(evaluate(spec, out, workers=1))}
+    assert sorted(typed) == ["@centralized/pack_objects/kitchen/3/0", "pack_objects/kitchen/3/0"]
+    paper, central = typed["pack_objects/kitchen/3/0"], typed["@centralized/pack_objects/kitchen/3/0"]
+    assert (paper.settings.protocol, central.settings.protocol) == ("mhrc", "centralized")
+    lines = [json.loads(line) for line in (out / "episodes.jsonl").read_text().splitlines()]
+    assert sorted(str(x.get("protocol")) for x in lines) == ["None", "centralized"]  # the paper's row: no column
+    assert central.metrics.messages == 0 and central.metrics.success  # one planner: nothing is told by message
+    assert setting_label(setting_of(central)).endswith(" · protocol centralized")
+    assert "protocol" not in setting_label(setting_of(paper))
+    md = (out / "summary.md").read_text()
+    assert "### heuristic · ablation none · paper · protocol centralized" in md
+    assert "the centralized protocol, not the paper's" in md
+    paired = [line for line in md.splitlines() if line.startswith("| heuristic · ablation none · paper |")]
+    assert len(paired) == 1 and "protocol centralized | 1 | 0 / 0 |" in paired[0]  # the same episode, paired
+    csv = (out / "summary.csv").read_text().splitlines()
+    assert csv[0].split(",")[csv[0].split(",").index("scenario") + 1] == "protocol"
+    assert sorted(line.split(",")[9] for line in csv[1:]) == ["", "centralized"]
+    assert read_manifest(out / "eval.json").identity.protocols == ("centralized", "mhrc")
+    from mhrc.core.protocol import EpisodeStarted
+    from mhrc.core.records import messages, read_records
+
+    assert [m.protocol for m in messages(read_records(out / str(central.trace)), EpisodeStarted)] == ["centralized"]
+    with pytest.raises(ConfigError, match="holds another evaluation: --protocol was"):
+        asyncio.run(evaluate(EvalSpec(**TINY), out, resume=True))  # type: ignore[arg-type]
+    assert asyncio.run(evaluate(spec, out, resume=True, workers=1)) == list(typed.values())
+
+
+def test_resume_names_the_protocols_that_differ() -> None:
+    from mhrc.eval.resume import differences
+
+    before, now = EvalSpec(**TINY), EvalSpec(**TINY, protocols=("mhrc", "leader"))  # type: ignore[arg-type]
+    assert differences(before, now, {"protocols"}) == ["--protocol was mhrc, now mhrc,leader"]
+    assert differences(before, before, {"protocols"}) == []

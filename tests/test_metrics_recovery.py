@@ -16,7 +16,7 @@ from mhrc.analysis.metrics import EpisodeMetrics, from_trace
 from mhrc.eval.means import summarize
 from mhrc.eval.records import EvalRow, upgrade_row
 from mhrc.eval.report import summary_csv, summary_markdown
-from mhrc.eval.rows import setting_of
+from mhrc.eval.rows import SETTING, setting_of
 
 STEP = 8.0  # async step_seconds of these traces
 
@@ -260,7 +260,8 @@ def test_the_report_shows_recovery_only_where_a_scenario_ran_and_never_mixes_two
         _row(scen, scenario="relocate", sha=sha_b),
     ]
     # two files of one name are two settings, labelled as `mhrc scenarios` lists them
-    assert [setting_of(r)[-1] for r in rows] == [None, "relocate@aaaaaaaaaaaa", "relocate@bbbbbbbbbbbb"]
+    scenario = SETTING.index("scenario")
+    assert [setting_of(r)[scenario] for r in rows] == [None, "relocate@aaaaaaaaaaaa", "relocate@bbbbbbbbbbbb"]
     md = summary_markdown(rows, resamples=50)
     per_setting = md.split("## Per setting")[1].split("## Failure diagnostics")[0]
     sections = {s.splitlines()[0]: s for s in per_setting.split("### ")[1:]}

@@ -121,3 +121,47 @@ async def test_the_planner_cannot_act_for_a_robot_it_was_not_given(tmp_path: Pat
         for s in sessions:
             await s.close()
         await world.close()
+
+
+def test_the_environment_runs_the_papers_protocol_only() -> None:
+    """In mhrc.env the caller gives every robot's command: a protocol's policies would have no
+    robot left to decide for, so any protocol but mhrc is refused with a typed code, before anything is built."""
+    import mhrc.env
+    from mhrc.env.options import CALLER_DECIDES, EnvProtocolError
+
+    for name, code in (("centralized", CALLER_DECIDES), ("leader", CALLER_DECIDES), ("nope", Refusal.UNKNOWN_PROTOCOL)):
+        with pytest.raises(EnvProtocolError) as exc:
+            mhrc.env.parallel_env(protocol=name)
+        assert exc.value.code == code and "protocol" in str(exc.value)
+
+
+@pytest.mark.slow
+def test_up_processes_runs_the_centralized_planner_as_one_agent_process(tmp_path: Path) -> None:
+    """`mhrc up --processes --protocol centralized` on the secured bus: the world and one planner
+    process, logged in as every robot (one --credentials each), whose episode's header says so."""
+    import json
+    import subprocess
+    import sys
+
+    from mhrc.core.records import messages
+
+    trace = tmp_path / "t.jsonl"
+    done = subprocess.run(
+        [sys.executable, "-m", "mhrc", "up", "--processes", "--protocol", "centralized", "--horizon", "6", "--json"]
+        + ["--trace", str(trace), "--quiet"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert json.loads(done.stdout.strip().splitlines()[-1])["temporal_steps"] == 6
+    records = read_records(trace)
+    assert [m.protocol for m in messages(records, EpisodeStarted)] == ["centralized"]
+    from mhrc.run.processes import agent_command, participants
+
+    cfg = EpisodeConfig.build(protocol="centralized", credentials=tmp_path / "creds").resolved()
+    (group,) = participants(cfg, cfg.robots)
+    cmd = agent_command(group, cfg)
+    assert group == cfg.robots and cmd.count("--robot") == 3 and cmd.count("--credentials") == 3
+    assert cmd[cmd.index("--protocol") + 1] == "centralized"

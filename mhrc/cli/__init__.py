@@ -5,6 +5,7 @@
 - `viewer`: `scenes`, `render`, `show`
 - `scenarios`: `scenarios` (the shipped scenarios of `--events`)
 - `teams`: `teams` (the shipped teams of `--team`, the robot kinds)
+- `protocols`: `protocols` (the coordination protocols of `--protocol`)
 - `play`: `play` (a person drives one robot from a browser page)
 - `bus`: `bus list|echo` (over `bustools`); `doctor`, `router`, `schema`, `credentials`: each its own
 - `options` (shared options, declared once), `running` (signals and Ctrl-C), `names` (the
@@ -43,6 +44,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "router": ("router", "router"),
     "scenarios": ("scenarios", "scenarios"),
     "teams": ("teams", "teams"),
+    "protocols": ("protocols", "protocols"),
     "play": ("play", "play"),
 }
 

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mhrc.cli.names import check_scene, check_task, unknown_team
+from mhrc.cli.names import check_protocol, check_scene, check_task, unknown_team
 from mhrc.cli.options import (
     ABLATIONS,
     AIDS_HELP,
@@ -72,6 +72,15 @@ def _teams(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -
         return tuple(resolve_team(v) for v in value)
     except TeamError as exc:
         raise click.UsageError(str(exc)) from None
+
+
+def _protocols(ctx: click.Context, param: click.Parameter, value: tuple[str, ...]) -> tuple[str, ...]:
+    """Each --protocol (repeatable, or a comma-separated list) a protocol's name, before anything
+    heavy is imported; the names in the order given."""
+    names = tuple(n.strip() for v in value for n in v.split(",") if n.strip())
+    for name in names:
+        check_protocol(ctx, param, name)
+    return names
 
 
 def _setting(spec: Any) -> str:
@@ -139,6 +148,16 @@ def _ended(row: EvalRow | None, t: Any) -> str:
     help=TEAM_HELP.removesuffix("Default: paper (Alice, Bob and David).")
     + "Repeat it to compare teams: the team is an axis of the grid, like the task and the scene; summaries never "
     "average across teams. Default: paper (Alice, Bob and David) only.",
+)
+@click.option(
+    "--protocol",
+    "protocols",
+    multiple=True,
+    metavar="NAME",
+    callback=_protocols,
+    help="How the team decides, a coordination protocol (mhrc protocols; docs/protocols.md). Repeat it (or give a "
+    "comma-separated list) to compare protocols: an axis of the grid like --team, every team running the same "
+    "episodes under each; rows record it and summaries never average across protocols. Default: mhrc, the paper's, only.",
 )
 @click.option("--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS))
 @click.option("--horizon", default=50, show_default=True, type=int)
@@ -213,6 +232,7 @@ def eval_(
     trials: int,
     repeats: int,
     teams: tuple[Any, ...],
+    protocols: tuple[str, ...],
     ablation: str,
     horizon: int,
     aids: str | None,
@@ -239,7 +259,8 @@ def eval_(
 
     The default grid is the paper's: per task, 3 scenes x one episode each with 3, 4, 5 and 6
     objects (12 per task, 36 in all); --repeats N runs it N times with other seeds, --objects and
-    --trials build larger grids, and --team (repeatable) runs the grid for each team. Without --llm the heuristic policy plays. Episodes run in
+    --trials build larger grids, --team (repeatable) runs the grid for each team and --protocol
+    (repeatable) for each coordination protocol. Without --llm the heuristic policy plays. Episodes run in
     --workers processes of this machine, or with --ray ADDRESS as tasks on a Ray cluster
     (`ray start --head` on one host, `ray start --address HEAD:6379` on the others; see
     docker/README.md). An interrupted run continues with --resume --out DIR."""
@@ -282,6 +303,7 @@ def eval_(
         time_scale=time_scale,
         events=events,
         **({"teams": teams} if teams else {}),
+        **({"protocols": protocols} if protocols else {}),
         **llm,
     )
     out = out or Path("runs") / time.strftime("eval-%Y%m%d-%H%M%S")
@@ -380,7 +402,8 @@ def eval_(
     where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {counted(options.processes, 'worker')}"
     console.print(
         f"evaluating {spec.method} (ablation {ablation}, {_setting(spec)}, {spec.mode} replies"
-        f"{'' if not teams else ', teams ' + ', '.join(t.name for t in spec.teams)}) on {counted(n_jobs, 'episode')} "
+        f"{'' if not teams else ', teams ' + ', '.join(t.name for t in spec.teams)}"
+        f"{'' if not protocols else ', protocols ' + ', '.join(spec.protocols)}) on {counted(n_jobs, 'episode')} "
         f"into {out} {where}, {counted(concurrency, 'episode')} at once each"
     )
     t0 = time.perf_counter()

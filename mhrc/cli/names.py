@@ -1,8 +1,8 @@
 """The shipped names an option is checked against before anything heavy is imported (tasks,
-scenes, teams), each refusal with its near matches, as click gives them for option names.
+scenes, teams, coordination protocols), each refusal with its near matches, as click gives them for option names.
 
 The registries of tasks and teams import the simulator (world/tasks.py builds on world/scene.py),
-so their names are listed here too, and tests/test_cli_light.py keeps both lists equal to the
+and the protocols' registry the model clients (their LLM forms), so their names are listed here too, and tests/test_cli_light.py keeps both lists equal to the
 registries. Scenes are read from the layout files (numpy and JSON, no simulator). None of this
 imports the simulator, the bus or a model client: a typo is refused in a fraction of a second
 (tests/test_cli_light.py checks which modules a refused command imports)."""
@@ -25,6 +25,11 @@ TEAMS = (
     "large",
     "full_house",
 )  # world/teams.py
+PROTOCOLS = (
+    "mhrc",
+    "centralized",
+    "leader",
+)  # mhrc.agents.protocols.PROTOCOLS, in its order (it imports the model clients)
 TOKEN_DEADLINE = 30.0  # mhrc.world.presence.TOKEN_DEADLINE, which imports the bus (a test keeps them equal)
 
 
@@ -59,6 +64,17 @@ def check_scene(ctx: click.Context, param: click.Parameter, value: str | None) -
         raise click.BadParameter(
             f"unknown scene {value!r}{near(value, LAYOUTS)}; known scenes: {', '.join(LAYOUTS)} "
             "(or a path to a layout .json file)"
+        )
+    return value
+
+
+def check_protocol(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """--protocol: a registered coordination protocol's name, else one line naming them and the nearest."""
+    if value is None:
+        return None
+    if value not in PROTOCOLS:
+        raise click.BadParameter(
+            f"unknown protocol {value!r}{near(value, PROTOCOLS)}; the protocols: {', '.join(PROTOCOLS)} (mhrc protocols)"
         )
     return value
 

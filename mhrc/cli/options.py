@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mhrc.cli.names import TOKEN_DEADLINE, check_scene, check_task, unknown_team
+from mhrc.cli.names import TOKEN_DEADLINE, check_protocol, check_scene, check_task, unknown_team
 from mhrc.core.fidelity import NOISE
 from mhrc.core.fidelity import describe as describe_aids
 from mhrc.core.lifeline import PARENT_ENV
@@ -240,6 +240,19 @@ def team_option(f: Callable[..., Any]) -> Callable[..., Any]:
     return click.option("--team", default=None, metavar="TEAM", callback=_team, help=TEAM_HELP)(f)
 
 
+PROTOCOL_HELP = (
+    "How the team decides, a coordination protocol (mhrc protocols; docs/protocols.md): mhrc, the paper's (each robot "
+    "its own agent); centralized (one planner drives every robot); leader (an elected leader allocates by auction). "
+    "Not the paper's unless mhrc: recorded in the trace and every result row."
+)
+
+
+def protocol_option(f: Callable[..., Any]) -> Callable[..., Any]:
+    return click.option(
+        "--protocol", default="mhrc", show_default=True, metavar="NAME", callback=check_protocol, help=PROTOCOL_HELP
+    )(f)
+
+
 def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
     """The episode options `up` and `world` share (task, scene, seed, horizon, schedule, ...)."""
     opts: list[Callable[[Callable[..., Any]], Callable[..., Any]]] = [
@@ -269,6 +282,7 @@ def episode_options(f: Callable[..., Any]) -> Callable[..., Any]:
             "no_feedback / no_history change LLM prompts.",
         ),
         team_option,
+        protocol_option,
         click.option("--aids", default=None, metavar="NAMES", help=AIDS_HELP),
         click.option("--noise", default="on", show_default=True, type=click.Choice(list(NOISE)), help=NOISE_HELP),
         click.option(

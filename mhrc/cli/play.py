@@ -99,6 +99,7 @@ def play(
                 f"{robot!r} is not in this episode's team (robots: {', '.join(cfg.robots)}; --team names the team)",
                 param_hint="--robot",
             )
+        _check_protocol(cfg, robot)
     try:
         sock = bind(page_port)  # before anything is written or started
     except PortInUse as exc:
@@ -194,3 +195,21 @@ async def _there(
         finally:
             await bus.close()
     return await play_there(robot, connect, run, sock, gate, security=creds, on_ready=ready)
+
+
+def _check_protocol(cfg: Any, robot: str) -> None:
+    """The teammates' protocol can seat them beside a person: a whole-team protocol (one planner
+    for every robot) cannot, since the person drives one of the robots; one line before anything starts."""
+    from mhrc.run.config import ConfigError
+    from mhrc.run.coordinated import check_seating
+
+    if cfg.coordination().whole_team:
+        raise click.BadParameter(
+            f"protocol {cfg.protocol!r} drives every robot from one planner: it cannot leave {robot} to you "
+            "(play under mhrc or leader)",
+            param_hint="--protocol",
+        )
+    try:
+        check_seating(cfg, tuple(r for r in cfg.robots if r != robot))
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None

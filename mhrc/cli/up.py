@@ -90,9 +90,11 @@ def up(
     from rich.console import Console
 
     from mhrc.core.endpoints import ListenError, check_listen
+    from mhrc.core.protocol.events import DEFAULT_PROTOCOL
     from mhrc.core.trace import TraceWriteError
     from mhrc.run.config import ConfigError, ModelServerDown, check_model_servers
     from mhrc.run.console import ProgressPrinter, summary_table
+    from mhrc.run.coordinated import check_seating
     from mhrc.run.inprocess import up_in_process
     from mhrc.run.processes import ProcessFailed, up_processes
     from mhrc.world.service_config import NobodyAttached
@@ -104,10 +106,16 @@ def up(
             f"{', '.join(unknown)} not in this episode's team (robots: {', '.join(cfg.robots)})",
             param_hint="--external",
         )
+    if external and cfg.coordination().whole_team:
+        raise click.BadParameter(
+            f"protocol {cfg.protocol!r} drives every robot from one planner: none can be external (mhrc protocols)",
+            param_hint="--external",
+        )
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
         raise click.BadParameter(f"{video.name}: the video must be a .mp4 or .gif file", param_hint="--video")
     robots = tuple(r for r in cfg.robots if r not in external)
     try:
+        check_seating(cfg, robots)  # a whole-team protocol drives every robot from here: none external
         check_model_servers(cfg, robots)  # before anything is written or started
         cfg.check_replays(robots)
     except (ModelServerDown, ConfigError) as exc:
@@ -136,6 +144,7 @@ def up(
             "attach the external robots with: "
             + "; ".join(
                 f"mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}"
+                + (f" --protocol {cfg.protocol}" if cfg.protocol != DEFAULT_PROTOCOL else "")
                 + (f" --credentials {cfg.credentials_file(r)}" if cfg.credentials else "")
                 for r in external
             ),

@@ -69,6 +69,7 @@ def world(
     **values: Any,
 ) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
+    from mhrc.core.protocol.events import DEFAULT_PROTOCOL
     from mhrc.run.console import ProgressPrinter
 
     logs.configure(log_level)
@@ -90,9 +91,12 @@ def world(
 
     def listening(bus: Any, run: str) -> None:  # said once the world listens, not before
         click.echo(f"world listening on {cfg.endpoint}, run {cfg.run}; attach agents with:", err=True)
-        for r in cfg.robots:
-            login = "" if creds is None else f" --credentials {_login_of(creds, r)}"
-            click.echo(f"  mhrc agent --robot {r} --run {cfg.run} --connect {cfg.endpoint}{login}", err=True)
+        protocol = "" if cfg.protocol == DEFAULT_PROTOCOL else f" --protocol {cfg.protocol}"
+        groups = [cfg.robots] if cfg.coordination().whole_team else [(r,) for r in cfg.robots]
+        for group in groups:  # a whole-team protocol's planner: one agent for every robot, with each one's login
+            robots = "".join(f" --robot {r}" for r in group)
+            login = "" if creds is None else "".join(f" --credentials {_login_of(creds, r)}" for r in group)
+            click.echo(f"  mhrc agent{robots} --run {cfg.run} --connect {cfg.endpoint}{protocol}{login}", err=True)
         printer.attach(bus, run)
 
     _serve_world(cfg, listening)

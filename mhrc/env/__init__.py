@@ -30,7 +30,7 @@ __all__ = [
 def parallel_env(*, render_mode: str | None = None, expert: bool = False, **options: Any) -> MhrcParallelEnv:
     """Every robot acts in every step (lockstep). Options: `mhrc up`'s episode options (task,
     scene, objects, seed, horizon, team, aids, noise, events, ablation, history_cap, prompts,
-    structured); a bad one is a ValueError naming it."""
+    structured, protocol: the paper's `mhrc` only, docs/env.md); a bad one is a ValueError naming it."""
     return MhrcParallelEnv(render_mode=render_mode, expert=expert, **options)
 
 

@@ -7,8 +7,9 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.team import TeamSpec
-from mhrc.run.config import EpisodeConfig
+from mhrc.run.config import EpisodeConfig, ProtocolConfigError
 from mhrc.run.teams import resolve_team
 
 # env option -> EpisodeConfig field (the CLI's --objects is n_objects there)
@@ -26,12 +27,27 @@ OPTIONS = {
     "history_cap": "history_cap",
     "prompts": "prompts",
     "structured": "structured",
+    "protocol": "protocol",
 }
 RENDER_MODES = ("rgb_array",)
 
 
 class EnvOptionError(ValueError):
     """An option the environment cannot be made with; the message names it."""
+
+
+class EnvProtocolError(EnvOptionError):
+    """`protocol=` names a coordination protocol the environment cannot seat: `code` says why
+    (mhrc.agents.protocols.Refusal's codes, or `CALLER_DECIDES`)."""
+
+    def __init__(self, message: str, code: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+# in the environment the caller gives every robot's command: it is the team's coordination, so a protocol whose
+# policies would decide for the robots (a planner, an elected leader) has no robot left to seat
+CALLER_DECIDES = "caller_decides"
 
 
 def episode_config(options: Mapping[str, object]) -> EpisodeConfig:
@@ -51,9 +67,18 @@ def episode_config(options: Mapping[str, object]) -> EpisodeConfig:
         if isinstance(value, str | os.PathLike):  # anything else is EpisodeConfig's to refuse, naming it
             values[path] = Path(value)
     try:
-        return EpisodeConfig.build(run="env", **values)
+        cfg = EpisodeConfig.build(run="env", **values)
+    except ProtocolConfigError as exc:
+        raise EnvProtocolError(str(exc).replace("--protocol", "protocol", 1), exc.code) from None
     except ValueError as exc:
         raise EnvOptionError(str(exc)) from None
+    if cfg.coordination().build is not None:
+        raise EnvProtocolError(
+            f"protocol {cfg.protocol!r}: in the environment the caller decides every robot's command, so no robot is "
+            f"left for its policies; the environment runs the paper's protocol ({DEFAULT_PROTOCOL}) only (docs/protocols.md)",
+            CALLER_DECIDES,
+        )
+    return cfg
 
 
 def check_render_mode(mode: str | None) -> str | None:

@@ -18,7 +18,7 @@ class MhrcParallelEnv(Made, ParallelEnv[str, Obs, str]):
     """One mhrc episode at a time, every robot acting in every step (the lockstep schedule).
 
     Made with `mhrc up`'s episode options (`task`, `scene`, `objects`, `seed`, `horizon`, `team`,
-    `aids`, `noise`, `events`, `ablation`, `history_cap`, `prompts`, `structured`); a bad one is a
+    `aids`, `noise`, `events`, `ablation`, `history_cap`, `prompts`, `structured`, `protocol`: the paper's `mhrc` only); a bad one is a
     ValueError naming it. `expert=True`: each robot's infos carry the heuristic's next command."""
 
     metadata = {"name": "mhrc_parallel_v0", "render_modes": ["rgb_array"], "is_parallelizable": True}

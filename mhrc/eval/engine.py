@@ -36,6 +36,7 @@ from typing import Protocol
 import structlog
 
 from mhrc.analysis.metrics import Invalid
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.writable import unwritable
 from mhrc.eval.directory import append_text, make_dirs, refuse_links, write_bytes, write_text
 from mhrc.eval.episode import Job, WorkerResult
@@ -284,6 +285,8 @@ def _row(plan: Plan, job: Job, res: WorkerResult, scored: Scored, out: Path) -> 
         scenario_sha256=plan.scenario_sha256,
         prompts=spec.prompts,
         base_url=spec.base_url,  # whether the paper's figures may stand beside it (mhrc.eval.paper)
+        # the paper's protocol is not written: its rows stay as they were (a row without one ran it)
+        **({} if job.config.protocol == DEFAULT_PROTOCOL else {"protocol": job.config.protocol}),
     )
     return EvalRow(
         key=res.key,

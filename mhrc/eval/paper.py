@@ -125,6 +125,7 @@ class Why(Enum):
     SCENARIO = "scenario"
     SCHEDULE = "schedule"
     TEAM = "team"  # a team other than the paper's Alice, Bob and David
+    PROTOCOL = "protocol"  # a coordination protocol other than the paper's (mhrc)
     SETTING = "setting"  # another field of the setting (a world setting) not at its default
     NO_FIGURES = "no_figures"  # the paper reports no figures for this model, ablation and task
     GRID = "grid"  # not the paper's grid of scenes and object counts
@@ -144,6 +145,7 @@ PAPER_SETTING: dict[str, tuple[Any, Why]] = {
     "scenario": (None, Why.SCENARIO),
     "schedule": (PAPER_SCHEDULE, Why.SCHEDULE),
     "team": (None, Why.TEAM),
+    "protocol": (None, Why.PROTOCOL),
 }
 TEAM_FIELDS = frozenset({"method", "ablation"})
 
@@ -201,6 +203,8 @@ class Mismatch:
                 )
             case Why.TEAM:
                 return f"the team {self.value}, not the paper's Alice, Bob and David"
+            case Why.PROTOCOL:
+                return f"the {self.value} protocol, not the paper's (each robot its own agent: mhrc)"
             case Why.SETTING:
                 return f"{self.field} {self.value}, not the default {self.default}"
             case Why.NO_FIGURES:

@@ -32,11 +32,12 @@ from pathlib import Path
 from typing import Any
 
 import structlog
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from mhrc.analysis.diagnostics import Diagnostics
 from mhrc.analysis.metrics import UNRECORDED, EpisodeMetrics
 from mhrc.analysis.values import Amount, Count, Seed
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.upgrade import paper_team
 from mhrc.eval.directory import read_bytes
 from mhrc.eval.spec import EvalIdentity, EvalSpec, bounded, episode_key
@@ -80,6 +81,18 @@ class Settings(BaseModel):
     scenario_sha256: str | None = None
     prompts: str | None = None
     base_url: str | None = None
+    # how the team decided (mhrc.agents.protocols): written only when not the paper's, so that the paper's rows
+    # stay as they were; a row without it ran the paper's; a name no protocol is registered under is no row
+    protocol: str = DEFAULT_PROTOCOL
+
+    @field_validator("protocol")
+    @classmethod
+    def _protocol(cls, v: str) -> str:
+        from mhrc.agents.protocols import PROTOCOLS
+
+        if v not in PROTOCOLS:
+            raise ValueError(f"unknown protocol {v!r} (the protocols: {', '.join(PROTOCOLS)})")
+        return v
 
 
 DIAG = "diag_"  # the prefix of the diagnostics' columns in episodes.jsonl
@@ -107,7 +120,9 @@ class EvalRow(BaseModel):
         """The key is the one its task, scene, objects, seed and team make; the trace, if any, is that
         key's file in traces/ (a path anywhere else, or a URL, is no trace of this directory)."""
         m = self.metrics
-        key = episode_key(None if m.team == "paper" else m.team, m.task, m.scene, m.n_objects, m.seed)
+        key = episode_key(
+            None if m.team == "paper" else m.team, m.task, m.scene, m.n_objects, m.seed, self.settings.protocol
+        )
         if self.key != key:
             raise ValueError(f"key {self.key!r} is not its episode's ({key!r})")
         if self.trace is not None and self.trace != trace_of(key):
@@ -281,6 +296,8 @@ def read_dir(d: Path) -> list[EvalRow]:
         s, horizon = r.settings, r.metrics.horizon
         if (s.method, s.ablation) != (manifest.identity.method, manifest.identity.ablation):
             raise ConfigError(f"{path}: episode {r.key} ran {s.method}, ablation {s.ablation}, not the evaluation's")
+        if s.protocol not in manifest.identity.protocols:
+            raise ConfigError(f"{path}: episode {r.key} ran protocol {s.protocol}, not one of the evaluation's")
         if horizon is not None and horizon != manifest.identity.horizon:
             raise ConfigError(
                 f"{path}: episode {r.key} ran horizon {horizon}, not the evaluation's {manifest.identity.horizon}"

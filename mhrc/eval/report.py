@@ -346,9 +346,10 @@ def csv_text(summary: Summary) -> str:
         "diag_episodes",
         *(f"diag_{c}" for c in DIAG_COLUMNS),
     ]  # means over the rows with diagnostics; empty: unknown
-    # the team column only where a team other than the paper's ran: a paper-only summary reads as it always did
-    teams = any(setting[TEAM] is not None for setting, _ in summary.cells)
-    fields = [i for i in range(len(SETTING)) if teams or i != TEAM]
+    # the team and protocol columns only where a team or protocol other than the paper's ran: a summary of the
+    # paper's reads as it always did
+    optional = {TEAM, SETTING.index("protocol")}
+    fields = [i for i in range(len(SETTING)) if i not in optional or any(s[i] is not None for s, _ in summary.cells)]
     w.writerow(
         [
             *(SETTING[i] for i in fields),

@@ -24,6 +24,7 @@ SPEC_OPTIONS = (
     "trials",
     "repeats",
     "teams",
+    "protocols",
     "ablation",
     "horizon",
     "aids",
@@ -55,6 +56,8 @@ def _shown(field: str, value: Any) -> str:
 
 
 def _option(field: str) -> str:
+    if field == "protocols":
+        return "--protocol"
     return "--stream/--no-stream" if field == "stream" else "--" + field.replace("_", "-")
 
 

@@ -11,6 +11,7 @@ import numpy as np
 import structlog
 
 from mhrc.analysis.metrics import EpisodeMetrics
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.upgrade import paper_team
 from mhrc.eval.means import summarize
 from mhrc.eval.paper import PAPER_HORIZON, PAPER_SCHEDULE
@@ -44,15 +45,29 @@ CI_METRICS: dict[str, Callable[[EvalRow], float | None]] = {
 # team: None for the paper's team (or as much of it as an ablation runs), else NAME@DIGEST (the team's name and
 # TeamSpec.digest(): two teams of one name are two settings); the summaries never average across teams;
 # scenario: the --events scenario as NAME@SHA12 (its name and the first 12 hex digits of the file's sha256, as
-# `mhrc scenarios` lists it: two files of one name are two settings), None for a static episode
-SETTING = ("method", "ablation", "fidelity", "noise", "history_cap", "horizon", "mode", "schedule", "team", "scenario")
+# `mhrc scenarios` lists it: two files of one name are two settings), None for a static episode;
+# protocol: the coordination protocol (mhrc.agents.protocols), None for the paper's (mhrc): never averaged across
+SETTING = (
+    "method",
+    "ablation",
+    "fidelity",
+    "noise",
+    "history_cap",
+    "horizon",
+    "mode",
+    "schedule",
+    "team",
+    "scenario",
+    "protocol",
+)
 Setting = tuple[Any, ...]  # a row's values of SETTING, in its order
 
 
 def setting_defaults() -> dict[str, Any]:
-    """Each SETTING field's value in a row written without it: its model's default (team: the paper's, None)."""
+    """Each SETTING field's value in a row written without it: its model's default (team and protocol: the
+    paper's, None)."""
     fields = {**Settings.model_fields, **EpisodeMetrics.model_fields}
-    return {k: None if k == "team" or fields[k].is_required() else fields[k].default for k in SETTING}
+    return {k: None if k in ("team", "protocol") or fields[k].is_required() else fields[k].default for k in SETTING}
 
 
 def team_setting(row: EvalRow) -> str | None:
@@ -81,6 +96,7 @@ def setting_of(row: EvalRow) -> Setting:
         s.schedule,
         team_setting(row),
         scenario,
+        None if s.protocol == DEFAULT_PROTOCOL else s.protocol,
     )
 
 
@@ -93,7 +109,7 @@ def order_key(key: Iterable[Any]) -> tuple[str, ...]:
 
 
 def setting_label(setting: Setting, *, ablation: bool = True) -> str:
-    method, abl, fidelity, noise, cap, horizon, mode, schedule, team, scenario = setting
+    method, abl, fidelity, noise, cap, horizon, mode, schedule, team, scenario, protocol = setting
     parts = (
         [method] + ([f"ablation {abl}"] if ablation else []) + [fidelity] + (["noise off"] if noise == "off" else [])
     )
@@ -108,6 +124,8 @@ def setting_label(setting: Setting, *, ablation: bool = True) -> str:
         parts.append(f"team {team}")
     if scenario is not None:
         parts.append(f"scenario {scenario}")
+    if protocol is not None:
+        parts.append(f"protocol {protocol}")
     return " · ".join(parts)
 
 

@@ -4,10 +4,13 @@ the `Plan` that `EvalSpec.validate` returns, every episode's `EpisodeConfig` alr
 
 The spec is checked in one place (`validate`): each cell of the grid (team, task, scene, object
 count) is built once with `EpisodeConfig.build`, the full check (the team against the world's
-kinds and the scene's layout, task, scene, scenario, model specs, prompt templates); the episodes
-of a cell differ only in their seed. The team is an axis of the grid like the task and the scene:
-the paper's team (the default) keys its episodes `task/scene/objects/seed` as always, any other
-team `TEAM/task/scene/objects/seed`. Workers receive
+kinds and the scene's layout, task, scene, scenario, model specs, prompt templates, the protocol
+seating the team); the episodes of a cell differ only in their seed. The team is an axis of the
+grid like the task and the scene: the paper's team (the default) keys its episodes
+`task/scene/objects/seed` as always, any other team `TEAM/task/scene/objects/seed`. So is the
+coordination protocol (--protocol): the paper's, `mhrc` (the default), adds nothing to a key, any
+other `@PROTOCOL/` before the rest (`@centralized/two_fetchers/pack_objects/kitchen/3/0`; `@`
+is no character of a team's name, so no key is two episodes'). Workers receive
 those configs inside their `Job` and run them as they are.
 """
 
@@ -17,15 +20,16 @@ import re
 from dataclasses import dataclass
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from mhrc.agents.llm import DEFAULT_MAX_TOKENS
 from mhrc.analysis.values import MAX_COUNT
 from mhrc.core.fidelity import label
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.eval.episode import Job
 from mhrc.eval.paper import PAPER_OBJECTS
-from mhrc.run.config import ConfigError, EpisodeConfig
+from mhrc.run.config import ConfigError, EpisodeConfig, ProtocolConfigError
 from mhrc.world.scenario import load_scenario
 
 __all__ = [
@@ -46,9 +50,13 @@ Bounded = Annotated[int, Field(strict=True, ge=-MAX_COUNT, le=MAX_COUNT)]
 Scale = Annotated[float, Field(strict=True, ge=0.0, allow_inf_nan=False)]
 
 
-def episode_key(team: str | None, task: str, scene: str, n_objects: int, seed: int) -> str:
-    """An episode's key: `task/scene/objects/seed`, after `TEAM/` for any team but the paper's (None)."""
-    return ("" if team is None else f"{team}/") + f"{task}/{scene}/{n_objects}/{seed}"
+def episode_key(
+    team: str | None, task: str, scene: str, n_objects: int, seed: int, protocol: str = DEFAULT_PROTOCOL
+) -> str:
+    """An episode's key: `task/scene/objects/seed`, after `TEAM/` for any team but the paper's (None),
+    after `@PROTOCOL/` for any coordination protocol but the paper's."""
+    head = "" if protocol == DEFAULT_PROTOCOL else f"@{protocol}/"
+    return head + ("" if team is None else f"{team}/") + f"{task}/{scene}/{n_objects}/{seed}"
 
 
 def is_paper_team(team: TeamSpec) -> bool:
@@ -83,6 +91,17 @@ class EvalIdentity(BaseModel):
     time_scale: Scale = 0.0
     scenario: str | None = None  # the scenario file's sha256
     teams: tuple[str, ...] = (team_identity(PAPER_TEAM),)  # team_identity of each team, sorted
+    protocols: tuple[str, ...] = (DEFAULT_PROTOCOL,)  # the coordination protocols of the grid, sorted
+
+    @field_validator("protocols")
+    @classmethod
+    def _protocols(cls, v: tuple[str, ...]) -> tuple[str, ...]:
+        """Registered protocols only: a manifest naming another is no manifest of an evaluation."""
+        from mhrc.agents.protocols import PROTOCOLS
+
+        if unknown := [p for p in v if p not in PROTOCOLS]:
+            raise ValueError(f"unknown protocol {unknown[0]!r} (the protocols: {', '.join(PROTOCOLS)})")
+        return v
 
 
 # the option each identity field comes from, where its name is not the field's
@@ -92,6 +111,7 @@ IDENTITY_OPTIONS = {
     "mode": "--structured",
     "scenario": "--events",
     "teams": "--team",
+    "protocols": "--protocol",
 }
 
 
@@ -137,6 +157,8 @@ class EvalSpec(BaseModel):
     # travels to the workers as the name so that each (a Ray node too) reads the copy installed with its own package
     events: str | None = None
     teams: tuple[TeamSpec, ...] = (PAPER_TEAM,)  # a grid axis (--team, repeatable); the paper's team by default
+    # a grid axis (--protocol, repeatable): how each team decides (mhrc.agents.protocols); the paper's by default
+    protocols: tuple[str, ...] = (DEFAULT_PROTOCOL,)
 
     def scenario(self) -> tuple[str, str] | tuple[None, None]:
         """The scenario's short name and sha256 (None, None without one): what rows record of it."""
@@ -175,16 +197,25 @@ class EvalSpec(BaseModel):
             time_scale=self.time_scale,
             scenario=scenario_sha256 if scenario_sha256 is not None else self.scenario()[1],
             teams=tuple(sorted(team_identity(t) for t in self.teams)),
+            protocols=tuple(sorted(self.protocols)),
         )
 
     def seed(self, repeat: int, trial: int) -> int:
         """The episode seed of a trial in a repeat: distinct for every (repeat, trial)."""
         return repeat * self.trials + trial
 
-    def episode_values(self, task: str, scene: str, n_objects: int, team: TeamSpec = PAPER_TEAM) -> dict[str, object]:
+    def episode_values(
+        self,
+        task: str,
+        scene: str,
+        n_objects: int,
+        team: TeamSpec = PAPER_TEAM,
+        protocol: str = DEFAULT_PROTOCOL,
+    ) -> dict[str, object]:
         """The EpisodeConfig fields of a cell of the grid (seed 0; no run, port or trace: the process that runs it picks those)."""
         cfg: dict[str, object] = {
             "team": None if team == PAPER_TEAM else team,
+            "protocol": None if protocol == DEFAULT_PROTOCOL else protocol,
             "task": task,
             "scene": scene,
             "seed": 0,
@@ -219,22 +250,29 @@ class EvalSpec(BaseModel):
             raise ConfigError(f"--trials: must be at least 1 (got {self.trials})")
         if not (self.tasks and self.scenes and self.objects and self.teams):
             raise ConfigError("--tasks, --scenes, --objects and --team must each name at least one value")
+        if not self.protocols:
+            raise ConfigError("--protocol must name at least one protocol")
         self._check_teams()
-        cells: dict[tuple[str, str, str, int], EpisodeConfig] = {}
-        for team in self.teams:
-            for task in self.tasks:
-                for scene in self.scenes:
-                    for n in self.objects:
-                        if (team.name, task, scene, n) in cells:
-                            continue
-                        try:
-                            cells[(team.name, task, scene, n)] = EpisodeConfig.build(
-                                **self.episode_values(task, scene, n, team)
-                            )
-                        except (
-                            ConfigError
-                        ) as exc:  # a scenario is checked against every task and scene of the grid: say which
-                            raise ConfigError(f"{exc} (in {task}/{scene})" if self.events else str(exc)) from None
+        self._check_protocols()
+        from mhrc.run.coordinated import check_seating
+
+        cells: dict[tuple[str, str, str, str, int], EpisodeConfig] = {}
+        for protocol in self.protocols:
+            for team in self.teams:
+                for task in self.tasks:
+                    for scene in self.scenes:
+                        for n in self.objects:
+                            if (protocol, team.name, task, scene, n) in cells:
+                                continue
+                            try:
+                                cfg = EpisodeConfig.build(**self.episode_values(task, scene, n, team, protocol))
+                                check_seating(cfg, cfg.robots)  # the episode's agents all run in its worker
+                            except ProtocolConfigError as exc:  # which team the protocol refused, and why (code)
+                                raise ProtocolConfigError(f"{exc} (team {team.name})", exc.code) from None
+                            except ConfigError as exc:
+                                # a scenario is checked against every task and scene of the grid: say which
+                                raise ConfigError(f"{exc} (in {task}/{scene})" if self.events else str(exc)) from None
+                            cells[(protocol, team.name, task, scene, n)] = cfg
         scenario, sha256 = self.scenario()
         return Plan(
             spec=self,
@@ -263,27 +301,44 @@ class EvalSpec(BaseModel):
                 )
             seen.add(team.name)
 
-    def _jobs(self, cells: dict[tuple[str, str, str, int], EpisodeConfig]) -> list[Job]:
-        """Repeat by repeat (a finished repeat is a whole grid), then team, task, scene, objects, trial."""
+    def _check_protocols(self) -> None:
+        """Each protocol a registered one's name (it keys its episodes), once."""
+        from mhrc.agents.protocols import PROTOCOLS
+
+        seen: set[str] = set()
+        for protocol in self.protocols:
+            if protocol not in PROTOCOLS:
+                raise ConfigError(
+                    f"--protocol: unknown protocol {protocol!r}: the protocols are {', '.join(PROTOCOLS)}"
+                )
+            if protocol in seen:
+                raise ConfigError(f"--protocol: {protocol!r} is given twice")
+            seen.add(protocol)
+
+    def _jobs(self, cells: dict[tuple[str, str, str, str, int], EpisodeConfig]) -> list[Job]:
+        """Repeat by repeat (a finished repeat is a whole grid), then protocol, team, task, scene, objects, trial."""
         out = []
         for repeat in range(self.repeats):
-            for team in self.teams:
-                prefix = "" if is_paper_team(team) else team.name
-                for task in self.tasks:
-                    for scene in self.scenes:
-                        for n in self.objects:
-                            for trial in range(self.trials):
-                                seed = self.seed(repeat, trial)
-                                config = cells[(team.name, task, scene, n)].model_copy(update={"seed": seed})
-                                key = episode_key(prefix or None, task, scene, n, seed)
-                                out.append(Job(key=key, config=config, repeat=repeat, trial=trial))
+            for protocol in self.protocols:
+                for team in self.teams:
+                    prefix = "" if is_paper_team(team) else team.name
+                    for task in self.tasks:
+                        for scene in self.scenes:
+                            for n in self.objects:
+                                for trial in range(self.trials):
+                                    seed = self.seed(repeat, trial)
+                                    cell = cells[(protocol, team.name, task, scene, n)]
+                                    config = cell.model_copy(update={"seed": seed})
+                                    key = episode_key(prefix or None, task, scene, n, seed, protocol)
+                                    out.append(Job(key=key, config=config, repeat=repeat, trial=trial))
         return out
 
     def keys(self) -> frozenset[str]:
         """The key of every episode of the grid, without building a config (what rows may hold)."""
         return frozenset(
-            episode_key(None if is_paper_team(team) else team.name, task, scene, n, self.seed(repeat, trial))
+            episode_key(None if is_paper_team(team) else team.name, task, scene, n, self.seed(repeat, trial), protocol)
             for repeat in range(self.repeats)
+            for protocol in self.protocols
             for team in self.teams
             for task in self.tasks
             for scene in self.scenes
@@ -304,7 +359,15 @@ def bounded(spec: EvalSpec) -> str | None:
             return f"{name}: {getattr(spec, name)} is outside 1..{MAX_COUNT}"
     if not all(0 <= n <= MAX_COUNT for n in spec.objects):
         return f"objects: {list(spec.objects)} holds a count outside 0..{MAX_COUNT}"
-    size = spec.repeats * spec.trials * len(spec.teams) * len(spec.tasks) * len(spec.scenes) * len(spec.objects)
+    size = (
+        spec.repeats
+        * spec.trials
+        * len(spec.protocols)
+        * len(spec.teams)
+        * len(spec.tasks)
+        * len(spec.scenes)
+        * len(spec.objects)
+    )
     if size > MAX_EPISODES:
         return f"a grid of {size} episodes (more than {MAX_EPISODES})"
     for name in ("history_cap", "max_tokens", "llm_seed"):

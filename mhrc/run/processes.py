@@ -20,6 +20,7 @@ from mhrc.core.endpoints import check_listen
 from mhrc.core.keys import Keys
 from mhrc.core.lifeline import child_env
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.records import messages, read_records
 from mhrc.core.team import PAPER_TEAM
 from mhrc.run.attach import local_models
@@ -96,7 +97,7 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
     ]
     if cfg.trace is not None:
         cmd += ["--trace", str(cfg.trace)]
-    cmd += team_args(cfg)
+    cmd += team_args(cfg) + protocol_args(cfg)
     if cfg.aids:
         cmd += ["--aids", ",".join(cfg.aids)]
     if cfg.noise != "on":
@@ -116,12 +117,33 @@ def world_command(cfg: EpisodeConfig) -> list[str]:
     return cmd
 
 
-def agent_command(robot: str, cfg: EpisodeConfig, spec: str | None = None) -> list[str]:
-    """`mhrc agent` for `robot`, driven by `spec` (its model, already resolved: no gguf) or the heuristic policy."""
-    cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", robot, "--run", cfg.run, "--connect", cfg.endpoint]
-    cmd += team_args(cfg)
+def participants(cfg: EpisodeConfig, robots: tuple[str, ...]) -> list[tuple[str, ...]]:
+    """The robots of each agent process: one each, or all in one under a whole-team protocol (a
+    central planner: one participant acting for every robot, with each robot's login)."""
+    if robots and cfg.coordination().whole_team:
+        return [robots]
+    return [(r,) for r in robots]
+
+
+def protocol_args(cfg: EpisodeConfig) -> list[str]:
+    """`--protocol` for a child process; nothing for the paper's (its argv as it always was)."""
+    return [] if cfg.protocol == DEFAULT_PROTOCOL else ["--protocol", cfg.protocol]
+
+
+def agent_command(robot: str | tuple[str, ...], cfg: EpisodeConfig, spec: str | None = None) -> list[str]:
+    """`mhrc agent` for `robot` (or, under a whole-team protocol, one planner for several robots:
+    a --robot and a --credentials for each), driven by `spec` (its model, already resolved: no
+    gguf; a planner's is its first robot's) or the heuristic policy."""
+    group = (robot,) if isinstance(robot, str) else robot
+    robot = group[0]
+    cmd = [sys.executable, "-m", "mhrc", "agent"]
+    for r in group:
+        cmd += ["--robot", r]
+    cmd += ["--run", cfg.run, "--connect", cfg.endpoint]
+    cmd += team_args(cfg) + protocol_args(cfg)
     if cfg.credentials is not None:
-        cmd += ["--credentials", str(cfg.credentials_file(robot))]
+        for r in group:
+            cmd += ["--credentials", str(cfg.credentials_file(r))]
     else:  # said, so that a $MHRC_CREDENTIALS of another run is not picked up
         cmd += ["--insecure"]
     if spec is not None:
@@ -201,10 +223,11 @@ async def _run_processes(
         exits: dict[asyncio.Future[Any], str] = {
             asyncio.ensure_future(asyncio.to_thread(world.wait)): "the world process"
         }
-        for r in robots:
-            agent = subprocess.Popen(agent_command(r, cfg, specs[r]), env=_child_env(), stdout=stdout)
+        groups = participants(cfg, robots)
+        for group in groups:
+            agent = subprocess.Popen(agent_command(group, cfg, specs[group[0]]), env=_child_env(), stdout=stdout)
             procs.append(agent)
-            exits[asyncio.ensure_future(asyncio.to_thread(agent.wait))] = f"{r}'s agent process"
+            exits[asyncio.ensure_future(asyncio.to_thread(agent.wait))] = _who(group, cfg)
         watched: set[asyncio.Future[Any]] = {done_fut, *exits}
         unheard = False  # the end was read from the world's trace, not heard on the bus
         while not done_fut.done():
@@ -238,9 +261,9 @@ async def _run_processes(
             done.reason == "no_agents" and not unheard
         ):  # as up_in_process: every agent gone, with an error, is the run's failure
             # (not when this observer lost the world too: the agents gave up on a world that was paused, and its end says so)
-            failed = [(r, p.returncode) for r, p in zip(robots, procs[1:]) if p.returncode != 0]
+            failed = [(g, p.returncode) for g, p in zip(groups, procs[1:]) if p.returncode != 0]
             if failed:
-                raise ProcessFailed(f"{failed[0][0]}'s agent process", failed[0][1], "ended")
+                raise ProcessFailed(_who(failed[0][0], cfg), failed[0][1], "ended")
         return done
     finally:
         for p in procs:
@@ -250,6 +273,13 @@ async def _run_processes(
             await asyncio.to_thread(_wait_or_kill, p, 10.0)
         if bus is not None:
             await bus.close()
+
+
+def _who(group: tuple[str, ...], cfg: EpisodeConfig) -> str:
+    """How a line names an agent process: its robot's, or the planner's of a whole-team protocol."""
+    if len(group) == 1:
+        return f"{group[0]}'s agent process"
+    return f"the {cfg.protocol} planner's process ({', '.join(group)})"
 
 
 def _end_in_trace(trace: Path | None) -> EpisodeDone | None:
