@@ -209,10 +209,10 @@ def test_episode_compose_wiring() -> None:
     for robot in ROBOT_SERVICES:
         argv = argv_of(services[robot], {})
         params = parse(argv).params
-        assert params["robot"] == robot
+        assert params["robots"] == (robot,)
         assert params["connect"] == f"tls/world:{port}"
         assert params["llm"] is None and params["run"] is None  # defaults: heuristic, the credentials' run
-        assert not params["insecure"] and params["credentials"] == Path(f"/credentials/{robot}.json")
+        assert not params["insecure"] and params["credential_files"] == (Path(f"/credentials/{robot}.json"),)
         assert _subpath(services[robot]) == robot  # never another robot's password
         assert services[robot]["depends_on"]["credentials"]["condition"] == "service_completed_successfully"
         full = parse(argv_of(services[robot], FULL_ENV)).params
