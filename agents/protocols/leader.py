@@ -42,7 +42,7 @@ from .base import Seating
 from .knowledge import Knowledge
 from .steps import BOB_TRIES, Hand, Job, Taken, finisher_step, job_step
 
-__all__ = ["ROLE_BID", "LeaderPolicy", "build_leader"]
+__all__ = ["ROLE_BID", "LeaderPolicy", "build_heuristic"]
 
 ROLE_BID = {"scout": 2.0, "finisher": 5.0, "fetcher": 9.0}  # steps of its own work a robot sets aside to lead
 BLOCKED = 3  # navigations in a row to an occupied stand pose before a robot reports and leaves the job
@@ -453,6 +453,6 @@ class LeaderPolicy:
         return Decision(action=action, reasoning=f"{lead}; {why}")
 
 
-def build_leader(seating: Seating) -> Mapping[str, Policy]:
-    """Each robot its own policy (they share nothing but messages)."""
+def build_heuristic(seating: Seating) -> Mapping[str, Policy]:
+    """Each robot its own policy (they share nothing but messages): the heuristic form."""
     return {r: LeaderPolicy(r, seating.team.names) for r in seating.robots}

@@ -38,5 +38,6 @@ def seat(
             model=model,
             base_url=cfg.base_url,
             client_options=options,
+            structured=cfg.structured,
         )
     )
