@@ -42,6 +42,13 @@ from mhrc.core.security import SecurityError
 )
 @team_option
 @click.option(
+    "--protocol",
+    default=None,
+    metavar="NAME",
+    help="The episode's coordination protocol (default mhrc, the paper's): under one whose robots each have "
+    "their own policy (leader), this robot's.",
+)
+@click.option(
     "--aids",
     default=None,
     metavar="NAMES",
@@ -75,6 +82,13 @@ def agent(
             f"{robot!r} is not in this episode's team (robots: {', '.join(cfg.robots)}; --team names the team)",
             param_hint="--robot",
         )
+    from mhrc.run.config import ConfigError
+    from mhrc.run.coordinated import seat
+
+    try:
+        seats = seat(cfg, (robot,))  # the protocol's policy of this robot (none for the paper's)
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
     if creds is None:
         open_bus_notice(insecure)
     spec = cfg.robot_specs().get(robot)
@@ -82,7 +96,6 @@ def agent(
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError
     from mhrc.core.lifeline import PARENT_ENV
-    from mhrc.run.config import ConfigError
 
     if not os.environ.get(PARENT_ENV):  # said by hand only: a child of mhrc up --processes has its parent's lines
         click.echo(f"waiting for the world at {connect} (up to {attach_timeout:g} s)", err=True)
@@ -97,6 +110,7 @@ def agent(
                 cfg.base_url,
                 cfg.client_options(spec),
                 security=creds,
+                policy=seats.get(robot),
                 **options,
             )
         )
