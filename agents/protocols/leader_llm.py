@@ -40,7 +40,7 @@ __all__ = ["LLMLeaderPolicy", "Stages", "build_leader", "read"]
 HEARD = 8  # messages the prompt shows (the latest)
 FEEDBACK = 4  # results of the robot's own last actions the prompt shows
 REPORTS = 8  # reports the leader's prompt shows (the latest)
-NAMED = ("robot", "leader", "convener")  # the robot names a sentence carries, read case-blind
+NAMED = ("robot", "leader", "convener", "asked")  # the robot names a sentence carries, read case-blind
 
 
 def _template(name: str) -> str:
