@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from string import Template
 
-from mhrc.core.protocol import Action, ActionResult, Communicate, Observation, Wait
+from mhrc.core.protocol import Action, ActionResult, Communicate, Move, Navigate, Observation, Wait
 from mhrc.core.protocol.actions import CALLS
 from mhrc.core.protocol.thoughts import ReplyFailure
 
@@ -78,6 +78,7 @@ class Stages:
     task: talk.TaskList | None = None  # the leader: what the finisher said the task is
     told_task: str | None = None  # the finisher: the leader it told the task
     tell_status: bool = False  # after a new election: tell the new leader what I work on
+    make_way: str | None = None  # a teammate asked me to leave this furniture
     elections: int = 0
 
     def convener(self) -> str:
@@ -119,6 +120,8 @@ class Stages:
         elif isinstance(said, talk.Done | talk.Failed):
             self._book(said.robot, Job(said.kind, said.target), None)
             self.reports = [*self.reports, _report(said)][-REPORTS:]
+        elif isinstance(said, talk.MakeWay) and said.asked == self.robot:
+            self.make_way = said.furniture
         elif isinstance(said, talk.Status):
             self._book(said.robot, None, Job(said.kind, said.target) if said.kind and said.target else None)
             self.reports = [*self.reports, _report(said)][-REPORTS:]
@@ -219,6 +222,8 @@ class Stages:
             lines.append("Stage 4, execution: put the targets within your reach on the goal, one at a time.")
         elif lead != me:
             lines.append(f"Stage 4, execution: no job from {lead} yet. Wait, and keep out of the others' way.")
+        if self.make_way is not None and not self.jobs:
+            lines.append(f"You were asked to make way at {self.make_way}: go to another furniture.")
         return "\n\n".join(lines)
 
     def book_text(self) -> str:
@@ -340,6 +345,8 @@ class LLMLeaderPolicy:
     def record(self, result: ActionResult) -> None:
         if isinstance(result.action, Communicate) and result.outcome.succeeded:
             self.stages.sent(result.action)
+        if isinstance(result.action, Navigate | Move) and result.outcome.succeeded:
+            self.stages.make_way = None  # it went
         if result.action.skill == "wait" and result.outcome.succeeded:
             return
         verdict = "succeeded" if result.outcome.succeeded else f"FAILED ({result.outcome.code.value})"
