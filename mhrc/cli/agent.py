@@ -82,6 +82,7 @@ def agent(
             f"{robot!r} is not in this episode's team (robots: {', '.join(cfg.robots)}; --team names the team)",
             param_hint="--robot",
         )
+    from mhrc.agents.llm.model_spec import LLMSpecError
     from mhrc.run.config import ConfigError
     from mhrc.run.coordinated import seat
 
@@ -89,6 +90,8 @@ def agent(
         seats = seat(cfg, (robot,))  # the protocol's policy of this robot (none for the paper's)
     except ConfigError as exc:
         raise click.UsageError(str(exc)) from None
+    except LLMSpecError as exc:  # a gguf: file, which only `mhrc up` serves for a protocol's policies
+        raise click.UsageError(f"--llm: {exc} (under --protocol {cfg.protocol})") from None
     if creds is None:
         open_bus_notice(insecure)
     spec = cfg.robot_specs().get(robot)
