@@ -66,3 +66,11 @@ async def test_the_leaders_process_killed_with_sigkill_the_team_elects_again_and
     leaders = [s.leader for _, s in said if isinstance(s, leader_talk.Assign)]
     assert leaders[0] == "david" and "bob" in leaders, leaders  # bob allocates after the new election
     assert any(robot == "alice" and isinstance(s, leader_talk.Status) for robot, s in said)  # told the new leader
+
+
+def test_mhrc_agent_refuses_a_whole_team_protocol_in_one_line() -> None:
+    """One agent drives one robot: a whole-team protocol's planner is refused before anything starts."""
+    cmd = [sys.executable, "-m", "mhrc", "agent", "--robot", "alice", "--connect", "tcp/127.0.0.1:9", "--insecure"]
+    done = subprocess.run([*cmd, "--protocol", "centralized"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "drives the whole team" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and "insecure" not in done.stderr  # refused before the bus notice
