@@ -34,6 +34,7 @@ def test_every_sentence_reads_back() -> None:
         leader_talk.task_list("bob", ["mug"], False, []),
         leader_talk.status("alice", "fetch", "book"),
         leader_talk.status("alice", None, None),
+        leader_talk.make_way("alice", "erin", "counter"),
     ]
     parsed = [leader_talk.parse(s) for s in said]
     assert parsed == [
@@ -47,6 +48,7 @@ def test_every_sentence_reads_back() -> None:
         leader_talk.TaskList("bob", ("mug",), False, ()),
         leader_talk.Status("alice", "fetch", "book"),
         leader_talk.Status("alice", None, None),
+        leader_talk.MakeWay("alice", "erin", "counter"),
     ]
     assert leader_talk.parse("On table_2 I found: sponge.") is None  # another protocol's message: not ours
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from mhrc.agents.protocols import PROTOCOLS, ProtocolRefused, Refusal, Seating, protocol
+from mhrc.agents.protocols import PROTOCOLS, CoordinationProtocol, ProtocolRefused, Refusal, Seating, protocol
 from mhrc.agents.protocols.centralized import Seat
 from mhrc.analysis.observability import check
 from mhrc.core import security
@@ -43,9 +43,11 @@ def test_refusals_are_typed() -> None:
         EpisodeConfig.build(protocol="nope")
     assert unknown.value.code is Refusal.UNKNOWN_PROTOCOL and "centralized" in str(unknown.value)
     assert isinstance(unknown.value, ConfigError)
-    with pytest.raises(ProtocolConfigError) as llm:
-        EpisodeConfig.build(protocol="leader", llm="openai:m", base_url="http://127.0.0.1:9/v1")
-    assert llm.value.code is Refusal.NO_LLM_FORM
+    heuristic_only = CoordinationProtocol(
+        "h", "a protocol with its heuristic form only"
+    )  # (every shipped one has both)
+    refused = heuristic_only.refusal(PAPER_TEAM, llm=True)
+    assert refused is not None and refused.code is Refusal.NO_LLM_FORM
     cfg = EpisodeConfig.build(protocol="centralized")
     with pytest.raises(ProtocolConfigError) as partial:  # the planner drives the whole team or nothing
         seat(cfg, ("alice", "bob"))

@@ -12,7 +12,7 @@ from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from . import leader_talk
 from .base import CoordinationProtocol, ProtocolRefused, Refusal, Seating
 from .centralized_llm import build_centralized
-from .leader import build_leader
+from .leader_llm import build_leader
 
 __all__ = [
     "DEFAULT_PROTOCOL",
@@ -68,5 +68,6 @@ register(
         "leader",
         "DynaHMRC's loop: self-descriptions and bids by message, an elected leader allocates by auction, robots report",
         build=build_leader,
+        forms=("heuristic", "llm"),
     )
 )

@@ -52,6 +52,7 @@ class Seating:
     model: str | None = None  # the LLM form's model spec (None: the heuristic form)
     base_url: str | None = None
     client_options: Mapping[str, Any] = field(default_factory=dict)
+    structured: bool = False  # the LLM form asks for JSON decisions (--structured), where it can
 
 
 Build = Callable[[Seating], Mapping[str, Policy]]

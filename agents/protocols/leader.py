@@ -42,13 +42,14 @@ from .base import Seating
 from .knowledge import Knowledge
 from .steps import BOB_TRIES, Hand, Job, Taken, finisher_step, job_step
 
-__all__ = ["ROLE_BID", "LeaderPolicy", "build_leader"]
+__all__ = ["ROLE_BID", "LeaderPolicy", "build_heuristic"]
 
 ROLE_BID = {"scout": 2.0, "finisher": 5.0, "fetcher": 9.0}  # steps of its own work a robot sets aside to lead
 BLOCKED = 3  # navigations in a row to an occupied stand pose before a robot reports and leaves the job
 TRIES = 3  # failed grasps of one object before a robot reports and leaves it to another
 AT_POSE = 0.3  # m: a robot this near a stand pose stands at it
 ASIDE = 0.5  # m: how far an idle robot steps away from the furniture it stood at
+ASIDE_HANDOVER = 1.0  # m: ... from the finisher's table, where the next fetcher's arm must have room (one move's most)
 ELECTION_WAIT = 3  # ticks a convener waits for bids before it elects among those it has
 QUEUE = 2  # jobs a robot holds at most (the one under way and the next): it goes on without waiting for the leader
 LOAD = 4.0  # steps: a bid's share for each job the robot holds already
@@ -88,6 +89,10 @@ class LeaderPolicy:
     failed_by: dict[Job, set[str]] = field(default_factory=dict)
     where: dict[str, str] = field(default_factory=dict)  # robot -> the furniture it last reported from
     aside: bool = False  # stepped out of a stand pose since its last job
+    parked: str | None = None  # the empty furniture it parked at since its last job: it stays there
+    park_failed: set[str] = field(default_factory=set)  # furniture it could not park at since its last job
+    make_way: str | None = None  # idle: the furniture a teammate asked me to leave
+    asked: set[tuple[str, str, str]] = field(default_factory=set)  # (occupant, furniture, my job) I asked to make way
     blocked: int = 0  # navigations in a row that found the stand pose occupied
 
     def __post_init__(self) -> None:
@@ -220,6 +225,8 @@ class LeaderPolicy:
                 self.theirs.discard(said.target)
             else:
                 self.failed_by.setdefault(Job(said.kind, said.target), set()).add(said.robot)
+        elif isinstance(said, talk.MakeWay) and said.asked == self.robot:
+            self.make_way, self.parked = said.furniture, None
         elif isinstance(said, talk.Status):
             self.awaiting.discard(said.robot)
             if said.kind is not None and said.target is not None:
@@ -341,12 +348,21 @@ class LeaderPolicy:
         last = self.hand.last
         occupied = last is not None and isinstance(last.action, Navigate) and last.outcome.code == OutcomeCode.OCCUPIED
         self.blocked = self.blocked + 1 if occupied else 0
+        who = last.outcome.details.get("occupant") if occupied and last is not None else None
+        busy = job is not None or obs.status.holding is not None
+        if busy and isinstance(who, str) and who in self.attached - {self.robot} and last is not None:
+            where = getattr(last.action, "target", "")
+            if (who, where, str(job)) not in self.asked:  # once a job: it leaves if idle, else its work takes it away
+                self.asked.add((who, where, str(job)))
+                self._queue(talk.make_way(self.robot, who, where), to=who)
+                return self._send()
         if job is not None and obs.status.holding is None and self.blocked >= BLOCKED:
             self.blocked = 0
             return self._give_up(obs, job)
         if job is None and obs.status.holding is None:
             return self._step_aside(obs)
-        self.aside = False
+        self.aside, self.parked, self.make_way = False, None, None
+        self.park_failed.clear()
         step = job_step(self.k, self.hand, Taken(set(), set()))
         if step is not None:
             return self._say(step, f"my job: {job.call() if job else 'deliver what I hold'}")
@@ -371,32 +387,38 @@ class LeaderPolicy:
 
     def _step_aside(self, obs: Observation) -> Decision:
         """No work: out of the stand pose it stands at (nobody else knows it is idle there, and one
-        robot stands at a stand pose at a time): to a stand pose of a furniture it saw empty,
-        else by a short move away from the furniture; tried again while it still stands there."""
+        robot stands at a stand pose at a time): to a stand pose of a furniture it saw empty, where
+        it then stays (another empty furniture next when that one was taken), else by a move away
+        from the furniture, longer from the finisher's table, where another fetcher's arm must have
+        room; tried again while it still stands there."""
         base = obs.status.base
         if base is None:
             return self._say(Wait(), "no work")
-        at = [
-            f
+        at = {
+            f.name
             for f in self.k.furniture.values()
             if any(math.hypot(base.x - sp.x, base.y - sp.y) <= AT_POSE for sp in f.stand_poses)
-        ]
-        if not at:
-            return self._say(Wait(), "no work")
+        }
         last = self.hand.last
-        if self.aside and last is not None and isinstance(last.action, Navigate) and last.outcome.succeeded:
-            return self._say(Wait(), "no work: parked")  # at an empty furniture: nobody is sent there
+        if self.aside and last is not None and isinstance(last.action, Navigate):
+            if last.outcome.succeeded:
+                self.parked = last.action.target
+            else:
+                self.park_failed.add(last.action.target)
+        asked = self.make_way in at
+        if not at or (self.parked in at and not asked):
+            return self._say(Wait(), "no work: parked" if at else "no work")
         moved_failed = last is not None and isinstance(last.action, Move) and failed(last)
-        parking_failed = self.aside and last is not None and isinstance(last.action, Navigate) and failed(last)
-        park = self._park(obs, {f.name for f in at})
-        if park is not None and not parking_failed:
+        park = self._park(obs, at | self.park_failed, anywhere=asked)
+        if park is not None:
             self.aside = True
             return self._say(park, "no work: out of the way")
         if "move" in obs.status.skills and not moved_failed:
-            f = at[0]
+            f = self.k.furniture[HANDOVER if HANDOVER in at else sorted(at)[0]]
             dx, dy = base.x - f.position[0], base.y - f.position[1]
             d = math.hypot(dx, dy) or 1.0
-            return self._say(Move(dx=ASIDE * dx / d, dy=ASIDE * dy / d), "no work: out of the way")
+            step = ASIDE_HANDOVER if f.name == HANDOVER else ASIDE
+            return self._say(Move(dx=step * dx / d, dy=step * dy / d), "no work: out of the way")
         return self._say(Wait(), "no work")
 
     def _finish(self, obs: Observation) -> Decision:
@@ -409,9 +431,10 @@ class LeaderPolicy:
             return self._send()
         return self._say(step or Wait(), "the finisher: what is within my reach onto its goal")
 
-    def _park(self, obs: Observation, here: set[str]) -> Navigate | None:
-        """A stand pose of the nearest furniture it saw empty, not one it stands at (nobody is sent
-        to an empty furniture); None when it knows none."""
+    def _park(self, obs: Observation, here: set[str], anywhere: bool = False) -> Navigate | None:
+        """A stand pose of the nearest furniture it saw empty, not one in `here` (nobody is sent to
+        an empty furniture); `anywhere` (asked to make way), else of a surface it knows nothing on;
+        None when it knows none."""
         base = obs.status.base
         assert base is not None
         empty = [
@@ -423,6 +446,13 @@ class LeaderPolicy:
             and f.name in self.k.explored
             and not any(o.on == f.name for o in self.k.objects.values())
         ]
+        if not empty and anywhere:
+            known = {o.on for o in self.k.objects.values()}
+            empty = [
+                f
+                for f in self.k.furniture.values()
+                if f.stand_poses and f.name not in here | known | {HANDOVER} and not f.openable
+            ]
         spots = (
             (math.hypot(base.x - sp.x, base.y - sp.y), f.name, i) for f in empty for i, sp in enumerate(f.stand_poses)
         )
@@ -453,6 +483,6 @@ class LeaderPolicy:
         return Decision(action=action, reasoning=f"{lead}; {why}")
 
 
-def build_leader(seating: Seating) -> Mapping[str, Policy]:
-    """Each robot its own policy (they share nothing but messages)."""
+def build_heuristic(seating: Seating) -> Mapping[str, Policy]:
+    """Each robot its own policy (they share nothing but messages): the heuristic form."""
     return {r: LeaderPolicy(r, seating.team.names) for r in seating.robots}

@@ -9,6 +9,7 @@ None: it is some other message, ignored).
     report (failure)           "alice reports: failed fetch(book) (too_far); reflection: no stand pose of table_0 reaches it, another robot should try."
     report (the task)          "bob reports: the targets are bread, tomato, cheese, in this order; I take bread myself."
     report (status)            "alice reports: working on fetch(book)."   /   "alice reports: free."
+    making way                 "alice asks erin: make way at counter."
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ __all__ = [
     "Elected",
     "Done",
     "Failed",
+    "MakeWay",
     "Status",
     "TaskList",
     "assign",
@@ -30,6 +32,7 @@ __all__ = [
     "done",
     "elected",
     "failed",
+    "make_way",
     "parse",
     "status",
     "task_list",
@@ -92,7 +95,14 @@ class Status:
     target: str | None
 
 
-Said = Describe | Elected | Assign | Done | Failed | TaskList | Status
+@dataclass(frozen=True)
+class MakeWay:
+    robot: str  # who asks
+    asked: str  # who stands at a stand pose of `furniture` that the asker must reach
+    furniture: str
+
+
+Said = Describe | Elected | Assign | Done | Failed | TaskList | Status | MakeWay
 
 
 def describe(robot: str, kind: str, skills: list[str], bid: float) -> str:
@@ -122,6 +132,10 @@ def task_list(robot: str, targets: list[str], ordered: bool, mine: list[str]) ->
     return f"{robot} reports: the targets are {', '.join(targets)}{order}; I take {', '.join(mine) or 'none'} myself."
 
 
+def make_way(robot: str, asked: str, furniture: str) -> str:
+    return f"{robot} asks {asked}: make way at {furniture}."
+
+
 def status(robot: str, kind: Kind | None, target: str | None) -> str:
     return f"{robot} reports: working on {kind}({target})." if kind else f"{robot} reports: free."
 
@@ -137,6 +151,7 @@ _SHAPES: list[tuple[re.Pattern[str], str]] = [
     (re.compile(rf"^({_W}) reports: the targets are ({_LIST}?)(, in this order)?; I take ({_LIST}) myself\.$"), "task"),
     (re.compile(rf"^({_W}) reports: working on (fetch|explore)\(({_W})\)\.$"), "working"),
     (re.compile(rf"^({_W}) reports: free\.$"), "free"),
+    (re.compile(rf"^({_W}) asks ({_W}): make way at ({_W})\.$"), "make_way"),
 ]
 
 
@@ -165,5 +180,7 @@ def parse(text: str) -> Said | None:
             return TaskList(g[0], _names(g[1]), g[2] is not None, _names(g[3]))
         if shape == "working":
             return Status(g[0], g[1], g[2])  # type: ignore[arg-type]
+        if shape == "make_way":
+            return MakeWay(g[0], g[1], g[2])
         return Status(g[0], None, None)
     return None

@@ -95,6 +95,7 @@ def agent(
     security = _logins(robots, logins, cfg.protocol)
     from mhrc.agents.agent import AgentError
     from mhrc.agents.llm import LLMFatalError
+    from mhrc.agents.llm.model_spec import LLMSpecError
     from mhrc.core.lifeline import PARENT_ENV
     from mhrc.run.config import ConfigError
     from mhrc.run.coordinated import attach_seated, check_seating
@@ -138,6 +139,7 @@ def agent(
     except (
         AgentError,
         LLMFatalError,
+        LLMSpecError,  # e.g. a gguf: file under a protocol, which only `mhrc up` serves for a protocol's policies
         SecurityError,
         ConfigError,
     ) as exc:  # the world, the model or the setup: one line, exit 2

@@ -53,6 +53,7 @@ def seat(
             model=model,
             base_url=cfg.base_url,
             client_options=options,
+            structured=cfg.structured,
         )
     )
 
