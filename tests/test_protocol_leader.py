@@ -15,7 +15,7 @@ from mhrc.agents.protocols.leader import LeaderPolicy
 from mhrc.analysis.observability import check
 from mhrc.core.bus import Bus
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import ActionResult, RobotDetached, TickClosed, decode_event
+from mhrc.core.protocol import ActionResult, RobotDetached, Thought, TickClosed, decode_event
 from mhrc.core.records import read_records
 from mhrc.core.team import PAPER_TEAM
 from mhrc.run.config import EpisodeConfig
@@ -104,6 +104,38 @@ async def test_the_leader_protocol_solves_an_episode_with_every_stage_in_its_tra
     assert all(s is not None for _, s in said)  # every message has one of the protocol's shapes
     seen = check(records)
     assert seen.unchecked is None and seen.leaks == []
+    _shows_who_leads_and_the_jobs(trace, tmp_path)
+
+
+def _shows_who_leads_and_the_jobs(trace: Path, tmp_path: Path) -> None:
+    """The report and the Rerun recording show the protocol, who leads and what was allocated to whom."""
+    from mhrc.viewer.load import load_trace
+    from mhrc.viewer.model import build_view
+    from mhrc.viewer.page import render_page
+
+    records = read_records(trace)
+    told = [r.msg.coordination for r in records if isinstance(r.msg, Thought) and r.msg.coordination is not None]
+    assert {c.leader for c in told} == {None, "david"}  # none before the election
+    assert any(c.job and c.by == "david" for c in told)
+    html = render_page(build_view(load_trace(trace)))
+    section = html[html.index('<section id="coordination">') : html.index('<section id="lanes-section">')]
+    assert "Coordination (leader)" in section and "<td>david</td>" in section  # the leader, from his tick
+    assert "<th>protocol</th><td>leader</td>" in html
+    row = section[section.index('<tr data-robot="alice">') :]  # the fetcher's jobs, in order (bob finishes)
+    assert "fetch(" in row[: row.index("</tr>")]
+    assert 'class="coordination dim">job <code>' in html  # each step the job it worked on
+    pytest.importorskip("rerun")
+    from test_rerun import read_back, verify
+
+    from mhrc.viewer.rerun import Mode, Target
+    from mhrc.viewer.rerun.record import write_recording
+
+    out = tmp_path / "leader.rrd"
+    write_recording(trace, Target(Mode.FILE, out))
+    verify(out)
+    got = read_back(out)
+    assert any("leader david" in t for t in got.texts("/agents/alice/coordination"))
+    assert any(t.startswith("job fetch(") for t in got.texts("/agents/alice/coordination"))
 
 
 @pytest.mark.slow

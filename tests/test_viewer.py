@@ -316,6 +316,8 @@ def test_the_failure_panel_says_why_when_the_diagnosis_fails(traces: dict[str, P
     )
     section = html[html.index('<section id="failures">') :]
     assert "KeyError" in section[: section.index("</section>")] and 'class="note"' in section
+    # the paper's protocol decides robot by robot: no coordination section, no protocol fact, no job lines
+    assert 'id="coordination"' not in html and "<th>protocol</th>" not in html and 'class="coordination' not in html
 
 
 def _data(html: str) -> dict[str, Any]:

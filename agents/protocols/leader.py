@@ -34,6 +34,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from mhrc.core.protocol import Action, ActionResult, Communicate, Move, Navigate, Observation, OutcomeCode, Wait
+from mhrc.core.protocol.thoughts import Coordination
 
 from ..heuristic_base import HANDOVER, failed, role_of
 from ..policy import Decision, Policy
@@ -480,7 +481,9 @@ class LeaderPolicy:
 
     def _say(self, action: Action, why: str) -> Decision:
         lead = f"leader {self.leader}" if self.leader else "no leader yet"
-        return Decision(action=action, reasoning=f"{lead}; {why}")
+        job = self.hand.job.call() if self.hand.job else None
+        told = Coordination(leader=self.leader, job=job, by=self.leader if job else None)
+        return Decision(action=action, reasoning=f"{lead}; {why}", coordination=told)
 
 
 def build_heuristic(seating: Seating) -> Mapping[str, Policy]:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from string import Template
 
-from mhrc.core.protocol import Action, ActionResult, Communicate, Move, Navigate, Observation, Wait
+from mhrc.core.protocol import Action, ActionResult, Communicate, Coordination, Move, Navigate, Observation, Wait
 from mhrc.core.protocol.actions import CALLS
 from mhrc.core.protocol.thoughts import ReplyFailure
 
@@ -304,6 +304,12 @@ class LLMLeaderPolicy:
             user = user.rstrip("\n") + "\n" + json_mode.STRUCTURED_INSTRUCTIONS
         return [{"role": "system", "content": system}, {"role": "user", "content": user}]
 
+    def _coordination(self) -> Coordination:
+        """Whom this robot follows and its first job not reported yet, as it read them from the messages."""
+        s = self.stages
+        job = s.jobs[0].call() if s.jobs else None
+        return Coordination(leader=s.leader, job=job, by=s.leader if job else None)
+
     async def decide(self, obs: Observation) -> Decision:
         self.stages.observe(obs)
         said = [f"- step {m.tick}, from {m.sender}: {m.content}" for m in obs.new_messages]
@@ -319,7 +325,12 @@ class LLMLeaderPolicy:
         except LLMError as exc:
             self.unread = f"the model did not answer: {exc}"[:300]
             return Decision(
-                Wait(), prompt, parse_error=self.unread, failure=ReplyFailure.MODEL_UNREACHABLE, schema_hash=digest
+                Wait(),
+                prompt,
+                parse_error=self.unread,
+                failure=ReplyFailure.MODEL_UNREACHABLE,
+                schema_hash=digest,
+                coordination=self._coordination(),
             )
         error: str | None = None
         try:
@@ -340,6 +351,7 @@ class LLMLeaderPolicy:
             finish_reason=done.finish_reason,
             schema_hash=digest,
             failure=None if error is None else ReplyFailure.UNREADABLE,
+            coordination=self._coordination(),
         )
 
     def record(self, result: ActionResult) -> None:
