@@ -194,3 +194,53 @@ def parse_structured(text: str) -> tuple[Action, str]:
         errors = "; ".join(f"{names.get(str(e['loc'][-1]), e['loc'][-1])}: {e['msg']}" for e in exc.errors()[:3])
         raise ReplyFormatError(f"{skill} got bad arguments: {errors}") from None
     return action, analysis
+
+
+# --------------------------------------------------------------------------- a planner's round
+
+
+def round_schema(observations: Iterable[Observation], *, max_analysis: int = MAX_ANALYSIS) -> JsonObject:
+    """The JSON Schema of a planner's round (a whole-team protocol, `centralized`): its analysis,
+    then one command for each robot, each among that robot's own skills with names from that
+    robot's own scene graph (`decision_schema`'s command). Robots in the observations' order."""
+    commands: JsonObject = {}
+    for obs in observations:
+        one = decision_schema(obs, max_analysis=0)["properties"]
+        assert isinstance(one, dict)
+        commands[obs.robot] = one["command"]
+    return {
+        "type": "object",
+        "properties": {
+            "analysis": {"type": "string", "maxLength": max_analysis},
+            "commands": {
+                "type": "object",
+                "properties": commands,
+                "required": list(commands),
+                "additionalProperties": False,
+            },
+        },
+        "required": ["analysis", "commands"],
+        "additionalProperties": False,
+    }
+
+
+def parse_round_structured(text: str, robots: Iterable[str]) -> tuple[dict[str, Action], dict[str, str]]:
+    """A structured round's commands by robot, and for each robot whose command is missing or
+    cannot be read, why (the others' commands still stand). ReplyFormatError when the reply is no
+    JSON object with a "commands" object at all."""
+    reply = _json_object(text)
+    commands = reply.get("commands")
+    if not isinstance(commands, dict):
+        raise ReplyFormatError('the reply has no "commands" object: give "commands": {"<robot>": {"skill": ...}}')
+    got: dict[str, Action] = {}
+    problems: dict[str, str] = {}
+    for robot in robots:
+        command = commands.get(robot)
+        if command is None:
+            problems[robot] = "no command was given for it"
+            continue
+        try:
+            got[robot] = parse_structured(json.dumps({"command": command}))[0]
+        except ReplyFormatError as exc:
+            problems[robot] = str(exc)
+    return got, problems
