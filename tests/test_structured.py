@@ -19,8 +19,10 @@ from mhrc.agents.structured import (
     STRUCTURED_INSTRUCTIONS,
     arguments,
     decision_schema,
+    parse_round_structured,
     parse_structured,
     response_format,
+    round_schema,
     schema_hash,
 )
 from mhrc.core.protocol import Communicate, Navigate, Observation, Pick, Wait
@@ -317,3 +319,28 @@ async def test_llama_cpp_server_compiles_every_robots_schema(gemma: Path, observ
             reply = await _ask(client, srv.base_url, decision_schema(obs))
             assert reply.status_code == 200, reply.text
             assert reply.json()["choices"][0]["message"]["content"].startswith("{")
+
+
+def test_a_planners_round_schema_gives_each_robot_its_own_commands_and_reads_them_back_one_by_one(
+    start: dict[str, Observation],
+) -> None:
+    """`centralized` with --structured: one command per robot, each from that robot's own schema;
+    a robot's bad command is that robot's problem, the others' commands stand."""
+    schema = round_schema(start.values())
+    jsonschema.Draft202012Validator.check_schema(schema)
+    commands = schema["properties"]["commands"]
+    assert commands["required"] == ["alice", "bob", "david"] and commands["additionalProperties"] is False
+    for robot, obs in start.items():  # the same command schema a robot's own decision has
+        assert commands["properties"][robot] == decision_schema(obs)["properties"]["command"]
+    for path, node in _walk(schema):
+        if not path.endswith("/properties"):
+            assert not FORBIDDEN & set(node), path
+    reply = {
+        "analysis": "alice looks at the table",
+        "commands": {"alice": {"skill": "navigate", "furniture": "table_1", "stand_pose": 0}, "bob": {"skill": "fly"}},
+    }
+    got, problems = parse_round_structured(json.dumps(reply), ("alice", "bob", "david"))
+    assert got == {"alice": Navigate(target="table_1", stand_pose=0)}
+    assert set(problems) == {"bob", "david"} and "fly" in problems["bob"]
+    with pytest.raises(ReplyFormatError, match="commands"):
+        parse_round_structured('{"analysis": "x"}', ("alice",))
