@@ -14,10 +14,9 @@ import socket
 import uuid
 from typing import TYPE_CHECKING
 
-import structlog
-
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import (
     OUT_OF_STEP,
     ActionAck,
@@ -45,7 +44,7 @@ from .progress import PROGRESS, Progress
 if TYPE_CHECKING:
     from mhrc.core.security import Credentials
 
-log = structlog.get_logger("mhrc.agent")
+log = get_logger("mhrc.agent")
 
 RESYNC_BACKOFF = (
     0.5  # s: the first wait before attaching again for a tick whose action is already taken; doubles each time

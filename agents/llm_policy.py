@@ -61,8 +61,7 @@ from pathlib import Path
 from string import Template
 from typing import TypedDict
 
-import structlog
-
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import LLM_ERROR_PREFIX, Action, ActionResult, Observation, Wait
 from mhrc.core.protocol.actions import CALLS
 from mhrc.core.protocol.thoughts import ReplyFailure
@@ -86,7 +85,7 @@ from .parse import ReplyFormatError, parse_command, signature
 from .policy import Decision
 from .replay import ReplayClient
 
-log = structlog.get_logger("mhrc.llm_policy")
+log = get_logger("mhrc.llm_policy")
 
 MEANINGS = {
     "navigate": "go to the stand pose with that id of that piece of furniture",

@@ -167,10 +167,14 @@ NO_SERVER = ("--llm", "llamacpp:m", "--base-url", "http://127.0.0.1:9/v1")  # a 
 @pytest.mark.parametrize(
     ("args", "option", "said"),
     [
-        (["up", "--protocol", "leader", *NO_SERVER], "--protocol", "has no LLM form yet"),
+        (["up", "--protocol", "centralized", "--ablation", "no_mobile", *NO_SERVER], "--protocol", "not given david"),
         (["up", "--processes", "--protocol", "centralized", "--external", "bob"], "--external", "none can be external"),
         (["play", "--robot", "bob", "--no-browser", "--protocol", "centralized"], "--protocol", "cannot leave bob"),
-        (["eval", "--protocol", "mhrc", "--protocol", "leader", *NO_SERVER], "--protocol", "no LLM form"),
+        (
+            ["eval", "--protocol", "mhrc", "--protocol", "centralized", "--ablation", "no_mobile", *NO_SERVER],
+            "--protocol",
+            "not given david",
+        ),
         (
             ["agent", "--insecure", "--connect", "tcp/127.0.0.1:9", "--protocol", "centralized", "--robot", "alice"],
             "--protocol",
@@ -182,7 +186,7 @@ NO_SERVER = ("--llm", "llamacpp:m", "--base-url", "http://127.0.0.1:9/v1")  # a 
             "one robot per agent under protocol 'mhrc'",
         ),
     ],
-    ids=["no-llm-form", "external", "play", "eval", "planner-partial", "two-robots"],  # unknown names: test_cli_light
+    ids=["unfit-team", "external", "play", "eval", "planner-partial", "two-robots"],  # unknown names: test_cli_light
 )
 def test_a_protocol_that_cannot_run_is_refused_before_anything_starts(
     tmp_path: Path, args: list[str], option: str, said: str

@@ -14,6 +14,7 @@ from mhrc.cli import COMMANDS, main
 from mhrc.cli import names as cli_names
 
 HEAVY = ("pybullet", "zenoh", "matplotlib", "ray", "xllamacpp", "httpx", "openai", "mhrc.agents.llm.openai_client")
+HEAVY += ("structlog", "cryptography", "asyncio")  # the logs, the secured bus, the event loop: a run's, not a refusal's
 
 PROBE = """
 import json, sys
@@ -26,9 +27,9 @@ print(json.dumps({"code": code, "heavy": sorted(m for m in HEAVY if m in sys.mod
 """
 
 
-def _refused(*args: str) -> tuple[dict[str, object], str]:
+def _refused(*args: str, heavy: tuple[str, ...] = HEAVY) -> tuple[dict[str, object], str]:
     done = subprocess.run(
-        [sys.executable, "-c", f"HEAVY = {HEAVY!r}\n{PROBE}", *args], capture_output=True, text=True, timeout=120
+        [sys.executable, "-c", f"HEAVY = {heavy!r}\n{PROBE}", *args], capture_output=True, text=True, timeout=120
     )
     return json.loads(done.stdout.strip().splitlines()[-1]), done.stderr
 
@@ -65,6 +66,26 @@ def test_a_typo_is_refused_in_one_line_before_any_heavy_import(args: list[str], 
     assert said in stderr, stderr
     assert got["heavy"] == [], f"{' '.join(args)} imported {got['heavy']} before refusing"
     assert "Traceback" not in stderr
+
+
+@pytest.mark.parametrize("args", [["--help"], ["up", "--help"], ["eval", "--help"], ["agent", "--help"]])
+def test_help_imports_no_command_it_does_not_show_nor_the_wire(args: list[str]) -> None:
+    """`mhrc --help` lists the commands from their one-line help (cli.SUMMARIES), so it imports
+    none of their modules; a command's --help imports its options only: no wire models, no logs."""
+    got, stderr = _refused(*args, heavy=(*HEAVY, "pydantic", "mhrc.core.protocol", "mhrc.cli.bustools"))
+    assert got["code"] == 0, stderr
+    assert got["heavy"] == [], f"{' '.join(args)} imported {got['heavy']}"
+
+
+def test_the_command_list_is_what_click_would_list_from_the_commands_themselves() -> None:
+    import click
+
+    ctx = click.Context(main)
+    for width in (50, 80, 120):
+        ours, clicks = click.HelpFormatter(width=width), click.HelpFormatter(width=width)
+        main.format_commands(ctx, ours)
+        click.Group.format_commands(main, ctx, clicks)  # imports every command's module
+        assert ours.getvalue() == clicks.getvalue()
 
 
 def test_the_light_lists_are_the_registries() -> None:

@@ -17,8 +17,8 @@ import math
 from collections.abc import Iterable
 
 import numpy as np
-import structlog
 
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import ScenarioEvent
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
@@ -30,7 +30,7 @@ from .physics import ObjectState, PhysicalWorld
 from .scenario import Breakdown, Close, EpisodeFacts, NewTarget, Relocate, Scenario, ScenarioEventSpec
 from .tasks import Task, get_task
 
-log = structlog.get_logger("mhrc.world.dynamics")
+log = get_logger("mhrc.world.dynamics")
 
 SPOT_CLEARANCE = 0.12  # m: a slot counts as free when no object's centre lies closer than this
 

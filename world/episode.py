@@ -13,10 +13,10 @@ from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-import structlog
 from structlog.typing import FilteringBoundLogger
 
 from mhrc.core.fidelity import label as fidelity_label
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import (
     ActionRequest,
     Communicate,
@@ -37,7 +37,7 @@ from .mail import Mailroom
 from .schedulers import Executed, Scheduler, TaskResultLike
 from .service_config import SimLike
 
-log = structlog.get_logger("mhrc.world")
+log = get_logger("mhrc.world")
 
 
 @dataclass

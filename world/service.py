@@ -17,10 +17,9 @@ import time
 from collections.abc import Sequence
 from dataclasses import replace
 
-import structlog
-
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import (
     ActionAck,
     ActionRequest,
@@ -49,7 +48,7 @@ from .roster import Roster
 from .schedulers import Executed, Scheduler, make_scheduler
 from .service_config import NobodyAttached, SimLike, WorldConfig
 
-log = structlog.get_logger("mhrc.world")
+log = get_logger("mhrc.world")
 
 
 class WorldService:

@@ -17,9 +17,9 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
 
 import numpy as np
-import structlog
 
 from mhrc.core.fidelity import motion_noise, parse_aids
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import (
     Action,
     Communicate,
@@ -54,7 +54,7 @@ from .skills import SKILLS, SkillContext
 from .tasks import Seen, TaskResult, get_task
 from .teams import check_team
 
-log = structlog.get_logger("mhrc.world.sim")
+log = get_logger("mhrc.world.sim")
 
 N_OBJECTS = (3, 6)
 

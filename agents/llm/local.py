@@ -42,12 +42,13 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any, Self
 
 import httpx
-import structlog
+
+from mhrc.core.logs import get_logger
 
 if TYPE_CHECKING:  # pragma: no cover
     import xllamacpp
 
-log = structlog.get_logger("mhrc.local")
+log = get_logger("mhrc.local")
 
 GGUF_MAGIC = b"GGUF"
 INSTALL_HINT = 'install it with `pip install -e ".[local]"` or `pip install xllamacpp`'

@@ -28,9 +28,9 @@ from collections.abc import AsyncIterator
 from typing import Self, TypedDict
 
 import httpx
-import structlog
 
 from mhrc.core.jsontypes import JsonObject
+from mhrc.core.logs import get_logger
 
 from ..progress import PROGRESS
 from .completion import (
@@ -45,7 +45,7 @@ from .completion import (
 )
 from .reply import StreamedReply, Unreadable, whole_completion
 
-log = structlog.get_logger("mhrc.llm")
+log = get_logger("mhrc.llm")
 
 DEFAULT_TIMEOUT = 120.0  # s to the first token (mhrc.run.config.SERVER_TIMEOUT says why)
 DEFAULT_IDLE_TIMEOUT = 30.0  # s between two chunks of a streamed reply: a decoding server sends one every few tokens

@@ -19,11 +19,9 @@ from __future__ import annotations
 
 import difflib
 import importlib
-import os
 
 import click
-
-from mhrc.core import logs
+from click.utils import make_default_short_help
 
 __all__ = ["main"]
 
@@ -48,6 +46,59 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "play": ("play", "play"),
 }
 
+# command name -> its one-line help, as `mhrc --help` lists it without importing the command's module
+# (tests/test_cli_light.py keeps each equal to the command's own short help)
+SUMMARIES: dict[str, str] = {
+    "up": "Run one episode: the world and the three robot agents, then print the metrics.",
+    "world": "Run the world alone and wait for agents to attach (`mhrc agent`).",
+    "agent": (
+        "Attach one robot's agent (heuristic or LLM policy) to a running world; under a whole-team protocol, "
+        "one planner for every robot of the team."
+    ),
+    "scenes": "List the scene layouts (world/scenes/*.json; `--scene FILE.json` loads your own).",
+    "render": (
+        "Write top-down and perspective PNGs of each scene (CPU renderer, no display needed): "
+        "OUT/<scene>_top.png and OUT/<scene>_perspective.png."
+    ),
+    "eval": (
+        "Run the paper's benchmark and write, to --out, one trace per episode, episodes.jsonl (every metric "
+        "of every episode, its fidelity and the LLM failures that shaped it) and summary.md / summary.csv "
+        "(tables shaped like the paper's Table I and II with 95% bootstrap intervals, the paper's figures "
+        "beside a matching configuration, TS next to its lower bound) and summary.html (the tables, plots, a "
+        "link to each episode's report)."
+    ),
+    "report": (
+        "Merge `mhrc eval` directories into one comparison (markdown on stdout): Succ, PS, TS and AS per task"
+        " with 95% bootstrap confidence intervals, grouped by method, ablation and fidelity, and the paper's "
+        "Table I / II figures beside the settings that match its configuration."
+    ),
+    "schema": 'The JSON Schema of every bus payload, for agents in any language (README, "Attaching your own agent").',
+    "credentials": (
+        "Issue one run's credentials for a world and agents started by hand or in containers (`mhrc up` makes"
+        " its own): a CA, the world's TLS certificate, one login per participant."
+    ),
+    "bus": "Look at a running bus: who is alive (`list`), every message on a key (`echo`).",
+    "doctor": (
+        "Check a bus endpoint: is a zenoh router or world there, which runs are alive, which protocol version"
+        " each world speaks."
+    ),
+    "show": (
+        "Write one self-contained HTML report of an episode (map, robot lanes, messages, failures) from "
+        "RUN_OR_TRACE: a trace file, or a run directory holding trace.jsonl."
+    ),
+    "router": "Run a Zenoh router that worlds and agents on several hosts can all connect to.",
+    "scenarios": (
+        "List the shipped scenarios, one a line: name, events (kind@tick) and the first 12 hex digits of the "
+        "file's sha256 (result rows record the name and the whole hash)."
+    ),
+    "teams": "List the shipped teams, one a line: name, robots (name:kind, in execution order) and purpose.",
+    "protocols": (
+        "List the coordination protocols, one a line: name, how the team decides, and its forms (heuristic: "
+        "the expert, no network; llm: with --llm)."
+    ),
+    "play": "Drive one robot yourself from a browser page, beside the AI teammates (heuristic, or --llm).",
+}
+
 
 def _load(name: str) -> click.Command:
     module, attr = COMMANDS[name]
@@ -62,6 +113,14 @@ class LazyGroup(click.Group):
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted(COMMANDS)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The commands and their one-line help, as click lists them, from SUMMARIES: `mhrc --help`
+        imports none of the commands' modules."""
+        names = self.list_commands(ctx)
+        limit = formatter.width - 6 - max(len(n) for n in names)
+        with formatter.section("Commands"):
+            formatter.write_dl([(n, make_default_short_help(SUMMARIES[n], limit)) for n in names])
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         return _load(cmd_name) if cmd_name in COMMANDS else None
@@ -86,7 +145,8 @@ def main() -> None:
     Start with `mhrc up`: one Pack Objects episode with Alice (mobile manipulator), Bob (arm on
     table_0) and David (mobile robot) driven by the built-in heuristic policy.
     """
-    logs.configure(os.environ.get("MHRC_LOG_LEVEL", "warning"))  # a command's --log-level overrides it
+    # structlog is set up (MHRC_LOG_LEVEL, else warning) by mhrc.core.logs when a command's modules import it;
+    # a command's --log-level overrides it. Parsing and refusing a command line imports neither.
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -25,8 +25,9 @@ from mhrc.cli.options import (
     team_option,
 )
 from mhrc.cli.running import run_command
-from mhrc.core import logs
-from mhrc.core.security import Credentials, SecurityError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mhrc.core.security import Credentials  # cryptography: imported once the command line is accepted
 
 
 @click.command()
@@ -79,6 +80,7 @@ def agent(
 ) -> None:
     """Attach one robot's agent (heuristic or LLM policy) to a running world; under a whole-team
     protocol, one planner for every robot of the team."""
+    from mhrc.core import logs  # structlog: imported once the command line is accepted
     from mhrc.run.attach import attach_agent
 
     logs.configure(log_level)
@@ -97,6 +99,7 @@ def agent(
     from mhrc.agents.llm import LLMFatalError
     from mhrc.agents.llm.model_spec import LLMSpecError
     from mhrc.core.lifeline import PARENT_ENV
+    from mhrc.core.security import SecurityError
     from mhrc.run.config import ConfigError
     from mhrc.run.coordinated import attach_seated, check_seating
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 import dataclasses
 import sys
 import time
@@ -28,8 +27,7 @@ from mhrc.cli.options import (
     rerun_option,
 )
 from mhrc.cli.running import run_command
-from mhrc.core import logs
-from mhrc.core.fidelity import NOISE
+from mhrc.core.aids import NOISE
 from mhrc.core.plural import counted
 from mhrc.run.errors import ConfigError, ModelServerDown  # the bus and the model clients: imported in eval_
 
@@ -274,6 +272,7 @@ def eval_(
         TimeRemainingColumn,
     )
 
+    from mhrc.core import logs  # structlog: imported once the command line is accepted
     from mhrc.core.fidelity import AidsError, parse_aids
     from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, preflight, resume_command, run
     from mhrc.eval.paper import PAPER_OBJECTS
@@ -397,6 +396,8 @@ def eval_(
         from mhrc.agents.llm import episodes_at_once
 
         specs = plan.jobs[0].config.robot_specs().values() if spec.llm else [None]
+        import asyncio
+
         concurrency = asyncio.run(episodes_at_once(list(specs), spec.base_url))
         options = dataclasses.replace(options, concurrency=concurrency)
     where = f"on the Ray cluster at {ray_address}" if ray_address else f"with {counted(options.processes, 'worker')}"

@@ -30,6 +30,11 @@ PROTOCOLS = (
     "centralized",
     "leader",
 )  # mhrc.agents.protocols.PROTOCOLS, in its order (it imports the model clients)
+SCHEDULES = (
+    "sequential",
+    "lockstep",
+    "async",
+)  # mhrc.world.schedulers.SCHEDULERS, in its order (a test keeps them equal)
 TOKEN_DEADLINE = 30.0  # mhrc.world.presence.TOKEN_DEADLINE, which imports the bus (a test keeps them equal)
 
 

@@ -9,18 +9,16 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mhrc.cli.names import TOKEN_DEADLINE, check_protocol, check_scene, check_task, unknown_team
-from mhrc.core.fidelity import NOISE
-from mhrc.core.fidelity import describe as describe_aids
+from mhrc.cli.names import SCHEDULES, TOKEN_DEADLINE, check_protocol, check_scene, check_task, unknown_team
+from mhrc.core.aids import NOISE
+from mhrc.core.aids import describe as describe_aids
 from mhrc.core.lifeline import PARENT_ENV
-from mhrc.core.security import Credentials, SecurityError, load
-from mhrc.world.scenario import ScenarioError, resolve_scenario
-from mhrc.world.schedulers import SCHEDULERS
 
 if TYPE_CHECKING:  # pragma: no cover
+    from mhrc.core.security import Credentials  # the wire's models and cryptography: imported when a file is read
     from mhrc.run.config import EpisodeConfig  # imports the bus: the commands import it when they run
 
-SCHEDULES = tuple(SCHEDULERS)  # as mhrc.run.config has them
+__all__ = ["SCHEDULES"]  # (and the options below) SCHEDULES: as mhrc.run.config has them, listed in mhrc.cli.names
 
 ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
 AIDS_HELP = (
@@ -81,6 +79,8 @@ LLM_HELP = (
 def _check_events(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     """--events as given (a shipped name travels as a name), once it is known to name a scenario."""
     if value is not None:
+        from mhrc.world.scenario import ScenarioError, resolve_scenario  # pydantic: only when --events is given
+
         try:
             resolve_scenario(value)
         except ScenarioError as exc:
@@ -321,6 +321,8 @@ def load_credentials(path: Path | None, insecure: bool, connect: str | None = No
                 "(e.g. runs/RUN/credentials/<robot>.json, or DIR/<robot>.json of mhrc credentials) or set $MHRC_CREDENTIALS"
             )
         return None
+    from mhrc.core.security import SecurityError, load
+
     try:
         return load(path)
     except SecurityError as exc:

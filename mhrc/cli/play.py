@@ -24,7 +24,6 @@ from mhrc.cli.options import (
     open_bus_notice,
 )
 from mhrc.cli.running import run_command
-from mhrc.core import logs
 
 
 def _page_port_not_world_port(f: Callable[..., Any]) -> Callable[..., Any]:
@@ -83,6 +82,7 @@ def play(
     from rich.console import Console
 
     from mhrc.agents.agent import AgentError
+    from mhrc.core import logs  # structlog: imported once the command line is accepted
     from mhrc.play.app import PortInUse, bind
     from mhrc.play.gate import Gate, launcher
 

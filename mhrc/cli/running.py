@@ -3,19 +3,20 @@
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import os
 import signal
 import sys
 from collections.abc import Callable, Coroutine
-from typing import Any, NoReturn, TypeVar
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 import click
 
-from mhrc.core import logs
 from mhrc.core.endpoints import BusError
 from mhrc.core.lifeline import PARENT_ENV, die_with_parent
+
+if TYPE_CHECKING:  # pragma: no cover
+    import asyncio  # imported when a command runs: refusing a command line needs no event loop
 
 T = TypeVar("T")
 
@@ -60,6 +61,10 @@ def run_command(
     `mhrc eval` says nothing (its parent, interrupted with it, says it once), and takes the
     terminal's Ctrl-C only as the word that the others are about to leave (its warnings about
     them hushed); its parent stops it."""
+    import asyncio
+
+    from mhrc.core import logs  # structlog: imported once the command line is accepted
+
     die_with_parent()
 
     async def main() -> T:

@@ -28,7 +28,6 @@ from mhrc.cli.options import (
 from mhrc.cli.rerun_view import both, close_live, keep_serving, start_live
 from mhrc.cli.running import run_command
 from mhrc.cli.viewer import render_video_to
-from mhrc.core import logs
 
 
 @click.command()
@@ -89,6 +88,7 @@ def up(
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
     from rich.console import Console
 
+    from mhrc.core import logs  # structlog: imported once the command line is accepted
     from mhrc.core.endpoints import ListenError, check_listen
     from mhrc.core.protocol.events import DEFAULT_PROTOCOL
     from mhrc.core.trace import TraceWriteError
@@ -116,6 +116,9 @@ def up(
     robots = tuple(r for r in cfg.robots if r not in external)
     try:
         check_seating(cfg, robots)  # a whole-team protocol drives every robot from here: none external
+    except ConfigError as exc:  # the command line asks for what the protocol cannot seat: a usage error
+        raise click.UsageError(str(exc)) from None
+    try:
         check_model_servers(cfg, robots)  # before anything is written or started
         cfg.check_replays(robots)
     except (ModelServerDown, ConfigError) as exc:

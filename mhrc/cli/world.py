@@ -24,7 +24,6 @@ from mhrc.cli.options import (
     open_bus_notice,
 )
 from mhrc.cli.running import run_command
-from mhrc.core import logs
 
 if TYPE_CHECKING:  # pragma: no cover
     from mhrc.run.config import EpisodeConfig  # the bus and the model clients: imported when a command runs
@@ -69,6 +68,7 @@ def world(
     **values: Any,
 ) -> None:
     """Run the world alone and wait for agents to attach (`mhrc agent`)."""
+    from mhrc.core import logs  # structlog: imported once the command line is accepted
     from mhrc.core.protocol.events import DEFAULT_PROTOCOL
     from mhrc.run.console import ProgressPrinter
 

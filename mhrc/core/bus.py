@@ -18,18 +18,18 @@ from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import structlog
 import zenoh
 from pydantic import BaseModel
 
 from mhrc.core.endpoints import BusError, BusRefused, listen_error
+from mhrc.core.logs import get_logger
 from mhrc.core.polling import poll
 from mhrc.core.protocol import encode
 from mhrc.core.refusal import why_refused
 from mhrc.core.security import Credentials, apply
 from mhrc.core.uncancelled import to_the_end
 
-log = structlog.get_logger("mhrc.core.bus")
+log = get_logger("mhrc.core.bus")
 
 
 DEFAULT_LEASE_MS = 2000

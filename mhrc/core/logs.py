@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import time
+from typing import Any
 
 import structlog
 from structlog.typing import EventDict, WrappedLogger
@@ -81,3 +83,14 @@ class Throttle:
             return False, 0
         self._last[key] = now
         return True, self._held.pop(key, 0)
+
+
+def get_logger(name: str) -> Any:
+    """structlog's logger for an mhrc module. Importing this module gives structlog mhrc's set-up
+    when nobody configured it (stderr, the level of MHRC_LOG_LEVEL, else warning): a library
+    prints nothing unless asked, and the `mhrc` command's modules import only what they use."""
+    return structlog.get_logger(name)
+
+
+if not structlog.is_configured():
+    configure(_env if (_env := os.environ.get("MHRC_LOG_LEVEL", "warning")) in LEVELS else "warning")

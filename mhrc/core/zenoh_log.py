@@ -25,11 +25,9 @@ import sys
 import threading
 from collections.abc import Callable
 
-import structlog
+from mhrc.core.logs import Throttle, get_logger
 
-from mhrc.core.logs import Throttle
-
-log = structlog.get_logger("mhrc.world")
+log = get_logger("mhrc.world")
 
 # zenoh's log for the world: the accept side of the transport (logins) and TLS link warnings
 # (alerts the client sent), nothing else; RUST_LOG, when set, replaces it (zenoh reads it first)

@@ -16,8 +16,7 @@ import itertools
 from collections.abc import Coroutine, Mapping, Sequence
 from typing import Any, TypeVar
 
-import structlog
-
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import (
     Action,
     ActionRequest,
@@ -36,7 +35,7 @@ from mhrc.world.roster import Roster
 from mhrc.world.schedulers import Executed, make_scheduler
 from mhrc.world.sim import Sim
 
-log = structlog.get_logger("mhrc.env")
+log = get_logger("mhrc.env")
 
 T = TypeVar("T")
 SESSION = "env"  # the one session every robot of an environment is attached from

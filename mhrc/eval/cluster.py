@@ -26,12 +26,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-import structlog
-
+from mhrc.core.logs import get_logger
 from mhrc.eval.episode import Job, WorkerResult
 from mhrc.run.config import ConfigError
 
-log = structlog.get_logger("mhrc.eval")
+log = get_logger("mhrc.eval")
 
 RAY_MIN = (2, 40)  # the oldest Ray this code is written against
 INSTALL = 'pip install -e ".[ray]"'

@@ -33,9 +33,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
-import structlog
-
 from mhrc.analysis.metrics import Invalid
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.writable import unwritable
 from mhrc.eval.directory import append_text, make_dirs, refuse_links, write_bytes, write_text
@@ -66,7 +65,7 @@ __all__ = [
     "write_summaries",
 ]
 
-log = structlog.get_logger("mhrc.eval")
+log = get_logger("mhrc.eval")
 
 
 class EvalAborted(RuntimeError):

@@ -18,18 +18,18 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-import structlog
 from pydantic import BaseModel, ConfigDict
 
 from mhrc.core.bus import Bus, Sample
 from mhrc.core.keys import Keys, new_run_id
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 from mhrc.run import malloc as memory
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.run.serve import EventHook
 
-log = structlog.get_logger("mhrc.eval")
+log = get_logger("mhrc.eval")
 
 
 class Job(BaseModel):

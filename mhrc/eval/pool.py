@@ -28,13 +28,13 @@ from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from typing import IO
 
-import structlog
 from pydantic import ValidationError
 
 from mhrc.core.lifeline import child_env
+from mhrc.core.logs import get_logger
 from mhrc.eval.episode import Job, WorkerFailure, WorkerResult, run_job, watch_start, worker_name
 
-log = structlog.get_logger("mhrc.eval")
+log = get_logger("mhrc.eval")
 
 # to_thread calls one episode may have in flight: its world's sim, its four sessions opening or closing (a query holds none: core/bus.py)
 THREADS_PER_EPISODE = 6

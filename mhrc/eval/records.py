@@ -31,19 +31,19 @@ from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
-import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from mhrc.analysis.diagnostics import Diagnostics
 from mhrc.analysis.metrics import UNRECORDED, EpisodeMetrics
 from mhrc.analysis.values import Amount, Count, Seed
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.upgrade import paper_team
 from mhrc.eval.directory import read_bytes
 from mhrc.eval.spec import EvalIdentity, EvalSpec, bounded, episode_key
 from mhrc.run.config import ConfigError
 
-log = structlog.get_logger("mhrc.eval.records")
+log = get_logger("mhrc.eval.records")
 
 Flat = dict[str, object]  # a row as a line of episodes.jsonl holds it: JSON values by column
 

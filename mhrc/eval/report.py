@@ -25,8 +25,7 @@ import csv
 import io
 from typing import Any
 
-import structlog
-
+from mhrc.core.logs import get_logger
 from mhrc.core.plural import counted
 from mhrc.eval.means import summarize
 from mhrc.eval.pairs import paired_markdown
@@ -46,7 +45,7 @@ from mhrc.eval.rows import (
 from mhrc.eval.summary import Summary
 from mhrc.eval.teams import TEAM, team_comparison
 
-log = structlog.get_logger("mhrc.eval.report")
+log = get_logger("mhrc.eval.report")
 
 
 COLUMNS = (

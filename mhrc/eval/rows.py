@@ -8,9 +8,9 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
-import structlog
 
 from mhrc.analysis.metrics import EpisodeMetrics
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.upgrade import paper_team
 from mhrc.eval.means import summarize
@@ -19,7 +19,7 @@ from mhrc.eval.records import EvalRow, Settings
 from mhrc.eval.records import merge_runs as merge_runs  # where callers have always found them
 from mhrc.eval.records import read_rows as read_rows
 
-log = structlog.get_logger("mhrc.eval.rows")
+log = get_logger("mhrc.eval.rows")
 
 RESAMPLES = 2000  # bootstrap resamples per confidence interval
 

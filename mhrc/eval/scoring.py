@@ -7,13 +7,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import structlog
-
 from mhrc.analysis.diagnostics import Diagnostics, diagnose
 from mhrc.analysis.metrics import EpisodeMetrics, from_trace
+from mhrc.core.logs import get_logger
 from mhrc.core.records import TraceLine, read_records
 
-log = structlog.get_logger("mhrc.eval")
+log = get_logger("mhrc.eval")
 
 
 def read_episode_trace(path: Path) -> list[TraceLine]:

@@ -10,7 +10,6 @@ import socket
 from collections.abc import Iterator
 from typing import Any
 
-import structlog
 import uvicorn
 from starlette.applications import Starlette
 from starlette.requests import Request
@@ -18,12 +17,14 @@ from starlette.responses import HTMLResponse, Response
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
+from mhrc.core.logs import get_logger
+
 from .gate import Gate, GateMiddleware, policy
 from .messages import PageMessage
 from .page import CSS, JS, page_html
 from .session import REPLACED, PlaySession, SecondDriver
 
-log = structlog.get_logger("mhrc.play")
+log = get_logger("mhrc.play")
 
 SECOND_DRIVER = 4409  # the WebSocket close code of a page refused because another drives the robot
 

@@ -33,9 +33,9 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs
 
-import structlog
+from mhrc.core.logs import get_logger
 
-log = structlog.get_logger("mhrc.play")
+log = get_logger("mhrc.play")
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]

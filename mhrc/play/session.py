@@ -19,11 +19,10 @@ import asyncio
 import contextlib
 from typing import TYPE_CHECKING, Final
 
-import structlog
-
 from mhrc.agents.agent import AgentError, RobotAgent, WorldGone
 from mhrc.core.bus import Sample, open_client
 from mhrc.core.keys import Keys
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, RobotDetached, decode_event
 
 from .human import HumanPolicy, Send
@@ -32,7 +31,7 @@ from .messages import Done, Hello
 if TYPE_CHECKING:
     from mhrc.core.security import Credentials
 
-log = structlog.get_logger("mhrc.play")
+log = get_logger("mhrc.play")
 
 RELOAD_GRACE = 10.0  # s a page's robot stays attached after the page went: a reload takes over its turn
 REPLACED: Final = "replaced"  # the message to a page whose tab reloaded: its socket closes, the new one drives

@@ -7,9 +7,8 @@ import contextlib
 from collections.abc import AsyncIterator, Callable
 from typing import TYPE_CHECKING, Unpack
 
-import structlog
-
 from mhrc.core.bus import Bus
+from mhrc.core.logs import get_logger
 from mhrc.core.polling import poll
 from mhrc.core.protocol import EpisodeDone
 
@@ -28,7 +27,7 @@ from mhrc.core.bus import open_client
 from mhrc.core.security import check_for
 from mhrc.run.config import ConfigError
 
-log = structlog.get_logger("mhrc.run.attach")
+log = get_logger("mhrc.run.attach")
 
 
 async def run_agent(

@@ -8,7 +8,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
-import structlog
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from mhrc.agents.llm import (
@@ -23,6 +22,7 @@ from mhrc.agents.protocols import CoordinationProtocol, ProtocolRefused, Refusal
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse_aids, parse_noise
 from mhrc.core.keys import check_id, new_run_id
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.security import Credentials, check_for, load, make_run_credentials
 from mhrc.core.team import PAPER_TEAM, TeamSpec
@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     from mhrc.agents.llm_policy import PolicyOptions
     from mhrc.world.sim import Sim
 
-log = structlog.get_logger("mhrc.run.config")
+log = get_logger("mhrc.run.config")
 
 
 ROBOTS = PAPER_TEAM.names  # the paper's team, the default (--team chooses another)

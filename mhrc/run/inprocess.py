@@ -10,10 +10,9 @@ import asyncio
 import contextlib
 from typing import TYPE_CHECKING, Any
 
-import structlog
-
 from mhrc.core.bus import Bus
 from mhrc.core.keys import Keys
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 
 if TYPE_CHECKING:
@@ -25,7 +24,7 @@ from mhrc.run.config import EpisodeConfig
 from mhrc.run.coordinated import seat
 from mhrc.run.serve import EventHook, serve_world
 
-log = structlog.get_logger("mhrc.run.inprocess")
+log = get_logger("mhrc.run.inprocess")
 
 
 async def up_in_process(

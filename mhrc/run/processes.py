@@ -13,12 +13,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-import structlog
-
 from mhrc.core.bus import open_client
 from mhrc.core.endpoints import check_listen
 from mhrc.core.keys import Keys
 from mhrc.core.lifeline import child_env
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import EpisodeDone, EpisodeStarted, ProtocolError, decode_event
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.records import messages, read_records
@@ -28,7 +27,7 @@ from mhrc.run.config import EpisodeConfig
 from mhrc.run.serve import EventHook
 from mhrc.run.teams import team_argument
 
-log = structlog.get_logger("mhrc.run.processes")
+log = get_logger("mhrc.run.processes")
 
 
 class ProcessFailed(RuntimeError):

@@ -7,9 +7,8 @@ import asyncio
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
-import structlog
-
 from mhrc.core.bus import Bus
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import EpisodeDone
 
 if TYPE_CHECKING:
@@ -22,7 +21,7 @@ from mhrc.run.config import EpisodeConfig
 from mhrc.world.service import WorldService
 from mhrc.world.service_config import SimLike, WorldConfig
 
-log = structlog.get_logger("mhrc.run.serve")
+log = get_logger("mhrc.run.serve")
 
 EventHook = Callable[[Bus, str], None]  # (bus, run) -> subscribes an observer
 LAST_WORDS = 2.0  # s the world waits, once the episode is over, for its agents to leave and its trace to record the end

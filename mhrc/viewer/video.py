@@ -30,9 +30,9 @@ from typing import Any
 import imageio.v2 as iio2
 import imageio.v3 as iio3
 import numpy as np
-import structlog
 from PIL import Image, ImageDraw, ImageFont
 
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import ActionResult, EpisodeStarted, ObjectPose, RobotPose, ScenarioEvent, Snapshot
 from mhrc.core.records import read_records
 from mhrc.core.team import PAPER_TEAM, from_kinds
@@ -44,7 +44,7 @@ from mhrc.world.render import VIEWS, render
 from mhrc.world.scenario import NewTarget, Scenario
 from mhrc.world.sim import Sim
 
-log = structlog.get_logger("mhrc.viewer.video")
+log = get_logger("mhrc.viewer.video")
 
 SUFFIXES = (".mp4", ".gif")
 OVERVIEW = "overview"  # the whole house from the south, fitted to the layout's bounds

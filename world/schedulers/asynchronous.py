@@ -31,8 +31,7 @@ import asyncio
 import math
 from dataclasses import dataclass
 
-import structlog
-
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import (
     ActionRequest,
     ActionResult,
@@ -45,7 +44,7 @@ from mhrc.core.protocol import (
 
 from .base import Scheduler, SchedulerOptionError, World, duration
 
-log = structlog.get_logger("mhrc.world")
+log = get_logger("mhrc.world")
 
 # The mean simulated duration of one lockstep step (its longest action) of the heuristic team,
 # measured over pack_objects, sort_solids and make_sandwich in the kitchen, 4 objects: 7.7 s.

@@ -7,13 +7,12 @@ longest action.
 
 from __future__ import annotations
 
-import structlog
-
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import ActionRequest, ActionResult, RejectCode, Rejection, TickClosed
 
 from .base import Scheduler, World, duration
 
-log = structlog.get_logger("mhrc.world")
+log = get_logger("mhrc.world")
 
 
 class LockstepScheduler(Scheduler):

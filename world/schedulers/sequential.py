@@ -25,8 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import structlog
-
+from mhrc.core.logs import get_logger
 from mhrc.core.protocol import (
     ActionRequest,
     ActionResult,
@@ -41,7 +40,7 @@ from mhrc.core.protocol import (
 
 from .base import Scheduler, TaskResultLike, World, duration
 
-log = structlog.get_logger("mhrc.world")
+log = get_logger("mhrc.world")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,120 @@
+"""Start-up (issue 46 item 4): the wall time of `mhrc --help`, a command's --help and refused command
+lines, in this tree and in a baseline tree measured in the same run, turn about (baseline, this
+tree, baseline, ...), the best of `--repeats` each; and which heavy modules each imports.
+
+    git worktree add /tmp/mhrc-base <commit>
+    python bench/bench_startup.py --baseline /tmp/mhrc-base [--repeats 15] [--out bench/results/startup.json]
+
+Each run is `python -m mhrc ARGS` in a fresh interpreter with PYTHONPATH set to the tree, so the
+same installed dependencies serve both. A bare `python -c pass` is measured too: the floor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from report import emit
+
+HERE = Path(__file__).resolve().parents[1]
+LINES = [
+    ["--help"],
+    ["up", "--help"],
+    ["eval", "--help"],
+    ["upp"],
+    ["up", "--horizn", "3"],
+    ["up", "--task", "pack_objetcs"],
+    ["up", "--team", "ful_house"],
+    ["eval", "--schedule", "lockstp"],
+    ["agent", "--robot", "bob", "--connect", "tcp/127.0.0.1:9", "--team", "larg"],
+]
+HEAVY = ("structlog", "pydantic", "cryptography", "asyncio", "zenoh", "pybullet", "numpy", "httpx")
+PROBE = """
+import json, runpy, sys
+sys.argv = ["mhrc", *sys.argv[1:]]
+try:
+    runpy.run_module("mhrc", run_name="__main__")
+except SystemExit:
+    pass
+sys.stderr.write("\\nHEAVY " + json.dumps(sorted(m for m in %r if m in sys.modules)) + "\\n")
+"""
+
+
+def _env(tree: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(tree)}
+
+
+def _once(tree: Path, args: list[str]) -> float:
+    started = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "mhrc", *args], env=_env(tree), capture_output=True, cwd=tree, check=False)
+    return time.perf_counter() - started
+
+
+def _heavy(tree: Path, args: list[str]) -> list[str]:
+    done = subprocess.run(
+        [sys.executable, "-c", PROBE % (HEAVY,), *args], env=_env(tree), capture_output=True, text=True, cwd=tree
+    )
+    line = [ln for ln in done.stderr.splitlines() if ln.startswith("HEAVY ")][-1]
+    return list(json.loads(line[len("HEAVY ") :]))
+
+
+def _floor(repeats: int) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        started = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "pass"], check=True)
+        best = min(best, time.perf_counter() - started)
+    return best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--baseline", type=Path, required=True, help="a checkout of the commit to compare with")
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--out", type=Path)
+    args = ap.parse_args()
+    base = args.baseline.resolve()
+    if not (base / "mhrc" / "__init__.py").exists():
+        ap.error(f"--baseline: {base} is not a checkout of mhrc")
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=base, capture_output=True, text=True).stdout
+    ours = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE, capture_output=True, text=True).stdout
+    rows: list[dict[str, Any]] = []
+    for line in LINES:
+        best = {"baseline": float("inf"), "this": float("inf")}
+        for _ in range(args.repeats):
+            best["baseline"] = min(best["baseline"], _once(base, line))
+            best["this"] = min(best["this"], _once(HERE, line))
+        rows.append(
+            {
+                "command": "mhrc " + " ".join(line),
+                "baseline_s": round(best["baseline"], 3),
+                "this_s": round(best["this"], 3),
+                "speedup": round(best["baseline"] / best["this"], 2),
+                "baseline_imports": _heavy(base, line),
+                "this_imports": _heavy(HERE, line),
+            }
+        )
+        print(f"{rows[-1]['command']}: {rows[-1]['baseline_s']} s -> {rows[-1]['this_s']} s", file=sys.stderr)
+    emit(
+        {
+            "bench": "startup",
+            "baseline": commit.strip(),
+            "this": ours.strip(),
+            "repeats": args.repeats,
+            "python_floor_s": round(_floor(args.repeats), 3),
+            "rows": rows,
+            "note": "best wall time of `python -m mhrc ARGS` over the repeats, the two trees in turn; imports: the "
+            "heavy modules in sys.modules when the command line was refused or its help printed",
+        },
+        args.out,
+    )
+
+
+if __name__ == "__main__":
+    main()
