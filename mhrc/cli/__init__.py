@@ -21,7 +21,6 @@ import difflib
 import importlib
 
 import click
-from click.utils import make_default_short_help
 
 __all__ = ["main"]
 
@@ -120,7 +119,8 @@ class LazyGroup(click.Group):
         names = self.list_commands(ctx)
         limit = formatter.width - 6 - max(len(n) for n in names)
         with formatter.section("Commands"):
-            formatter.write_dl([(n, make_default_short_help(SUMMARIES[n], limit)) for n in names])
+            # a bare command holding the summary shortens it as click shortens the real one's help
+            formatter.write_dl([(n, click.Command(n, help=SUMMARIES[n]).get_short_help_str(limit)) for n in names])
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         return _load(cmd_name) if cmd_name in COMMANDS else None
