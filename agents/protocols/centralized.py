@@ -149,19 +149,19 @@ class CentralPlanner:
             return Wait()
         if not self._mobile(hand.robot):
             return finisher_step(k, hand) or Wait()
+        at = {h.robot: standing(k, h.robot) for h in self.hands.values() if h.robot in k.obs and self._mobile(h.robot)}
         for h in self.hands.values():
-            if h.pose is None and h.robot in k.obs:
-                h.pose = standing(k, h.robot)  # a navigation that failed left it where it stood
-        others = [h for h in self.hands.values() if h is not hand and h.pose is not None]
-        idle = {
-            h.pose for h in others if h.pose is not None and h.job is None and k.obs[h.robot].status.holding is None
-        }
-        taken = Taken({h.pose for h in others if h.pose is not None} - idle, idle)
+            if h.robot in at and (h.pose is None or self._idle(h)):  # without work it holds only where it stands
+                h.pose = at[h.robot]
+        others = [h for h in self.hands.values() if h is not hand and h.robot in at]
+        idle = {h.pose for h in others if h.pose is not None and self._idle(h)}
+        held = {p for h in others for p in (h.pose, at[h.robot]) if p is not None}  # where it stands, and heads
+        taken = Taken(held - idle, idle)
         holding = k.obs[hand.robot].status.holding
         if holding is not None and holding in k.targets:
             hand.job = Job("fetch", holding)  # what it carries is its work: nobody else is sent for it
         if hand.job is None and holding is None:
-            claimed = {h.pose for h in others if h.pose is not None and h.pose not in idle}
+            claimed = {h.pose for h in others if h.pose is not None and not self._idle(h)}  # (one claimed from it too)
             return make_room(k, hand, claimed, taken) or Wait()
         step = job_step(k, hand, taken)
         if step is None and hand.job is not None:
@@ -171,6 +171,10 @@ class CentralPlanner:
     # ---------------------------------------------------------------- the work there is
     def _mobile(self, robot: str) -> bool:
         return "navigate" in self.knowledge.obs[robot].status.skills
+
+    def _idle(self, hand: Hand) -> bool:
+        """No work and nothing in its gripper (as the team last heard)."""
+        return hand.job is None and self.knowledge.latest(hand.robot).status.holding is None
 
     def _working(self, hand: Hand) -> bool:
         o = self.knowledge.obs.get(hand.robot)

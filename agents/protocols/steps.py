@@ -193,7 +193,7 @@ def _standing_at(k: Knowledge, hand: Hand, furniture: str) -> int | None:
 
 def standing(k: Knowledge, robot: str) -> tuple[str, int] | None:
     """The stand pose `robot` stands at now (furniture, index), if any."""
-    obs = k.obs.get(robot)
+    obs = k.latest(robot) if robot in k.obs else None
     if obs is None or obs.status.base is None:
         return None
     for f in k.furniture.values():
