@@ -28,7 +28,7 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import Action, ActionResult, Observation, Place, Wait
+from mhrc.core.protocol import Action, ActionResult, Navigate, Observation, Place, Wait
 
 from ..heuristic_base import HANDOVER, role_of
 from ..policy import Decision
@@ -52,6 +52,7 @@ class CentralPlanner:
     rounds: int = 0
     _commands: dict[int, dict[str, Action]] = field(default_factory=dict)  # lockstep: tick -> the round's commands
     _arrived: asyncio.Condition | None = None
+    _sent: dict[str, Action] = field(default_factory=dict)  # robot -> the command it was given, until its result
 
     def __post_init__(self) -> None:
         self.hands = {r: Hand(r) for r in self.robots}
@@ -60,6 +61,11 @@ class CentralPlanner:
     async def command(self, obs: Observation) -> Action:
         """The command of `obs.robot` for its observation's tick."""
         self.knowledge.take(obs)
+        action = await self._command(obs)
+        self._sent[obs.robot] = action
+        return action
+
+    async def _command(self, obs: Observation) -> Action:
         if self.schedule != "lockstep":
             return (await self.plan((obs.robot,)))[obs.robot]
         if self._arrived is None:
@@ -89,6 +95,7 @@ class CentralPlanner:
         return obs.tick in self._commands or all(self._at(r, obs.tick) for r in attached)
 
     def record(self, robot: str, result: ActionResult) -> None:
+        self._sent.pop(robot, None)
         self.knowledge.record(robot, result)
         self.hands[robot].record(result)
         a = result.action
@@ -149,7 +156,7 @@ class CentralPlanner:
             return Wait()
         if not self._mobile(hand.robot):
             return finisher_step(k, hand) or Wait()
-        at = {h.robot: standing(k, h.robot) for h in self.hands.values() if h.robot in k.obs and self._mobile(h.robot)}
+        at = {h.robot: self._where(h.robot) for h in self.hands.values() if h.robot in k.obs and self._mobile(h.robot)}
         for h in self.hands.values():
             if h.robot in at and (h.pose is None or self._idle(h)):  # without work it holds only where it stands
                 h.pose = at[h.robot]
@@ -171,6 +178,15 @@ class CentralPlanner:
     # ---------------------------------------------------------------- the work there is
     def _mobile(self, robot: str) -> bool:
         return "navigate" in self.knowledge.obs[robot].status.skills
+
+    def _where(self, robot: str) -> tuple[str, int] | None:
+        """The stand pose `robot` stands at, as the team knows; one it was sent to and whose result
+        is not heard yet counts as reached (in the sequential schedule a result waits for its
+        robot's next turn: its teammates plan before then, on the command it was given)."""
+        sent = self._sent.get(robot)
+        if isinstance(sent, Navigate):
+            return (sent.target, sent.stand_pose)
+        return standing(self.knowledge, robot)
 
     def _idle(self, hand: Hand) -> bool:
         """No work and nothing in its gripper (as the team last heard)."""
