@@ -169,7 +169,7 @@ class CentralPlanner:
             hand.job = Job("fetch", holding)  # what it carries is its work: nobody else is sent for it
         if hand.job is None and holding is None:
             claimed = {h.pose for h in others if h.pose is not None and not self._idle(h)}  # (one claimed from it too)
-            return make_room(k, hand, claimed, taken) or Wait()
+            return make_room(k, hand, claimed, taken, self._needed()) or Wait()
         step = job_step(k, hand, taken)
         if step is None and hand.job is not None:
             hand.job = None  # its work is done or cannot go on: the next round gives it other work
@@ -187,6 +187,22 @@ class CentralPlanner:
         if isinstance(sent, Navigate):
             return (sent.target, sent.stand_pose)
         return standing(self.knowledge, robot)
+
+    def _needed(self) -> frozenset[str]:
+        """Furniture where a target lies that a robot will come for: an idle robot standing there
+        leaves before the fetcher comes (which may need another of its stand poses after a failed
+        grasp)."""
+        k = self.knowledge
+        lying = (k.located(t) for t in k.todo())
+        return frozenset(
+            o.on
+            for o in lying
+            if o is not None
+            and o.on is not None
+            and o.held_by is None
+            and o.on != HANDOVER
+            and not k.goal_fixture(o.on)
+        )
 
     def _idle(self, hand: Hand) -> bool:
         """No work and nothing in its gripper (as the team last heard)."""

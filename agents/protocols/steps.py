@@ -343,10 +343,13 @@ def finisher_can_take(k: Knowledge, hand: Hand, name: str) -> bool:
     return o is not None and hand.tries.get(name, 0) < BOB_TRIES and k.in_reach(hand.robot, o, STRETCH)
 
 
-def make_room(k: Knowledge, hand: Hand, claimed: set[tuple[str, int]], taken: Taken) -> Action | None:
+def make_room(
+    k: Knowledge, hand: Hand, claimed: set[tuple[str, int]], taken: Taken, needed: frozenset[str] = frozenset()
+) -> Action | None:
     """An idle robot standing where another robot needs to stand: to the nearest stand pose of a
-    furniture nobody needs (not the finisher's table, nothing claimed there)."""
-    if hand.pose is None or (hand.pose not in claimed and hand.pose[0] != HANDOVER):
+    furniture nobody needs (not the finisher's table, nothing claimed there, none of `needed`:
+    furniture a robot will come to for an object, whose stand poses it may all need)."""
+    if hand.pose is None or (hand.pose not in claimed and hand.pose[0] != HANDOVER and hand.pose[0] not in needed):
         return None  # (at the finisher's table it leaves anyway: that is where the fetchers come)
     here = k.base(hand.robot)
     if here is None:
@@ -354,7 +357,7 @@ def make_room(k: Knowledge, hand: Hand, claimed: set[tuple[str, int]], taken: Ta
     options = [
         (dist(here, (sp.x, sp.y)), f.name, i)
         for f in k.furniture.values()
-        if f.name != HANDOVER and f.name != hand.pose[0]
+        if f.name != HANDOVER and f.name != hand.pose[0] and f.name not in needed
         for i, sp in enumerate(f.stand_poses)
         if (f.name, i) not in taken and (f.name, i) not in claimed
     ]
