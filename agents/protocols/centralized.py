@@ -170,7 +170,7 @@ class CentralPlanner:
         if hand.job is None and holding is None:
             claimed = {h.pose for h in others if h.pose is not None and not self._idle(h)}  # (one claimed from it too)
             return make_room(k, hand, claimed, taken, self._needed()) or Wait()
-        step = job_step(k, hand, taken)
+        step = job_step(k, hand, taken, near=True)
         if step is None and hand.job is not None:
             hand.job = None  # its work is done or cannot go on: the next round gives it other work
         return step or Wait()

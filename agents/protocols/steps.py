@@ -36,6 +36,7 @@ MAX_TRIES = 8  # failed grasps of one object by one robot before it leaves it to
 BOB_TRIES = 2  # failed picks by the finisher before a fetcher brings the object closer
 HANDOVER_MARGIN = 0.35  # m: how far inside both arms' reach the band of the finisher's table must lie
 REACH_MARGIN = 0.1  # m inside a fetcher's reach it picks from where it stands rather than walk to a nearer pose
+PLACE_MARGIN = 0.15  # m: _places_here, the looser estimate of the band (see _hands_over's HANDOVER_MARGIN)
 STRETCH = 0.1  # m beyond the finisher's reach it still tries for an object brought to its table
 
 
@@ -267,11 +268,44 @@ def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | N
     return Place(obj=holding, location=HANDOVER)
 
 
-def job_step(k: Knowledge, hand: Hand, taken: Taken) -> Action | None:
+def _slipped_to(hand: Hand, furniture: str) -> bool:
+    """Its last navigation, to `furniture`, ended off target (near the stand pose)."""
+    last = hand.last
+    return (
+        last is not None
+        and isinstance(last.action, Navigate)
+        and last.action.target == furniture
+        and last.outcome.code == OutcomeCode.OFF_TARGET
+    )
+
+
+def _places_here(k: Knowledge, robot: str) -> bool:
+    """Whether, from where it stands, `robot`'s arm likely reaches a spot on the finisher's table
+    that the finisher's arm reaches (looser than `_hands_over`: a wrong guess costs one failed place)."""
+    mine = k.obs[robot].status
+    fin = k.obs.get(k.finisher or "")
+    theirs = fin.status if fin is not None else None
+    if mine.arm_base is None or mine.reach is None or theirs is None or theirs.arm_base is None:
+        return False
+    return dist(mine.arm_base, theirs.arm_base) <= mine.reach + (theirs.reach or 0.0) - PLACE_MARGIN
+
+
+def job_step(k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False) -> Action | None:
     """The next step of `hand`'s job; None when it is done or cannot go on (the planner gives
-    other work)."""
+    other work). `near`: after a navigation that ended off target, act from where it stopped when
+    that looks near enough (the object within its arm's reach; the finisher's table's band within
+    reach), rather than always driving to the stand pose again."""
     job, status = hand.job, k.obs[hand.robot].status
     if status.holding is not None:
+        wanted = next_wanted(k)
+        if (
+            near
+            and _slipped_to(hand, HANDOVER)
+            and _places_here(k, hand.robot)
+            and (wanted is None or wanted == status.holding or status.holding not in k.targets)
+        ):
+            hand.last = None
+            return Place(obj=status.holding, location=HANDOVER)
         return _retry_slip(hand) or _deliver(k, hand, status.holding, taken)
     if job is None:
         return None
@@ -287,6 +321,8 @@ def job_step(k: Knowledge, hand: Hand, taken: Taken) -> Action | None:
         return None
     if f.openable and not f.is_open:
         return _open(k, hand, f.name, taken)
+    if near and _slipped_to(hand, f.name) and _within_arm(k, hand.robot, o.position):
+        return Pick(obj=job.target)  # (a grasp too far is fixed with a move, as after any grasp)
     if (slip := _retry_slip(hand)) is not None:
         return slip
     last = hand.last
