@@ -4,11 +4,16 @@ makes of a fetcher finding an object gone from the finisher's table."""
 
 from __future__ import annotations
 
+import asyncio
+
+import pytest
+
+from mhrc.agents.protocols import centralized
 from mhrc.agents.protocols.allocation import assign
 from mhrc.agents.protocols.centralized import CentralPlanner
 from mhrc.agents.protocols.knowledge import Knowledge
 from mhrc.agents.protocols.steps import Hand, Job, Taken, job_step
-from mhrc.core.protocol import FurnitureView, ObjectView, Observation, Place, Pose2D, RobotStatus, Wait
+from mhrc.core.protocol import Action, FurnitureView, ObjectView, Observation, Place, Pose2D, RobotStatus, Wait
 
 FETCHER = ["navigate", "move", "open", "pick", "place", "communicate", "wait"]
 SCOUT = ["navigate", "communicate", "wait"]
@@ -112,3 +117,57 @@ def test_in_a_sandwich_only_the_object_wanted_next_is_put_down() -> None:
     on_goal = ObjectView(name="ham", position=(0.0, 0.2, 0.85), on="tray")
     k.take(_obs("bob", ARM, 0.0, [on_goal], targets=["ham", "tomato"], goals={}, ordered=True, tick=2))
     assert job_step(k, hand, Taken(set(), set())) == Place(obj="tomato", location="table_0")
+
+
+def _lockstep() -> tuple[CentralPlanner, list[tuple[str, ...]]]:
+    """A lockstep planner for f0, bob and david that notes which robots each of its rounds asked for."""
+    planner = CentralPlanner(("f0", "bob", "david"), "lockstep")
+    rounds: list[tuple[str, ...]] = []
+    plan = planner.plan
+
+    async def noted(asking: tuple[str, ...]) -> dict[str, Action]:
+        rounds.append(asking)
+        return await plan(asking)
+
+    planner.plan = noted  # type: ignore[method-assign]
+    return planner, rounds
+
+
+def _tick(robot: str, tick: int, attached: tuple[str, ...]) -> Observation:
+    """`robot`'s observation of `tick`, naming the `attached` teammates (the world's word)."""
+    skills = {"f0": FETCHER, "bob": ARM, "david": SCOUT}
+    mates = {r: skills[r] for r in attached if r != robot}
+    if robot == "bob":
+        return _obs("bob", ARM, 0.0, targets=["mug"], goals={"mug": "tray"}, tick=tick, teammates=mates)
+    return _obs(robot, skills[robot], 2.0 if robot == "f0" else 4.0, tick=tick, teammates=mates)
+
+
+async def test_the_lockstep_round_waits_for_the_attached_robots_and_a_late_one_is_planned_alone() -> None:
+    """The round of a tick runs once every attached robot brought its observation (the event, not a
+    clock); a robot the tick's observations do not list as attached is not waited for, and when it
+    comes back later in the tick it gets its own command without its teammates' being planned again."""
+    planner, rounds = _lockstep()
+    everyone = ("f0", "bob", "david")
+    first = [asyncio.create_task(planner.command(_tick(r, 1, everyone))) for r in ("f0", "bob")]
+    await asyncio.sleep(0)  # both are in the barrier now
+    assert not any(t.done() for t in first) and rounds == []  # david is attached: his observation is awaited
+    last = await asyncio.wait_for(planner.command(_tick("david", 1, everyone)), 30)
+    await asyncio.wait_for(asyncio.gather(*first), 30)
+    assert rounds == [everyone] and last is not None
+    pair = ("f0", "bob")  # david detached: the world's observations of tick 2 do not list him
+    await asyncio.wait_for(asyncio.gather(*(planner.command(_tick(r, 2, pair)) for r in pair)), 30)
+    assert rounds[-1] == pair
+    await asyncio.wait_for(planner.command(_tick("david", 2, everyone)), 30)  # attached again, late in the tick
+    assert rounds[-1] == ("david",) and len(rounds) == 3
+
+
+async def test_a_robot_that_never_brings_its_observation_holds_the_round_only_for_a_bound(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An attached robot whose agent died after the world released the tick: the round runs for the
+    others once the bound since the tick's first observation has passed."""
+    monkeypatch.setattr(centralized, "RELEASE_SPREAD", 0.05)
+    planner, rounds = _lockstep()
+    everyone = ("f0", "bob", "david")
+    await asyncio.wait_for(asyncio.gather(*(planner.command(_tick(r, 1, everyone)) for r in ("f0", "bob"))), 30)
+    assert rounds == [("f0", "bob")]

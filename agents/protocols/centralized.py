@@ -38,7 +38,12 @@ from .steps import MAX_TRIES, Hand, Job, Taken, finisher_can_take, finisher_step
 
 __all__ = ["CentralPlanner", "Seat"]
 
-BARRIER_TIMEOUT = 5.0  # s: lockstep, how long a round waits for a robot that may be re-attaching
+# s: lockstep, how long after the first observation of a tick reached the planner it waits for one of its robots
+# that is attached but never brings its own. The world released every robot's observation of the tick at the same
+# moment (a lockstep tick closes for all), so a live agent has its own a moment after its teammates; one that has
+# not has died between the release and its decision. The world detaches it as its liveliness token goes, but no
+# observation says so while the tick waits for its robots: only this bound ends that wait.
+RELEASE_SPREAD = 5.0
 
 
 @dataclass
@@ -53,6 +58,8 @@ class CentralPlanner:
     _commands: dict[int, dict[str, Action]] = field(default_factory=dict)  # lockstep: tick -> the round's commands
     _arrived: asyncio.Condition | None = None
     _sent: dict[str, Action] = field(default_factory=dict)  # robot -> the command it was given, until its result
+    _released: dict[int, float] = field(default_factory=dict)  # lockstep: tick -> when its first observation came
+    _ended: set[str] = field(default_factory=set)  # robots whose last result ended the episode
 
     def __post_init__(self) -> None:
         self.hands = {r: Hand(r) for r in self.robots}
@@ -70,32 +77,43 @@ class CentralPlanner:
             return (await self.plan((obs.robot,)))[obs.robot]
         if self._arrived is None:
             self._arrived = asyncio.Condition()
+        loop, t = asyncio.get_running_loop(), obs.tick
         async with self._arrived:
-            self._arrived.notify_all()
-            if obs.tick not in self._commands:
+            first = self._released.setdefault(t, loop.time())
+            self._arrived.notify_all()  # an arrival: the barrier of its tick looks again
+            while t not in self._commands and not self._all_in(t):
+                left = first + RELEASE_SPREAD - loop.time()
+                if left <= 0:
+                    break
                 try:
-                    await asyncio.wait_for(self._arrived.wait_for(lambda: self._all_in(obs)), BARRIER_TIMEOUT)
+                    await asyncio.wait_for(self._arrived.wait(), left)
                 except TimeoutError:
-                    pass
-            if obs.tick not in self._commands or obs.robot not in self._commands[obs.tick]:
-                ready = tuple(r for r in self.robots if self._at(r, obs.tick))
-                self._commands[obs.tick] = self._commands.get(obs.tick, {}) | await self.plan(ready)
-                for old in [t for t in self._commands if t < obs.tick - 2]:
+                    break
+            if t not in self._commands:  # the round of tick t, for every robot that brought its observation
+                self._commands[t] = await self.plan(tuple(r for r in self.robots if self._at(r, t)))
+                for old in [u for u in self._commands if u < t - 2]:
                     del self._commands[old]
-            return self._commands[obs.tick][obs.robot]
+                    self._released.pop(old, None)
+            elif obs.robot not in self._commands[t]:  # late (re-attached): its own command, its teammates' stand
+                self._commands[t] |= await self.plan((obs.robot,))
+            return self._commands[t][obs.robot]
 
     def _at(self, robot: str, tick: int) -> bool:
         o = self.knowledge.obs.get(robot)
         return o is not None and o.tick == tick
 
-    def _all_in(self, obs: Observation) -> bool:
-        """Every robot of this planner attached now (the observation's teammates) brought its
-        observation of the tick, or the round was run."""
-        attached = [r for r in self.robots if r == obs.robot or r in obs.teammates]
-        return obs.tick in self._commands or all(self._at(r, obs.tick) for r in attached)
+    def _all_in(self, tick: int) -> bool:
+        """Every robot of this planner attached at `tick` brought its observation of it. Attached:
+        the world's word in the observations of the tick (each lists the teammates attached when it
+        was made); a robot detached is not waited for, nor one whose episode ended."""
+        seen = [o for o in self.knowledge.obs.values() if o.tick == tick]
+        attached = {r for o in seen for r in (o.robot, *o.teammates)} - self._ended
+        return all(self._at(r, tick) for r in self.robots if r in attached)
 
     def record(self, robot: str, result: ActionResult) -> None:
         self._sent.pop(robot, None)
+        if result.done:
+            self._ended.add(robot)
         self.knowledge.record(robot, result)
         self.hands[robot].record(result)
         a = result.action
