@@ -76,7 +76,8 @@ def cost(k: Knowledge, hand: Hand, job: Job, rank: int = 0, scouts: bool = False
         + (1 if hand.tries.get(job.target, 0) else 0)
     )
     walk = dist(here, o.position) + dist(o.position, table.position)
-    return fetch_steps + RANK * rank + PER_METRE * walk + keep
+    ahead = 0.0 if there else RANK * rank  # one it stands at does not wait its turn: its navigation is saved
+    return fetch_steps + ahead + PER_METRE * walk + keep
 
 
 def _there(hand: Hand, job: Job, here: tuple[float, float], f: FurnitureView) -> bool:

@@ -46,6 +46,9 @@ __all__ = ["CentralPlanner", "Seat"]
 RELEASE_SPREAD = 5.0
 
 
+EARLY = 1  # an ordered task: objects that may lie on the finisher's table before their turn (steps.job_step)
+
+
 @dataclass
 class CentralPlanner:
     """The one planner behind every seat (see the module docstring)."""
@@ -188,7 +191,7 @@ class CentralPlanner:
         if hand.job is None and holding is None:
             claimed = {h.pose for h in others if h.pose is not None and not self._idle(h)}  # (one claimed from it too)
             return make_room(k, hand, claimed, taken, self._needed()) or Wait()
-        step = job_step(k, hand, taken, near=True)
+        step = job_step(k, hand, taken, near=True, early=EARLY)
         if step is None and hand.job is not None:
             hand.job = None  # its work is done or cannot go on: the next round gives it other work
         return step or Wait()
@@ -264,7 +267,7 @@ class CentralPlanner:
         jobs: list[Job] = []
         lost = not k.targets  # the task's list not known yet (the finisher has not been heard): look around
         fetchers = sum(1 for r in self.robots if r in k.obs and role_of(k.obs[r].status.skills) == "fetcher")
-        wanted = 0  # an ordered task: only the next few are fetched (steps.next_wanted), one per fetcher
+        wanted = 0  # an ordered task: only the next few are fetched (steps.next_wanted), one per fetcher and EARLY more
         for t in k.todo():
             o = k.located(t)
             if o is None:
@@ -278,7 +281,7 @@ class CentralPlanner:
                 and not (fin is not None and finisher_can_take(k, fin, t))
             ):
                 wanted += 1
-                if k.ordered and wanted > max(1, fetchers):
+                if k.ordered and wanted > max(1, fetchers) + (0 if lost else EARLY):  # (early: not while one is lost)
                     continue
                 if any(h.tries.get(t, 0) < MAX_TRIES for h in self.hands.values() if h is not fin):
                     jobs.append(Job("fetch", t))

@@ -228,7 +228,7 @@ def _hands_over(k: Knowledge, robot: str) -> bool:
     return dist(mine.arm_base, theirs.arm_base) <= mine.reach + (theirs.reach or 0.0) - HANDOVER_MARGIN
 
 
-def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | None:
+def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken, early: int = 0) -> Action | None:
     """To the finisher's table and put it down: from the stand pose it stands at already, else
     the free one nearest the table's place pose (after a place failed, the next one). In an
     ordered task only the object wanted next is put down; another waits in the gripper there
@@ -261,7 +261,13 @@ def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | N
     if step is not None:
         return step
     wanted = next_wanted(k)
-    if wanted is not None and holding != wanted and holding in k.targets and hand.held_for < HOLD_TICKS:
+    if (
+        wanted is not None
+        and holding != wanted
+        and holding in k.targets
+        and hand.held_for < HOLD_TICKS
+        and _waiting_on_table(k, wanted) >= early
+    ):
         hand.held_for += 1
         return Wait()
     hand.held_for = 0
@@ -290,11 +296,18 @@ def _places_here(k: Knowledge, robot: str) -> bool:
     return dist(mine.arm_base, theirs.arm_base) <= mine.reach + (theirs.reach or 0.0) - PLACE_MARGIN
 
 
-def job_step(k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False) -> Action | None:
+def _waiting_on_table(k: Knowledge, wanted: str) -> int:
+    """Targets of an ordered task lying on the finisher's table before their turn (`wanted` is next)."""
+    return sum(1 for t in k.todo() if t != wanted and (o := k.located(t)) is not None and o.on == HANDOVER)
+
+
+def job_step(k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False, early: int = 0) -> Action | None:
     """The next step of `hand`'s job; None when it is done or cannot go on (the planner gives
     other work). `near`: after a navigation that ended off target, act from where it stopped when
     that looks near enough (the object within its arm's reach; the finisher's table's band within
-    reach), rather than always driving to the stand pose again."""
+    reach), rather than always driving to the stand pose again. `early`: in an ordered task, how
+    many objects may lie on the finisher's table before their turn (one put down early frees the
+    fetcher's gripper; too many fill the band the finisher's arm reaches)."""
     job, status = hand.job, k.obs[hand.robot].status
     if status.holding is not None:
         wanted = next_wanted(k)
@@ -302,11 +315,16 @@ def job_step(k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False) -> A
             near
             and _slipped_to(hand, HANDOVER)
             and _places_here(k, hand.robot)
-            and (wanted is None or wanted == status.holding or status.holding not in k.targets)
+            and (
+                wanted is None
+                or wanted == status.holding
+                or status.holding not in k.targets
+                or _waiting_on_table(k, wanted) < early
+            )
         ):
             hand.last = None
             return Place(obj=status.holding, location=HANDOVER)
-        return _retry_slip(hand) or _deliver(k, hand, status.holding, taken)
+        return _retry_slip(hand) or _deliver(k, hand, status.holding, taken, early)
     if job is None:
         return None
     if job.kind == "explore":
