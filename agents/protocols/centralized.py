@@ -46,6 +46,7 @@ __all__ = ["CentralPlanner", "Seat"]
 RELEASE_SPREAD = 5.0
 
 
+NEAR_POSE = 0.5  # m: a robot stopped this near a stand pose (off target) holds it: it is in the way there
 EARLY = 1  # an ordered task: objects that may lie on the finisher's table before their turn (steps.job_step)
 
 
@@ -207,7 +208,7 @@ class CentralPlanner:
         sent = self._sent.get(robot)
         if isinstance(sent, Navigate):
             return (sent.target, sent.stand_pose)
-        return standing(self.knowledge, robot)
+        return standing(self.knowledge, robot) or standing(self.knowledge, robot, near=NEAR_POSE)
 
     def _needed(self) -> frozenset[str]:
         """Furniture where a target lies that a robot will come for: an idle robot standing there
@@ -268,6 +269,18 @@ class CentralPlanner:
         lost = not k.targets  # the task's list not known yet (the finisher has not been heard): look around
         fetchers = sum(1 for r in self.robots if r in k.obs and role_of(k.obs[r].status.skills) == "fetcher")
         wanted = 0  # an ordered task: only the next few are fetched (steps.next_wanted), one per fetcher and EARLY more
+        to_bring = sum(
+            1
+            for t in k.todo()
+            if (o := k.located(t)) is None
+            or (
+                o.held_by is None
+                and not k.goal_fixture(o.on)
+                and not (fin is not None and finisher_can_take(k, fin, t))
+            )
+        )
+        early = EARLY if to_bring > EARLY + 1 else 0  # brought early only with more to bring after the next: the
+        # finisher takes them in order, so one brought early at the end only lengthens the finisher's last work
         for t in k.todo():
             o = k.located(t)
             if o is None:
@@ -281,7 +294,7 @@ class CentralPlanner:
                 and not (fin is not None and finisher_can_take(k, fin, t))
             ):
                 wanted += 1
-                if k.ordered and wanted > max(1, fetchers) + (0 if lost else EARLY):  # (early: not while one is lost)
+                if k.ordered and wanted > max(1, fetchers) + (0 if lost else early):  # (early: not while one is lost)
                     continue
                 if any(h.tries.get(t, 0) < MAX_TRIES for h in self.hands.values() if h is not fin):
                     jobs.append(Job("fetch", t))

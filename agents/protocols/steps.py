@@ -11,6 +11,7 @@ there again, a stand pose another robot holds (or is headed to) is not chosen.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -192,11 +193,21 @@ def _standing_at(k: Knowledge, hand: Hand, furniture: str) -> int | None:
     return next((i for i in range(len(f.stand_poses)) if _at_stand_pose(obs, f, i)), None)
 
 
-def standing(k: Knowledge, robot: str) -> tuple[str, int] | None:
-    """The stand pose `robot` stands at now (furniture, index), if any."""
+def standing(k: Knowledge, robot: str, near: float | None = None) -> tuple[str, int] | None:
+    """The stand pose `robot` stands at now (furniture, index), if any; with `near`, the nearest
+    one within that many metres (a robot stopped off target near a pose is in the way of it)."""
     obs = k.latest(robot) if robot in k.obs else None
     if obs is None or obs.status.base is None:
         return None
+    if near is not None:
+        b = obs.status.base
+        poses = [
+            (dist((b.x, b.y), (sp.x, sp.y)), f.name, i)
+            for f in k.furniture.values()
+            for i, sp in enumerate(f.stand_poses)
+        ]
+        d, name, idx = min(poses, default=(math.inf, "", 0))
+        return (name, idx) if d <= near else None
     for f in k.furniture.values():
         for i in range(len(f.stand_poses)):
             if _at_stand_pose(obs, f, i):
