@@ -13,7 +13,17 @@ from mhrc.agents.protocols.allocation import assign
 from mhrc.agents.protocols.centralized import CentralPlanner
 from mhrc.agents.protocols.knowledge import Knowledge
 from mhrc.agents.protocols.steps import Hand, Job, Taken, job_step
-from mhrc.core.protocol import Action, FurnitureView, ObjectView, Observation, Place, Pose2D, RobotStatus, Wait
+from mhrc.core.protocol import (
+    Action,
+    FurnitureView,
+    Navigate,
+    ObjectView,
+    Observation,
+    Place,
+    Pose2D,
+    RobotStatus,
+    Wait,
+)
 
 FETCHER = ["navigate", "move", "open", "pick", "place", "communicate", "wait"]
 SCOUT = ["navigate", "communicate", "wait"]
@@ -171,3 +181,38 @@ async def test_a_robot_that_never_brings_its_observation_holds_the_round_only_fo
     everyone = ("f0", "bob", "david")
     await asyncio.wait_for(asyncio.gather(*(planner.command(_tick(r, 1, everyone)) for r in ("f0", "bob"))), 30)
     assert rounds == [("f0", "bob")]
+
+
+def test_a_fetcher_sent_to_a_closed_container_opens_it_though_its_arrival_is_not_heard_yet() -> None:
+    """Its navigation is spent (in the sequential schedule its result waits for its next turn):
+    leaving for a known object would have to come back for the container later."""
+    k = _team(1, ["mug", "soap"], [_mug()])
+    hand = Hand("f0", job=Job("explore", "fridge"), pose=("fridge", 0))
+    jobs = [Job("fetch", "mug"), Job("explore", "fridge"), Job("explore", "cabinet")]
+    assert assign(k, [hand], jobs, scouts=True) == {"f0": Job("explore", "fridge")}
+
+
+def test_a_fetcher_standing_at_a_target_takes_it_before_the_tasks_first() -> None:
+    """Any order will do for an unordered task: the object it stands at comes first (no
+    navigation), not after the one the list names first (the container it just opened, say)."""
+    soap = ObjectView(name="soap", position=(5.0, 0.0, 0.5), on="sofa")
+    k = _team(1, ["mug", "soap"], [_mug(), soap])
+    k.take(_obs("f0", FETCHER, 5.0, [_mug(), soap], y=-1.0, tick=2))  # at the sofa's stand pose 0
+    jobs = [Job("fetch", "mug"), Job("fetch", "soap")]
+    assert assign(k, [Hand("f0")], jobs, scouts=True) == {"f0": Job("fetch", "soap")}
+
+
+def test_a_robot_is_where_it_stands_not_where_it_once_meant_to_go() -> None:
+    """full_house's deadlock: an idle fetcher stood at the finisher's table while its recorded
+    stand pose said elsewhere, so another fetcher, holding an object, drove into its pose until
+    the horizon. Poses are worked out again each round: the other takes the free pose, and the
+    idle one makes room."""
+    k = _team(2, ["mug"], [])
+    held = ObjectView(name="mug", position=(3.0, -2.0, 0.9), held_by="f0")
+    k.take(_obs("f0", FETCHER, 3.0, [held], holding="mug", tick=3))
+    k.take(_obs("f1", FETCHER, 0.0, y=-1.0, tick=3))  # at table_0's stand pose 0
+    planner = CentralPlanner(("bob", "f0", "f1", "david"), "sequential", knowledge=k)
+    planner.hands["f1"].pose = ("sofa", 0)  # where it was once sent
+    assert planner._step(planner.hands["f0"]) == Navigate(target="table_0", stand_pose=1)
+    leave = planner._step(planner.hands["f1"])
+    assert isinstance(leave, Navigate) and leave.target != "table_0"
