@@ -191,6 +191,8 @@ class CentralPlanner:
             hand.job = Job("fetch", holding)  # what it carries is its work: nobody else is sent for it
         if hand.job is None and holding is None:
             claimed = {h.pose for h in others if h.pose is not None and not self._idle(h)}  # (one claimed from it too)
+            if not claimed and self._all_brought():
+                return Wait()  # nobody comes any more: making room would be a step for nothing
             return make_room(k, hand, claimed, taken, self._needed()) or Wait()
         step = job_step(k, hand, taken, near=True, early=EARLY)
         if step is None and hand.job is not None:
@@ -224,6 +226,17 @@ class CentralPlanner:
             and o.held_by is None
             and o.on != HANDOVER
             and not k.goal_fixture(o.on)
+        )
+
+    def _all_brought(self) -> bool:
+        """Every target still to go lies within the finisher's reach or is in its gripper: the task
+        is the finisher's alone now."""
+        k, fin = self.knowledge, self._finisher()
+        if fin is None or not k.targets:
+            return False
+        return all(
+            (o := k.located(t)) is not None and (o.held_by == fin.robot or finisher_can_take(k, fin, t))
+            for t in k.todo()
         )
 
     def _idle(self, hand: Hand) -> bool:
