@@ -4,11 +4,26 @@ makes of a fetcher finding an object gone from the finisher's table."""
 
 from __future__ import annotations
 
+import asyncio
+
+import pytest
+
+from mhrc.agents.protocols import centralized
 from mhrc.agents.protocols.allocation import assign
 from mhrc.agents.protocols.centralized import CentralPlanner
 from mhrc.agents.protocols.knowledge import Knowledge
 from mhrc.agents.protocols.steps import Hand, Job, Taken, job_step
-from mhrc.core.protocol import FurnitureView, ObjectView, Observation, Place, Pose2D, RobotStatus, Wait
+from mhrc.core.protocol import (
+    Action,
+    FurnitureView,
+    Navigate,
+    ObjectView,
+    Observation,
+    Place,
+    Pose2D,
+    RobotStatus,
+    Wait,
+)
 
 FETCHER = ["navigate", "move", "open", "pick", "place", "communicate", "wait"]
 SCOUT = ["navigate", "communicate", "wait"]
@@ -112,3 +127,92 @@ def test_in_a_sandwich_only_the_object_wanted_next_is_put_down() -> None:
     on_goal = ObjectView(name="ham", position=(0.0, 0.2, 0.85), on="tray")
     k.take(_obs("bob", ARM, 0.0, [on_goal], targets=["ham", "tomato"], goals={}, ordered=True, tick=2))
     assert job_step(k, hand, Taken(set(), set())) == Place(obj="tomato", location="table_0")
+
+
+def _lockstep() -> tuple[CentralPlanner, list[tuple[str, ...]]]:
+    """A lockstep planner for f0, bob and david that notes which robots each of its rounds asked for."""
+    planner = CentralPlanner(("f0", "bob", "david"), "lockstep")
+    rounds: list[tuple[str, ...]] = []
+    plan = planner.plan
+
+    async def noted(asking: tuple[str, ...]) -> dict[str, Action]:
+        rounds.append(asking)
+        return await plan(asking)
+
+    planner.plan = noted  # type: ignore[method-assign]
+    return planner, rounds
+
+
+def _tick(robot: str, tick: int, attached: tuple[str, ...]) -> Observation:
+    """`robot`'s observation of `tick`, naming the `attached` teammates (the world's word)."""
+    skills = {"f0": FETCHER, "bob": ARM, "david": SCOUT}
+    mates = {r: skills[r] for r in attached if r != robot}
+    if robot == "bob":
+        return _obs("bob", ARM, 0.0, targets=["mug"], goals={"mug": "tray"}, tick=tick, teammates=mates)
+    return _obs(robot, skills[robot], 2.0 if robot == "f0" else 4.0, tick=tick, teammates=mates)
+
+
+async def test_the_lockstep_round_waits_for_the_attached_robots_and_a_late_one_is_planned_alone() -> None:
+    """The round of a tick runs once every attached robot brought its observation (the event, not a
+    clock); a robot the tick's observations do not list as attached is not waited for, and when it
+    comes back later in the tick it gets its own command without its teammates' being planned again."""
+    planner, rounds = _lockstep()
+    everyone = ("f0", "bob", "david")
+    first = [asyncio.create_task(planner.command(_tick(r, 1, everyone))) for r in ("f0", "bob")]
+    await asyncio.sleep(0)  # both are in the barrier now
+    assert not any(t.done() for t in first) and rounds == []  # david is attached: his observation is awaited
+    last = await asyncio.wait_for(planner.command(_tick("david", 1, everyone)), 30)
+    await asyncio.wait_for(asyncio.gather(*first), 30)
+    assert rounds == [everyone] and last is not None
+    pair = ("f0", "bob")  # david detached: the world's observations of tick 2 do not list him
+    await asyncio.wait_for(asyncio.gather(*(planner.command(_tick(r, 2, pair)) for r in pair)), 30)
+    assert rounds[-1] == pair
+    await asyncio.wait_for(planner.command(_tick("david", 2, everyone)), 30)  # attached again, late in the tick
+    assert rounds[-1] == ("david",) and len(rounds) == 3
+
+
+async def test_a_robot_that_never_brings_its_observation_holds_the_round_only_for_a_bound(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An attached robot whose agent died after the world released the tick: the round runs for the
+    others once the bound since the tick's first observation has passed."""
+    monkeypatch.setattr(centralized, "RELEASE_SPREAD", 0.05)
+    planner, rounds = _lockstep()
+    everyone = ("f0", "bob", "david")
+    await asyncio.wait_for(asyncio.gather(*(planner.command(_tick(r, 1, everyone)) for r in ("f0", "bob"))), 30)
+    assert rounds == [("f0", "bob")]
+
+
+def test_a_fetcher_sent_to_a_closed_container_opens_it_though_its_arrival_is_not_heard_yet() -> None:
+    """Its navigation is spent (in the sequential schedule its result waits for its next turn):
+    leaving for a known object would have to come back for the container later."""
+    k = _team(1, ["mug", "soap"], [_mug()])
+    hand = Hand("f0", job=Job("explore", "fridge"), pose=("fridge", 0))
+    jobs = [Job("fetch", "mug"), Job("explore", "fridge"), Job("explore", "cabinet")]
+    assert assign(k, [hand], jobs, scouts=True) == {"f0": Job("explore", "fridge")}
+
+
+def test_a_fetcher_standing_at_a_target_takes_it_before_the_tasks_first() -> None:
+    """Any order will do for an unordered task: the object it stands at comes first (no
+    navigation), not after the one the list names first (the container it just opened, say)."""
+    soap = ObjectView(name="soap", position=(5.0, 0.0, 0.5), on="sofa")
+    k = _team(1, ["mug", "soap"], [_mug(), soap])
+    k.take(_obs("f0", FETCHER, 5.0, [_mug(), soap], y=-1.0, tick=2))  # at the sofa's stand pose 0
+    jobs = [Job("fetch", "mug"), Job("fetch", "soap")]
+    assert assign(k, [Hand("f0")], jobs, scouts=True) == {"f0": Job("fetch", "soap")}
+
+
+def test_a_robot_is_where_it_stands_not_where_it_once_meant_to_go() -> None:
+    """full_house's deadlock: an idle fetcher stood at the finisher's table while its recorded
+    stand pose said elsewhere, so another fetcher, holding an object, drove into its pose until
+    the horizon. Poses are worked out again each round: the other takes the free pose, and the
+    idle one makes room."""
+    k = _team(2, ["mug"], [])
+    held = ObjectView(name="mug", position=(3.0, -2.0, 0.9), held_by="f0")
+    k.take(_obs("f0", FETCHER, 3.0, [held], holding="mug", tick=3))
+    k.take(_obs("f1", FETCHER, 0.0, y=-1.0, tick=3))  # at table_0's stand pose 0
+    planner = CentralPlanner(("bob", "f0", "f1", "david"), "sequential", knowledge=k)
+    planner.hands["f1"].pose = ("sofa", 0)  # where it was once sent
+    assert planner._step(planner.hands["f0"]) == Navigate(target="table_0", stand_pose=1)
+    leave = planner._step(planner.hands["f1"])
+    assert isinstance(leave, Navigate) and leave.target != "table_0"

@@ -22,6 +22,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from mhrc.core.protocol import FurnitureView
+
 from ..heuristic_base import HANDOVER
 from .knowledge import Knowledge, dist
 from .steps import Hand, Job
@@ -55,7 +57,7 @@ def cost(k: Knowledge, hand: Hand, job: Job, rank: int = 0, scouts: bool = False
             return INFEASIBLE
         surface = not f.openable
         extra = SCOUT_SURFACE if surface and scouts and "pick" in skills else 0.0
-        there = any(dist(here, (sp.x, sp.y)) <= AT_POSE for sp in f.stand_poses)  # half done: finish it
+        there = _there(hand, job, here, f)  # half done: finish it
         steps = (0 if there else 1) + (1 if closed else 0)
         return LOOK + steps + extra + PER_METRE * dist(here, f.position) + keep
     if "pick" not in skills:
@@ -67,31 +69,44 @@ def cost(k: Knowledge, hand: Hand, job: Job, rank: int = 0, scouts: bool = False
     table = k.furniture.get(HANDOVER)
     if src is None or table is None:
         return INFEASIBLE
-    there = any(dist(here, (sp.x, sp.y)) <= AT_POSE for sp in src.stand_poses)
+    there = _there(hand, job, here, src)
     fetch_steps = (
         (3.0 if there else 4.0)
         + (1 if src.openable and not src.is_open else 0)
         + (1 if hand.tries.get(job.target, 0) else 0)
     )
     walk = dist(here, o.position) + dist(o.position, table.position)
-    return fetch_steps + RANK * rank + PER_METRE * walk + keep
+    ahead = 0.0 if there else RANK * rank  # one it stands at does not wait its turn: its navigation is saved
+    return fetch_steps + ahead + PER_METRE * walk + keep
+
+
+def _there(hand: Hand, job: Job, here: tuple[float, float], f: FurnitureView) -> bool:
+    """`hand`'s robot stands at a stand pose of `f`, or was sent there for `job` (its navigation
+    may still be under way, or its result not heard yet): the navigation is spent."""
+    if any(dist(here, (sp.x, sp.y)) <= AT_POSE for sp in f.stand_poses):
+        return True
+    return hand.job == job and hand.pose is not None and hand.pose[0] == f.name
 
 
 def assign(
     k: Knowledge, hands: Sequence[Hand], jobs: Sequence[Job], *, start: int = 0, scouts: bool = False
 ) -> dict[str, Job]:
     """The assignment of `jobs` to `hands` that minimizes the summed cost (each robot at most one
-    job, each job at most one robot); pairs that cannot be done are left out. The fetches rank in
-    the order `jobs` lists them, after the `start` fetches under way already."""
+    job, each job at most one robot); pairs that cannot be done are left out. The fetches rank
+    after the `start` fetches under way already: in the task's order for an ordered task, else
+    cheapest first (by the lowest cost any of `hands` has for it)."""
     if not hands or not jobs:
         return {}
     from scipy.optimize import linear_sum_assignment  # here: the CLI's start does not load scipy
 
-    ranks: list[int] = []
-    n = start
-    for j in jobs:
-        ranks.append(n if j.kind == "fetch" else 0)
-        n += j.kind == "fetch"
+    fetches = [i for i, j in enumerate(jobs) if j.kind == "fetch"]
+    if (
+        not k.ordered
+    ):  # any order will do: the cheapest first (an object in the gripper's reach before one across the house)
+        fetches.sort(key=lambda i: min(cost(k, h, jobs[i]) for h in hands))
+    ranks = [0] * len(jobs)
+    for n, i in enumerate(fetches):
+        ranks[i] = start + n
     matrix = np.array([[cost(k, h, j, r, scouts) for j, r in zip(jobs, ranks, strict=True)] for h in hands])
     rows, cols = linear_sum_assignment(matrix)
     return {hands[r].robot: jobs[c] for r, c in zip(rows, cols, strict=True) if matrix[r, c] < INFEASIBLE}

@@ -28,7 +28,7 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import Action, ActionResult, Observation, Place, Wait
+from mhrc.core.protocol import Action, ActionResult, Navigate, Observation, Place, Wait
 
 from ..heuristic_base import HANDOVER, role_of
 from ..policy import Decision
@@ -38,7 +38,16 @@ from .steps import MAX_TRIES, Hand, Job, Taken, finisher_can_take, finisher_step
 
 __all__ = ["CentralPlanner", "Seat"]
 
-BARRIER_TIMEOUT = 5.0  # s: lockstep, how long a round waits for a robot that may be re-attaching
+# s: lockstep, how long after the first observation of a tick reached the planner it waits for one of its robots
+# that is attached but never brings its own. The world released every robot's observation of the tick at the same
+# moment (a lockstep tick closes for all), so a live agent has its own a moment after its teammates; one that has
+# not has died between the release and its decision. The world detaches it as its liveliness token goes, but no
+# observation says so while the tick waits for its robots: only this bound ends that wait.
+RELEASE_SPREAD = 5.0
+
+
+NEAR_POSE = 0.5  # m: a robot stopped this near a stand pose (off target) holds it: it is in the way there
+EARLY = 1  # an ordered task: objects that may lie on the finisher's table before their turn (steps.job_step)
 
 
 @dataclass
@@ -52,6 +61,9 @@ class CentralPlanner:
     rounds: int = 0
     _commands: dict[int, dict[str, Action]] = field(default_factory=dict)  # lockstep: tick -> the round's commands
     _arrived: asyncio.Condition | None = None
+    _sent: dict[str, Action] = field(default_factory=dict)  # robot -> the command it was given, until its result
+    _released: dict[int, float] = field(default_factory=dict)  # lockstep: tick -> when its first observation came
+    _ended: set[str] = field(default_factory=set)  # robots whose last result ended the episode
 
     def __post_init__(self) -> None:
         self.hands = {r: Hand(r) for r in self.robots}
@@ -60,35 +72,52 @@ class CentralPlanner:
     async def command(self, obs: Observation) -> Action:
         """The command of `obs.robot` for its observation's tick."""
         self.knowledge.take(obs)
+        action = await self._command(obs)
+        self._sent[obs.robot] = action
+        return action
+
+    async def _command(self, obs: Observation) -> Action:
         if self.schedule != "lockstep":
             return (await self.plan((obs.robot,)))[obs.robot]
         if self._arrived is None:
             self._arrived = asyncio.Condition()
+        loop, t = asyncio.get_running_loop(), obs.tick
         async with self._arrived:
-            self._arrived.notify_all()
-            if obs.tick not in self._commands:
+            first = self._released.setdefault(t, loop.time())
+            self._arrived.notify_all()  # an arrival: the barrier of its tick looks again
+            while t not in self._commands and not self._all_in(t):
+                left = first + RELEASE_SPREAD - loop.time()
+                if left <= 0:
+                    break
                 try:
-                    await asyncio.wait_for(self._arrived.wait_for(lambda: self._all_in(obs)), BARRIER_TIMEOUT)
+                    await asyncio.wait_for(self._arrived.wait(), left)
                 except TimeoutError:
-                    pass
-            if obs.tick not in self._commands or obs.robot not in self._commands[obs.tick]:
-                ready = tuple(r for r in self.robots if self._at(r, obs.tick))
-                self._commands[obs.tick] = self._commands.get(obs.tick, {}) | await self.plan(ready)
-                for old in [t for t in self._commands if t < obs.tick - 2]:
+                    break
+            if t not in self._commands:  # the round of tick t, for every robot that brought its observation
+                self._commands[t] = await self.plan(tuple(r for r in self.robots if self._at(r, t)))
+                for old in [u for u in self._commands if u < t - 2]:
                     del self._commands[old]
-            return self._commands[obs.tick][obs.robot]
+                    self._released.pop(old, None)
+            elif obs.robot not in self._commands[t]:  # late (re-attached): its own command, its teammates' stand
+                self._commands[t] |= await self.plan((obs.robot,))
+            return self._commands[t][obs.robot]
 
     def _at(self, robot: str, tick: int) -> bool:
         o = self.knowledge.obs.get(robot)
         return o is not None and o.tick == tick
 
-    def _all_in(self, obs: Observation) -> bool:
-        """Every robot of this planner attached now (the observation's teammates) brought its
-        observation of the tick, or the round was run."""
-        attached = [r for r in self.robots if r == obs.robot or r in obs.teammates]
-        return obs.tick in self._commands or all(self._at(r, obs.tick) for r in attached)
+    def _all_in(self, tick: int) -> bool:
+        """Every robot of this planner attached at `tick` brought its observation of it. Attached:
+        the world's word in the observations of the tick (each lists the teammates attached when it
+        was made); a robot detached is not waited for, nor one whose episode ended."""
+        seen = [o for o in self.knowledge.obs.values() if o.tick == tick]
+        attached = {r for o in seen for r in (o.robot, *o.teammates)} - self._ended
+        return all(self._at(r, tick) for r in self.robots if r in attached)
 
     def record(self, robot: str, result: ActionResult) -> None:
+        self._sent.pop(robot, None)
+        if result.done:
+            self._ended.add(robot)
         self.knowledge.record(robot, result)
         self.hands[robot].record(result)
         a = result.action
@@ -149,21 +178,23 @@ class CentralPlanner:
             return Wait()
         if not self._mobile(hand.robot):
             return finisher_step(k, hand) or Wait()
+        at = {h.robot: self._where(h.robot) for h in self.hands.values() if h.robot in k.obs and self._mobile(h.robot)}
         for h in self.hands.values():
-            if h.pose is None and h.robot in k.obs:
-                h.pose = standing(k, h.robot)  # a navigation that failed left it where it stood
-        others = [h for h in self.hands.values() if h is not hand and h.pose is not None]
-        idle = {
-            h.pose for h in others if h.pose is not None and h.job is None and k.obs[h.robot].status.holding is None
-        }
-        taken = Taken({h.pose for h in others if h.pose is not None} - idle, idle)
+            if h.robot in at and (h.pose is None or self._idle(h)):  # without work it holds only where it stands
+                h.pose = at[h.robot]
+        others = [h for h in self.hands.values() if h is not hand and h.robot in at]
+        idle = {h.pose for h in others if h.pose is not None and self._idle(h)}
+        held = {p for h in others for p in (h.pose, at[h.robot]) if p is not None}  # where it stands, and heads
+        taken = Taken(held - idle, idle)
         holding = k.obs[hand.robot].status.holding
         if holding is not None and holding in k.targets:
             hand.job = Job("fetch", holding)  # what it carries is its work: nobody else is sent for it
         if hand.job is None and holding is None:
-            claimed = {h.pose for h in others if h.pose is not None and h.pose not in idle}
-            return make_room(k, hand, claimed, taken) or Wait()
-        step = job_step(k, hand, taken)
+            claimed = {h.pose for h in others if h.pose is not None and not self._idle(h)}  # (one claimed from it too)
+            if not claimed and self._all_brought():
+                return Wait()  # nobody comes any more: making room would be a step for nothing
+            return make_room(k, hand, claimed, taken, self._needed()) or Wait()
+        step = job_step(k, hand, taken, near=True, early=EARLY)
         if step is None and hand.job is not None:
             hand.job = None  # its work is done or cannot go on: the next round gives it other work
         return step or Wait()
@@ -171,6 +202,46 @@ class CentralPlanner:
     # ---------------------------------------------------------------- the work there is
     def _mobile(self, robot: str) -> bool:
         return "navigate" in self.knowledge.obs[robot].status.skills
+
+    def _where(self, robot: str) -> tuple[str, int] | None:
+        """The stand pose `robot` stands at, as the team knows; one it was sent to and whose result
+        is not heard yet counts as reached (in the sequential schedule a result waits for its
+        robot's next turn: its teammates plan before then, on the command it was given)."""
+        sent = self._sent.get(robot)
+        if isinstance(sent, Navigate):
+            return (sent.target, sent.stand_pose)
+        return standing(self.knowledge, robot) or standing(self.knowledge, robot, near=NEAR_POSE)
+
+    def _needed(self) -> frozenset[str]:
+        """Furniture where a target lies that a robot will come for: an idle robot standing there
+        leaves before the fetcher comes (which may need another of its stand poses after a failed
+        grasp)."""
+        k = self.knowledge
+        lying = (k.located(t) for t in k.todo())
+        return frozenset(
+            o.on
+            for o in lying
+            if o is not None
+            and o.on is not None
+            and o.held_by is None
+            and o.on != HANDOVER
+            and not k.goal_fixture(o.on)
+        )
+
+    def _all_brought(self) -> bool:
+        """Every target still to go lies within the finisher's reach or is in its gripper: the task
+        is the finisher's alone now."""
+        k, fin = self.knowledge, self._finisher()
+        if fin is None or not k.targets:
+            return False
+        return all(
+            (o := k.located(t)) is not None and (o.held_by == fin.robot or finisher_can_take(k, fin, t))
+            for t in k.todo()
+        )
+
+    def _idle(self, hand: Hand) -> bool:
+        """No work and nothing in its gripper (as the team last heard)."""
+        return hand.job is None and self.knowledge.latest(hand.robot).status.holding is None
 
     def _working(self, hand: Hand) -> bool:
         o = self.knowledge.obs.get(hand.robot)
@@ -210,7 +281,19 @@ class CentralPlanner:
         jobs: list[Job] = []
         lost = not k.targets  # the task's list not known yet (the finisher has not been heard): look around
         fetchers = sum(1 for r in self.robots if r in k.obs and role_of(k.obs[r].status.skills) == "fetcher")
-        wanted = 0  # an ordered task: only the next few are fetched (steps.next_wanted), one per fetcher
+        wanted = 0  # an ordered task: only the next few are fetched (steps.next_wanted), one per fetcher and EARLY more
+        to_bring = sum(
+            1
+            for t in k.todo()
+            if (o := k.located(t)) is None
+            or (
+                o.held_by is None
+                and not k.goal_fixture(o.on)
+                and not (fin is not None and finisher_can_take(k, fin, t))
+            )
+        )
+        early = EARLY if to_bring > EARLY + 1 else 0  # brought early only with more to bring after the next: the
+        # finisher takes them in order, so one brought early at the end only lengthens the finisher's last work
         for t in k.todo():
             o = k.located(t)
             if o is None:
@@ -224,7 +307,7 @@ class CentralPlanner:
                 and not (fin is not None and finisher_can_take(k, fin, t))
             ):
                 wanted += 1
-                if k.ordered and wanted > max(1, fetchers):
+                if k.ordered and wanted > max(1, fetchers) + (0 if lost else early):  # (early: not while one is lost)
                     continue
                 if any(h.tries.get(t, 0) < MAX_TRIES for h in self.hands.values() if h is not fin):
                     jobs.append(Job("fetch", t))

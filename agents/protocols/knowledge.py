@@ -41,6 +41,7 @@ class Knowledge:
     brought: set[str] = field(default_factory=set)  # put on the finisher's table (by this robot, or as reported)
     _views: dict[str, dict[str, ObjectView]] = field(default_factory=dict)  # robot -> object -> its last view
     _open: dict[str, dict[str, bool | None]] = field(default_factory=dict)  # robot -> container -> is_open
+    _after: dict[str, Observation] = field(default_factory=dict)  # robot -> the observation its last result carried
 
     # ---------------------------------------------------------------- taking in
     def take(self, obs: Observation) -> None:
@@ -68,7 +69,9 @@ class Knowledge:
             self.objects[holding] = self.objects[holding].model_copy(update={"held_by": obs.robot, "on": None})
 
     def record(self, robot: str, result: ActionResult) -> None:
-        """What a result says beyond the next observation: a furniture looked at."""
+        """What a result says beyond the next observation: a furniture looked at, and where the
+        robot stands after it (its next observation may come only at its next turn)."""
+        self._after[robot] = result.observation
         a, ok = result.action, result.outcome.succeeded
         if isinstance(a, Navigate) and ok:
             f = self.furniture.get(a.target)
@@ -135,6 +138,13 @@ class Knowledge:
             and dist(o.position, s.arm_base) <= s.reach + margin
         )
 
+    def latest(self, robot: str) -> Observation:
+        """`robot`'s newest observation: the one it decided on, or, when newer, the one its last
+        result carried (in the sequential schedule a robot that acted this tick shows where it
+        went only at its next turn; its teammates plan before then)."""
+        o, after = self.obs[robot], self._after.get(robot)
+        return after if after is not None and after.tick > o.tick else o
+
     def base(self, robot: str) -> tuple[float, float] | None:
-        b = self.obs[robot].status.base
+        b = self.latest(robot).status.base
         return None if b is None else (b.x, b.y)

@@ -11,6 +11,7 @@ there again, a stand pose another robot holds (or is headed to) is not chosen.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -36,6 +37,7 @@ MAX_TRIES = 8  # failed grasps of one object by one robot before it leaves it to
 BOB_TRIES = 2  # failed picks by the finisher before a fetcher brings the object closer
 HANDOVER_MARGIN = 0.35  # m: how far inside both arms' reach the band of the finisher's table must lie
 REACH_MARGIN = 0.1  # m inside a fetcher's reach it picks from where it stands rather than walk to a nearer pose
+PLACE_MARGIN = 0.15  # m: _places_here, the looser estimate of the band (see _hands_over's HANDOVER_MARGIN)
 STRETCH = 0.1  # m beyond the finisher's reach it still tries for an object brought to its table
 
 
@@ -191,11 +193,21 @@ def _standing_at(k: Knowledge, hand: Hand, furniture: str) -> int | None:
     return next((i for i in range(len(f.stand_poses)) if _at_stand_pose(obs, f, i)), None)
 
 
-def standing(k: Knowledge, robot: str) -> tuple[str, int] | None:
-    """The stand pose `robot` stands at now (furniture, index), if any."""
-    obs = k.obs.get(robot)
+def standing(k: Knowledge, robot: str, near: float | None = None) -> tuple[str, int] | None:
+    """The stand pose `robot` stands at now (furniture, index), if any; with `near`, the nearest
+    one within that many metres (a robot stopped off target near a pose is in the way of it)."""
+    obs = k.latest(robot) if robot in k.obs else None
     if obs is None or obs.status.base is None:
         return None
+    if near is not None:
+        b = obs.status.base
+        poses = [
+            (dist((b.x, b.y), (sp.x, sp.y)), f.name, i)
+            for f in k.furniture.values()
+            for i, sp in enumerate(f.stand_poses)
+        ]
+        d, name, idx = min(poses, default=(math.inf, "", 0))
+        return (name, idx) if d <= near else None
     for f in k.furniture.values():
         for i in range(len(f.stand_poses)):
             if _at_stand_pose(obs, f, i):
@@ -227,7 +239,7 @@ def _hands_over(k: Knowledge, robot: str) -> bool:
     return dist(mine.arm_base, theirs.arm_base) <= mine.reach + (theirs.reach or 0.0) - HANDOVER_MARGIN
 
 
-def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | None:
+def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken, early: int = 0) -> Action | None:
     """To the finisher's table and put it down: from the stand pose it stands at already, else
     the free one nearest the table's place pose (after a place failed, the next one). In an
     ordered task only the object wanted next is put down; another waits in the gripper there
@@ -260,19 +272,70 @@ def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken) -> Action | N
     if step is not None:
         return step
     wanted = next_wanted(k)
-    if wanted is not None and holding != wanted and holding in k.targets and hand.held_for < HOLD_TICKS:
+    if (
+        wanted is not None
+        and holding != wanted
+        and holding in k.targets
+        and hand.held_for < HOLD_TICKS
+        and _waiting_on_table(k, wanted) >= early
+    ):
         hand.held_for += 1
         return Wait()
     hand.held_for = 0
     return Place(obj=holding, location=HANDOVER)
 
 
-def job_step(k: Knowledge, hand: Hand, taken: Taken) -> Action | None:
+def _slipped_to(hand: Hand, furniture: str) -> bool:
+    """Its last navigation, to `furniture`, ended off target (near the stand pose)."""
+    last = hand.last
+    return (
+        last is not None
+        and isinstance(last.action, Navigate)
+        and last.action.target == furniture
+        and last.outcome.code == OutcomeCode.OFF_TARGET
+    )
+
+
+def _places_here(k: Knowledge, robot: str) -> bool:
+    """Whether, from where it stands, `robot`'s arm likely reaches a spot on the finisher's table
+    that the finisher's arm reaches (looser than `_hands_over`: a wrong guess costs one failed place)."""
+    mine = k.obs[robot].status
+    fin = k.obs.get(k.finisher or "")
+    theirs = fin.status if fin is not None else None
+    if mine.arm_base is None or mine.reach is None or theirs is None or theirs.arm_base is None:
+        return False
+    return dist(mine.arm_base, theirs.arm_base) <= mine.reach + (theirs.reach or 0.0) - PLACE_MARGIN
+
+
+def _waiting_on_table(k: Knowledge, wanted: str) -> int:
+    """Targets of an ordered task lying on the finisher's table before their turn (`wanted` is next)."""
+    return sum(1 for t in k.todo() if t != wanted and (o := k.located(t)) is not None and o.on == HANDOVER)
+
+
+def job_step(k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False, early: int = 0) -> Action | None:
     """The next step of `hand`'s job; None when it is done or cannot go on (the planner gives
-    other work)."""
+    other work). `near`: after a navigation that ended off target, act from where it stopped when
+    that looks near enough (the object within its arm's reach; the finisher's table's band within
+    reach), rather than always driving to the stand pose again. `early`: in an ordered task, how
+    many objects may lie on the finisher's table before their turn (one put down early frees the
+    fetcher's gripper; too many fill the band the finisher's arm reaches)."""
     job, status = hand.job, k.obs[hand.robot].status
     if status.holding is not None:
-        return _retry_slip(hand) or _deliver(k, hand, status.holding, taken)
+        wanted = next_wanted(k)
+        if (
+            near
+            and _slipped_to(hand, HANDOVER)
+            and _places_here(k, hand.robot)
+            and (
+                wanted is None
+                or wanted == status.holding
+                or status.holding not in k.targets
+                or _waiting_on_table(k, wanted) < early
+            )
+        ):
+            hand.last = None
+            return Place(obj=status.holding, location=HANDOVER)
+        return _retry_slip(hand) or _deliver(k, hand, status.holding, taken, early)
     if job is None:
         return None
     if job.kind == "explore":
@@ -287,6 +350,8 @@ def job_step(k: Knowledge, hand: Hand, taken: Taken) -> Action | None:
         return None
     if f.openable and not f.is_open:
         return _open(k, hand, f.name, taken)
+    if near and _slipped_to(hand, f.name) and _within_arm(k, hand.robot, o.position):
+        return Pick(obj=job.target)  # (a grasp too far is fixed with a move, as after any grasp)
     if (slip := _retry_slip(hand)) is not None:
         return slip
     last = hand.last
@@ -343,10 +408,13 @@ def finisher_can_take(k: Knowledge, hand: Hand, name: str) -> bool:
     return o is not None and hand.tries.get(name, 0) < BOB_TRIES and k.in_reach(hand.robot, o, STRETCH)
 
 
-def make_room(k: Knowledge, hand: Hand, claimed: set[tuple[str, int]], taken: Taken) -> Action | None:
+def make_room(
+    k: Knowledge, hand: Hand, claimed: set[tuple[str, int]], taken: Taken, needed: frozenset[str] = frozenset()
+) -> Action | None:
     """An idle robot standing where another robot needs to stand: to the nearest stand pose of a
-    furniture nobody needs (not the finisher's table, nothing claimed there)."""
-    if hand.pose is None or (hand.pose not in claimed and hand.pose[0] != HANDOVER):
+    furniture nobody needs (not the finisher's table, nothing claimed there, none of `needed`:
+    furniture a robot will come to for an object, whose stand poses it may all need)."""
+    if hand.pose is None or (hand.pose not in claimed and hand.pose[0] != HANDOVER and hand.pose[0] not in needed):
         return None  # (at the finisher's table it leaves anyway: that is where the fetchers come)
     here = k.base(hand.robot)
     if here is None:
@@ -354,7 +422,7 @@ def make_room(k: Knowledge, hand: Hand, claimed: set[tuple[str, int]], taken: Ta
     options = [
         (dist(here, (sp.x, sp.y)), f.name, i)
         for f in k.furniture.values()
-        if f.name != HANDOVER and f.name != hand.pose[0]
+        if f.name != HANDOVER and f.name != hand.pose[0] and f.name not in needed
         for i, sp in enumerate(f.stand_poses)
         if (f.name, i) not in taken and (f.name, i) not in claimed
     ]
