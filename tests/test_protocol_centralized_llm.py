@@ -5,10 +5,11 @@ command the planner cannot read becomes that robot's feedback while the others' 
 from __future__ import annotations
 
 import asyncio
+import json
 from pathlib import Path
 
 from mhrc.agents.protocols.centralized_llm import parse_round
-from mhrc.core.protocol import ActionResult, Navigate, Wait
+from mhrc.core.protocol import ActionResult, Coordination, Navigate, Thought, Wait
 from mhrc.core.records import read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
@@ -63,3 +64,55 @@ async def test_one_model_call_per_round_and_an_unreadable_command_is_feedback(tm
     for body in server.requests:  # every robot's observation in the one prompt
         prompt = body["messages"][-1]["content"]
         assert all(f"## {r}" in prompt for r in ROBOTS)
+    # each robot's thought says what the planner allocated it (the report's coordination section)
+    told = {(r.msg.tick, r.msg.robot): r.msg.coordination for r in read_records(trace) if isinstance(r.msg, Thought)}
+    assert told[(0, "alice")] == Coordination(job="navigate(table_1, 0)", by="planner")
+    assert told[(0, "bob")] == Coordination(job=None, by="planner")  # told to wait
+
+
+async def test_with_structured_one_json_reply_names_each_robots_command_from_its_own_schema(tmp_path: Path) -> None:
+    """--structured: the request carries one schema with a command for each robot (each from that
+    robot's own skills and scene graph); a robot's command the schema would refuse is its problem."""
+    replies = [
+        json.dumps(
+            {
+                "analysis": "alice goes to the sink, bob waits, david flies",
+                "commands": {
+                    "alice": {"skill": "navigate", "furniture": "table_1", "stand_pose": 0},
+                    "bob": {"skill": "wait"},
+                    "david": {"skill": "fly"},
+                },
+            }
+        ),
+        '{"analysis": "nothing"}',  # no commands at all: every robot waits and is told why
+    ]
+    server = ScriptedModelServer(replies, when_done=None)
+    try:
+        trace = tmp_path / "t.jsonl"
+        cfg = EpisodeConfig.build(
+            protocol="centralized",
+            task="pack_objects",
+            scene="bathroom",
+            seed=0,
+            n_objects=3,
+            horizon=2,
+            schedule="lockstep",
+            llm="openai:scripted",
+            base_url=server.url,
+            structured=True,
+            trace=trace,
+        )
+        done = await asyncio.wait_for(up_in_process(cfg.resolved()), 120)
+    finally:
+        server.close()
+    assert done.reason == "horizon" and len(server.requests) == 2
+    schema = server.requests[0]["response_format"]["json_schema"]["schema"]
+    assert schema["properties"]["commands"]["required"] == list(ROBOTS)
+    bob = schema["properties"]["commands"]["properties"]["bob"]["anyOf"]
+    assert "navigate" not in {v["properties"]["skill"]["const"] for v in bob}  # bob's own skills: an arm
+    results = {(r.msg.tick, r.msg.robot): r.msg.action for r in read_records(trace) if isinstance(r.msg, ActionResult)}
+    assert results[(0, "alice")] == Navigate(target="table_1", stand_pose=0) and results[(0, "david")] == Wait()
+    second = server.requests[1]["messages"][-1]["content"]
+    assert "could not be read" in second and "fly" in second
+    thoughts = [r.msg for r in read_records(trace) if isinstance(r.msg, Thought) and r.msg.reply is not None]
+    assert thoughts and all(t.schema_hash for t in thoughts)

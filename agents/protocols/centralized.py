@@ -28,7 +28,7 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import Action, ActionResult, Navigate, Observation, Place, Wait
+from mhrc.core.protocol import Action, ActionResult, Coordination, Navigate, Observation, Place, Wait
 
 from ..heuristic_base import HANDOVER, role_of
 from ..policy import Decision
@@ -48,6 +48,7 @@ RELEASE_SPREAD = 5.0
 
 NEAR_POSE = 0.5  # m: a robot stopped this near a stand pose (off target) holds it: it is in the way there
 EARLY = 1  # an ordered task: objects that may lie on the finisher's table before their turn (steps.job_step)
+PLANNER = "planner"  # a Coordination's `by` for the jobs the central planner allocates
 
 
 @dataclass
@@ -134,7 +135,9 @@ class CentralPlanner:
     def decision(self, robot: str, action: Action) -> Decision:
         """What `robot`'s seat publishes with its command."""
         hand = self.hands[robot]
-        return Decision(action=action, reasoning=f"round {self.rounds}: {hand.job.call() if hand.job else 'no work'}")
+        job = hand.job.call() if hand.job else None
+        told = Coordination(job=job, by=PLANNER if job else None)
+        return Decision(action=action, reasoning=f"round {self.rounds}: {job or 'no work'}", coordination=told)
 
     def round(self, asking: tuple[str, ...]) -> dict[str, Action]:
         """Allocate the work of every robot, then each asking robot's next step."""

@@ -21,22 +21,37 @@ from dataclasses import dataclass, field
 from importlib import resources
 from string import Template
 
-from mhrc.core.protocol import Action, ActionResult, Observation, Wait
+from mhrc.core.protocol import Action, ActionResult, Coordination, Observation, Wait
 
+from .. import structured as json_mode
 from ..llm.completion import Completion, LLMClient
 from ..observation import robot_status, scene_graph, task_text
 from ..parse import ReplyFormatError, parse_command
 from ..policy import Decision, Policy
 from .base import Seating
-from .centralized import CentralPlanner, Seat
+from .centralized import PLANNER, CentralPlanner, Seat
 
 __all__ = ["LLMCentralPlanner", "build_centralized", "parse_round", "round_prompt"]
 
+ROUND_INSTRUCTIONS = (
+    'Answer with one JSON object and nothing else: {"analysis": "...", "commands": {"<robot>": {"skill": "...", ...}}}, '
+    "one command for every robot, each with that robot's own skills and names from its own scene graph (for example "
+    '{"skill": "navigate", "furniture": "table_1", "stand_pose": 0} or {"skill": "wait"}). '
+    "This JSON object replaces the lines naming each robot's command."
+)
 LINE = re.compile(r"^\s*[-*]?\s*([A-Za-z][A-Za-z0-9_]*)\s*:\s*(.+?)\s*$")
 
 
 def _template(name: str) -> str:
     return resources.files("mhrc.prompts").joinpath(name).read_text(encoding="utf-8")
+
+
+def round_analysis_bound(max_tokens: object, robots: int) -> int:
+    """Characters a structured round's analysis may take so that every robot's command still fits
+    in a reply of `max_tokens` (json_mode.analysis_bound, with a command's room for each robot)."""
+    if not isinstance(max_tokens, int):
+        return json_mode.analysis_bound(None)
+    return json_mode.analysis_bound(max_tokens - json_mode.COMMAND_TOKENS * (robots - 1))
 
 
 def parse_round(reply: str, robots: tuple[str, ...]) -> tuple[dict[str, Action], dict[str, str]]:
@@ -102,6 +117,9 @@ class LLMCentralPlanner(CentralPlanner):
     _last: Completion | None = None
     _prompt: str | None = None
     _for: dict[str, tuple[str, Completion]] = field(default_factory=dict)  # robot -> the call its turn made
+    structured: bool = False  # --structured: the reply is one JSON object, each robot's command from its own schema
+    max_analysis: int = json_mode.MAX_ANALYSIS
+    _schema_hash: str | None = None  # the last call's schema, with --structured
 
     async def plan(self, asking: tuple[str, ...]) -> dict[str, Action]:
         tick = max(self.knowledge.obs[r].tick for r in asking)
@@ -111,14 +129,30 @@ class LLMCentralPlanner(CentralPlanner):
         told = {r: f"{self.unread[r]}; you waited instead" if r in self.unread else f for r, f in self.feedback.items()}
         told |= {r: f"{p}; you waited instead" for r, p in self.unread.items() if r not in told}
         messages = round_prompt(self.robots, self.knowledge.obs, told)
-        done = await self.client.complete(messages)
+        schema = None
+        if self.structured:  # each heard robot's command from its own skills and scene graph (agents/structured.py)
+            heard = [self.knowledge.obs[r] for r in self.robots if r in self.knowledge.obs]
+            schema = json_mode.round_schema(heard, max_analysis=self.max_analysis)
+            messages[-1]["content"] = messages[-1]["content"].rstrip("\n") + "\n" + ROUND_INSTRUCTIONS
+            self._schema_hash = json_mode.schema_hash(schema)
+        done = await self.client.complete(messages, schema=schema)
         self.calls += 1
         self.rounds += 1
-        commands, self.unread = parse_round(done.text, self.robots)
+        commands, self.unread = self._read(done.text)
         self._cached = {tick: commands}
         prompt = "\n\n".join(m["content"] for m in messages)
         self._for[asking[0]] = (prompt, done)
         return {r: commands.get(r, Wait()) for r in asking}
+
+    def _read(self, text: str) -> tuple[dict[str, Action], dict[str, str]]:
+        """The round's commands and each unread robot's problem, from lines or (--structured) JSON."""
+        if not self.structured:
+            return parse_round(text, self.robots)
+        try:
+            commands, problems = json_mode.parse_round_structured(text, self.robots)
+        except ReplyFormatError as exc:  # no commands object at all: every robot's problem
+            return {}, {r: f"the planner's reply could not be read: {exc}" for r in self.robots}
+        return commands, {r: f"your command could not be read: {p}" for r, p in problems.items()}
 
     def record(self, robot: str, result: ActionResult) -> None:
         super().record(robot, result)
@@ -126,10 +160,13 @@ class LLMCentralPlanner(CentralPlanner):
 
     def decision(self, robot: str, action: Action) -> Decision:
         made = self._for.pop(robot, None)
+        told = Coordination(job=None if isinstance(action, Wait) else action.call(), by=PLANNER)
         if made is None:
-            return Decision(action=action, reasoning=f"round {self.rounds}: the planner's command")
+            return Decision(action=action, reasoning=f"round {self.rounds}: the planner's command", coordination=told)
         prompt, done = made
         return Decision(
+            coordination=told,
+            schema_hash=self._schema_hash if self.structured else None,
             action=action,
             prompt=prompt,
             reply=done.text,
@@ -148,7 +185,13 @@ def build_centralized(seating: Seating) -> Mapping[str, Policy]:
         from ..llm.model_spec import make_client  # here: the heuristic form needs no HTTP client
 
         client = make_client(seating.model, seating.base_url, **dict(seating.client_options))
-        planner: CentralPlanner = LLMCentralPlanner(seating.robots, seating.schedule, client=client)
+        planner: CentralPlanner = LLMCentralPlanner(
+            seating.robots,
+            seating.schedule,
+            client=client,
+            structured=seating.structured,
+            max_analysis=round_analysis_bound(seating.client_options.get("max_tokens"), len(seating.robots)),
+        )
     else:
         planner = CentralPlanner(seating.robots, seating.schedule)
     return {r: Seat(r, planner) for r in seating.robots}
