@@ -106,3 +106,37 @@ async def test_a_gguf_episode_needs_no_server_of_its_own(gemma: Path, tmp_path: 
     ts = thoughts(cfg.trace)
     assert {t.robot for t in ts} == {"alice", "bob", "david"}
     assert all(t.policy == f"llm:{gemma}" and 0 < t.completion_tokens <= 24 for t in ts)
+
+
+@pytest.mark.parametrize("protocol", ["centralized", "leader"])
+async def test_one_round_of_each_protocol_holds_its_format_on_a_real_server(
+    gemma: Path, tmp_path: Path, protocol: str
+) -> None:
+    """Issue 45: a protocol's LLM form with --structured against llama.cpp's own server: the
+    centralized planner's one reply names a command for every robot, each leader-protocol robot's
+    reply is one action; every reply parses (the grammar holds the format), whatever it decides."""
+    from mhrc.agents.structured import parse_round_structured
+
+    async with LocalModelServer(gemma, slots=3, n_ctx_per_slot=CTX, seed=3) as srv:
+        cfg = EpisodeConfig.build(
+            protocol=protocol,
+            seed=0,
+            horizon=1,
+            schedule="lockstep",
+            llm=f"llamacpp:{srv.model}",
+            base_url=srv.base_url,
+            structured=True,
+            max_tokens=600,
+            llm_seed=3,
+            trace=tmp_path / "t.jsonl",
+        ).resolved()
+        done = await up_in_process(cfg)
+    assert done.metrics.temporal_steps == 1
+    replied = [t for t in thoughts(cfg.trace) if t.reply is not None]
+    assert len(replied) == (1 if protocol == "centralized" else 3)  # one call a round against one per robot
+    assert all(t.schema_hash and t.parse_error is None and t.completion_tokens <= 600 for t in replied), [
+        (t.parse_error, t.reply) for t in replied
+    ]
+    if protocol == "centralized":
+        commands, problems = parse_round_structured(replied[0].reply or "", ("alice", "bob", "david"))
+        assert set(commands) == {"alice", "bob", "david"} and not problems, problems
