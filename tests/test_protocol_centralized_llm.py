@@ -10,10 +10,11 @@ from pathlib import Path
 
 from mhrc.agents.protocols.centralized_llm import parse_round
 from mhrc.core.protocol import ActionResult, Coordination, Navigate, Thought, Wait
+from mhrc.core.protocol.thoughts import ReplyFailure
 from mhrc.core.records import read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
-from mhrc.testing import ScriptedModelServer
+from mhrc.testing import ModelReply, ScriptedModelServer
 
 ROBOTS = ("alice", "bob", "david")
 
@@ -116,3 +117,32 @@ async def test_with_structured_one_json_reply_names_each_robots_command_from_its
     assert "could not be read" in second and "fly" in second
     thoughts = [r.msg for r in read_records(trace) if isinstance(r.msg, Thought) and r.msg.reply is not None]
     assert thoughts and all(t.schema_hash for t in thoughts)
+
+
+async def test_a_planner_whose_model_does_not_answer_has_every_robot_wait_and_say_why(tmp_path: Path) -> None:
+    """The model down (503 on every call, after the client's retries): the round is every robot's
+    wait, each robot's thought carries the failure's code, and the episode goes on to its horizon."""
+    server = ScriptedModelServer(
+        lambda body: ModelReply(status=503, headers={"Retry-After": "0"}, body=b'{"error": "down"}'), when_done=None
+    )
+    try:
+        trace = tmp_path / "t.jsonl"
+        cfg = EpisodeConfig.build(
+            protocol="centralized",
+            task="pack_objects",
+            scene="bathroom",
+            seed=0,
+            n_objects=3,
+            horizon=1,
+            schedule="lockstep",
+            llm="openai:scripted",
+            base_url=server.url,
+            trace=trace,
+        )
+        done = await asyncio.wait_for(up_in_process(cfg.resolved()), 120)
+    finally:
+        server.close()
+    assert done.reason == "horizon"
+    thoughts = [r.msg for r in read_records(trace) if isinstance(r.msg, Thought)]
+    assert {t.robot for t in thoughts} == set(ROBOTS)
+    assert all(t.failure is ReplyFailure.MODEL_UNREACHABLE and t.action == "wait()" for t in thoughts)

@@ -22,9 +22,10 @@ from importlib import resources
 from string import Template
 
 from mhrc.core.protocol import Action, ActionResult, Coordination, Observation, Wait
+from mhrc.core.protocol.thoughts import ReplyFailure
 
 from .. import structured as json_mode
-from ..llm.completion import Completion, LLMClient
+from ..llm.completion import Completion, LLMClient, LLMError, LLMFatalError
 from ..observation import robot_status, scene_graph, task_text
 from ..parse import ReplyFormatError, parse_command
 from ..policy import Decision, Policy
@@ -120,6 +121,7 @@ class LLMCentralPlanner(CentralPlanner):
     structured: bool = False  # --structured: the reply is one JSON object, each robot's command from its own schema
     max_analysis: int = json_mode.MAX_ANALYSIS
     _schema_hash: str | None = None  # the last call's schema, with --structured
+    _failed: str | None = None  # why the last call gave no reply (the model did not answer)
 
     async def plan(self, asking: tuple[str, ...]) -> dict[str, Action]:
         tick = max(self.knowledge.obs[r].tick for r in asking)
@@ -135,9 +137,19 @@ class LLMCentralPlanner(CentralPlanner):
             schema = json_mode.round_schema(heard, max_analysis=self.max_analysis)
             messages[-1]["content"] = messages[-1]["content"].rstrip("\n") + "\n" + ROUND_INSTRUCTIONS
             self._schema_hash = json_mode.schema_hash(schema)
-        done = await self.client.complete(messages, schema=schema)
         self.calls += 1
         self.rounds += 1
+        try:
+            done = await self.client.complete(messages, schema=schema)
+        except LLMFatalError:
+            raise
+        except LLMError as exc:  # the model did not answer: every robot waits this round and is told why
+            said = f"the planner's model did not answer: {exc}"[:300]
+            self.unread = dict.fromkeys(self.robots, said)
+            self._cached = {tick: {}}
+            self._failed = said
+            return {r: Wait() for r in asking}
+        self._failed = None
         commands, self.unread = self._read(done.text)
         self._cached = {tick: commands}
         prompt = "\n\n".join(m["content"] for m in messages)
@@ -161,6 +173,10 @@ class LLMCentralPlanner(CentralPlanner):
     def decision(self, robot: str, action: Action) -> Decision:
         made = self._for.pop(robot, None)
         told = Coordination(job=None if isinstance(action, Wait) else action.call(), by=PLANNER)
+        if made is None and self._failed is not None:  # a thought that says the model did not answer, as a robot's own
+            return Decision(
+                action=action, parse_error=self._failed, failure=ReplyFailure.MODEL_UNREACHABLE, coordination=told
+            )
         if made is None:
             return Decision(action=action, reasoning=f"round {self.rounds}: the planner's command", coordination=told)
         prompt, done = made
