@@ -165,6 +165,9 @@ class RobotAgent:
         except ProtocolError as exc:
             self._log.warning("malformed world event ignored", reason=str(exc))
             return
+        heard = getattr(self.policy, "world_event", None)  # a policy that follows the team (a central planner)
+        if callable(heard):
+            heard(event)
         if isinstance(event, EpisodeDone):
             self.episode = event
             self._done.set()

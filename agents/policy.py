@@ -32,7 +32,11 @@ class Decision:
 
 
 class Policy(Protocol):
-    """Chooses a robot's next action from that robot's own observation only."""
+    """Chooses a robot's next action from that robot's own observation only.
+
+    A policy may also have `world_event(event)`: its agent calls it with every world event
+    (`mhrc.core.protocol.WorldEvent`: ticks, robots attached and detached, the episode's end), as
+    every participant hears them; a central planner hears a teammate detach there."""
 
     name: str
 

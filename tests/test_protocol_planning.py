@@ -10,7 +10,7 @@ import pytest
 
 from mhrc.agents.protocols import centralized
 from mhrc.agents.protocols.allocation import assign
-from mhrc.agents.protocols.centralized import CentralPlanner
+from mhrc.agents.protocols.centralized import CentralPlanner, Seat
 from mhrc.agents.protocols.knowledge import Knowledge
 from mhrc.agents.protocols.steps import Hand, Job, Taken, job_step
 from mhrc.core.protocol import (
@@ -21,6 +21,7 @@ from mhrc.core.protocol import (
     Observation,
     Place,
     Pose2D,
+    RobotDetached,
     RobotStatus,
     Wait,
 )
@@ -216,3 +217,21 @@ def test_a_robot_is_where_it_stands_not_where_it_once_meant_to_go() -> None:
     assert planner._step(planner.hands["f0"]) == Navigate(target="table_0", stand_pose=1)
     leave = planner._step(planner.hands["f1"])
     assert isinstance(leave, Navigate) and leave.target != "table_0"
+
+
+async def test_a_robot_the_world_detaches_is_not_waited_for() -> None:
+    """The world's robot_detached, as a seat's agent hears it, ends the wait of the tick under way
+    for that robot: the round runs for the others at once, without the bound."""
+    planner, rounds = _lockstep()
+    everyone = ("f0", "bob", "david")
+    waiting = [asyncio.create_task(planner.command(_tick(r, 1, everyone))) for r in ("f0", "bob")]
+    for _ in range(3):
+        await asyncio.sleep(0)
+    assert not any(t.done() for t in waiting)  # david is attached: awaited
+    seat = Seat("f0", planner)
+    seat.world_event(RobotDetached(robot="david", tick=1, reason="token lost"))
+    for _ in range(10):  # the wake-up and the round: a few turns of the loop, no clock
+        await asyncio.sleep(0)
+    assert all(t.done() for t in waiting) and rounds == [("f0", "bob")]
+    await asyncio.wait_for(planner.command(_tick("david", 2, everyone)), 30)  # back: counted again
+    assert "david" not in planner._gone

@@ -28,7 +28,17 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass, field
 
-from mhrc.core.protocol import Action, ActionResult, Coordination, Navigate, Observation, Place, Wait
+from mhrc.core.protocol import (
+    Action,
+    ActionResult,
+    Coordination,
+    Navigate,
+    Observation,
+    Place,
+    RobotDetached,
+    Wait,
+    WorldEvent,
+)
 
 from ..heuristic_base import HANDOVER, role_of
 from ..policy import Decision
@@ -41,8 +51,9 @@ __all__ = ["CentralPlanner", "Seat"]
 # s: lockstep, how long after the first observation of a tick reached the planner it waits for one of its robots
 # that is attached but never brings its own. The world released every robot's observation of the tick at the same
 # moment (a lockstep tick closes for all), so a live agent has its own a moment after its teammates; one that has
-# not has died between the release and its decision. The world detaches it as its liveliness token goes, but no
-# observation says so while the tick waits for its robots: only this bound ends that wait.
+# not has died between the release and its decision. The world detaches it as its liveliness token goes, and its
+# `robot_detached` event ends the wait (`Seat.world_event`); this bound is for an agent that stopped while its
+# session, and so its token, lives on.
 RELEASE_SPREAD = 5.0
 
 
@@ -65,13 +76,27 @@ class CentralPlanner:
     _sent: dict[str, Action] = field(default_factory=dict)  # robot -> the command it was given, until its result
     _released: dict[int, float] = field(default_factory=dict)  # lockstep: tick -> when its first observation came
     _ended: set[str] = field(default_factory=set)  # robots whose last result ended the episode
+    _gone: set[str] = field(default_factory=set)  # robots the world detached since their last observation
 
     def __post_init__(self) -> None:
         self.hands = {r: Hand(r) for r in self.robots}
 
     # ---------------------------------------------------------------- the seats' side
+    def detached(self, robot: str) -> None:
+        """The world let `robot` go (its agent died, its token was lost): the round of the tick under
+        way no longer waits for it. It counts again from its next observation."""
+        self._gone.add(robot)
+        if self._arrived is not None:
+            asyncio.get_running_loop().create_task(self._wake())
+
+    async def _wake(self) -> None:
+        assert self._arrived is not None
+        async with self._arrived:
+            self._arrived.notify_all()
+
     async def command(self, obs: Observation) -> Action:
         """The command of `obs.robot` for its observation's tick."""
+        self._gone.discard(obs.robot)
         self.knowledge.take(obs)
         action = await self._command(obs)
         self._sent[obs.robot] = action
@@ -112,7 +137,7 @@ class CentralPlanner:
         the world's word in the observations of the tick (each lists the teammates attached when it
         was made); a robot detached is not waited for, nor one whose episode ended."""
         seen = [o for o in self.knowledge.obs.values() if o.tick == tick]
-        attached = {r for o in seen for r in (o.robot, *o.teammates)} - self._ended
+        attached = {r for o in seen for r in (o.robot, *o.teammates)} - self._ended - self._gone
         return all(self._at(r, tick) for r in self.robots if r in attached)
 
     def record(self, robot: str, result: ActionResult) -> None:
@@ -351,6 +376,11 @@ class Seat:
     async def decide(self, obs: Observation) -> Decision:
         action = await self.planner.command(obs)
         return self.planner.decision(self.robot, action)
+
+    def world_event(self, event: WorldEvent) -> None:
+        """A world event, as this robot's agent heard it: a teammate detached is not awaited."""
+        if isinstance(event, RobotDetached):
+            self.planner.detached(event.robot)
 
     def record(self, result: ActionResult) -> None:
         self.planner.record(self.robot, result)
