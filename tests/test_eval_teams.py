@@ -332,17 +332,12 @@ def test_the_papers_protocol_keeps_its_keys_and_the_others_are_prefixed() -> Non
         ({"protocols": ("leader", "leader")}, "--protocol: 'leader' is given twice", None),
         ({"protocols": ()}, "--protocol must name at least one protocol", None),
         (
-            {"protocols": ("mhrc", "leader"), "llm": "openai:m", "base_url": "http://127.0.0.1:9/v1"},
-            "protocol 'leader' has no LLM form yet",
-            "no_llm_form",
-        ),
-        (
             {"protocols": ("centralized",), "ablation": "no_mobile"},
             "it was not given david",
             "not_all_robots",
         ),
     ],
-    ids=["unknown", "twice", "none", "no-llm-form", "not-all-robots"],
+    ids=["unknown", "twice", "none", "not-all-robots"],  # no_llm_form: every shipped protocol has one (test_protocols)
 )
 def test_each_protocol_is_checked_before_anything_starts(
     values: dict[str, Any], message: str, code: str | None
@@ -359,7 +354,7 @@ def test_each_protocol_is_checked_before_anything_starts(
 def test_a_bad_protocol_on_the_command_line_is_one_line_and_exit_2(tmp_path: Path) -> None:
     for args, message in (
         (["--protocol", "mhrc,leder"], "unknown protocol 'leder' (did you mean 'leader'?)"),
-        (["--protocol", "leader", "--llm", "openai:m", "--base-url", "http://127.0.0.1:9/v1"], "no LLM form"),
+        (["--protocol", "mhrc,centralized", "--ablation", "no_mobile"], "it was not given david"),
     ):
         out = subprocess.run(
             [sys.executable, "-m", "mhrc", "eval", "--out", str(tmp_path / "x"), *args],
