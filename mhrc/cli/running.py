@@ -95,8 +95,10 @@ def run_command(
             if not os.environ.get(PARENT_ENV):
                 loop.add_signal_handler(signal.SIGINT, on_interrupt)
             else:  # a child: the terminal's Ctrl-C reaches it too, and its parent stops it (SIGTERM); the
-                # others leave because of that same Ctrl-C, which may be before this child's SIGTERM comes
-                loop.add_signal_handler(signal.SIGINT, logs.hush)
+                # others leave because of that same Ctrl-C, which may be before this child's SIGTERM comes. Hushed
+                # in Python's own handler, at once: a loop's handler waits its turn, and on a loaded machine a
+                # teammate stopped by the parent could be seen leaving (and warned of) before that turn came
+                signal.signal(signal.SIGINT, lambda signum, frame: logs.hush())
         try:
             return await coro_fn()
         finally:

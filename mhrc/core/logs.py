@@ -61,7 +61,9 @@ def hush() -> None:
     """A run being stopped (Ctrl-C, SIGTERM): at the default level, no more warnings about the
     other participants leaving, which they do because of the same stop; errors still show, and a
     --log-level below warning is kept as asked."""
+    global _level
     if _level == "warning":
+        _level = "error"  # first: level_now reads it at every call, so nothing below error gets out from here on
         configure("error")
 
 
