@@ -25,7 +25,7 @@ from mhrc.core.protocol import Action, ActionResult, Coordination, Observation, 
 from mhrc.core.protocol.thoughts import ReplyFailure
 
 from .. import structured as json_mode
-from ..llm.completion import Completion, LLMClient, LLMError, LLMFatalError
+from ..llm.completion import Completion, LLMClient, LLMError, LLMFatalError, prompt_text
 from ..observation import robot_status, scene_graph, task_text
 from ..parse import ReplyFormatError, parse_command
 from ..policy import Decision, Policy
@@ -115,8 +115,6 @@ class LLMCentralPlanner(CentralPlanner):
     unread: dict[str, str] = field(default_factory=dict)  # robot -> why the last call's command for it was not run
     calls: int = 0
     _cached: dict[int, dict[str, Action]] = field(default_factory=dict)  # sequential: tick -> the call's commands
-    _last: Completion | None = None
-    _prompt: str | None = None
     _for: dict[str, tuple[str, Completion]] = field(default_factory=dict)  # robot -> the call its turn made
     structured: bool = False  # --structured: the reply is one JSON object, each robot's command from its own schema
     max_analysis: int = json_mode.MAX_ANALYSIS
@@ -152,7 +150,7 @@ class LLMCentralPlanner(CentralPlanner):
         self._failed = None
         commands, self.unread = self._read(done.text)
         self._cached = {tick: commands}
-        prompt = "\n\n".join(m["content"] for m in messages)
+        prompt = prompt_text(messages)
         self._for[asking[0]] = (prompt, done)
         return {r: commands.get(r, Wait()) for r in asking}
 

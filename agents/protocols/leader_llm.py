@@ -25,7 +25,7 @@ from mhrc.core.protocol.thoughts import ReplyFailure
 
 from .. import structured as json_mode
 from ..heuristic_base import role_of
-from ..llm.completion import LLMClient, LLMError, LLMFatalError
+from ..llm.completion import LLMClient, LLMError, LLMFatalError, prompt_text
 from ..llm_policy import MEANINGS
 from ..observation import robot_status, scene_graph, task_text
 from ..parse import ReplyFormatError, parse_command, signature
@@ -315,7 +315,7 @@ class LLMLeaderPolicy:
         said = [f"- step {m.tick}, from {m.sender}: {m.content}" for m in obs.new_messages]
         self.heard = [*self.heard, *said][-HEARD:]
         messages = self.prompt(obs)
-        prompt = "\n\n".join(m["content"] for m in messages)
+        prompt = prompt_text(messages)
         schema = json_mode.decision_schema(obs, max_analysis=self.max_analysis) if self.structured else None
         digest = json_mode.schema_hash(schema) if schema is not None else None
         try:
