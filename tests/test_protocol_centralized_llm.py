@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 from mhrc.agents.protocols.centralized_llm import parse_round
-from mhrc.core.protocol import ActionResult, Coordination, Navigate, Thought, Wait
+from mhrc.core.protocol import ActionResult, Coordination, EpisodeDone, Navigate, Thought, Wait
 from mhrc.core.protocol.thoughts import ReplyFailure
 from mhrc.core.records import read_records
 from mhrc.run.config import EpisodeConfig
@@ -17,6 +17,27 @@ from mhrc.run.inprocess import up_in_process
 from mhrc.testing import ModelReply, ScriptedModelServer
 
 ROBOTS = ("alice", "bob", "david")
+
+
+async def _episode(server: ScriptedModelServer, trace: Path, **options: object) -> EpisodeDone:
+    """A centralized episode (the trio, bathroom, 3 objects, lockstep) whose planner asks `server`;
+    the server is closed once it ends."""
+    try:
+        cfg = EpisodeConfig.build(
+            protocol="centralized",
+            task="pack_objects",
+            scene="bathroom",
+            seed=0,
+            n_objects=3,
+            schedule="lockstep",
+            llm="openai:scripted",
+            base_url=server.url,
+            trace=trace,
+            **options,
+        )
+        return await asyncio.wait_for(up_in_process(cfg.resolved()), 120)
+    finally:
+        server.close()
 
 
 def test_a_reply_names_one_command_per_robot_and_a_bad_line_is_that_robots_problem() -> None:
@@ -36,23 +57,8 @@ async def test_one_model_call_per_round_and_an_unreadable_command_is_feedback(tm
         "alice: wait()\nbob: wait()\ndavid: wait()",
     ]
     server = ScriptedModelServer(replies, when_done=None)
-    try:
-        trace = tmp_path / "t.jsonl"
-        cfg = EpisodeConfig.build(
-            protocol="centralized",
-            task="pack_objects",
-            scene="bathroom",
-            seed=0,
-            n_objects=3,
-            horizon=3,
-            schedule="lockstep",
-            llm="openai:scripted",
-            base_url=server.url,
-            trace=trace,
-        )
-        done = await asyncio.wait_for(up_in_process(cfg.resolved()), 120)
-    finally:
-        server.close()
+    trace = tmp_path / "t.jsonl"
+    done = await _episode(server, trace, horizon=3)
     assert done.reason == "horizon"
     assert len(server.requests) == 3  # one call per round (a tick), not one per robot
     results = [r.msg for r in read_records(trace) if isinstance(r.msg, ActionResult)]
@@ -88,24 +94,8 @@ async def test_with_structured_one_json_reply_names_each_robots_command_from_its
         '{"analysis": "nothing"}',  # no commands at all: every robot waits and is told why
     ]
     server = ScriptedModelServer(replies, when_done=None)
-    try:
-        trace = tmp_path / "t.jsonl"
-        cfg = EpisodeConfig.build(
-            protocol="centralized",
-            task="pack_objects",
-            scene="bathroom",
-            seed=0,
-            n_objects=3,
-            horizon=2,
-            schedule="lockstep",
-            llm="openai:scripted",
-            base_url=server.url,
-            structured=True,
-            trace=trace,
-        )
-        done = await asyncio.wait_for(up_in_process(cfg.resolved()), 120)
-    finally:
-        server.close()
+    trace = tmp_path / "t.jsonl"
+    done = await _episode(server, trace, horizon=2, structured=True)
     assert done.reason == "horizon" and len(server.requests) == 2
     schema = server.requests[0]["response_format"]["json_schema"]["schema"]
     assert schema["properties"]["commands"]["required"] == list(ROBOTS)
@@ -125,23 +115,8 @@ async def test_a_planner_whose_model_does_not_answer_has_every_robot_wait_and_sa
     server = ScriptedModelServer(
         lambda body: ModelReply(status=503, headers={"Retry-After": "0"}, body=b'{"error": "down"}'), when_done=None
     )
-    try:
-        trace = tmp_path / "t.jsonl"
-        cfg = EpisodeConfig.build(
-            protocol="centralized",
-            task="pack_objects",
-            scene="bathroom",
-            seed=0,
-            n_objects=3,
-            horizon=1,
-            schedule="lockstep",
-            llm="openai:scripted",
-            base_url=server.url,
-            trace=trace,
-        )
-        done = await asyncio.wait_for(up_in_process(cfg.resolved()), 120)
-    finally:
-        server.close()
+    trace = tmp_path / "t.jsonl"
+    done = await _episode(server, trace, horizon=1)
     assert done.reason == "horizon"
     thoughts = [r.msg for r in read_records(trace) if isinstance(r.msg, Thought)]
     assert {t.robot for t in thoughts} == set(ROBOTS)
