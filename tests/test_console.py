@@ -219,6 +219,33 @@ def test_the_summary_table_calls_the_sum_over_robots_actions_not_action_steps() 
     assert not any("action steps" in label for label in rows)
 
 
+def test_the_summary_table_names_a_protocol_other_than_the_papers() -> None:
+    """`mhrc up --protocol centralized` says how the team coordinated; the paper's table is as it was."""
+    from mhrc.core.protocol import EpisodeDone, Metrics
+    from mhrc.run.console import summary_table
+
+    done = EpisodeDone(
+        run="r",
+        reason="success",
+        metrics=Metrics(
+            success=True,
+            partial_success=1.0,
+            placed=1,
+            total=1,
+            temporal_steps=3,
+            action_steps=3,
+            action_steps_per_robot={"alice": 3},
+        ),
+    )
+    tables = {}
+    for protocol in (None, "mhrc", "centralized"):
+        out = io.StringIO()
+        Console(file=out, width=120).print(summary_table(done, protocol=protocol))
+        tables[protocol] = out.getvalue()
+    assert tables[None] == tables["mhrc"] and "protocol" not in tables["mhrc"]
+    assert _table_rows(tables["centralized"])["protocol"] == "centralized"
+
+
 def test_every_schedule_has_a_gloss_for_the_header() -> None:
     from mhrc.run.config import SCHEDULES
     from mhrc.run.console import SCHEDULE_GLOSS

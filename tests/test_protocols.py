@@ -157,7 +157,8 @@ def test_up_processes_runs_the_centralized_planner_as_one_agent_process(tmp_path
         timeout=300,
     )
     assert done.returncode == 0, done.stderr[-3000:]
-    assert json.loads(done.stdout.strip().splitlines()[-1])["temporal_steps"] == 6
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["temporal_steps"] == 6 and out["protocol"] == "centralized"
     records = read_records(trace)
     assert [m.protocol for m in messages(records, EpisodeStarted)] == ["centralized"]
     from mhrc.run.processes import agent_command, participants

@@ -167,7 +167,7 @@ def play(
             page.unlink(missing_ok=True)
     from mhrc.run.console import summary_table
 
-    console.print(summary_table(done))
+    console.print(summary_table(done, protocol=cfg.protocol if cfg is not None else None))
     trace = cfg.trace if cfg is not None else None
     if trace is not None and trace.is_file():
         from mhrc.play.contribution import from_trace_file

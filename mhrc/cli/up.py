@@ -186,14 +186,18 @@ def up(
             close_live(live, "up")
     if printer is not None:
         printer.close()  # what arrived late for its tick, then nothing more: the table is the last line
-    console.print(summary_table(done, _recovery(cfg.trace) if cfg.events is not None else None, _lost(cfg.trace)))
+    recovery = _recovery(cfg.trace) if cfg.events is not None else None
+    console.print(summary_table(done, recovery, _lost(cfg.trace), protocol=cfg.protocol))
     if video is not None and cfg.trace is not None:
         path = render_video_to(cfg.trace, video, video_size)
         if not quiet:
             console.print(f"video {path}")
     if as_json:  # the metrics, and which run and trace they are of (docs/quickstart.md lists every key)
         trace = None if cfg.trace is None else str(cfg.trace)
-        click.echo(json.dumps({"run": done.run, "reason": done.reason, "trace": trace, **done.metrics.model_dump()}))
+        head = {"run": done.run, "reason": done.reason, "trace": trace}
+        if cfg.protocol != DEFAULT_PROTOCOL:  # the paper's own run prints what it always printed
+            head["protocol"] = cfg.protocol
+        click.echo(json.dumps({**head, **done.metrics.model_dump()}))
     if live is not None:
         keep_serving(live.viewer)
 

@@ -37,6 +37,7 @@ from mhrc.core.protocol import (
     decode_event,
 )
 from mhrc.core.protocol.base import MAX_REQUEST_BYTES
+from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.protocol.thoughts import MAX_THOUGHT_BYTES, ReplyFailure
 from mhrc.core.records import TraceLine, messages
 
@@ -311,12 +312,17 @@ def summary_table(
     done: EpisodeDone,
     recovery: Sequence[Mapping[str, object]] | None = None,
     lost: list[RobotDetached] | None = None,
+    protocol: str | None = None,
 ) -> Table:
     """The episode's metrics for a person; the makespan is the world's clock at the end (README, "Metrics").
     `recovery`: a scenario's events as mhrc.analysis.metrics scores them (`--events`), one row of them;
-    `lost`: the robots whose agents left mid-episode and did not come back (mhrc.run.console.lost_robots)."""
+    `lost`: the robots whose agents left mid-episode and did not come back (mhrc.run.console.lost_robots);
+    `protocol`: how the team coordinated (docs/protocols.md), a row only when it is not the paper's, so the
+    paper's table stays as it was."""
     m = done.metrics
     t = Table(title=f"episode {inert(done.run)}: {inert(done.reason)}", show_header=False)
+    if protocol is not None and protocol != DEFAULT_PROTOCOL:
+        t.add_row("protocol", inert(protocol))
     t.add_row("success", "yes" if m.success else "no")
     t.add_row("partial success", f"{m.partial_success:.2f} ({m.placed}/{m.total} placed)")
     bound = f" (no team can need fewer than {m.lower_bound})" if m.lower_bound is not None else ""
