@@ -171,6 +171,11 @@ NO_SERVER = ("--llm", "llamacpp:m", "--base-url", "http://127.0.0.1:9/v1")  # a 
         (["up", "--processes", "--protocol", "centralized", "--external", "bob"], "--external", "none can be external"),
         (["play", "--robot", "bob", "--no-browser", "--protocol", "centralized"], "--protocol", "cannot leave bob"),
         (
+            ["play", "--robot", "david", "--no-browser", "--protocol", "leader"],
+            "--protocol",
+            "cannot take david's part",
+        ),
+        (
             ["eval", "--protocol", "mhrc", "--protocol", "centralized", "--ablation", "no_mobile", *NO_SERVER],
             "--protocol",
             "not given david",
@@ -186,7 +191,8 @@ NO_SERVER = ("--llm", "llamacpp:m", "--base-url", "http://127.0.0.1:9/v1")  # a 
             "one robot per agent under protocol 'mhrc'",
         ),
     ],
-    ids=["unfit-team", "external", "play", "eval", "planner-partial", "two-robots"],  # unknown names: test_cli_light
+    # unknown names: test_cli_light
+    ids=["unfit-team", "external", "play", "play-leader", "eval", "planner-partial", "two-robots"],
 )
 def test_a_protocol_that_cannot_run_is_refused_before_anything_starts(
     tmp_path: Path, args: list[str], option: str, said: str

@@ -69,5 +69,6 @@ register(
         "DynaHMRC's loop: self-descriptions and bids by message, an elected leader allocates by auction, robots report",
         build=build_leader,
         forms=("heuristic", "llm"),
+        spoken=True,
     )
 )

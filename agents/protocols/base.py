@@ -62,13 +62,17 @@ Build = Callable[[Seating], Mapping[str, Policy]]
 class CoordinationProtocol:
     """One way for a team to decide. `build` None: each robot's own agent with its own policy,
     built as it always was (the paper's protocol); otherwise the policies of `Seating.robots`.
-    `whole_team`: one participant must drive every robot of the team (a central planner)."""
+    `whole_team`: one participant must drive every robot of the team (a central planner).
+    `spoken`: every robot takes its part in fixed sentences of the protocol's own (the leader
+    protocol's bids, elections and reports): a person at `mhrc play`'s page, who writes free text,
+    cannot take a robot's place."""
 
     name: str
     summary: str
     build: Build | None = None
     forms: tuple[str, ...] = ("heuristic",)
     whole_team: bool = False
+    spoken: bool = False
 
     def line(self) -> str:
         """One line for a listing (`mhrc protocols`)."""

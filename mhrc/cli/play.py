@@ -199,14 +199,22 @@ async def _there(
 
 def _check_protocol(cfg: Any, robot: str) -> None:
     """The teammates' protocol can seat them beside a person: a whole-team protocol (one planner
-    for every robot) cannot, since the person drives one of the robots; one line before anything starts."""
+    for every robot) cannot, since the person drives one of the robots, nor a spoken one (leader),
+    whose teammates wait for the person's bid and reports in its own sentences; one line before
+    anything starts."""
     from mhrc.run.config import ConfigError
     from mhrc.run.coordinated import check_seating
 
     if cfg.coordination().whole_team:
         raise click.BadParameter(
             f"protocol {cfg.protocol!r} drives every robot from one planner: it cannot leave {robot} to you "
-            "(play under mhrc or leader)",
+            "(play under mhrc)",
+            param_hint="--protocol",
+        )
+    if cfg.coordination().spoken:
+        raise click.BadParameter(
+            f"protocol {cfg.protocol!r} runs its stages in fixed sentences every robot must send (bids, "
+            f"reports): a person cannot take {robot}'s part (play under mhrc)",
             param_hint="--protocol",
         )
     try:
