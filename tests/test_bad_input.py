@@ -167,7 +167,6 @@ NO_SERVER = ("--llm", "llamacpp:m", "--base-url", "http://127.0.0.1:9/v1")  # a 
 @pytest.mark.parametrize(
     ("args", "option", "said"),
     [
-        (["up", "--protocol", "centralized", "--ablation", "no_mobile", *NO_SERVER], "--protocol", "not given david"),
         (["up", "--processes", "--protocol", "centralized", "--external", "bob"], "--external", "none can be external"),
         (["play", "--robot", "bob", "--no-browser", "--protocol", "centralized"], "--protocol", "cannot leave bob"),
         (
@@ -175,11 +174,7 @@ NO_SERVER = ("--llm", "llamacpp:m", "--base-url", "http://127.0.0.1:9/v1")  # a 
             "--protocol",
             "cannot take david's part",
         ),
-        (
-            ["eval", "--protocol", "mhrc", "--protocol", "centralized", "--ablation", "no_mobile", *NO_SERVER],
-            "--protocol",
-            "not given david",
-        ),
+        (["eval", "--protocol", "mhrc", "--protocol", "nope", *NO_SERVER], "--protocol", "unknown protocol 'nope'"),
         (
             ["agent", "--insecure", "--connect", "tcp/127.0.0.1:9", "--protocol", "centralized", "--robot", "alice"],
             "--protocol",
@@ -192,7 +187,7 @@ NO_SERVER = ("--llm", "llamacpp:m", "--base-url", "http://127.0.0.1:9/v1")  # a 
         ),
     ],
     # unknown names: test_cli_light
-    ids=["unfit-team", "external", "play", "play-leader", "eval", "planner-partial", "two-robots"],
+    ids=["external", "play", "play-leader", "eval", "planner-partial", "two-robots"],
 )
 def test_a_protocol_that_cannot_run_is_refused_before_anything_starts(
     tmp_path: Path, args: list[str], option: str, said: str

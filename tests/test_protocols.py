@@ -52,6 +52,10 @@ def test_refusals_are_typed() -> None:
     with pytest.raises(ProtocolConfigError) as partial:  # the planner drives the whole team or nothing
         seat(cfg, ("alice", "bob"))
     assert partial.value.code is Refusal.NOT_ALL_ROBOTS and "david" in str(partial.value)
+    duo = EpisodeConfig.build(protocol="centralized", ablation="no_mobile")  # the episode's whole team: no David
+    assert set(seat(duo, ("alice", "bob"))) == {"alice", "bob"}
+    with pytest.raises(ProtocolConfigError):
+        seat(duo, ("alice",))
     with pytest.raises(ProtocolRefused):
         protocol("nope")
 

@@ -79,10 +79,16 @@ class CoordinationProtocol:
         return f"{self.name:<12} {self.summary} [{', '.join(self.forms)}]"
 
     def refusal(
-        self, team: TeamSpec, *, llm: bool = False, robots: tuple[str, ...] | None = None
+        self,
+        team: TeamSpec,
+        *,
+        llm: bool = False,
+        robots: tuple[str, ...] | None = None,
+        episode: tuple[str, ...] | None = None,
     ) -> ProtocolRefused | None:
         """Why this protocol cannot run `team` (with an LLM when `llm`, driving `robots` from one
-        participant when given), or None when it can."""
+        participant when given), or None when it can. `episode`: the team's robots in the episode,
+        when an ablation leaves some out (no_mobile), default the whole team."""
         if llm and "llm" not in self.forms:
             return ProtocolRefused(
                 Refusal.NO_LLM_FORM,
@@ -95,7 +101,7 @@ class CoordinationProtocol:
                 f"protocol {self.name!r} cannot seat robots of kind(s) {', '.join(unknown)} (team {team.name})",
             )
         if self.whole_team and robots is not None:
-            missing = [r for r in team.names if r not in robots]
+            missing = [r for r in (episode if episode is not None else team.names) if r not in robots]
             if missing:
                 return ProtocolRefused(
                     Refusal.NOT_ALL_ROBOTS,

@@ -25,7 +25,7 @@ def check_seating(cfg: EpisodeConfig, robots: tuple[str, ...]) -> CoordinationPr
     from mhrc.run.config import ProtocolConfigError
 
     p = cfg.coordination()
-    refused = p.refusal(cfg.team, robots=robots if p.whole_team else None)
+    refused = p.refusal(cfg.team, robots=robots if p.whole_team else None, episode=cfg.robots)
     if refused is not None:
         raise ProtocolConfigError(f"--protocol: {refused}", refused.code)
     return p
