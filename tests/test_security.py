@@ -11,6 +11,7 @@ import json
 import socket
 import stat
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -151,6 +152,25 @@ async def test_expired_certificate_fails_clearly(tmp_path: Path) -> None:
         security.load(files["world"])
 
 
+def _attaches(robot: str) -> tuple[list[str], asyncio.Event, Callable[[Bus, str], None]]:
+    """The agent ids of `robot`'s attaches, as the public robot_attached event gives them, heard on the
+    world's own bus from before any agent starts (up_in_process's `observe`): a client that connects
+    after the world opens may miss an attach that came first."""
+    ids: list[str] = []
+    seen = asyncio.Event()
+
+    def watch(bus: Bus, run: str) -> None:
+        def on_event(sample: Sample) -> None:
+            ev = decode_event(sample.payload)
+            if isinstance(ev, RobotAttached) and ev.robot == robot:
+                ids.append(ev.agent_id)
+                seen.set()
+
+        bus.subscribe(Keys(run).world_event, on_event)
+
+    return ids, seen, watch
+
+
 async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> None:
     cfg = (
         EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "trace.jsonl")
@@ -158,7 +178,8 @@ async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> Non
         .with_credentials(tmp_path / "cred")
     )
     k = Keys(cfg.run)
-    episode = asyncio.create_task(up_in_process(cfg))
+    alice_id, alice_seen, watch = _attaches("alice")
+    episode = asyncio.create_task(up_in_process(cfg, observe=watch))
     evil_goals: list[str] = []
     # no credentials: refused at once
     with pytest.raises(BusRefused):
@@ -166,16 +187,6 @@ async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> Non
     # bob's credentials, alice's agent id copied from the public robot_attached event
     mallory = await open_client(cfg.endpoint, 30, security=cfg.participant("bob"))
     try:
-        alice_id: list[str] = []
-        alice_seen = asyncio.Event()
-
-        def on_event(sample) -> None:  # type: ignore[no-untyped-def]
-            ev = decode_event(sample.payload)
-            if isinstance(ev, RobotAttached) and ev.robot == "alice":
-                alice_id.append(ev.agent_id)
-                alice_seen.set()
-
-        mallory.subscribe(k.world_event, on_event)
         attached = asyncio.create_task(alice_seen.wait())
         await asyncio.wait({attached, episode}, timeout=60, return_when=asyncio.FIRST_COMPLETED)
         attached.cancel()
@@ -188,7 +199,7 @@ async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> Non
             evil_goals.append(req.goal_id)
             mallory.put(k.action_request("alice"), req)
             tick += 1
-            await asyncio.sleep(0.05)
+            await asyncio.sleep(0.01)  # many tries while alice plays: a heuristic episode is over in a second
     finally:
         await mallory.close()
     done = await episode
@@ -206,19 +217,12 @@ async def test_duplicate_attach_with_a_live_agents_id_is_refused(tmp_path: Path)
         .with_credentials(tmp_path / "cred")
     )
     k = Keys(cfg.run)
-    episode = asyncio.create_task(up_in_process(cfg, robots=("alice",)))  # the world waits for bob and david
+    ids, seen, watch = _attaches("alice")
+    episode = asyncio.create_task(
+        up_in_process(cfg, robots=("alice",), observe=watch)
+    )  # the world waits for bob and david
     copycat = await open_client(cfg.endpoint, 30, security=cfg.participant("alice"))  # even alice's own credentials
     try:
-        ids: list[str] = []
-        seen = asyncio.Event()
-
-        def on_event(sample) -> None:  # type: ignore[no-untyped-def]
-            ev = decode_event(sample.payload)
-            if isinstance(ev, RobotAttached):
-                ids.append(ev.agent_id)
-                seen.set()
-
-        copycat.subscribe(k.world_event, on_event)
         await asyncio.wait_for(seen.wait(), 60)
         replies = await copycat.get(k.attach("alice"), AttachRequest(robot="alice", agent_id=ids[0]), timeout=3)
         reply = decode(replies[0], AttachReply)

@@ -64,6 +64,10 @@ def make_config(
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "true")
+    # zenoh's open waits `scouting/delay` (500 ms by default) for what scouting finds before it
+    # returns; with multicast off there is nothing to wait for, and every world (a router) paid it:
+    # half a second of each evaluation episode and of each `mhrc up` before its first tick
+    conf.insert_json5("scouting/delay", "0")
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("transport/link/tx/lease", str(lease_ms))
