@@ -257,8 +257,9 @@ def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken, early: int = 
     the free one nearest the table's place pose (after a place failed, the next one). In an
     ordered task only the object wanted next is put down; another waits in the gripper there
     (a few ticks at most: `HOLD_TICKS`). `pair`: a pose it stands at counts when its arm likely
-    reaches the band near the table's place pose (pairing.places_from), and it comes to the pose from which it also picks a
-    target lying on the table beyond the finisher's reach, when there is one (pairing.pair_pose)."""
+    reaches the band near the table's place pose (pairing.places_from), and it comes to the pose
+    from which it also picks a target lying on the table beyond the finisher's reach, when there
+    is one (pairing.pair_pose)."""
     table = k.furniture.get(HANDOVER)
     if table is None or not table.stand_poses:
         return None
