@@ -222,7 +222,7 @@ class CentralPlanner:
             if not claimed and self._all_brought():
                 return Wait()  # nobody comes any more: making room would be a step for nothing
             return make_room(k, hand, claimed, taken, self._needed()) or Wait()
-        step = job_step(k, hand, taken, near=True, early=EARLY)
+        step = job_step(k, hand, taken, near=True, early=EARLY, pair=True)
         if step is None and hand.job is not None:
             hand.job = None  # its work is done or cannot go on: the next round gives it other work
         return step or Wait()

@@ -29,6 +29,7 @@ from mhrc.core.protocol import (
 
 from ..heuristic_base import HANDOVER, _at_stand_pose, corrective_move, failed
 from .knowledge import Knowledge, dist
+from .pairing import arm_at, pair_pose, places_from
 
 __all__ = ["MAX_TRIES", "Hand", "Job", "finisher_step", "job_step", "next_wanted", "standing"]
 
@@ -239,11 +240,26 @@ def _hands_over(k: Knowledge, robot: str) -> bool:
     return dist(mine.arm_base, theirs.arm_base) <= mine.reach + (theirs.reach or 0.0) - HANDOVER_MARGIN
 
 
-def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken, early: int = 0) -> Action | None:
+def _far_one(k: Knowledge, holding: str) -> str | None:
+    """A target other than `holding` lying on the finisher's table beyond the finisher's reach,
+    that nobody holds: the one a fetcher at the table may take next."""
+    fin = k.finisher
+    for t in k.todo():
+        o = k.located(t)
+        if t != holding and o is not None and o.on == HANDOVER and o.held_by is None and fin is not None:
+            if not k.in_reach(fin, o, STRETCH):
+                return t
+    return None
+
+
+def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken, early: int = 0, pair: bool = False) -> Action | None:
     """To the finisher's table and put it down: from the stand pose it stands at already, else
     the free one nearest the table's place pose (after a place failed, the next one). In an
     ordered task only the object wanted next is put down; another waits in the gripper there
-    (a few ticks at most: `HOLD_TICKS`)."""
+    (a few ticks at most: `HOLD_TICKS`). `pair`: a pose it stands at counts when its arm likely
+    reaches the band near the table's place pose (pairing.places_from), and it comes to the pose
+    from which it also picks a target lying on the table beyond the finisher's reach, when there
+    is one (pairing.pair_pose)."""
     table = k.furniture.get(HANDOVER)
     if table is None or not table.stand_poses:
         return None
@@ -253,8 +269,20 @@ def _deliver(k: Knowledge, hand: Hand, holding: str, taken: Taken, early: int = 
         bad.clear()  # it failed from every pose (the table was crowded): try them again
     here = _standing_at(k, hand, HANDOVER)
     idx: int | None
-    if here is not None and here not in bad and (HANDOVER, here) not in taken and _hands_over(k, hand.robot):
+    arm = arm_at(k, hand.robot, here) if pair and here is not None else None
+    paired = None
+    if pair and (far := _far_one(k, holding)) is not None:
+        paired = pair_pose(k, hand.robot, far, bad | {i for i in range(n) if (HANDOVER, i) in taken})
+    if (
+        here is not None
+        and here not in bad
+        and (HANDOVER, here) not in taken
+        and (places_from(k, hand.robot, arm) if arm is not None else _hands_over(k, hand.robot))
+        and (paired is None or paired == here)
+    ):
         idx = here
+    elif paired is not None:
+        idx = paired
     else:
         near = table.place_pose or table.position
         order = [
@@ -312,13 +340,16 @@ def _waiting_on_table(k: Knowledge, wanted: str) -> int:
     return sum(1 for t in k.todo() if t != wanted and (o := k.located(t)) is not None and o.on == HANDOVER)
 
 
-def job_step(k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False, early: int = 0) -> Action | None:
+def job_step(
+    k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False, early: int = 0, pair: bool = False
+) -> Action | None:
     """The next step of `hand`'s job; None when it is done or cannot go on (the planner gives
     other work). `near`: after a navigation that ended off target, act from where it stopped when
     that looks near enough (the object within its arm's reach; the finisher's table's band within
     reach), rather than always driving to the stand pose again. `early`: in an ordered task, how
     many objects may lie on the finisher's table before their turn (one put down early frees the
-    fetcher's gripper; too many fill the band the finisher's arm reaches)."""
+    fetcher's gripper; too many fill the band the finisher's arm reaches). `pair`: at the finisher's
+    table, stand where one pose serves both picking and placing (pairing.py; `_deliver`)."""
     job, status = hand.job, k.obs[hand.robot].status
     if status.holding is not None:
         wanted = next_wanted(k)
@@ -335,7 +366,7 @@ def job_step(k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False, earl
         ):
             hand.last = None
             return Place(obj=status.holding, location=HANDOVER)
-        return _retry_slip(hand) or _deliver(k, hand, status.holding, taken, early)
+        return _retry_slip(hand) or _deliver(k, hand, status.holding, taken, early, pair)
     if job is None:
         return None
     if job.kind == "explore":
@@ -374,6 +405,10 @@ def job_step(k: Knowledge, hand: Hand, taken: Taken, *, near: bool = False, earl
     if here is not None and here not in hand.bad.get(f.name, set()) and _within_arm(k, hand.robot, o.position):
         hand.pose = (f.name, here)  # it looked from here (or brought another from here): no need to stand elsewhere
         return Pick(obj=job.target)
+    if pair and f.name == HANDOVER:  # beyond the finisher's reach on its table: a pose that also places it
+        skip = hand.bad.get(f.name, set()) | {i for i in range(len(f.stand_poses)) if (f.name, i) in taken}
+        if (both := pair_pose(k, hand.robot, job.target, skip)) is not None:
+            return _go(k, hand, f.name, both) or Pick(obj=job.target)
     idx = _pose(k, hand, f.name, o.position, taken)
     if idx is None:
         return None
