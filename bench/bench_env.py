@@ -9,14 +9,22 @@ commands given as strings; bus: ticks over the episode's wall time). The simulat
 time (`Sim.execute`: planners, collision checks, motion) is timed in both, and its share of a
 step is reported; so is whether both modes gave the same metrics for every episode.
 
-    python bench/bench_env.py [--tasks pack_objects,sort_solids,make_sandwich] [--seeds 0-3] [--objects 4] [--out FILE]
+    python bench/bench_env.py [--tasks pack_objects,sort_solids,make_sandwich] [--seeds 0-3] [--objects 4]
+                              [--baseline DIR] [--out FILE]
+
+With --baseline (a tree of an earlier commit: `git worktree add /tmp/mhrc-base <commit>`) the same
+measurement runs first with that tree's mhrc, in a fresh interpreter, and the report sets this
+tree's steps a second beside it (issue 46 item 6).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import json
+import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -113,8 +121,10 @@ def main() -> None:
     ap.add_argument("--tasks", default="pack_objects,sort_solids,make_sandwich")
     ap.add_argument("--seeds", default="0-3")
     ap.add_argument("--objects", type=int, default=4)
+    ap.add_argument("--baseline", type=Path, default=None, help="a tree to measure first, for comparison")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
+    base = _baseline(args) if args.baseline is not None else None
     logs.configure()  # warnings only: no debug line per skill in either mode
     _time_skills()
     tasks, seeds = args.tasks.split(","), int_range(args.seeds)
@@ -155,7 +165,34 @@ def main() -> None:
             "collision checks, world/arm.py, so a plan does not depend on the machine's load)."
         ),
     }
+    if base is not None and args.baseline is not None:
+        b_env = base["runs"][0]
+        report["baseline"] = {
+            "tree": str(args.baseline),
+            "commit": _commit(args.baseline),
+            "env_steps_per_s": b_env["steps_per_s"],
+            "env_resets_per_s": b_env["resets_per_s"],
+            "bus_steps_per_s": base["runs"][1]["steps_per_s"],
+            "same_metrics": base["same_metrics"],
+        }
+        report["env_steps_per_s_over_baseline"] = round(env_s["steps_per_s"] / b_env["steps_per_s"], 3)
+        report["bus_steps_per_s_over_baseline"] = round(bus_s["steps_per_s"] / base["runs"][1]["steps_per_s"], 3)
     emit(report, args.out)
+
+
+def _commit(root: Path) -> str:
+    got = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    return got.stdout.strip()
+
+
+def _baseline(args: argparse.Namespace) -> dict[str, Any]:
+    """This benchmark run first with the baseline tree's mhrc, in a fresh interpreter: its report."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "baseline.json"
+        cmd = [sys.executable, __file__, "--tasks", args.tasks, "--seeds", args.seeds, "--objects", str(args.objects)]
+        env = {**os.environ, "PYTHONPATH": f"{args.baseline}{os.pathsep}{Path(__file__).parent}"}
+        subprocess.run([*cmd, "--out", str(out)], env=env, cwd=args.baseline, check=True, stdout=subprocess.DEVNULL)
+        return dict(json.loads(out.read_text()))
 
 
 if __name__ == "__main__":
