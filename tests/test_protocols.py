@@ -172,3 +172,16 @@ def test_up_processes_runs_the_centralized_planner_as_one_agent_process(tmp_path
     cmd = agent_command(group, cfg)
     assert group == cfg.robots and cmd.count("--robot") == 3 and cmd.count("--credentials") == 3
     assert cmd[cmd.index("--protocol") + 1] == "centralized"
+
+
+def test_a_planner_process_under_no_mobile_is_told_the_episodes_robots() -> None:
+    """`mhrc up --processes --protocol centralized --ablation no_mobile`: one planner for Alice and
+    Bob, told the ablation, so that it seats the episode's robots instead of asking for David's."""
+    from mhrc.run.processes import agent_command, participants
+
+    cfg = EpisodeConfig.build(protocol="centralized", ablation="no_mobile").resolved()
+    (group,) = participants(cfg, cfg.robots)
+    cmd = agent_command(group, cfg)
+    assert group == ("alice", "bob") and cmd[cmd.index("--ablation") + 1] == "no_mobile"
+    paper = agent_command("alice", EpisodeConfig.build().resolved())
+    assert "--ablation" not in paper  # the paper's agents' command lines as they were

@@ -156,6 +156,8 @@ def agent_command(robot: str | tuple[str, ...], cfg: EpisodeConfig, spec: str | 
         cmd += ["--step-deadline", str(cfg.step_deadline)] if cfg.step_deadline else []
         cmd += ["--history-cap", str(cfg.history_cap)] if cfg.history_cap else []
         cmd += ["--aids", ",".join(cfg.aids)] if cfg.aids else []
+    elif cfg.ablation != "none":  # the episode's robots (no_mobile: without David), which a planner must all be given
+        cmd += ["--ablation", cfg.ablation]
     return cmd
 
 
