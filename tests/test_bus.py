@@ -139,3 +139,45 @@ async def test_an_outstanding_query_holds_no_thread() -> None:
         held.clear()
         await client.close()
         await router.close()
+
+
+async def test_subscribers_queryables_and_queries_start_no_python_thread_each() -> None:
+    """A Bus's callbacks run on the zenoh thread that delivers the sample: declaring twenty
+    subscribers, queryables and liveliness watches and asking queries starts no Python thread
+    (zenoh-python's default starts one per callback, which the sample then wakes and which
+    takes the GIL: about 25 an episode, 900 in a worker running 36), and every sample still
+    reaches its handler on the loop."""
+    import threading
+
+    def threads() -> int:  # but the loop's executor's (opening sessions, the waits)
+        return sum(1 for t in threading.enumerate() if not t.name.startswith("asyncio_"))
+
+    port = free_port()
+    router = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    client = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    try:
+        before = threads()
+        got: asyncio.Queue[str] = asyncio.Queue()
+
+        async def answer(key: str, params: dict[str, str], payload: bytes) -> ActionAck:
+            return ActionAck(goal_id="g", robot="bob", accepted=True)
+
+        for n in range(20):
+            router.subscribe(f"n/{n}", lambda s: got.put_nowait(s.key))
+            router.watch_liveliness(f"n/alive/{n}", lambda s: got.put_nowait(s.key))
+            router.serve(f"q/{n}", answer)
+        await subscribed(client, "n/19")
+        await served(client, "q/19")
+        assert threads() == before
+        for n in range(20):
+            client.put(f"n/{n}", b"x")
+            assert [decode(r, ActionAck) for r in await client.get(f"q/{n}")] == [
+                ActionAck(goal_id="g", robot="bob", accepted=True)
+            ]
+        client.declare_token("n/alive/3")
+        keys = {await asyncio.wait_for(got.get(), 5) for _ in range(21)}
+        assert keys == {f"n/{n}" for n in range(20)} | {"n/alive/3"}
+        assert threads() == before
+    finally:
+        await client.close()
+        await router.close()

@@ -76,6 +76,17 @@ def make_config(
     return conf
 
 
+def _direct(callback: Callable[[Any], None]) -> zenoh.handlers.Callback[Any]:
+    """`callback` run on the zenoh thread that delivers the sample (or inside the put, for this
+    session's own), not handed to a Python thread of its own first. zenoh-python's default
+    (`indirect=True`) gives every subscriber, queryable and query a Python thread that the
+    sample wakes: a thread switch and a handoff of the GIL per sample per subscriber, and about
+    25 Python threads an episode contending for the GIL (bench/bench_llm_client.py). Our
+    callbacks only copy the sample and hand it to the loop (or append a line to the trace), and
+    zenoh-python lets go of the GIL in every call that waits (put, get, undeclare, close)."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
 class Bus:
     """One Zenoh session, with asyncio-friendly publish, subscribe, query and liveliness."""
 
@@ -202,7 +213,7 @@ class Bus:
         """Call `handler(Sample)` on the event loop for every sample matching `key_expr`; with
         `on_thread`, on zenoh's thread at once (a quick, thread-safe handler that must not depend
         on the loop: the trace recorder, which keeps writing while the loop is busy or stopping)."""
-        self._entities.append(self._session.declare_subscriber(key_expr, self._bridge(handler, on_thread)))
+        self._entities.append(self._session.declare_subscriber(key_expr, _direct(self._bridge(handler, on_thread))))
 
     # ------------------------------------------------------------------ queries
     def serve(self, key: str, handler: QueryHandler) -> None:
@@ -233,7 +244,7 @@ class Bus:
             except RuntimeError:
                 query.drop()
 
-        self._entities.append(self._session.declare_queryable(key, on_query, complete=True))
+        self._entities.append(self._session.declare_queryable(key, _direct(on_query), complete=True))
 
     async def get(self, selector: str, payload: BaseModel | bytes | None = None, timeout: float = 5.0) -> list[bytes]:
         """Query `selector`; return the payloads of the OK replies received within `timeout`."""
@@ -265,7 +276,7 @@ class Bus:
             with contextlib.suppress(RuntimeError):  # the loop closed first: nobody waits any more
                 loop.call_soon_threadsafe(settle)
 
-        ask(zenoh.handlers.Callback(lambda reply: keep(reply, out), finish))
+        ask(zenoh.handlers.Callback(lambda reply: keep(reply, out), finish, indirect=False))
         await finished
         return list(out)
 
@@ -288,7 +299,9 @@ class Bus:
 
         Tokens alive at the time of the call are reported too (history)."""
         self._entities.append(
-            self._session.liveliness().declare_subscriber(key_expr, self._bridge(handler, on_thread), history=True)
+            self._session.liveliness().declare_subscriber(
+                key_expr, _direct(self._bridge(handler, on_thread)), history=True
+            )
         )
 
     async def alive(self, key_expr: str, timeout: float = 2.0) -> list[str]:
