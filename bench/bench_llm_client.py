@@ -5,8 +5,8 @@ one. Each run is a child process with PYTHONPATH set to its tree, so the worker 
 that tree's mhrc.
 
 For each run: the worker process's CPU (user and sys, from the OS's accounting of the waited
-child), the coordinator's (this child: the driver, scoring and the fake model server), both per
-model call, the wall time over the ideal, and where the worker's CPU went by thread, read from
+child), the coordinator's (this child: the driver and scoring; the fake model server runs in a
+process of its own, its CPU reported apart), both per model call, the wall time over the ideal, and where the worker's CPU went by thread, read from
 /proc/<pid>/task/*/stat every `--every` seconds (real CPU, not samples): the main thread (the
 asyncio loop: the world, the agents, the bus's Python side, the trace), Zenoh's runtime threads
 by pool (`rx-*`, `tx-*`, `net-*`, `acc-*`, `app-*`: native Rust, no GIL), and the other
@@ -110,16 +110,38 @@ class ThreadClock:
         return groups
 
 
+class ModelProcess:
+    """bench_llm_grid's FixedLatencyModel in a process of its own, so that the CPU of this one
+    is the coordinator's alone (the fake model's is not ours)."""
+
+    def __init__(self, latency: float) -> None:
+        code = (
+            f"import sys; sys.path.insert(0, {str(HERE)!r}); from bench_llm_grid import FixedLatencyModel; "
+            f"m = FixedLatencyModel({latency!r}); print(m.url, flush=True); sys.stdin.read(); m.close()"
+        )
+        self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        assert self.proc.stdout is not None
+        self.url = self.proc.stdout.readline().decode().strip()
+
+    def cpu(self) -> float:
+        """CPU seconds the model server used so far."""
+        fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / TICK
+
+    def close(self) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.close()
+        self.proc.wait(30)
+
+
 def one(args: argparse.Namespace) -> dict[str, Any]:
     """One run of the grid in this process (the child of `main`)."""
-    from bench_llm_grid import FixedLatencyModel
-
     import mhrc
     from mhrc.eval.engine import EvalSpec, evaluate
     from mhrc.world.scene import LAYOUTS
     from mhrc.world.tasks import TASKS
 
-    model = FixedLatencyModel(args.latency)
+    model = ModelProcess(args.latency)
     spec = EvalSpec(
         tasks=tuple(TASKS),
         scenes=tuple(LAYOUTS),
@@ -133,7 +155,8 @@ def one(args: argparse.Namespace) -> dict[str, Any]:
         with tempfile.TemporaryDirectory() as tmp, ThreadClock(args.every) as clock:
             cpu0, t0 = os.times(), time.perf_counter()
             rows = asyncio.run(evaluate(spec, Path(tmp) / "ev", workers=1, concurrency=args.concurrency))
-            wall, cpu = time.perf_counter() - t0, os.times()
+            wall, cpu = time.perf_counter() - t0, os.times()  # the worker was waited; the model server was not
+        model_cpu = model.cpu()
     finally:
         model.close()
     calls = sum(r.metrics.llm_calls for r in rows)
@@ -155,6 +178,7 @@ def one(args: argparse.Namespace) -> dict[str, Any]:
             "sys": round(cpu.children_system - cpu0.children_system, 2),
         },
         "coordinator_cpu_s": round(coordinator, 2),
+        "model_server_cpu_s": round(model_cpu, 2),
         "worker_cpu_ms_per_call": round(1000 * worker / calls, 2),
         "total_cpu_ms_per_call": round(1000 * (worker + coordinator) / calls, 2),
         "worker_cpu_by_thread_s": {k: round(v, 2) for k, v in sorted(by_thread.items(), key=lambda kv: -kv[1])},
@@ -168,6 +192,13 @@ def main() -> None:
     ap.add_argument("--latency", type=float, default=1.0)
     ap.add_argument("--horizon", type=int, default=50)
     ap.add_argument("--concurrency", type=int, default=36)
+    ap.add_argument(
+        "--short-horizon",
+        type=int,
+        default=5,
+        help="a second run per tree at this horizon: the CPU that does not grow with the calls (scene builds, "
+        "start-up, scoring) is told apart from each call's (0: none)",
+    )
     ap.add_argument("--every", type=float, default=0.5, help="seconds between reads of the threads' CPU")
     ap.add_argument("--shared", action="store_true", help="note that the machine was shared with other work")
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)  # a child: one run, JSON on stdout
@@ -177,24 +208,39 @@ def main() -> None:
         print(json.dumps(one(args)))
         return
     trees = {"this": HERE.parent} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
-    order = [name for _ in range(args.rounds) for name in sorted(trees)]  # baseline first in each round
-    runs: dict[str, list[dict[str, Any]]] = {name: [] for name in trees}
-    for name in order:
+    horizons = [args.horizon] + ([args.short_horizon] if args.short_horizon else [])
+    order = [(name, h) for _ in range(args.rounds) for h in horizons for name in sorted(trees)]  # baseline first
+    runs: dict[str, list[dict[str, Any]]] = {f"{name}_h{h}": [] for name in trees for h in horizons}
+    for name, horizon in order:
         cmd = [sys.executable, str(Path(__file__).resolve()), "--one"]
-        cmd += ["--latency", str(args.latency), "--horizon", str(args.horizon)]
+        cmd += ["--latency", str(args.latency), "--horizon", str(horizon)]
         cmd += ["--concurrency", str(args.concurrency), "--every", str(args.every)]
         env = dict(os.environ, PYTHONPATH=str(trees[name]))
         done = subprocess.run(cmd, env=env, check=True, stdout=subprocess.PIPE, cwd=trees[name])
-        runs[name].append(json.loads(done.stdout.decode().strip().splitlines()[-1]))
-        print(name, json.dumps(runs[name][-1]), file=sys.stderr)
+        runs[f"{name}_h{horizon}"].append(json.loads(done.stdout.decode().strip().splitlines()[-1]))
+        print(name, horizon, json.dumps(runs[f"{name}_h{horizon}"][-1]), file=sys.stderr)
 
-    def mean(name: str, field: str) -> float:
-        return round(sum(r[field] for r in runs[name]) / len(runs[name]), 2)
+    def mean(key: str, field: str) -> float:
+        return sum(r[field] for r in runs[key]) / len(runs[key])
 
-    summary = {
-        name: {f: mean(name, f) for f in ("worker_cpu_ms_per_call", "total_cpu_ms_per_call", "ratio_to_ideal")}
-        for name in trees
-    }
+    def cpu(key: str, with_coordinator: bool) -> float:  # CPU seconds of a run, the mean over the rounds
+        total = mean(key, "worker_cpu_ms_per_call") * mean(key, "llm_calls") / 1000
+        return total + (mean(key, "coordinator_cpu_s") if with_coordinator else 0.0)
+
+    summary: dict[str, dict[str, float]] = {}
+    for name in trees:
+        long = f"{name}_h{args.horizon}"
+        summary[name] = {
+            f: round(mean(long, f), 2) for f in ("worker_cpu_ms_per_call", "total_cpu_ms_per_call", "ratio_to_ideal")
+        }
+        if args.short_horizon:  # what each further call costs: the difference of the two horizons' CPU
+            short = f"{name}_h{args.short_horizon}"
+            calls = mean(long, "llm_calls") - mean(short, "llm_calls")
+            for label, coord in (("worker", False), ("total", True)):
+                marginal = (cpu(long, coord) - cpu(short, coord)) / calls
+                summary[name][f"{label}_cpu_ms_per_further_call"] = round(1000 * marginal, 2)
+                fixed = cpu(short, coord) - marginal * mean(short, "llm_calls")
+                summary[name][f"{label}_cpu_s_per_episode_besides_calls"] = round(fixed / mean(short, "episodes"), 3)
     emit(
         {
             "bench": "llm_client",
@@ -204,15 +250,19 @@ def main() -> None:
                 "horizon": args.horizon,
                 "concurrency": args.concurrency,
                 "workers": 1,
-                "order": order,
+                "short_horizon": args.short_horizon,
+                "order": [f"{name}_h{h}" for name, h in order],
                 "cpus": os.cpu_count(),
                 "machine_shared": args.shared,
             },
             "summary": summary,
             "runs": runs,
             "note": "worker_cpu_ms_per_call: the episode worker's CPU (user + sys) over the grid / model calls; "
-            "total adds the coordinator (driver, scoring, the fake model server); both include each episode's "
-            "scene build and start-up; ideal_s = longest episode's ticks x latency. "
+            "total adds the coordinator (the driver, scoring; not the fake model server, a process of its own, "
+            "model_server_cpu_s); both include each episode's "
+            "scene build and start-up; *_per_further_call: the difference of the two horizons' CPU over the difference "
+            "of their calls; *_per_episode_besides_calls: the rest, per episode (scene build, sessions, scoring); "
+            "ideal_s = longest episode's ticks x latency. "
             + (
                 "The machine was shared with another session's episodes: regenerate on a quiet one. "
                 if args.shared
