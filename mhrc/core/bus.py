@@ -1,7 +1,7 @@
 """Zenoh sessions bridged to asyncio.
 
 zenoh-python has no asyncio API: its callbacks run on zenoh threads. Every callback here
-copies the sample and hands it to the event loop with `call_soon_threadsafe`, then returns;
+copies the sample and hands it to the event loop (a batch at a time: `_Inbox`), then returns;
 all user handlers run on the loop. Blocking zenoh calls (`open`, `close`) run in
 `asyncio.to_thread`; a query's replies come to a callback and hold no thread while the query is
 outstanding; a put (congestion control BLOCK) runs on the loop. A
@@ -12,8 +12,11 @@ exception; `close()` (use `async with`) closes them all."""
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import json
+import threading
+import weakref
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -85,6 +88,47 @@ def _direct(callback: Callable[[Any], None]) -> zenoh.handlers.Callback[Any]:
     callbacks only copy the sample and hand it to the loop (or append a line to the trace), and
     zenoh-python lets go of the GIL in every call that waits (put, get, undeclare, close)."""
     return zenoh.handlers.Callback(callback, indirect=False)
+
+
+class _Inbox:
+    """Calls handed from zenoh's threads to one event loop, which is woken once per batch: each
+    `call_soon_threadsafe` writes to the loop's self-pipe (a system call and a wake-up of the
+    loop), and a worker's loop gets some twelve samples a model call from up to 144 sessions.
+    The calls run in the order they came."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self._calls: collections.deque[tuple[Callable[..., None], tuple[Any, ...]]] = collections.deque()
+        self._lock = threading.Lock()
+        self._armed = False  # a drain is scheduled on the loop and has not begun
+
+    def put(self, fn: Callable[..., None], *args: Any) -> None:
+        """Run `fn(*args)` on the loop, after the calls put before it (dropped once the loop closed)."""
+        with self._lock:
+            self._calls.append((fn, args))
+            if self._armed:
+                return
+            self._armed = True
+        with contextlib.suppress(RuntimeError):  # the loop closed while zenoh still delivers
+            self._loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        with self._lock:
+            calls, self._calls = self._calls, collections.deque()
+            self._armed = False
+        for fn, args in calls:
+            fn(*args)
+
+
+_INBOXES: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Inbox] = weakref.WeakKeyDictionary()
+
+
+def _inbox(loop: asyncio.AbstractEventLoop) -> _Inbox:
+    """The loop's one inbox, shared by every Bus on it (called on the loop)."""
+    inbox = _INBOXES.get(loop)
+    if inbox is None:
+        inbox = _INBOXES[loop] = _Inbox(loop)
+    return inbox
 
 
 class Bus:
@@ -195,17 +239,14 @@ class Bus:
             log.error("bus handler failed", task=task.get_name(), error=str(exc), exc_info=exc)
 
     def _bridge(self, handler: Handler, on_thread: bool = False) -> Callable[[zenoh.Sample], None]:
-        loop = self._loop
+        inbox = _inbox(self._loop)
 
         def on_sample(sample: zenoh.Sample) -> None:
             copy = Sample(str(sample.key_expr), sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT)
             if on_thread:
                 self._run_handler(handler, copy)
                 return
-            try:
-                loop.call_soon_threadsafe(self._run_handler, handler, copy)
-            except RuntimeError:  # loop closed while zenoh still delivers
-                pass
+            inbox.put(self._run_handler, handler, copy)
 
         return on_sample
 
