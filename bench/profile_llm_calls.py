@@ -7,9 +7,14 @@ every on-CPU sample is put in one bucket by the first rule its stack matches, in
                                       [--out bench/results/llm_call_profile.json]
     python bench/profile_llm_calls.py --stacks FILE.raw.gz   # the shares of stacks sampled before
 
-py-spy counts a thread that runs native code (Zenoh's callback threads have no Python frame below
-`Thread.run`) as on CPU; it cannot see inside it. Shares are of the samples, on a machine that may
-be shared: read them as where the time goes, not as seconds.
+py-spy samples with `--gil`: only the thread holding the GIL, i.e. running Python. Without it,
+py-spy took every thread for active (its idle detection does not see threads waiting in native
+code): zenoh-python's callback threads, each blocked in Rust on its channel below `Thread.run`,
+and the executor's idle threads made 63% of the worker's samples in an earlier profile, while
+their real CPU (bench/bench_llm_client.py reads it per thread from /proc) was a small part. Native
+work without the GIL (Zenoh's runtime threads) is not sampled at all: bench_llm_client.py has its
+CPU. Shares are of the samples, on a machine that may be shared: read them as where the Python
+time goes, not as seconds.
 """
 
 from __future__ import annotations
@@ -34,13 +39,19 @@ def _any(*needles: str) -> Rule:
 
 
 BUCKETS: list[tuple[str, Rule]] = [
-    ("zenoh's callback threads (native code under Thread.run)", lambda f: f[-1].startswith("Thread.run")),
+    (
+        "a thread in native code under Thread.run (zenoh-python's callback threads)",
+        lambda f: f[-1].startswith("Thread.run"),
+    ),
     ("world: building the scene", _any("Sim.__init__", "Sim._build", "ArmPlanner.__init__", "mhrc/world/robots.py")),
     ("world: skills", _any("mhrc/world/skills", "mhrc/world/arm.py", "mhrc/world/astar.py")),
     ("writing the summary and reports", _any("matplotlib", "mhrc/eval/html", "mhrc/viewer", "mhrc/eval/report")),
     ("imports", _any("_find_and_load")),
-    ("model client (httpx, the LLM client)", _any("httpx", "httpcore", "agents/llm")),
-    ("prompt rendering", _any("agents/prompt")),
+    ("prompt rendering", _any("LLMPolicy.prepare", "LLMPolicy.render", "agents/prompt")),
+    (
+        "model client (httpx, httpcore, h11, anyio, the LLM client)",
+        _any("httpx", "httpcore", "h11", "anyio", "agents/llm/"),
+    ),
     ("the trace (recorder)", _any("recorder", "core/records.py")),
     ("bus, Python side (put, get, decode)", _any("mhrc/core/bus.py")),
     ("pydantic", _any("pydantic")),
@@ -54,6 +65,7 @@ WORKER = "mhrc.eval.pool"
 def shares(stacks: Path) -> dict[str, object]:
     """The share of each bucket among the worker's samples and among all samples."""
     worker: collections.Counter[str] = collections.Counter()
+    loop: collections.Counter[str] = collections.Counter()  # the worker's main thread: its asyncio loop
     total = outside = 0
     opener = gzip.open if stacks.suffix == ".gz" else open
     with opener(stacks, "rt") as lines:
@@ -65,13 +77,20 @@ def shares(stacks: Path) -> dict[str, object]:
             if not any(WORKER in f for f in frames[:2]):
                 outside += n  # the bench's own process: the model server, the coordinator
                 continue
-            worker[next((name for name, rule in BUCKETS if rule(frames)), "other")] += n
+            bucket = next((name for name, rule in BUCKETS if rule(frames)), "other")
+            worker[bucket] += n
+            if any(f.startswith("Runner.run ") for f in frames):
+                loop[bucket] += n
     in_worker = total - outside
     return {
         "samples": total,
         "worker_samples": in_worker,
         "outside_worker_share": round(outside / total, 3) if total else None,
         "worker_shares": {k: round(v / in_worker, 3) for k, v in worker.most_common()} if in_worker else {},
+        "worker_loop_thread_samples": sum(loop.values()),
+        "worker_loop_thread_shares": {k: round(v / sum(loop.values()), 3) for k, v in loop.most_common()}
+        if loop
+        else {},
     }
 
 
@@ -84,7 +103,7 @@ def main() -> None:
     ap.add_argument("--stacks", type=Path, help="read these stacks (py-spy raw, maybe gzipped) instead of sampling")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
-    config = {"latency_s": args.latency, "horizon": args.horizon, "concurrency": args.concurrency}
+    config = {"latency_s": args.latency, "horizon": args.horizon, "concurrency": args.concurrency, "py_spy": "--gil"}
     stacks = args.stacks
     if stacks is None:
         spy = shutil.which("py-spy", path=str(Path(sys.executable).parent)) or shutil.which("py-spy")
@@ -94,7 +113,7 @@ def main() -> None:
         grid = [sys.executable, str(Path(__file__).with_name("bench_llm_grid.py"))]
         grid += ["--latency", args.latency, "--horizon", args.horizon, "--concurrency", args.concurrency]
         subprocess.run(
-            [spy, "record", "--subprocesses", "-r", args.rate, "-f", "raw", "-o", str(raw), "--", *grid],
+            [spy, "record", "--gil", "--subprocesses", "-r", args.rate, "-f", "raw", "-o", str(raw), "--", *grid],
             check=True,
             stdout=subprocess.DEVNULL,
         )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from typing import Any
 
 from structlog.testing import capture_logs
 from waits import served, subscribed
@@ -137,5 +138,98 @@ async def test_an_outstanding_query_holds_no_thread() -> None:
         silent.undeclare()
     finally:
         held.clear()
+        await client.close()
+        await router.close()
+
+
+async def test_subscribers_queryables_and_queries_start_no_python_thread_each() -> None:
+    """A Bus's callbacks run on the zenoh thread that delivers the sample: declaring twenty
+    subscribers, queryables and liveliness watches and asking queries starts no Python thread
+    (zenoh-python's default starts one per callback, which the sample then wakes and which
+    takes the GIL: about 25 an episode, 900 in a worker running 36), and every sample still
+    reaches its handler on the loop."""
+    import threading
+
+    def threads() -> int:  # but the loop's executor's (opening sessions, the waits)
+        return sum(1 for t in threading.enumerate() if not t.name.startswith("asyncio_"))
+
+    port = free_port()
+    router = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    client = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    try:
+        before = threads()
+        got: asyncio.Queue[str] = asyncio.Queue()
+
+        async def answer(key: str, params: dict[str, str], payload: bytes) -> ActionAck:
+            return ActionAck(goal_id="g", robot="bob", accepted=True)
+
+        for n in range(20):
+            router.subscribe(f"n/{n}", lambda s: got.put_nowait(s.key))
+            router.watch_liveliness(f"n/alive/{n}", lambda s: got.put_nowait(s.key))
+            router.serve(f"q/{n}", answer)
+        await subscribed(client, "n/19")
+        await served(client, "q/19")
+        assert threads() == before
+        for n in range(20):
+            client.put(f"n/{n}", b"x")
+            assert [decode(r, ActionAck) for r in await client.get(f"q/{n}")] == [
+                ActionAck(goal_id="g", robot="bob", accepted=True)
+            ]
+        client.declare_token("n/alive/3")
+        keys = {await asyncio.wait_for(got.get(), 5) for _ in range(21)}
+        assert keys == {f"n/{n}" for n in range(20)} | {"n/alive/3"}
+        assert threads() == before
+    finally:
+        await client.close()
+        await router.close()
+
+
+async def test_samples_that_come_while_the_loop_is_busy_wake_it_once() -> None:
+    """Zenoh's threads hand samples to the loop in batches: a hundred samples that come while
+    the loop is busy wake it a few times at most (each wake-up is a write to the loop's self-pipe, a
+    system call), not a hundred times, and every handler still runs, in order."""
+    import threading
+
+    port = free_port()
+    router = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    client = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    loop = asyncio.get_running_loop()
+    wakes = 0
+    wake = loop.call_soon_threadsafe
+
+    def counted(*args: Any, **kwargs: Any) -> Any:  # the loop's own call, counted
+        nonlocal wakes
+        wakes += 1
+        return wake(*args, **kwargs)
+
+    try:
+        got: list[bytes] = []
+        all_got = asyncio.Event()
+        arrived = threading.Event()
+        seen = 0
+
+        def on_thread(s: Sample) -> None:
+            nonlocal seen
+            seen += 1
+            if seen == 100:
+                arrived.set()
+
+        def on_loop(s: Sample) -> None:
+            got.append(s.payload)
+            if len(got) == 100:
+                all_got.set()
+
+        router.subscribe("b/*", on_thread, on_thread=True)
+        router.subscribe("b/*", on_loop)
+        await subscribed(client, "b/x")
+        loop.call_soon_threadsafe = counted  # type: ignore[method-assign]
+        for n in range(100):
+            client.put("b/x", str(n).encode())
+        assert arrived.wait(10)  # the loop is busy (blocked here) while the samples come
+        await asyncio.wait_for(all_got.wait(), 10)
+        assert got == [str(n).encode() for n in range(100)]
+        assert wakes < 10  # one per sample (100) before; a few at most now
+    finally:
+        loop.call_soon_threadsafe = wake  # type: ignore[method-assign]
         await client.close()
         await router.close()

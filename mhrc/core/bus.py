@@ -1,7 +1,7 @@
 """Zenoh sessions bridged to asyncio.
 
 zenoh-python has no asyncio API: its callbacks run on zenoh threads. Every callback here
-copies the sample and hands it to the event loop with `call_soon_threadsafe`, then returns;
+copies the sample and hands it to the event loop (a batch at a time: `_Inbox`), then returns;
 all user handlers run on the loop. Blocking zenoh calls (`open`, `close`) run in
 `asyncio.to_thread`; a query's replies come to a callback and hold no thread while the query is
 outstanding; a put (congestion control BLOCK) runs on the loop. A
@@ -12,8 +12,11 @@ exception; `close()` (use `async with`) closes them all."""
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import json
+import threading
+import weakref
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -78,6 +81,58 @@ def make_config(
     if security is not None:
         apply(conf, security, router=mode == "router")
     return conf
+
+
+def _direct(callback: Callable[[Any], None]) -> zenoh.handlers.Callback[Any]:
+    """`callback` run on the zenoh thread that delivers the sample (or inside the put, for this
+    session's own), not handed to a Python thread of its own first. zenoh-python's default
+    (`indirect=True`) gives every subscriber, queryable and query a Python thread that the
+    sample wakes: a thread switch and a handoff of the GIL per sample per subscriber, and about
+    25 Python threads an episode contending for the GIL (bench/bench_llm_client.py). Our
+    callbacks only copy the sample and hand it to the loop (or append a line to the trace), and
+    zenoh-python lets go of the GIL in every call that waits (put, get, undeclare, close)."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
+class _Inbox:
+    """Calls handed from zenoh's threads to one event loop, which is woken once per batch: each
+    `call_soon_threadsafe` writes to the loop's self-pipe (a system call and a wake-up of the
+    loop), and a worker's loop gets some twelve samples a model call from up to 144 sessions.
+    The calls run in the order they came."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self._calls: collections.deque[tuple[Callable[..., None], tuple[Any, ...]]] = collections.deque()
+        self._lock = threading.Lock()
+        self._armed = False  # a drain is scheduled on the loop and has not begun
+
+    def put(self, fn: Callable[..., None], *args: Any) -> None:
+        """Run `fn(*args)` on the loop, after the calls put before it (dropped once the loop closed)."""
+        with self._lock:
+            self._calls.append((fn, args))
+            if self._armed:
+                return
+            self._armed = True
+        with contextlib.suppress(RuntimeError):  # the loop closed while zenoh still delivers
+            self._loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        with self._lock:
+            calls, self._calls = self._calls, collections.deque()
+            self._armed = False
+        for fn, args in calls:
+            fn(*args)
+
+
+_INBOXES: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, _Inbox] = weakref.WeakKeyDictionary()
+
+
+def _inbox(loop: asyncio.AbstractEventLoop) -> _Inbox:
+    """The loop's one inbox, shared by every Bus on it (called on the loop)."""
+    inbox = _INBOXES.get(loop)
+    if inbox is None:
+        inbox = _INBOXES[loop] = _Inbox(loop)
+    return inbox
 
 
 class Bus:
@@ -188,17 +243,14 @@ class Bus:
             log.error("bus handler failed", task=task.get_name(), error=str(exc), exc_info=exc)
 
     def _bridge(self, handler: Handler, on_thread: bool = False) -> Callable[[zenoh.Sample], None]:
-        loop = self._loop
+        inbox = _inbox(self._loop)
 
         def on_sample(sample: zenoh.Sample) -> None:
             copy = Sample(str(sample.key_expr), sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT)
             if on_thread:
                 self._run_handler(handler, copy)
                 return
-            try:
-                loop.call_soon_threadsafe(self._run_handler, handler, copy)
-            except RuntimeError:  # loop closed while zenoh still delivers
-                pass
+            inbox.put(self._run_handler, handler, copy)
 
         return on_sample
 
@@ -206,7 +258,7 @@ class Bus:
         """Call `handler(Sample)` on the event loop for every sample matching `key_expr`; with
         `on_thread`, on zenoh's thread at once (a quick, thread-safe handler that must not depend
         on the loop: the trace recorder, which keeps writing while the loop is busy or stopping)."""
-        self._entities.append(self._session.declare_subscriber(key_expr, self._bridge(handler, on_thread)))
+        self._entities.append(self._session.declare_subscriber(key_expr, _direct(self._bridge(handler, on_thread))))
 
     # ------------------------------------------------------------------ queries
     def serve(self, key: str, handler: QueryHandler) -> None:
@@ -237,7 +289,7 @@ class Bus:
             except RuntimeError:
                 query.drop()
 
-        self._entities.append(self._session.declare_queryable(key, on_query, complete=True))
+        self._entities.append(self._session.declare_queryable(key, _direct(on_query), complete=True))
 
     async def get(self, selector: str, payload: BaseModel | bytes | None = None, timeout: float = 5.0) -> list[bytes]:
         """Query `selector`; return the payloads of the OK replies received within `timeout`."""
@@ -269,7 +321,7 @@ class Bus:
             with contextlib.suppress(RuntimeError):  # the loop closed first: nobody waits any more
                 loop.call_soon_threadsafe(settle)
 
-        ask(zenoh.handlers.Callback(lambda reply: keep(reply, out), finish))
+        ask(zenoh.handlers.Callback(lambda reply: keep(reply, out), finish, indirect=False))
         await finished
         return list(out)
 
@@ -292,7 +344,9 @@ class Bus:
 
         Tokens alive at the time of the call are reported too (history)."""
         self._entities.append(
-            self._session.liveliness().declare_subscriber(key_expr, self._bridge(handler, on_thread), history=True)
+            self._session.liveliness().declare_subscriber(
+                key_expr, _direct(self._bridge(handler, on_thread)), history=True
+            )
         )
 
     async def alive(self, key_expr: str, timeout: float = 2.0) -> list[str]:

@@ -249,9 +249,9 @@ class Recorder:
         return False
 
     def _too_early(self, sample: Sample, msg: Any, t: float | None) -> bool:
-        """The world's ack or result of a request not seen yet, held until it comes: each
-        subscriber has its own thread, and the world may handle the request and answer before
-        the recorder's thread is given it. True when the sample is held."""
+        """The world's ack or result of a request not seen yet, held until it comes: the world's
+        answer reaches the recorder inside its put, and the world may handle the request and
+        answer before the agent's link delivers the request to the recorder. True when the sample is held."""
         if not (sample.key.endswith("/action/ack") or sample.key.endswith("/action/result")) or not isinstance(
             msg, dict
         ):
