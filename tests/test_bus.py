@@ -169,7 +169,7 @@ async def test_subscribers_queryables_and_queries_start_no_python_thread_each() 
             router.serve(f"q/{n}", answer)
         await subscribed(client, "n/19")
         await served(client, "q/19")
-        assert threads() == before
+        assert threads() == before, [t.name for t in threading.enumerate()]
         for n in range(20):
             client.put(f"n/{n}", b"x")
             assert [decode(r, ActionAck) for r in await client.get(f"q/{n}")] == [

@@ -19,6 +19,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import zenoh
+
 from mhrc.core.bus import Bus
 from mhrc.testing.world import robots_attached
 
@@ -69,7 +71,9 @@ async def _matched(entity: Any, what: str, timeout: float) -> None:
         if status.matching:
             loop.call_soon_threadsafe(ready.set)
 
-    listener = entity.declare_matching_listener(on_status)
+    # on zenoh's own thread (indirect=False), as the bus's callbacks run: a Python thread of its own
+    # would outlive the listener a moment (test_bus counts the threads the bus starts)
+    listener = entity.declare_matching_listener(zenoh.handlers.Callback(on_status, indirect=False))
     try:
         if not entity.matching_status.matching:
             try:
