@@ -173,7 +173,8 @@ def _attaches(robot: str) -> tuple[list[str], asyncio.Event, Callable[[Bus, str]
 
 async def test_impersonators_never_act_and_alice_finishes(tmp_path: Path) -> None:
     cfg = (
-        EpisodeConfig.build(seed=0, n_objects=3, trace=tmp_path / "trace.jsonl")
+        # 0.1 s a tick: alice plays for a couple of seconds, while mallory tries
+        EpisodeConfig.build(seed=0, n_objects=3, tick_delay=0.1, trace=tmp_path / "trace.jsonl")
         .resolved()
         .with_credentials(tmp_path / "cred")
     )

@@ -15,7 +15,9 @@ import asyncio
 import collections
 import contextlib
 import json
+import socket
 import threading
+import time
 import weakref
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
@@ -135,6 +137,31 @@ def _inbox(loop: asyncio.AbstractEventLoop) -> _Inbox:
     return inbox
 
 
+LISTEN_WAIT = 10.0  # s: how long a router's listeners may take to accept connections once its session is open
+
+
+def _until_listening(listen: Sequence[str], timeout: float) -> None:
+    """Return once every tcp/tls endpoint of `listen` with a port accepts a TCP connection. With
+    `scouting/delay` 0 (make_config) zenoh's open returns without waiting, and its listeners are
+    started on its own runtime: a client that came at once was refused (a world "ready" that no
+    agent could reach). BusError when one does not listen within `timeout` seconds."""
+    deadline = time.monotonic() + timeout
+    for ep in listen:
+        proto, _, addr = ep.partition("/")
+        host, _, port = addr.split("#", 1)[0].rpartition(":")
+        if proto not in ("tcp", "tls") or not port.isdigit() or int(port) == 0:
+            continue
+        host = host.strip("[]")
+        while True:
+            try:
+                with socket.create_connection((host, int(port)), timeout=0.2):
+                    break
+            except OSError as exc:
+                if time.monotonic() > deadline:
+                    raise BusError(f"zenoh opened but does not listen on {ep} after {timeout:.0f} s ({exc})") from None
+                time.sleep(0.01)
+
+
 class Bus:
     """One Zenoh session, with asyncio-friendly publish, subscribe, query and liveliness."""
 
@@ -179,6 +206,12 @@ class Bus:
             if listen:
                 raise listen_error(listen, str(exc)) from None
             raise BusError(f"could not open a zenoh session ({where}): {exc}") from None
+        if mode == "router":
+            try:
+                await asyncio.to_thread(_until_listening, listen, LISTEN_WAIT)
+            except BusError:
+                await asyncio.to_thread(session.close)
+                raise
         bus = cls(session, asyncio.get_running_loop())
         bus.connected_to = tuple(connect)
         return bus

@@ -203,7 +203,12 @@ async def _run_processes(
         )  # a port taken is one line now, not a world process failing behind a client that waits
         world = subprocess.Popen(world_command(cfg), env=_child_env(), stdout=stdout)
         procs.append(world)
-        await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)
+        try:
+            await asyncio.to_thread(wait_for_port, cfg.host, cfg.port, 60.0, world)
+        except RuntimeError:  # the world ended before it listened (a trace it cannot write): it said why itself
+            if world.returncode is None:
+                raise
+            raise ProcessFailed("the world process", world.returncode, "started") from None
         bus = await open_client(cfg.endpoint, 10.0, security=cfg.participant("observer"))
         done_fut: asyncio.Future[EpisodeDone] = asyncio.get_running_loop().create_future()
         started = asyncio.Event()
