@@ -32,7 +32,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from report import emit, int_range, percentile
+from report import commit_of, emit, int_range, percentile
 
 import mhrc.env as mhrc_env
 from mhrc.core import logs
@@ -169,7 +169,7 @@ def main() -> None:
         b_env = base["runs"][0]
         report["baseline"] = {
             "tree": str(args.baseline),
-            "commit": _commit(args.baseline),
+            "commit": commit_of(args.baseline),
             "env_steps_per_s": b_env["steps_per_s"],
             "env_resets_per_s": b_env["resets_per_s"],
             "bus_steps_per_s": base["runs"][1]["steps_per_s"],
@@ -178,11 +178,6 @@ def main() -> None:
         report["env_steps_per_s_over_baseline"] = round(env_s["steps_per_s"] / b_env["steps_per_s"], 3)
         report["bus_steps_per_s_over_baseline"] = round(bus_s["steps_per_s"] / base["runs"][1]["steps_per_s"], 3)
     emit(report, args.out)
-
-
-def _commit(root: Path) -> str:
-    got = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
-    return got.stdout.strip()
 
 
 def _baseline(args: argparse.Namespace) -> dict[str, Any]:

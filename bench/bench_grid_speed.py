@@ -30,15 +30,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from report import emit
+from report import check_tree, commit_of, emit
 
 SAME = ("success", "temporal_steps", "action_steps", "placed", "messages")
-
-
-def _commit(root: Path) -> str:
-    out = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
-    dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain"], capture_output=True, text=True).stdout
-    return out.stdout.strip() + (" (dirty)" if dirty.strip() else "")
 
 
 def _children_cpu() -> float:
@@ -67,19 +61,6 @@ def run_eval(root: Path, trials: int, workers: int, tmp: Path, extra: list[str])
     }
 
 
-def _check_tree(root: Path) -> None:
-    got = subprocess.run(
-        [sys.executable, "-c", "import mhrc.eval as e; print(e.__file__)"],
-        env={**os.environ, "PYTHONPATH": str(root)},
-        cwd=root,
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout.strip()
-    if not Path(got).resolve().is_relative_to(root.resolve()):
-        raise SystemExit(f"mhrc imports from {got}, not from {root}")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--baseline", type=Path, required=True, help="the tree to compare with (a git worktree)")
@@ -96,7 +77,7 @@ def main() -> None:
     extra = [*(["--tasks", args.tasks] if args.tasks else []), *(["--scenes", args.scenes] if args.scenes else [])]
     this_root = Path(__file__).resolve().parent.parent
     for root in (args.baseline, this_root):
-        _check_tree(root)
+        check_tree(root, "mhrc.eval")
     runs: dict[str, list[dict[str, Any]]] = {"baseline": [], "this": [], "this_1_worker": []}
     plan = [
         ("baseline", args.baseline, args.workers),
@@ -135,8 +116,8 @@ def main() -> None:
         "machine": f"{platform.machine()}, {platform.python_implementation()} {platform.python_version()}, "
         f"{os.cpu_count()} cores",
         "baseline": str(args.baseline),
-        "baseline_commit": _commit(args.baseline),
-        "this_commit": _commit(this_root),
+        "baseline_commit": commit_of(args.baseline),
+        "this_commit": commit_of(this_root),
         "grid": f"mhrc eval --trials {args.trials} {' '.join(extra)} (by default 3 tasks x 3 scenes x objects 3-6 "
         f"x {args.trials} trial(s)), heuristic, the defaults otherwise",
         "episodes": episodes,

@@ -138,21 +138,13 @@ class ModelProcess:
 
 def one(args: argparse.Namespace) -> dict[str, Any]:
     """One run of the grid in this process (the child of `main`)."""
+    from bench_llm_grid import lockstep_grid
+
     import mhrc
-    from mhrc.eval.engine import EvalSpec, evaluate
-    from mhrc.world.scene import LAYOUTS
-    from mhrc.world.tasks import TASKS
+    from mhrc.eval.engine import evaluate
 
     model = ModelProcess(args.latency)
-    spec = EvalSpec(
-        tasks=tuple(TASKS),
-        scenes=tuple(LAYOUTS),
-        objects=(3, 4, 5, 6),
-        horizon=args.horizon,
-        llm="m",
-        base_url=model.url,
-        schedule="lockstep",
-    )
+    spec = lockstep_grid(args.horizon, model.url)
     try:
         with tempfile.TemporaryDirectory() as tmp, ThreadClock(args.every) as clock:
             cpu0, t0 = os.times(), time.perf_counter()

@@ -98,6 +98,20 @@ class FixedLatencyModel(ThreadingHTTPServer):
         self.server_close()
 
 
+def lockstep_grid(horizon: int, base_url: str) -> EvalSpec:
+    """Every task and scene with 3-6 objects, seed 0, driven by the model at `base_url`, lockstep: as the
+    recorded figures ran (mhrc eval now defaults to sequential); bench_llm_client.py runs it too."""
+    return EvalSpec(
+        tasks=tuple(TASKS),
+        scenes=tuple(LAYOUTS),
+        objects=(3, 4, 5, 6),
+        horizon=horizon,
+        llm="m",
+        base_url=base_url,
+        schedule="lockstep",
+    )
+
+
 def run(spec: EvalSpec, model: FixedLatencyModel, concurrency: int) -> dict[str, Any]:
     """One evaluation of the grid on one local worker running `concurrency` episodes at once."""
     model.reset()
@@ -145,15 +159,7 @@ def main() -> None:
     args = ap.parse_args()
     levels = [int(x) for x in args.concurrency.split(",")]
     model = FixedLatencyModel(args.latency)
-    spec = EvalSpec(
-        tasks=tuple(TASKS),
-        scenes=tuple(LAYOUTS),
-        objects=(3, 4, 5, 6),
-        horizon=args.horizon,
-        llm="m",
-        base_url=model.url,
-        schedule="lockstep",
-    )  # as its recorded figures ran (mhrc eval now defaults to sequential)
+    spec = lockstep_grid(args.horizon, model.url)
     try:
         runs = {f"concurrency_{c}": run(spec, model, c) for c in levels}
     finally:

@@ -32,7 +32,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-from report import emit
+from report import check_tree, commit_of, emit
 
 SENTINEL = "@@bench_skill_speed@@"
 
@@ -152,16 +152,7 @@ class Tree:
 
     def check(self, root: Path) -> None:
         """The worker must import this tree's mhrc, not the installed one."""
-        got = subprocess.run(
-            [sys.executable, "-c", "import mhrc.world.sim as s; print(s.__file__)"],
-            env={**os.environ, "PYTHONPATH": str(root)},
-            cwd=root,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-        if not Path(got).resolve().is_relative_to(root.resolve()):
-            raise SystemExit(f"{self.name}: mhrc imports from {got}, not from {root}")
+        check_tree(root, "mhrc.world.sim", self.name)
 
     def run(self, key: str) -> dict[str, Any]:
         assert self.proc.stdin is not None and self.proc.stdout is not None
@@ -283,8 +274,8 @@ def main() -> None:
         "machine": f"{platform.machine()}, {platform.python_implementation()} {platform.python_version()}, "
         f"{os.cpu_count()} cores",
         "baseline": str(args.baseline),
-        "baseline_commit": _commit(args.baseline),
-        "this_commit": _commit(this_root),
+        "baseline_commit": commit_of(args.baseline),
+        "this_commit": commit_of(this_root),
         "grid": {"tasks": args.tasks, "scenes": args.scenes, "objects": args.objects, "repeats": args.repeats},
         "rounds": args.rounds,
         "episodes_identical": f"{sum(e['identical'] for e in episodes)}/{len(episodes)}",
@@ -295,20 +286,6 @@ def main() -> None:
         "and the same action results in the trace (outcome, observation, simulated times)",
     }
     emit(report, args.out)
-
-
-def _commit(root: Path) -> str:
-    try:
-        return subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip() + (" (dirty)" if _dirty(root) else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
-def _dirty(root: Path) -> bool:
-    out = subprocess.run(["git", "-C", str(root), "status", "--porcelain"], capture_output=True, text=True).stdout
-    return bool(out.strip())
 
 
 if __name__ == "__main__":

@@ -68,6 +68,22 @@ def _heavy(tree: Path, args: list[str]) -> list[str]:
     return list(json.loads(line[len("HEAVY ") :]))
 
 
+def _timed(base: Path, line: list[str], command: str, repeats: int) -> dict[str, Any]:
+    """`line`'s best wall time over `repeats` in the baseline and in this tree, the two in turn."""
+    best = {"baseline": float("inf"), "this": float("inf")}
+    for _ in range(repeats):
+        best["baseline"] = min(best["baseline"], _once(base, line))
+        best["this"] = min(best["this"], _once(HERE, line))
+    row = {
+        "command": command,
+        "baseline_s": round(best["baseline"], 3),
+        "this_s": round(best["this"], 3),
+        "speedup": round(best["baseline"] / best["this"], 2),
+    }
+    print(f"{command}: {row['baseline_s']} s -> {row['this_s']} s", file=sys.stderr)
+    return row
+
+
 def _floor(repeats: int) -> float:
     best = float("inf")
     for _ in range(repeats):
@@ -91,36 +107,13 @@ def main() -> None:
     ours = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE, capture_output=True, text=True).stdout
     rows: list[dict[str, Any]] = []
     for line in LINES:
-        best = {"baseline": float("inf"), "this": float("inf")}
-        for _ in range(args.repeats):
-            best["baseline"] = min(best["baseline"], _once(base, line))
-            best["this"] = min(best["this"], _once(HERE, line))
         rows.append(
-            {
-                "command": "mhrc " + " ".join(line),
-                "baseline_s": round(best["baseline"], 3),
-                "this_s": round(best["this"], 3),
-                "speedup": round(best["baseline"] / best["this"], 2),
-                "baseline_imports": _heavy(base, line),
-                "this_imports": _heavy(HERE, line),
-            }
+            _timed(base, line, "mhrc " + " ".join(line), args.repeats)
+            | {"baseline_imports": _heavy(base, line), "this_imports": _heavy(HERE, line)}
         )
-        print(f"{rows[-1]['command']}: {rows[-1]['baseline_s']} s -> {rows[-1]['this_s']} s", file=sys.stderr)
     with tempfile.TemporaryDirectory() as tmp:
         line = [*UP, "--trace", str(Path(tmp) / "trace.jsonl")]
-        best = {"baseline": float("inf"), "this": float("inf")}
-        for _ in range(args.up_repeats):
-            best["baseline"] = min(best["baseline"], _once(base, line))
-            best["this"] = min(best["this"], _once(HERE, line))
-        rows.append(
-            {
-                "command": "mhrc " + " ".join(UP) + " --trace TMP",
-                "baseline_s": round(best["baseline"], 3),
-                "this_s": round(best["this"], 3),
-                "speedup": round(best["baseline"] / best["this"], 2),
-            }
-        )
-        print(f"{rows[-1]['command']}: {rows[-1]['baseline_s']} s -> {rows[-1]['this_s']} s", file=sys.stderr)
+        rows.append(_timed(base, line, "mhrc " + " ".join(UP) + " --trace TMP", args.up_repeats))
     emit(
         {
             "bench": "startup",
