@@ -26,7 +26,7 @@ from typing import Any
 import zenoh
 from pydantic import BaseModel
 
-from mhrc.core.endpoints import BusError, BusRefused, listen_error
+from mhrc.core.endpoints import BusError, BusRefused, listen_error, split_endpoint
 from mhrc.core.logs import get_logger
 from mhrc.core.polling import poll
 from mhrc.core.protocol import encode
@@ -147,14 +147,12 @@ def _until_listening(listen: Sequence[str], timeout: float) -> None:
     agent could reach). BusError when one does not listen within `timeout` seconds."""
     deadline = time.monotonic() + timeout
     for ep in listen:
-        proto, _, addr = ep.partition("/")
-        host, _, port = addr.split("#", 1)[0].rpartition(":")
-        if proto not in ("tcp", "tls") or not port.isdigit() or int(port) == 0:
+        proto, host, port = split_endpoint(ep)
+        if proto not in ("tcp", "tls") or not port:
             continue
-        host = host.strip("[]")
         while True:
             try:
-                with socket.create_connection((host, int(port)), timeout=0.2):
+                with socket.create_connection((host, port), timeout=0.2):
                     break
             except OSError as exc:
                 if time.monotonic() > deadline:
