@@ -168,9 +168,22 @@ def test_each_episode_has_the_work_the_paper_describes() -> None:
             assert len(elsewhere) == 3
 
 
+def _visual_meshes(sim: Sim) -> int:
+    """The robots' links drawn with a visual mesh (without them pybullet draws the collision mesh)."""
+    return sum(
+        b"/meshes/visual/" in shape[4]
+        for bot in sim.bots.values()
+        for body in (bot.body, bot.arm)
+        if body >= 0
+        for shape in p.getVisualShapeData(body, physicsClientId=sim.cid)
+    )
+
+
 def test_same_seed_same_actions_same_outcomes() -> None:
-    """Two worlds side by side (gymnasium style): every outcome and the final state agree."""
-    with Sim(seed=2, n_objects=4) as a, Sim(seed=2, n_objects=4) as b:
+    """Two worlds side by side (gymnasium style): every outcome and the final state agree, the
+    second one built without its robots' visual meshes (the world service's, which no camera sees)."""
+    with Sim(seed=2, n_objects=4) as a, Sim(seed=2, n_objects=4, visuals=False) as b:
+        assert _visual_meshes(a) > 0 and _visual_meshes(b) == 0
         bob = a.observe("bob", 0)
         far = next(
             t for t in a.targets if (o := _obj(bob, t)) is not None and o.on == "table_0" and not _bob_can_reach(bob, o)

@@ -208,27 +208,31 @@ def spawn(
     arm_base: tuple[float, float, float] | None = None,
     arm_yaw: float = 0.0,
     altitude: float = 0.0,
+    visuals: bool = True,
 ) -> RobotBody:
     """Load a robot's bodies: a chassis with an arm, a fixed arm, a bare mobile base or a drone
-    (hovering at `altitude`)."""
+    (hovering at `altitude`). `visuals` False: pybullet_data's robots without their visual meshes
+    (most of a scene's build time: the Panda's alone take 65 ms a load), for a world no camera sees;
+    their collision shapes, inertia and joints are the same."""
     r = RobotBody(name, kind, cid, fixed_arm=arm_base, fixed_yaw=arm_yaw, altitude=altitude)
     data = pybullet_data.getDataPath()
+    flags = 0 if visuals else p.URDF_IGNORE_VISUAL_SHAPES
     if kind.has_arm:
         if kind.mobile:
             urdf = assets.link_urdf(f"{name}_chassis", assets.chassis_boxes(*CHASSIS, CHASSIS_COLOR))
             r.body = p.loadURDF(assets_dir.write(f"{name}_chassis", urdf), useFixedBase=True, physicsClientId=cid)
-            r.arm = p.loadURDF(f"{data}/{PANDA}", useFixedBase=True, physicsClientId=cid)
+            r.arm = p.loadURDF(f"{data}/{PANDA}", useFixedBase=True, flags=flags, physicsClientId=cid)
         else:
             assert arm_base is not None, f"{name}: a fixed arm needs its base position"
             orn = p.getQuaternionFromEuler((0, 0, arm_yaw))
-            r.arm = p.loadURDF(f"{data}/{PANDA}", arm_base, orn, useFixedBase=True, physicsClientId=cid)
+            r.arm = p.loadURDF(f"{data}/{PANDA}", arm_base, orn, useFixedBase=True, flags=flags, physicsClientId=cid)
         for f in FINGERS:  # closed fingers around the suction cup
             p.resetJointState(r.arm, f, 0.0, physicsClientId=cid)
     elif kind.flies:
         urdf = assets.link_urdf(f"{name}_drone", assets.drone_boxes(DRONE_COLOR))
         r.body = p.loadURDF(assets_dir.write(f"{name}_drone", urdf), useFixedBase=True, physicsClientId=cid)
     else:
-        r.body = p.loadURDF(f"{data}/r2d2.urdf", globalScaling=0.8, physicsClientId=cid)
+        r.body = p.loadURDF(f"{data}/r2d2.urdf", globalScaling=0.8, flags=flags, physicsClientId=cid)
     if kind.mobile:
         assert pose is not None, f"{name}: a mobile robot needs a start pose"
         r.set_base(pose)

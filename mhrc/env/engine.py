@@ -74,7 +74,7 @@ class EnvCore:
             raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
         self.close()
         cfg = self.cfg
-        self.sim = cfg.sim(None if seed is None else int(seed))
+        self.sim = cfg.sim(None if seed is None else int(seed), visuals=self.render_mode is not None)
         self.world = DirectWorld(self.sim, schedule=self.schedule, horizon=cfg.horizon)
         self.seats = {r: Seat.make(r, cfg, expert=self.expert) for r in self.robots}
         self.news = {r: {} for r in self.robots}

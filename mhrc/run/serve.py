@@ -36,6 +36,12 @@ class Simulator(SimLike, Protocol):
 Simulators = Callable[[EpisodeConfig], Simulator]  # a configuration -> its simulator, built
 
 
+def _unseen(cfg: EpisodeConfig) -> Simulator:
+    """The world's simulator: no camera renders it (a picture or a video is drawn from the trace, in
+    a simulator of its own), so its robots are loaded without their visual meshes."""
+    return cfg.sim(visuals=False)
+
+
 async def serve_world(
     cfg: EpisodeConfig,
     *,
@@ -49,9 +55,9 @@ async def serve_world(
     client of a router that already exists, logged in with `login` if given: an evaluation
     worker's), record, and run the episode. `on_service` gets the WorldService once it exists
     (the in-process runner stops it when an agent fails for good). `simulator` builds the simulator
-    from `cfg` (`EpisodeConfig.sim` by default): a test injects one that wraps the real one, as httpx's
+    from `cfg` (by default `EpisodeConfig.sim`, without visuals): a test injects one that wraps the real one, as httpx's
     MockTransport stands in for the network, instead of patching the world's methods."""
-    sim: Simulator = await asyncio.to_thread(simulator or EpisodeConfig.sim, cfg)
+    sim: Simulator = await asyncio.to_thread(simulator or _unseen, cfg)
     bus = None
     recorder = None
     world: WorldService | None = None
