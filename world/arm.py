@@ -34,6 +34,7 @@ EE_LINK = 11  # panda_grasptarget: the suction cup's tip
 LOWER = np.array([-2.9671, -1.8326, -2.9671, -3.1416, -2.9671, -0.0873, -2.9671])  # panda.urdf's limits
 UPPER = np.array([2.9671, 1.8326, 2.9671, 0.0, 2.9671, 3.8223, 2.9671])
 _LOW, _HIGH = LOWER - 1e-6, UPPER + 1e-6  # what `valid` accepts
+_LIMITS = tuple(zip(_LOW.tolist(), _HIGH.tolist(), strict=True))  # the same, for a check in plain Python
 _STILL = [[0.0]] * len(ARM_JOINTS)  # joint velocities set with the positions
 HOME = np.array([0.0, -1.2, 0.0, -2.9, 0.0, 1.9, 0.785])  # tucked carry posture: hand over the base
 DOWN = (math.pi, 0.0)  # roll, pitch of a top-down tool (z axis pointing down)
@@ -168,12 +169,16 @@ class ArmPlanner:
         st = p.getLinkState(self.arm, EE_LINK, computeForwardKinematics=True, physicsClientId=self.cid)
         return np.array(st[4]), np.array(st[5])
 
-    def valid(self, q: np.ndarray) -> bool:
-        """Within limits and touching nothing but the mount under the arm's base link."""
+    def valid(self, q: np.ndarray | list[float]) -> bool:
+        """Within limits and touching nothing but the mount under the arm's base link. `q`: an
+        array, or the plain list OMPL's states give (BIT* calls this for every state it checks,
+        so the limits are compared in plain Python, without building an array)."""
         self.checks += 1
-        if (q < _LOW).any() or (q > _HIGH).any():
-            return False
-        self._set(q)
+        values = q.tolist() if isinstance(q, np.ndarray) else q
+        for (low, high), x in zip(_LIMITS, values, strict=True):
+            if not low <= x <= high:
+                return False
+        set_joints(self.cid, self.arm, values)
         p.performCollisionDetection(physicsClientId=self.cid)
         for c in p.getContactPoints(bodyA=self.arm, physicsClientId=self.cid):
             if c[2] != self.arm and c[3] >= 0 and c[8] < 0:  # c[3]: the arm's link; its base (-1) sits on the mount
@@ -254,7 +259,7 @@ class ArmPlanner:
             bounds.setHigh(i, float(UPPER[i]))
         space.setBounds(bounds)
         ss = og.SimpleSetup(space)
-        ss.setStateValidityChecker(lambda s: self.valid(np.array(s[0:7])))
+        ss.setStateValidityChecker(lambda s: self.valid(s[0:7]))
         si = ss.getSpaceInformation()
         si.setStateValidityCheckingResolution(0.005)
         st, gl = si.allocState(), si.allocState()
@@ -278,11 +283,12 @@ class ArmPlanner:
         return out
 
 
-def set_joints(cid: int, body: int, q: np.ndarray) -> None:
+def set_joints(cid: int, body: int, q: np.ndarray | list[float]) -> None:
     """A Panda's seven arm joints at `q`, still: one call, the state that a resetJointState per joint
     leaves (the same links and contacts; the planning client lists contacts in another order now and
     then, which `valid` ignores; the live world's settling came out bit for bit the same)."""
-    p.resetJointStatesMultiDof(body, ARM_JOINTS, np.reshape(q[:7], (7, 1)).tolist(), _STILL, physicsClientId=cid)
+    values = q.tolist() if isinstance(q, np.ndarray) else q
+    p.resetJointStatesMultiDof(body, ARM_JOINTS, [[x] for x in values[:7]], _STILL, physicsClientId=cid)
 
 
 def straight(a: np.ndarray, b: np.ndarray, n: int) -> list[np.ndarray]:
