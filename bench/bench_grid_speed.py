@@ -82,7 +82,7 @@ def main() -> None:
     plan = [
         ("baseline", args.baseline, args.workers),
         ("this", this_root, args.workers),
-        ("this_1_worker", this_root, 1),
+        *([("this_1_worker", this_root, 1)] if args.one_worker else []),
     ]
     with tempfile.TemporaryDirectory(prefix="bench-grid-speed-") as tmp:
         for rnd in range(args.rounds):
