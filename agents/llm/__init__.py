@@ -3,7 +3,8 @@
 - `mhrc.agents.llm.completion`: what a model answers (`Completion`), how a call fails (`LLMError`
   and its kinds), the `LLMClient` protocol every policy needs, reasoning split off a reply;
 - `mhrc.agents.llm.openai_client`: `OpenAIChatClient`, an OpenAI-compatible server over httpx:
-  streamed, timed to the first token and between chunks, retried, bounded;
+  streamed, timed to the first token and between chunks, retried, bounded (its names are
+  imported from here on first use, so that a run without a model loads no HTTP client);
 - `mhrc.agents.llm.reply`: a reply's body (whole or streamed) read into a `Completion`;
 - `mhrc.agents.llm.model_spec`: `--llm` specs (`openai:gpt-4o`, `alice=SPEC,bob=SPEC`, `SPEC@URL`)
   checked and turned into clients, and how many episodes keep a server busy;
@@ -14,9 +15,13 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from .completion import (
+    DEFAULT_IDLE_TIMEOUT,
     DEFAULT_MAX_TOKENS,
     DEFAULT_TEMPERATURE,
+    DEFAULT_TIMEOUT,
     MAX_REPLY_CHARS,
     THINK,
     Completion,
@@ -44,15 +49,23 @@ from .model_spec import (
     server_slots,
     split_url,
 )
-from .openai_client import (
-    DEFAULT_IDLE_TIMEOUT,
-    DEFAULT_TIMEOUT,
-    MAX_STREAM_CHARS,
-    MAX_STREAM_CHUNKS,
-    OpenAIChatClient,
-    retry_after,
-)
 from .scripted_client import Reply, ScriptedClient
+
+if TYPE_CHECKING:
+    from .openai_client import MAX_STREAM_CHARS, MAX_STREAM_CHUNKS, OpenAIChatClient, retry_after
+
+_OPENAI_CLIENT = ("MAX_STREAM_CHARS", "MAX_STREAM_CHUNKS", "OpenAIChatClient", "retry_after")
+
+
+def __getattr__(name: str) -> Any:
+    """The OpenAI client's names, imported on first use (httpx with them): a heuristic run, which
+    imports this package for its errors and spec checks, never loads an HTTP client."""
+    if name in _OPENAI_CLIENT:
+        from . import openai_client
+
+        return getattr(openai_client, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "DEFAULT_IDLE_TIMEOUT",

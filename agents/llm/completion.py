@@ -18,6 +18,8 @@ Messages = list[dict[str, str]]
 DEFAULT_TEMPERATURE = 0.5  # the paper's
 DEFAULT_MAX_TOKENS = 1024  # the paper's reply format (analysis, reasoning, one command) with room to think
 MAX_REPLY_CHARS = 16_000  # what a reply may feed into the trace and the parser (about 4x DEFAULT_MAX_TOKENS tokens)
+DEFAULT_TIMEOUT = 120.0  # s to the first token (mhrc.run.config.SERVER_TIMEOUT says why)
+DEFAULT_IDLE_TIMEOUT = 30.0  # s between two chunks of a streamed reply: a decoding server sends one every few tokens
 
 
 class LLMError(RuntimeError):

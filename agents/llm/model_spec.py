@@ -5,6 +5,9 @@ A model spec names the provider and the model: `openai:gpt-4o`, `ollama:llama3.1
 to that server, and a spec without a known provider is the model name itself (`qwen2.5:7b`). The API
 key comes from the provider's variable (OPENAI_API_KEY for openai), from `api_key_env` if
 given, else from MHRC_API_KEY.
+
+httpx, the local server and the OpenAI client are imported where a spec is turned into a client or a
+server is asked: checking the names of a heuristic run's (no model) imports none of them.
 """
 
 from __future__ import annotations
@@ -12,12 +15,10 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Sequence
-from typing import Unpack
+from typing import TYPE_CHECKING, Unpack
 
-import httpx
-
-from .local import GGUFError, check_gguf
-from .openai_client import ClientOptions, OpenAIChatClient
+if TYPE_CHECKING:
+    from .openai_client import ClientOptions, OpenAIChatClient
 
 # provider -> (default base URL, environment variable holding the API key, or None)
 # `replay:TRACE` is not a provider: mhrc.agents.replay builds one client per robot from a trace.
@@ -88,6 +89,8 @@ def check_spec(spec: str, base_url: str | None = None, api_key_env: str | None =
             raise LLMSpecError(f"replay trace {model!r} (from LLM spec {spec!r}) does not exist")
         return model, "", None
     if provider == "gguf":
+        from .local import GGUFError, check_gguf
+
         try:
             return str(check_gguf(model)), "", None
         except GGUFError as exc:
@@ -119,6 +122,8 @@ def make_client(
     `options` go to OpenAIChatClient: timeout (to the first token), idle_timeout, stream, retries,
     backoff, max_concurrency, max_tokens, extra_body.
     """
+    from .openai_client import OpenAIChatClient
+
     model, url, api_key = check_spec(spec, base_url, api_key_env)
     if spec.startswith("replay:"):
         raise LLMSpecError(f"{spec!r} is a recorded trace: use mhrc.agents.replay.replay_clients for it")
@@ -139,6 +144,8 @@ PROVIDER_EPISODES: dict[str, int] = {"openai": 12, "vllm": 12, "ollama": 1, "lms
 async def server_slots(base_url: str, timeout: float = 3.0) -> int | None:
     """How many requests the server decodes at once, where it says (llama.cpp's `/props`
     `total_slots`); None when it does not answer that."""
+    import httpx
+
     root = base_url.rstrip("/").removesuffix("/v1")
     try:
         async with httpx.AsyncClient(timeout=timeout) as http:

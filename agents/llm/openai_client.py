@@ -34,8 +34,10 @@ from mhrc.core.logs import get_logger
 
 from ..progress import PROGRESS
 from .completion import (
+    DEFAULT_IDLE_TIMEOUT,
     DEFAULT_MAX_TOKENS,
     DEFAULT_TEMPERATURE,
+    DEFAULT_TIMEOUT,
     Completion,
     LLMError,
     LLMFatalError,
@@ -47,8 +49,6 @@ from .reply import StreamedReply, Unreadable, whole_completion
 
 log = get_logger("mhrc.llm")
 
-DEFAULT_TIMEOUT = 120.0  # s to the first token (mhrc.run.config.SERVER_TIMEOUT says why)
-DEFAULT_IDLE_TIMEOUT = 30.0  # s between two chunks of a streamed reply: a decoding server sends one every few tokens
 MAX_STREAM_CHARS = (
     1_000_000  # a streamed reply is read no further (a server that never stops): far beyond any max_tokens
 )

@@ -3,16 +3,21 @@
 `PROTOCOLS` is the registry, in listing order; `protocol(name)` looks one up (ProtocolRefused
 with `Refusal.UNKNOWN_PROTOCOL` for a name nobody registered), `register` adds one. The paper's
 protocol, `mhrc`, is the default: every robot its own agent, messages as actions.
+
+The centralized and leader protocols' modules (their planners, their LLM forms, the LLM policy's
+vocabulary) are imported when one of them builds its policies, not with the registry: the paper's
+protocol, which builds none, imports neither.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 
+from ..policy import Policy
 from . import leader_talk
 from .base import CoordinationProtocol, ProtocolRefused, Refusal, Seating
-from .centralized_llm import build_centralized
-from .leader_llm import build_leader
 
 __all__ = [
     "DEFAULT_PROTOCOL",
@@ -45,6 +50,20 @@ def protocol(name: str) -> CoordinationProtocol:
         raise ProtocolRefused(
             Refusal.UNKNOWN_PROTOCOL, f"unknown protocol {name!r}: the protocols are {', '.join(PROTOCOLS)}"
         ) from None
+
+
+def build_centralized(seating: Seating) -> Mapping[str, Policy]:
+    """The centralized protocol's policies (centralized_llm.build_centralized), its modules imported now."""
+    from .centralized_llm import build_centralized as build
+
+    return build(seating)
+
+
+def build_leader(seating: Seating) -> Mapping[str, Policy]:
+    """The leader protocol's policies (leader_llm.build_leader), its modules imported now."""
+    from .leader_llm import build_leader as build
+
+    return build(seating)
 
 
 register(

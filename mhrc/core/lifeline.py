@@ -11,8 +11,6 @@ its Zenoh sessions close and its trace is flushed in `finally` blocks.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import os
 import signal
 import sys
@@ -37,6 +35,9 @@ def die_with_parent() -> bool:
         return False
     parent = int(value)
     if sys.platform.startswith("linux"):
+        import ctypes  # here, not at the top: every command imports this module for PARENT_ENV
+        import ctypes.util
+
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
         libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
     if os.getppid() != parent:  # the parent died before we could ask

@@ -24,6 +24,9 @@ robot's request, thought and generating keys, query its own attach key, declare 
 and subscribe to what an agent needs. A denied message is dropped by the router.
 
 Why a client session was refused (`why_refused`) is told by mhrc.core.refusal.
+
+cryptography (mhrc.core.certs) is imported by the functions that write or read certificates, not
+with this module: the bus imports it, and a run on the open bus (`--insecure`) never needs it.
 """
 
 from __future__ import annotations
@@ -37,9 +40,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NotRequired, TypedDict
 
-from cryptography import x509
-
-from mhrc.core.certs import make_ca, make_server_cert, pem_cert, pem_key, write_private
 from mhrc.core.participants import OBSERVER, WORLD, reserved_why
 
 ENV = "MHRC_CREDENTIALS"
@@ -162,6 +162,8 @@ def _issue(
     files go to `directory`, or to a directory of its own with `split`."""
     directory.mkdir(parents=True, exist_ok=True)
     os.chmod(directory, 0o700)
+    from mhrc.core.certs import make_ca, make_server_cert, pem_cert, pem_key, write_private
+
     write_private(directory / ".gitignore", GITIGNORE)  # `git add -A` in a checkout must never take a private key
     ca, ca_key = make_ca(run, days=days)
     cert, key = make_server_cert(ca, ca_key, days=days, hosts=hosts)
@@ -246,6 +248,8 @@ def load(path: Path | str) -> Credentials:
 
 def _check_current(pem: Path, source: Path) -> None:
     """Raise unless the certificate in `pem` is valid now (not expired, not yet valid)."""
+    from cryptography import x509
+
     try:
         cert = x509.load_pem_x509_certificate(pem.read_bytes())
     except (OSError, ValueError) as exc:
@@ -265,6 +269,8 @@ def _check_current(pem: Path, source: Path) -> None:
 def expiry(creds: Credentials) -> datetime.datetime | None:
     """When the first of the run's certificates this participant holds (the CA's, and the world's
     own) stops being valid; None if none can be read."""
+    from cryptography import x509
+
     ends = []
     for pem in (creds.ca, creds.cert):
         if pem is not None:

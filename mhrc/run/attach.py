@@ -13,16 +13,13 @@ from mhrc.core.polling import poll
 from mhrc.core.protocol import EpisodeDone
 
 if TYPE_CHECKING:
+    from mhrc.agents.llm.openai_client import ClientOptions
+    from mhrc.agents.llm_policy import PolicyOptions
     from mhrc.core.security import Credentials
 
 from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
-from mhrc.agents.llm import make_client
-from mhrc.agents.llm.local import LocalModelServer
-from mhrc.agents.llm.openai_client import ClientOptions
-from mhrc.agents.llm_policy import LLMPolicy, PolicyOptions
 from mhrc.agents.policy import Policy
-from mhrc.agents.replay import ReplayClient
 from mhrc.core.bus import open_client
 from mhrc.core.security import check_for
 from mhrc.run.config import ConfigError
@@ -58,7 +55,11 @@ async def run_agent(
             pass
         elif llm is None:
             policy = heuristic_policy(robot)
-        else:
+        else:  # a model's policy: its modules (and httpx) are imported only for it
+            from mhrc.agents.llm import make_client
+            from mhrc.agents.llm_policy import LLMPolicy
+            from mhrc.agents.replay import ReplayClient
+
             if llm.startswith("replay:"):
                 policy = LLMPolicy(robot, ReplayClient(llm.removeprefix("replay:"), robot), **policy_options)  # type: ignore[assignment]
             else:
@@ -99,6 +100,8 @@ async def local_models(specs: dict[str, str | None], seed: int | None = None) ->
     if not paths:
         yield specs
         return
+
+    from mhrc.agents.llm.local import LocalModelServer
 
     async with contextlib.AsyncExitStack() as stack:
         served: dict[str, str] = {}

@@ -249,13 +249,13 @@ class EpisodeConfig(BaseModel):
         """Each replay: spec's trace read as the robot's agent will read it (its records, the robot's
         prompts, the templates they were rendered from): ConfigError before anything is written,
         instead of each agent failing on it once the run has started."""
-        from mhrc.agents.llm_policy import LLMPolicy
-        from mhrc.agents.replay import ReplayClient, ReplayMismatch
-
         for robot in robots:
             spec = self.robot_specs().get(robot)
             if spec is None or not spec.startswith("replay:"):
                 continue
+            from mhrc.agents.llm_policy import LLMPolicy  # here: a run without a replay needs neither
+            from mhrc.agents.replay import ReplayClient, ReplayMismatch
+
             try:
                 LLMPolicy(robot, ReplayClient(spec.removeprefix("replay:"), robot), **self.policy_options(spec))
             except (ValueError, OSError, ReplayMismatch) as exc:
