@@ -70,6 +70,8 @@ geometry in furniture.py.
 from __future__ import annotations
 
 import json
+import threading
+from collections.abc import Iterator, MutableMapping
 from pathlib import Path
 from typing import Any
 
@@ -131,17 +133,49 @@ def load_layout(path: str | Path) -> Layout:
     return parse_layout(data, str(path))
 
 
-def _builtin() -> dict[str, Layout]:
-    out = {}
-    for path in sorted(SCENES_DIR.glob("*.json")):
-        lay = load_layout(path)
-        if lay.name != path.stem:
-            raise LayoutError(f"{path}: name: {lay.name!r} must match the file name {path.stem!r}")
-        out[lay.name] = lay
-    return out
+class BuiltinLayouts(MutableMapping[str, Layout]):
+    """The shipped layouts by name (`scenes/<name>.json`, in the files' order), each file read and
+    validated the first time its layout is asked for, not when this module is imported: a run
+    reads its own scene only, and a name can be checked (`in`, listed) without reading any. A test
+    may put a layout of its own in (pytest's monkeypatch.setitem) as in a dict."""
+
+    def __init__(self, directory: Path) -> None:
+        self._files: dict[str, Path | None] = {path.stem: path for path in sorted(directory.glob("*.json"))}
+        self._loaded: dict[str, Layout] = {}
+        self._lock = threading.Lock()  # the world's simulator is built in a thread of its own
+
+    def __getitem__(self, name: str) -> Layout:
+        with self._lock:
+            if name not in self._loaded:
+                path = self._files[name]  # KeyError for a name no file has
+                assert path is not None  # a name set without a file is loaded already
+                lay = load_layout(path)
+                if lay.name != name:
+                    raise LayoutError(f"{path}: name: {lay.name!r} must match the file name {name!r}")
+                self._loaded[name] = lay
+            return self._loaded[name]
+
+    def __setitem__(self, name: str, layout: Layout) -> None:
+        with self._lock:
+            self._files.setdefault(name, None)
+            self._loaded[name] = layout
+
+    def __delitem__(self, name: str) -> None:
+        with self._lock:
+            del self._files[name]
+            self._loaded.pop(name, None)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(list(self._files))
+
+    def __len__(self) -> int:
+        return len(self._files)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._files
 
 
-LAYOUTS: dict[str, Layout] = _builtin()
+LAYOUTS = BuiltinLayouts(SCENES_DIR)
 
 
 def get_layout(name: str) -> Layout:
