@@ -77,6 +77,22 @@ def test_help_imports_no_command_it_does_not_show_nor_the_wire(args: list[str]) 
     assert got["heavy"] == [], f"{' '.join(args)} imported {got['heavy']}"
 
 
+# what a heuristic episode on the open bus never uses: the model clients (httpx), the LLM policy and
+# replays, the other protocols' planners, the certificates (cryptography)
+UNUSED = ("httpx", "cryptography", "mhrc.agents.llm.openai_client", "mhrc.agents.llm.local", "mhrc.agents.llm_policy")
+UNUSED += ("mhrc.agents.protocols.centralized_llm", "mhrc.agents.protocols.leader_llm", "mhrc.core.certs")
+
+
+def test_a_heuristic_run_on_the_open_bus_imports_no_model_client_nor_cryptography(tmp_path: object) -> None:
+    """`mhrc up --insecure` with the heuristic team, to the end of one tick (issue 46 item 4: its
+    start-up): the modules it has no use for stay unimported, they were a fifth of its imports."""
+    got, stderr = _refused(
+        *("up", "--horizon", "1", "--quiet", "--insecure", "--trace", f"{tmp_path}/trace.jsonl"), heavy=UNUSED
+    )
+    assert got["code"] in (0, None), stderr
+    assert got["heavy"] == [], f"mhrc up imported {got['heavy']}"
+
+
 def test_the_command_list_is_what_click_would_list_from_the_commands_themselves() -> None:
     import click
 
