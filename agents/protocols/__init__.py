@@ -11,12 +11,14 @@ protocol, which builds none, imports neither.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Mapping
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 
 from ..policy import Policy
-from . import leader_talk
 from .base import CoordinationProtocol, ProtocolRefused, Refusal, Seating
 
 __all__ = [
@@ -31,7 +33,18 @@ __all__ = [
     "register",
 ]
 
+if TYPE_CHECKING:
+    from . import leader_talk
+
 PROTOCOLS: dict[str, CoordinationProtocol] = {}
+
+
+def __getattr__(name: str) -> ModuleType:
+    """`leader_talk`, the leader protocol's sentences, imported on first use (its patterns are
+    compiled on import, a tenth of the registry's import for a protocol that speaks none)."""
+    if name == "leader_talk":
+        return importlib.import_module(f"{__name__}.leader_talk")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def register(p: CoordinationProtocol) -> CoordinationProtocol:

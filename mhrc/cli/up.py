@@ -27,7 +27,6 @@ from mhrc.cli.options import (
 )
 from mhrc.cli.rerun_view import both, close_live, keep_serving, start_live
 from mhrc.cli.running import run_command
-from mhrc.cli.viewer import render_video_to
 
 
 @click.command()
@@ -95,8 +94,8 @@ def up(
     from mhrc.run.config import ConfigError, ModelServerDown, check_model_servers
     from mhrc.run.console import ProgressPrinter, summary_table
     from mhrc.run.coordinated import check_seating
+    from mhrc.run.errors import ProcessFailed
     from mhrc.run.inprocess import up_in_process
-    from mhrc.run.processes import ProcessFailed, up_processes
     from mhrc.world.service_config import NobodyAttached
 
     logs.configure(log_level)
@@ -153,7 +152,12 @@ def up(
             ),
             err=quiet or as_json,
         )
-    runner = functools.partial(up_processes, quiet=quiet) if processes else up_in_process
+    if processes:
+        from mhrc.run.processes import up_processes
+
+        runner: Any = functools.partial(up_processes, quiet=quiet)
+    else:
+        runner = up_in_process
     live = None if rerun is None else start_live(rerun, cfg.run, "up")  # fed from the bus as the episode runs
     observe = both(None if printer is None else printer.attach, None if live is None else live.observe)
     from mhrc.agents.agent import AgentError
@@ -189,6 +193,8 @@ def up(
     recovery = _recovery(cfg.trace) if cfg.events is not None else None
     console.print(summary_table(done, recovery, _lost(cfg.trace), protocol=cfg.protocol))
     if video is not None and cfg.trace is not None:
+        from mhrc.cli.viewer import render_video_to
+
         path = render_video_to(cfg.trace, video, video_size)
         if not quiet:
             console.print(f"video {path}")

@@ -24,25 +24,11 @@ from mhrc.core.records import messages, read_records
 from mhrc.core.team import PAPER_TEAM
 from mhrc.run.attach import local_models
 from mhrc.run.config import EpisodeConfig
+from mhrc.run.errors import ProcessFailed as ProcessFailed  # defined apart: mhrc up catches it without this module
 from mhrc.run.serve import EventHook
 from mhrc.run.teams import team_argument
 
 log = get_logger("mhrc.run.processes")
-
-
-class ProcessFailed(RuntimeError):
-    """A process of `mhrc up --processes` failed the run: the world's ended before the episode
-    did, or an agent's before the episode started (the world would wait for its robot forever).
-    With a positive exit code the process has said why on stderr itself; a negative one is the
-    signal that killed it."""
-
-    def __init__(self, who: str, returncode: int, before: str | None) -> None:
-        self.who = who
-        self.returncode = returncode
-        how = f"was killed by signal {-returncode}" if returncode < 0 else f"exited with code {returncode}"
-        super().__init__(
-            f"{who} {how} " + ("after the episode ended" if before is None else f"before the episode {before}")
-        )
 
 
 def _child_env() -> dict[str, str]:
