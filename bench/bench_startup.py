@@ -7,6 +7,11 @@ tree, baseline, ...), the best of `--repeats` each; and which heavy modules each
 
 Each run is `python -m mhrc ARGS` in a fresh interpreter with PYTHONPATH set to the tree, so the
 same installed dependencies serve both. A bare `python -c pass` is measured too: the floor.
+
+The one-tick `mhrc up` is timed twice: as the environment runs it (where PYTHONDONTWRITEBYTECODE is
+set, as in this project's sandbox, every module of the tree is compiled anew at each run), and with
+a bytecode cache, as an installed package or a checkout run once before has one: each tree's own
+cache in a temporary directory (PYTHONPYCACHEPREFIX), filled by one untimed run, the trees untouched.
 """
 
 from __future__ import annotations
@@ -50,13 +55,21 @@ sys.stderr.write("\\nHEAVY " + json.dumps(sorted(m for m in %r if m in sys.modul
 """
 
 
-def _env(tree: Path) -> dict[str, str]:
-    return {**os.environ, "PYTHONPATH": str(tree)}
+def _env(tree: Path, cache: Path | None = None) -> dict[str, str]:
+    """The environment of a run of `tree`; with `cache`, bytecode written to and read from that tree's
+    own directory under it (the trees are not written to)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    if cache is not None:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(cache / ("baseline" if tree != HERE else "this"))
+    return env
 
 
-def _once(tree: Path, args: list[str]) -> float:
+def _once(tree: Path, args: list[str], cache: Path | None = None) -> float:
     started = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "mhrc", *args], env=_env(tree), capture_output=True, cwd=tree, check=False)
+    subprocess.run(
+        [sys.executable, "-m", "mhrc", *args], env=_env(tree, cache), capture_output=True, cwd=tree, check=False
+    )
     return time.perf_counter() - started
 
 
@@ -68,12 +81,16 @@ def _heavy(tree: Path, args: list[str]) -> list[str]:
     return list(json.loads(line[len("HEAVY ") :]))
 
 
-def _timed(base: Path, line: list[str], command: str, repeats: int) -> dict[str, Any]:
-    """`line`'s best wall time over `repeats` in the baseline and in this tree, the two in turn."""
+def _timed(base: Path, line: list[str], command: str, repeats: int, cache: Path | None = None) -> dict[str, Any]:
+    """`line`'s best wall time over `repeats` in the baseline and in this tree, the two in turn
+    (with `cache`, each tree's bytecode cache under it, filled by a first run that is not timed)."""
     best = {"baseline": float("inf"), "this": float("inf")}
+    if cache is not None:
+        _once(base, line, cache)
+        _once(HERE, line, cache)
     for _ in range(repeats):
-        best["baseline"] = min(best["baseline"], _once(base, line))
-        best["this"] = min(best["this"], _once(HERE, line))
+        best["baseline"] = min(best["baseline"], _once(base, line, cache))
+        best["this"] = min(best["this"], _once(HERE, line, cache))
     row = {
         "command": command,
         "baseline_s": round(best["baseline"], 3),
@@ -114,6 +131,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         line = [*UP, "--trace", str(Path(tmp) / "trace.jsonl")]
         rows.append(_timed(base, line, "mhrc " + " ".join(UP) + " --trace TMP", args.up_repeats))
+        rows.append(
+            _timed(base, line, "mhrc " + " ".join(UP) + " --trace TMP (bytecode cached)", args.up_repeats, Path(tmp))
+        )
     emit(
         {
             "bench": "startup",
@@ -123,7 +143,9 @@ def main() -> None:
             "python_floor_s": round(_floor(args.repeats), 3),
             "rows": rows,
             "note": "best wall time of `python -m mhrc ARGS` over the repeats, the two trees in turn; imports: the "
-            "heavy modules in sys.modules when the command line was refused or its help printed",
+            "heavy modules in sys.modules when the command line was refused or its help printed; (bytecode cached): "
+            "each tree's .pyc in a temporary PYTHONPYCACHEPREFIX filled by one untimed run, as an installed package "
+            "has them (without it, with PYTHONDONTWRITEBYTECODE set, each run compiles the tree's modules anew)",
         },
         args.out,
     )
