@@ -23,10 +23,8 @@ and enforces `access_control` (default deny): a robot's user may publish only it
 robot's request, thought and generating keys, query its own attach key, declare its own liveliness token
 and subscribe to what an agent needs. A denied message is dropped by the router.
 
-Why a client session was refused (`why_refused`) is told by mhrc.core.refusal.
-
-cryptography (mhrc.core.certs) is imported by the functions that write or read certificates, not
-with this module: the bus imports it, and a run on the open bus (`--insecure`) never needs it.
+Why a client session was refused (`why_refused`) is told by mhrc.core.refusal. cryptography
+(mhrc.core.certs) is imported only where certificates are written or read: `--insecure` never loads it.
 """
 
 from __future__ import annotations
