@@ -80,7 +80,7 @@ def test_help_imports_no_command_it_does_not_show_nor_the_wire(args: list[str]) 
 # what a heuristic episode on the open bus never uses: the model clients (httpx), the LLM policy and
 # replays, the other protocols' planners, the certificates (cryptography)
 UNUSED = ("httpx", "cryptography", "mhrc.agents.llm.openai_client", "mhrc.agents.llm.local", "mhrc.agents.llm_policy")
-UNUSED += ("mhrc.agents.protocols.centralized_llm", "mhrc.agents.protocols.leader_llm", "mhrc.core.certs")
+UNUSED += ("mhrc.agents.protocols.centralized_llm", "mhrc.agents.protocols.leader_llm", "mhrc.core.security")
 
 
 def test_a_heuristic_run_on_the_open_bus_imports_no_model_client_nor_cryptography(tmp_path: object) -> None:

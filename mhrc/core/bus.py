@@ -21,7 +21,7 @@ import time
 import weakref
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 from pydantic import BaseModel
@@ -31,8 +31,10 @@ from mhrc.core.logs import get_logger
 from mhrc.core.polling import poll
 from mhrc.core.protocol import encode
 from mhrc.core.refusal import why_refused
-from mhrc.core.security import Credentials, apply
 from mhrc.core.uncancelled import to_the_end
+
+if TYPE_CHECKING:
+    from mhrc.core.security import Credentials
 
 log = get_logger("mhrc.core.bus")
 
@@ -81,6 +83,8 @@ def make_config(
     # never unmaps it when the session closes: an eval worker grew ~16 MB an episode (bench/bench_memory.py)
     conf.insert_json5("transport/shared_memory/enabled", "false")
     if security is not None:
+        from mhrc.core.security import apply  # here: the open bus never needs it (nor cryptography)
+
         apply(conf, security, router=mode == "router")
     return conf
 

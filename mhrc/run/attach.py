@@ -21,7 +21,6 @@ from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Policy
 from mhrc.core.bus import open_client
-from mhrc.core.security import check_for
 from mhrc.run.config import ConfigError
 
 log = get_logger("mhrc.run.attach")
@@ -49,6 +48,8 @@ async def run_agent(
     world sees the robot vanish."""
 
     if security is not None:
+        from mhrc.core.security import check_for
+
         check_for(security, run=run, user=robot)
     async with contextlib.AsyncExitStack() as stack:
         if policy is not None:

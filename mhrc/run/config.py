@@ -24,7 +24,6 @@ from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse
 from mhrc.core.keys import check_id, new_run_id
 from mhrc.core.logs import get_logger
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
-from mhrc.core.security import Credentials, check_for, load, make_run_credentials
 from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.core.writable import unwritable
 from mhrc.run.errors import (
@@ -38,6 +37,7 @@ from mhrc.world.schedulers import SCHEDULERS
 if TYPE_CHECKING:
     from mhrc.agents.llm.openai_client import ClientOptions
     from mhrc.agents.llm_policy import PolicyOptions
+    from mhrc.core.security import Credentials
     from mhrc.world.sim import Sim
 
 log = get_logger("mhrc.run.config")
@@ -315,6 +315,8 @@ class EpisodeConfig(BaseModel):
         """`user`'s credentials, checked to be of this run and this user; None on the open bus."""
         if self.credentials is None:
             return None
+        from mhrc.core.security import check_for, load  # here: the open bus needs neither
+
         creds = load(self.credentials_file(user))
         check_for(creds, run=self.run, user=user)
         return creds
@@ -324,6 +326,8 @@ class EpisodeConfig(BaseModel):
         also runs/RUN/credentials for a trace that is a device, such as /dev/null or /dev/full: never into /dev)."""
         trace = self.trace if self.trace is not None and (self.trace.is_file() or not self.trace.exists()) else None
         where = directory or ((trace.parent if trace is not None else Path("runs") / self.run) / "credentials")
+        from mhrc.core.security import make_run_credentials
+
         make_run_credentials(self.run, self.team.names, where)
         return self.model_copy(update={"credentials": where})
 
