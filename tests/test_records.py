@@ -7,10 +7,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from test_metrics import _trace
 
+from mhrc.core import records
 from mhrc.core.protocol import LLM_ERROR_PREFIX, ActionAck, EpisodeStarted, RejectCode, Thought
 from mhrc.core.protocol.thoughts import ReplyFailure
-from mhrc.core.records import LineError, LineKind, NotCopied, TraceLineError, decode_row, read_records
+from mhrc.core.records import LineError, LineKind, NotCopied, TraceLineError, decode_row, parse_line, read_records
 from mhrc.core.upgrade import UNRECORDED
 
 
@@ -173,3 +175,36 @@ def test_a_junk_line_keeps_the_recorders_own_code() -> None:
         2,
     )
     assert old.junk is not None and old.junk.code is RejectCode.MALFORMED
+
+
+def test_a_put_of_todays_shape_reads_in_one_pass_as_the_long_way_reads_it() -> None:
+    """parse_line validates a put of today's shape from its text in one pass (records._put); it makes the
+    TraceLine decode_row makes of the line's JSON, and leaves every line `upgrade` would change (and any
+    other) to the long way."""
+    ack = {
+        "v": 2,
+        "kind": "action_ack",
+        "goal_id": "g",
+        "robot": "bob",
+        "accepted": False,
+        "reason": "Bob is still busy",
+    }
+    thought = {"v": 2, "kind": "thought", "robot": "bob", "tick": 0, "policy": "llm:m", "parse_error": "no action"}
+    today = [_line(m, "mhrc/r/robot/bob/x") for m in (ack | {"code": "busy"}, thought | {"failure": "unreadable"})]
+    today += [line for line in _trace() if line["kind"] == "put" and line["msg"]["kind"] != "episode_started"]
+    long_name = {"v": 2, "kind": "action_request", "goal_id": "g", "robot": "bob", "agent_id": "a",
+                 "tick": 0, "action": {"skill": "pick", "obj": "x" * 1000}}  # fmt: skip
+    older = [_line(m, "mhrc/r/robot/bob/x") for m in (STARTED, ack, thought, long_name)]
+    others = [_line(None, "mhrc/r/alive/robot/bob", "alive"), _line({"kind": "tick", "tick": "x"}), _line(ack, t=True)]
+    for n, line in enumerate(today + older + others, 1):
+        text = json.dumps(line)
+        fast = records._put(text, n)
+        assert (fast is not None) == (line in today), line
+        try:
+            long_way = decode_row(json.loads(text), n)
+        except TraceLineError as exc:
+            with pytest.raises(TraceLineError, match=exc.code.value):
+                parse_line(text, n)
+        else:
+            assert parse_line(text, n) == long_way and (fast is None or fast == long_way)
+    assert parse_line(json.dumps(_line(ack, "k")), 1).msg.code is RejectCode.BUSY  # type: ignore[union-attr]  # upgraded
