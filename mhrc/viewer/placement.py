@@ -130,19 +130,34 @@ def _spots(a: Box, w: float, h: float, prefer_outside: bool) -> list[tuple[float
     return (near + inside if prefer_outside else inside + near) + rings
 
 
+def _covered(x0: float, y0: float, x1: float, y1: float, soft: list[tuple[float, float, float, float, float]]) -> float:
+    """The weighted area the box (x0, y0, x1, y1) covers of `soft`: Box.overlap times the weight, summed by
+    `sum` in the same order, without the boxes it does not overlap (their 0.0 adds nothing)."""
+    return sum(
+        [
+            w * h * weight
+            for b0, c0, b1, c1, weight in soft
+            if (w := (x1 if x1 < b1 else b1) - (x0 if x0 > b0 else b0)) > 0
+            and (h := (y1 if y1 < c1 else c1) - (y0 if y0 > c0 else c0)) > 0
+        ]
+    )
+
+
 def place(requests: list[Request], frame: Box, soft: list[tuple[Box, float]]) -> list[Placed]:
     """Place `requests` in order (earlier ones get the better spots) inside `frame`, overlapping
     no placed label; `soft` are (box, weight) things a label should rather not cover."""
     placed: list[Placed] = []
+    taken: list[Box] = []  # the placed labels' boxes, grown by GAP
     for req in requests:
         best: tuple[float, Box, float] | None = None
+        others = [(b.x0, b.y0, b.x1, b.y1, weight) for b, weight in soft if b != req.anchor]
         for font in req.fonts:
             w, h = text_width(req.text, font), font * 1.25
             for rank, (cx, cy) in enumerate(_spots(req.anchor, w, h, req.prefer_outside)):
                 box = Box.centred(cx, cy, w, h)
-                if not box.inside(frame) or any(box.overlap(p.box.grow(GAP)) for p in placed):
+                if not box.inside(frame) or any(box.overlap(t) for t in taken):
                     continue
-                cost = rank * 4.0 + sum(box.overlap(b) * weight for b, weight in soft if b != req.anchor)
+                cost = rank * 4.0 + _covered(box.x0, box.y0, box.x1, box.y1, others)
                 if best is None or cost < best[0]:
                     best = (cost, box, font)
                 if cost == rank * 4.0:
@@ -160,4 +175,5 @@ def place(requests: list[Request], frame: Box, soft: list[tuple[Box, float]]) ->
             bx, by = box.clamp(ax, ay)
             leader = (round(ax, 1), round(ay, 1), round(bx, 1), round(by, 1))
         placed.append(Placed(req, box, font, leader))
+        taken.append(box.grow(GAP))
     return placed
