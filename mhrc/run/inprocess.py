@@ -63,6 +63,8 @@ async def _run_in_process(
             observe(bus, run)
 
         def on_event(sample: Any) -> None:
+            if started.is_set():  # every later event (a tick, a snapshot) would be decoded for nothing
+                return
             with contextlib.suppress(ProtocolError):
                 if isinstance(decode_event(sample.payload), EpisodeStarted):
                     started.set()
