@@ -194,7 +194,9 @@ def test_a_put_of_todays_shape_reads_in_one_pass_as_the_long_way_reads_it() -> N
     today += [line for line in _trace() if line["kind"] == "put" and line["msg"]["kind"] != "episode_started"]
     long_name = {"v": 2, "kind": "action_request", "goal_id": "g", "robot": "bob", "agent_id": "a",
                  "tick": 0, "action": {"skill": "pick", "obj": "x" * 1000}}  # fmt: skip
-    older = [_line(m, "mhrc/r/robot/bob/x") for m in (STARTED, ack, thought, long_name)]
+    pose = {"x": 10**400, "y": 0.0, "yaw": 0.0}  # no float: model_validate refuses it, pydantic's JSON parser reads inf
+    huge = {"v": 2, "kind": "snapshot", "tick": 0, "goals": [], "robots": {"bob": pose}, "objects": {}, "open": {}}
+    older = [_line(m, "mhrc/r/robot/bob/x") for m in (STARTED, ack, thought, long_name, huge)]
     others = [_line(None, "mhrc/r/alive/robot/bob", "alive"), _line({"kind": "tick", "tick": "x"}), _line(ack, t=True)]
     for n, line in enumerate(today + older + others, 1):
         text = json.dumps(line)

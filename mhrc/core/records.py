@@ -234,10 +234,19 @@ class _Put(BaseModel):
     msg: Annotated[Payload, Field(discriminator="kind")]
 
 
+# an integer of 309 digits or more is no float: Python's validation refuses it, pydantic's JSON parser reads inf;
+# a line's bytes with every digit a 0 and any other byte a space hold such a run where they hold _HUGE
+_DIGITS = bytes(0x30 if 0x30 <= b <= 0x39 else 0x20 for b in range(256))
+_HUGE = b"0" * 309
+
+
 def _put(text: str, number: int) -> TraceLine | None:
     """The line `decode_row` would make of `text`, when it is a put of today's shape whose message fits
     its model; None for any other line (read the long way). A message `upgrade` would change (an older
-    trace's), or whose model is a start's, is left to the long way too."""
+    trace's), or whose model is a start's, is left to the long way too, and so is a line with a run of
+    digits too long for a float (the two validators read it differently)."""
+    if _HUGE in text.encode("utf-8", "surrogatepass").translate(_DIGITS):  # a regular expression costs 7x
+        return None
     try:
         line = _Put.model_validate_json(text)
     except ValidationError:
