@@ -16,11 +16,11 @@ declare -A BENCH=(
 # (bench_env.py takes it too, when set).
 declare -A BASELINED=(
   [skill_speed]=bench_skill_speed.py [startup]=bench_startup.py [grid_speed]=bench_grid_speed.py
-  [llm_client]=bench_llm_client.py
+  [llm_client]=bench_llm_client.py [eval_cpu]=bench_eval_cpu.py
 )
 declare -A EXTRA=([grid_speed]="--trials 10")  # the paper's 360-episode grid
 names=("$@")
-[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model schedulers video security memory ray scenarios teams env hostile rerun protocols protocol_scaling llm_call_profile skill_speed startup grid_speed llm_client)
+[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model schedulers video security memory ray scenarios teams env hostile rerun protocols protocol_scaling llm_call_profile skill_speed startup grid_speed llm_client eval_cpu)
 for name in "${names[@]}"; do
   if [ "$name" = llm_call_profile ]; then
     script=profile_llm_calls.py
