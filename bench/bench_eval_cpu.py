@@ -38,6 +38,7 @@ from report import check_tree, commit_of, emit
 # runs `mhrc eval` in this interpreter and prints its own CPU and its children's (the workers it waited for)
 EVAL = """
 import json, resource, sys
+import mhrc
 from mhrc.cli import main
 try:
     main(sys.argv[1:])
@@ -45,13 +46,15 @@ except SystemExit as exc:
     if exc.code not in (0, None):
         raise
 me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-print(json.dumps({"main_cpu_s": me.ru_utime + me.ru_stime, "workers_cpu_s": kids.ru_utime + kids.ru_stime}))
+print(json.dumps({"main_cpu_s": me.ru_utime + me.ru_stime, "workers_cpu_s": kids.ru_utime + kids.ru_stime,
+                  "mhrc": mhrc.__file__}))
 """
 
 # the driver's per-episode work over the traces in argv[1] (copied to argv[2]), best of three; prints ms an episode
 TAKE = """
 import json, shutil, sys, time
 from pathlib import Path
+import mhrc
 from mhrc.eval.scoring import score, write_episode_report
 src, dst = Path(sys.argv[1]), Path(sys.argv[2])
 dst.mkdir(parents=True, exist_ok=True)
@@ -71,35 +74,36 @@ for _ in range(3):
         s, r = s + t1 - t0, r + time.process_time() - t1
     best = (s, r) if best is None or s + r < sum(best) else best
 n = len(traces)
-print(json.dumps({"score_ms": best[0] / n * 1e3, "report_ms": best[1] / n * 1e3}))
+print(json.dumps({"score_ms": best[0] / n * 1e3, "report_ms": best[1] / n * 1e3, "mhrc": mhrc.__file__}))
 """
 
 
-def _last_json(text: str) -> dict[str, Any]:
-    return dict(json.loads(text.strip().splitlines()[-1]))
-
-
-def run_eval(root: Path, out: Path, workers: int, extra: list[str]) -> dict[str, Any]:
-    cmd = [sys.executable, "-c", EVAL, "eval", "--workers", str(workers), "--out", str(out), "--log-level", "error"]
+def _run(root: Path, args: list[str], cwd: Path) -> dict[str, Any]:
+    """`python ARGS` with `root`'s mhrc: the last line of its output, as JSON. The working directory is a
+    neutral one: `python -c` and `-m` (the workers) put theirs first on sys.path, before PYTHONPATH."""
     done = subprocess.run(
-        [*cmd, *extra], env={**os.environ, "PYTHONPATH": str(root)}, capture_output=True, text=True, check=False
-    )
-    if done.returncode != 0:
-        raise SystemExit(f"{root}: mhrc eval exited {done.returncode}: {done.stderr[-2000:]}")
-    return _last_json(done.stdout)
-
-
-def take(root: Path, traces: Path, dst: Path) -> dict[str, float]:
-    done = subprocess.run(
-        [sys.executable, "-c", TAKE, str(traces), str(dst)],
+        [sys.executable, *args],
         env={**os.environ, "PYTHONPATH": str(root)},
+        cwd=cwd,
         capture_output=True,
         text=True,
         check=False,
     )
     if done.returncode != 0:
-        raise SystemExit(f"{root}: the driver's timing failed: {done.stderr[-2000:]}")
-    return _last_json(done.stdout)
+        raise SystemExit(f"{root}: {' '.join(args[2:5])} exited {done.returncode}: {done.stderr[-2000:]}")
+    out = dict(json.loads(done.stdout.strip().splitlines()[-1]))
+    if not Path(out.pop("mhrc")).resolve().is_relative_to(root.resolve()):
+        raise SystemExit(f"{root}: the run imported another tree's mhrc")
+    return out
+
+
+def run_eval(root: Path, out: Path, workers: int, extra: list[str]) -> dict[str, Any]:
+    args = ["-c", EVAL, "eval", "--workers", str(workers), "--out", str(out), "--log-level", "error", *extra]
+    return _run(root, args, out.parent)
+
+
+def take(root: Path, traces: Path, dst: Path) -> dict[str, float]:
+    return _run(root, ["-c", TAKE, str(traces), str(dst)], dst.parent)
 
 
 def _blank(d: Path, p: Path) -> str:
