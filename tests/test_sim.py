@@ -26,6 +26,7 @@ from mhrc.core.protocol import (
     SkillOutcome,
     Wait,
 )
+from mhrc.world.render import render
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.sim import Sim, check_episode
 from mhrc.world.tasks import TASKS
@@ -181,9 +182,12 @@ def _visual_meshes(sim: Sim) -> int:
 
 def test_same_seed_same_actions_same_outcomes() -> None:
     """Two worlds side by side (gymnasium style): every outcome and the final state agree, the
-    second one built without its robots' visual meshes (the world service's, which no camera sees)."""
-    with Sim(seed=2, n_objects=4) as a, Sim(seed=2, n_objects=4, visuals=False) as b:
+    first built with its robots' visual meshes (for a camera) and the second without (the default:
+    the world service's, which no camera sees); the second refuses to be drawn."""
+    with Sim(seed=2, n_objects=4, visuals=True) as a, Sim(seed=2, n_objects=4) as b:
         assert _visual_meshes(a) > 0 and _visual_meshes(b) == 0
+        with pytest.raises(ValueError, match="visuals=True"):
+            render(b, "top")
         bob = a.observe("bob", 0)
         far = next(
             t for t in a.targets if (o := _obj(bob, t)) is not None and o.on == "table_0" and not _bob_can_reach(bob, o)

@@ -32,7 +32,15 @@ def write_png(path: Path, rgb: np.ndarray) -> None:
     path.write_bytes(png)
 
 
+def check_drawable(sim: Sim) -> None:
+    """ValueError for a world built without its visual meshes (Sim's `visuals`): drawn, its robots
+    would show their collision meshes."""
+    if not sim.visuals:
+        raise ValueError("this world was built without visual meshes: build it with Sim(visuals=True) to render it")
+
+
 def render(sim: Sim, view: str, width: int = 800, height: int = 600) -> np.ndarray:
+    check_drawable(sim)
     eye, target, up = VIEWS[view]
     vm = p.computeViewMatrix(eye, target, up, physicsClientId=sim.cid)
     fov = 45.0 if view == "top" else 55.0
@@ -47,7 +55,7 @@ def render_scene(
     """Top-down and perspective PNGs of `scene` with one generated episode's objects."""
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
-    with Sim(task=task, scene=scene, seed=seed, n_objects=n_objects) as sim:
+    with Sim(task=task, scene=scene, seed=seed, n_objects=n_objects, visuals=True) as sim:
         for view in VIEWS:
             path = out_dir / f"{scene}_{view}.png"
             write_png(path, render(sim, view))

@@ -84,16 +84,17 @@ class Sim:
         scenario: Scenario | None = None,
         noise: str = "on",
         one_per_stand_pose: bool | None = None,
-        visuals: bool = True,
+        visuals: bool = False,
     ) -> None:
         """`scenario`: the events fired during the episode (`fire_events`; dynamics.py); `noise`: on
         (the calibrated motion noise) or off (none: bases stop exactly, releases do not slip).
         `one_per_stand_pose`: a robot cannot navigate to a stand pose another robot stands at (per
         level: floor or air); None: so for any team but the paper's, whose world (like the
-        paper's) lets robots share a stand pose, so that it scores as it always did. `visuals` False:
-        the robots are loaded without their visual meshes, for a world no camera renders (the
-        world service's: pictures and videos are drawn from a trace, in a Sim of their own); it
-        plays the same, and builds in about a third of the time. The GUI always has them."""
+        paper's) lets robots share a stand pose, so that it scores as it always did. `visuals`: load
+        the robots' visual meshes, for a world a camera renders (`world/render.py`, the video, the
+        environment's frames; the GUI always has them). Without them (the default) pybullet_data's
+        robots carry their collision meshes alone: the world plays the same, and builds in about a
+        third of the time; rendering it is refused (ValueError)."""
         check_episode(task=task, scene=scene, n_objects=n_objects)
         self.aids: frozenset[str] = frozenset(parse_aids(aids))
         # the motion noise's rates (`noise`: on, the calibration, or off); none with the exact_motion aid either

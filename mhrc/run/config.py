@@ -274,11 +274,11 @@ class EpisodeConfig(BaseModel):
         )
         return scenario
 
-    def sim(self, seed: int | None = None, *, visuals: bool = True) -> Sim:
+    def sim(self, seed: int | None = None, *, visuals: bool = False) -> Sim:
         """The world this configuration describes, built (with `seed`, another seed than its own):
         the world's side of `mhrc up` (mhrc.run.serve) and the environment (mhrc.env) build it here,
-        so both build the same one. `visuals` False: for a world no camera renders (Sim's
-        `visuals`; the GUI always has them)."""
+        so both build the same one. `visuals`: for a world a camera renders (Sim's `visuals`: the
+        environment's frames; the world service's is never drawn, and the GUI always has them)."""
         from mhrc.world.sim import Sim  # here, not at the top: the CLI reads configurations without PyBullet
 
         return Sim(

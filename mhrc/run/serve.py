@@ -36,12 +36,6 @@ class Simulator(SimLike, Protocol):
 Simulators = Callable[[EpisodeConfig], Simulator]  # a configuration -> its simulator, built
 
 
-def _unseen(cfg: EpisodeConfig) -> Simulator:
-    """The world's simulator: no camera renders it (a picture or a video is drawn from the trace, in
-    a simulator of its own), so its robots are loaded without their visual meshes."""
-    return cfg.sim(visuals=False)
-
-
 async def serve_world(
     cfg: EpisodeConfig,
     *,
@@ -55,9 +49,9 @@ async def serve_world(
     client of a router that already exists, logged in with `login` if given: an evaluation
     worker's), record, and run the episode. `on_service` gets the WorldService once it exists
     (the in-process runner stops it when an agent fails for good). `simulator` builds the simulator
-    from `cfg` (by default `EpisodeConfig.sim`, without visuals): a test injects one that wraps the real one, as httpx's
+    from `cfg` (`EpisodeConfig.sim` by default: no camera renders the world's simulator): a test injects one that wraps the real one, as httpx's
     MockTransport stands in for the network, instead of patching the world's methods."""
-    sim: Simulator = await asyncio.to_thread(simulator or _unseen, cfg)
+    sim: Simulator = await asyncio.to_thread(simulator or EpisodeConfig.sim, cfg)
     bus = None
     recorder = None
     world: WorldService | None = None

@@ -40,7 +40,7 @@ from mhrc.viewer.events import caption as event_caption
 from mhrc.viewer.events import captions_by_snapshot, scenario_label
 from mhrc.viewer.page import distinct
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
-from mhrc.world.render import VIEWS, render
+from mhrc.world.render import VIEWS, check_drawable, render
 from mhrc.world.scenario import NewTarget, Scenario
 from mhrc.world.sim import Sim
 
@@ -249,6 +249,7 @@ def _poses(
 def camera(sim: Sim, view: str, width: int, height: int) -> np.ndarray:
     """An RGB picture of the scene (TinyRenderer): `overview`, or one of world/render.py's views (also
     the environment's rgb_array frame, mhrc.env)."""
+    check_drawable(sim)
     if view != OVERVIEW:
         return render(sim, view, width, height)
     x0, x1, y0, y1 = sim.layout.bounds
@@ -405,6 +406,7 @@ def render_video(
     out.parent.mkdir(parents=True, exist_ok=True)
     rendering = 0.0
     with Sim(
+        visuals=True,
         task=started.task,
         scene=started.scene,
         seed=started.seed,
