@@ -106,6 +106,12 @@ def test_a_name_longer_than_todays_bound_reads_as_recorded() -> None:
         ('{"t": 0.1, "key": "mhrc/r/world/event", "kind": "put", "msg": {', LineError.NOT_JSON, "line 3"),
         ('["not", "a", "line"]', LineError.NOT_A_LINE, "line 3"),
         ('{"t": "soon", "key": "mhrc/r/world/event", "kind": "put", "msg": null}', LineError.NOT_A_LINE, "line 3"),
+        # an integer no float holds (an OverflowError before)
+        (
+            '{"t": 1' + "0" * 400 + ', "key": "mhrc/r/world/event", "kind": "put", "msg": null}',
+            LineError.NOT_A_LINE,
+            "line 3",
+        ),
         ('{"t": 0.1, "key": "mhrc/r/world/event", "kind": "shout", "msg": null}', LineError.UNKNOWN_KIND, "line 3"),
     ],
 )

@@ -203,6 +203,10 @@ def decode_row(row: Any, number: int) -> TraceLine:
     if isinstance(t, bool) or not isinstance(t, (int, float)):
         raise TraceLineError(LineError.NOT_A_LINE, number, f"`t` is {t!r}, not a number of seconds")
     try:
+        t = float(t)
+    except OverflowError:  # an integer of 309 digits or more: no float holds it
+        raise TraceLineError(LineError.NOT_A_LINE, number, "`t` is too large for a number of seconds") from None
+    try:
         kind = LineKind(str(row.get("kind")))
     except ValueError:
         raise TraceLineError(LineError.UNKNOWN_KIND, number, f"`kind` is {str(row.get('kind'))[:40]!r}") from None
