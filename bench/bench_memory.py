@@ -1,12 +1,16 @@
 """Resident memory of one long-lived process running episode after episode, as an `mhrc eval`
 worker does (heuristic team, sequential schedule, every task x scene in turn, 4 objects).
 
-Three configurations, each in a fresh process, measured in the same run:
+Four configurations, each in a fresh process, measured in the same run, with the wall time of
+its episodes:
 - `before`: zenoh's shared-memory transport on (zenoh's default, which mhrc used until this
   benchmark found it: each session maps a 16 MB pool for messages over 3 KB and never unmaps
   it), no trim between episodes;
 - `shm_off`: shared memory off (mhrc.core.bus's configuration now), no trim;
-- `now`: shared memory off and `mhrc.run.malloc.release()` after every episode (what a worker does).
+- `trim_every`: shared memory off and malloc_trim after every episode (what a worker did until
+  issue 46 measured its price: the next episode faults the same pages in again);
+- `now`: shared memory off, `mhrc.run.malloc.limit_arenas()` before the first episode and
+  `release()` after each, which trims only above `TRIM_ABOVE_MB` (what a worker does).
 
 Reports the resident size (MB) after each episode and the growth per episode over the second
 half. Prints JSON (or writes it with --out).
@@ -26,7 +30,7 @@ from typing import Any
 from report import emit
 
 CHILD = r"""
-import asyncio, itertools, json, os, sys, tempfile
+import asyncio, itertools, json, os, sys, tempfile, time
 from pathlib import Path
 
 import mhrc.core.bus
@@ -34,7 +38,9 @@ from mhrc.run import malloc as memory
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 
-episodes, shm, trim = int(sys.argv[1]), sys.argv[2] == "1", sys.argv[3] == "1"
+episodes, shm, trim = int(sys.argv[1]), sys.argv[2] == "1", sys.argv[3]  # trim: none, every or policy
+if trim == "policy":
+    memory.limit_arenas()
 if shm:  # the configuration before: zenoh's default shared-memory transport
     plain = mhrc.core.bus.make_config
 
@@ -53,6 +59,7 @@ def rss_mb() -> int:
 async def main() -> None:
     grid = list(itertools.product(["pack_objects", "sort_solids", "make_sandwich"], ["kitchen", "bathroom", "bedroom"]))
     out = []
+    wall, cpu = time.perf_counter(), time.process_time()
     with tempfile.TemporaryDirectory() as d:
         for i in range(episodes):
             task, scene = grid[i % len(grid)]
@@ -60,23 +67,28 @@ async def main() -> None:
                                       trace=Path(d) / f"{i}.jsonl").resolved()
             done = await up_in_process(cfg)
             assert done.metrics.success, (task, scene, i)
-            if trim:
-                memory.release()
+            if trim != "none":
+                memory.release(above_mb=0 if trim == "every" else memory.TRIM_ABOVE_MB)
             out.append(rss_mb())
-    print(json.dumps(out))
+    print(json.dumps({"rss_mb": out, "wall_s": time.perf_counter() - wall, "cpu_s": time.process_time() - cpu}))
 
 
 asyncio.run(main())
 """
 
-CONFIGS = {"before": ("1", "0"), "shm_off": ("0", "0"), "now": ("0", "1")}
+CONFIGS = {
+    "before": ("1", "none"),
+    "shm_off": ("0", "none"),
+    "trim_every": ("0", "every"),
+    "now": ("0", "policy"),
+}
 
 
-def run(episodes: int, shm: str, trim: str) -> list[int]:
+def run(episodes: int, shm: str, trim: str) -> dict[str, Any]:
     done = subprocess.run(
         [sys.executable, "-c", CHILD, str(episodes), shm, trim], capture_output=True, text=True, check=True
     )
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    return dict(json.loads(done.stdout.strip().splitlines()[-1]))
 
 
 def growth(rss: list[int]) -> float:
@@ -96,8 +108,15 @@ def main() -> None:
         "unit": "MB resident after each episode",
     }
     for name, (shm, trim) in CONFIGS.items():
-        rss = run(args.episodes, shm, trim)
-        report[name] = {"rss_mb": rss, "last_mb": rss[-1], "growth_mb_per_episode": growth(rss)}
+        got = run(args.episodes, shm, trim)
+        rss = got["rss_mb"]
+        report[name] = {
+            "rss_mb": rss,
+            "last_mb": rss[-1],
+            "growth_mb_per_episode": growth(rss),
+            "wall_s": round(got["wall_s"], 2),
+            "cpu_s": round(got["cpu_s"], 2),
+        }
     emit(report, args.out)
 
 

@@ -102,6 +102,7 @@ async def run_job(
 ) -> WorkerResult:
     """Run one episode in this process; never raises but for cancellation. With `trace_dest`
     (a shared --out) the trace is written there and only its path goes back."""
+    memory.limit_arenas()  # a worker's threads share malloc's arenas (before its first episode's threads start)
     with tempfile.TemporaryDirectory(prefix="mhrc-eval-") as tmp:
         trace = Path(tmp) / "trace.jsonl"
         try:
@@ -125,4 +126,4 @@ async def run_job(
                 key=job.key, worker=worker, error=f"{type(exc).__name__}: {exc}", fatal=isinstance(exc, LLMFatalError)
             )
         finally:
-            memory.release()  # a worker runs hundreds of episodes: give back what this one freed
+            memory.release()  # a worker runs hundreds of episodes: give back what they freed once it holds too much
