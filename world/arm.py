@@ -11,10 +11,7 @@ from __future__ import annotations
 import functools
 import math
 import re
-import shutil
-import tempfile
 import threading
-import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,7 +23,8 @@ from ompl import util as ou
 
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
-from .scene import StaticBody, load_statics
+from .scene import StaticBody
+from .shadow import POOL, Shadow, ShadowPool
 
 ARM_JOINTS = tuple(range(7))
 FINGERS = (9, 10)
@@ -101,39 +99,45 @@ class ArmPlanner:
         seed: int = 0,
         budget: int = PLAN_CHECKS,
         wall_limit: float = PLAN_WALL_LIMIT,
+        pool: ShadowPool | None = POOL,
     ) -> None:
-        self.cid = p.connect(p.DIRECT)
+        """`pool`: where the shadow client comes from and goes back to when closed (world/shadow.py;
+        None: a client of its own, disconnected when closed)."""
         self.rng = np.random.default_rng(seed)
         self.budget, self.wall_limit = budget, wall_limit
-        tmp = tempfile.mkdtemp(prefix="mhrc-planner-")
-        self._remove_tmp = weakref.finalize(self, shutil.rmtree, tmp, True)
-        self.panda = str(Path(tmp) / "panda.urdf")  # every Panda of this client: the arm and the other arms
-        Path(self.panda).write_text(_shadow_panda_urdf(), encoding="utf-8")
-        self.arm = p.loadURDF(self.panda, useFixedBase=True, physicsClientId=self.cid)
-        self._filter(self.arm, _ARM_GROUP, _OBSTACLE_GROUP)
-        for f in FINGERS:
-            p.resetJointState(self.arm, f, 0.0, physicsClientId=self.cid)
-        self.bodies = load_statics(self.cid, statics)
-        for body in self.bodies.values():
-            self._filter(body, _OBSTACLE_GROUP, _ARM_GROUP)
+        shadow = pool.take(statics) if pool is not None else None
+        if shadow is None:
+            shadow = Shadow.build(statics, _shadow_panda_urdf(), _setup)
+        self._pool = pool
+        self._shadow: Shadow | None = shadow
+        self.cid = shadow.cid
+        self.panda = shadow.panda  # every Panda of this client: the arm and the other arms
+        self.arm = shadow.arm
+        self.bodies = shadow.bodies
         self.boxes: dict[str, int] = {}
         self.other_arms: dict[str, int] = {}
         self.checks = 0
 
     def close(self) -> None:
-        if self.cid >= 0:
-            p.disconnect(self.cid)
-            self.cid = -1
-        self._remove_tmp()
+        """Let go of the shadow client (idempotent): back to the pool, or disconnected. From then on
+        every call of this planner fails (its `cid` is -1), as on a disconnected client."""
+        shadow, self._shadow = self._shadow, None
+        self.cid = -1
+        if shadow is None:
+            return
+        if self._pool is None:
+            shadow.close()
+        else:
+            self._pool.give(shadow, list(self.boxes.values()), list(self.other_arms.values()))
 
     # ------------------------------------------------------------------ world model
     def _filter(self, body: int, group: int, mask: int) -> None:
-        """Every link of `body` in collision group `group`, colliding only with `mask`."""
-        for link in range(-1, p.getNumJoints(body, physicsClientId=self.cid)):
-            p.setCollisionFilterGroupMask(body, link, group, mask, physicsClientId=self.cid)
+        _filter(self.cid, body, group, mask)
 
     def set_joint(self, body: str, joint: int, value: float) -> None:
         """Mirror a live joint (an opened drawer) into the planning world."""
+        if self._shadow is not None:
+            self._shadow.note_joint(self.bodies[body], joint)  # set back when the client goes back to the pool
         p.resetJointState(self.bodies[body], joint, value, physicsClientId=self.cid)
 
     def set_box(
@@ -155,8 +159,11 @@ class ArmPlanner:
     def set_other_arm(self, name: str, base: tuple[float, float, float], yaw: float, q: np.ndarray) -> None:
         """Mirror another robot's arm (pose and joints) as an obstacle."""
         if name not in self.other_arms:
-            self.other_arms[name] = p.loadURDF(self.panda, useFixedBase=True, physicsClientId=self.cid)
-            self._filter(self.other_arms[name], _OBSTACLE_GROUP, _ARM_GROUP)
+            if self._shadow is not None and self._shadow.spares:  # a Panda an earlier episode left hidden
+                self.other_arms[name] = self._shadow.spares.pop()
+            else:
+                self.other_arms[name] = p.loadURDF(self.panda, useFixedBase=True, physicsClientId=self.cid)
+                self._filter(self.other_arms[name], _OBSTACLE_GROUP, _ARM_GROUP)
         body = self.other_arms[name]
         p.resetBasePositionAndOrientation(body, base, p.getQuaternionFromEuler((0, 0, yaw)), physicsClientId=self.cid)
         set_joints(self.cid, body, q)
@@ -296,6 +303,21 @@ class ArmPlanner:
             out = [np.array([path.getState(k)[i] for i in range(7)]) for k in range(path.getStateCount())]
         ss.clear()
         return out
+
+
+def _filter(cid: int, body: int, group: int, mask: int) -> None:
+    """Every link of `body` in collision group `group`, colliding only with `mask`."""
+    for link in range(-1, p.getNumJoints(body, physicsClientId=cid)):
+        p.setCollisionFilterGroupMask(body, link, group, mask, physicsClientId=cid)
+
+
+def _setup(shadow: Shadow) -> None:
+    """A new shadow client's collision filters (the arm against the obstacles only), fingers closed."""
+    _filter(shadow.cid, shadow.arm, _ARM_GROUP, _OBSTACLE_GROUP)
+    for f in FINGERS:
+        p.resetJointState(shadow.arm, f, 0.0, physicsClientId=shadow.cid)
+    for body in shadow.bodies.values():
+        _filter(shadow.cid, body, _OBSTACLE_GROUP, _ARM_GROUP)
 
 
 def set_joints(cid: int, body: int, q: np.ndarray | list[float]) -> None:
