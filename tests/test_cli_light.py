@@ -81,16 +81,52 @@ def test_help_imports_no_command_it_does_not_show_nor_the_wire(args: list[str]) 
 # replays, the other protocols' planners, the certificates (cryptography)
 UNUSED = ("httpx", "cryptography", "mhrc.agents.llm.openai_client", "mhrc.agents.llm.local", "mhrc.agents.llm_policy")
 UNUSED += ("mhrc.agents.protocols.centralized_llm", "mhrc.agents.protocols.leader_llm", "mhrc.core.security")
+# and structlog with rich's tracebacks and pygments behind it: nothing is logged at the default level, and
+# mhrc.core.logs imports structlog when a line is first due
+UNUSED += ("structlog", "pygments")
 
 
 def test_a_heuristic_run_on_the_open_bus_imports_no_model_client_nor_cryptography(tmp_path: object) -> None:
     """`mhrc up --insecure` with the heuristic team, to the end of one tick (issue 46 item 4: its
-    start-up): the modules it has no use for stay unimported, they were a fifth of its imports."""
+    start-up): the modules it has no use for stay unimported, they were a fifth of its imports (and
+    structlog a tenth of its start)."""
     got, stderr = _refused(
         *("up", "--horizon", "1", "--quiet", "--insecure", "--trace", f"{tmp_path}/trace.jsonl"), heavy=UNUSED
     )
     assert got["code"] in (0, None), stderr
     assert got["heavy"] == [], f"mhrc up imported {got['heavy']}"
+
+
+LOGS = """
+import io, json, sys
+from mhrc.core import logs
+log = logs.get_logger("mhrc.probe").bind(run="r1")
+log.debug("below the level")
+before = "structlog" in sys.modules
+log.warning("a robot left", robot="bob")
+import structlog
+from structlog.testing import LogCapture
+seen = LogCapture()  # another set-up than mhrc's, at debug: it gets every line, whatever mhrc's level
+structlog.configure(processors=[seen], wrapper_class=structlog.make_filtering_bound_logger(10))
+logs.get_logger("mhrc.other").bind(run="r2").debug("for the test")
+logs.configure("warning")  # mhrc's again, at once now that structlog is imported
+logs.get_logger("mhrc.other").info("below the level again")
+print(json.dumps({"before": before, "seen": seen.entries, "installed": structlog.get_config()["processors"] is logs._installed}))
+"""
+
+
+def test_a_line_below_the_level_leaves_structlog_unimported_and_a_line_due_prints_as_before() -> None:
+    """mhrc.core.logs imports structlog when a line is first due: a debug line at the default level
+    (warning) does not import it; a warning does, installs mhrc's set-up and prints its usual line
+    on stderr (time, level, event, its bound and given context); a configuration that is not mhrc's
+    (a library user's) gets every line, whatever mhrc's level."""
+    done = subprocess.run([sys.executable, "-c", LOGS], capture_output=True, text=True, timeout=120)
+    got = json.loads(done.stdout.strip().splitlines()[-1])
+    assert got["before"] is False and got["installed"] is True
+    assert got["seen"] == [{"run": "r2", "event": "for the test", "log_level": "debug"}]
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert "[warning  ] a robot left" in lines[0] and "robot=bob" in lines[0] and "run=r1" in lines[0], lines
 
 
 def test_the_command_list_is_what_click_would_list_from_the_commands_themselves() -> None:

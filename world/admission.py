@@ -19,8 +19,7 @@ back since the last line: a flood of repeats costs a line per interval, not a li
 from __future__ import annotations
 
 import re
-
-from structlog.typing import FilteringBoundLogger
+from typing import TYPE_CHECKING
 
 from mhrc.core.logs import Throttle
 from mhrc.core.protocol import ActionRequest, ProtocolError, RejectCode, Rejection, decode
@@ -29,6 +28,9 @@ from mhrc.core.protocol.exchange import GOAL_ID
 
 from .roster import Roster
 from .schedulers import Scheduler
+
+if TYPE_CHECKING:
+    from structlog.typing import FilteringBoundLogger
 
 LOG_INTERVAL = 5.0  # s: at most one line per robot and reject code in this time
 _WARNED = {

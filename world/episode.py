@@ -12,8 +12,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-
-from structlog.typing import FilteringBoundLogger
+from typing import TYPE_CHECKING
 
 from mhrc.core.fidelity import label as fidelity_label
 from mhrc.core.logs import get_logger
@@ -36,6 +35,9 @@ from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from .mail import Mailroom
 from .schedulers import Executed, Scheduler, TaskResultLike
 from .service_config import SimLike
+
+if TYPE_CHECKING:
+    from structlog.typing import FilteringBoundLogger
 
 log = get_logger("mhrc.world")
 

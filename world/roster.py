@@ -9,10 +9,12 @@ decides and remembers; the service does the talking on the bus.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-
-from structlog.typing import FilteringBoundLogger
+from typing import TYPE_CHECKING
 
 from mhrc.core.protocol import EPISODE_OVER, ActionRequest, AttachRequest, RejectCode, Rejection
+
+if TYPE_CHECKING:
+    from structlog.typing import FilteringBoundLogger
 
 
 class Roster:

@@ -1,42 +1,87 @@
-"""structlog set-up: human-readable lines on stderr, context (run, robot, tick) bound by callers."""
+"""structlog set-up: human-readable lines on stderr, context (run, robot, tick) bound by callers.
+
+structlog itself is imported when a line is first due: a logger from `get_logger` drops a line
+below the configured level without it, so a run that logs nothing (a clean `mhrc up` at the default
+level) never imports structlog, rich's tracebacks and pygments behind it (a tenth of a second of
+every command's start). While structlog has a configuration that is not this module's (a library
+user's, a test's `capture_logs`), every line goes to it, whatever the level here.
+"""
 
 from __future__ import annotations
 
-import logging
 import os
 import sys
 import time
-from typing import Any
-
-import structlog
-from structlog.typing import EventDict, WrappedLogger
+from typing import TYPE_CHECKING, Any
 
 from mhrc.core.printable import printable
 
+if TYPE_CHECKING:
+    from structlog.typing import EventDict, WrappedLogger
+
 LEVELS = ("debug", "info", "warning", "error")
 _level = "warning"  # the level configured last
+_pending: bool | None = (
+    None  # a set-up to install once structlog is imported: True asked by configure, False only if none
+)
+_installed: list[Any] | None = None  # the processors of mhrc's set-up, once installed
 
 
 def configure(level: str = "warning") -> None:
-    """Route structlog to stderr at `level` (debug, info, warning, error)."""
-    global _level
+    """Route structlog to stderr at `level` (debug, info, warning, error): now if structlog is
+    imported, else when a line is first due."""
+    global _level, _pending
     if level not in LEVELS:
         raise ValueError(f"log level must be one of {', '.join(LEVELS)}, not {level!r}")
     _level = level
+    if "structlog" in sys.modules:
+        _install(level)
+    else:
+        _pending = True
+
+
+def _install(level: str) -> None:
+    global _installed, _pending
+    import logging
+
+    import structlog
+
+    _pending = None
+    _installed = [
+        level_now,
+        structlog.contextvars.merge_contextvars,
+        structlog.processors.add_log_level,
+        structlog.processors.TimeStamper(fmt="%H:%M:%S", utc=False),
+        inert_values,  # before the traceback is formatted: its line breaks stay
+        structlog.processors.format_exc_info,
+        structlog.dev.ConsoleRenderer(colors=False),
+    ]
     structlog.configure(
-        processors=[
-            level_now,
-            structlog.contextvars.merge_contextvars,
-            structlog.processors.add_log_level,
-            structlog.processors.TimeStamper(fmt="%H:%M:%S", utc=False),
-            inert_values,  # before the traceback is formatted: its line breaks stay
-            structlog.processors.format_exc_info,
-            structlog.dev.ConsoleRenderer(colors=False),
-        ],
+        processors=_installed,
         wrapper_class=structlog.make_filtering_bound_logger(getattr(logging, level.upper())),
         logger_factory=structlog.PrintLoggerFactory(file=sys.stderr),
         cache_logger_on_first_use=False,
     )
+
+
+def _ready() -> Any:
+    """structlog, imported, with the set-up this module still owes it."""
+    import structlog
+
+    if _pending or (_pending is False and not structlog.is_configured()):
+        _install(_level)
+    return structlog
+
+
+def _ours() -> bool:
+    """Whether mhrc's set-up is the one in force, or will be (structlog not imported yet, or with no
+    configuration when mhrc's import-time set-up is still owed)."""
+    structlog = sys.modules.get("structlog")
+    if structlog is None or _pending:
+        return True
+    if not structlog.is_configured():
+        return _pending is False
+    return structlog.get_config()["processors"] is _installed
 
 
 _SEVERITY = {"debug": 10, "info": 20, "warning": 30, "warn": 30, "error": 40, "exception": 40, "critical": 50}
@@ -47,6 +92,8 @@ def level_now(logger: WrappedLogger, name: str, event: EventDict) -> EventDict:
     (a service's `log.bind(run=...)`) keeps the level and processors of its binding; `hush` must
     quiet it too, so the level is read here, at every call."""
     if _SEVERITY.get(name, 50) < _SEVERITY[_level]:
+        import structlog
+
         raise structlog.DropEvent
     return event
 
@@ -87,12 +134,70 @@ class Throttle:
         return True, self._held.pop(key, 0)
 
 
+class Logger:
+    """An mhrc module's logger: structlog's, once a line is due (see the module's docstring).
+    `bind` adds context (bound in structlog when the first line is due, with the set-up then)."""
+
+    __slots__ = ("_name", "_context", "_real")
+
+    def __init__(self, name: str, context: dict[str, Any] | None = None) -> None:
+        self._name = name
+        self._context = context or {}
+        self._real: Any = None
+
+    def bind(self, **context: Any) -> Logger:
+        return Logger(self._name, {**self._context, **context})
+
+    def _logger(self) -> Any:
+        structlog = _ready()
+        if self._real is None:
+            base = structlog.get_logger(self._name)
+            self._real = base.bind(**self._context) if self._context else base
+        return self._real
+
+    def _emit(self, method: str, event: Any, args: tuple[Any, ...], kw: dict[str, Any]) -> Any:
+        if _SEVERITY[method] < _SEVERITY[_level] and _ours():
+            return None
+        return getattr(self._logger(), method)(event, *args, **kw)
+
+    def debug(self, event: Any = None, *args: Any, **kw: Any) -> Any:
+        return self._emit("debug", event, args, kw)
+
+    def info(self, event: Any = None, *args: Any, **kw: Any) -> Any:
+        return self._emit("info", event, args, kw)
+
+    def warning(self, event: Any = None, *args: Any, **kw: Any) -> Any:
+        return self._emit("warning", event, args, kw)
+
+    warn = warning
+
+    def error(self, event: Any = None, *args: Any, **kw: Any) -> Any:
+        return self._emit("error", event, args, kw)
+
+    def exception(self, event: Any = None, *args: Any, **kw: Any) -> Any:
+        return self._emit("exception", event, args, kw)
+
+    def critical(self, event: Any = None, *args: Any, **kw: Any) -> Any:
+        return self._emit("critical", event, args, kw)
+
+    def __getattr__(self, name: str) -> Any:  # the rest of structlog's logger (new, unbind, ...), as structlog has it
+        if name.startswith("_"):  # a slot not set yet (a copy being made): not structlog's
+            raise AttributeError(name)
+        return getattr(self._logger(), name)
+
+
 def get_logger(name: str) -> Any:
-    """structlog's logger for an mhrc module. Importing this module gives structlog mhrc's set-up
-    when nobody configured it (stderr, the level of MHRC_LOG_LEVEL, else warning): a library
-    prints nothing unless asked, and the `mhrc` command's modules import only what they use."""
-    return structlog.get_logger(name)
+    """The logger of an mhrc module. When nobody configured structlog, mhrc's set-up is installed
+    with the first line due (stderr, the level of MHRC_LOG_LEVEL, else warning): a library prints
+    nothing unless asked, and the `mhrc` command's modules import only what they use."""
+    return Logger(name)
 
 
-if not structlog.is_configured():
-    configure(_env if (_env := os.environ.get("MHRC_LOG_LEVEL", "warning")) in LEVELS else "warning")
+if "structlog" not in sys.modules:
+    _level = _env if (_env := os.environ.get("MHRC_LOG_LEVEL", "warning")) in LEVELS else "warning"
+    _pending = False  # mhrc's set-up, if nobody has configured structlog by the first line due
+else:
+    import structlog as _structlog
+
+    if not _structlog.is_configured():
+        configure(_env if (_env := os.environ.get("MHRC_LOG_LEVEL", "warning")) in LEVELS else "warning")
