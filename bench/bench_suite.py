@@ -1,0 +1,81 @@
+"""The test suite's wall time, this tree beside a baseline tree (issue 46 item 5): the fast tier
+(`-m "not slow"`) by default, or the whole suite (`--marker ""`), each tree's pytest in turn in this
+interpreter's environment with PYTHONPATH set to the tree (its own tests, its own conftest, the
+pytest options of its own pyproject: two xdist workers), CI=true as `.ci/run` sets it.
+
+Per tree: the wall seconds, pytest's exit status and counts line, and its 25 slowest tests (pytest's
+own `--durations=25`). The static checks and the package install that `.ci/run` adds are the same
+for both trees and not timed here.
+
+    git worktree add --detach /tmp/mhrc-base <commit>
+    python bench/bench_suite.py --baseline /tmp/mhrc-base [--marker "not slow"] [--out bench/results/suite_fast.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from report import check_tree, commit_of, emit
+
+ROOT = Path(__file__).resolve().parents[1]
+DURATION = re.compile(r"^(?P<s>[0-9.]+)s (?P<phase>call|setup|teardown)\s+(?P<test>\S+)")
+COUNTS = re.compile(r"=+ (?P<line>.*\d+ (?:passed|failed).*?) in [0-9.]+s")
+
+
+def run_tree(root: Path, marker: str) -> dict[str, Any]:
+    check_tree(root)
+    argv = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider"] + (["-m", marker] if marker else [])
+    env = {**os.environ, "PYTHONPATH": str(root), "CI": "true"}
+    t0 = time.perf_counter()
+    done = subprocess.run(argv, cwd=root, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    lines = done.stdout.splitlines()
+    slowest = [
+        {"seconds": float(m["s"]), "phase": m["phase"], "test": m["test"]}
+        for line in lines
+        if (m := DURATION.match(line.strip()))
+    ]
+    counts = next((m["line"] for line in reversed(lines) if (m := COUNTS.search(line))), None)
+    return {
+        "commit": commit_of(root),
+        "wall_s": round(wall, 1),
+        "exit": done.returncode,
+        "counts": counts,
+        "slowest": slowest[:25],
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--baseline", type=Path, required=True, help="a checkout of the tree to compare with")
+    ap.add_argument("--marker", default="not slow", help='pytest -m expression ("" for the whole suite)')
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args()
+    base = run_tree(args.baseline.resolve(), args.marker)
+    this = run_tree(ROOT, args.marker)
+    emit(
+        {
+            "bench": "suite",
+            "machine": f"{platform.machine()}, CPython {platform.python_version()}, {os.cpu_count()} cores",
+            "tier": f'-m "{args.marker}"' if args.marker else "the whole suite",
+            "baseline": base,
+            "this": this,
+            "wall_ratio": round(this["wall_s"] / base["wall_s"], 3),
+            "note": "wall seconds of each tree's pytest (two xdist workers, CI=true), run one after the other on a "
+            "machine otherwise quiet; the static checks and install of .ci/run are not timed; slowest: pytest's "
+            "--durations=25 of that run",
+        },
+        args.out,
+    )
+
+
+if __name__ == "__main__":
+    main()
