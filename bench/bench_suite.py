@@ -27,7 +27,9 @@ from report import check_tree, commit_of, emit
 
 ROOT = Path(__file__).resolve().parents[1]
 DURATION = re.compile(r"^(?P<s>[0-9.]+)s (?P<phase>call|setup|teardown)\s+(?P<test>\S+)")
-COUNTS = re.compile(r"=+ (?P<line>.*\d+ (?:passed|failed).*?) in [0-9.]+s")
+COUNTS = re.compile(
+    r"(?P<line>\d+ (?:passed|failed)[^=]*?) in [0-9.]+s"
+)  # pytest's last line, with or without -q's rule
 
 
 def run_tree(root: Path, marker: str) -> dict[str, Any]:
