@@ -129,32 +129,6 @@ def test_a_line_below_the_level_leaves_structlog_unimported_and_a_line_due_print
     assert "[warning  ] a robot left" in lines[0] and "robot=bob" in lines[0] and "run=r1" in lines[0], lines
 
 
-EXIT = """
-import atexit, gc, tempfile, weakref
-from pathlib import Path
-gc.freeze = lambda: print("frozen", flush=True)  # what the command calls at exit, seen
-from mhrc.cli import main
-for _ in range(2):  # in one process twice (a test's): one handler
-    try:
-        main(["teams"], prog_name="mhrc")
-    except SystemExit:
-        pass
-kept = Path(tempfile.mkdtemp())
-class Held: pass
-held = Held()
-weakref.finalize(held, lambda: print("removed", kept.rmdir(), flush=True))  # the command's own exit work
-"""
-
-
-def test_the_command_skips_the_last_garbage_collection_after_its_own_exit_work() -> None:
-    """At exit the `mhrc` command freezes the collector (the interpreter's last collection, about
-    0.1 s of a one-tick `mhrc up`, is left to the OS), once, after its own atexit work has run."""
-    done = subprocess.run([sys.executable, "-c", EXIT], capture_output=True, text=True, timeout=120)
-    lines = done.stdout.strip().splitlines()
-    assert lines[-2:] == ["removed None", "frozen"], done.stdout[-2000:] + done.stderr[-2000:]
-    assert lines.count("frozen") == 1 and any(line.startswith("paper") for line in lines)
-
-
 def test_the_command_list_is_what_click_would_list_from_the_commands_themselves() -> None:
     import click
 

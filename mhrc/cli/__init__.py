@@ -17,7 +17,6 @@ or option is refused before the bus, the simulator or a model client is imported
 
 from __future__ import annotations
 
-import atexit
 import difflib
 import importlib
 
@@ -137,19 +136,6 @@ class LazyGroup(click.Group):
         return super().resolve_command(ctx, args)
 
 
-_skipping = False
-
-
-def _skip_the_last_collection() -> None:
-    """At exit, after the command's own atexit work: leave every object to the OS rather than to the
-    interpreter's last garbage collection (`gc.freeze`: the collection at shutdown skips frozen
-    objects). By then the command has closed its files, sessions and worlds itself; the collection
-    only walked the heap of a process about to end, about 0.1 s of a one-tick `mhrc up`."""
-    import gc
-
-    gc.freeze()
-
-
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="mhrc")
 def main() -> None:
@@ -161,10 +147,6 @@ def main() -> None:
     """
     # structlog is set up (MHRC_LOG_LEVEL, else warning) by mhrc.core.logs when a command's modules import it;
     # a command's --log-level overrides it. Parsing and refusing a command line imports neither.
-    global _skipping
-    if not _skipping:  # registered before the command's own handlers, so it runs after them
-        _skipping = True
-        atexit.register(_skip_the_last_collection)
 
 
 if __name__ == "__main__":
