@@ -3,8 +3,8 @@
 interpreter's environment with PYTHONPATH set to the tree (its own tests, its own conftest, the
 pytest options of its own pyproject: two xdist workers), CI=true as `.ci/run` sets it.
 
-Per tree: the wall seconds, pytest's exit status and counts line, and its 25 slowest tests (pytest's
-own `--durations=25`). The static checks and the package install that `.ci/run` adds are the same
+Per tree: the wall seconds, pytest's exit status and counts line, the tests that failed or erred (its
+-ra lines), and its 25 slowest tests (pytest's own `--durations=25`). The static checks and the package install that `.ci/run` adds are the same
 for both trees and not timed here.
 
     git worktree add --detach /tmp/mhrc-base <commit>
@@ -46,11 +46,13 @@ def run_tree(root: Path, marker: str) -> dict[str, Any]:
         if (m := DURATION.match(line.strip()))
     ]
     counts = next((m["line"] for line in reversed(lines) if (m := COUNTS.search(line))), None)
+    failed = [line.split(" ", 1)[1] for line in lines if line.startswith(("FAILED ", "ERROR "))]  # pytest's -ra lines
     return {
         "commit": commit_of(root),
         "wall_s": round(wall, 1),
         "exit": done.returncode,
         "counts": counts,
+        "failed": failed,
         "slowest": slowest[:25],
     }
 
