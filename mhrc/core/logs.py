@@ -4,7 +4,7 @@ structlog itself is imported when a line is first due: a logger from `get_logger
 below the configured level without it, so a run that logs nothing (a clean `mhrc up` at the default
 level) never imports structlog, rich's tracebacks and pygments behind it (a tenth of a second of
 every command's start). While structlog has a configuration that is not this module's (a library
-user's, a test's `capture_logs`), every line goes to it, whatever the level here.
+user's), every line goes to it, whatever the level here.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from mhrc.core.printable import printable
@@ -21,9 +22,8 @@ if TYPE_CHECKING:
 
 LEVELS = ("debug", "info", "warning", "error")
 _level = "warning"  # the level configured last
-_pending: bool | None = (
-    None  # a set-up to install once structlog is imported: True asked by configure, False only if none
-)
+# a set-up owed to structlog once imported: True asked by configure, False only if it has none, None owed nothing
+_pending: bool | None = None
 _installed: list[Any] | None = None  # the processors of mhrc's set-up, once installed
 
 
@@ -134,6 +134,16 @@ class Throttle:
         return True, self._held.pop(key, 0)
 
 
+def _at(method: str) -> Callable[..., Any]:
+    """A Logger's method for one level (structlog's of that name, once a line is due)."""
+
+    def log(self: Logger, event: Any = None, *args: Any, **kw: Any) -> Any:
+        return self._emit(method, event, args, kw)
+
+    log.__name__ = log.__qualname__ = method
+    return log
+
+
 class Logger:
     """An mhrc module's logger: structlog's, once a line is due (see the module's docstring).
     `bind` adds context (bound in structlog when the first line is due, with the set-up then)."""
@@ -160,25 +170,12 @@ class Logger:
             return None
         return getattr(self._logger(), method)(event, *args, **kw)
 
-    def debug(self, event: Any = None, *args: Any, **kw: Any) -> Any:
-        return self._emit("debug", event, args, kw)
-
-    def info(self, event: Any = None, *args: Any, **kw: Any) -> Any:
-        return self._emit("info", event, args, kw)
-
-    def warning(self, event: Any = None, *args: Any, **kw: Any) -> Any:
-        return self._emit("warning", event, args, kw)
-
-    warn = warning
-
-    def error(self, event: Any = None, *args: Any, **kw: Any) -> Any:
-        return self._emit("error", event, args, kw)
-
-    def exception(self, event: Any = None, *args: Any, **kw: Any) -> Any:
-        return self._emit("exception", event, args, kw)
-
-    def critical(self, event: Any = None, *args: Any, **kw: Any) -> Any:
-        return self._emit("critical", event, args, kw)
+    debug = _at("debug")
+    info = _at("info")
+    warning = warn = _at("warning")
+    error = _at("error")
+    exception = _at("exception")
+    critical = _at("critical")
 
     def __getattr__(self, name: str) -> Any:  # the rest of structlog's logger (new, unbind, ...), as structlog has it
         if name.startswith("_"):  # a slot not set yet (a copy being made): not structlog's
@@ -193,11 +190,8 @@ def get_logger(name: str) -> Any:
     return Logger(name)
 
 
+_from_env = _env if (_env := os.environ.get("MHRC_LOG_LEVEL", "warning")) in LEVELS else "warning"
 if "structlog" not in sys.modules:
-    _level = _env if (_env := os.environ.get("MHRC_LOG_LEVEL", "warning")) in LEVELS else "warning"
-    _pending = False  # mhrc's set-up, if nobody has configured structlog by the first line due
-else:
-    import structlog as _structlog
-
-    if not _structlog.is_configured():
-        configure(_env if (_env := os.environ.get("MHRC_LOG_LEVEL", "warning")) in LEVELS else "warning")
+    _level, _pending = _from_env, False  # mhrc's set-up, if nobody has configured structlog by the first line due
+elif not sys.modules["structlog"].is_configured():
+    configure(_from_env)
