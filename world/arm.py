@@ -24,7 +24,7 @@ from ompl import util as ou
 from mhrc.world.quiet import pybullet as p  # no C banner on stdout
 
 from .scene import StaticBody
-from .shadow import POOL, Shadow, ShadowPool
+from .shadow import POOL, Shadow, ShadowPool, statics_key
 
 ARM_JOINTS = tuple(range(7))
 FINGERS = (9, 10)
@@ -105,9 +105,10 @@ class ArmPlanner:
         None: a client of its own, disconnected when closed)."""
         self.rng = np.random.default_rng(seed)
         self.budget, self.wall_limit = budget, wall_limit
-        shadow = pool.take(statics) if pool is not None else None
+        key = statics_key(statics)
+        shadow = pool.take(key) if pool is not None else None
         if shadow is None:
-            shadow = Shadow.build(statics, _shadow_panda_urdf(), _setup)
+            shadow = Shadow.build(statics, key, _shadow_panda_urdf(), _setup)
         self._pool = pool
         self._shadow: Shadow | None = shadow
         self.cid = shadow.cid

@@ -25,7 +25,6 @@ import shutil
 import tempfile
 import threading
 import weakref
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,15 +62,17 @@ class Shadow:
     _remove_tmp: weakref.finalize | None = None  # type: ignore[type-arg]
 
     @classmethod
-    def build(cls, statics: list[StaticBody], panda_urdf: str, setup: Callable[[Shadow], None]) -> Shadow:
-        """A new client: the arm from `panda_urdf` (text), the fixed bodies; `setup(shadow)` sets
-        the collision filters (ArmPlanner's)."""
+    def build(
+        cls, statics: list[StaticBody], key: tuple[object, ...], panda_urdf: str, setup: Callable[[Shadow], None]
+    ) -> Shadow:
+        """A new client: the arm from `panda_urdf` (text), the fixed bodies (`key`: their
+        `statics_key`); `setup(shadow)` sets the collision filters (ArmPlanner's)."""
         cid = p.connect(p.DIRECT)
         tmp = tempfile.mkdtemp(prefix="mhrc-planner-")
         panda = str(Path(tmp) / "panda.urdf")  # every Panda of this client: the arm and the other arms
         Path(panda).write_text(panda_urdf, encoding="utf-8")
         arm = p.loadURDF(panda, useFixedBase=True, physicsClientId=cid)
-        shadow = cls(cid, panda, arm, load_statics(cid, statics), statics_key(statics))
+        shadow = cls(cid, panda, arm, load_statics(cid, statics), key)
         shadow._remove_tmp = weakref.finalize(shadow, shutil.rmtree, tmp, True)
         setup(shadow)
         return shadow
@@ -105,19 +106,19 @@ class Shadow:
 
 
 class ShadowPool:
-    """Idle shadow clients by their fixed bodies (`statics_key`), the oldest disconnected first."""
+    """Idle shadow clients, each with its fixed bodies' `statics_key`, the oldest disconnected first."""
 
     def __init__(self, idle: int = IDLE) -> None:
         self.idle = idle
         self._lock = threading.Lock()
-        self._waiting: OrderedDict[Shadow, tuple[object, ...]] = OrderedDict()
+        self._waiting: list[Shadow] = []  # oldest first
 
-    def take(self, statics: list[StaticBody]) -> Shadow | None:
-        key = statics_key(statics)
+    def take(self, key: tuple[object, ...]) -> Shadow | None:
+        """A waiting client whose fixed bodies have this `statics_key`, if any."""
         with self._lock:
-            for shadow, k in self._waiting.items():
-                if k == key:
-                    del self._waiting[shadow]
+            for shadow in self._waiting:
+                if shadow.key == key:
+                    self._waiting.remove(shadow)
                     return shadow
         return None
 
@@ -129,10 +130,9 @@ class ShadowPool:
             shadow.close()
             return
         with self._lock:
-            self._waiting[shadow] = shadow.key
-            extra = [s for s in list(self._waiting)[: max(0, len(self._waiting) - self.idle)]]
-            for s in extra:
-                del self._waiting[s]
+            self._waiting.append(shadow)
+            extra = self._waiting[: max(0, len(self._waiting) - self.idle)]
+            del self._waiting[: len(extra)]
         for s in extra:
             s.close()
 
@@ -142,7 +142,7 @@ class ShadowPool:
     def close(self) -> None:
         """Disconnect every waiting client."""
         with self._lock:
-            waiting, self._waiting = list(self._waiting), OrderedDict()
+            waiting, self._waiting = self._waiting, []
         for s in waiting:
             s.close()
 
