@@ -30,7 +30,7 @@ from typing import Any
 from report import emit
 
 CHILD = r"""
-import asyncio, itertools, json, os, sys, tempfile, time
+import asyncio, itertools, json, sys, tempfile, time
 from pathlib import Path
 
 import mhrc.core.bus
@@ -52,10 +52,6 @@ if shm:  # the configuration before: zenoh's default shared-memory transport
     mhrc.core.bus.make_config = with_shm
 
 
-def rss_mb() -> int:
-    return int(open(f"/proc/{os.getpid()}/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE") // 2**20
-
-
 async def main() -> None:
     grid = list(itertools.product(["pack_objects", "sort_solids", "make_sandwich"], ["kitchen", "bathroom", "bedroom"]))
     out = []
@@ -69,7 +65,7 @@ async def main() -> None:
             assert done.metrics.success, (task, scene, i)
             if trim != "none":
                 memory.release(above_mb=0 if trim == "every" else memory.TRIM_ABOVE_MB)
-            out.append(rss_mb())
+            out.append(int(memory.resident_mb()))
     print(json.dumps({"rss_mb": out, "wall_s": time.perf_counter() - wall, "cpu_s": time.process_time() - cpu}))
 
 

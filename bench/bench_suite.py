@@ -4,8 +4,8 @@ interpreter's environment with PYTHONPATH set to the tree (its own tests, its ow
 pytest options of its own pyproject: two xdist workers), CI=true as `.ci/run` sets it.
 
 Per tree: the wall seconds, pytest's exit status and counts line, the tests that failed or erred (its
--ra lines), and its 25 slowest tests (pytest's own `--durations=25`). The static checks and the package install that `.ci/run` adds are the same
-for both trees and not timed here.
+-ra lines), and its 25 slowest tests (pytest's own `--durations=25`). The static checks and the
+package install that `.ci/run` adds are the same for both trees and not timed here.
 
     git worktree add --detach /tmp/mhrc-base <commit>
     python bench/bench_suite.py --baseline /tmp/mhrc-base [--marker "not slow"] [--out bench/results/suite_fast.json]
@@ -27,9 +27,8 @@ from report import check_tree, commit_of, emit
 
 ROOT = Path(__file__).resolve().parents[1]
 DURATION = re.compile(r"^(?P<s>[0-9.]+)s (?P<phase>call|setup|teardown)\s+(?P<test>\S+)")
-COUNTS = re.compile(
-    r"(?P<line>\d+ (?:passed|failed)[^=]*?) in [0-9.]+s"
-)  # pytest's last line, with or without -q's rule
+# pytest's last line, with or without -q's rule
+COUNTS = re.compile(r"(?P<line>\d+ (?:passed|failed)[^=]*?) in [0-9.]+s")
 
 
 def run_tree(root: Path, marker: str) -> dict[str, Any]:
