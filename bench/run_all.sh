@@ -10,6 +10,7 @@ declare -A BENCH=(
   [eval_grid]=bench_grid.py [llm_grid]=bench_llm_grid.py [local_model]=bench_local_model.py [schedulers]=bench_schedulers.py
   [video]=bench_video.py [security]=bench_security.py [memory]=bench_memory.py [ray]=bench_ray.py
   [scenarios]=bench_scenarios.py [teams]=bench_teams.py [env]=bench_env.py [hostile]=bench_hostile.py [rerun]=bench_rerun.py [protocols]=bench_protocols.py [protocol_scaling]=bench_protocol_scaling.py
+  [http_client]=bench_http_client.py
 )
 # Against a baseline tree measured in the same run (issue 46's speed figures): set BASELINE to a
 # checkout of the commit to compare with, e.g. `git worktree add /tmp/mhrc-base 1cb6261`
@@ -20,7 +21,7 @@ declare -A BASELINED=(
 )
 declare -A EXTRA=([grid_speed]="--trials 10")  # the paper's 360-episode grid
 names=("$@")
-[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model schedulers video security memory ray scenarios teams env hostile rerun protocols protocol_scaling llm_call_profile skill_speed startup grid_speed llm_client eval_cpu)
+[ ${#names[@]} -gt 0 ] || names=(bus skills episodes llm_concurrency prompt_size eval eval_grid llm_grid local_model schedulers video security memory ray scenarios teams env hostile rerun protocols protocol_scaling http_client llm_call_profile skill_speed startup grid_speed llm_client eval_cpu)
 for name in "${names[@]}"; do
   if [ "$name" = llm_call_profile ]; then
     script=profile_llm_calls.py
