@@ -36,7 +36,9 @@ class Policy(Protocol):
 
     A policy may also have `world_event(event)`: its agent calls it with every world event
     (`mhrc.core.protocol.WorldEvent`: ticks, robots attached and detached, the episode's end), as
-    every participant hears them; a central planner hears a teammate detach there."""
+    every participant hears them; a central planner hears a teammate detach there. It may have
+    `aclose()` too: awaited once its episode is over, by whoever built it (a protocol's policies
+    close their model clients there; mhrc.run.coordinated.close_seats)."""
 
     name: str
 

@@ -8,6 +8,9 @@ import asyncio
 import json
 from pathlib import Path
 
+import pytest
+
+from mhrc.agents.llm import OpenAIChatClient, model_spec
 from mhrc.agents.protocols.centralized_llm import parse_round
 from mhrc.core.protocol import ActionResult, Coordination, EpisodeDone, Navigate, Thought, Wait
 from mhrc.core.protocol.thoughts import ReplyFailure
@@ -77,9 +80,26 @@ async def test_one_model_call_per_round_and_an_unreadable_command_is_feedback(tm
     assert told[(0, "bob")] == Coordination(job=None, by="planner")  # told to wait
 
 
-async def test_with_structured_one_json_reply_names_each_robots_command_from_its_own_schema(tmp_path: Path) -> None:
+def made_clients(monkeypatch: pytest.MonkeyPatch) -> list[OpenAIChatClient]:
+    """The model clients the protocols make from now on (model_spec.make_client, real ones), in order."""
+    made: list[OpenAIChatClient] = []
+    make = model_spec.make_client
+
+    def noted(*args: object, **kwargs: object) -> OpenAIChatClient:
+        made.append(make(*args, **kwargs))  # type: ignore[arg-type]
+        return made[-1]
+
+    monkeypatch.setattr(model_spec, "make_client", noted)
+    return made
+
+
+async def test_with_structured_one_json_reply_names_each_robots_command_from_its_own_schema(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """--structured: the request carries one schema with a command for each robot (each from that
-    robot's own skills and scene graph); a robot's command the schema would refuse is its problem."""
+    robot's own skills and scene graph); a robot's command the schema would refuse is its problem.
+    The planner's one model client is closed once the episode is over."""
+    made = made_clients(monkeypatch)
     replies = [
         json.dumps(
             {
@@ -107,6 +127,7 @@ async def test_with_structured_one_json_reply_names_each_robots_command_from_its
     assert "could not be read" in second and "fly" in second
     thoughts = [r.msg for r in read_records(trace) if isinstance(r.msg, Thought) and r.msg.reply is not None]
     assert thoughts and all(t.schema_hash for t in thoughts)
+    assert len(made) == 1 and made[0].closed
 
 
 async def test_a_planner_whose_model_does_not_answer_has_every_robot_wait_and_say_why(tmp_path: Path) -> None:

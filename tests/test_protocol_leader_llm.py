@@ -9,6 +9,9 @@ import asyncio
 import json
 from pathlib import Path
 
+import pytest
+from test_protocol_centralized_llm import made_clients
+
 from mhrc.agents.protocols import PROTOCOLS, leader_talk
 from mhrc.agents.protocols.leader_llm import Stages, read
 from mhrc.core.protocol import ActionResult, Communicate
@@ -110,8 +113,12 @@ async def test_an_election_allocation_and_reports_in_messages_solve_the_episode(
     assert "the targets are phone, book, soap" not in david[3] and "Targets: phone, book, soap" in david[4]
 
 
-async def test_with_structured_each_robot_answers_one_json_decision(tmp_path: Path) -> None:
-    """--structured: each request carries the robot's decision schema and a JSON reply is its command."""
+async def test_with_structured_each_robot_answers_one_json_decision(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """--structured: each request carries the robot's decision schema and a JSON reply is its command.
+    Each robot's model client is closed once the episode is over."""
+    made = made_clients(monkeypatch)
     bid = {"skill": "communicate", "content": A_DESC, "to": "david"}
     script = {"alice": [json.dumps({"analysis": "I bid to the convener.", "command": bid})]}
     server = ScriptedModelServer(script, when_done=json.dumps({"analysis": "", "command": {"skill": "wait"}}))
@@ -139,3 +146,4 @@ async def test_with_structured_each_robot_answers_one_json_decision(tmp_path: Pa
     )
     sent = [r.msg.action for r in read_records(trace) if isinstance(r.msg, ActionResult) and r.msg.robot == "alice"]
     assert sent == [Communicate(to="david", content=A_DESC)]
+    assert len(made) == 3 and all(c.closed for c in made)

@@ -136,6 +136,11 @@ class OpenAIChatClient:
         evaluation's earlier episode): a server that answered before and stalls now is slow, not down."""
         return self.responses > 0 or self.base_url in _ANSWERED
 
+    @property
+    def closed(self) -> bool:
+        """Whether `aclose` was called (its connections are closed)."""
+        return self._http.is_closed
+
     async def aclose(self) -> None:
         await self._http.aclose()
 

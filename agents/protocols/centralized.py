@@ -81,6 +81,9 @@ class CentralPlanner:
     def __post_init__(self) -> None:
         self.hands = {r: Hand(r) for r in self.robots}
 
+    async def aclose(self) -> None:
+        """The episode is over. The heuristic planner holds nothing to close."""
+
     # ---------------------------------------------------------------- the seats' side
     def detached(self, robot: str) -> None:
         """The world let `robot` go (its agent died, its token was lost): the round of the tick under
@@ -384,3 +387,7 @@ class Seat:
 
     def record(self, result: ActionResult) -> None:
         self.planner.record(self.robot, result)
+
+    async def aclose(self) -> None:
+        """The episode is over: the planner lets go of what it holds (every seat says so; once is enough)."""
+        await self.planner.aclose()

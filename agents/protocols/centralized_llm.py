@@ -121,6 +121,13 @@ class LLMCentralPlanner(CentralPlanner):
     _schema_hash: str | None = None  # the last call's schema, with --structured
     _failed: str | None = None  # why the last call gave no reply (the model did not answer)
 
+    async def aclose(self) -> None:
+        """The episode is over: the model client is closed (its connections with it), once for all the seats."""
+        client, self.client = self.client, None
+        close = getattr(client, "aclose", None)  # an LLMClient need not hold anything to close
+        if close is not None:
+            await close()
+
     async def plan(self, asking: tuple[str, ...]) -> dict[str, Action]:
         tick = max(self.knowledge.obs[r].tick for r in asking)
         if self.schedule == "sequential" and tick in self._cached:

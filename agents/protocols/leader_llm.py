@@ -272,6 +272,12 @@ class LLMLeaderPolicy:
         self.stages = Stages(self.robot, self.team)
         self.name = f"leader-llm:{self.client.model}"
 
+    async def aclose(self) -> None:
+        """The episode is over: this robot's model client is closed, its connections with it."""
+        close = getattr(self.client, "aclose", None)  # an LLMClient need not hold anything to close
+        if close is not None:
+            await close()
+
     def prompt(self, obs: Observation) -> list[dict[str, str]]:
         """The chat of this step: the system text (who it is, the loop, the shapes), and its stage,
         what the team said, its status, scene graph, feedback and messages."""

@@ -58,6 +58,15 @@ def seat(
     )
 
 
+async def close_seats(seats: Mapping[str, Policy]) -> None:
+    """Await each seated policy's `aclose`, where it has one (the protocols' LLM forms close their
+    model clients), once the episode is over."""
+    for policy in seats.values():
+        close = getattr(policy, "aclose", None)
+        if close is not None:
+            await close()
+
+
 async def attach_seated(
     cfg: EpisodeConfig,
     robots: tuple[str, ...],
@@ -84,21 +93,24 @@ async def attach_seated(
     own = cfg.robot_specs()
     async with local_models({r: own[r] for r in robots}, cfg.llm_seed) as specs:
         seats = seat(cfg, robots, specs)
-        ends = await asyncio.gather(
-            *(
-                run_agent(
-                    r,
-                    run,
-                    connect,
-                    llm=specs[r],
-                    base_url=cfg.base_url,
-                    client_options=cfg.client_options(own[r]),
-                    attach_timeout=attach_timeout,
-                    security=security.get(r),
-                    policy=seats.get(r),
-                    **cfg.policy_options(own[r]),
+        try:
+            ends = await asyncio.gather(
+                *(
+                    run_agent(
+                        r,
+                        run,
+                        connect,
+                        llm=specs[r],
+                        base_url=cfg.base_url,
+                        client_options=cfg.client_options(own[r]),
+                        attach_timeout=attach_timeout,
+                        security=security.get(r),
+                        policy=seats.get(r),
+                        **cfg.policy_options(own[r]),
+                    )
+                    for r in robots
                 )
-                for r in robots
             )
-        )
+        finally:
+            await close_seats(seats)
     return ends[0]

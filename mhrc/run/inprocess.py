@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 from mhrc.agents.llm import LLMFatalError
 from mhrc.run.attach import local_models, run_agent
 from mhrc.run.config import EpisodeConfig
-from mhrc.run.coordinated import seat
+from mhrc.run.coordinated import close_seats, seat
 from mhrc.run.serve import EventHook, serve_world
 
 log = get_logger("mhrc.run.inprocess")
@@ -153,6 +153,7 @@ async def _run_in_process(
             world.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await world
+        await close_seats(seats)  # the agents are over: the protocol's model clients close
     return done
 
 
