@@ -8,8 +8,12 @@ beyond loopback, and no assertion depends on how long anything took.
 from __future__ import annotations
 
 import asyncio
+import json
+import re
 import socket
+import ssl
 from collections.abc import Callable, Iterator, MutableMapping
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -109,6 +113,52 @@ async def test_a_server_that_is_not_there_is_retried_then_reported() -> None:
         with capture_logs() as logs, pytest.raises(LLMError, match="failed after 3 attempts: ConnectError"):
             await client.complete(HI)
     assert len(_delays(logs)) == 2 and client.requests == 3
+
+
+async def test_a_model_server_behind_tls_answers_over_a_trusted_context_and_an_untrusted_one_is_refused(
+    tmp_path: Path,
+) -> None:
+    """HTTPS as a hosted API serves it, from a real TLS server on 127.0.0.1 whose certificate a
+    CA of the test's signs: a client trusting that CA gets its reply over the aiohttp transport;
+    the default client, which trusts the public CAs only, is refused, the certificate named."""
+    from mhrc.agents.llm.transport import AiohttpTransport
+    from mhrc.core.certs import make_ca, make_server_cert, pem_cert, pem_key
+
+    ca, ca_key = make_ca("tls-test", days=1)
+    cert, key = make_server_cert(ca, ca_key, days=1)
+    (tmp_path / "ca.pem").write_bytes(pem_cert(ca))
+    (tmp_path / "server.pem").write_bytes(pem_cert(cert))
+    (tmp_path / "server.key").write_bytes(pem_key(key))
+    served = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    served.load_cert_chain(tmp_path / "server.pem", tmp_path / "server.key")
+    reply = json.dumps(
+        {"choices": [{"message": {"content": "wait()"}, "finish_reason": "stop"}], "usage": {"prompt_tokens": 9}}
+    ).encode()
+    bodies: list[bytes] = []
+
+    async def answer(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        head = await reader.readuntil(b"\r\n\r\n")
+        length = int(re.search(rb"(?i)content-length: *(\d+)", head)[1])  # type: ignore[index]
+        bodies.append(await reader.readexactly(length))
+        writer.write(b"HTTP/1.1 200 OK\r\ncontent-type: application/json\r\nconnection: close\r\n")
+        writer.write(b"content-length: %d\r\n\r\n" % len(reply) + reply)
+        await writer.drain()
+        writer.close()
+
+    server = await asyncio.start_server(answer, "127.0.0.1", 0, ssl=served)
+    url = f"https://127.0.0.1:{server.sockets[0].getsockname()[1]}/v1"
+    try:
+        trusting = ssl.create_default_context(cafile=tmp_path / "ca.pem")
+        async with OpenAIChatClient("m", url, stream=False, transport=AiohttpTransport(trusting)) as client:
+            got = await client.complete(HI)
+        assert got.text == "wait()" and json.loads(bodies[0])["messages"] == HI
+        async with OpenAIChatClient("m", url, stream=False, retries=0) as client:
+            with pytest.raises(LLMError, match="ConnectError: .*certificate verify failed"):
+                await client.complete(HI)
+        assert len(bodies) == 1  # the refused client sent nothing
+    finally:
+        server.close()
+        await server.wait_closed()
 
 
 @pytest.mark.parametrize(

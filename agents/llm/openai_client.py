@@ -1,4 +1,5 @@
-"""An OpenAI-compatible chat-completions client over httpx: streamed, timed, retried, bounded.
+"""An OpenAI-compatible chat-completions client over httpx (on aiohttp's connections, transport.py):
+streamed, timed, retried, bounded.
 
 Every call is bounded: `max_tokens` (default 1024) and, where given, `seed` go in every request.
 Replies are streamed (`"stream": true`, usage asked for in the stream) unless `stream=False`, and
@@ -120,7 +121,13 @@ class OpenAIChatClient:
         self.seed = seed
         self.extra_body = dict(extra_body or {})
         headers = {"Authorization": f"Bearer {api_key}"} if api_key else {}
-        # the deadlines of a call are this client's own (asyncio), not httpx's per-read timeout
+        # the deadlines of a call are this client's own (asyncio), not httpx's per-read timeout. The
+        # requests go over aiohttp's connections (transport.py: a quarter to a half of httpx's own
+        # transport's CPU); proxies named by the environment are httpx's, over its own transports.
+        if transport is None:
+            from .transport import AiohttpTransport
+
+            transport = AiohttpTransport(_tls())
         self._http = httpx.AsyncClient(
             timeout=httpx.Timeout(None, connect=timeout), headers=headers, transport=transport, verify=_tls()
         )
