@@ -1,6 +1,8 @@
-"""Where a model call's CPU goes on the client's side (issue 46 item 3): our OpenAIChatClient, the
-same HTTP exchange through httpx alone, through httpx over an aiohttp transport, and through aiohttp
-alone, each in a fresh interpreter, against one local server in a process of its own.
+"""Where a model call's CPU goes on the client's side (issue 46 item 3): our OpenAIChatClient (as
+this tree has it: httpx over aiohttp's connections, agents/llm/transport.py), the same HTTP exchange
+through httpx alone with its own transport (the client's before), through httpx over a bare aiohttp
+transport, and through aiohttp alone, each in a fresh interpreter, against one local server in a
+process of its own.
 
 The server (starlette on uvicorn, 127.0.0.1) answers every POST of /v1/chat/completions with a
 streamed reply of CHUNKS `data:` events (one token each, as llama.cpp and hosted APIs stream), the
@@ -8,8 +10,7 @@ usage and [DONE]. Each client process sends `--calls` requests through one clien
 each C of `--concurrency` (1: an episode's robot, whose client has one call in flight; 36: one client
 shared by many calls), with the bench_llm_grid's prompt size, after `--warmup` calls it does not count,
 and prints its own CPU (process_time) per call; the modes take turns round by round. Only the
-client's CPU is counted, never the server's. (aiohttp is no dependency of mhrc: the test extra
-brings it, with ray[default].)
+client's CPU is counted, never the server's.
 
     python bench/bench_http_client.py [--calls 1000] [--chunks 1,30] [--concurrency 1,36] [--rounds 2]
                                       [--out bench/results/http_client.json]
@@ -213,7 +214,7 @@ def main() -> None:
                 "case": name[case],
                 **{f"{m}_ms": v for m, v in means.items()},
                 "httpx_over_aiohttp_ratio": round(means["httpx_over_aiohttp"] / means["httpx"], 3),
-                "ours_besides_httpx_ms": round(means["ours"] - means["httpx"], 3),
+                "ours_over_httpx_ratio": round(means["ours"] / means["httpx"], 3),
             }
         )
     first = summary[len(chunk_counts) - 1]  # the most chunks, the fewest at once

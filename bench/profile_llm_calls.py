@@ -49,8 +49,8 @@ BUCKETS: list[tuple[str, Rule]] = [
     ("imports", _any("_find_and_load")),
     ("prompt rendering", _any("LLMPolicy.prepare", "LLMPolicy.render", "agents/prompt")),
     (
-        "model client (httpx, httpcore, h11, anyio, the LLM client)",
-        _any("httpx", "httpcore", "h11", "anyio", "agents/llm/"),
+        "model client (httpx, aiohttp, httpcore, h11, anyio, the LLM client)",
+        _any("httpx", "aiohttp", "httpcore", "h11", "anyio", "agents/llm/"),
     ),
     ("the trace (recorder)", _any("recorder", "core/records.py")),
     ("bus, Python side (put, get, decode)", _any("mhrc/core/bus.py")),
