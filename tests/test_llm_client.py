@@ -115,6 +115,28 @@ async def test_a_server_that_is_not_there_is_retried_then_reported() -> None:
     assert len(_delays(logs)) == 2 and client.requests == 3
 
 
+REPLY = json.dumps(
+    {"choices": [{"message": {"content": "wait()"}, "finish_reason": "stop"}], "usage": {"prompt_tokens": 9}}
+).encode()
+
+
+async def _one_reply_each(tls: ssl.SSLContext | None = None) -> tuple[asyncio.Server, list[tuple[bytes, bytes]]]:
+    """A real server on 127.0.0.1 (over TLS with `tls`) that answers every request with one whole
+    completion and closes; the list gets each request's head and body as they come."""
+    seen: list[tuple[bytes, bytes]] = []
+
+    async def answer(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        head = await reader.readuntil(b"\r\n\r\n")
+        length = int(re.search(rb"(?i)content-length: *(\d+)", head)[1])  # type: ignore[index]
+        seen.append((head, await reader.readexactly(length)))
+        writer.write(b"HTTP/1.1 200 OK\r\ncontent-type: application/json\r\nconnection: close\r\n")
+        writer.write(b"content-length: %d\r\n\r\n" % len(REPLY) + REPLY)
+        await writer.drain()
+        writer.close()
+
+    return await asyncio.start_server(answer, "127.0.0.1", 0, ssl=tls), seen
+
+
 async def test_a_model_server_behind_tls_answers_over_a_trusted_context_and_an_untrusted_one_is_refused(
     tmp_path: Path,
 ) -> None:
@@ -131,34 +153,40 @@ async def test_a_model_server_behind_tls_answers_over_a_trusted_context_and_an_u
     (tmp_path / "server.key").write_bytes(pem_key(key))
     served = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
     served.load_cert_chain(tmp_path / "server.pem", tmp_path / "server.key")
-    reply = json.dumps(
-        {"choices": [{"message": {"content": "wait()"}, "finish_reason": "stop"}], "usage": {"prompt_tokens": 9}}
-    ).encode()
-    bodies: list[bytes] = []
-
-    async def answer(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        head = await reader.readuntil(b"\r\n\r\n")
-        length = int(re.search(rb"(?i)content-length: *(\d+)", head)[1])  # type: ignore[index]
-        bodies.append(await reader.readexactly(length))
-        writer.write(b"HTTP/1.1 200 OK\r\ncontent-type: application/json\r\nconnection: close\r\n")
-        writer.write(b"content-length: %d\r\n\r\n" % len(reply) + reply)
-        await writer.drain()
-        writer.close()
-
-    server = await asyncio.start_server(answer, "127.0.0.1", 0, ssl=served)
+    server, seen = await _one_reply_each(served)
     url = f"https://127.0.0.1:{server.sockets[0].getsockname()[1]}/v1"
     try:
         trusting = ssl.create_default_context(cafile=tmp_path / "ca.pem")
         async with OpenAIChatClient("m", url, stream=False, transport=AiohttpTransport(trusting)) as client:
             got = await client.complete(HI)
-        assert got.text == "wait()" and json.loads(bodies[0])["messages"] == HI
+        assert got.text == "wait()" and json.loads(seen[0][1])["messages"] == HI
         async with OpenAIChatClient("m", url, stream=False, retries=0) as client:
             with pytest.raises(LLMError, match="ConnectError: .*certificate verify failed"):
                 await client.complete(HI)
-        assert len(bodies) == 1  # the refused client sent nothing
+        assert len(seen) == 1  # the refused client sent nothing
     finally:
         server.close()
         await server.wait_closed()
+
+
+async def test_a_proxy_the_environment_names_carries_the_calls(monkeypatch: pytest.MonkeyPatch) -> None:
+    """HTTP_PROXY names a proxy (here a real one on 127.0.0.1 that answers itself): the call goes
+    to it, in a proxy's absolute form, and never to the model's own address (where nothing listens)."""
+    proxy, seen = await _one_reply_each()
+    for var in ("NO_PROXY", "no_proxy", "ALL_PROXY", "all_proxy", "HTTPS_PROXY", "https_proxy"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setenv("HTTP_PROXY", f"http://127.0.0.1:{proxy.sockets[0].getsockname()[1]}")
+    with socket.socket() as s:  # the model's address: a free port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    try:
+        async with OpenAIChatClient("m", f"http://127.0.0.1:{port}/v1", stream=False, retries=0) as client:
+            got = await client.complete(HI)
+    finally:
+        proxy.close()
+        await proxy.wait_closed()
+    assert got.text == "wait()"
+    assert seen[0][0].startswith(f"POST http://127.0.0.1:{port}/v1/chat/completions HTTP/1.1".encode())
 
 
 @pytest.mark.parametrize(

@@ -123,8 +123,9 @@ class OpenAIChatClient:
         headers = {"Authorization": f"Bearer {api_key}"} if api_key else {}
         # the deadlines of a call are this client's own (asyncio), not httpx's per-read timeout. The
         # requests go over aiohttp's connections (transport.py: a quarter to a half of httpx's own
-        # transport's CPU); proxies named by the environment are httpx's, over its own transports.
-        if transport is None:
+        # transport's CPU), unless the environment names a proxy: httpx reads it only when it
+        # makes its own transports, so those carry the calls then, through the proxy, as before.
+        if transport is None and not _proxied():
             from .transport import AiohttpTransport
 
             transport = AiohttpTransport(_tls())
@@ -291,6 +292,14 @@ class OpenAIChatClient:
                 "run without --structured, or use a server that accepts response_format json_schema"
             )
         return LLMError(f"{url} answered HTTP {code} (not retried): {text}")
+
+
+def _proxied() -> bool:
+    """Whether the environment names an HTTP(S) proxy (HTTP_PROXY, HTTPS_PROXY, ALL_PROXY: what
+    httpx reads, through urllib's getproxies)."""
+    import urllib.request
+
+    return any(scheme in urllib.request.getproxies() for scheme in ("http", "https", "all"))
 
 
 @functools.cache

@@ -3,8 +3,8 @@
 `OpenAIChatClient` speaks httpx (its requests, responses, streams, errors and timeouts), and
 httpx's own transport (httpcore, h11, anyio) cost most of the client's CPU a call: 2-5 ms, where
 the same requests over aiohttp take a half to a quarter of that (bench/bench_http_client.py,
-issue 46). This transport keeps httpx above it (headers, decoding, proxies from the environment,
-which httpx mounts on transports of its own) and hands the connection's work to aiohttp:
+issue 46). This transport keeps httpx above it (its requests, headers, decoding and errors) and
+hands the connection's work to aiohttp:
 
 - the request goes as httpx built it (every header, its body), aiohttp adds none of its own;
 - the response's body is streamed as it arrives, undecoded (httpx decodes it);
@@ -13,7 +13,9 @@ which httpx mounts on transports of its own) and hands the connection's work to 
 - the connect timeout is the request's (httpx's ``timeout`` extension); there is no other;
 - aiohttp's failures are httpx's: ConnectError, ConnectTimeout, ReadError,
   RemoteProtocolError, or TransportError for the rest, as the client retries them;
-- TLS is the caller's context (the client's one context for every client).
+- TLS is the caller's context (the client's one context for every client);
+- no proxy: httpx reads the environment's proxies only for transports of its own, so a client
+  whose environment names one keeps httpx's (openai_client._proxied).
 
 The aiohttp session is opened on the first request (inside the event loop) and closed by
 `aclose`. A transport dropped without `aclose` lets its connections go quietly when it is
@@ -34,6 +36,7 @@ __all__ = ["AiohttpTransport"]
 
 POOL = 100  # connections at most, as httpx's default pool (a client's calls are bounded by its max_concurrency)
 KEEPALIVE = 5.0  # s an idle connection is kept, as httpx's default keepalive_expiry
+MAX_HEADER = 65536  # bytes of a status or header line (aiohttp's 8190 by default; h11 took more)
 
 
 class AiohttpTransport(httpx.AsyncBaseTransport):
@@ -55,7 +58,9 @@ class AiohttpTransport(httpx.AsyncBaseTransport):
                 cookie_jar=aiohttp.DummyCookieJar(),  # httpx keeps the cookies
                 skip_auto_headers=("User-Agent", "Accept", "Accept-Encoding", "Content-Type"),
                 timeout=aiohttp.ClientTimeout(total=None),
-                trust_env=False,  # httpx has read the environment's proxies (its own transports carry them)
+                trust_env=False,  # with a proxy in the environment, httpx's own transports carry the calls
+                max_line_size=MAX_HEADER,
+                max_field_size=MAX_HEADER,
             )
             weakref.finalize(self, _let_go, self._session)
         return self._session
