@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from waits import until
@@ -61,34 +60,3 @@ async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_p
     for goal in ("late", "late-rejected"):
         request, answer = (r.t for r in rows if getattr(r.msg, "goal_id", None) == goal)
         assert request == answer, f"the {goal} request takes the time of its answer"
-
-
-async def test_a_payload_is_copied_into_its_line_as_it_came_when_it_can_stand_there(tmp_path: Path) -> None:
-    """A message's payload, UTF-8 on one line as mhrc's encoder writes it, is copied into its
-    trace line byte for byte (a thought carries its whole prompt: not decoded and encoded again).
-    Whatever else json reads (a document over several lines, UTF-16, a byte order mark, a lone
-    surrogate) is written encoded again, on one line; every line holds the payload's values."""
-    run = "rec-raw"
-    k = Keys(run)
-    payloads = {
-        "as-it-came": '{"kind":"note","text":"café, 東京 — ok","v":1e-05,"big":1e16}'.encode(),
-        "over-lines": b'{\n  "kind": "note",\r\n  "n": [1, 2]\n}',
-        "utf-16": '{"kind":"note","text":"é"}'.encode("utf-16"),
-        "bom": b"\xef\xbb\xbf" + b'{"kind":"note"}',
-        "surrogate": b'{"kind":"note","text":"\xed\xa0\x80"}',
-    }
-    bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", free_port())])
-    recorder = Recorder(bus, run, tmp_path / "t.jsonl").start()
-    try:
-        for name, payload in payloads.items():
-            bus.put(f"{k.base}/{name}", payload)
-        await until(lambda: recorder.count >= len(payloads), "a line for each payload", 15, every=0.05)
-    finally:
-        recorder.close()
-        await bus.close()
-    data = (tmp_path / "t.jsonl").read_bytes()
-    lines = data.decode("utf-8").split("\n")[:-1]
-    assert len(lines) == len(payloads) and len(read_records(tmp_path / "t.jsonl")) == len(payloads)
-    got = {json.loads(line)["key"].rsplit("/", 1)[-1]: json.loads(line)["msg"] for line in lines}
-    assert got == {name: json.loads(payload) for name, payload in payloads.items()}
-    assert b',"msg":' + payloads["as-it-came"] + b"}\n" in data  # copied, UTF-8 and 1e-05 as they were

@@ -118,9 +118,7 @@ class Recorder:
         self.count = 0
         self._ended = threading.Event()  # an episode_done event is on disk
         self._junk: dict[str, _Junk] = {}  # key -> counts not yet written
-        self._held: dict[
-            str, tuple[float, str, Any, str | None]
-        ] = {}  # goal id -> (t, key, msg, raw) of a request awaiting its ack
+        self._held: dict[str, tuple[float, str, Any]] = {}  # goal id -> (t, key, msg) of a request awaiting its ack
         self._requested: dict[str, None] = {}  # goal ids whose request was seen (the newest MAX_REQUESTED, in order)
         self._early: dict[
             str, list[tuple[float, Sample, Any]]
@@ -139,14 +137,14 @@ class Recorder:
         self._bus.watch_liveliness(f"{self._keys.base}/alive/**", self._on_liveliness, on_thread=True)
         return self
 
-    def _write(self, key: str, kind: str, msg: Any, t: float | None = None, raw: str | None = None) -> None:
-        """One line. `raw`: `msg`'s payload as it came, when it can stand in the line as it is
-        (_parse): copied, not encoded again (a thought carries its whole prompt)."""
-        head = {"t": round((time.perf_counter() if t is None else t) - self._t0, 6), "key": key, "kind": kind}
-        if raw is None:
-            text = json.dumps(head | {"msg": msg}, separators=(",", ":")) + "\n"
-        else:
-            text = json.dumps(head, separators=(",", ":"))[:-1] + ',"msg":' + raw + "}\n"
+    def _write(self, key: str, kind: str, msg: Any, t: float | None = None) -> None:
+        line = {
+            "t": round((time.perf_counter() if t is None else t) - self._t0, 6),
+            "key": key,
+            "kind": kind,
+            "msg": msg,
+        }
+        text = json.dumps(line, separators=(",", ":")) + "\n"
         with self._lock:  # one whole line at a time, whichever thread
             if self._file is None or self._file.closed or self.error is not None:
                 return
@@ -195,9 +193,8 @@ class Recorder:
             return  # an agent's live status of a long model call: its thought records the call
         if sample.is_put and self._is_malformed(sample):
             return  # an agent's request or thought that is none: counted, never parsed whole nor copied
-        raw: str | None = None
         try:
-            msg, raw = _parse(sample.payload)
+            msg: Any = loads(sample.payload)
         except ProtocolError:
             msg = {"raw": _excerpt(sample.payload)}
         goal = msg.get("goal_id") if isinstance(msg, dict) else None
@@ -209,22 +206,21 @@ class Recorder:
                 and sample.key.endswith("/action/request")
             ):
                 early = self._early.pop(goal)
-                # seen after its answer: written before it, at the answer's time
-                self._record(sample, msg, early[0][0], raw)
+                self._record(sample, msg, early[0][0])  # seen after its answer, written before it, at the answer's time
                 for t, s, m in early:
                     self._record(s, m, t)
                 return
-            self._record(sample, msg, raw=raw)
+            self._record(sample, msg)
 
-    def _record(self, sample: Sample, msg: Any, t: float | None = None, raw: str | None = None) -> None:
+    def _record(self, sample: Sample, msg: Any, t: float | None = None) -> None:
         if sample.is_put and (
             self._is_junk(sample, msg)
             or self._thinks_ahead(sample)
             or self._too_early(sample, msg, t)
-            or self._held_or_counted(sample, msg, t, raw)
+            or self._held_or_counted(sample, msg, t)
         ):
             return
-        self._write(sample.key, "put" if sample.is_put else "delete", msg, t, raw)
+        self._write(sample.key, "put" if sample.is_put else "delete", msg, t)
         if isinstance(msg, dict) and msg.get("kind") == "episode_done":
             self._ended.set()
 
@@ -308,7 +304,7 @@ class Recorder:
             )
         return True
 
-    def _held_or_counted(self, sample: Sample, msg: Any, t: float | None = None, raw: str | None = None) -> bool:
+    def _held_or_counted(self, sample: Sample, msg: Any, t: float | None = None) -> bool:
         """Hold a well-formed request until its ack; at the ack, write the request then let the
         ack be written, or, for a rejection past REJECTIONS_IN_FULL in this interval, count both
         as junk. True when the sample is held or counted (not to be written now)."""
@@ -317,14 +313,14 @@ class Recorder:
         now = time.perf_counter() if t is None else t
         with self._lock:
             if sample.key.endswith("/action/request"):
-                self._held[msg["goal_id"]] = (now, sample.key, msg, raw)
+                self._held[msg["goal_id"]] = (now, sample.key, msg)
                 self._requested[msg["goal_id"]] = None
                 if len(self._requested) > MAX_REQUESTED:
                     del self._requested[next(iter(self._requested))]
                 if len(self._held) > MAX_HELD:  # acks that never come (a world gone): do not hold forever
                     oldest = next(iter(self._held))
-                    t, key, old, old_raw = self._held.pop(oldest)
-                    self._write(key, "put", old, t, old_raw)
+                    t, key, old = self._held.pop(oldest)
+                    self._write(key, "put", old, t)
                 return True
             if not sample.key.endswith("/action/ack"):
                 return False
@@ -341,7 +337,7 @@ class Recorder:
                     return True
                 self._rejected[sample.key] = (start, copied + 1)
             if held is not None:
-                self._write(held[1], "put", held[2], held[0], held[3])
+                self._write(held[1], "put", held[2], held[0])
             return False
 
     def _count_junk(
@@ -372,8 +368,8 @@ class Recorder:
         if until_done > 0:
             self._ended.wait(until_done)
         with self._lock:
-            for t, key, msg, raw in self._held.values():  # requests never acked (the episode ended first)
-                self._write(key, "put", msg, t, raw)
+            for t, key, msg in self._held.values():  # requests never acked (the episode ended first)
+                self._write(key, "put", msg, t)
             self._held.clear()
             for t, s, m in sorted((e for early in self._early.values() for e in early), key=lambda e: e[0]):
                 self._write(s.key, "put", m, t)  # answers whose request never came
@@ -386,21 +382,6 @@ class Recorder:
                     self._file.close()
                 except OSError as exc:
                     self._fail(exc)
-
-
-def _parse(payload: bytes) -> tuple[Any, str | None]:
-    """The payload's JSON (ProtocolError if it is none), and its text when that can stand in a
-    trace line as it is: UTF-8 as it came (json reads UTF-16 and -32 too, and lone surrogates),
-    with no line break (a document laid out over lines). Otherwise the line encodes it again; its
-    values are the same either way."""
-    if json.detect_encoding(payload) == "utf-8":
-        try:
-            text = payload.decode("utf-8")
-        except UnicodeDecodeError:
-            pass
-        else:
-            return loads(text), None if "\n" in text or "\r" in text else text
-    return loads(payload), None
 
 
 def _excerpt(payload: bytes) -> str:
