@@ -122,7 +122,7 @@ class OpenAIChatClient:
         self.extra_body = dict(extra_body or {})
         headers = {"Authorization": f"Bearer {api_key}"} if api_key else {}
         # the deadlines of a call are this client's own (asyncio), not httpx's per-read timeout. The
-        # requests go over aiohttp's connections (transport.py: a quarter to a half of httpx's own
+        # requests go over aiohttp's connections (transport.py: a quarter to two thirds of httpx's own
         # transport's CPU), unless the environment names a proxy: httpx reads it only when it
         # makes its own transports, so those carry the calls then, through the proxy, as before.
         if transport is None and not _proxied():

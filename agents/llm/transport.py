@@ -2,7 +2,7 @@
 
 `OpenAIChatClient` speaks httpx (its requests, responses, streams, errors and timeouts), and
 httpx's own transport (httpcore, h11, anyio) cost most of the client's CPU a call: 2-5 ms, where
-the same requests over aiohttp take a half to a quarter of that (bench/bench_http_client.py,
+the same requests over aiohttp take two thirds to a quarter of that (bench/bench_http_client.py,
 issue 46). This transport keeps httpx above it (its requests, headers, decoding and errors) and
 hands the connection's work to aiohttp:
 
