@@ -32,6 +32,8 @@ from typing import Any
 
 from report import commit_of, emit
 
+from mhrc.core.endpoints import free_port
+
 ROOT = Path(__file__).resolve().parents[1]
 
 SERVER = """
@@ -148,12 +150,6 @@ asyncio.run({"ours": ours, "httpx": httpx_alone, "httpx_over_aiohttp": httpx_ove
 MODES = ("ours", "httpx", "httpx_over_aiohttp", "aiohttp")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def _wait_listening(port: int, proc: subprocess.Popen[bytes]) -> None:
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
@@ -181,7 +177,7 @@ def main() -> None:
     cases = [(k, c) for c in at_once for k in chunk_counts]
     name = {case: f"{case[0]} chunk(s), {case[1]} at once" for case in cases}
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    port = _free_port()
+    port = free_port()
     server = subprocess.Popen([sys.executable, "-c", SERVER, str(port)], env=env)
     runs: dict[str, dict[str, list[float]]] = {name[case]: {m: [] for m in MODES} for case in cases}
     try:

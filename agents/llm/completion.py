@@ -69,6 +69,14 @@ class LLMClient(Protocol):
     ) -> Completion: ...
 
 
+async def close_client(client: LLMClient | None) -> None:
+    """Close `client` where it holds something to close (an HTTP client's connections: its
+    `aclose`); a scripted or replayed client holds nothing."""
+    close = getattr(client, "aclose", None)
+    if close is not None:
+        await close()
+
+
 THINK = re.compile(r"<think>(.*?)(?:</think>|\Z)", re.DOTALL | re.IGNORECASE)
 
 

@@ -25,7 +25,7 @@ from mhrc.core.protocol import Action, ActionResult, Coordination, Observation, 
 from mhrc.core.protocol.thoughts import ReplyFailure
 
 from .. import structured as json_mode
-from ..llm.completion import Completion, LLMClient, LLMError, LLMFatalError, prompt_text
+from ..llm.completion import Completion, LLMClient, LLMError, LLMFatalError, close_client, prompt_text
 from ..observation import robot_status, scene_graph, task_text
 from ..parse import ReplyFormatError, parse_command
 from ..policy import Decision, Policy
@@ -124,9 +124,7 @@ class LLMCentralPlanner(CentralPlanner):
     async def aclose(self) -> None:
         """The episode is over: the model client is closed (its connections with it), once for all the seats."""
         client, self.client = self.client, None
-        close = getattr(client, "aclose", None)  # an LLMClient need not hold anything to close
-        if close is not None:
-            await close()
+        await close_client(client)
 
     async def plan(self, asking: tuple[str, ...]) -> dict[str, Action]:
         tick = max(self.knowledge.obs[r].tick for r in asking)

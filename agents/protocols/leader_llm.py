@@ -25,7 +25,7 @@ from mhrc.core.protocol.thoughts import ReplyFailure
 
 from .. import structured as json_mode
 from ..heuristic_base import role_of
-from ..llm.completion import LLMClient, LLMError, LLMFatalError, prompt_text
+from ..llm.completion import LLMClient, LLMError, LLMFatalError, close_client, prompt_text
 from ..llm_policy import MEANINGS
 from ..observation import robot_status, scene_graph, task_text
 from ..parse import ReplyFormatError, parse_command, signature
@@ -274,9 +274,7 @@ class LLMLeaderPolicy:
 
     async def aclose(self) -> None:
         """The episode is over: this robot's model client is closed, its connections with it."""
-        close = getattr(self.client, "aclose", None)  # an LLMClient need not hold anything to close
-        if close is not None:
-            await close()
+        await close_client(self.client)
 
     def prompt(self, obs: Observation) -> list[dict[str, str]]:
         """The chat of this step: the system text (who it is, the loop, the shapes), and its stage,
