@@ -6,10 +6,10 @@ import asyncio
 from typing import Any
 
 from structlog.testing import capture_logs
-from waits import served, subscribed
+from waits import served, subscribed, until
 
 from mhrc.core.bus import Bus, Sample
-from mhrc.core.endpoints import endpoint, free_port
+from mhrc.core.endpoints import BusError, endpoint, free_port
 from mhrc.core.protocol import ActionAck, decode
 
 
@@ -233,3 +233,80 @@ async def test_samples_that_come_while_the_loop_is_busy_wake_it_once() -> None:
         loop.call_soon_threadsafe = wake  # type: ignore[method-assign]
         await client.close()
         await router.close()
+
+
+def established(port: int) -> int:
+    """TCP connections of this machine accepted on `port` and still open (the kernel's table)."""
+    count = 0
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        with open(table) as f:
+            for line in f.readlines()[1:]:
+                local, state = line.split()[1], line.split()[3]
+                if int(local.rsplit(":", 1)[1], 16) == port and state == "01":  # 01: ESTABLISHED
+                    count += 1
+    return count
+
+
+async def test_a_shared_session_is_a_participant_of_its_own_and_closes_with_its_last_user() -> None:
+    """`Bus.share`: a second participant on the world's session hears and is heard by the world
+    and by a client across a real link, answers and asks queries, and its own close withdraws
+    its token while the session lives on; the session (its listener) closes with the last Bus."""
+    port = free_port()
+    world = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", port)])
+    outside = await Bus.open(mode="client", connect=[endpoint("127.0.0.1", port)])
+    agent = world.share()
+    later = world.share()
+    try:
+        assert established(port) == 1  # the outside client's link: the shares opened none
+        heard: asyncio.Queue[Sample] = asyncio.Queue()
+        agent.subscribe("t/**", heard.put_nowait)
+        from_agent: asyncio.Queue[Sample] = asyncio.Queue()
+        outside.subscribe("t/from/agent", from_agent.put_nowait)
+        presence: asyncio.Queue[tuple[str, bool]] = asyncio.Queue()
+        world.watch_liveliness("t/alive/*", lambda s: presence.put_nowait((s.key, s.is_put)))
+
+        async def answer(key: str, params: dict[str, str], payload: bytes) -> ActionAck:
+            return ActionAck(goal_id=payload.decode(), robot=params["robot"], accepted=True)
+
+        world.serve("t/q", answer)
+        await subscribed(outside, "t/x")
+        world.put("t/x", b"from the world")
+        assert (await asyncio.wait_for(heard.get(), 5)).payload == b"from the world"
+        await subscribed(agent, "t/from/agent")
+        agent.put("t/from/agent", b"hello")
+        assert (await asyncio.wait_for(from_agent.get(), 5)).payload == b"hello"
+        replies = await agent.get("t/q?robot=bob", b"g1", timeout=5)
+        assert [decode(r, ActionAck) for r in replies] == [ActionAck(goal_id="g1", robot="bob", accepted=True)]
+
+        agent.declare_token("t/alive/agent")
+        assert await asyncio.wait_for(presence.get(), 5) == ("t/alive/agent", True)
+        assert await outside.alive("t/alive/*") == ["t/alive/agent"]
+        await agent.close()
+        assert await asyncio.wait_for(presence.get(), 5) == ("t/alive/agent", False)
+
+        await world.close()  # the world leaves first: `later` still holds the session
+        got: asyncio.Queue[Sample] = asyncio.Queue()
+        outside.subscribe("t/later2", got.put_nowait)
+        await subscribed(later, "t/later2")
+        later.put("t/later2", b"still here")
+        assert (await asyncio.wait_for(got.get(), 5)).payload == b"still here"
+        try:
+            world.share()
+            raise AssertionError("a closed bus shared its session")
+        except BusError:
+            pass
+        await later.close()  # the last user: the session, and its listener, close
+        await until(lambda: not _listens(port), "the shared session's listener closing")
+    finally:
+        for bus in (agent, later, outside, world):
+            await bus.close()
+
+
+def _listens(port: int) -> bool:
+    import socket
+
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+            return True
+    except OSError:
+        return False

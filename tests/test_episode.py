@@ -7,11 +7,12 @@ import subprocess
 import sys
 
 import pytest
+from test_bus import established
 
 from mhrc.agents.agent import AttachRejected
-from mhrc.core.bus import open_client
+from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import ActionResult, EpisodeDone, RobotAttached, decode_event
+from mhrc.core.protocol import ActionResult, EpisodeDone, EpisodeStarted, RobotAttached, decode_event
 from mhrc.core.records import messages, read_records
 from mhrc.run.attach import run_agent
 from mhrc.run.config import ConfigError, EpisodeConfig
@@ -22,9 +23,19 @@ from mhrc.run.serve import serve_world
 
 async def test_heuristic_team_solves_pack_objects_in_process(tmp_path) -> None:  # type: ignore[no-untyped-def]
     cfg = EpisodeConfig.build(seed=0, n_objects=4, trace=tmp_path / "trace.jsonl").resolved()
-    done = await up_in_process(cfg)
+    links: list[int] = []  # connections the world's listener held once the episode started
+
+    def count_links(bus: Bus, run: str) -> None:
+        def on_event(sample: Sample) -> None:
+            if not links and isinstance(decode_event(sample.payload), EpisodeStarted):
+                links.append(established(int(cfg.endpoint.rsplit(":", 1)[1])))
+
+        bus.subscribe(Keys(run).world_event, on_event)
+
+    done = await up_in_process(cfg, observe=count_links)
     m = done.metrics
     assert done.reason == "success" and m.success and m.placed == m.total == 4
+    assert links == [0]  # on the open bus the agents share the world's session (Bus.share): no socket between them
     assert 0 < m.temporal_steps < 50 and m.action_steps > 0
 
     trace = read_records(tmp_path / "trace.jsonl")

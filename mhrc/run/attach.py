@@ -38,6 +38,7 @@ async def run_agent(
     security: Credentials | None = None,
     on_error: Callable[[BaseException], None] | None = None,
     policy: Policy | None = None,
+    session_of: Bus | None = None,
     **policy_options: Unpack[PolicyOptions],
 ) -> EpisodeDone | None:
     """Attach an agent for `robot` to the world at `connect` and play until the episode ends:
@@ -45,7 +46,8 @@ async def run_agent(
     policy, or with `llm` (one robot's spec) an LLMPolicy on that model. A
     `gguf:PATH` spec gets a one-slot local server of its own for as long as the agent runs.
     `on_error` hears an error that ends the agent while its session is still open: before the
-    world sees the robot vanish."""
+    world sees the robot vanish. With `session_of` (a Bus of this process that logs in as this
+    agent would), the agent shares its session (Bus.share) instead of connecting to `connect`."""
 
     if security is not None:
         from mhrc.core.security import check_for
@@ -72,7 +74,11 @@ async def run_agent(
                 client = make_client(llm, base_url=base_url, **(client_options or {}))
                 stack.push_async_callback(client.aclose)
                 policy = LLMPolicy(robot, client, **policy_options)  # type: ignore[assignment]
-        bus = await open_client(connect, attach_timeout, security=security)
+        bus = (
+            session_of.share()
+            if session_of is not None
+            else await open_client(connect, attach_timeout, security=security)
+        )
         try:
             agent = RobotAgent(
                 bus,

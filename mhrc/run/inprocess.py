@@ -1,8 +1,10 @@
 """`mhrc up`: the world and every agent as asyncio tasks of this process, on one Zenoh bus.
 
-The world's session is a Zenoh router listening on `tcp/HOST:PORT`; every agent connects to it
-as a client, so any participant's messages reach every other one, and the recorder on the
-world's session sees them all."""
+The world's session is a Zenoh router listening on `tcp/HOST:PORT`. An agent that logs in as
+itself (the secured bus) connects to it as a client; on the open bus (and in an evaluation
+worker, whose participants share one login) every agent shares the world's session instead
+(Bus.share). Either way any participant's messages reach every other one, and the recorder on
+the world's session sees them all."""
 
 from __future__ import annotations
 
@@ -58,7 +60,13 @@ async def _run_in_process(
     services: list[Any] = []  # the WorldService, once built
     failures: list[BaseException] = []  # an agent's error that ends the run: a model that cannot answer at all
 
+    # the agents share the world's session when they would log in as it does (an evaluation
+    # worker's one login, or none: the open bus): no link, no socket between them (Bus.share)
+    share = login is not None or cfg.credentials is None
+    world_bus: list[Bus] = []
+
     def on_open(bus: Bus, run: str) -> None:
+        world_bus.append(bus)
         if observe is not None:
             observe(bus, run)
 
@@ -102,6 +110,7 @@ async def _run_in_process(
                 security=login or cfg.participant(r),
                 on_error=on_agent_error,
                 policy=seats.get(r),
+                session_of=world_bus[0] if share else None,
                 **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",
