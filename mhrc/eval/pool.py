@@ -36,7 +36,8 @@ from mhrc.eval.episode import Job, WorkerFailure, WorkerResult, run_job, watch_s
 
 log = get_logger("mhrc.eval")
 
-# to_thread calls one episode may have in flight: its world's sim, its four sessions opening or closing (a query holds none: core/bus.py)
+# to_thread calls one episode may have in flight: its world's sim, its sessions opening or closing (one
+# on the open bus, where the agents share the world's; four when each logs in) (a query holds none: core/bus.py)
 THREADS_PER_EPISODE = 6
 STARTS_AT_ONCE = 4  # episodes of one worker building their scene and attaching their agents at the same time
 LINE_LIMIT = 1 << 30  # a result line carries a whole trace
@@ -55,7 +56,7 @@ async def _serve(concurrency: int, results: IO[bytes]) -> None:
     loop.add_signal_handler(signal.SIGTERM, task.cancel)
     if concurrency > 1:
         # asyncio's default pool (cores + 4 threads) is too small for several episodes starting at
-        # once: each builds its scene and opens four sessions on threads
+        # once: each builds its scene and opens its sessions on threads
         loop.set_default_executor(
             ThreadPoolExecutor(max_workers=THREADS_PER_EPISODE * concurrency + 4, thread_name_prefix="mhrc-worker")
         )
