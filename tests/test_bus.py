@@ -21,13 +21,7 @@ async def test_pub_sub_query_and_liveliness_across_sessions() -> None:
     try:
         got: asyncio.Queue[Sample] = asyncio.Queue()
         other.subscribe("t/**", got.put_nowait)
-        presence: asyncio.Queue[tuple[str, bool]] = asyncio.Queue()
-        router.watch_liveliness("t/alive/*", lambda s: presence.put_nowait((s.key, s.is_put)))
-
-        async def answer(key: str, params: dict[str, str], payload: bytes) -> ActionAck:
-            return ActionAck(goal_id=payload.decode(), robot=params["robot"], accepted=True)
-
-        router.serve("t/q", answer)
+        presence = _answer_and_watch(router)
         await subscribed(client, "t/x")  # the declarations reached the client's session
         await served(client, "t/q")
 
@@ -47,6 +41,19 @@ async def test_pub_sub_query_and_liveliness_across_sessions() -> None:
         await client.close()
         await other.close()
         await router.close()
+
+
+def _answer_and_watch(bus: Bus) -> asyncio.Queue[tuple[str, bool]]:
+    """`bus` answers `t/q?robot=R` with an ack of the goal id sent; the queue returned gets
+    (key, appeared) for every token on `t/alive/*`."""
+    presence: asyncio.Queue[tuple[str, bool]] = asyncio.Queue()
+    bus.watch_liveliness("t/alive/*", lambda s: presence.put_nowait((s.key, s.is_put)))
+
+    async def answer(key: str, params: dict[str, str], payload: bytes) -> ActionAck:
+        return ActionAck(goal_id=payload.decode(), robot=params["robot"], accepted=True)
+
+    bus.serve("t/q", answer)
+    return presence
 
 
 async def test_a_failing_handler_does_not_stop_delivery() -> None:
@@ -262,14 +269,7 @@ async def test_a_shared_session_is_a_participant_of_its_own_and_closes_with_its_
         agent.subscribe("t/**", heard.put_nowait)
         from_agent: asyncio.Queue[Sample] = asyncio.Queue()
         outside.subscribe("t/from/agent", from_agent.put_nowait)
-        presence: asyncio.Queue[tuple[str, bool]] = asyncio.Queue()
-        world.watch_liveliness("t/alive/*", lambda s: presence.put_nowait((s.key, s.is_put)))
-
-        async def answer(key: str, params: dict[str, str], payload: bytes) -> ActionAck:
-            return ActionAck(goal_id=payload.decode(), robot=params["robot"], accepted=True)
-
-        world.serve("t/q", answer)
-        await subscribed(outside, "t/x")
+        presence = _answer_and_watch(world)
         world.put("t/x", b"from the world")
         assert (await asyncio.wait_for(heard.get(), 5)).payload == b"from the world"
         await subscribed(agent, "t/from/agent")
