@@ -25,6 +25,7 @@ import signal
 import sys
 import time
 from collections import deque
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import IO
 
@@ -257,18 +258,18 @@ class PoolExecutor:
             if w.proc.stdin is not None and not w.proc.stdin.is_closing():
                 w.proc.stdin.close()
             if w.jobs and w.proc.returncode is None:
-                w.proc.terminate()
+                _signal(w.proc.terminate)
         readers = [w.reader for w in self._pool if w.reader is not None]
         deadline = time.monotonic() + grace
         for w in list(self._pool):
             try:
                 await asyncio.wait_for(asyncio.shield(w.proc.wait()), timeout=max(0.0, deadline - time.monotonic()))
             except asyncio.TimeoutError:
-                w.proc.terminate()
+                _signal(w.proc.terminate)
                 with contextlib.suppress(asyncio.TimeoutError):
                     await asyncio.wait_for(asyncio.shield(w.proc.wait()), timeout=1.0)
                 if w.proc.returncode is None:
-                    w.proc.kill()
+                    _signal(w.proc.kill)
                     await w.proc.wait()
         await asyncio.gather(*readers, return_exceptions=True)  # every result line written is read
         out = []
@@ -277,6 +278,13 @@ class PoolExecutor:
             if res.error_code is not WorkerFailure.WORKER_DIED:
                 out.append(res)
         return out
+
+
+def _signal(send: Callable[[], None]) -> None:
+    """`send` a worker its signal; one that ended meanwhile (asyncio knows it before its return
+    code is set, and raises ProcessLookupError) needs none."""
+    with contextlib.suppress(ProcessLookupError):
+        send()
 
 
 if __name__ == "__main__":
