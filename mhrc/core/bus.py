@@ -171,6 +171,10 @@ class _Users:
         self.count = 1
         self.lock = threading.Lock()
 
+    def join(self) -> None:
+        with self.lock:
+            self.count += 1
+
     def leave(self) -> bool:
         """One user fewer; whether it was the last."""
         with self.lock:
@@ -270,8 +274,7 @@ class Bus:
         sees one login for them all."""
         if self._closed:
             raise BusError("this bus is closed: nothing can share its session")
-        with self._users.lock:
-            self._users.count += 1
+        self._users.join()
         bus = Bus(self._session, self._loop, self._users)
         bus.connected_to = self.connected_to
         return bus
