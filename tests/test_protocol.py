@@ -146,6 +146,28 @@ def test_size_and_nesting_are_bounded_before_python_recurses() -> None:
         loads(b"[1" + b"0" * 5000 + b"]")  # past Python's 4,300 digits
 
 
+def test_loads_takes_what_pythons_parser_takes_and_reads_it_alike() -> None:
+    """`loads` reads with pydantic's parser first; what that one refuses and Python's takes (an
+    unpaired surrogate's escape, nesting past 200 levels) is still read, as json.loads reads it."""
+    import json
+
+    from mhrc.core.protocol.base import loads
+
+    for doc in (
+        b'{"a":[1,2.5,-0.0,1e400,null,true],"b":"\\u00e9"}',
+        b'"\\ud800"',
+        b"[" * 300 + b"]" * 300,
+        b"NaN",
+        b'{"a":1,"a":2}',
+        '"caf\u00e9"'.encode(),
+    ):
+        got, want = loads(doc), json.loads(doc)
+        assert json.dumps(got) == json.dumps(want), doc[:40]
+    for bad in (b"", b"{", b"[1,]", b'"\x01"', b"\xff"):
+        with pytest.raises(ProtocolError, match="not JSON"):
+            loads(bad)
+
+
 def test_a_reason_never_quotes_a_long_input_whole() -> None:
     with pytest.raises(ProtocolError) as exc:
         decode(_req(action={"skill": "x" * 100_000}), ActionRequest)

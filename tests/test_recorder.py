@@ -60,3 +60,43 @@ async def test_an_answer_that_comes_before_its_request_is_written_after_it(tmp_p
     for goal in ("late", "late-rejected"):
         request, answer = (r.t for r in rows if getattr(r.msg, "goal_id", None) == goal)
         assert request == answer, f"the {goal} request takes the time of its answer"
+
+
+async def test_a_payload_is_copied_as_it_came_when_ascii_and_on_one_line_and_written_again_otherwise(
+    tmp_path: Path,
+) -> None:
+    """The recorder parses every payload (its checks read it) and copies an ASCII one on one line
+    as it came instead of encoding it again; a payload with a line end between its tokens, or
+    with characters beyond ASCII (U+2028 ends a line for str.splitlines), is written again by
+    json.dumps, escaped. Either way the file is ASCII, one line per message, and every `msg`
+    reads as the payload does."""
+    import json
+
+    run = "rec-copy"
+    k = Keys(run)
+    sent = {
+        "ours": ActionAck(goal_id="g", robot="alice", accepted=True).model_dump_json().encode(),
+        "spaced": b'{"kind": "x", "n": [1, 2.5, 1e-5]}',
+        "lines": b'{\n"kind": "x",\r\n"n": 1}',
+        "beyond": '{"kind":"x","text":"caf\u00e9 \u2028 done"}'.encode(),
+        "escaped": b'{"kind":"x","text":"\\u00e9 \\ud800"}',  # an unpaired surrogate: Python's parser takes it
+        "scalar": b"12",
+    }
+    bus = await Bus.open(mode="router", listen=[endpoint("127.0.0.1", free_port())])
+    recorder = Recorder(bus, run, tmp_path / "t.jsonl").start()
+    try:
+        for name, payload in sent.items():
+            bus.put(f"{k.base}/test/{name}", payload)
+        await until(lambda: recorder.count >= len(sent), "every line", 15, every=0.05)
+    finally:
+        recorder.close()
+        await bus.close()
+    raw = (tmp_path / "t.jsonl").read_bytes()
+    assert raw.isascii()
+    lines = raw.decode().splitlines()
+    assert len(lines) == len(sent)
+    got = {line["key"].rsplit("/", 1)[-1]: line for line in map(json.loads, lines)}
+    for name, payload in sent.items():
+        assert got[name]["msg"] == json.loads(payload), name
+    copied = {name for name, text in zip(got, lines) if text.endswith(',"msg":' + sent[name].decode("utf-8") + "}")}
+    assert copied == {"ours", "spaced", "escaped", "scalar"}, copied

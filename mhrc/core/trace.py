@@ -3,7 +3,8 @@
 It subscribes to `mhrc/<run>/**` and to the run's liveliness tokens, so it sees every request,
 ack, result, message, thought and world event, whichever process sent them. Each line is
 `{"t": seconds since recording started, "key": ..., "kind": "put"|"delete"|"alive"|"gone"|"junk",
-"msg": the decoded JSON payload}`; a payload that is not JSON is kept as `{"raw": its first EXCERPT
+"msg": the JSON payload}`: copied as it came when it is ASCII on one line (`_copyable`), else
+the parsed payload written again by json.dumps, escaped (every line is ASCII); a payload that is not JSON is kept as `{"raw": its first EXCERPT
 characters}`. Malformed action requests and thoughts (too long, too deep, out of bounds: docs/protocol.md,
 "Limits"; checked before they are parsed whole) and the world's rejections of them are not copied: a `junk` line per key and second holds their count,
 bytes, first reason and the first one's start (EXCERPT characters). So are well-formed requests the
@@ -118,10 +119,11 @@ class Recorder:
         self.count = 0
         self._ended = threading.Event()  # an episode_done event is on disk
         self._junk: dict[str, _Junk] = {}  # key -> counts not yet written
-        self._held: dict[str, tuple[float, str, Any]] = {}  # goal id -> (t, key, msg) of a request awaiting its ack
+        # goal id -> (t, key, msg, raw) of a request awaiting its ack
+        self._held: dict[str, tuple[float, str, Any, str | None]] = {}
         self._requested: dict[str, None] = {}  # goal ids whose request was seen (the newest MAX_REQUESTED, in order)
         self._early: dict[
-            str, list[tuple[float, Sample, Any]]
+            str, list[tuple[float, Sample, Any, str | None]]
         ] = {}  # goal id -> its ack or result, come before its request
         self._rejected: dict[str, tuple[float, int]] = {}  # ack key -> (interval start, rejections copied in it)
         self._asked: Counter[str] = Counter()  # robot -> its well-formed action requests seen
@@ -137,14 +139,11 @@ class Recorder:
         self._bus.watch_liveliness(f"{self._keys.base}/alive/**", self._on_liveliness, on_thread=True)
         return self
 
-    def _write(self, key: str, kind: str, msg: Any, t: float | None = None) -> None:
-        line = {
-            "t": round((time.perf_counter() if t is None else t) - self._t0, 6),
-            "key": key,
-            "kind": kind,
-            "msg": msg,
-        }
-        text = json.dumps(line, separators=(",", ":")) + "\n"
+    def _write(self, key: str, kind: str, msg: Any, t: float | None = None, raw: str | None = None) -> None:
+        """One line; `raw`: `msg` as the JSON text it came in, copied as it is (see `_copyable`)."""
+        stamp = round((time.perf_counter() if t is None else t) - self._t0, 6)
+        body = json.dumps(msg, separators=(",", ":")) if raw is None else raw
+        text = f'{{"t":{stamp!r},"key":{json.dumps(key)},"kind":"{kind}","msg":{body}}}\n'
         with self._lock:  # one whole line at a time, whichever thread
             if self._file is None or self._file.closed or self.error is not None:
                 return
@@ -154,7 +153,7 @@ class Recorder:
             except OSError as exc:
                 self._fail(exc)
                 return
-            self._last, self._good = self._good, self._good + len(text.encode("utf-8"))
+            self._last, self._good = self._good, self._good + len(text)  # ASCII: json.dumps escapes, `raw` is
             self.count += 1
 
     def _fail(self, exc: OSError) -> None:
@@ -193,8 +192,10 @@ class Recorder:
             return  # an agent's live status of a long model call: its thought records the call
         if sample.is_put and self._is_malformed(sample):
             return  # an agent's request or thought that is none: counted, never parsed whole nor copied
+        raw: str | None = None
         try:
             msg: Any = loads(sample.payload)
+            raw = _copyable(sample.payload)
         except ProtocolError:
             msg = {"raw": _excerpt(sample.payload)}
         goal = msg.get("goal_id") if isinstance(msg, dict) else None
@@ -206,21 +207,22 @@ class Recorder:
                 and sample.key.endswith("/action/request")
             ):
                 early = self._early.pop(goal)
-                self._record(sample, msg, early[0][0])  # seen after its answer, written before it, at the answer's time
-                for t, s, m in early:
-                    self._record(s, m, t)
+                # seen after its answer, written before it, at the answer's time
+                self._record(sample, msg, early[0][0], raw)
+                for t, s, m, r in early:
+                    self._record(s, m, t, r)
                 return
-            self._record(sample, msg)
+            self._record(sample, msg, None, raw)
 
-    def _record(self, sample: Sample, msg: Any, t: float | None = None) -> None:
+    def _record(self, sample: Sample, msg: Any, t: float | None = None, raw: str | None = None) -> None:
         if sample.is_put and (
             self._is_junk(sample, msg)
             or self._thinks_ahead(sample)
-            or self._too_early(sample, msg, t)
-            or self._held_or_counted(sample, msg, t)
+            or self._too_early(sample, msg, t, raw)
+            or self._held_or_counted(sample, msg, t, raw)
         ):
             return
-        self._write(sample.key, "put" if sample.is_put else "delete", msg, t)
+        self._write(sample.key, "put" if sample.is_put else "delete", msg, t, raw)
         if isinstance(msg, dict) and msg.get("kind") == "episode_done":
             self._ended.set()
 
@@ -248,7 +250,7 @@ class Recorder:
         self._thought[robot] += 1
         return False
 
-    def _too_early(self, sample: Sample, msg: Any, t: float | None) -> bool:
+    def _too_early(self, sample: Sample, msg: Any, t: float | None, raw: str | None = None) -> bool:
         """The world's ack or result of a request not seen yet, held until it comes: the world's
         answer reaches the recorder inside its put, and the world may handle the request and
         answer before the agent's link delivers the request to the recorder. True when the sample is held."""
@@ -259,10 +261,10 @@ class Recorder:
         goal = msg.get("goal_id")
         if not isinstance(goal, str) or goal in self._requested or goal in self._held:
             return False
-        self._early.setdefault(goal, []).append((time.perf_counter() if t is None else t, sample, msg))
+        self._early.setdefault(goal, []).append((time.perf_counter() if t is None else t, sample, msg, raw))
         if len(self._early) > MAX_HELD:  # answers to requests that never come: do not hold forever
-            for t_old, s, m in self._early.pop(next(iter(self._early))):
-                self._write(s.key, "put", m, t_old)
+            for t_old, s, m, r in self._early.pop(next(iter(self._early))):
+                self._write(s.key, "put", m, t_old, r)
         return True
 
     def _said_by(self, key: str) -> tuple[tuple[str, ...], str] | None:
@@ -304,7 +306,7 @@ class Recorder:
             )
         return True
 
-    def _held_or_counted(self, sample: Sample, msg: Any, t: float | None = None) -> bool:
+    def _held_or_counted(self, sample: Sample, msg: Any, t: float | None = None, raw: str | None = None) -> bool:
         """Hold a well-formed request until its ack; at the ack, write the request then let the
         ack be written, or, for a rejection past REJECTIONS_IN_FULL in this interval, count both
         as junk. True when the sample is held or counted (not to be written now)."""
@@ -313,14 +315,14 @@ class Recorder:
         now = time.perf_counter() if t is None else t
         with self._lock:
             if sample.key.endswith("/action/request"):
-                self._held[msg["goal_id"]] = (now, sample.key, msg)
+                self._held[msg["goal_id"]] = (now, sample.key, None if raw is not None else msg, raw)  # one copy
                 self._requested[msg["goal_id"]] = None
                 if len(self._requested) > MAX_REQUESTED:
                     del self._requested[next(iter(self._requested))]
                 if len(self._held) > MAX_HELD:  # acks that never come (a world gone): do not hold forever
                     oldest = next(iter(self._held))
-                    t, key, old = self._held.pop(oldest)
-                    self._write(key, "put", old, t)
+                    t, key, old, old_raw = self._held.pop(oldest)
+                    self._write(key, "put", old, t, old_raw)
                 return True
             if not sample.key.endswith("/action/ack"):
                 return False
@@ -332,12 +334,12 @@ class Recorder:
                 if copied >= REJECTIONS_IN_FULL:
                     reason, code = "rejected: " + str(msg.get("reason", "")), msg.get("code")
                     if held is not None:
-                        self._count_junk(held[1], reason, len(json.dumps(held[2])), now, code)
+                        self._count_junk(held[1], reason, len(held[3] or json.dumps(held[2])), now, code)
                     self._count_junk(sample.key, reason, len(sample.payload), now, code)
                     return True
                 self._rejected[sample.key] = (start, copied + 1)
             if held is not None:
-                self._write(held[1], "put", held[2], held[0])
+                self._write(held[1], "put", held[2], held[0], held[3])
             return False
 
     def _count_junk(
@@ -368,11 +370,11 @@ class Recorder:
         if until_done > 0:
             self._ended.wait(until_done)
         with self._lock:
-            for t, key, msg in self._held.values():  # requests never acked (the episode ended first)
-                self._write(key, "put", msg, t)
+            for t, key, msg, raw in self._held.values():  # requests never acked (the episode ended first)
+                self._write(key, "put", msg, t, raw)
             self._held.clear()
-            for t, s, m in sorted((e for early in self._early.values() for e in early), key=lambda e: e[0]):
-                self._write(s.key, "put", m, t)  # answers whose request never came
+            for t, s, m, r in sorted((e for early in self._early.values() for e in early), key=lambda e: e[0]):
+                self._write(s.key, "put", m, t, r)  # answers whose request never came
             self._early.clear()
             for key in list(self._junk):
                 self._flush_junk(key)
@@ -387,3 +389,13 @@ class Recorder:
 def _excerpt(payload: bytes) -> str:
     """The start of a payload recorded by excerpt (EXCERPT characters)."""
     return payload[: EXCERPT * 4].decode("utf-8", "replace")[:EXCERPT]
+
+
+def _copyable(payload: bytes) -> str | None:
+    """The payload as its line's `msg`, copied as it came, when that is safe: JSON already parsed
+    (the caller's), ASCII (so nothing in it ends a line for any reader: JSON's own whitespace
+    is the only control character it may hold unescaped, and it holds no line ends). None: the
+    recorder writes the parsed value again (json.dumps escapes what is not ASCII)."""
+    if not payload.isascii() or b"\n" in payload or b"\r" in payload:
+        return None
+    return payload.decode("ascii")
