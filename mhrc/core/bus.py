@@ -119,6 +119,9 @@ class _Inbox:
             if self._armed:
                 return
             self._armed = True
+        if asyncio._get_running_loop() is self._loop:  # put on the loop itself (a share's put delivers in place):
+            self._loop.call_soon(self._drain)  # the loop is awake, no need to write to its self-pipe
+            return
         with contextlib.suppress(RuntimeError):  # the loop closed while zenoh still delivers
             self._loop.call_soon_threadsafe(self._drain)
 
