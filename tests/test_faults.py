@@ -496,8 +496,12 @@ async def test_an_agent_frozen_and_resumed_attaches_again(schedule: str, tmp_pat
     from mhrc.core.protocol import RobotAttached, RobotDetached
     from mhrc.testing import world_on_loopback
 
+    # under lockstep Alice and Bob play on while David is frozen, and can finish the task without
+    # him: the episode must outlast his resumption, which a loaded machine slows (a CI run ended
+    # the episode 14 s after his detach, before he attached again; here it takes about 2 s)
+    delay = 0.8 if schedule == "lockstep" else 0.4
     async with world_on_loopback(
-        seed=0, n_objects=4, tick_delay=0.4, schedule=schedule, trace=tmp_path / "t.jsonl"
+        seed=0, n_objects=4, tick_delay=delay, schedule=schedule, trace=tmp_path / "t.jsonl"
     ) as world:
         events: list[Any] = []
         news = asyncio.Event()
