@@ -167,6 +167,17 @@ def _until_listening(listen: Sequence[str], timeout: float) -> None:
                 time.sleep(0.01)
 
 
+# Closed sessions, kept until the process exits. A zenoh Session is freed with the GIL held, and
+# freeing a router's waits (up to 10 s) for a task of zenoh's `net` runtime to end; if that
+# runtime's one worker is itself waiting for the GIL (delivering a liveliness subscriber's
+# history to a Python callback), the two wait on each other until zenoh gives up. A closed Bus
+# caught in a reference cycle is freed by Python's cyclic collector, on whichever thread
+# allocates at that moment: about one episode in fifty run one after another on a loop stalled
+# 10 to 40 s (gdb showed the collector in Session's drop and `net-1` waiting for the GIL). Kept
+# here, no session is freed while others run; a closed one holds about 16 kB.
+_CLOSED: list[zenoh.Session] = []
+
+
 class _Users:
     """How many Buses use one zenoh session: the last to close closes it (Bus.share)."""
 
@@ -266,6 +277,7 @@ class Bus:
         self._tokens.clear()
         if self._users.leave():
             self._session.close()
+            _CLOSED.append(self._session)
 
     def share(self) -> Bus:
         """Another participant on this one's session, as a client of the same world would be:
