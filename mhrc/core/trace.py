@@ -393,9 +393,10 @@ def _excerpt(payload: bytes) -> str:
 
 def _copyable(payload: bytes) -> str | None:
     """The payload as its line's `msg`, copied as it came, when that is safe: JSON already parsed
-    (the caller's), ASCII (so nothing in it ends a line for any reader: JSON's own whitespace
-    is the only control character it may hold unescaped, and it holds no line ends). None: the
-    recorder writes the parsed value again (json.dumps escapes what is not ASCII)."""
+    (the caller's), ASCII and without \\n or \\r, so nothing in it ends a line for any reader
+    (below 0x20, valid JSON holds only its whitespace unescaped: tab, \\n, \\r; DEL, which
+    json.dumps escapes, may stay as it came). None: the recorder writes the parsed value again
+    (json.dumps escapes what is not ASCII)."""
     if not payload.isascii() or b"\n" in payload or b"\r" in payload:
         return None
     return payload.decode("ascii")
