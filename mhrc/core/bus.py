@@ -178,6 +178,12 @@ def _until_listening(listen: Sequence[str], timeout: float) -> None:
 _CLOSED: list[zenoh.Session] = []
 
 
+def _close_session(session: zenoh.Session) -> None:
+    """Close `session` and keep it (_CLOSED); blocks: call it off the loop."""
+    session.close()
+    _CLOSED.append(session)
+
+
 class _Users:
     """How many Buses use one zenoh session: the last to close closes it (Bus.share)."""
 
@@ -247,7 +253,7 @@ class Bus:
             try:
                 await asyncio.to_thread(_until_listening, listen, LISTEN_WAIT)
             except BusError:
-                await asyncio.to_thread(session.close)
+                await asyncio.to_thread(_close_session, session)
                 raise
         bus = cls(session, asyncio.get_running_loop())
         bus.connected_to = tuple(connect)
@@ -276,8 +282,7 @@ class Bus:
         self._publishers.clear()
         self._tokens.clear()
         if self._users.leave():
-            self._session.close()
-            _CLOSED.append(self._session)
+            _close_session(self._session)
 
     def share(self) -> Bus:
         """Another participant on this one's session, as a client of the same world would be:

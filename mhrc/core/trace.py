@@ -119,8 +119,8 @@ class Recorder:
         self.count = 0
         self._ended = threading.Event()  # an episode_done event is on disk
         self._junk: dict[str, _Junk] = {}  # key -> counts not yet written
-        # goal id -> (t, key, msg, raw) of a request awaiting its ack
-        self._held: dict[str, tuple[float, str, Any, str | None]] = {}
+        # goal id -> (t, key, the request's JSON text) of a request awaiting its ack
+        self._held: dict[str, tuple[float, str, str]] = {}
         self._requested: dict[str, None] = {}  # goal ids whose request was seen (the newest MAX_REQUESTED, in order)
         self._early: dict[
             str, list[tuple[float, Sample, Any, str | None]]
@@ -140,9 +140,10 @@ class Recorder:
         return self
 
     def _write(self, key: str, kind: str, msg: Any, t: float | None = None, raw: str | None = None) -> None:
-        """One line; `raw`: `msg` as the JSON text it came in, copied as it is (see `_copyable`)."""
+        """One line; `raw`: its `msg` as JSON text already (a payload as it came, `_copyable`, or a
+        held request's), written as it is instead of encoding `msg`."""
         stamp = round((time.perf_counter() if t is None else t) - self._t0, 6)
-        body = json.dumps(msg, separators=(",", ":")) if raw is None else raw
+        body = _dumps(msg) if raw is None else raw
         text = f'{{"t":{stamp!r},"key":{json.dumps(key)},"kind":"{kind}","msg":{body}}}\n'
         with self._lock:  # one whole line at a time, whichever thread
             if self._file is None or self._file.closed or self.error is not None:
@@ -315,14 +316,14 @@ class Recorder:
         now = time.perf_counter() if t is None else t
         with self._lock:
             if sample.key.endswith("/action/request"):
-                self._held[msg["goal_id"]] = (now, sample.key, None if raw is not None else msg, raw)  # one copy
+                self._held[msg["goal_id"]] = (now, sample.key, _dumps(msg) if raw is None else raw)
                 self._requested[msg["goal_id"]] = None
                 if len(self._requested) > MAX_REQUESTED:
                     del self._requested[next(iter(self._requested))]
                 if len(self._held) > MAX_HELD:  # acks that never come (a world gone): do not hold forever
                     oldest = next(iter(self._held))
-                    t, key, old, old_raw = self._held.pop(oldest)
-                    self._write(key, "put", old, t, old_raw)
+                    t, key, text = self._held.pop(oldest)
+                    self._write(key, "put", None, t, text)
                 return True
             if not sample.key.endswith("/action/ack"):
                 return False
@@ -334,12 +335,12 @@ class Recorder:
                 if copied >= REJECTIONS_IN_FULL:
                     reason, code = "rejected: " + str(msg.get("reason", "")), msg.get("code")
                     if held is not None:
-                        self._count_junk(held[1], reason, len(held[3] or json.dumps(held[2])), now, code)
+                        self._count_junk(held[1], reason, len(held[2]), now, code)
                     self._count_junk(sample.key, reason, len(sample.payload), now, code)
                     return True
                 self._rejected[sample.key] = (start, copied + 1)
             if held is not None:
-                self._write(held[1], "put", held[2], held[0], held[3])
+                self._write(held[1], "put", None, held[0], held[2])
             return False
 
     def _count_junk(
@@ -370,8 +371,8 @@ class Recorder:
         if until_done > 0:
             self._ended.wait(until_done)
         with self._lock:
-            for t, key, msg, raw in self._held.values():  # requests never acked (the episode ended first)
-                self._write(key, "put", msg, t, raw)
+            for t, key, text in self._held.values():  # requests never acked (the episode ended first)
+                self._write(key, "put", None, t, text)
             self._held.clear()
             for t, s, m, r in sorted((e for early in self._early.values() for e in early), key=lambda e: e[0]):
                 self._write(s.key, "put", m, t, r)  # answers whose request never came
@@ -389,6 +390,11 @@ class Recorder:
 def _excerpt(payload: bytes) -> str:
     """The start of a payload recorded by excerpt (EXCERPT characters)."""
     return payload[: EXCERPT * 4].decode("utf-8", "replace")[:EXCERPT]
+
+
+def _dumps(msg: Any) -> str:
+    """`msg` as a line's JSON text, the way the recorder always wrote it (compact, escaped to ASCII)."""
+    return json.dumps(msg, separators=(",", ":"))
 
 
 def _copyable(payload: bytes) -> str | None:
