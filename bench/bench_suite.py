@@ -1,7 +1,7 @@
 """The test suite's wall time, this tree beside a baseline tree (issue 46 item 5): the fast tier
 (`-m "not slow"`) by default, or the whole suite (`--marker ""`), each tree's pytest in turn in this
 interpreter's environment with PYTHONPATH set to the tree (its own tests, its own conftest, the
-pytest options of its own pyproject: two xdist workers), CI=true as `.ci/run` sets it.
+pytest options of its own pyproject and conftest: its xdist workers), CI=true as `.ci/run` sets it.
 
 Per tree: the wall seconds, pytest's exit status and counts line, the tests that failed or erred (its
 -ra lines), and its 25 slowest tests (pytest's own `--durations=25`). The static checks and the
@@ -72,7 +72,7 @@ def main() -> None:
             "baseline": base,
             "this": this,
             "wall_ratio": round(this["wall_s"] / base["wall_s"], 3),
-            "note": "wall seconds of each tree's pytest (two xdist workers, CI=true), run one after the other on a "
+            "note": "wall seconds of each tree's pytest (its own xdist workers, CI=true), run one after the other on a "
             "machine otherwise quiet; the static checks and install of .ci/run are not timed; slowest: pytest's "
             "--durations=25 of that run",
         },
