@@ -50,6 +50,8 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
 # llama.cpp model (each server decodes on every core). Under pytest-xdist they run on one worker
 # (`--dist loadgroup`), one after another, and while one runs the other worker waits: beside
 # other tests the free-text llama.cpp episode took 232 s instead of 70 s, near its timeout.
+# A test of such a group that only waits (`@pytest.mark.shares_machine`: a refusal that takes its
+# time) keeps its group's worker and order but shares the machine, so the others run meanwhile.
 WHOLE_MACHINE = "whole-machine"
 GROUPS = {"ray_cluster": WHOLE_MACHINE, "gemma": WHOLE_MACHINE}
 
@@ -72,7 +74,9 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
     if "PYTEST_XDIST_WORKER" not in os.environ:
         yield
         return
-    alone = any(m.args[:1] == (WHOLE_MACHINE,) for m in item.iter_markers("xdist_group"))
+    alone = item.get_closest_marker("shares_machine") is None and any(
+        m.args[:1] == (WHOLE_MACHINE,) for m in item.iter_markers("xdist_group")
+    )
     where = item.config._tmp_path_factory.getbasetemp().parent  # type: ignore[attr-defined]  # pytest-N/, above popen-gwK/
     with (where / "machine.turnstile").open("a") as turn, (where / "machine.lock").open("a") as machine:
         fcntl.flock(turn, fcntl.LOCK_EX)
