@@ -50,6 +50,9 @@ RESYNC_BACKOFF = (
     0.5  # s: the first wait before attaching again for a tick whose action is already taken; doubles each time
 )
 RESYNC_BACKOFF_MAX = 8.0  # s
+ATTACH_TIMEOUT = (
+    30.0  # s an agent waits, by default, for the world to answer its attach (at the start, or once it fell silent)
+)
 EXPIRY_SLACK = 10.0  # s: a secured link that closes this close to the run's certificates' end closed because of it
 GENERATING_EVERY = (
     5.0  # s: a model call longer than this says how far it got (agent/<robot>/generating), then again every as long
@@ -102,7 +105,7 @@ class RobotAgent:
         run: str,
         robot: str,
         agent_id: str | None = None,
-        attach_timeout: float = 30.0,
+        attach_timeout: float = ATTACH_TIMEOUT,
         ack_timeout: float = 10.0,
         result_timeout: float | None = None,
         final_result_grace: float = 10.0,

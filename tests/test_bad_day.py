@@ -328,7 +328,9 @@ def test_a_world_paused_until_its_agents_give_up_reports_its_own_end(tmp_path: P
 
     from test_faults import _start, _until
 
-    proc = _start(["up", "--processes", "--insecure", "--tick-delay", "0.3", "--horizon", "40"], tmp_path)
+    proc = _start(  # agents that give up on a silent world after 5 s instead of the default 30
+        ["up", "--processes", "--insecure", "--tick-delay", "0.3", "--horizon", "40", "--attach-timeout", "5"], tmp_path
+    )
     stdout = tmp_path / "stdout.txt"
     try:
         _until(lambda: "tick  2 closed" in stdout.read_text(), HANG, "tick 2 closed", proc)
@@ -353,6 +355,21 @@ def test_a_world_paused_until_its_agents_give_up_reports_its_own_end(tmp_path: P
     assert "before the episode ended" not in err, err[-2000:]
     assert code == 0, (code, err[-2000:])
     assert ": no_agents" in out and "partial success" in out and "robots lost" in out, out[-3000:]
+
+
+def test_the_attach_timeout_reaches_every_agent_and_a_bad_one_is_refused_naming_it() -> None:
+    """`mhrc up --processes --attach-timeout S`: every agent process is told S (the paper's command
+    lines, at the default, unchanged); a timeout of 0 is refused, naming the option."""
+    from mhrc.run.config import ConfigError, EpisodeConfig
+    from mhrc.run.processes import agent_command
+
+    cfg = EpisodeConfig.build(attach_timeout=5).resolved()
+    for robot in cfg.robots:
+        cmd = agent_command(robot, cfg)
+        assert cmd[cmd.index("--attach-timeout") + 1] == "5.0"
+    assert "--attach-timeout" not in agent_command("alice", EpisodeConfig.build().resolved())
+    with pytest.raises(ConfigError, match="^--attach-timeout: Input should be greater than 0"):
+        EpisodeConfig.build(attach_timeout=0)
 
 
 def _alive(pid: int) -> bool:

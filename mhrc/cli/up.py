@@ -46,6 +46,13 @@ from mhrc.cli.running import run_command
     help="Start with the robots attached after this many seconds (fail if none is); default: wait for all of them.",
 )
 @click.option(
+    "--attach-timeout",
+    type=float,
+    default=None,
+    help="Seconds each agent waits for the world to answer its attach, at the start and whenever the world falls "
+    "silent, before it gives up on it [default: 30].",
+)
+@click.option(
     "--secure/--insecure",
     "secure",
     default=True,

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from mhrc.agents.llm_policy import PolicyOptions
     from mhrc.core.security import Credentials
 
-from mhrc.agents.agent import RobotAgent
+from mhrc.agents.agent import ATTACH_TIMEOUT, RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Policy
 from mhrc.core.bus import open_client
@@ -34,7 +34,7 @@ async def run_agent(
     llm: str | None = None,
     base_url: str | None = None,
     client_options: ClientOptions | None = None,
-    attach_timeout: float = 30.0,
+    attach_timeout: float = ATTACH_TIMEOUT,
     security: Credentials | None = None,
     on_error: Callable[[BaseException], None] | None = None,
     policy: Policy | None = None,
@@ -139,7 +139,7 @@ async def attach_agent(
     robot: str,
     connect: str,
     run: str | None,
-    attach_timeout: float = 30.0,
+    attach_timeout: float = ATTACH_TIMEOUT,
     llm: str | None = None,
     base_url: str | None = None,
     client_options: ClientOptions | None = None,

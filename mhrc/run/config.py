@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from mhrc.agents.agent import ATTACH_TIMEOUT
 from mhrc.agents.llm import (
     DEFAULT_IDLE_TIMEOUT,
     DEFAULT_MAX_TOKENS,
@@ -87,6 +88,12 @@ class EpisodeConfig(BaseModel):
     trace: Path | None = None
     gui: bool = False
     start_timeout: float | None = Field(None, gt=0)
+    attach_timeout: float = Field(
+        ATTACH_TIMEOUT,
+        gt=0,
+        allow_inf_nan=False,
+        description="seconds an agent waits for the world to answer its attach: at the start, and when the world falls silent",
+    )
     tick_delay: float = Field(0.0, ge=0)
     schedule: Literal["sequential", "lockstep", "async"] = Field(
         "lockstep", description='the world\'s time policy (docs/architecture.md, "Time")'

@@ -111,6 +111,7 @@ async def _run_in_process(
                 on_error=on_agent_error,
                 policy=seats.get(r),
                 session_of=world_bus[0] if share else None,
+                attach_timeout=cfg.attach_timeout,
                 **cfg.policy_options(own[r]),
             ),
             name=f"agent-{r}",

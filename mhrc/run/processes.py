@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from mhrc.agents.agent import ATTACH_TIMEOUT
 from mhrc.core.bus import open_client
 from mhrc.core.endpoints import check_listen
 from mhrc.core.keys import Keys
@@ -126,6 +127,7 @@ def agent_command(robot: str | tuple[str, ...], cfg: EpisodeConfig, spec: str | 
         cmd += ["--robot", r]
     cmd += ["--run", cfg.run, "--connect", cfg.endpoint]
     cmd += team_args(cfg) + protocol_args(cfg)
+    cmd += ["--attach-timeout", str(cfg.attach_timeout)] if cfg.attach_timeout != ATTACH_TIMEOUT else []
     if cfg.credentials is not None:
         for r in group:
             cmd += ["--credentials", str(cfg.credentials_file(r))]
