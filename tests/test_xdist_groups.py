@@ -3,7 +3,7 @@
 pytest-xdist 3.8's loadgroup, which marks a grouped test by appending `@GROUP` to that id, lost
 its groups without a word (pytest-xdist#1386): `test_play_browser`'s module fixture, a 40 s
 episode in a browser, was then built on both workers, and the whole-machine tests were spread
-over both. This runs pytest as the suite does, on two workers, over a module of its own."""
+over both. This runs pytest with the suite's distribution, on two workers, over a module of its own."""
 
 from __future__ import annotations
 
