@@ -153,6 +153,9 @@ def test_the_light_lists_are_the_registries() -> None:
 
     assert cli_names.PROTOCOLS == tuple(PROTOCOLS)
     assert cli_names.TOKEN_DEADLINE == TOKEN_DEADLINE
+    from mhrc.agents.agent import ATTACH_TIMEOUT
+
+    assert cli_names.ATTACH_TIMEOUT == ATTACH_TIMEOUT
     from mhrc.cli.options import SCHEDULES as OPTION_SCHEDULES
 
     assert OPTION_SCHEDULES == SCHEDULES

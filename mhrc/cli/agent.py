@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from mhrc.cli.names import ATTACH_TIMEOUT
 from mhrc.cli.options import (
     ABLATIONS,
     AIDS_HELP,
@@ -42,7 +43,9 @@ if TYPE_CHECKING:  # pragma: no cover
 )
 @click.option("--connect", required=True, help="The world's endpoint, e.g. tcp/127.0.0.1:7447.")
 @click.option("--run", default=None, help="Run id of the world; default: the only world alive at --connect.")
-@click.option("--attach-timeout", default=30.0, show_default=True, type=float, help="Seconds to wait for the world.")
+@click.option(
+    "--attach-timeout", default=ATTACH_TIMEOUT, show_default=True, type=float, help="Seconds to wait for the world."
+)
 @llm_options
 @click.option(
     "--ablation", default="none", show_default=True, type=click.Choice(ABLATIONS), help="LLM prompt ablation."

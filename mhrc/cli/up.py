@@ -14,6 +14,7 @@ from typing import Any
 
 import click
 
+from mhrc.cli.names import ATTACH_TIMEOUT
 from mhrc.cli.options import (
     OPEN_BUS,
     OVERWRITE,
@@ -50,7 +51,7 @@ from mhrc.cli.running import run_command
     type=float,
     default=None,
     help="Seconds each agent waits for the world to answer its attach, at the start and whenever the world falls "
-    "silent, before it gives up on it [default: 30].",
+    f"silent, before it gives up on it [default: {ATTACH_TIMEOUT:g}].",
 )
 @click.option(
     "--secure/--insecure",
