@@ -19,11 +19,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from bench_bus import attach
 from report import emit, percentile
 
 from mhrc.core.bus import Bus, Sample, open_client
 from mhrc.core.keys import Keys
-from mhrc.core.protocol import ActionRequest, ActionResult, AttachReply, AttachRequest, Wait, decode
+from mhrc.core.protocol import ActionRequest, ActionResult, Wait, decode
 from mhrc.core.team import TeamSpec
 from mhrc.eval.engine import EvalSpec, evaluate
 from mhrc.eval.means import summarize
@@ -74,18 +75,6 @@ async def grid(teams: list[TeamSpec], trials: int, workers: int, tmp: Path) -> d
     return out
 
 
-async def _attach(bus: Bus, keys: Keys, robot: str) -> int:
-    for _ in range(300):
-        got = await bus.get(keys.attach(robot), AttachRequest(robot=robot, agent_id=f"bench-{robot}"))
-        if got:
-            reply = decode(got[0], AttachReply)
-            assert reply.accepted, reply.reason
-            bus.declare_token(keys.alive_robot(robot))
-            return reply.tick
-        await asyncio.sleep(0.1)
-    raise TimeoutError(f"{robot} could not attach")
-
-
 def _into(q: asyncio.Queue[ActionResult]) -> Callable[[Sample], None]:
     return lambda sample: q.put_nowait(decode(sample.payload, ActionResult))
 
@@ -104,7 +93,7 @@ async def round_trips(team: TeamSpec, n: int, tmp: Path) -> dict[str, float]:
         results: dict[str, asyncio.Queue[ActionResult]] = {r: asyncio.Queue() for r in team.names}
         for bus, robot in zip(buses, team.names, strict=True):
             bus.subscribe(keys.action_result(robot), _into(results[robot]))
-        ticks = [await _attach(bus, keys, robot) for bus, robot in zip(buses, team.names, strict=True)]
+        ticks = [(await attach(bus, keys, robot)).tick for bus, robot in zip(buses, team.names, strict=True)]
         tick = max(ticks)
         times: list[float] = []
 
