@@ -90,7 +90,7 @@ class KindPrompt:
     can: str
 
 
-# kind id (world.robots.KINDS) -> its templates and words; data, so a kind's template is picked by its id
+# kind id (world.kinds.KINDS) -> its templates and words; data, so a kind's template is picked by its id
 KIND_PROMPTS: dict[str, KindPrompt] = {
     "mobile_manipulator": KindPrompt(
         "mobile_manipulator", "fetcher", "a mobile manipulator", "navigate through the house and manipulate objects"

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from mhrc.world.astar import SQRT2, Grid, astar, line_free, path_length, smooth
-from mhrc.world.scene import LAYOUTS, occupancy
+from mhrc.world.occupancy import occupancy
+from mhrc.world.scene import LAYOUTS
 
 
 def _dijkstra(grid: Grid, s: tuple[int, int], g: tuple[int, int]) -> float:

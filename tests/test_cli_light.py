@@ -77,6 +77,32 @@ def test_help_imports_no_command_it_does_not_show_nor_the_wire(args: list[str]) 
     assert got["heavy"] == [], f"{' '.join(args)} imported {got['heavy']}"
 
 
+SIMULATOR = ("pybullet", "ompl", "mhrc.world.sim", "mhrc.world.robots", "mhrc.world.arm", "mhrc.world.scene")
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "heavy"),
+    [
+        (["up", "--team", "alice=mobile_manipulator,david=mobile_base"], 2, SIMULATOR),  # no finisher
+        (["up", "--objects", "9"], 2, (*SIMULATOR, "numpy")),
+        (["eval", "--trials", "0"], 2, (*SIMULATOR, "numpy", "matplotlib")),
+        (["teams"], 0, (*SIMULATOR, "numpy")),
+        (["scenes"], 0, (*SIMULATOR, "numpy")),
+    ],
+    ids=["up-team", "up-objects", "eval-trials", "teams", "scenes"],
+)
+def test_a_value_checked_against_the_world_needs_no_simulator(
+    args: list[str], code: int, heavy: tuple[str, ...]
+) -> None:
+    """Past the names, a value is checked against the world's data (its robot kinds, layouts,
+    tasks, a team's room on the map), never its simulator: the kinds, layouts, tasks and occupancy
+    grid import no PyBullet or OMPL, and what needs no grid no numpy either (issue 46 item 4)."""
+    got, stderr = _refused(*args, heavy=heavy)
+    assert got["code"] == code, stderr
+    assert got["heavy"] == [], f"{' '.join(args)} imported {got['heavy']}"
+    assert "Traceback" not in stderr
+
+
 # what a heuristic episode on the open bus never uses: the model clients (httpx), the LLM policy and
 # replays, the other protocols' planners, the certificates (cryptography)
 UNUSED = ("httpx", "cryptography", "mhrc.agents.llm.openai_client", "mhrc.agents.llm.local", "mhrc.agents.llm_policy")

@@ -15,9 +15,9 @@ from mhrc.core.records import messages, read_records
 from mhrc.run.config import EpisodeConfig
 from mhrc.run.inprocess import up_in_process
 from mhrc.world.arm import HOME
+from mhrc.world.kinds import ARM_FORWARD, CHASSIS
 from mhrc.world.layouts import CHASSIS_FOOTPRINT, HOME_FOOTPRINT, MIN_CONTAINERS
 from mhrc.world.quiet import pybullet as p
-from mhrc.world.robots import ARM_FORWARD, CHASSIS
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.sim import Sim
 from mhrc.world.tasks import TASKS

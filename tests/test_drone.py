@@ -13,7 +13,7 @@ import pytest
 
 from mhrc.core.protocol import Move, Navigate, Open, OutcomeCode, Pick, Place
 from mhrc.world.furniture import inside
-from mhrc.world.robots import AIR_CLEARANCE, KINDS, flight_altitude
+from mhrc.world.kinds import AIR_CLEARANCE, KINDS, flight_altitude
 from mhrc.world.scene import LAYOUTS
 from mhrc.world.sim import Sim
 from mhrc.world.teams import SHIPPED

@@ -15,7 +15,7 @@ from mhrc.core.protocol import ActionResult, EpisodeStarted, SkillOutcome, Wait
 from mhrc.core.records import messages, read_records
 from mhrc.run.config import ConfigError, EpisodeConfig
 from mhrc.run.inprocess import up_in_process
-from mhrc.world.robots import ARM_FORWARD
+from mhrc.world.kinds import ARM_FORWARD
 from mhrc.world.sim import Sim
 from mhrc.world.skills import reaching
 

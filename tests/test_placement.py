@@ -12,10 +12,11 @@ import pytest
 from mhrc.core.protocol import Navigate, OutcomeCode
 from mhrc.core.team import RobotSpec, TeamError, TeamProblem, TeamSpec
 from mhrc.world.bound import lower_bound, symbolic_episode
+from mhrc.world.kinds import KINDS
 from mhrc.world.layout_schema import LayoutFile
+from mhrc.world.occupancy import occupancy
 from mhrc.world.placement import STAND_CLEARANCE, START_GAP, place_team, reachable
-from mhrc.world.robots import KINDS
-from mhrc.world.scene import LAYOUTS, Layout, occupancy
+from mhrc.world.scene import LAYOUTS, Layout
 from mhrc.world.sim import Sim
 from mhrc.world.skills.navigation import OFF_TARGET
 from mhrc.world.teams import SHIPPED

@@ -31,8 +31,8 @@ from mhrc.testing import ModelReply, ScriptedModelServer  # noqa: E402
 from mhrc.viewer.rerun import Mode, Target  # noqa: E402
 from mhrc.viewer.rerun.live import LiveRecording  # noqa: E402
 from mhrc.viewer.rerun.sinks import quiet_env, rerun_binary  # noqa: E402
+from mhrc.world.kinds import KINDS, flight_altitude  # noqa: E402
 from mhrc.world.layouts import get_layout  # noqa: E402
-from mhrc.world.robots import KINDS, flight_altitude  # noqa: E402
 
 TEAM = "scout_and_drone"  # alice, bob, david and lucy (a drone): a team that is not the paper's
 TEAM_ROBOTS = ("alice", "bob", "david", "lucy")

@@ -18,9 +18,10 @@ from mhrc.agents.llm_policy import load_template
 from mhrc.core.protocol import Navigate, Open, OutcomeCode, Pick
 from mhrc.world import assets
 from mhrc.world.arm import HOME
+from mhrc.world.kinds import KINDS, TEAM
 from mhrc.world.layouts import ARM_REACH, FAR_SLOT, SCENES_DIR, LayoutError, load_layout, parse_layout
-from mhrc.world.robots import KINDS, TEAM
-from mhrc.world.scene import LAYOUTS, occupancy
+from mhrc.world.occupancy import occupancy
+from mhrc.world.scene import LAYOUTS
 from mhrc.world.sim import Sim
 from mhrc.world.tasks import TASKS
 

@@ -26,9 +26,10 @@ from mhrc.core.protocol import (
     SkillOutcome,
     Wait,
 )
+from mhrc.world.checks import check_episode
 from mhrc.world.render import render
 from mhrc.world.scene import LAYOUTS
-from mhrc.world.sim import Sim, check_episode
+from mhrc.world.sim import Sim
 from mhrc.world.tasks import TASKS
 
 

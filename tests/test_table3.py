@@ -37,7 +37,7 @@ from mhrc.core.protocol import (
     Wait,
 )
 from mhrc.world import feedback as fb
-from mhrc.world.robots import KINDS
+from mhrc.world.kinds import KINDS
 from mhrc.world.sim import Sim
 from mhrc.world.skills import navigation
 

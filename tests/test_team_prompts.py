@@ -21,7 +21,7 @@ from mhrc.agents.parse import signature
 from mhrc.core.protocol import Observation, RobotStatus
 from mhrc.core.team import PAPER_TEAM, RobotSpec, TeamSpec
 from mhrc.testing import PolicyHarness, observation
-from mhrc.world.robots import KINDS
+from mhrc.world.kinds import KINDS
 from mhrc.world.teams import SHIPPED
 
 DRONE_SKILLS = ["navigate", "communicate", "wait"]  # the drone: navigate, communicate, wait

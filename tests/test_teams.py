@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from mhrc.core.team import PAPER_TEAM, TeamError, TeamProblem, TeamSpec, load_team_file, parse_inline
-from mhrc.world.robots import KINDS
+from mhrc.world.kinds import KINDS
 from mhrc.world.scene import get_layout
 from mhrc.world.teams import SHIPPED, check_team
 

@@ -278,7 +278,7 @@ def test_a_drone_is_drawn_flying_at_its_altitude(driver: Any, tmp_path: Path) ->
     the house it flew in on its label and on hover; the ground robots are drawn as ever."""
     from selenium.webdriver.common.by import By
 
-    from mhrc.world.robots import KINDS, flight_altitude
+    from mhrc.world.kinds import KINDS, flight_altitude
     from mhrc.world.scene import get_layout
     from mhrc.world.teams import SHIPPED
 

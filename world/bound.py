@@ -40,8 +40,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .kinds import MAX_ARM_RANGE
 from .physics import PhysicalWorld
-from .robots import MAX_ARM_RANGE
 
 
 @dataclass(frozen=True)

@@ -8,13 +8,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from .assets import ChestGeometry, Color, CupboardGeometry, DrawerGeometry, Panel
 
 Vec2 = tuple[float, float]
 HANDLE_CLEARANCE = 0.015  # an open drawer's footprint reaches this beyond its handle
-CHASSIS_FOOTPRINT = (0.6, 0.5)  # Alice's chassis, length x width (robots.CHASSIS; a test keeps them equal)
+CHASSIS_FOOTPRINT = (0.6, 0.5)  # Alice's chassis, length x width (kinds.CHASSIS; a test keeps them equal)
 # Alice's arm in its carry posture (arm.HOME), seen from above: from this far behind to this far
 # ahead of her base centre, this wide (measured from panda.urdf's link boxes; a test keeps it so)
 HOME_FOOTPRINT = (-0.18, 0.53, 0.27)
@@ -285,11 +283,20 @@ def _outline(
     x, y, yaw = pose
     c, s = math.cos(yaw), math.sin(yaw)
     local: list[Vec2] = []
-    for u in np.linspace(us[0], us[1], int(round((us[1] - us[0]) / step)) + 1):
-        local += [(float(u), vs[0]), (float(u), vs[1])]
-    for v in np.linspace(vs[0], vs[1], int(round((vs[1] - vs[0]) / step)) + 1):
-        local += [(us[0], float(v)), (us[1], float(v))]
+    for u in _linspace(us[0], us[1], int(round((us[1] - us[0]) / step)) + 1):
+        local += [(u, vs[0]), (u, vs[1])]
+    for v in _linspace(vs[0], vs[1], int(round((vs[1] - vs[0]) / step)) + 1):
+        local += [(us[0], v), (us[1], v)]
     return [(x + c * u - s * v, y + s * u + c * v) for u, v in local]
+
+
+def _linspace(start: float, stop: float, num: int) -> list[float]:
+    """numpy.linspace's points, bit for bit (i * step + start, the last exactly `stop`), without
+    numpy: checking a layout imports no numerics."""
+    if num <= 1:
+        return [float(start)][:num]
+    step = (stop - start) / (num - 1)
+    return [i * step + start for i in range(num - 1)] + [float(stop)]
 
 
 def inside_turned(center: Vec2, size: tuple[float, ...], yaw: float, xy: Vec2, margin: float) -> bool:
@@ -303,3 +310,23 @@ def inside_turned(center: Vec2, size: tuple[float, ...], yaw: float, xy: Vec2, m
 def inside(center: Vec2, size: tuple[float, ...], xy: Vec2, margin: float = 1e-9) -> bool:
     """Whether `xy` lies on an axis-aligned footprint (centre, size), grown by `margin`."""
     return abs(xy[0] - center[0]) <= size[0] / 2 + margin and abs(xy[1] - center[1]) <= size[1] / 2 + margin
+
+
+@dataclass(frozen=True)
+class Fixture:
+    """A goal surface a task lays on Bob's table: the tray, a coloured panel, the cutting board."""
+
+    name: str
+    kind: str  # how observations describe it
+    center: tuple[float, float]
+    size: tuple[float, float]
+    color: Color
+    thickness: float  # its surface above the table top
+    rim: bool = False  # a tray's low walls
+    stack: bool = False  # objects go on top of each other at its centre
+
+    def contains_xy(self, x: float, y: float, margin: float = 0.0) -> bool:
+        return (
+            abs(x - self.center[0]) <= self.size[0] / 2 + margin
+            and abs(y - self.center[1]) <= self.size[1] / 2 + margin
+        )

@@ -98,7 +98,7 @@ class PhysicalWorld:
         return None
 
     def finisher(self) -> RobotBody | None:
-        """The robot that places on the task's goal fixtures (robots.RobotKind.finishes_task; the paper's Bob)."""
+        """The robot that places on the task's goal fixtures (kinds.RobotKind.finishes_task; the paper's Bob)."""
         return next((b for b in self.bots.values() if b.kind.finishes_task), None)
 
     # ------------------------------------------------------------------ objects and containers

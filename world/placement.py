@@ -25,8 +25,8 @@ from mhrc.core.team import TeamError, TeamProblem, TeamSpec
 
 from .astar import Grid
 from .furniture import Layout
-from .robots import KINDS, RobotKind
-from .scene import occupancy
+from .kinds import KINDS, RobotKind
+from .occupancy import occupancy
 
 __all__ = ["START_GAP", "STAND_CLEARANCE", "check_placement", "floor_margin", "place_team", "reachable"]
 

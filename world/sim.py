@@ -43,28 +43,21 @@ from .arm import ArmPlanner
 from .assets import AssetDir
 from .astar import Grid
 from .bound import lower_bound, symbolic_episode
+from .checks import check_episode
 from .dynamics import Dynamics
+from .furniture import Fixture, Layout
+from .kinds import KINDS, flight_altitude
 from .observe import Knowledge, WorldSnapshot
 from .physics import ObjectState, PhysicalWorld
 from .placement import floor_margin, place_team
-from .robots import KINDS, RobotBody, flight_altitude, spawn
+from .robots import RobotBody, spawn
 from .scenario import Scenario
-from .scene import BuiltScene, Fixture, Layout, build_scene, get_layout
+from .scene import BuiltScene, build_scene, get_layout
 from .skills import SKILLS, SkillContext
 from .tasks import Seen, TaskResult, get_task
 from .teams import check_team
 
 log = get_logger("mhrc.world.sim")
-
-N_OBJECTS = (3, 6)
-
-
-def check_episode(*, task: str, scene: str, n_objects: int) -> None:
-    """Raise ValueError naming the problem, without building anything."""
-    get_task(task)
-    get_layout(scene)
-    if not N_OBJECTS[0] <= n_objects <= N_OBJECTS[1]:
-        raise ValueError(f"n_objects must be between {N_OBJECTS[0]} and {N_OBJECTS[1]}, not {n_objects}")
 
 
 class Sim:

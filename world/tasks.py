@@ -12,14 +12,15 @@ rest on furniture in other rooms, plus one or two distractors anywhere.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, TypeVar
-
-import numpy as np
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 from .assets import Color, Shape
 from .briefs import Briefing, ask
 from .colors import NO_PANEL_COLORS, PANEL_COLORS
-from .scene import Fixture, Layout
+from .furniture import Fixture, Layout
+
+if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
 
 
 @dataclass(frozen=True)
@@ -116,6 +117,14 @@ def register_task(cls: type[T]) -> type[T]:
     return cls
 
 
+def _rng(seed: int) -> np.random.Generator:
+    """An episode's random generator. numpy is imported here: the registry of tasks (a command line
+    checking a task's name) needs no numerics."""
+    import numpy as np
+
+    return np.random.default_rng(seed)
+
+
 def get_task(task_id: str) -> Task:
     try:
         return TASKS[task_id]
@@ -204,7 +213,7 @@ class PackObjects:
     ordered = False
 
     def generate(self, layout: Layout, seed: int, n_objects: int) -> list[Placement]:
-        rng = np.random.default_rng(seed)
+        rng = _rng(seed)
         n_distractors = 1 + int(rng.integers(0, 2))
         kinds = [PACK_POOL[i] for i in rng.permutation(len(PACK_POOL))[: n_objects + n_distractors]]
         return scatter(layout, rng, kinds[:n_objects], kinds[n_objects:])
@@ -285,7 +294,7 @@ class SortSolids:
     ordered = False
 
     def generate(self, layout: Layout, seed: int, n_objects: int) -> list[Placement]:
-        rng = np.random.default_rng(seed)
+        rng = _rng(seed)
         shapes = list(SOLIDS)
         colors = [list(PANEL_COLORS)[i] for i in rng.permutation(len(PANEL_COLORS))[:n_objects]]
         targets = [solid_kind(c, shapes[int(rng.integers(0, len(shapes)))], PANEL_COLORS) for c in colors]
@@ -401,7 +410,7 @@ class MakeSandwich:
         return name, MENUS[name]
 
     def generate(self, layout: Layout, seed: int, n_objects: int) -> list[Placement]:
-        rng = np.random.default_rng(seed)
+        rng = _rng(seed)
         _, items = self.menu(n_objects, rng)
         seen: dict[str, int] = {}
         targets = []

@@ -11,7 +11,7 @@ from __future__ import annotations
 from mhrc.core.team import PAPER_TEAM, RobotSpec, TeamError, TeamProblem, TeamSpec
 
 from .furniture import Layout
-from .robots import KINDS, RobotKind
+from .kinds import KINDS, RobotKind
 
 __all__ = ["SHIPPED", "check_team", "fetches", "kind_of", "scouts"]
 

@@ -277,7 +277,7 @@ def eval_(
     from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, preflight, resume_command, run
     from mhrc.eval.paper import PAPER_OBJECTS
     from mhrc.eval.summaries import SUMMARY_FILES
-    from mhrc.world.scene import LAYOUTS
+    from mhrc.world.layouts import LAYOUTS
     from mhrc.world.tasks import TASKS
 
     logs.configure(log_level)

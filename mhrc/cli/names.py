@@ -1,9 +1,10 @@
 """The shipped names an option is checked against before anything heavy is imported (tasks,
 scenes, teams, coordination protocols), each refusal with its near matches, as click gives them for option names.
 
-The registries of tasks and teams import the simulator (world/tasks.py builds on world/scene.py),
-and the protocols' registry the model clients (their LLM forms), so their names are listed here too, and tests/test_cli_light.py keeps both lists equal to the
-registries. Scenes are read from the layout files (numpy and JSON, no simulator). None of this
+The registries cost more than a typo should: the tasks' (their generators and the furniture, some
+30 ms), the teams' (pydantic models) and the protocols' (the model clients, their LLM forms). So
+their names are listed here too, and tests/test_cli_light.py keeps the lists equal to the
+registries. Scenes are read from the layout files (JSON, no simulator). None of this
 imports the simulator, the bus or a model client: a typo is refused in a fraction of a second
 (tests/test_cli_light.py checks which modules a refused command imports)."""
 

@@ -19,7 +19,7 @@ def teams(team: str | None, kinds: bool) -> None:
     rows record it). Run one with `mhrc up --team NAME` (or `world`, `eval`). Docs: docs/teams.md."""
     from mhrc.run.teams import resolve_team, shipped_teams
     from mhrc.world.briefs import role_of
-    from mhrc.world.robots import KINDS
+    from mhrc.world.kinds import KINDS
 
     if kinds:
         width = max(len(k) for k in KINDS)

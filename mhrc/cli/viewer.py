@@ -14,7 +14,7 @@ from mhrc.cli.options import VIDEO_HELP, VIDEO_SIZE, rerun_option
 @click.command()
 def scenes() -> None:
     """List the scene layouts (world/scenes/*.json; `--scene FILE.json` loads your own)."""
-    from mhrc.world.scene import LAYOUTS
+    from mhrc.world.layouts import LAYOUTS
 
     for layout in LAYOUTS.values():
         names = ", ".join(
@@ -37,9 +37,9 @@ def scenes() -> None:
 def render(scenes_: tuple[str, ...], task: str, seed: int, n_objects: int, out: Path) -> None:
     """Write top-down and perspective PNGs of each scene (CPU renderer, no display needed):
     OUT/<scene>_top.png and OUT/<scene>_perspective.png."""
+    from mhrc.world.checks import check_episode
+    from mhrc.world.layouts import LAYOUTS
     from mhrc.world.render import render_scene
-    from mhrc.world.scene import LAYOUTS
-    from mhrc.world.sim import check_episode
 
     try:
         for scene in scenes_ or tuple(LAYOUTS):

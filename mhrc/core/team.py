@@ -2,7 +2,7 @@
 
 The paper fixes one team, Alice (a mobile manipulator), Bob (a tabletop arm) and David (a mobile
 base); `PAPER_TEAM` is that team and the default everywhere. A `TeamSpec` names each robot, its
-kind (the world's `RobotKind` ids: `mhrc.world.robots.KINDS`) and optionally its start pose and
+kind (the world's `RobotKind` ids: `mhrc.world.kinds.KINDS`) and optionally its start pose and
 its model (`--llm` spec). The order of `robots` is the execution order of the sequential
 schedule (the paper's Algorithm 1). This module checks what can be checked without the world
 (names, counts, duplicates, the shape of a file); the world checks the kinds against its robots

@@ -15,8 +15,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from math import comb
 
-import numpy as np
-
 from mhrc.eval.rows import CI_LEVEL, CI_SEED, bootstrap_ci
 from mhrc.eval.rows import RESAMPLES as RESAMPLES
 
@@ -91,6 +89,8 @@ def compare(
     only_b = tuple(sorted(set(arm_b) - set(arm_a)))
     if not shared:
         return Paired(a, b, shared, only_a, only_b, None, None, None, None, 0, 0, None)
+    import numpy as np  # here: a refused `mhrc eval` command line, which imports this module, needs no numerics
+
     ts = [arm_a[e].ts - arm_b[e].ts for e in shared]
     steps = [arm_a[e].as_ticks - arm_b[e].as_ticks for e in shared]
     a_only = sum(1 for e in shared if arm_a[e].success and not arm_b[e].success)

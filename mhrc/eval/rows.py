@@ -7,8 +7,6 @@ from collections import defaultdict
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-import numpy as np
-
 from mhrc.analysis.metrics import EpisodeMetrics
 from mhrc.core.logs import get_logger
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
@@ -134,6 +132,8 @@ def bootstrap_ci(
 ) -> tuple[float, float]:
     """Percentile bootstrap confidence interval of the mean: `resamples` resamples with
     replacement, drawn with `seed` (the same values always give the same interval)."""
+    import numpy as np  # here: a refused `mhrc eval` command line, which imports this module, needs no numerics
+
     x = np.asarray([float(v) for v in values], dtype=float)
     if x.size == 0:
         raise ValueError("no values to bootstrap")

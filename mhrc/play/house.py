@@ -15,7 +15,7 @@ from mhrc.core.protocol import Observation
 from mhrc.viewer.page import SCALE, MapFrame
 from mhrc.viewer.scene_map import scene_map
 from mhrc.viewer.wording import html_text as _e
-from mhrc.world.scene import LAYOUTS
+from mhrc.world.layouts import LAYOUTS
 
 
 def scene_of(obs: Observation) -> str | None:

@@ -209,9 +209,9 @@ class EpisodeConfig(BaseModel):
             raise ConfigError(
                 f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})"
             )
+        from mhrc.world.checks import check_episode  # validates task and scene names without building
+        from mhrc.world.layouts import get_layout
         from mhrc.world.placement import check_placement
-        from mhrc.world.scene import get_layout
-        from mhrc.world.sim import check_episode  # validates task and scene names without building
         from mhrc.world.teams import check_team
 
         try:

@@ -38,7 +38,7 @@ from mhrc.core.protocol import (
     RobotStatus,
     SkillOutcome,
 )
-from mhrc.world.robots import KINDS, TEAM
+from mhrc.world.kinds import KINDS, TEAM
 
 __all__ = ["FURNITURE", "PolicyHarness", "Step", "World", "observation", "outcome"]
 

@@ -31,7 +31,7 @@ from mhrc.viewer.frames import Frame
 from mhrc.viewer.load import LoadedTrace
 from mhrc.viewer.scene_map import SceneMap, scene_map
 from mhrc.viewer.targets import TaskView, task_view
-from mhrc.world.robots import KINDS, flight_altitude
+from mhrc.world.kinds import KINDS, flight_altitude
 
 
 @dataclass
@@ -103,7 +103,7 @@ class EpisodeView:
 
 def fliers(started: EpisodeStarted | None, scene: SceneMap | None) -> dict[str, float]:
     """The robots of the recorded team that fly, and the altitude they fly at in that house (m),
-    as the world set it (world/robots.py flight_altitude)."""
+    as the world set it (world/kinds.py flight_altitude)."""
     kinds = started.team.kinds if started is not None and started.team is not None else {}
     out = {}
     for robot, kind in kinds.items():

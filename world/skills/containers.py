@@ -11,7 +11,8 @@ from mhrc.core.protocol import Open, OutcomeCode, SkillOutcome
 from .. import feedback as fb
 from ..arm import HOME, LOWER, UPPER, ArmPlanner, straight
 from ..furniture import FurnitureSpec
-from ..robots import MAX_ARM_RANGE, RobotBody
+from ..kinds import MAX_ARM_RANGE
+from ..robots import RobotBody
 from .context import SkillContext
 from .reaching import (
     APPROACH,

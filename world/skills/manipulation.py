@@ -18,8 +18,9 @@ from mhrc.core.fidelity import CALIBRATION
 from mhrc.core.protocol import OutcomeCode, Pick, Place, SkillOutcome
 
 from .. import feedback as fb
+from ..kinds import MAX_ARM_RANGE
 from ..physics import ObjectState, half_extent
-from ..robots import MAX_ARM_RANGE, RobotBody
+from ..robots import RobotBody
 from .context import SkillContext
 from .reaching import JOINT_SPEED, SUCTION_TIME, TIP_CLEARANCE, horizontal, reach_point, retract, too_far, wrap
 from .registry import skill

@@ -14,7 +14,8 @@ from mhrc.core.protocol import OutcomeCode, SkillOutcome
 
 from .. import feedback as fb
 from ..arm import HOME, ArmPlanner, IKResult, straight
-from ..robots import ARM_FORWARD, CHASSIS, MAX_ARM_RANGE, RobotBody
+from ..kinds import ARM_FORWARD, CHASSIS, MAX_ARM_RANGE
+from ..robots import RobotBody
 from .context import SkillContext
 from .navigation import MAX_MOVE, move_blocked
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import rerun as rr
 
+from mhrc.world.kinds import CHASSIS, CHASSIS_COLOR, DRONE_COLOR, KINDS, flight_altitude
 from mhrc.world.layouts import Layout
-from mhrc.world.robots import CHASSIS, CHASSIS_COLOR, DRONE_COLOR, KINDS, flight_altitude
 
 WALL_HEIGHT = 1.0  # m (world/layouts.py: walls are 1 m high)
 WALL_COLOR = (170, 170, 170, 255)
