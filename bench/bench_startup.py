@@ -40,10 +40,17 @@ LINES = [
     ["eval", "--schedule", "lockstp"],
     ["agent", "--robot", "bob", "--connect", "tcp/127.0.0.1:9", "--team", "larg"],
 ]
+# refused for a value checked against the world's data, past the names: timed with a bytecode cache, as an
+# installed package runs (they import far more of the tree than a typo, so compiling it would be most of the time)
+VALUE_LINES = [
+    ["eval", "--trials", "0"],
+    ["up", "--objects", "9"],
+    ["up", "--team", "alice=mobile_manipulator,david=mobile_base"],
+]
 # `mhrc up` to the end of a one-tick episode (imports, the scene, the bus, the agents' attach, the tick):
 # its start-up, as a person waits for it; a trace in a temporary directory, the open bus, no credentials
 UP = ["up", "--horizon", "1", "--quiet", "--insecure", "--overwrite"]
-HEAVY = ("structlog", "pydantic", "cryptography", "asyncio", "zenoh", "pybullet", "numpy", "httpx")
+HEAVY = ("structlog", "pydantic", "cryptography", "asyncio", "zenoh", "pybullet", "ompl", "numpy", "httpx")
 PROBE = """
 import json, runpy, sys
 sys.argv = ["mhrc", *sys.argv[1:]]
@@ -129,6 +136,11 @@ def main() -> None:
             | {"baseline_imports": _heavy(base, line), "this_imports": _heavy(HERE, line)}
         )
     with tempfile.TemporaryDirectory() as tmp:
+        for line in VALUE_LINES:
+            rows.append(
+                _timed(base, line, "mhrc " + " ".join(line) + " (bytecode cached)", args.repeats, Path(tmp))
+                | {"baseline_imports": _heavy(base, line), "this_imports": _heavy(HERE, line)}
+            )
         line = [*UP, "--trace", str(Path(tmp) / "trace.jsonl")]
         rows.append(_timed(base, line, "mhrc " + " ".join(UP) + " --trace TMP", args.up_repeats))
         rows.append(

@@ -45,15 +45,15 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     return (os.cpu_count() or 1) + 1
 
 
-# Tests that take the whole machine, by the fixture they use: the Ray cluster (its teardown is
-# `ray stop --force`, which stops every Ray on the machine; its episodes fill two cores) and the
-# llama.cpp model (each server decodes on every core). Under pytest-xdist they run on one worker
-# (`--dist loadgroup`), one after another, and while one runs the other worker waits: beside
-# other tests the free-text llama.cpp episode took 232 s instead of 70 s, near its timeout.
-# A test of such a group that only waits (`@pytest.mark.shares_machine`: a refusal that takes its
-# time) keeps its group's worker and order but shares the machine, so the others run meanwhile.
+# Tests grouped on one worker (`--dist loadgroup`), one after another, by the fixture they use. The
+# Ray cluster's: its teardown is `ray stop --force`, which stops every Ray on the machine, so no two
+# of its clusters may overlap; they run beside the other workers' tests (their timeouts are minutes,
+# and a driver refused for want of the token waits 25 s on Ray's join, mostly idle). The llama.cpp
+# model's take the whole machine: each server decodes on every core, and while one runs the other
+# workers wait (beside other tests the free-text llama.cpp episode took 232 s instead of 70 s, near
+# its timeout).
 WHOLE_MACHINE = "whole-machine"
-GROUPS = {"ray_cluster": WHOLE_MACHINE, "gemma": WHOLE_MACHINE}
+GROUPS = {"ray_cluster": "ray-cluster", "gemma": WHOLE_MACHINE}
 
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's, which reads the groups
@@ -74,9 +74,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
     if "PYTEST_XDIST_WORKER" not in os.environ:
         yield
         return
-    alone = item.get_closest_marker("shares_machine") is None and any(
-        m.args[:1] == (WHOLE_MACHINE,) for m in item.iter_markers("xdist_group")
-    )
+    alone = any(m.args[:1] == (WHOLE_MACHINE,) for m in item.iter_markers("xdist_group"))
     where = item.config._tmp_path_factory.getbasetemp().parent  # type: ignore[attr-defined]  # pytest-N/, above popen-gwK/
     with (where / "machine.turnstile").open("a") as turn, (where / "machine.lock").open("a") as machine:
         fcntl.flock(turn, fcntl.LOCK_EX)

@@ -249,7 +249,6 @@ def test_a_driver_outside_the_cluster_runs_episodes_through_ray_client(ray_clust
 
 
 @pytest.mark.slow
-@pytest.mark.shares_machine  # Ray's join waits about 25 s before it gives up: the machine is idle meanwhile
 def test_a_driver_without_the_clusters_token_is_refused_before_any_episode(
     ray_cluster: Cluster, tmp_path: Path
 ) -> None:
