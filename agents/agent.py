@@ -15,6 +15,7 @@ import uuid
 from typing import TYPE_CHECKING
 
 from mhrc.core.bus import Bus, Sample
+from mhrc.core.deadlines import ATTACH_TIMEOUT
 from mhrc.core.keys import Keys
 from mhrc.core.logs import get_logger
 from mhrc.core.protocol import (
@@ -50,9 +51,6 @@ RESYNC_BACKOFF = (
     0.5  # s: the first wait before attaching again for a tick whose action is already taken; doubles each time
 )
 RESYNC_BACKOFF_MAX = 8.0  # s
-ATTACH_TIMEOUT = (
-    30.0  # s an agent waits, by default, for the world to answer its attach (at the start, or once it fell silent)
-)
 EXPIRY_SLACK = 10.0  # s: a secured link that closes this close to the run's certificates' end closed because of it
 GENERATING_EVERY = (
     5.0  # s: a model call longer than this says how far it got (agent/<robot>/generating), then again every as long

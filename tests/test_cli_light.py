@@ -78,14 +78,15 @@ def test_help_imports_no_command_it_does_not_show_nor_the_wire(args: list[str]) 
 
 
 SIMULATOR = ("pybullet", "ompl", "mhrc.world.sim", "mhrc.world.robots", "mhrc.world.arm", "mhrc.world.scene")
+BUS = ("zenoh", "mhrc.core.bus", "mhrc.core.trace", "rich")  # the bus, the trace and the console: a run's
 
 
 @pytest.mark.parametrize(
     ("args", "code", "heavy"),
     [
-        (["up", "--team", "alice=mobile_manipulator,david=mobile_base"], 2, SIMULATOR),  # no finisher
-        (["up", "--objects", "9"], 2, (*SIMULATOR, "numpy")),
-        (["eval", "--trials", "0"], 2, (*SIMULATOR, "numpy", "matplotlib")),
+        (["up", "--team", "alice=mobile_manipulator,david=mobile_base"], 2, (*SIMULATOR, *BUS)),  # no finisher
+        (["up", "--objects", "9"], 2, (*SIMULATOR, *BUS, "numpy")),
+        (["eval", "--trials", "0"], 2, (*SIMULATOR, *BUS, "numpy", "matplotlib", "mhrc.eval.engine")),
         (["teams"], 0, (*SIMULATOR, "numpy")),
         (["scenes"], 0, (*SIMULATOR, "numpy")),
     ],
@@ -96,7 +97,8 @@ def test_a_value_checked_against_the_world_needs_no_simulator(
 ) -> None:
     """Past the names, a value is checked against the world's data (its robot kinds, layouts,
     tasks, a team's room on the map), never its simulator: the kinds, layouts, tasks and occupancy
-    grid import no PyBullet or OMPL, and what needs no grid no numpy either (issue 46 item 4)."""
+    grid import no PyBullet or OMPL, and what needs no grid no numpy either; nor does a refusal
+    import the bus, the trace, the console or the evaluation's engine (issue 46 item 4)."""
     got, stderr = _refused(*args, heavy=heavy)
     assert got["code"] == code, stderr
     assert got["heavy"] == [], f"{' '.join(args)} imported {got['heavy']}"
@@ -169,7 +171,6 @@ def test_the_command_list_is_what_click_would_list_from_the_commands_themselves(
 def test_the_light_lists_are_the_registries() -> None:
     """names.py lists tasks and teams because their registries import the simulator; they must agree."""
     from mhrc.run.config import SCHEDULES
-    from mhrc.world.presence import TOKEN_DEADLINE
     from mhrc.world.tasks import TASKS
     from mhrc.world.teams import SHIPPED
 
@@ -178,10 +179,6 @@ def test_the_light_lists_are_the_registries() -> None:
     from mhrc.agents.protocols import PROTOCOLS
 
     assert cli_names.PROTOCOLS == tuple(PROTOCOLS)
-    assert cli_names.TOKEN_DEADLINE == TOKEN_DEADLINE
-    from mhrc.agents.agent import ATTACH_TIMEOUT
-
-    assert cli_names.ATTACH_TIMEOUT == ATTACH_TIMEOUT
     from mhrc.cli.options import SCHEDULES as OPTION_SCHEDULES
 
     assert OPTION_SCHEDULES == SCHEDULES

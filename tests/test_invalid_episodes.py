@@ -19,7 +19,8 @@ from mhrc.core.keys import Keys
 from mhrc.core.protocol import AttachReply, AttachRequest, EpisodeDone, RobotDetached, decode, decode_event
 from mhrc.core.records import read_records
 from mhrc.eval.engine import EvalSpec
-from mhrc.eval.episode import Job, WorkerResult, run_job, worker_name
+from mhrc.eval.episode import run_job, worker_name
+from mhrc.eval.jobs import Job, WorkerResult
 from mhrc.testing import world_on_loopback
 
 DEADLINE = 1.0  # s: the world's token deadline in these tests (30 by default)

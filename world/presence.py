@@ -18,12 +18,6 @@ from mhrc.core.keys import Keys
 
 from .roster import Roster
 
-# s an attached agent has to show its liveliness token. mhrc's agents declare it before they attach, so this only
-# bounds how long an agent that never will can hold up an episode (once); it must never catch a live one: 30 s is
-# as long as an agent itself waits for the world to answer its attach (RobotAgent.attach_timeout), what a loaded
-# machine is granted everywhere else; a foreign agent that still declares its token after the attach reply has as long.
-# The former 3 s, with the token declared after the reply, let a loaded 2-core machine's whole team go before it acted.
-TOKEN_DEADLINE = 30.0
 LIVELINESS_QUERY = 2.0  # s: asking the router for a token whose put this session may not have seen yet
 
 Detach = Callable[[str, str], None]  # (robot, why a person reads)

@@ -10,6 +10,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+from mhrc.core.deadlines import TOKEN_DEADLINE
 from mhrc.core.protocol import (
     Action,
     FurnitureView,
@@ -24,7 +25,6 @@ from mhrc.core.protocol import (
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.team import TeamSpec
 
-from .presence import TOKEN_DEADLINE
 from .schedulers import TaskResultLike
 
 

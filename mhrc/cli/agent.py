@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mhrc.cli.names import ATTACH_TIMEOUT
 from mhrc.cli.options import (
     ABLATIONS,
     AIDS_HELP,
@@ -26,6 +25,7 @@ from mhrc.cli.options import (
     team_option,
 )
 from mhrc.cli.running import run_command
+from mhrc.core.deadlines import ATTACH_TIMEOUT
 
 if TYPE_CHECKING:  # pragma: no cover
     from mhrc.core.security import Credentials  # cryptography: imported once the command line is accepted

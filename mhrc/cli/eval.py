@@ -262,21 +262,10 @@ def eval_(
     --workers processes of this machine, or with --ray ADDRESS as tasks on a Ray cluster
     (`ray start --head` on one host, `ray start --address HEAD:6379` on the others; see
     docker/README.md). An interrupted run continues with --resume --out DIR."""
-    from rich.console import Console
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
     from mhrc.core import logs  # structlog: imported once the command line is accepted
     from mhrc.core.fidelity import AidsError, parse_aids
-    from mhrc.eval.engine import EvalAborted, EvalSpec, RunOptions, Tally, preflight, resume_command, run
     from mhrc.eval.paper import PAPER_OBJECTS
-    from mhrc.eval.summaries import SUMMARY_FILES
+    from mhrc.eval.spec import EvalSpec, RunOptions
     from mhrc.world.layouts import LAYOUTS
     from mhrc.world.tasks import TASKS
 
@@ -319,6 +308,24 @@ def eval_(
             spec = resumed_spec(out, spec, given)
         except ConfigError as exc:
             raise click.UsageError(str(exc)) from None
+    try:
+        plan = spec.validate()
+    except ConfigError as exc:
+        raise click.UsageError(str(exc)) from None
+    # the command line is accepted: now the engine (the runner, the bus, the summaries) and the console
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from mhrc.eval.engine import EvalAborted, Tally, preflight, resume_command, run
+    from mhrc.eval.summaries import SUMMARY_FILES
+
     console = Console(stderr=True)
     console.soft_wrap = not console.is_terminal  # a log file's lines are not cut at 80 columns
     progress = Progress(
@@ -358,10 +365,6 @@ def eval_(
                 f"[yellow]not solved[/]: {row.key} (PS {m.partial_success:.2f}, TS {m.temporal_steps})"
             )
 
-    try:
-        plan = spec.validate()
-    except ConfigError as exc:
-        raise click.UsageError(str(exc)) from None
     n_jobs = len(plan.jobs)
     if dry_run:
         for job in plan.jobs:

@@ -36,8 +36,6 @@ SCHEDULES = (
     "lockstep",
     "async",
 )  # mhrc.world.schedulers.SCHEDULERS, in its order (a test keeps them equal)
-TOKEN_DEADLINE = 30.0  # mhrc.world.presence.TOKEN_DEADLINE, which imports the bus (a test keeps them equal)
-ATTACH_TIMEOUT = 30.0  # mhrc.agents.agent.ATTACH_TIMEOUT, which imports the bus (a test keeps them equal)
 
 
 def did_you_mean(name: str, known: Iterable[str]) -> str:

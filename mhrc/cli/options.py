@@ -9,9 +9,10 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mhrc.cli.names import SCHEDULES, TOKEN_DEADLINE, check_protocol, check_scene, check_task, unknown_team
+from mhrc.cli.names import SCHEDULES, check_protocol, check_scene, check_task, unknown_team
 from mhrc.core.aids import NOISE
 from mhrc.core.aids import describe as describe_aids
+from mhrc.core.deadlines import TOKEN_DEADLINE
 from mhrc.core.lifeline import PARENT_ENV
 
 if TYPE_CHECKING:  # pragma: no cover

@@ -14,7 +14,6 @@ from typing import Any
 
 import click
 
-from mhrc.cli.names import ATTACH_TIMEOUT
 from mhrc.cli.options import (
     OPEN_BUS,
     OVERWRITE,
@@ -28,6 +27,7 @@ from mhrc.cli.options import (
 )
 from mhrc.cli.rerun_view import both, close_live, keep_serving, start_live
 from mhrc.cli.running import run_command
+from mhrc.core.deadlines import ATTACH_TIMEOUT
 
 
 @click.command()
@@ -93,9 +93,12 @@ def up(
     **values: Any,
 ) -> None:
     """Run one episode: the world and the three robot agents, then print the metrics."""  # noqa: D401
+    from mhrc.core import logs  # structlog: imported once the command line is accepted
+
+    logs.configure(log_level)
+    cfg = episode_config(**values)  # a value refused here costs no import of the bus, the trace or the console
     from rich.console import Console
 
-    from mhrc.core import logs  # structlog: imported once the command line is accepted
     from mhrc.core.endpoints import ListenError, check_listen
     from mhrc.core.protocol.events import DEFAULT_PROTOCOL
     from mhrc.core.trace import TraceWriteError
@@ -106,8 +109,6 @@ def up(
     from mhrc.run.inprocess import up_in_process
     from mhrc.world.service_config import NobodyAttached
 
-    logs.configure(log_level)
-    cfg = episode_config(**values)
     if unknown := [r for r in external if r not in cfg.robots]:
         raise click.BadParameter(
             f"{', '.join(unknown)} not in this episode's team (robots: {', '.join(cfg.robots)})",

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from mhrc.core.logs import get_logger
-from mhrc.eval.episode import Job, WorkerResult
+from mhrc.eval.jobs import Job, WorkerResult
 from mhrc.run.config import ConfigError
 
 log = get_logger("mhrc.eval")

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 import shlex
 import zlib
 from collections import defaultdict
@@ -38,12 +37,12 @@ from mhrc.core.logs import get_logger
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.writable import unwritable
 from mhrc.eval.directory import append_text, make_dirs, refuse_links, write_bytes, write_text
-from mhrc.eval.episode import Job, WorkerResult
+from mhrc.eval.jobs import Job, WorkerResult
 from mhrc.eval.records import EvalManifest, EvalRow, Settings, read_manifest, read_rows, trace_of
 from mhrc.eval.report import summary_csv, summary_markdown
 from mhrc.eval.rows import merge_runs
 from mhrc.eval.scoring import Scored, score, write_episode_report
-from mhrc.eval.spec import EvalSpec, Plan, identity_difference
+from mhrc.eval.spec import EvalSpec, Plan, RunOptions, identity_difference
 from mhrc.eval.summaries import write_summaries
 from mhrc.run.config import ConfigError, check_model_servers
 
@@ -70,37 +69,6 @@ log = get_logger("mhrc.eval")
 
 class EvalAborted(RuntimeError):
     """The evaluation cannot go on (an error every episode would hit); finished rows are kept."""
-
-
-@dataclass(frozen=True)
-class RunOptions:
-    """Where and how many episodes run at once, checked once, when made (ConfigError naming the option)."""
-
-    workers: int | None = (
-        None  # local worker processes; None: the number of cores (not with `ray`: its resources decide)
-    )
-    concurrency: int | None = (
-        None  # episodes each worker runs at once (Ray: an LLM episode takes 1/concurrency of a CPU); None: 1
-    )
-    ray: str | None = None  # a Ray cluster's address, as ray.init takes it
-    shared_out: bool = False  # with `ray`: --out is the same path on every node
-
-    def __post_init__(self) -> None:
-        if self.ray is not None and self.workers is not None:
-            raise ConfigError(
-                "--workers: not with --ray (the Ray cluster's resources say how many episodes run at once)"
-            )
-        if self.shared_out and self.ray is None:
-            raise ConfigError("--shared-out: only with --ray (a local run writes into --out anyway)")
-        if self.workers is not None and self.workers < 1:
-            raise ConfigError(f"--workers: must be at least 1 (got {self.workers})")
-        if self.concurrency is not None and self.concurrency < 1:
-            raise ConfigError(f"--concurrency: must be at least 1 (got {self.concurrency})")
-
-    @property
-    def processes(self) -> int:
-        """Local worker processes."""
-        return self.workers or os.cpu_count() or 1
 
 
 @dataclass

@@ -33,7 +33,8 @@ from pydantic import ValidationError
 
 from mhrc.core.lifeline import child_env
 from mhrc.core.logs import get_logger
-from mhrc.eval.episode import Job, WorkerFailure, WorkerResult, run_job, watch_start, worker_name
+from mhrc.eval.episode import run_job, watch_start, worker_name
+from mhrc.eval.jobs import Job, WorkerFailure, WorkerResult
 
 log = get_logger("mhrc.eval")
 

@@ -16,6 +16,7 @@ those configs inside their `Job` and run them as they are.
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
 from typing import Annotated
@@ -27,7 +28,7 @@ from mhrc.analysis.values import MAX_COUNT
 from mhrc.core.fidelity import label
 from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.team import PAPER_TEAM, TeamSpec
-from mhrc.eval.episode import Job
+from mhrc.eval.jobs import Job
 from mhrc.eval.paper import PAPER_OBJECTS
 from mhrc.run.config import ConfigError, EpisodeConfig, ProtocolConfigError
 from mhrc.world.scenario import load_scenario
@@ -387,3 +388,34 @@ class Plan:
     scenario: str | None
     scenario_sha256: str | None
     identity: EvalIdentity
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Where and how many episodes run at once, checked once, when made (ConfigError naming the option)."""
+
+    workers: int | None = (
+        None  # local worker processes; None: the number of cores (not with `ray`: its resources decide)
+    )
+    concurrency: int | None = (
+        None  # episodes each worker runs at once (Ray: an LLM episode takes 1/concurrency of a CPU); None: 1
+    )
+    ray: str | None = None  # a Ray cluster's address, as ray.init takes it
+    shared_out: bool = False  # with `ray`: --out is the same path on every node
+
+    def __post_init__(self) -> None:
+        if self.ray is not None and self.workers is not None:
+            raise ConfigError(
+                "--workers: not with --ray (the Ray cluster's resources say how many episodes run at once)"
+            )
+        if self.shared_out and self.ray is None:
+            raise ConfigError("--shared-out: only with --ray (a local run writes into --out anyway)")
+        if self.workers is not None and self.workers < 1:
+            raise ConfigError(f"--workers: must be at least 1 (got {self.workers})")
+        if self.concurrency is not None and self.concurrency < 1:
+            raise ConfigError(f"--concurrency: must be at least 1 (got {self.concurrency})")
+
+    @property
+    def processes(self) -> int:
+        """Local worker processes."""
+        return self.workers or os.cpu_count() or 1

@@ -17,10 +17,11 @@ if TYPE_CHECKING:
     from mhrc.agents.llm_policy import PolicyOptions
     from mhrc.core.security import Credentials
 
-from mhrc.agents.agent import ATTACH_TIMEOUT, RobotAgent
+from mhrc.agents.agent import RobotAgent
 from mhrc.agents.heuristic import heuristic_policy
 from mhrc.agents.policy import Policy
 from mhrc.core.bus import open_client
+from mhrc.core.deadlines import ATTACH_TIMEOUT
 from mhrc.run.config import ConfigError
 
 log = get_logger("mhrc.run.attach")

@@ -10,7 +10,6 @@ from typing import TYPE_CHECKING, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from mhrc.agents.agent import ATTACH_TIMEOUT
 from mhrc.agents.llm import (
     DEFAULT_IDLE_TIMEOUT,
     DEFAULT_MAX_TOKENS,
@@ -20,6 +19,7 @@ from mhrc.agents.llm import (
     split_url,
 )
 from mhrc.agents.protocols import CoordinationProtocol, ProtocolRefused, Refusal, protocol
+from mhrc.core.deadlines import ATTACH_TIMEOUT, TOKEN_DEADLINE
 from mhrc.core.endpoints import endpoint, free_port
 from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse_aids, parse_noise
 from mhrc.core.keys import check_id, new_run_id
@@ -31,7 +31,6 @@ from mhrc.run.errors import (
     ConfigError as ConfigError,  # defined apart: the CLI catches it without this module's imports
 )
 from mhrc.run.errors import ModelServerDown as ModelServerDown
-from mhrc.world.presence import TOKEN_DEADLINE
 from mhrc.world.scenario import Scenario, check_scenario, load_scenario
 from mhrc.world.schedulers import SCHEDULERS
 

@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from mhrc.agents.agent import ATTACH_TIMEOUT
 from mhrc.core.bus import open_client
+from mhrc.core.deadlines import ATTACH_TIMEOUT
 from mhrc.core.endpoints import check_listen
 from mhrc.core.keys import Keys
 from mhrc.core.lifeline import child_env
