@@ -58,11 +58,19 @@ GROUPS = {"ray_cluster": "ray-cluster", "gemma": WHOLE_MACHINE}
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist's, which reads the groups
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The groups of GROUPS by fixture; then a test that uses a module-scoped fixture (an episode
+    run once for a module's tests) joins its module's group, so that the fixture is built on one
+    worker instead of on each that runs one of those tests. A test's own group is kept."""
     for item in items:
-        for fixture, group in GROUPS.items():
-            if fixture in getattr(item, "fixturenames", ()):
-                item.add_marker(pytest.mark.xdist_group(group))
-                break
+        if any(True for _ in item.iter_markers("xdist_group")):
+            continue
+        names = getattr(item, "fixturenames", ())
+        group = next((g for fixture, g in GROUPS.items() if fixture in names), None)
+        defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
+        if group is None and any(d[-1].scope == "module" for d in defs.values() if d):
+            group = f"module:{item.nodeid.split('::')[0]}"
+        if group is not None:
+            item.add_marker(pytest.mark.xdist_group(group))
 
 
 @pytest.hookimpl(hookwrapper=True, tryfirst=True)  # around setup, call and teardown, the timeout's too
