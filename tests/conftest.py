@@ -62,7 +62,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     run once for a module's tests) joins its module's group, so that the fixture is built on one
     worker instead of on each that runs one of those tests. A test's own group is kept."""
     for item in items:
-        if any(True for _ in item.iter_markers("xdist_group")):
+        if item.get_closest_marker("xdist_group") is not None:
             continue
         names = getattr(item, "fixturenames", ())
         group = next((g for fixture, g in GROUPS.items() if fixture in names), None)

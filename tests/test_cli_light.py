@@ -169,7 +169,7 @@ def test_the_command_list_is_what_click_would_list_from_the_commands_themselves(
 
 
 def test_the_light_lists_are_the_registries() -> None:
-    """names.py lists tasks and teams because their registries import the simulator; they must agree."""
+    """names.py lists tasks, teams and protocols because their registries cost more than a typo should; they must agree."""
     from mhrc.run.config import SCHEDULES
     from mhrc.world.tasks import TASKS
     from mhrc.world.teams import SHIPPED

@@ -9,10 +9,11 @@ import math
 from dataclasses import dataclass, field
 
 from .assets import ChestGeometry, Color, CupboardGeometry, DrawerGeometry, Panel
+from .kinds import CHASSIS
 
 Vec2 = tuple[float, float]
 HANDLE_CLEARANCE = 0.015  # an open drawer's footprint reaches this beyond its handle
-CHASSIS_FOOTPRINT = (0.6, 0.5)  # Alice's chassis, length x width (kinds.CHASSIS; a test keeps them equal)
+CHASSIS_FOOTPRINT = CHASSIS[:2]  # Alice's chassis, length x width
 # Alice's arm in its carry posture (arm.HOME), seen from above: from this far behind to this far
 # ahead of her base centre, this wide (measured from panda.urdf's link boxes; a test keeps it so)
 HOME_FOOTPRINT = (-0.18, 0.53, 0.27)

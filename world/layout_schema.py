@@ -28,9 +28,12 @@ from .furniture import (
     overlap,
 )
 from .furniture_schema import FurnitureFile, Name, Pose, Positive, Strict, color_of, door_spec
+from .kinds import KINDS
 
 ROBOT_CLEARANCE = 0.3  # a stand pose or start must be this far from walls and furniture
-ARM_REACH = 0.62  # Bob's conservative horizontal reach (kinds.KINDS["tabletop_arm"].reach; a test keeps them equal)
+_BOB_REACH = KINDS["tabletop_arm"].reach  # Bob's conservative horizontal reach: an arm's kind has one
+assert _BOB_REACH is not None
+ARM_REACH: float = _BOB_REACH
 FAR_SLOT = 1.0  # far slots lie beyond this from Bob's arm base, his position in his prompt: it tells him he picks best within 1 m
 # (the paper's appendix: ideal pick distance about 1 m), so what the task puts "out of his reach" must lie beyond it
 GOAL_CORNER_REACH = 0.8  # every corner of the goal area lies within this of Bob's arm base
