@@ -4,14 +4,17 @@ sys.modules (never by the clock); task, scene, team and command names get near m
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from mhrc.cli import COMMANDS, main
 from mhrc.cli import names as cli_names
+from mhrc.core.endpoints import free_port
 
 HEAVY = ("pybullet", "zenoh", "matplotlib", "ray", "xllamacpp", "httpx", "openai", "mhrc.agents.llm.openai_client")
 HEAVY += ("structlog", "cryptography", "asyncio")  # the logs, the secured bus, the event loop: a run's, not a refusal's
@@ -216,3 +219,16 @@ def test_mhrc_protocols_lists_each_protocol_in_one_line() -> None:
 
     out = CliRunner().invoke(main, ["protocols"])
     assert out.exit_code == 0 and out.output.splitlines() == [p.line() for p in PROTOCOLS.values()]
+
+
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="the ray extra is not installed")
+def test_a_ray_address_nothing_answers_at_is_refused_before_ray_is_imported(tmp_path: Path) -> None:
+    """Ray's import takes most of a second; `--ray HOST:PORT` with nothing listening there is
+    refused first (the extra is found installed without importing it)."""
+    address = f"127.0.0.1:{free_port('127.0.0.1')}"
+    args = ("eval", "--tasks", "pack_objects", "--scenes", "kitchen", "--trials", "1", "--out", f"{tmp_path}/x")
+    got, stderr = _refused(*args, "--ray", address, heavy=("ray",))
+    assert got["code"] == 2, stderr
+    assert f"--ray: nothing answers at {address}" in stderr, stderr
+    assert got["heavy"] == [], f"the refusal imported {got['heavy']}"
+    assert not (tmp_path / "x").exists()

@@ -18,10 +18,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib.util
 import logging
 import os
 import re
 import socket
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -55,6 +57,14 @@ def import_ray() -> Any:
         need = ".".join(map(str, RAY_MIN))
         raise ConfigError(f"--ray: Ray {version} is not supported; mhrc needs ray>={need}: {INSTALL}")
     return ray
+
+
+def require_ray() -> None:
+    """A ConfigError naming the install command when Ray is not installed, found without importing
+    it (Ray's import takes most of a second): a refusal for the address comes before that import."""
+    installed = sys.modules["ray"] is not None if "ray" in sys.modules else importlib.util.find_spec("ray") is not None
+    if not installed:
+        raise ConfigError(f"--ray: Ray is not installed; install the extra: {INSTALL}")
 
 
 def probe(address: str, timeout: float = PROBE_TIMEOUT) -> None:

@@ -150,10 +150,11 @@ def preflight(plan: Plan, out: Path, options: RunOptions, resume: bool) -> None:
     for job in {j.config.team.name: j for j in plan.jobs}.values():
         check_model_servers(job.config, job.config.robots)
     if options.ray is not None:  # a missing extra, an old Ray, an address nothing answers at
-        from mhrc.eval.cluster import import_ray, probe
+        from mhrc.eval.cluster import import_ray, probe, require_ray
 
-        import_ray()
-        probe(options.ray)
+        require_ray()
+        probe(options.ray)  # before Ray's import, which takes most of a second
+        import_ray()  # its version
 
 
 def finished_rows(out: Path, plan: Plan) -> dict[str, EvalRow]:
