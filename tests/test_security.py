@@ -442,6 +442,12 @@ async def test_only_the_world_speaks_for_the_world(attacker: str, tmp_path: Path
                 alice.subscribe(key, lambda s: seen["alice"].append((s.key, s.payload)))
             alice.subscribe(k.world_event, lambda s: seen["alice"].append((s.key, s.payload)))
             recorder.subscribe(k.all, lambda s: seen["recorder"].append((s.key, s.payload)))
+
+            def probed() -> bool:  # the world's probe reaches alice's last subscription and the recorder's:
+                world.put(k.world_event, b"probe")  # the router knows all their subscriptions (a link keeps order)
+                return all(any(p == b"probe" for _, p in seen[who]) for who in ("alice", "recorder"))
+
+            await until(probed, "alice's and the recorder's subscriptions, at the router", 10, every=0.05)
             for key in WORLD_ONLY_PUTS:
                 mallory.put(f"{k.base}/{key}", b"forged")
             mallory.declare_token(k.alive_world)
