@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import asyncio
+import importlib.util
 import json
 import os
 import signal
@@ -20,19 +21,18 @@ import pytest
 from click.testing import CliRunner
 from old_traces import as_version_1
 
-rr = pytest.importorskip("rerun")
+from mhrc.cli import main
+from mhrc.core.protocol import EpisodeDone
+from mhrc.core.records import messages, read_records
+from mhrc.run.config import EpisodeConfig
+from mhrc.run.inprocess import up_in_process
+from mhrc.testing import ModelReply, ScriptedModelServer
+from mhrc.viewer.rerun import Mode, Target  # imports no rerun-sdk
+from mhrc.world.kinds import KINDS, flight_altitude
+from mhrc.world.layouts import get_layout
 
-from mhrc.cli import main  # noqa: E402
-from mhrc.core.protocol import EpisodeDone  # noqa: E402
-from mhrc.core.records import messages, read_records  # noqa: E402
-from mhrc.run.config import EpisodeConfig  # noqa: E402
-from mhrc.run.inprocess import up_in_process  # noqa: E402
-from mhrc.testing import ModelReply, ScriptedModelServer  # noqa: E402
-from mhrc.viewer.rerun import Mode, Target  # noqa: E402
-from mhrc.viewer.rerun.live import LiveRecording  # noqa: E402
-from mhrc.viewer.rerun.sinks import quiet_env, rerun_binary  # noqa: E402
-from mhrc.world.kinds import KINDS, flight_altitude  # noqa: E402
-from mhrc.world.layouts import get_layout  # noqa: E402
+# rerun-sdk (some 500 modules) is imported by the tests that use it, not by every worker that collects them
+pytestmark = pytest.mark.skipif(importlib.util.find_spec("rerun") is None, reason="rerun-sdk is not installed")
 
 TEAM = "scout_and_drone"  # alice, bob, david and lucy (a drone): a team that is not the paper's
 TEAM_ROBOTS = ("alice", "bob", "david", "lucy")
@@ -63,6 +63,8 @@ def rows_of(chunk: Any) -> list[dict[str, Any]]:
 
 
 def read_back(path: Path) -> Readback:
+    import rerun as rr
+
     out = Readback()
     reader = rr.chunk.RrdReader(str(path))
     for chunk in reader.stream():
@@ -81,6 +83,8 @@ def read_back(path: Path) -> Readback:
 
 def verify(path: Path) -> None:
     """`rerun rrd verify`, the CLI rerun-sdk ships (with Rerun's analytics off)."""
+    from mhrc.viewer.rerun.sinks import quiet_env, rerun_binary
+
     done = subprocess.run(
         [str(rerun_binary()), "rrd", "verify", str(path)], capture_output=True, text=True, env=quiet_env(), timeout=120
     )
@@ -176,6 +180,8 @@ def test_the_model_reply_is_in_the_live_recording_of_a_scripted_episode(tmp_path
         cfg = EpisodeConfig.build(
             seed=0, horizon=2, n_objects=3, llm="openai:test-model", base_url=server.url, trace=tmp_path / "t.jsonl"
         ).resolved()
+        from mhrc.viewer.rerun.live import LiveRecording
+
         live = LiveRecording(Target(Mode.FILE, out), cfg.run)
         try:
             asyncio.run(up_in_process(cfg, observe=live.observe))
