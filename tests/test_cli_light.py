@@ -81,6 +81,9 @@ def test_help_imports_no_command_it_does_not_show_nor_the_wire(args: list[str]) 
 
 
 SIMULATOR = ("pybullet", "ompl", "mhrc.world.sim", "mhrc.world.robots", "mhrc.world.arm", "mhrc.world.scene")
+LAYOUTS = (
+    "mhrc.world.layouts"  # the layouts' models: --scene is checked against the files' names (world/scene_files.py)
+)
 BUS = ("zenoh", "mhrc.core.bus", "mhrc.core.trace", "rich")  # the bus, the trace and the console: a run's
 
 
@@ -88,8 +91,8 @@ BUS = ("zenoh", "mhrc.core.bus", "mhrc.core.trace", "rich")  # the bus, the trac
     ("args", "code", "heavy"),
     [
         (["up", "--team", "alice=mobile_manipulator,david=mobile_base"], 2, (*SIMULATOR, *BUS)),  # no finisher
-        (["up", "--objects", "9"], 2, (*SIMULATOR, *BUS, "numpy")),
-        (["eval", "--trials", "0"], 2, (*SIMULATOR, *BUS, "numpy", "matplotlib", "mhrc.eval.engine")),
+        (["up", "--objects", "9"], 2, (*SIMULATOR, *BUS, "numpy", LAYOUTS)),
+        (["eval", "--trials", "0"], 2, (*SIMULATOR, *BUS, "numpy", "matplotlib", "mhrc.eval.engine", LAYOUTS)),
         (["teams"], 0, (*SIMULATOR, "numpy")),
         (["scenes"], 0, (*SIMULATOR, "numpy")),
     ],
@@ -185,6 +188,10 @@ def test_the_light_lists_are_the_registries() -> None:
     from mhrc.cli.options import SCHEDULES as OPTION_SCHEDULES
 
     assert OPTION_SCHEDULES == SCHEDULES
+    from mhrc.world.layouts import LAYOUTS
+    from mhrc.world.scene_files import scene_files
+
+    assert list(scene_files()) == list(LAYOUTS) and "kitchen" in LAYOUTS  # --scene's names, without a layout read
 
 
 def test_every_command_loads_under_its_name() -> None:

@@ -80,6 +80,7 @@ from pydantic import ValidationError
 from .furniture import CHASSIS_FOOTPRINT, HOME_FOOTPRINT, DrawerSpec, FurnitureSpec, Layout, door_sweep
 from .furniture_schema import STAND_OFFSET
 from .layout_schema import ARM_REACH, FAR_SLOT, MIN_CONTAINERS, LayoutFile
+from .scene_files import SCENES_DIR, scene_files
 
 __all__ = [
     "ARM_REACH",
@@ -99,8 +100,6 @@ __all__ = [
     "load_layout",
     "parse_layout",
 ]
-
-SCENES_DIR = Path(__file__).with_name("scenes")
 
 
 class LayoutError(ValueError):
@@ -140,7 +139,7 @@ class BuiltinLayouts(MutableMapping[str, Layout]):
     may put a layout of its own in (pytest's monkeypatch.setitem) as in a dict."""
 
     def __init__(self, directory: Path) -> None:
-        self._files: dict[str, Path | None] = {path.stem: path for path in sorted(directory.glob("*.json"))}
+        self._files: dict[str, Path | None] = dict(scene_files(directory))
         self._loaded: dict[str, Layout] = {}
         self._lock = threading.Lock()  # the world's simulator is built in a thread of its own
 

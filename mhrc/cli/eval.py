@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mhrc.cli.names import check_protocol, check_scene, check_task, unknown_team
+from mhrc.cli.names import TASKS, check_protocol, check_scene, check_task, unknown_team
 from mhrc.cli.options import (
     ABLATIONS,
     AIDS_HELP,
@@ -266,8 +266,7 @@ def eval_(
     from mhrc.core.fidelity import AidsError, parse_aids
     from mhrc.eval.paper import PAPER_OBJECTS
     from mhrc.eval.spec import EvalSpec, RunOptions
-    from mhrc.world.layouts import LAYOUTS
-    from mhrc.world.tasks import TASKS
+    from mhrc.world.scene_files import scene_files
 
     logs.configure(log_level)
     try:  # every option checked once, here: the engine and the workers take what these checks made
@@ -277,8 +276,8 @@ def eval_(
         raise click.UsageError(str(exc)) from None
     prompts = llm.pop("prompts")
     spec = EvalSpec(
-        tasks=_csv(str, tasks) or tuple(TASKS),
-        scenes=_csv(str, scenes) or tuple(LAYOUTS),
+        tasks=_csv(str, tasks) or TASKS,  # the registry's, in its order (cli.names; a test keeps them equal)
+        scenes=_csv(str, scenes) or tuple(scene_files()),
         objects=PAPER_OBJECTS if objects is None else (_csv(int, objects) or ()),
         trials=trials,
         repeats=repeats,

@@ -4,7 +4,7 @@ scenes, teams, coordination protocols), each refusal with its near matches, as c
 The registries cost more than a typo should: the tasks' (their generators and the furniture, some
 30 ms), the teams' (pydantic models) and the protocols' (the model clients, their LLM forms). So
 their names are listed here too, and tests/test_cli_light.py keeps the lists equal to the
-registries. Scenes are read from the layout files (JSON, no simulator). None of this
+registries. Scenes are the layout files' names (mhrc.world.scene_files: no layout is read). None of this
 imports the simulator, the bus or a model client: a typo is refused in a fraction of a second
 (tests/test_cli_light.py checks which modules a refused command imports)."""
 
@@ -15,6 +15,8 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import click
+
+from mhrc.world.scene_files import scene_files
 
 TASKS = ("pack_objects", "sort_solids", "make_sandwich")  # mhrc.world.tasks.TASKS, in its order
 TEAMS = (
@@ -61,9 +63,9 @@ def check_task(ctx: click.Context, param: click.Parameter, value: str | None) ->
 
 def check_scene(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     """--scene: a shipped layout's name or a .json file (checked later, when it is loaded)."""
-    if value is None or value.endswith(".json"):
+    if value is None or value.endswith(".json") or value in scene_files():
         return value
-    from mhrc.world.layouts import LAYOUTS
+    from mhrc.world.layouts import LAYOUTS  # a layout a test put in; else the refusal's names
 
     if value not in LAYOUTS:
         raise click.BadParameter(
