@@ -81,18 +81,22 @@ def test_help_imports_no_command_it_does_not_show_nor_the_wire(args: list[str]) 
 
 
 SIMULATOR = ("pybullet", "ompl", "mhrc.world.sim", "mhrc.world.robots", "mhrc.world.arm", "mhrc.world.scene")
-LAYOUTS = (
-    "mhrc.world.layouts"  # the layouts' models: --scene is checked against the files' names (world/scene_files.py)
-)
+# the wire's models, the protocols' registry, the schedulers (asyncio with them): the configuration
+# reads the default protocol, the schedules' and the aids' names from light modules (mhrc.core.coordination,
+# mhrc.world.schedules, mhrc.core.aids)
+WIRE = ("mhrc.core.protocol", "mhrc.agents.protocols", "mhrc.world.schedulers", "asyncio")
+# the layouts' models, the tasks and numpy (a team's room on the map): --scene is checked against the layout
+# files' names (mhrc.world.scene_files), and a team's kinds before the registries are imported
+REGISTRIES = ("mhrc.world.layouts", "mhrc.world.tasks", "numpy")
 BUS = ("zenoh", "mhrc.core.bus", "mhrc.core.trace", "rich")  # the bus, the trace and the console: a run's
 
 
 @pytest.mark.parametrize(
     ("args", "code", "heavy"),
     [
-        (["up", "--team", "alice=mobile_manipulator,david=mobile_base"], 2, (*SIMULATOR, *BUS)),  # no finisher
-        (["up", "--objects", "9"], 2, (*SIMULATOR, *BUS, "numpy", LAYOUTS)),
-        (["eval", "--trials", "0"], 2, (*SIMULATOR, *BUS, "numpy", "matplotlib", "mhrc.eval.engine", LAYOUTS)),
+        (["up", "--team", "alice=mobile_manipulator,david=mobile_base"], 2, (*SIMULATOR, *BUS, *WIRE, *REGISTRIES)),
+        (["up", "--objects", "9"], 2, (*SIMULATOR, *BUS, *WIRE, *REGISTRIES)),
+        (["eval", "--trials", "0"], 2, (*SIMULATOR, *BUS, *WIRE, *REGISTRIES, "matplotlib", "mhrc.eval.engine")),
         (["teams"], 0, (*SIMULATOR, "numpy")),
         (["scenes"], 0, (*SIMULATOR, "numpy")),
     ],
@@ -104,7 +108,9 @@ def test_a_value_checked_against_the_world_needs_no_simulator(
     """Past the names, a value is checked against the world's data (its robot kinds, layouts,
     tasks, a team's room on the map), never its simulator: the kinds, layouts, tasks and occupancy
     grid import no PyBullet or OMPL, and what needs no grid no numpy either; nor does a refusal
-    import the bus, the trace, the console or the evaluation's engine (issue 46 item 4)."""
+    import the bus, the trace, the console or the evaluation's engine, and a value refused by the
+    configuration's fields or by a team's kinds neither the wire's models nor the layouts (issue 46
+    item 4)."""
     got, stderr = _refused(*args, heavy=heavy)
     assert got["code"] == code, stderr
     assert got["heavy"] == [], f"{' '.join(args)} imported {got['heavy']}"

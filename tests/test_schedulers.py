@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import asyncio
+import typing
 from pathlib import Path
 
 import pytest
@@ -67,7 +68,8 @@ async def test_same_seed_same_actions_and_outcomes(tmp_path: Path) -> None:
 
 def test_registry_has_sequential_and_the_cli_offers_every_schedule() -> None:
     assert SCHEDULERS["sequential"] is SequentialScheduler
-    assert set(SCHEDULES) == set(SCHEDULERS)
+    assert SCHEDULES == tuple(SCHEDULERS)  # mhrc.world.schedules: the registry's names, in its order
+    assert typing.get_args(EpisodeConfig.model_fields["schedule"].annotation) == SCHEDULES
     assert EpisodeConfig.build().schedule == "lockstep"
     with pytest.raises(ConfigError, match="--schedule"):
         EpisodeConfig.build(schedule="warp")

@@ -49,21 +49,28 @@ from .model_spec import (
     server_slots,
     split_url,
 )
-from .scripted_client import Reply, ScriptedClient
 
 if TYPE_CHECKING:
     from .openai_client import MAX_STREAM_CHARS, MAX_STREAM_CHUNKS, OpenAIChatClient, retry_after
+    from .scripted_client import Reply, ScriptedClient
 
 _OPENAI_CLIENT = ("MAX_STREAM_CHARS", "MAX_STREAM_CHUNKS", "OpenAIChatClient", "retry_after")
+_SCRIPTED_CLIENT = ("Reply", "ScriptedClient")
 
 
 def __getattr__(name: str) -> Any:
-    """The OpenAI client's names, imported on first use (httpx with them): a heuristic run, which
-    imports this package for its errors and spec checks, never loads an HTTP client."""
+    """The clients' names, imported on first use: the OpenAI client's (httpx with them), so that a
+    heuristic run, which imports this package for its errors and spec checks, never loads an HTTP
+    client; the scripted client's (asyncio with it), so that a command line checked against the
+    configuration loads no event loop before it is accepted."""
     if name in _OPENAI_CLIENT:
         from . import openai_client
 
         return getattr(openai_client, name)
+    if name in _SCRIPTED_CLIENT:
+        from . import scripted_client
+
+        return getattr(scripted_client, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

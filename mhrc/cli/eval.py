@@ -263,7 +263,7 @@ def eval_(
     (`ray start --head` on one host, `ray start --address HEAD:6379` on the others; see
     docker/README.md). An interrupted run continues with --resume --out DIR."""
     from mhrc.core import logs  # structlog: imported once the command line is accepted
-    from mhrc.core.fidelity import AidsError, parse_aids
+    from mhrc.core.aids import AidsError, parse_aids
     from mhrc.eval.paper import PAPER_OBJECTS
     from mhrc.eval.spec import EvalSpec, RunOptions
     from mhrc.world.scene_files import scene_files

@@ -17,6 +17,7 @@ from pathlib import Path
 import click
 
 from mhrc.world.scene_files import scene_files
+from mhrc.world.schedules import SCHEDULES as SCHEDULES  # the world's, without the schedulers
 
 TASKS = ("pack_objects", "sort_solids", "make_sandwich")  # mhrc.world.tasks.TASKS, in its order
 TEAMS = (
@@ -33,11 +34,6 @@ PROTOCOLS = (
     "centralized",
     "leader",
 )  # mhrc.agents.protocols.PROTOCOLS, in its order (it imports the model clients)
-SCHEDULES = (
-    "sequential",
-    "lockstep",
-    "async",
-)  # mhrc.world.schedulers.SCHEDULERS, in its order (a test keeps them equal)
 
 
 def did_you_mean(name: str, known: Iterable[str]) -> str:

@@ -19,7 +19,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from mhrc.core.security import Credentials  # the wire's models and cryptography: imported when a file is read
     from mhrc.run.config import EpisodeConfig  # imports the bus: the commands import it when they run
 
-__all__ = ["SCHEDULES"]  # (and the options below) SCHEDULES: as mhrc.run.config has them, listed in mhrc.cli.names
+__all__ = ["SCHEDULES"]  # (and the options below) SCHEDULES: the world's, mhrc.world.schedules
 
 ABLATIONS = ["none", "no_feedback", "no_history", "no_mobile"]
 AIDS_HELP = (

@@ -25,8 +25,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from mhrc.agents.llm import DEFAULT_MAX_TOKENS
 from mhrc.analysis.values import MAX_COUNT
-from mhrc.core.fidelity import label
-from mhrc.core.protocol.events import DEFAULT_PROTOCOL
+from mhrc.core.aids import label
+from mhrc.core.coordination import DEFAULT_PROTOCOL
 from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.eval.jobs import Job
 from mhrc.eval.paper import PAPER_OBJECTS
@@ -152,7 +152,9 @@ class EvalSpec(BaseModel):
     llm_seed: int | None = None
     structured: bool = False  # JSON decisions (not the paper's free text)
     step_deadline: float | None = None
-    schedule: str = "sequential"  # the world's time policy (mhrc.run.config.SCHEDULES); the paper's loop by default
+    schedule: str = (
+        "sequential"  # the world's time policy (mhrc.world.schedules.SCHEDULES); the paper's loop by default
+    )
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
     # a scenario (world/scenario.py), applied to every episode: a file's path, or a shipped scenario's name, which
     # travels to the workers as the name so that each (a Ray node too) reads the copy installed with its own package

@@ -18,13 +18,19 @@ from mhrc.agents.llm import (
     robot_specs,
     split_url,
 )
-from mhrc.agents.protocols import CoordinationProtocol, ProtocolRefused, Refusal, protocol
+from mhrc.core.aids import (  # not via mhrc.core.fidelity, which builds the wire's models
+    AidsError,
+    NoiseError,
+    NoiseSetting,
+    label,
+    parse_aids,
+    parse_noise,
+)
+from mhrc.core.coordination import DEFAULT_PROTOCOL
 from mhrc.core.deadlines import ATTACH_TIMEOUT, TOKEN_DEADLINE
 from mhrc.core.endpoints import endpoint, free_port
-from mhrc.core.fidelity import AidsError, NoiseError, NoiseSetting, label, parse_aids, parse_noise
 from mhrc.core.keys import check_id, new_run_id
 from mhrc.core.logs import get_logger
-from mhrc.core.protocol.events import DEFAULT_PROTOCOL
 from mhrc.core.team import PAPER_TEAM, TeamSpec
 from mhrc.core.writable import unwritable
 from mhrc.run.errors import (
@@ -32,11 +38,12 @@ from mhrc.run.errors import (
 )
 from mhrc.run.errors import ModelServerDown as ModelServerDown
 from mhrc.world.scenario import Scenario, check_scenario, load_scenario
-from mhrc.world.schedulers import SCHEDULERS
+from mhrc.world.schedules import SCHEDULES as SCHEDULES  # the schedulers by name, without importing them
 
 if TYPE_CHECKING:
     from mhrc.agents.llm.openai_client import ClientOptions
     from mhrc.agents.llm_policy import PolicyOptions
+    from mhrc.agents.protocols import CoordinationProtocol, Refusal
     from mhrc.core.security import Credentials
     from mhrc.world.sim import Sim
 
@@ -44,7 +51,6 @@ log = get_logger("mhrc.run.config")
 
 
 ROBOTS = PAPER_TEAM.names  # the paper's team, the default (--team chooses another)
-SCHEDULES = tuple(SCHEDULERS)  # the world's registry, in its order: sequential (the paper's), lockstep, async
 
 
 class ProtocolConfigError(ConfigError):
@@ -208,14 +214,16 @@ class EpisodeConfig(BaseModel):
             raise ConfigError(
                 f"--time-scale: only the async schedule has a clock against wall time (got --schedule {cfg.schedule})"
             )
-        from mhrc.world.checks import check_episode  # validates task and scene names without building
-        from mhrc.world.layouts import get_layout
-        from mhrc.world.placement import check_placement
         from mhrc.world.teams import check_team
 
         try:
+            check_team(cfg.team)  # its kinds, a finisher, a fetcher: before the imports below
+            from mhrc.world.checks import check_episode  # task and scene names, without building: the registries
+            from mhrc.world.layouts import get_layout
+            from mhrc.world.placement import check_placement  # numpy
+
             check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
-            check_team(cfg.team, get_layout(cfg.scene))
+            check_team(cfg.team, get_layout(cfg.scene))  # and the layout's arm mounts
             check_placement(get_layout(cfg.scene), cfg.team, cfg.seed)  # room for every robot, before anything starts
             cfg.scenario()
             if any(cfg.robot_specs().values()):
@@ -242,6 +250,8 @@ class EpisodeConfig(BaseModel):
     def coordination(self) -> CoordinationProtocol:
         """The episode's protocol; ConfigError (--protocol) for an unknown one or one that cannot
         run this team (its refusal's code is the error's `code`)."""
+        from mhrc.agents.protocols import ProtocolRefused, protocol  # the registry: the wire's models with it
+
         try:
             p = protocol(self.protocol)
             refused = p.refusal(self.team, llm=any(self.robot_specs().values()))

@@ -6,10 +6,9 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, TypeAdapter, ValidationError
 
+from mhrc.core.coordination import DEFAULT_PROTOCOL as DEFAULT_PROTOCOL  # the wire's name for it, too
 from mhrc.core.protocol.base import MAX_NAME, Message, ProtocolError, _Model, _reason
 from mhrc.core.protocol.observation import FurnitureView, ObjectView
-
-DEFAULT_PROTOCOL = "mhrc"  # the paper's coordination: one agent per robot, messages as actions (mhrc.agents.protocols)
 
 # --------------------------------------------------------------------------- world events
 
