@@ -192,8 +192,9 @@ def test_the_light_lists_are_the_registries() -> None:
 
     assert cli_names.PROTOCOLS == tuple(PROTOCOLS)
     from mhrc.cli.options import SCHEDULES as OPTION_SCHEDULES
+    from mhrc.world.schedulers import SCHEDULERS
 
-    assert OPTION_SCHEDULES == SCHEDULES
+    assert OPTION_SCHEDULES == SCHEDULES == tuple(SCHEDULERS)  # one light list (world/schedules.py), the registry's
     from mhrc.world.layouts import LAYOUTS
     from mhrc.world.scene_files import scene_files
 

@@ -36,6 +36,7 @@ log = get_logger("mhrc.eval")
 
 RAY_MIN = (2, 40)  # the oldest Ray this code is written against
 INSTALL = 'pip install -e ".[ray]"'
+NOT_INSTALLED = f"--ray: Ray is not installed; install the extra: {INSTALL}"
 RAY_RETRIES = 3  # runs of a task whose worker process or node died, after the first
 PROBE_TIMEOUT = 5.0  # s to wait for anything to answer at --ray HOST:PORT before saying nothing does
 # A head's Ray Client server forks a server process for every driver that connects; that process
@@ -50,7 +51,7 @@ def import_ray() -> Any:
     try:
         import ray
     except ImportError:
-        raise ConfigError(f"--ray: Ray is not installed; install the extra: {INSTALL}") from None
+        raise ConfigError(NOT_INSTALLED) from None
     version = getattr(ray, "__version__", "0")
     parts = tuple(int(p) for p in re.findall(r"\d+", version)[:2])
     if parts < RAY_MIN:
@@ -64,7 +65,7 @@ def require_ray() -> None:
     it (Ray's import takes most of a second): a refusal for the address comes before that import."""
     installed = sys.modules["ray"] is not None if "ray" in sys.modules else importlib.util.find_spec("ray") is not None
     if not installed:
-        raise ConfigError(f"--ray: Ray is not installed; install the extra: {INSTALL}")
+        raise ConfigError(NOT_INSTALLED)
 
 
 def probe(address: str, timeout: float = PROBE_TIMEOUT) -> None:

@@ -152,9 +152,7 @@ class EvalSpec(BaseModel):
     llm_seed: int | None = None
     structured: bool = False  # JSON decisions (not the paper's free text)
     step_deadline: float | None = None
-    schedule: str = (
-        "sequential"  # the world's time policy (mhrc.world.schedules.SCHEDULES); the paper's loop by default
-    )
+    schedule: str = "sequential"  # the world's time policy (mhrc.world.schedules); the paper's loop by default
     time_scale: float = 0.0  # async: simulated seconds per wall second, 0 as fast as possible
     # a scenario (world/scenario.py), applied to every episode: a file's path, or a shipped scenario's name, which
     # travels to the workers as the name so that each (a Ray node too) reads the copy installed with its own package

@@ -223,8 +223,9 @@ class EpisodeConfig(BaseModel):
             from mhrc.world.placement import check_placement  # numpy
 
             check_episode(task=cfg.task, scene=cfg.scene, n_objects=cfg.n_objects)
-            check_team(cfg.team, get_layout(cfg.scene))  # and the layout's arm mounts
-            check_placement(get_layout(cfg.scene), cfg.team, cfg.seed)  # room for every robot, before anything starts
+            layout = get_layout(cfg.scene)  # a .json scene is read and validated once
+            check_team(cfg.team, layout)  # and the layout's arm mounts
+            check_placement(layout, cfg.team, cfg.seed)  # room for every robot, before anything starts
             cfg.scenario()
             if any(cfg.robot_specs().values()):
                 from mhrc.agents.llm import check_spec
